@@ -1,0 +1,177 @@
+"""Configuration plumbing shared by every stage: validation, TOML/JSON round trips.
+
+Every user-facing setting lives in a frozen dataclass whose defaults are the paper's
+values. A value out of range raises :class:`ConfigError`, which names the field, the
+value and what is allowed, at construction time, before any simulation starts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import tempfile
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+class ConfigError(ValueError):
+    """A user input (a setting, a file, a value) is invalid; the message says why."""
+
+
+def check_range(
+    owner: str,
+    field: str,
+    value: float,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> None:
+    """Raise ConfigError unless lo <= value <= hi (strict where *_open)."""
+    name = f"{owner}.{field}" if owner else field
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{name} = {value!r} must be a number")
+    if not math.isfinite(value):
+        raise ConfigError(f"{name} = {value!r} must be finite")
+    bad = (lo is not None and (value <= lo if lo_open else value < lo)) or (
+        hi is not None and (value >= hi if hi_open else value > hi)
+    )
+    if bad:
+        lo_s = "" if lo is None else f"{lo:g} {'<' if lo_open else '<='} "
+        hi_s = "" if hi is None else f" {'<' if hi_open else '<='} {hi:g}"
+        raise ConfigError(f"{name} = {value!r} is out of range: allowed {lo_s}{field}{hi_s}")
+
+
+def check_choice(owner: str, field: str, value: Any, choices: tuple) -> None:
+    """Raise ConfigError unless value is one of choices."""
+    if value not in choices:
+        raise ConfigError(
+            f"{owner}.{field} = {value!r} is not allowed: choose one of "
+            + ", ".join(repr(c) for c in choices)
+        )
+
+
+def from_mapping(cls: type[T], data: Mapping[str, Any], *, where: str = "") -> T:
+    """Build dataclass cls from a mapping, rejecting unknown keys by name.
+
+    Nested dataclass fields accept nested mappings. Lists become tuples so the result
+    stays hashable (frozen dataclasses are used as static jit arguments).
+    """
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    label = where or cls.__name__
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ConfigError(
+            f"{label}: unknown setting(s) {', '.join(unknown)}; known: {', '.join(sorted(fields))}"
+        )
+    kwargs = {}
+    for key, value in data.items():
+        ftype = fields[key].type
+        sub = _dataclass_type(cls, key, ftype)
+        if sub is not None and isinstance(value, Mapping):
+            value = from_mapping(sub, value, where=f"{label}.{key}")
+        elif isinstance(value, list):
+            value = tuple(value)
+        kwargs[key] = value
+    return cls(**kwargs)
+
+
+def _dataclass_type(cls: type, key: str, ftype: Any) -> type | None:
+    hints = getattr(cls, "__annotations__", {})
+    resolved = hints.get(key, ftype)
+    if isinstance(resolved, str):
+        import typing
+
+        try:
+            resolved = typing.get_type_hints(cls)[key]
+        except Exception:  # noqa: BLE001 - an unresolvable hint just means "not nested"
+            return None
+    return resolved if dataclasses.is_dataclass(resolved) else None
+
+
+def load_toml(cls: type[T], path: str | os.PathLike, *, table: str | None = None) -> T:
+    """Load dataclass cls from a TOML file (optionally from one [table] of it)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{cls.__name__} file {str(path)!r} does not exist")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
+    if table is not None:
+        data = data.get(table, {})
+    return from_mapping(cls, data, where=f"{path.name}")
+
+
+def to_dict(obj: Any) -> Any:
+    """Dataclass (possibly nested) to plain JSON-able Python values."""
+    if dataclasses.is_dataclass(obj):
+        return {f.name: to_dict(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, tuple | list):
+        return [to_dict(v) for v in obj]
+    if isinstance(obj, Path):
+        return str(obj)
+    if hasattr(obj, "item") and callable(obj.item):  # numpy scalar
+        return obj.item()
+    return obj
+
+
+def to_toml(obj: Any) -> str:
+    """Flat or one-level-nested dataclass to TOML text (the subset this project writes)."""
+    data = to_dict(obj)
+    lines, tables = [], []
+    for key, value in data.items():
+        if value is None:
+            continue  # TOML has no null: an absent key means "the default"
+        if isinstance(value, dict):
+            tables.append((key, value))
+        else:
+            lines.append(f"{key} = {_toml_value(value)}")
+    for name, table in tables:
+        lines.append(f"\n[{name}]")
+        lines.extend(f"{k} = {_toml_value(v)}" for k, v in table.items() if v is not None)
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(float(value)) if isinstance(value, float) else str(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if value is None:
+        raise ConfigError("TOML cannot store None; leave the key out instead")
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
+    """Write a file so that readers see the old or the new content, never a partial one."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = data.encode() if isinstance(data, str) else data
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(payload)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> Path:
+    """Atomically write obj (dataclasses allowed) as indented JSON."""
+    return write_atomic(path, json.dumps(to_dict(obj), indent=2, sort_keys=False) + "\n")

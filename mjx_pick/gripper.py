@@ -1,0 +1,98 @@
+"""Parametric parallel-jaw (two-finger) gripper specs and the shipped presets.
+
+Gripper frame: the gripper centre is the origin, fingers close along x, the gripper
+approaches along -z. Each finger is a pad box: ``finger_depth_mm`` along x (the closing
+direction), ``finger_width_mm`` along y, ``pad_height_mm`` along z. ``stroke_mm`` is the
+largest distance between the pads' inner faces.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from importlib import resources
+from pathlib import Path
+
+from mjx_pick.config import ConfigError, check_range, load_toml
+
+
+@dataclasses.dataclass(frozen=True)
+class GripperSpec:
+    """A two-finger parallel gripper. Defaults: Robotiq 2F-85 as used in the paper."""
+
+    name: str = "robotiq-2f85"
+    stroke_mm: float = 85.0
+    finger_width_mm: float = 22.0
+    finger_depth_mm: float = 8.0
+    pad_height_mm: float = 38.0
+    force_min_n: float = 20.0
+    force_max_n: float = 235.0
+    # closing speed = rate of change of the opening (datasheet convention); each
+    # finger moves at half of it
+    speed_min_mm_s: float = 20.0
+    speed_max_mm_s: float = 150.0
+    finger_mass_g: float = 40.0
+    body_mass_g: float = 925.0
+    # drive: the finger servo that tracks the integrated speed command
+    drive_stiffness_n_per_mm: float = 10.0
+    drive_damping_ns_per_mm: float = 0.02
+    pad_material: str = "nbr"
+    # overrides ContactParams.pad_friction for this gripper's pads when set
+    pad_friction: float | None = None
+    source: str = "Bencak et al. 2023, Fig. 10; Robotiq 2F-85 datasheet"
+
+    def __post_init__(self):
+        o = f"gripper[{self.name}]"
+        for field in (
+            "stroke_mm",
+            "finger_width_mm",
+            "finger_depth_mm",
+            "pad_height_mm",
+            "force_max_n",
+            "speed_max_mm_s",
+            "finger_mass_g",
+            "body_mass_g",
+            "drive_stiffness_n_per_mm",
+        ):
+            check_range(o, field, getattr(self, field), 0, lo_open=True)
+        check_range(o, "stroke_mm", self.stroke_mm, 0, 1000, lo_open=True)
+        check_range(o, "force_min_n", self.force_min_n, 0, self.force_max_n)
+        check_range(o, "speed_min_mm_s", self.speed_min_mm_s, 0, self.speed_max_mm_s)
+        check_range(o, "drive_damping_ns_per_mm", self.drive_damping_ns_per_mm, 0)
+        if self.pad_friction is not None:
+            check_range(o, "pad_friction", self.pad_friction, 0, 5, lo_open=True)
+        # the two pads must fit side by side in the gripper body when fully open, and
+        # a pad must be thinner than half the stroke so the fingers can close fully
+        if 2 * self.finger_depth_mm >= self.stroke_mm:
+            raise ConfigError(
+                f"{o}: fingers cannot fit the stroke: 2 x finger_depth_mm = "
+                f"{2 * self.finger_depth_mm:g} mm must be < stroke_mm = {self.stroke_mm:g} mm"
+            )
+        if self.finger_width_mm > 10 * self.stroke_mm:
+            raise ConfigError(
+                f"{o}.finger_width_mm = {self.finger_width_mm:g} is out of range: allowed "
+                f"<= 10 x stroke_mm ({10 * self.stroke_mm:g})"
+            )
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped gripper presets (assets/grippers/*.toml)."""
+    folder = resources.files("mjx_pick.assets") / "grippers"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_gripper(name_or_path: str | os.PathLike) -> GripperSpec:
+    """A preset by name (e.g. "robotiq-2f85") or a gripper TOML file by path."""
+    text = str(name_or_path)
+    if text.endswith(".toml") or os.sep in text:
+        path = Path(text)
+        spec = load_toml(GripperSpec, path)
+        return spec
+    names = preset_names()
+    if text not in names:
+        raise ConfigError(
+            f"unknown gripper preset {text!r}: choose one of {', '.join(names)} "
+            "or pass a gripper TOML file"
+        )
+    with resources.as_file(resources.files("mjx_pick.assets") / "grippers" / f"{text}.toml") as p:
+        return load_toml(GripperSpec, p)

@@ -1,0 +1,179 @@
+"""Contact parameters (the paper's Table 1) and solver settings, and their MuJoCo mapping.
+
+The paper's ADAMS model uses an impact contact: force = K * depth**e + B * depth_rate,
+with K = 1e5 N/mm, B = 5.5 N s/mm (finger-object) or 10 N s/mm (object-ground),
+exponents 1.2 / 2.2, full damping at 1 um / 10 um penetration, and static/dynamic
+Coulomb friction with stiction and friction transition velocities (Table 1).
+
+MuJoCo has a different, soft-constraint contact model, so the mapping is partial:
+
+* Friction: MuJoCo has one Coulomb coefficient per contact (pyramidal or elliptic
+  cone). The pads use the paper's static coefficient (0.86, equal to its dynamic one):
+  holding is sticking. The object-table contact uses the *dynamic* coefficient (0.2):
+  the object slides on the table when the first finger pushes it, and MuJoCo's soft
+  contacts creep under any tangential load, so stiction is not representable anyway.
+* Stiffness and damping: a negative ``solref = (-k, -b)`` gives MuJoCo a mass-normalised
+  spring k [1/s^2] and damper b [1/s]. We take k = K / m and b = B / m with m the
+  object's mass (the contact's effective mass: the fingers are held by stiff servos and
+  the table is fixed). MuJoCo integrates this reference spring once per time step, so
+  it is stable only for a contact time constant of at least about two time steps (its
+  own ``refsafe`` rule for positive solref). Table 1's values are 4-5 orders of
+  magnitude stiffer than that at any practical time step (ADAMS used a variable-step
+  stiff integrator and ~1 um penetration), so they are clamped to the stiffest stable
+  contact: critically damped with time constant ``SolverParams.contact_timeconst_s``.
+  Softer values (e.g. from calibration) pass through unclamped. ``mujoco_contact``
+  reports what was clamped.
+* Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
+  the impedance instead), the penetration depth for full damping (solimp's width plays a
+  similar role), the static/dynamic split and the stiction/friction transition
+  velocities (no velocity-dependent friction in MuJoCo).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from mjx_pick.config import ConfigError, check_choice, check_range
+
+# Handbook friction of common object materials against NBR pads and a steel/laminate
+# table top: rough guides for a first run, to be refined by calibration. PLA matches
+# the paper's Table 1 (its test object was 3D printed).
+MATERIALS = {
+    # material: (pad_friction, table_friction)
+    "pla": (0.86, 0.2),
+    "abs": (0.8, 0.25),
+    "steel": (0.6, 0.15),
+    "aluminium": (0.6, 0.2),
+    "wood": (0.7, 0.3),
+    "cardboard": (0.7, 0.35),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class ContactParams:
+    """Contact parameters. Defaults: the paper's Table 1 (see the module docstring)."""
+
+    # Coulomb coefficients (MuJoCo: one per contact; sliding, both tangent directions)
+    pad_friction: float = 0.86  # Table 1, finger-object, static = dynamic = 0.86
+    table_friction: float = 0.2  # Table 1, object-ground dynamic (static is 0.4)
+    # ADAMS impact stiffness/damping (Table 1); mapped to negative solref, clamped
+    pad_stiffness_n_per_mm: float = 1e5
+    pad_damping_ns_per_mm: float = 5.5
+    table_stiffness_n_per_mm: float = 1e5
+    table_damping_ns_per_mm: float = 10.0
+    # MuJoCo impedance (dmin, dmax, width[m], midpoint, power); MuJoCo's defaults
+    solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
+
+    def __post_init__(self):
+        o = "contact"
+        check_range(o, "pad_friction", self.pad_friction, 0, 5, lo_open=True)
+        check_range(o, "table_friction", self.table_friction, 0, 5)
+        for field in (
+            "pad_stiffness_n_per_mm",
+            "pad_damping_ns_per_mm",
+            "table_stiffness_n_per_mm",
+            "table_damping_ns_per_mm",
+        ):
+            check_range(o, field, getattr(self, field), 0, lo_open=True)
+        if len(self.solimp) != 5:
+            raise ConfigError(f"contact.solimp = {self.solimp!r} must have 5 numbers")
+        dmin, dmax, width, mid, power = self.solimp
+        check_range(o, "solimp[0] (dmin)", dmin, 0, 1, lo_open=True, hi_open=True)
+        check_range(o, "solimp[1] (dmax)", dmax, dmin, 1, hi_open=True)
+        check_range(o, "solimp[2] (width)", width, 0, lo_open=True)
+        check_range(o, "solimp[3] (midpoint)", mid, 0, 1, lo_open=True, hi_open=True)
+        check_range(o, "solimp[4] (power)", power, 1)
+
+    @classmethod
+    def for_material(cls, material: str, **overrides) -> ContactParams:
+        """Defaults with the friction of a material from MATERIALS."""
+        if material not in MATERIALS:
+            raise ConfigError(
+                f"unknown material {material!r}: choose one of {', '.join(sorted(MATERIALS))} "
+                "or set pad_friction/table_friction yourself"
+            )
+        pad, table = MATERIALS[material]
+        return cls(**{"pad_friction": pad, "table_friction": table, **overrides})
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverParams:
+    """MuJoCo solver settings shared by both backends."""
+
+    timestep_s: float = 0.001
+    cone: str = "elliptic"  # elliptic + impratio 10: ~20x less creep (MuJoCo issue #3328)
+    impratio: float = 10.0
+    iterations: int = 10
+    ls_iterations: int = 8
+    integrator: str = "implicitfast"
+    # softest-allowed contact time constant; stiffer requests are clamped to it.
+    # None: two time steps (MuJoCo's refsafe rule).
+    contact_timeconst_s: float | None = None
+
+    def __post_init__(self):
+        o = "solver"
+        check_range(o, "timestep_s", self.timestep_s, 1e-5, 0.01)
+        check_choice(o, "cone", self.cone, ("elliptic", "pyramidal"))
+        check_range(o, "impratio", self.impratio, 1, 100)
+        check_range(o, "iterations", self.iterations, 1, 1000)
+        check_range(o, "ls_iterations", self.ls_iterations, 1, 1000)
+        check_choice(o, "integrator", self.integrator, ("implicitfast", "euler"))
+        if self.contact_timeconst_s is not None:
+            check_range(o, "contact_timeconst_s", self.contact_timeconst_s, 2 * self.timestep_s)
+
+    @property
+    def timeconst_s(self) -> float:
+        return self.contact_timeconst_s if self.contact_timeconst_s else 2 * self.timestep_s
+
+
+@dataclasses.dataclass(frozen=True)
+class MujocoContact:
+    """What ContactParams become in MuJoCo for one object (see the module docstring)."""
+
+    pad_friction: float
+    table_friction: float
+    pad_solref: tuple[float, float]  # negative form (-k [1/s^2], -b [1/s])
+    table_solref: tuple[float, float]
+    solimp: tuple[float, float, float, float, float]
+    clamped: tuple[str, ...]  # which Table-1 values were limited by the time step
+
+
+def spring_solref(
+    stiffness_n_per_mm: float, damping_ns_per_mm: float, mass_kg: float, timeconst_s: float
+) -> tuple[tuple[float, float], tuple[str, ...]]:
+    """Negative solref for a physical spring-damper on a body of mass_kg, clamped.
+
+    Returns:
+      (-k, -b) with k in 1/s^2 and b in 1/s, and the names of the clamped terms.
+    """
+    k = stiffness_n_per_mm * 1e3 / mass_kg
+    b = damping_ns_per_mm * 1e3 / mass_kg
+    k_max = 1.0 / timeconst_s**2  # critically damped spring of that time constant
+    b_max = 2.0 / timeconst_s
+    clamped = []
+    if k > k_max:
+        k, clamped = k_max, clamped + ["stiffness"]
+    if b > b_max:
+        b, clamped = b_max, clamped + ["damping"]
+    return (-k, -b), tuple(clamped)
+
+
+def mujoco_contact(
+    contact: ContactParams, solver: SolverParams, mass_kg: float, pad_friction: float | None = None
+) -> MujocoContact:
+    """Map ContactParams to MuJoCo pair parameters for an object of mass_kg."""
+    tc = solver.timeconst_s
+    pad_ref, pad_c = spring_solref(
+        contact.pad_stiffness_n_per_mm, contact.pad_damping_ns_per_mm, mass_kg, tc
+    )
+    tab_ref, tab_c = spring_solref(
+        contact.table_stiffness_n_per_mm, contact.table_damping_ns_per_mm, mass_kg, tc
+    )
+    return MujocoContact(
+        pad_friction=contact.pad_friction if pad_friction is None else pad_friction,
+        table_friction=contact.table_friction,
+        pad_solref=pad_ref,
+        table_solref=tab_ref,
+        solimp=tuple(contact.solimp),
+        clamped=tuple(f"pad_{c}" for c in pad_c) + tuple(f"table_{c}" for c in tab_c),
+    )

@@ -1,0 +1,251 @@
+"""Scene: object on a table under a two-finger gripper, as one MuJoCo model.
+
+The model compiles for the MuJoCo C engine and for MJX (``mujoco.mjx.put_model``).
+Only the contacts that matter exist: every geom has contype = conaffinity = 0 and the
+contacts are explicit ``<pair>``s -- each pad against each collision piece of the
+object, and the table against each piece. Fingers never collide with the table or each
+other, which keeps MJX's fixed-size contact buffers small.
+
+Bodies: ``object`` (free joint), ``gripper`` (vertical ``lift`` slide joint, position
+servo), ``finger_left`` / ``finger_right`` (slide joints along +x / -x measuring each
+finger's closing travel from fully open, position servos with a force limit of the
+gripper's maximum force). The object's pad contact forces are read from ``cfrc_ext`` of
+the finger bodies; an accelerometer on the object makes both engines compute it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+
+from mjx_pick.gripper import GripperSpec
+from mjx_pick.objects import ObjectModel
+from mjx_pick.physics import ContactParams, MujocoContact, SolverParams, mujoco_contact
+
+# the robot arm carrying the gripper: a stiff, well-damped vertical servo
+LIFT_STIFFNESS_N_PER_M = 2e4
+LIFT_DAMPING_NS_PER_M = 400.0
+LIFT_FORCE_LIMIT_N = 500.0
+TABLE_HALF_SIZE_M = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneIndex:
+    """Ids and addresses the controller and the metrics need (ints: static under jit)."""
+
+    object_body: int
+    gripper_body: int
+    finger_left_body: int
+    finger_right_body: int
+    object_qpos: int  # start of the object's free joint (x, y, z, qw, qx, qy, qz)
+    object_qvel: int  # start of its 6 dofs
+    lift_qpos: int
+    finger_left_qpos: int
+    finger_right_qpos: int
+    lift_actuator: int
+    finger_left_actuator: int
+    finger_right_actuator: int
+    pad_pairs: tuple[int, ...]  # pair ids of pad-object contacts
+    table_pairs: tuple[int, ...]  # pair ids of table-object contacts
+    pad_bottom_z0_m: float  # fingertip height above the table at the start
+    stroke_m: float
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Scene:
+    """A compiled scene: the model, its MJCF text, the index, and what built it."""
+
+    model: mujoco.MjModel
+    xml: str
+    index: SceneIndex
+    contact: MujocoContact
+    object: ObjectModel
+    gripper: GripperSpec
+    solver: SolverParams
+
+    def initial_qpos(self, x_m, y_m, yaw_rad, opening_m) -> np.ndarray:
+        """Initial joint positions for picks (N,) arrays -> (N, nq)."""
+        x_m, y_m, yaw_rad, opening_m = (
+            np.atleast_1d(np.asarray(a, float)) for a in (x_m, y_m, yaw_rad, opening_m)
+        )
+        n = len(x_m)
+        idx = self.index
+        qpos = np.tile(self.model.qpos0, (n, 1))
+        o = idx.object_qpos
+        qpos[:, o] = x_m
+        qpos[:, o + 1] = y_m
+        qpos[:, o + 2] = 0.0  # object frame origin on the table
+        qpos[:, o + 3] = np.cos(yaw_rad / 2)
+        qpos[:, o + 4 : o + 6] = 0.0
+        qpos[:, o + 6] = np.sin(yaw_rad / 2)
+        travel = 0.5 * (idx.stroke_m - opening_m)
+        qpos[:, idx.finger_left_qpos] = travel
+        qpos[:, idx.finger_right_qpos] = travel
+        qpos[:, idx.lift_qpos] = 0.0
+        return qpos
+
+
+def _fmt(values) -> str:
+    return " ".join(f"{float(v):.9g}" for v in np.ravel(values))
+
+
+def scene_xml(
+    obj: ObjectModel, gripper: GripperSpec, mjc: MujocoContact, solver: SolverParams
+) -> str:
+    """MJCF text of the scene (deterministic: same inputs, same text)."""
+    stroke = gripper.stroke_mm * 1e-3
+    depth = gripper.finger_depth_mm * 1e-3
+    width = gripper.finger_width_mm * 1e-3
+    pad_h = gripper.pad_height_mm * 1e-3
+    pick_h = obj.pick_height_mm * 1e-3
+    z_grip = pick_h + 0.5 * pad_h  # pad centres: pad bottoms at the pick height
+    fmass = gripper.finger_mass_g * 1e-3
+    kp = gripper.drive_stiffness_n_per_mm * 1e3
+    kv = gripper.drive_damping_ns_per_mm * 1e3
+    fmax = gripper.force_max_n
+
+    meshes = [
+        f'<mesh name="visual" vertex="{_fmt(obj.mesh.vertices)}" face="{_fmt(obj.mesh.faces)}"/>'
+    ]
+    meshes += [
+        f'<mesh name="piece{i}" vertex="{_fmt(v)}" maxhullvert="32"/>'
+        for i, v in enumerate(obj.pieces)
+    ]
+    pieces = "\n".join(
+        f'      <geom name="piece{i}" type="mesh" mesh="piece{i}" group="3" rgba=".9 .5 .1 .5"/>'
+        for i in range(len(obj.pieces))
+    )
+    inertia = obj.inertia_kg_m2
+    full = _fmt(
+        [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
+    )
+    pad_fr = _fmt([mjc.pad_friction, mjc.pad_friction, 0.005, 0.0001, 0.0001])
+    tab_fr = _fmt([mjc.table_friction, mjc.table_friction, 0.005, 0.0001, 0.0001])
+    solimp = _fmt(mjc.solimp)
+    pairs = []
+    for i in range(len(obj.pieces)):
+        for pad in ("pad_left", "pad_right"):
+            pairs.append(
+                f'    <pair name="{pad}_piece{i}" geom1="{pad}" geom2="piece{i}" condim="3" '
+                f'friction="{pad_fr}" solref="{_fmt(mjc.pad_solref)}" solimp="{solimp}"/>'
+            )
+    for i in range(len(obj.pieces)):
+        pairs.append(
+            f'    <pair name="table_piece{i}" geom1="table" geom2="piece{i}" condim="3" '
+            f'friction="{tab_fr}" solref="{_fmt(mjc.table_solref)}" solimp="{solimp}"/>'
+        )
+    finger_link_h = 0.03
+    pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
+    table_size = _fmt([TABLE_HALF_SIZE_M, TABLE_HALF_SIZE_M, 0.01])
+    lift_range = _fmt([-LIFT_FORCE_LIMIT_N, LIFT_FORCE_LIMIT_N])
+    return f"""<mujoco model="mjx_pick {obj.name} {gripper.name}">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{solver.timestep_s:.9g}" cone="{solver.cone}" impratio="{solver.impratio:.9g}"
+          iterations="{solver.iterations}" ls_iterations="{solver.ls_iterations}"
+          integrator="{solver.integrator}"/>
+  <default>
+    <geom contype="0" conaffinity="0"/>
+  </default>
+  <visual><global offwidth="1280" offheight="960"/></visual>
+  <asset>
+    {chr(10).join("    " + m for m in meshes).strip()}
+    <texture name="grid" type="2d" builtin="checker" width="256" height="256"
+             rgb1=".85 .85 .85" rgb2=".75 .75 .75"/>
+    <material name="grid" texture="grid" texrepeat="20 20"/>
+  </asset>
+  <worldbody>
+    <light pos="0 -0.3 0.6" dir="0 0.4 -1" diffuse=".8 .8 .8"/>
+    <geom name="table" type="plane" size="{table_size}" material="grid"/>
+    <camera name="top" pos="0 0 0.45" xyaxes="1 0 0 0 1 0"/>
+    <camera name="side" pos="0 -0.35 0.12" xyaxes="1 0 0 0 0.2 1"/>
+    <body name="object">
+      <freejoint name="object"/>
+      <inertial pos="{_fmt(obj.com_m)}" mass="{obj.mass_kg:.9g}" fullinertia="{full}"/>
+      <site name="object_com" pos="{_fmt(obj.com_m)}"/>
+      <geom name="object_visual" type="mesh" mesh="visual" group="1" rgba=".2 .45 .8 1" mass="0"/>
+{pieces}
+    </body>
+    <body name="gripper" pos="0 0 {z_grip:.9g}" gravcomp="1">
+      <joint name="lift" type="slide" axis="0 0 1"/>
+      <inertial pos="0 0 {0.5 * pad_h + 0.06:.9g}" mass="{gripper.body_mass_g * 1e-3:.9g}"
+                diaginertia="1e-3 1e-3 1e-3"/>
+      <geom name="gripper_body" type="box" group="2" rgba=".25 .25 .25 1" mass="0"
+            size="{0.5 * stroke + depth + 0.01:.9g} {0.5 * width + 0.01:.9g} 0.03"
+            pos="0 0 {0.5 * pad_h + finger_link_h + 0.03:.9g}"/>
+      <body name="finger_left" pos="{-0.5 * stroke - 0.5 * depth:.9g} 0 0" gravcomp="1">
+        <joint name="finger_left" type="slide" axis="1 0 0" range="0 {0.5 * stroke:.9g}"/>
+        <geom name="pad_left" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
+        <geom name="link_left" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
+              size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
+              pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
+      </body>
+      <body name="finger_right" pos="{0.5 * stroke + 0.5 * depth:.9g} 0 0" gravcomp="1">
+        <joint name="finger_right" type="slide" axis="-1 0 0" range="0 {0.5 * stroke:.9g}"/>
+        <geom name="pad_right" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
+        <geom name="link_right" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
+              size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
+              pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
+      </body>
+    </body>
+  </worldbody>
+  <contact>
+{chr(10).join(pairs)}
+  </contact>
+  <actuator>
+    <position name="lift" joint="lift" kp="{LIFT_STIFFNESS_N_PER_M:.9g}"
+              kv="{LIFT_DAMPING_NS_PER_M:.9g}" forcerange="{lift_range}"/>
+    <position name="finger_left" joint="finger_left" kp="{kp:.9g}" kv="{kv:.9g}"
+              forcerange="{-fmax:.9g} {fmax:.9g}" ctrlrange="-0.05 {0.5 * stroke + 0.05:.9g}"/>
+    <position name="finger_right" joint="finger_right" kp="{kp:.9g}" kv="{kv:.9g}"
+              forcerange="{-fmax:.9g} {fmax:.9g}" ctrlrange="-0.05 {0.5 * stroke + 0.05:.9g}"/>
+  </actuator>
+  <sensor>
+    <accelerometer name="object_acc" site="object_com"/>
+  </sensor>
+</mujoco>
+"""
+
+
+def build_scene(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    contact: ContactParams | None = None,
+    solver: SolverParams | None = None,
+) -> Scene:
+    """Compile the scene for (object, gripper, contact parameters, solver settings)."""
+    contact = contact or ContactParams()
+    solver = solver or SolverParams()
+    mjc = mujoco_contact(contact, solver, obj.mass_kg, gripper.pad_friction)
+    xml = scene_xml(obj, gripper, mjc, solver)
+    model = mujoco.MjModel.from_xml_string(xml)
+    model.qpos0[:] = 0.0
+    model.qpos0[model.jnt_qposadr[model.joint("object").id] + 3] = 1.0
+
+    def pairs(prefixes) -> tuple[int, ...]:
+        return tuple(i for i in range(model.npair) if model.pair(i).name.startswith(prefixes))
+
+    index = SceneIndex(
+        object_body=model.body("object").id,
+        gripper_body=model.body("gripper").id,
+        finger_left_body=model.body("finger_left").id,
+        finger_right_body=model.body("finger_right").id,
+        object_qpos=int(model.jnt_qposadr[model.joint("object").id]),
+        object_qvel=int(model.jnt_dofadr[model.joint("object").id]),
+        lift_qpos=int(model.jnt_qposadr[model.joint("lift").id]),
+        finger_left_qpos=int(model.jnt_qposadr[model.joint("finger_left").id]),
+        finger_right_qpos=int(model.jnt_qposadr[model.joint("finger_right").id]),
+        lift_actuator=model.actuator("lift").id,
+        finger_left_actuator=model.actuator("finger_left").id,
+        finger_right_actuator=model.actuator("finger_right").id,
+        pad_pairs=pairs(("pad_left", "pad_right")),
+        table_pairs=pairs(("table",)),
+        pad_bottom_z0_m=obj.pick_height_mm * 1e-3,
+        stroke_m=gripper.stroke_mm * 1e-3,
+    )
+    return Scene(
+        model=model, xml=xml, index=index, contact=mjc, object=obj, gripper=gripper, solver=solver
+    )
