@@ -1,0 +1,197 @@
+"""Pick-point generation: the three checks on known answers, reference agreement, modes."""
+
+import math
+
+import numpy as np
+import pytest
+from mjx_pick.kernels import feasibility as fk
+from shapely.geometry import Point, box
+
+import mjx_pick as mp
+from mjx_pick import pickpoints as pp
+
+GRIPPER = mp.GripperSpec()  # Robotiq 2F-85: stroke 85, width 22, depth 8
+
+
+def rect(w_x=20.0, h_y=40.0):
+    return mp.object_from_polygon(
+        box(-w_x / 2, -h_y / 2, w_x / 2, h_y / 2),
+        thickness_mm=10,
+        mass_g=20,
+        name=f"rect{w_x}x{h_y}",
+    )
+
+
+def test_centred_rectangle_coverage_by_hand():
+    # 20 (x) by 40 (y) at yaw 0: pads start 5 mm outside x = +-10 -> opening 30 mm;
+    # the 22 mm band is fully inside the rectangle's 40 mm: covered 20 x 22 of 30 x 22
+    checker = pp.FeasibilityChecker(rect(), GRIPPER)
+    res = checker([0.0], [0.0], [0.0])
+    assert res["reason"][0] == fk.FEASIBLE
+    assert res["opening_mm"][0] == pytest.approx(30.0, abs=0.5)
+    assert res["coverage"][0] == pytest.approx(20 * 22 / (30 * 22), abs=0.02)
+    assert res["gap_left_mm"][0] == pytest.approx(5.0, abs=0.5)
+
+
+def test_turned_rectangle_wider_than_stroke_is_too_wide():
+    narrow = mp.GripperSpec(name="narrow", stroke_mm=38.0)  # shorter than the 40 mm length
+    checker = pp.FeasibilityChecker(rect(), narrow)
+    res = checker([0.0, 0.0], [0.0, 0.0], [0.0, 90.0])
+    assert list(res["reason"]) == [fk.FEASIBLE, fk.TOO_WIDE]
+
+
+def test_candidate_off_the_object():
+    checker = pp.FeasibilityChecker(rect(), GRIPPER)
+    res = checker([0.0], [60.0], [0.0])  # band misses the rectangle entirely
+    assert res["reason"][0] == fk.OFF_OBJECT
+
+
+def test_finger_inside_ring_hole_fails_clearance():
+    # the 24 mm hole is taller than the 22 mm fingers, so the band sees a 9.6 mm gap in
+    # it; the right finger starts in that gap but needs 5 + 8 mm: it lands on the rim
+    ring = mp.object_from_polygon(
+        Point(0, 0).buffer(30, quad_segs=64).difference(Point(0, 0).buffer(12, quad_segs=64)),
+        thickness_mm=6,
+        mass_g=15,
+        name="ring24",
+    )
+    checker = pp.FeasibilityChecker(ring, GRIPPER)
+    res = checker([40.0], [0.0], [0.0])
+    assert res["reason"][0] == fk.CLEARANCE
+    ref = fk.reference_check(ring.polygon, checker.band, 40.0, 0.0, 0.0)
+    assert ref[0] == fk.CLEARANCE
+
+
+def test_low_coverage_rejected():
+    thin = mp.object_from_polygon(box(-2, -20, 2, 20), thickness_mm=5, mass_g=5, name="thin")
+    checker = pp.FeasibilityChecker(thin, GRIPPER, pp.PickConfig(min_coverage=0.35))
+    res = checker([0.0], [0.0], [0.0])  # 4 mm of 14 mm between the pads
+    assert res["reason"][0] == fk.COVERAGE
+    assert res["coverage"][0] == pytest.approx(4 / 14, abs=0.04)
+
+
+def test_kernel_agrees_with_reference(door_opener):
+    # disagreements come only from the 0.5 mm raster: each must flip back under a
+    # half-pixel nudge of the pose or a 1 mm change of the band
+    checker = pp.FeasibilityChecker(door_opener, GRIPPER)
+    rng = np.random.default_rng(3)
+    n = 150
+    x, y = rng.uniform(-45, 45, n), rng.uniform(-45, 45, n)
+    yaw = rng.uniform(0, 360, n)
+    res = checker(x, y, yaw)
+    mismatches = 0
+    for i in range(n):
+        reason, opening, coverage = fk.reference_check(
+            door_opener.polygon, checker.band, x[i], y[i], math.radians(yaw[i])
+        )
+        if reason != res["reason"][i]:
+            mismatches += 1
+            nudged = {
+                fk.reference_check(
+                    door_opener.polygon,
+                    checker.band._replace(finger_width_mm=22 + dw),
+                    x[i] + dx,
+                    y[i] + dy,
+                    math.radians(yaw[i]),
+                )[0]
+                for dw in (-1, 0, 1)
+                for dx in (-0.5, 0, 0.5)
+                for dy in (-0.5, 0, 0.5)
+            }
+            assert res["reason"][i] in nudged
+        elif reason == fk.FEASIBLE:
+            assert res["opening_mm"][i] == pytest.approx(opening, abs=1.5)
+            assert res["coverage"][i] == pytest.approx(coverage, abs=0.05)
+    assert mismatches <= 0.05 * n
+
+
+def test_yaw_symmetry(door_opener):
+    # a symmetric gripper: (x, y, yaw + 180) is (-x, -y, yaw) with the fingers swapped
+    checker = pp.FeasibilityChecker(door_opener, GRIPPER)
+    rng = np.random.default_rng(0)
+    x, y, yaw = rng.uniform(-30, 30, 64), rng.uniform(-30, 30, 64), rng.uniform(0, 180, 64)
+    a, b = checker(x, y, yaw), checker(-x, -y, yaw + 180)
+    np.testing.assert_array_equal(a["reason"], b["reason"])
+    np.testing.assert_allclose(a["gap_left_mm"], b["gap_right_mm"], atol=1e-4)
+
+
+def test_same_seed_same_picks(door_opener):
+    a = pp.generate_normal(door_opener, GRIPPER, 50, seed=7)
+    b = pp.generate_normal(door_opener, GRIPPER, 50, seed=7)
+    c = pp.generate_normal(door_opener, GRIPPER, 50, seed=8)
+    np.testing.assert_array_equal(a.x_mm, b.x_mm)
+    np.testing.assert_array_equal(a.pick_id, b.pick_id)
+    assert not np.array_equal(a.x_mm, c.x_mm)
+
+
+def test_normal_mode_gives_n_feasible(door_opener):
+    picks = pp.generate_normal(door_opener, GRIPPER, 300, seed=0)
+    assert len(picks) == 300
+    res = pp.FeasibilityChecker(door_opener, GRIPPER)(picks.x_mm, picks.y_mm, picks.yaw_deg)
+    assert (res["reason"] == fk.FEASIBLE).all()
+    assert np.all(np.abs(picks.x_mm) <= 0.5 * door_opener.length_mm)
+    assert np.all((picks.yaw_deg >= 0) & (picks.yaw_deg < 360))
+    # candidates are checked in whole blocks; every rejection is counted with its reason
+    assert picks.n_candidates % pp.CANDIDATE_BLOCK == 0
+    assert 300 <= picks.n_candidates - sum(picks.rejected.values())
+    assert picks.pick_id.max() < picks.n_candidates
+
+
+def test_grid_mode_is_systematic():
+    picks = pp.generate_grid(rect(), GRIPPER, x_step_mm=5, y_step_mm=5, yaw_step_deg=45)
+    xs, ys, yaws = set(np.round(picks.x_mm, 6)), set(np.round(picks.y_mm, 6)), set(picks.yaw_deg)
+    assert yaws <= {0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0}
+    assert 0.0 in xs and 0.0 in ys  # the centred pose is on the grid (range +-20 mm)
+    total = len(picks) + sum(picks.rejected.values())
+    assert total == picks.n_candidates == 9 * 9 * 8
+
+
+def test_optimization_mode_stops_at_k_or_max():
+    obj = rect()
+
+    def score(batch):  # a stand-in for the simulator: centred pick-points score high
+        return np.exp(-(batch.x_mm**2 + batch.y_mm**2) / 50.0)
+
+    res = pp.optimize(obj, GRIPPER, score, k=5, min_score=0.8, max_n=5000, batch_size=64, seed=1)
+    assert res.reached
+    assert len(res.best) >= 5 and np.all(score(res.best) >= 0.8)
+    assert len(res.picks) % 64 == 0 or len(res.picks) == 5000
+    capped = pp.optimize(obj, GRIPPER, score, k=10**6, min_score=0.8, max_n=200, batch_size=64)
+    assert not capped.reached and len(capped.picks) == 200
+
+
+def test_bad_settings():
+    with pytest.raises(mp.ConfigError, match="min_coverage = 1.5"):
+        pp.PickConfig(min_coverage=1.5)
+    with pytest.raises(mp.ConfigError, match="safety_zone_mm = -1"):
+        pp.PickConfig(safety_zone_mm=-1)
+    with pytest.raises(mp.ConfigError, match="safety_zone_mm = 50"):
+        pp.FeasibilityChecker(rect(), GRIPPER, pp.PickConfig(safety_zone_mm=50))
+    wide = mp.object_from_polygon(box(-60, -60, 60, 60), thickness_mm=5, mass_g=50, name="big")
+    central = pp.PickConfig(max_candidates=5000, x_range_mm=10, y_range_mm=10)
+    with pytest.raises(mp.ConfigError, match="wider than the stroke"):
+        pp.generate_normal(wide, GRIPPER, 10, config=central)
+
+
+def test_pictures(tmp_path, door_opener):
+    from mjx_pick import plots
+
+    picks = pp.generate_normal(door_opener, GRIPPER, 20, seed=0)
+    plots.draw_pick(
+        door_opener,
+        GRIPPER,
+        picks.x_mm[0],
+        picks.y_mm[0],
+        picks.yaw_deg[0],
+        picks.opening_mm[0],
+        tmp_path / "pick.png",
+    )
+    rng = np.random.default_rng(0)
+    x, y, yaw = rng.uniform(-40, 40, 500), rng.uniform(-40, 40, 500), rng.uniform(0, 360, 500)
+    reasons = np.array(fk.REASONS)[pp.FeasibilityChecker(door_opener, GRIPPER)(x, y, yaw)["reason"]]
+    plots.draw_candidates(door_opener, x, y, yaw, tmp_path / "overview.png", labels=reasons)
+    import matplotlib.image as mpimg
+
+    for name in ("pick.png", "overview.png"):
+        img = mpimg.imread(tmp_path / name)
+        assert img.shape[0] > 300 and img.std() > 0.05  # a real picture, not blank
