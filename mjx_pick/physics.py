@@ -20,7 +20,7 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   own ``refsafe`` rule for positive solref). Table 1's values are 4-5 orders of
   magnitude stiffer than that at any practical time step (ADAMS used a variable-step
   stiff integrator and ~1 um penetration), so they are clamped to the stiffest stable
-  contact: critically damped with time constant ``SolverParams.contact_timeconst_s``.
+  contact: critically damped with time constant ``SolverParams.timeconst_s``.
   Softer values (e.g. from calibration) pass through unclamped. ``mujoco_contact``
   reports what was clamped.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
@@ -98,17 +98,27 @@ class ContactParams:
 
 @dataclasses.dataclass(frozen=True)
 class SolverParams:
-    """MuJoCo solver settings shared by both backends."""
+    """MuJoCo solver settings shared by both backends.
+
+    Defaults were chosen by measurement on this scene (benchmarks/RESULTS.md, "solver
+    choice"): elliptic cones with impratio 10 -- the usual cure for creep (MuJoCo issue
+    #3328) -- blew up (NaN accelerations) in most random grasps of the block, where an
+    object pushed and spun by the first pad chatters between pads and table; pyramidal
+    cones with impratio 1 were stable, and their creep over lift + hold stayed below
+    1 mm against the 10 mm success margin. Pyramidal cones are also the ones whose
+    forward-mode derivatives are finite in MJX (calibration) and the faster ones.
+    """
 
     timestep_s: float = 0.001
-    cone: str = "elliptic"  # elliptic + impratio 10: ~20x less creep (MuJoCo issue #3328)
-    impratio: float = 10.0
+    cone: str = "pyramidal"
+    impratio: float = 1.0
     iterations: int = 10
     ls_iterations: int = 8
     integrator: str = "implicitfast"
-    # softest-allowed contact time constant; stiffer requests are clamped to it.
-    # None: two time steps (MuJoCo's refsafe rule).
-    contact_timeconst_s: float | None = None
+    # softest-allowed contact time constant: stiffer requests (Table 1) are clamped to
+    # it. Fixed in seconds, so halving the time step refines the integration of the
+    # same contact; never below two time steps (MuJoCo's refsafe rule).
+    contact_timeconst_s: float = 0.002
 
     def __post_init__(self):
         o = "solver"
@@ -118,12 +128,12 @@ class SolverParams:
         check_range(o, "iterations", self.iterations, 1, 1000)
         check_range(o, "ls_iterations", self.ls_iterations, 1, 1000)
         check_choice(o, "integrator", self.integrator, ("implicitfast", "euler"))
-        if self.contact_timeconst_s is not None:
-            check_range(o, "contact_timeconst_s", self.contact_timeconst_s, 2 * self.timestep_s)
+        check_range(o, "contact_timeconst_s", self.contact_timeconst_s, 0, 1, lo_open=True)
 
     @property
     def timeconst_s(self) -> float:
-        return self.contact_timeconst_s if self.contact_timeconst_s else 2 * self.timestep_s
+        """The contact time constant in effect: at least two time steps."""
+        return max(self.contact_timeconst_s, 2 * self.timestep_s)
 
 
 @dataclasses.dataclass(frozen=True)

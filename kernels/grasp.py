@@ -1,0 +1,398 @@
+"""One pick-point's controller, phase machine and metric accumulation (pure JAX).
+
+Written for ONE pick-point: every function takes scalars (or small vectors) and is
+batched with ``vmap`` by the runners. Both backends call these same functions once per
+control period -- MJX inside its jitted scan, the MuJoCo C backend through a jitted
+vmap on the CPU -- so the controller, the phase machine and the metrics have one
+definition.
+
+Phases: SETTLE (object comes to rest) -> CLOSE (P force controller) -> DWELL (optional)
+-> LIFT -> HOLD -> DONE. The P controller (the paper's Fig. 6) commands each finger's
+closing speed v = clip(kp * (F_d - F), -v_open, v_close) from the mean pad force F; the
+speed is integrated into the finger servos' position target, so the force loop has
+integral action and holds F_d without steady-state error. Lifting starts as soon as F
+reaches reach_fraction * F_d (the paper's rule against slip before the lift), after the
+optional dwell.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+SETTLE, CLOSE, DWELL, LIFT, HOLD, DONE = range(6)
+PHASES = ("settle", "close", "dwell", "lift", "hold", "done")
+
+OK, NO_CONTACT, FORCE_NOT_REACHED, SLIPPED_IN_LIFT, DROPPED_IN_HOLD, ROTATED, DIVERGED = range(7)
+FAILURES = (
+    "none",
+    "no_contact",
+    "force_not_reached",
+    "slipped_in_lift",
+    "dropped_in_hold",
+    "rotated",
+    "diverged",
+)
+
+
+class GraspParams(NamedTuple):
+    """Per-pick controller and phase settings, SI units (each a traced scalar)."""
+
+    force_n: jax.Array  # F_d, desired pad force
+    kp: jax.Array  # (m/s)/N, finger speed per newton of force error
+    v_close: jax.Array  # m/s, each finger's largest closing speed
+    v_open: jax.Array  # m/s, each finger's largest opening speed
+    reach_fraction: jax.Array  # F >= reach_fraction * F_d counts as reached
+    dwell_s: jax.Array
+    settle_s: jax.Array
+    close_timeout_s: jax.Array
+    lift_height_m: jax.Array
+    lift_speed_m_s: jax.Array
+    hold_s: jax.Array
+    pad_contact_n: jax.Array  # a pad touches when its force exceeds this
+    table_contact_n: jax.Array  # the object touches the table when its force exceeds this
+    success_height_fraction: jax.Array
+    max_rotation_rad: jax.Array
+    divergence_speed: jax.Array  # |qvel| above this (m/s or rad/s) is a blow-up
+    dt: jax.Array  # control period, s
+
+
+class ControlState(NamedTuple):
+    phase: jax.Array  # int32
+    t_phase: jax.Array  # s in the current phase
+    finger_target: jax.Array  # m, each finger's closing-travel target
+    lift_target: jax.Array  # m, gripper lift target
+
+
+class Measurement(NamedTuple):
+    """What the controller and metrics see at a control tick."""
+
+    force_left: jax.Array  # N, normal force on the left pad (its x component)
+    force_right: jax.Array  # N
+    force_table: jax.Array  # N, vertical table force on the object
+    object_pos: jax.Array  # (3,) m, object frame origin
+    object_quat: jax.Array  # (4,) w, x, y, z
+    lift: jax.Array  # m, gripper lift joint position
+    speed_max: jax.Array  # largest |qvel|
+    finite: jax.Array  # bool, state is finite
+
+
+class Accumulators(NamedTuple):
+    contact_seen: jax.Array  # bool
+    reached: jax.Array  # bool, F_d reached
+    t_reached: jax.Array  # s since start when reached
+    held: jax.Array  # bool, grip held uninterrupted since reaching F_d
+    held_time: jax.Array  # s
+    off_table_time: jax.Array  # s in the grasp window without table contact
+    phi_max: jax.Array  # rad, largest rotation from the initial orientation
+    yaw_max: jax.Array  # rad, largest |yaw change| (about the vertical)
+    tilt_max: jax.Array  # rad, largest tilt of the object's vertical axis
+    force_left_max: jax.Array
+    force_right_max: jax.Array
+    lift_after_lift: jax.Array  # m, object lift when the LIFT phase ended
+    table_after_lift: jax.Array  # bool, touching the table then
+    slip_max: jax.Array  # m, largest gripper lift minus object lift in the window
+    lift_final: jax.Array  # m, object lift at the end of the hold
+    table_final: jax.Array  # bool
+    rot_final: jax.Array  # rad
+    finished: jax.Array  # bool, the hold ended (success is only possible then)
+    diverged: jax.Array  # bool
+    t: jax.Array  # s since start
+
+
+def initial_state(finger_travel0) -> ControlState:
+    """Start: settling, fingers at their starting travel, gripper not lifted."""
+    z = jnp.zeros_like(finger_travel0)
+    return ControlState(
+        jnp.int32(SETTLE) + jnp.zeros_like(finger_travel0, jnp.int32), z, finger_travel0, z
+    )
+
+
+def initial_accumulators(like) -> Accumulators:
+    z = jnp.zeros_like(like)
+    f = jnp.zeros_like(like, dtype=bool)
+    return Accumulators(
+        contact_seen=f,
+        reached=f,
+        t_reached=z - 1.0,
+        held=f,
+        held_time=z,
+        off_table_time=z,
+        phi_max=z,
+        yaw_max=z,
+        tilt_max=z,
+        force_left_max=z,
+        force_right_max=z,
+        lift_after_lift=z,
+        table_after_lift=~f,
+        slip_max=z,
+        lift_final=z,
+        table_final=~f,
+        rot_final=z,
+        finished=f,
+        diverged=f,
+        t=z,
+    )
+
+
+def control_step(p: GraspParams, s: ControlState, m: Measurement):
+    """One control period: phase transitions and the P force controller.
+
+    Returns:
+      the next ControlState (its targets are the commands for this period).
+    """
+    force = 0.5 * (m.force_left + m.force_right)
+    t = s.t_phase + p.dt
+    ph = s.phase
+    reached = force >= p.reach_fraction * p.force_n
+    lift_time = p.lift_height_m / p.lift_speed_m_s
+    nxt = jnp.select(
+        [
+            (ph == SETTLE) & (t >= p.settle_s),
+            (ph == CLOSE) & reached & (p.dwell_s > 0),
+            (ph == CLOSE) & reached,
+            (ph == CLOSE) & (t >= p.close_timeout_s),
+            (ph == DWELL) & (t >= p.dwell_s),
+            (ph == LIFT) & (t >= lift_time),
+            (ph == HOLD) & (t >= p.hold_s),
+        ],
+        [CLOSE, DWELL, LIFT, DONE, LIFT, HOLD, DONE],
+        ph,
+    ).astype(jnp.int32)
+    t_next = jnp.where(nxt == ph, t, 0.0)
+    # P force controller: on from CLOSE on; a failed close (DONE without a lift) stops
+    active = (
+        (ph != SETTLE) & ~((ph == CLOSE) & (nxt == DONE)) & ~((ph == DONE) & (s.lift_target <= 0))
+    )
+    v = jnp.clip(p.kp * (p.force_n - force), -p.v_open, p.v_close)
+    finger_target = s.finger_target + jnp.where(active, v * p.dt, 0.0)
+    lifting = (nxt == LIFT) | (nxt == HOLD) | ((nxt == DONE) & (s.lift_target > 0))
+    lift_target = jnp.where(
+        lifting,
+        jnp.minimum(s.lift_target + p.lift_speed_m_s * p.dt, p.lift_height_m),
+        s.lift_target,
+    )
+    return ControlState(nxt, t_next, finger_target, lift_target)
+
+
+def _quat_angle(q, q0):
+    """Rotation angle between unit quaternions (rad, 0..pi)."""
+    c = jnp.abs(jnp.sum(q * q0))
+    return 2.0 * jnp.arccos(jnp.clip(c, 0.0, 1.0))
+
+
+def _yaw(q):
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return jnp.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _tilt(q):
+    """Angle between the object's z axis and the world's (rad)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    r22 = 1.0 - 2.0 * (x * x + y * y)
+    return jnp.arccos(jnp.clip(r22, -1.0, 1.0))
+
+
+def accumulate(
+    p: GraspParams,
+    a: Accumulators,
+    s: ControlState,
+    s_next: ControlState,
+    m: Measurement,
+    pos0,
+    quat0,
+) -> Accumulators:
+    """Fold one tick's measurement into the per-pick metrics.
+
+    s is the state the tick ran in, s_next the one the controller chose; pos0, quat0
+    the object's initial pose.
+    """
+    running = s.phase != DONE
+    bad = (~m.finite | (m.speed_max > p.divergence_speed)) & running
+    diverged = a.diverged | bad
+    # nothing accumulates once DONE (a backend may stop stepping a finished pick) or
+    # diverged (NaNs must not leak into maxima)
+    live = ~diverged & running
+    fl = jnp.where(live, m.force_left, 0.0)
+    fr = jnp.where(live, m.force_right, 0.0)
+    ft = jnp.where(live, m.force_table, 0.0)
+    quat = jnp.where(live, m.object_quat, quat0)
+    pos = jnp.where(live, m.object_pos, pos0)
+
+    contact = jnp.maximum(fl, fr) > p.pad_contact_n
+    gripping = jnp.minimum(fl, fr) > p.pad_contact_n
+    on_table = ft > p.table_contact_n
+    just_reached = (s.phase == CLOSE) & ((s_next.phase == LIFT) | (s_next.phase == DWELL))
+    reached = a.reached | (live & just_reached)
+    in_window = live & a.reached & (s.phase != DONE)
+    held = jnp.where(live & just_reached, True, a.held & (~in_window | gripping))
+    rot = _quat_angle(quat, quat0)
+    d = _yaw(quat) - _yaw(quat0)
+    dyaw = jnp.abs(jnp.arctan2(jnp.sin(d), jnp.cos(d)))
+    obj_lift = pos[2] - pos0[2]
+    lift_end = (s.phase == LIFT) & (s_next.phase == HOLD) & live
+    hold_end = (s.phase == HOLD) & (s_next.phase == DONE) & live
+    return Accumulators(
+        contact_seen=a.contact_seen | (live & contact),
+        reached=reached,
+        t_reached=jnp.where(live & just_reached, a.t + p.dt, a.t_reached),
+        held=held,
+        held_time=a.held_time + jnp.where(in_window & held & gripping, p.dt, 0.0),
+        off_table_time=a.off_table_time + jnp.where(in_window & ~on_table, p.dt, 0.0),
+        phi_max=jnp.maximum(a.phi_max, jnp.where(live, rot, 0.0)),
+        yaw_max=jnp.maximum(a.yaw_max, jnp.where(live, dyaw, 0.0)),
+        tilt_max=jnp.maximum(a.tilt_max, jnp.where(live, _tilt(quat), 0.0)),
+        force_left_max=jnp.maximum(a.force_left_max, fl),
+        force_right_max=jnp.maximum(a.force_right_max, fr),
+        lift_after_lift=jnp.where(lift_end, obj_lift, a.lift_after_lift),
+        table_after_lift=jnp.where(lift_end, on_table, a.table_after_lift),
+        slip_max=jnp.maximum(a.slip_max, jnp.where(in_window, m.lift - obj_lift, 0.0)),
+        lift_final=jnp.where(hold_end, obj_lift, a.lift_final),
+        table_final=jnp.where(hold_end, on_table, a.table_final),
+        rot_final=jnp.where(hold_end, rot, a.rot_final),
+        finished=a.finished | hold_end,
+        diverged=diverged,
+        t=a.t + p.dt,
+    )
+
+
+def finalize(p: GraspParams, a: Accumulators) -> dict:
+    """Per-pick results: eq. (2) score with documented normalisation, success, reason.
+
+    Normalisation: t_grasp and t_grasp_nc are fractions of the planned grasp window
+    (dwell + lift + hold), so each term of S lies in [0, 1]; weights are 1/3 each (the
+    paper's 0.33), so S lies in [0, 1].
+    """
+    window = p.dwell_s + p.lift_height_m / p.lift_speed_m_s + p.hold_s
+    t_grasp = jnp.clip(a.held_time / window, 0.0, 1.0)
+    t_nc = jnp.clip(a.off_table_time / window, 0.0, 1.0)
+    phi_deg = jnp.rad2deg(a.phi_max)
+    score = (t_grasp + (180.0 - phi_deg) / 180.0 + t_nc) / 3.0
+    high = p.success_height_fraction * p.lift_height_m
+    lifted_after_lift = (a.lift_after_lift >= high) & ~a.table_after_lift
+    held_to_end = a.finished & (a.lift_final >= high) & ~a.table_final
+    upright = a.rot_final <= p.max_rotation_rad
+    success = a.reached & held_to_end & upright & ~a.diverged
+    failure = jnp.select(
+        [
+            a.diverged,
+            ~a.reached & ~a.contact_seen,
+            ~a.reached,
+            ~lifted_after_lift,
+            ~held_to_end,
+            ~upright,
+        ],
+        [DIVERGED, NO_CONTACT, FORCE_NOT_REACHED, SLIPPED_IN_LIFT, DROPPED_IN_HOLD, ROTATED],
+        OK,
+    )
+    nan = jnp.full_like(score, jnp.nan)
+    return {
+        "success": success,
+        "failure": failure.astype(jnp.int32),
+        "diverged": a.diverged,
+        "score": jnp.where(a.diverged, nan, score),
+        "t_grasp": jnp.where(a.diverged, nan, t_grasp),
+        "phi_max_deg": jnp.where(a.diverged, nan, phi_deg),
+        "t_grasp_nc": jnp.where(a.diverged, nan, t_nc),
+        "yaw_max_deg": jnp.rad2deg(a.yaw_max),
+        "tilt_max_deg": jnp.rad2deg(a.tilt_max),
+        "t_reached_s": a.t_reached,
+        "max_force_left_n": a.force_left_max,
+        "max_force_right_n": a.force_right_max,
+        "lift_height_mm": 1e3 * a.lift_final,
+        "slip_mm": 1e3 * a.slip_max,
+    }
+
+
+class Addresses(NamedTuple):
+    """Where the kernels read and write in MuJoCo's arrays (ints: static under jit)."""
+
+    object_qpos: int
+    lift_qpos: int
+    finger_left_qpos: int
+    finger_right_qpos: int
+    object_body: int
+    finger_left_body: int
+    finger_right_body: int
+    lift_actuator: int
+    finger_left_actuator: int
+    finger_right_actuator: int
+    nu: int
+
+
+def measure(ad: Addresses, qpos, qvel, cfrc_ext) -> Measurement:
+    """Measurement from one simulation's qpos (nq,), qvel (nv,), cfrc_ext (nbody, 6).
+
+    cfrc_ext rows are (torque, force) in world axes. The object pushes the left pad
+    towards -x and the right pad towards +x; the table force on the object is the
+    object's external force minus what the pads apply to it (Newton's third law).
+    """
+    f_obj = cfrc_ext[ad.object_body, 3:]
+    f_left = cfrc_ext[ad.finger_left_body, 3:]
+    f_right = cfrc_ext[ad.finger_right_body, 3:]
+    o = ad.object_qpos
+    return Measurement(
+        force_left=-f_left[0],
+        force_right=f_right[0],
+        force_table=f_obj[2] + f_left[2] + f_right[2],
+        object_pos=qpos[o : o + 3],
+        object_quat=qpos[o + 3 : o + 7],
+        lift=qpos[ad.lift_qpos],
+        speed_max=jnp.max(jnp.abs(qvel)),
+        finite=jnp.all(jnp.isfinite(qpos)) & jnp.all(jnp.isfinite(qvel)),
+    )
+
+
+def command(ad: Addresses, s: ControlState, like):
+    """Actuator controls (nu,) for the state's targets."""
+    ctrl = jnp.zeros(ad.nu, like.dtype)
+    ctrl = ctrl.at[ad.lift_actuator].set(s.lift_target)
+    ctrl = ctrl.at[ad.finger_left_actuator].set(s.finger_target)
+    return ctrl.at[ad.finger_right_actuator].set(s.finger_target)
+
+
+def tick(p: GraspParams, ad: Addresses, s, a, qpos, qvel, cfrc_ext, pos0, quat0):
+    """Measure, control, accumulate: everything one pick does once per control period.
+
+    Returns:
+      (next ControlState, next Accumulators, ctrl (nu,), trace row (TRACE_FIELDS,)).
+    """
+    m = measure(ad, qpos, qvel, cfrc_ext)
+    s_next = control_step(p, s, m)
+    a_next = accumulate(p, a, s, s_next, m, pos0, quat0)
+    row = jnp.stack(
+        [
+            a.t,
+            m.force_left,
+            m.force_right,
+            m.force_table,
+            m.object_pos[0],
+            m.object_pos[1],
+            m.object_pos[2],
+            _yaw(m.object_quat),
+            qpos[ad.finger_left_qpos],
+            qpos[ad.finger_right_qpos],
+            m.lift,
+            s.phase.astype(m.lift.dtype),
+        ]
+    )
+    return s_next, a_next, command(ad, s_next, qpos), row
+
+
+# one row per control tick of a recorded pick, SI units, in tick()'s order
+TRACE_FIELDS = (
+    "t_s",
+    "force_left_n",
+    "force_right_n",
+    "force_table_n",
+    "object_x_m",
+    "object_y_m",
+    "object_z_m",
+    "object_yaw_rad",
+    "finger_left_m",
+    "finger_right_m",
+    "lift_m",
+    "phase",
+)

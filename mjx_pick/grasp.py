@@ -1,0 +1,144 @@
+"""The simulated pick procedure: force-controlled close, lift, hold (user settings).
+
+:class:`GraspConfig` holds the user-facing settings (units in the names); ``params``
+turns them into the kernels' per-pick SI arrays (``mjx_pick.kernels.grasp``), which
+both backends share. Defaults follow the paper: F_d = 50 N (its UR5e test), a 5 ms
+control period (its Simulink rate), lifting as soon as F_d is reached, a 100 mm lift.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mjx_pick.config import ConfigError, check_range
+from mjx_pick.gripper import GripperSpec
+from mjx_pick.kernels import grasp as gk
+from mjx_pick.objects import ObjectModel
+from mjx_pick.physics import SolverParams
+
+G = 9.81
+
+
+@dataclasses.dataclass(frozen=True)
+class GraspConfig:
+    """Controller and phase settings of one simulated pick."""
+
+    grip_force_n: float = 50.0  # F_d, the desired pad force
+    kp_mm_s_per_n: float = 2.0  # P gain: each finger's speed (mm/s) per N of force error
+    # largest rate of closing of the opening; Robotiq 2F-85 range 20-150 mm/s
+    closing_speed_mm_s: float = 100.0
+    opening_speed_mm_s: float = 10.0  # largest rate of opening (force overshoot)
+    control_period_s: float = 0.005  # the paper's Simulink sample time
+    reach_fraction: float = 0.95  # F >= 0.95 F_d counts as "force reached"
+    dwell_s: float = 0.0  # wait between reaching F_d and lifting (paper: none)
+    settle_s: float = 0.02  # the object settles on the table before closing
+    close_timeout_s: float = 1.5  # a symmetric gripper may travel its half stroke
+    lift_height_mm: float = 100.0  # the paper's test lifted 10 cm
+    lift_speed_mm_s: float = 200.0
+    hold_s: float = 0.5
+    success_height_fraction: float = 0.9  # success: object lifted >= 90 % of the lift
+    max_rotation_deg: float = 45.0  # ...and turned at most this much in the grip
+    pad_contact_fraction: float = 0.02  # a pad touches above this fraction of F_d
+    table_contact_fraction: float = 0.1  # table contact above this fraction of m g
+    safety_factor: float = 1.1  # S_f of eq. (1), the paper's "gripper safety margin"
+    # |qvel| above this (m/s, rad/s) is a blow-up; a light block squeezed out of a
+    # corner pinch legitimately spins at ~60 rad/s, a blow-up reaches 1e3+ or NaN
+    divergence_speed: float = 200.0
+
+    def __post_init__(self):
+        o = "grasp"
+        check_range(o, "grip_force_n", self.grip_force_n, 0, lo_open=True)
+        check_range(o, "kp_mm_s_per_n", self.kp_mm_s_per_n, 0, 1e4, lo_open=True)
+        check_range(o, "closing_speed_mm_s", self.closing_speed_mm_s, 0, 2000, lo_open=True)
+        check_range(o, "opening_speed_mm_s", self.opening_speed_mm_s, 0, 2000)
+        check_range(o, "control_period_s", self.control_period_s, 1e-4, 0.05)
+        check_range(o, "reach_fraction", self.reach_fraction, 0.5, 1.0)
+        check_range(o, "dwell_s", self.dwell_s, 0, 10)
+        check_range(o, "settle_s", self.settle_s, 0, 10)
+        check_range(o, "close_timeout_s", self.close_timeout_s, 0, 60, lo_open=True)
+        check_range(o, "lift_height_mm", self.lift_height_mm, 0, 2000, lo_open=True)
+        check_range(o, "lift_speed_mm_s", self.lift_speed_mm_s, 0, 5000, lo_open=True)
+        check_range(o, "hold_s", self.hold_s, 0, 60)
+        check_range(o, "success_height_fraction", self.success_height_fraction, 0, 1, lo_open=True)
+        check_range(o, "max_rotation_deg", self.max_rotation_deg, 0, 180, lo_open=True)
+        check_range(o, "pad_contact_fraction", self.pad_contact_fraction, 0, 0.5, lo_open=True)
+        check_range(o, "table_contact_fraction", self.table_contact_fraction, 0, 1, lo_open=True)
+        check_range(o, "safety_factor", self.safety_factor, 1.0)
+        check_range(o, "divergence_speed", self.divergence_speed, 0.1, lo_open=False)
+
+    @property
+    def duration_s(self) -> float:
+        """Simulated time: every phase at its longest."""
+        lift = self.lift_height_mm / self.lift_speed_mm_s
+        return self.settle_s + self.close_timeout_s + self.dwell_s + lift + self.hold_s
+
+    def n_ticks(self) -> int:
+        """Control periods simulated (one spare so the last transition is seen)."""
+        return int(math.ceil(self.duration_s / self.control_period_s)) + 2
+
+    def substeps(self, solver: SolverParams) -> int:
+        """Physics steps per control period."""
+        n = self.control_period_s / solver.timestep_s
+        if abs(n - round(n)) > 1e-6 or round(n) < 1:
+            raise ConfigError(
+                f"grasp.control_period_s = {self.control_period_s:g} must be a whole multiple "
+                f"of solver.timestep_s = {solver.timestep_s:g}"
+            )
+        return int(round(n))
+
+    def check_gripper(self, gripper: GripperSpec) -> None:
+        """Settings the gripper cannot do are errors naming the field and the range."""
+        if not gripper.force_min_n <= self.grip_force_n <= gripper.force_max_n:
+            raise ConfigError(
+                f"grasp.grip_force_n = {self.grip_force_n:g} is out of range for {gripper.name}: "
+                f"allowed {gripper.force_min_n:g} <= grip_force_n <= {gripper.force_max_n:g}"
+            )
+        if not gripper.speed_min_mm_s <= self.closing_speed_mm_s <= gripper.speed_max_mm_s:
+            raise ConfigError(
+                f"grasp.closing_speed_mm_s = {self.closing_speed_mm_s:g} is out of range for "
+                f"{gripper.name}: allowed {gripper.speed_min_mm_s:g} <= closing_speed_mm_s "
+                f"<= {gripper.speed_max_mm_s:g}"
+            )
+
+    def params(self, obj: ObjectModel) -> gk.GraspParams:
+        """The kernels' parameters (float32 scalars, SI)."""
+        f32 = np.float32
+        return gk.GraspParams(
+            force_n=f32(self.grip_force_n),
+            kp=f32(self.kp_mm_s_per_n * 1e-3),
+            v_close=f32(0.5 * self.closing_speed_mm_s * 1e-3),
+            v_open=f32(0.5 * self.opening_speed_mm_s * 1e-3),
+            reach_fraction=f32(self.reach_fraction),
+            dwell_s=f32(self.dwell_s),
+            settle_s=f32(self.settle_s),
+            close_timeout_s=f32(self.close_timeout_s),
+            lift_height_m=f32(self.lift_height_mm * 1e-3),
+            lift_speed_m_s=f32(self.lift_speed_mm_s * 1e-3),
+            hold_s=f32(self.hold_s),
+            pad_contact_n=f32(self.pad_contact_fraction * self.grip_force_n),
+            table_contact_n=f32(self.table_contact_fraction * obj.mass_kg * G),
+            success_height_fraction=f32(self.success_height_fraction),
+            max_rotation_rad=f32(math.radians(self.max_rotation_deg)),
+            divergence_speed=f32(self.divergence_speed),
+            dt=f32(self.control_period_s),
+        )
+
+
+def min_grasp_force_n(obj: ObjectModel, pad_friction: float, safety_factor: float) -> float:
+    """Eq. (1) of the paper: F_Gmin = m g S_f / (2 mu_s), N."""
+    return obj.mass_kg * G * safety_factor / (2.0 * pad_friction)
+
+
+def broadcast_params(p: gk.GraspParams, n: int, **per_pick) -> gk.GraspParams:
+    """(N,) arrays of every parameter; per_pick names fields given per pick-point."""
+    unknown = set(per_pick) - set(gk.GraspParams._fields)
+    if unknown:
+        raise ConfigError(f"unknown grasp parameter(s): {', '.join(sorted(unknown))}")
+    fields = {}
+    for name in gk.GraspParams._fields:
+        value = per_pick.get(name, getattr(p, name))
+        fields[name] = np.broadcast_to(np.asarray(value, np.float32), (n,)).copy()
+    return gk.GraspParams(**fields)
