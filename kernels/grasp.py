@@ -190,7 +190,7 @@ def _yaw(q):
 
 def _tilt(q):
     """Angle between the object's z axis and the world's (rad)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
+    x, y = q[1], q[2]
     r22 = 1.0 - 2.0 * (x * x + y * y)
     return jnp.arccos(jnp.clip(r22, -1.0, 1.0))
 
