@@ -50,6 +50,7 @@ class GraspParams(NamedTuple):
     close_timeout_s: jax.Array
     lift_height_m: jax.Array
     lift_speed_m_s: jax.Array
+    lift_accel_m_s2: jax.Array  # trapezoidal lift: accelerate, cruise, decelerate
     hold_s: jax.Array
     pad_contact_n: jax.Array  # a pad touches when its force exceeds this
     table_contact_n: jax.Array  # the object touches the table when its force exceeds this
@@ -64,6 +65,7 @@ class ControlState(NamedTuple):
     t_phase: jax.Array  # s in the current phase
     finger_target: jax.Array  # m, each finger's closing-travel target
     lift_target: jax.Array  # m, gripper lift target
+    lift_velocity: jax.Array  # m/s, of the lift target
 
 
 class Measurement(NamedTuple):
@@ -105,9 +107,8 @@ class Accumulators(NamedTuple):
 def initial_state(finger_travel0) -> ControlState:
     """Start: settling, fingers at their starting travel, gripper not lifted."""
     z = jnp.zeros_like(finger_travel0)
-    return ControlState(
-        jnp.int32(SETTLE) + jnp.zeros_like(finger_travel0, jnp.int32), z, finger_travel0, z
-    )
+    phase = jnp.int32(SETTLE) + jnp.zeros_like(finger_travel0, jnp.int32)
+    return ControlState(phase, z, finger_travel0, z, z)
 
 
 def initial_accumulators(like) -> Accumulators:
@@ -147,7 +148,6 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
     t = s.t_phase + p.dt
     ph = s.phase
     reached = force >= p.reach_fraction * p.force_n
-    lift_time = p.lift_height_m / p.lift_speed_m_s
     nxt = jnp.select(
         [
             (ph == SETTLE) & (t >= p.settle_s),
@@ -155,7 +155,7 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
             (ph == CLOSE) & reached,
             (ph == CLOSE) & (t >= p.close_timeout_s),
             (ph == DWELL) & (t >= p.dwell_s),
-            (ph == LIFT) & (t >= lift_time),
+            (ph == LIFT) & (s.lift_target >= p.lift_height_m),
             (ph == HOLD) & (t >= p.hold_s),
         ],
         [CLOSE, DWELL, LIFT, DONE, LIFT, HOLD, DONE],
@@ -168,13 +168,26 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
     )
     v = jnp.clip(p.kp * (p.force_n - force), -p.v_open, p.v_close)
     finger_target = s.finger_target + jnp.where(active, v * p.dt, 0.0)
-    lifting = (nxt == LIFT) | (nxt == HOLD) | ((nxt == DONE) & (s.lift_target > 0))
-    lift_target = jnp.where(
-        lifting,
-        jnp.minimum(s.lift_target + p.lift_speed_m_s * p.dt, p.lift_height_m),
-        s.lift_target,
-    )
-    return ControlState(nxt, t_next, finger_target, lift_target)
+    # the lift runs in LIFT only: trapezoidal profile, the speed rises by a*dt, never
+    # above the cruise speed, and never above what still allows a stop at the top
+    lifting = nxt == LIFT
+    remaining = jnp.maximum(p.lift_height_m - s.lift_target, 0.0)
+    v_stop = jnp.sqrt(2.0 * p.lift_accel_m_s2 * remaining)
+    v_lift = jnp.minimum(s.lift_velocity + p.lift_accel_m_s2 * p.dt, p.lift_speed_m_s)
+    v_lift = jnp.where(lifting, jnp.clip(v_lift, 0.0, v_stop), 0.0)
+    lift_target = s.lift_target + v_lift * p.dt
+    # within a micrometre of the top counts as arrived (the stopping speed tends to 0)
+    lift_target = jnp.where(p.lift_height_m - lift_target < 1e-6, p.lift_height_m, lift_target)
+    lift_target = jnp.where(lifting, jnp.minimum(lift_target, p.lift_height_m), s.lift_target)
+    return ControlState(nxt, t_next, finger_target, lift_target, v_lift)
+
+
+def lift_duration(p: GraspParams):
+    """Time of the trapezoidal lift (triangular when the cruise speed is not reached), s."""
+    v, a, h = p.lift_speed_m_s, p.lift_accel_m_s2, p.lift_height_m
+    trapezoid = h / v + v / a
+    triangle = 2.0 * jnp.sqrt(h / a)
+    return jnp.where(v * v / a < h, trapezoid, triangle)
 
 
 def _quat_angle(q, q0):
@@ -265,7 +278,7 @@ def finalize(p: GraspParams, a: Accumulators) -> dict:
     (dwell + lift + hold), so each term of S lies in [0, 1]; weights are 1/3 each (the
     paper's 0.33), so S lies in [0, 1].
     """
-    window = p.dwell_s + p.lift_height_m / p.lift_speed_m_s + p.hold_s
+    window = p.dwell_s + lift_duration(p) + p.hold_s
     t_grasp = jnp.clip(a.held_time / window, 0.0, 1.0)
     t_nc = jnp.clip(a.off_table_time / window, 0.0, 1.0)
     phi_deg = jnp.rad2deg(a.phi_max)

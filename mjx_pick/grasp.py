@@ -38,6 +38,7 @@ class GraspConfig:
     close_timeout_s: float = 1.5  # a symmetric gripper may travel its half stroke
     lift_height_mm: float = 100.0  # the paper's test lifted 10 cm
     lift_speed_mm_s: float = 200.0
+    lift_accel_mm_s2: float = 2000.0  # the arm's acceleration (trapezoidal profile)
     hold_s: float = 0.5
     success_height_fraction: float = 0.9  # success: object lifted >= 90 % of the lift
     max_rotation_deg: float = 45.0  # ...and turned at most this much in the grip
@@ -61,6 +62,7 @@ class GraspConfig:
         check_range(o, "close_timeout_s", self.close_timeout_s, 0, 60, lo_open=True)
         check_range(o, "lift_height_mm", self.lift_height_mm, 0, 2000, lo_open=True)
         check_range(o, "lift_speed_mm_s", self.lift_speed_mm_s, 0, 5000, lo_open=True)
+        check_range(o, "lift_accel_mm_s2", self.lift_accel_mm_s2, 0, 1e5, lo_open=True)
         check_range(o, "hold_s", self.hold_s, 0, 60)
         check_range(o, "success_height_fraction", self.success_height_fraction, 0, 1, lo_open=True)
         check_range(o, "max_rotation_deg", self.max_rotation_deg, 0, 180, lo_open=True)
@@ -72,8 +74,13 @@ class GraspConfig:
     @property
     def duration_s(self) -> float:
         """Simulated time: every phase at its longest."""
-        lift = self.lift_height_mm / self.lift_speed_mm_s
-        return self.settle_s + self.close_timeout_s + self.dwell_s + lift + self.hold_s
+        return self.settle_s + self.close_timeout_s + self.dwell_s + self.lift_s + self.hold_s
+
+    @property
+    def lift_s(self) -> float:
+        """Duration of the trapezoidal (or triangular) lift."""
+        v, a, h = self.lift_speed_mm_s, self.lift_accel_mm_s2, self.lift_height_mm
+        return h / v + v / a if v * v / a < h else 2.0 * math.sqrt(h / a)
 
     def n_ticks(self) -> int:
         """Control periods simulated (one spare so the last transition is seen)."""
@@ -117,6 +124,7 @@ class GraspConfig:
             close_timeout_s=f32(self.close_timeout_s),
             lift_height_m=f32(self.lift_height_mm * 1e-3),
             lift_speed_m_s=f32(self.lift_speed_mm_s * 1e-3),
+            lift_accel_m_s2=f32(self.lift_accel_mm_s2 * 1e-3),
             hold_s=f32(self.hold_s),
             pad_contact_n=f32(self.pad_contact_fraction * self.grip_force_n),
             table_contact_n=f32(self.table_contact_fraction * obj.mass_kg * G),

@@ -233,6 +233,8 @@ def object_from_image(
       material: material name recorded with the results.
       name: defaults to the file stem.
     """
+    if not Path(path).is_file():
+        raise ConfigError(f"image {str(path)!r} does not exist")
     if px_per_mm is None:
         raise ConfigError("px_per_mm is required for an image object (pixels per millimetre)")
     if thickness_mm is None:

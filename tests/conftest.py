@@ -1,4 +1,9 @@
-"""Shared fixtures. Strict numerics: rank promotion raises, warnings are errors (pyproject)."""
+"""Shared fixtures and strict numerics.
+
+Rank promotion raises in every test except those marked ``mjx``: MJX's own code relies
+on implicit rank promotion, so tests that trace MJX run under JAX's default. Warnings
+are errors (pyproject's filterwarnings).
+"""
 
 import os
 
@@ -8,7 +13,18 @@ os.environ.setdefault("JAX_PLATFORMS", "cpu")
 import jax  # noqa: E402
 import pytest  # noqa: E402
 
-jax.config.update("jax_numpy_rank_promotion", "raise")
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "mjx: traces MJX (runs without strict rank promotion)")
+
+
+@pytest.fixture(autouse=True)
+def strict_rank_promotion(request):
+    if request.node.get_closest_marker("mjx"):
+        yield
+        return
+    with jax.numpy_rank_promotion("raise"):
+        yield
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,358 @@
+"""Evaluate pick-points end to end: object + gripper -> pick-points -> simulation -> results.
+
+``evaluate`` is the Python form of ``mjx-pick evaluate``. With ``out`` it writes:
+
+* ``config.json``  the merged configuration, versions, backend, device and seed;
+* ``scene.xml``    the MuJoCo model that was simulated;
+* ``results.parquet`` one row per pick-point (``mjx_pick.metrics.COLUMNS``);
+* ``summary.json`` counts, success rate, score quantiles, failure reasons, eq. (1)'s
+  F_Gmin, pick-points per second, compile time apart from run time;
+* ``traces.parquet`` long-format traces of the n best and n worst pick-points (they
+  are re-simulated with recording on: keeping traces of every pick-point of a large
+  batch would not fit in device memory).
+
+Large runs go in chunks; each finished chunk is written atomically under ``chunks/`` so
+that ``resume=True`` redoes nothing that finished.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import hashlib
+import json
+import platform
+import sys
+import time
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from mjx_pick import pickpoints as pp
+from mjx_pick.config import ConfigError, to_dict, write_atomic, write_json
+from mjx_pick.grasp import GraspConfig, min_grasp_force_n
+from mjx_pick.gripper import GripperSpec, load_gripper
+from mjx_pick.kernels import grasp as gk
+from mjx_pick.metrics import results_table, summarize
+from mjx_pick.objects import ObjectModel, load_object
+from mjx_pick.physics import ContactParams, SolverParams
+from mjx_pick.scene import Scene, build_scene
+from mjx_pick.simulate import make_backend, make_inputs
+
+
+@dataclasses.dataclass
+class Evaluation:
+    """What an evaluation produced (also written to out_dir when one was given)."""
+
+    table: pa.Table
+    summary: dict
+    config: dict
+    traces: pa.Table | None
+    out_dir: Path | None
+
+
+def default_batch_size(backend_name: str) -> int:
+    """Simulations per backend call: MJX fills a GPU; the C engine a thread pool."""
+    from mjx_pick.simulate import has_accelerator
+
+    if backend_name == "mujoco" or (backend_name == "auto" and not has_accelerator()):
+        return 256
+    return 8192 if has_accelerator() else 64
+
+
+def read_picks_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """User pick-points: a CSV with columns x_mm, y_mm, yaw_deg (a header row)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"picks file {str(path)!r} does not exist")
+    with path.open(newline="") as fh:
+        reader = csv.DictReader(fh)
+        need = ("x_mm", "y_mm", "yaw_deg")
+        missing = [c for c in need if c not in (reader.fieldnames or [])]
+        if missing:
+            raise ConfigError(
+                f"picks file {path.name}: missing column(s) {', '.join(missing)}; "
+                f"found {reader.fieldnames}"
+            )
+        rows = []
+        for i, row in enumerate(reader, start=2):
+            try:
+                rows.append([float(row[c]) for c in need])
+            except (TypeError, ValueError) as err:
+                raise ConfigError(f"picks file {path.name}, row {i}: {err}") from err
+    if not rows:
+        raise ConfigError(f"picks file {path.name} has no rows")
+    a = np.asarray(rows, float)
+    if not np.isfinite(a).all():
+        bad = int(np.flatnonzero(~np.isfinite(a).all(axis=1))[0]) + 2
+        raise ConfigError(f"picks file {path.name}, row {bad}: values must be finite")
+    return a[:, 0], a[:, 1], a[:, 2]
+
+
+def user_picks(obj: ObjectModel, gripper: GripperSpec, x, y, yaw, config=None) -> pp.PickBatch:
+    """Check user pick-points; infeasible ones are an error naming rows and reasons."""
+    checker = pp.FeasibilityChecker(obj, gripper, config)
+    ids = np.arange(len(x))
+    res = checker(x, y, yaw)
+    bad = np.flatnonzero(res["reason"] != 0)
+    if len(bad):
+        shown = ", ".join(f"row {i + 2} ({pp.REASONS[res['reason'][i]]})" for i in bad[:8])
+        raise ConfigError(
+            f"{len(bad)} of {len(x)} pick-points are infeasible for {gripper.name}: {shown}"
+            + (" ..." if len(bad) > 8 else "")
+        )
+    return checker.batch(ids, x, y, yaw, mode="user")
+
+
+def versions() -> dict:
+    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for pkg in ("mjx-pick", "mujoco", "mujoco-mjx", "jax", "jaxlib", "numpy"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def _resolve(obj, gripper) -> tuple[ObjectModel, GripperSpec]:
+    if not isinstance(obj, ObjectModel):
+        obj = load_object(obj)
+    if not isinstance(gripper, GripperSpec):
+        gripper = load_gripper(gripper)
+    return obj, gripper
+
+
+def evaluate(
+    obj: ObjectModel | str,
+    gripper: GripperSpec | str = "robotiq-2f85",
+    *,
+    n: int = 1000,
+    seed: int = 0,
+    picks: pp.PickBatch | str | Path | None = None,
+    contact: ContactParams | None = None,
+    solver: SolverParams | None = None,
+    grasp: GraspConfig | None = None,
+    pick_config: pp.PickConfig | None = None,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    out: str | Path | None = None,
+    n_traces: int = 3,
+    progress: bool = False,
+    resume: bool = False,
+    until: int | None = None,
+    min_score: float = 0.9,
+    max_n: int | None = None,
+) -> Evaluation:
+    """Simulate pick-points of an object with a gripper; see the module docstring.
+
+    Args:
+      obj: an ObjectModel, a shipped asset name, or an image/mesh path (see load_object).
+      gripper: a GripperSpec, a preset name or a gripper TOML path.
+      n: pick-points to generate (Normal mode) when picks is None.
+      seed: generator seed (same seed, same pick-points).
+      picks: a PickBatch or a CSV path (x_mm, y_mm, yaw_deg) instead of generating.
+      contact, solver, grasp, pick_config: settings (defaults: the paper's).
+      backend: "auto", "mjx" or "mujoco".
+      batch_size: simulations per backend call (default: per backend).
+      out: output folder (nothing is written without one).
+      n_traces: traces kept for the n best and n worst pick-points.
+      progress: show a progress bar.
+      resume: skip chunks an interrupted run with the same configuration finished.
+      until, min_score, max_n: Optimization mode -- simulate batches until `until`
+        pick-points reach min_score or max_n are spent.
+    """
+    obj, gripper = _resolve(obj, gripper)
+    contact = contact or ContactParams()
+    solver = solver or SolverParams()
+    grasp = grasp or GraspConfig()
+    pick_config = pick_config or pp.PickConfig()
+    grasp.check_gripper(gripper)
+    scene = build_scene(obj, gripper, contact, solver)
+    batch = batch_size or default_batch_size(backend)
+    runner = make_backend(backend, scene, grasp, batch)
+    out_dir = Path(out) if out is not None else None
+
+    if until is not None:
+        picks_batch, results = _optimize(
+            scene,
+            grasp,
+            runner,
+            obj,
+            gripper,
+            until,
+            min_score,
+            max_n or 10 * until,
+            batch,
+            seed,
+            pick_config,
+        )
+    else:
+        if picks is None:
+            picks_batch = pp.generate_normal(obj, gripper, n, seed=seed, config=pick_config)
+        elif isinstance(picks, pp.PickBatch):
+            picks_batch = picks
+        else:
+            picks_batch = user_picks(obj, gripper, *read_picks_csv(picks), config=pick_config)
+        results = None
+
+    config = {
+        "object": obj.summary(),
+        "gripper": to_dict(gripper),
+        "contact": to_dict(contact),
+        "contact_in_mujoco": to_dict(scene.contact),
+        "solver": to_dict(solver),
+        "grasp": to_dict(grasp),
+        "picks": to_dict(pick_config),
+        "n": int(len(picks_batch)),
+        "seed": int(seed),
+        "mode": picks_batch.mode,
+        "backend": runner.name,
+        "device": runner.device,
+        "batch_size": int(batch),
+    }
+    key = _config_key(config)
+    config["config_key"] = key
+    config["versions"] = versions()
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        _check_resume(out_dir, key, resume)
+        write_json(out_dir / "config.json", config)
+        write_atomic(out_dir / "scene.xml", scene.xml)
+
+    t0 = time.perf_counter()
+    if results is None:
+        table = _run_chunks(scene, grasp, runner, picks_batch, batch, out_dir, progress)
+    else:
+        table = results_table(picks_batch, results)
+    wall = time.perf_counter() - t0
+    summary = summarize(table)
+    mu = gripper.pad_friction if gripper.pad_friction is not None else contact.pad_friction
+    summary.update(
+        {
+            "object": obj.name,
+            "gripper": gripper.name,
+            "backend": runner.name,
+            "device": runner.device,
+            "f_gmin_n": min_grasp_force_n(obj, mu, grasp.safety_factor),
+            "grip_force_n": grasp.grip_force_n,
+            "candidates_checked": int(picks_batch.n_candidates),
+            "rejected": dict(picks_batch.rejected),
+            "compile_s": round(runner.stats.compile_s, 3),
+            "run_s": round(runner.stats.run_s, 3),
+            "wall_s": round(wall, 3),
+            "picks_per_s": round(runner.stats.n / runner.stats.run_s, 2)
+            if runner.stats.run_s > 0
+            else None,
+            "simulated_s_per_pick": round(grasp.duration_s, 3),
+            "physics_steps_per_pick": grasp.n_ticks() * grasp.substeps(solver),
+        }
+    )
+    traces = _traces(scene, grasp, runner, picks_batch, table, n_traces) if n_traces else None
+    if out_dir is not None:
+        _write_table(out_dir / "results.parquet", table)
+        write_json(out_dir / "summary.json", summary)
+        if traces is not None:
+            _write_table(out_dir / "traces.parquet", traces)
+    return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _config_key(config: dict) -> str:
+    text = json.dumps(
+        {k: v for k, v in config.items() if k not in ("device",)}, sort_keys=True, default=str
+    )
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _check_resume(out_dir: Path, key: str, resume: bool) -> None:
+    old = out_dir / "config.json"
+    chunks = sorted((out_dir / "chunks").glob("part-*.parquet"))
+    if not chunks:
+        return
+    if not resume:
+        raise ConfigError(
+            f"{out_dir} holds results of an earlier run: pass --resume to continue it, "
+            "or choose another --out"
+        )
+    if old.is_file() and json.loads(old.read_text()).get("config_key") != key:
+        raise ConfigError(
+            f"{out_dir} holds a run with a different configuration; it cannot be resumed "
+            "with these settings (choose another --out)"
+        )
+
+
+def _write_table(path: Path, table: pa.Table) -> None:
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    write_atomic(path, sink.getvalue().to_pybytes())
+
+
+def _run_chunks(scene, grasp, runner, picks, batch, out_dir, progress) -> pa.Table:
+    chunk = max(batch, 1)
+    n = len(picks)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n, unit="pick", desc=f"simulating ({runner.name})")
+    parts = []
+    for k, start in enumerate(range(0, n, chunk)):
+        path = out_dir / "chunks" / f"part-{k:06d}.parquet" if out_dir is not None else None
+        sub = picks.take(slice(start, start + chunk))
+        if path is not None and path.is_file():
+            part = pq.read_table(path)
+        else:
+            out, _ = runner.run(make_inputs(scene, grasp, sub))
+            part = results_table(sub, out)
+            if path is not None:
+                _write_table(path, part)
+        parts.append(part)
+        if bar is not None:
+            bar.update(len(sub))
+    if bar is not None:
+        bar.close()
+    return pa.concat_tables(parts)
+
+
+def _optimize(scene, grasp, runner, obj, gripper, k, min_score, max_n, batch, seed, config):
+    collected = {}
+
+    def score_fn(b: pp.PickBatch) -> np.ndarray:
+        out, _ = runner.run(make_inputs(scene, grasp, b))
+        for name, v in out.items():
+            collected.setdefault(name, []).append(np.asarray(v))
+        return np.where(out["success"], np.nan_to_num(out["score"], nan=-1.0), -1.0)
+
+    res = pp.optimize(
+        obj,
+        gripper,
+        score_fn,
+        k=k,
+        min_score=min_score,
+        max_n=max_n,
+        batch_size=min(batch, max_n),
+        seed=seed,
+        config=config,
+    )
+    merged = {name: np.concatenate(v) for name, v in collected.items()}
+    return res.picks, merged
+
+
+def _traces(scene: Scene, grasp, runner, picks: pp.PickBatch, table: pa.Table, n: int):
+    """Re-simulate the n best and n worst pick-points with recording on."""
+    score = np.asarray(table["score"], float)
+    order = np.argsort(np.where(np.isnan(score), -np.inf, score))
+    chosen = np.unique(np.concatenate([order[::-1][:n], order[:n]]))
+    if len(chosen) == 0:
+        return None
+    sub = picks.take(chosen)
+    _, rows = runner.run(make_inputs(scene, grasp, sub), record=True)
+    n_pick, n_tick, _ = rows.shape
+    cols = {"pick_id": np.repeat(sub.pick_id, n_tick)}
+    for j, name in enumerate(gk.TRACE_FIELDS):
+        cols[name] = rows[:, :, j].reshape(-1)
+    cols["phase"] = np.asarray(gk.PHASES, dtype=object)[cols["phase"].astype(int)]
+    cols["rank"] = np.repeat(np.where(np.isin(chosen, order[::-1][:n]), "best", "worst"), n_tick)
+    return pa.table(cols)
