@@ -27,8 +27,7 @@ COLUMNS = {
     "t_grasp_nc": ("float64", "fraction of the grasp window the object was off the table"),
     "failure": (
         "string",
-        "none, no_contact, force_not_reached, slipped_in_lift, dropped_in_hold, rotated, "
-        "diverged",
+        "none, no_contact, force_not_reached, slipped_in_lift, dropped_in_hold, rotated, diverged",
     ),
     "diverged": ("bool", "the simulation blew up (NaN/Inf, MuJoCo reset, absurd speed)"),
     "max_force_left_n": ("float64", "largest left pad force"),

@@ -2,8 +2,10 @@
 
 The model compiles for the MuJoCo C engine and for MJX (``mujoco.mjx.put_model``).
 Only the contacts that matter exist: every geom has contype = conaffinity = 0 and the
-contacts are explicit ``<pair>``s -- each pad against each collision piece of the
-object, and the table against each piece. Fingers never collide with the table or each
+contacts are explicit ``<pair>``s -- each pad against each convex collision piece of the
+object, and the table against the object's convex hull (a rigid body on a plane touches
+it only on its hull, so one pair replaces one per piece). Fingers never collide with the
+table or each
 other, which keeps MJX's fixed-size contact buffers small.
 
 Bodies: ``object`` (free joint), ``gripper`` (vertical ``lift`` slide joint, position
@@ -113,10 +115,13 @@ def scene_xml(
         f'<mesh name="piece{i}" vertex="{_fmt(v)}" maxhullvert="32"/>'
         for i, v in enumerate(obj.pieces)
     ]
+    # a rigid body on a plane touches it only on its convex hull: one table pair
+    meshes.append(f'<mesh name="hull" vertex="{_fmt(np.vstack(obj.pieces))}"/>')
     pieces = "\n".join(
         f'      <geom name="piece{i}" type="mesh" mesh="piece{i}" group="3" rgba=".9 .5 .1 .5"/>'
         for i in range(len(obj.pieces))
     )
+    pieces += '\n      <geom name="hull" type="mesh" mesh="hull" group="4" rgba=".5 .5 .5 .3"/>'
     inertia = obj.inertia_kg_m2
     full = _fmt(
         [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
@@ -131,11 +136,10 @@ def scene_xml(
                 f'    <pair name="{pad}_piece{i}" geom1="{pad}" geom2="piece{i}" condim="3" '
                 f'friction="{pad_fr}" solref="{_fmt(mjc.pad_solref)}" solimp="{solimp}"/>'
             )
-    for i in range(len(obj.pieces)):
-        pairs.append(
-            f'    <pair name="table_piece{i}" geom1="table" geom2="piece{i}" condim="3" '
-            f'friction="{tab_fr}" solref="{_fmt(mjc.table_solref)}" solimp="{solimp}"/>'
-        )
+    pairs.append(
+        f'    <pair name="table_hull" geom1="table" geom2="hull" condim="3" '
+        f'friction="{tab_fr}" solref="{_fmt(mjc.table_solref)}" solimp="{solimp}"/>'
+    )
     finger_link_h = 0.03
     pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
     table_size = _fmt([TABLE_HALF_SIZE_M, TABLE_HALF_SIZE_M, 0.01])
