@@ -67,6 +67,31 @@ class ObjectModel:
     pick_height_mm: float
     material: str = "pla"
     source: str = ""
+    # prisms only: the outline the pieces were cut from (mm), and the thickness (m)
+    outline: Polygon | None = None
+
+    def pad_pieces(self, finger_depth_mm: float, finger_width_mm: float) -> tuple[np.ndarray, ...]:
+        """Collision pieces for the pads of a finger of this footprint (depth x width).
+
+        A hole no finger can enter never touches a pad, so for a prism it is filled
+        before partitioning: every hole vertex is reflex and costs a piece, and every
+        piece costs MJX a contact pair per pad. Mass properties and the table contact
+        (the convex hull) are unaffected. A hole is kept when its area could hold the
+        footprint and it is wider than the finger is deep (conservative: a hole kept
+        in doubt only costs speed).
+        """
+        if self.outline is None or not self.outline.interiors:
+            return self.pieces
+        kept = [
+            h
+            for h in self.outline.interiors
+            if _finger_may_enter(Polygon(h), finger_depth_mm, finger_width_mm)
+        ]
+        if len(kept) == len(self.outline.interiors):
+            return self.pieces
+        filled = Polygon(self.outline.exterior, kept)
+        height = float(self.pieces[0][:, 2].max())
+        return tuple(_prism(p, height) for p in convex_partition(filled, MAX_PIECE_CORNERS))
 
     @property
     def area_mm2(self) -> float:
@@ -293,9 +318,17 @@ def object_from_polygon(
     pieces = tuple(
         _prism(piece, thickness_mm * 1e-3) for piece in convex_partition(coarse, MAX_PIECE_CORNERS)
     )
-    return _finish(
+    obj = _finish(
         name, polygon, thickness_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
     )
+    return dataclasses.replace(obj, outline=coarse)
+
+
+def _finger_may_enter(hole: Polygon, depth_mm: float, width_mm: float) -> bool:
+    if hole.area < depth_mm * width_mm:
+        return False
+    radius = shapely.maximum_inscribed_circle(hole, tolerance=0.05).length
+    return 2.0 * radius >= depth_mm
 
 
 def _mass_kg(name: str, volume_m3: float, mass_g: float | None, density: float | None) -> float:

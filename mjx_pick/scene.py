@@ -111,15 +111,16 @@ def scene_xml(
     meshes = [
         f'<mesh name="visual" vertex="{_fmt(obj.mesh.vertices)}" face="{_fmt(obj.mesh.faces)}"/>'
     ]
+    pad_pieces = obj.pad_pieces(gripper.finger_depth_mm, gripper.finger_width_mm)
     meshes += [
         f'<mesh name="piece{i}" vertex="{_fmt(v)}" maxhullvert="32"/>'
-        for i, v in enumerate(obj.pieces)
+        for i, v in enumerate(pad_pieces)
     ]
     # a rigid body on a plane touches it only on its convex hull: one table pair
     meshes.append(f'<mesh name="hull" vertex="{_fmt(np.vstack(obj.pieces))}"/>')
     pieces = "\n".join(
         f'      <geom name="piece{i}" type="mesh" mesh="piece{i}" group="3" rgba=".9 .5 .1 .5"/>'
-        for i in range(len(obj.pieces))
+        for i in range(len(pad_pieces))
     )
     pieces += '\n      <geom name="hull" type="mesh" mesh="hull" group="4" rgba=".5 .5 .5 .3"/>'
     inertia = obj.inertia_kg_m2
@@ -130,7 +131,7 @@ def scene_xml(
     tab_fr = _fmt([mjc.table_friction, mjc.table_friction, 0.005, 0.0001, 0.0001])
     solimp = _fmt(mjc.solimp)
     pairs = []
-    for i in range(len(obj.pieces)):
+    for i in range(len(pad_pieces)):
         for pad in ("pad_left", "pad_right"):
             pairs.append(
                 f'    <pair name="{pad}_piece{i}" geom1="{pad}" geom2="piece{i}" condim="3" '
