@@ -116,8 +116,12 @@ def scene_xml(
         f'<mesh name="piece{i}" vertex="{_fmt(v)}" maxhullvert="32"/>'
         for i, v in enumerate(pad_pieces)
     ]
-    # a rigid body on a plane touches it only on its convex hull: one table pair
-    meshes.append(f'<mesh name="hull" vertex="{_fmt(np.vstack(obj.pieces))}"/>')
+    # a rigid body on a plane touches it only on its convex hull: one table pair. The
+    # hull is capped at 32 vertices (MuJoCo/MJX want no face of more than 20); for a
+    # flat object that trims the support polygon's corners by well under a millimetre
+    meshes.append(
+        f'<mesh name="hull" vertex="{_fmt(np.vstack(obj.pieces))}" maxhullvert="32"/>'
+    )
     pieces = "\n".join(
         f'      <geom name="piece{i}" type="mesh" mesh="piece{i}" group="3" rgba=".9 .5 .1 .5"/>'
         for i in range(len(pad_pieces))
