@@ -6,13 +6,15 @@ measure, P controller, phase machine, metrics) runs for the whole batch as one j
 ``vmap`` on the CPU, exactly the code MJX runs, then every simulation still running
 advances ``n_substeps`` physics steps. Finished pick-points (DONE) stop stepping.
 
-MuJoCo C resets a simulation whose accelerations blow up (it warns and restarts from
-qpos0); such a reset, a MuJoCo error, non-finite state or an absurd speed all mark the
-pick-point ``diverged``.
+MuJoCo C normally resets a simulation whose state blows up; here auto-reset is
+disabled (as in MJX, a blown-up state stays non-finite), so a non-finite state, an
+absurd speed, a MuJoCo error or a reset that happens anyway all mark the pick-point
+``diverged``.
 """
 
 from __future__ import annotations
 
+import copy
 import functools
 import os
 import time
@@ -62,7 +64,9 @@ class MujocoBackend:
 
     def _batch(self, n: int) -> mujoco.batch.Batch:
         if n not in self._batches:
-            self._batches[n] = mujoco.batch.Batch(self.scene.model, nsim=n, nthread=self.nthread)
+            model = copy.copy(self.scene.model)
+            model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+            self._batches[n] = mujoco.batch.Batch(model, nsim=n, nthread=self.nthread)
         return self._batches[n]
 
     def run(self, inputs: PickInputs, record: bool = False):

@@ -119,9 +119,7 @@ def scene_xml(
     # a rigid body on a plane touches it only on its convex hull: one table pair. The
     # hull is capped at 32 vertices (MuJoCo/MJX want no face of more than 20); for a
     # flat object that trims the support polygon's corners by well under a millimetre
-    meshes.append(
-        f'<mesh name="hull" vertex="{_fmt(np.vstack(obj.pieces))}" maxhullvert="32"/>'
-    )
+    meshes.append(f'<mesh name="hull" vertex="{_fmt(np.vstack(obj.pieces))}" maxhullvert="32"/>')
     pieces = "\n".join(
         f'      <geom name="piece{i}" type="mesh" mesh="piece{i}" group="3" rgba=".9 .5 .1 .5"/>'
         for i in range(len(pad_pieces))
@@ -153,7 +151,7 @@ def scene_xml(
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{solver.timestep_s:.9g}" cone="{solver.cone}" impratio="{solver.impratio:.9g}"
           iterations="{solver.iterations}" ls_iterations="{solver.ls_iterations}"
-          integrator="{solver.integrator}"/>
+          integrator="{ {"euler": "Euler"}.get(solver.integrator, solver.integrator) }"/>
   <default>
     <geom contype="0" conaffinity="0"/>
   </default>

@@ -1,0 +1,58 @@
+"""The MuJoCo C backend pinned to the MJX backend, and backend selection.
+
+The full-size check (512 door-opener pick-points, default procedure) runs on a GPU in
+benchmarks/agreement.py (figures in benchmarks/RESULTS.md); this is its CI size.
+"""
+
+import numpy as np
+import pytest
+from scipy.stats import spearmanr
+
+import mjx_pick as mp
+from mjx_pick import pickpoints as pp
+from mjx_pick.grasp import GraspConfig
+from mjx_pick.simulate import has_accelerator, make_backend, make_inputs
+
+SHORT = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.3)
+
+
+@pytest.mark.mjx
+def test_backends_agree_on_door_opener(door_opener):
+    gripper = mp.load_gripper("robotiq-2f85")
+    picks = pp.generate_normal(door_opener, gripper, 32, seed=3)
+    scene = mp.build_scene(door_opener, gripper)
+    inputs = make_inputs(scene, SHORT, picks)
+    c, _ = make_backend("mujoco", scene, SHORT, batch_size=32).run(inputs)
+    j, _ = make_backend("mjx", scene, SHORT, batch_size=32).run(inputs)
+    agree = np.mean(c["success"] == j["success"])
+    rho = spearmanr(c["score"], j["score"]).statistic
+    assert agree >= 0.9, f"labels agree on {agree:.1%}"
+    assert rho >= 0.9, f"Spearman {rho:.3f}"
+    assert not c["diverged"].any() and not j["diverged"].any()
+    # the shared kernel gives both the same bookkeeping: equal reach times where both
+    # reached the force, to a control period
+    both = (c["t_reached_s"] > 0) & (j["t_reached_s"] > 0)
+    assert (
+        np.median(np.abs(c["t_reached_s"][both] - j["t_reached_s"][both])) <= SHORT.control_period_s
+    )
+
+
+def test_auto_backend_choice(block):
+    scene = mp.build_scene(block, mp.GripperSpec())
+    backend = make_backend("auto", scene, SHORT, batch_size=4)
+    assert backend.name == ("mjx" if has_accelerator() else "mujoco")
+    with pytest.raises(mp.ConfigError, match="backend = 'gpu'"):
+        make_backend("gpu", scene, SHORT, batch_size=4)
+
+
+def test_c_backend_flags_a_blow_up(block):
+    # a non-finite state makes MuJoCo warn and reset that simulation: the backend must
+    # flag it diverged and leave it unscored, and leave the others alone
+    scene = mp.build_scene(block, mp.GripperSpec())
+    picks = pp.generate_normal(block, mp.GripperSpec(), 4, seed=0)
+    inputs = make_inputs(scene, SHORT, picks)
+    inputs.qpos0[1, scene.index.object_qpos + 2] = np.inf
+    out, _ = make_backend("mujoco", scene, SHORT, batch_size=4).run(inputs)
+    assert list(out["diverged"]) == [False, True, False, False]
+    assert np.isnan(out["score"][1]) and not out["success"][1]
+    assert out["success"][[0, 2, 3]].sum() >= 2
