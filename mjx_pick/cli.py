@@ -259,6 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--picks", help="CSV of your own pick-points (x_mm, y_mm, yaw_deg)")
     ev.add_argument("--out", help="output folder")
     ev.add_argument("--resume", action="store_true", help="continue an interrupted run")
+    ev.add_argument("--chunk-size", type=int,
+                    help="pick-points per chunk written to disk (default: from device memory)")
     ev.add_argument("--traces", type=int, default=3, help="traces of the n best and n worst")
     ev.add_argument("--until", type=int, help="Optimization mode: stop after K good pick-points")
     ev.add_argument("--min-score", type=float, default=0.9, help="Optimization threshold")

@@ -145,6 +145,7 @@ def evaluate(
     until: int | None = None,
     min_score: float = 0.9,
     max_n: int | None = None,
+    chunk_size: int | None = None,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
@@ -163,6 +164,7 @@ def evaluate(
       resume: skip chunks an interrupted run with the same configuration finished.
       until, min_score, max_n: Optimization mode -- simulate batches until `until`
         pick-points reach min_score or max_n are spent.
+      chunk_size: pick-points per chunk written to disk (default: from device memory).
     """
     obj, gripper = _resolve(obj, gripper)
     contact = contact or ContactParams()
@@ -198,6 +200,9 @@ def evaluate(
             picks_batch = user_picks(obj, gripper, *read_picks_csv(picks), config=pick_config)
         results = None
 
+    chunk = int(chunk_size or _auto_chunk(runner, runner.batch_size))
+    if chunk < 1:
+        raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
     config = {
         "object": obj.summary(),
         "gripper": to_dict(gripper),
@@ -211,7 +216,8 @@ def evaluate(
         "mode": picks_batch.mode,
         "backend": runner.name,
         "device": runner.device,
-        "batch_size": int(batch),
+        "batch_size": int(runner.batch_size),
+        "chunk_size": int(chunk),
     }
     key = _config_key(config)
     config["config_key"] = key
@@ -224,7 +230,7 @@ def evaluate(
 
     t0 = time.perf_counter()
     if results is None:
-        table = _run_chunks(scene, grasp, runner, picks_batch, batch, out_dir, progress)
+        table = _run_chunks(scene, grasp, runner, picks_batch, chunk, out_dir, progress)
     else:
         table = results_table(picks_batch, results)
     wall = time.perf_counter() - t0
@@ -259,6 +265,20 @@ def evaluate(
     return Evaluation(table, summary, config, traces, out_dir)
 
 
+def _auto_chunk(runner, batch: int) -> int:
+    """Chunk size: what fits in half the free device memory (MJX on an accelerator),
+    capped at 65536 pick-points, a whole number of batches; else one batch."""
+    stats = None
+    if runner.name == "mjx":
+        dev = runner.devices[0]
+        stats = dev.memory_stats() if dev.platform != "cpu" else None
+    if not stats or "bytes_limit" not in stats:
+        return batch
+    free = (stats["bytes_limit"] - stats.get("bytes_in_use", 0)) * len(runner.devices)
+    fits = int(0.5 * free // runner.device_bytes_per_pick())
+    return max(batch, min(65536, fits) // batch * batch)
+
+
 def _config_key(config: dict) -> str:
     text = json.dumps(
         {k: v for k, v in config.items() if k not in ("device",)}, sort_keys=True, default=str
@@ -289,31 +309,109 @@ def _write_table(path: Path, table: pa.Table) -> None:
     write_atomic(path, sink.getvalue().to_pybytes())
 
 
-def _run_chunks(scene, grasp, runner, picks, batch, out_dir, progress) -> pa.Table:
-    chunk = max(batch, 1)
+class Progress:
+    """Which chunks are finished, checkpointed with orbax so a killed run resumes.
+
+    The chunk files under ``chunks/`` are the data (each written atomically); this
+    record is the progress: the chunks done and the time spent, saved after every
+    chunk. A chunk file found without a record (a kill between the two writes) is
+    complete by construction and is used as is.
+    """
+
+    def __init__(self, out_dir: Path | None, n_chunks: int, process: int):
+        self.done = np.zeros(n_chunks, bool)
+        self.run_s = 0.0
+        self._mngr = None
+        if out_dir is None:
+            return
+        import orbax.checkpoint as ocp
+
+        path = (out_dir / "checkpoint" / f"process-{process}").absolute()
+        self._mngr = ocp.CheckpointManager(
+            path, options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True)
+        )
+        step = self._mngr.latest_step()
+        if step is not None:
+            state = self._mngr.restore(step, args=ocp.args.StandardRestore(self._state()))
+            if len(state["done"]) == n_chunks:
+                self.done = np.asarray(state["done"], bool).copy()
+                self.run_s = float(state["run_s"])
+
+    def _state(self) -> dict:
+        return {"done": self.done, "run_s": np.float64(self.run_s)}
+
+    def finish(self, k: int, run_s: float) -> None:
+        self.done[k] = True
+        self.run_s += run_s
+        if self._mngr is not None:
+            import orbax.checkpoint as ocp
+
+            self._mngr.save(int(self.done.sum()), args=ocp.args.StandardSave(self._state()),
+                            force=True)
+            self._mngr.wait_until_finished()
+
+    def close(self) -> None:
+        if self._mngr is not None:
+            self._mngr.close()
+
+
+def _run_chunks(scene, grasp, runner, picks, chunk, out_dir, progress) -> pa.Table:
+    """Simulate picks chunk by chunk; each finished chunk is a Parquet file at once.
+
+    With several JAX processes (jax.distributed), process i takes chunks k with
+    k % P == i; process 0 then waits for the others' chunk files and assembles.
+    """
+    import jax
+
     n = len(picks)
+    n_chunks = max(1, -(-n // chunk))
+    proc, nproc = jax.process_index(), jax.process_count()
+    state = Progress(out_dir, n_chunks, proc)
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=n, unit="pick", desc=f"simulating ({runner.name})")
-    parts = []
-    for k, start in enumerate(range(0, n, chunk)):
-        path = out_dir / "chunks" / f"part-{k:06d}.parquet" if out_dir is not None else None
-        sub = picks.take(slice(start, start + chunk))
-        if path is not None and path.is_file():
-            part = pq.read_table(path)
-        else:
-            out, _ = runner.run(make_inputs(scene, grasp, sub))
-            part = results_table(sub, out)
-            if path is not None:
-                _write_table(path, part)
-        parts.append(part)
+    parts: dict[int, pa.Table] = {}
+    try:
+        for k in range(n_chunks):
+            sub = picks.take(slice(k * chunk, (k + 1) * chunk))
+            path = out_dir / "chunks" / f"part-{k:06d}.parquet" if out_dir is not None else None
+            if path is not None and path.is_file():
+                parts[k] = pq.read_table(path)  # finished by an earlier run
+            elif k % nproc == proc:
+                before = runner.stats.run_s
+                out, _ = runner.run(make_inputs(scene, grasp, sub))
+                parts[k] = results_table(sub, out)
+                if path is not None:
+                    _write_table(path, parts[k])
+                state.finish(k, runner.stats.run_s - before)
+            if bar is not None:
+                bar.update(len(sub))
+    finally:
+        state.close()
         if bar is not None:
-            bar.update(len(sub))
-    if bar is not None:
-        bar.close()
-    return pa.concat_tables(parts)
+            bar.close()
+    if nproc > 1:
+        parts = _gather_chunks(out_dir, n_chunks, parts)
+    return pa.concat_tables([parts[k] for k in range(n_chunks)])
+
+
+def _gather_chunks(out_dir: Path | None, n_chunks: int, parts: dict, timeout_s: float = 86400):
+    """Multi-process: wait for every chunk file (shared file system) and read them."""
+    if out_dir is None:
+        raise ConfigError("a multi-process run needs --out on a file system all hosts share")
+    t0 = time.monotonic()
+    for k in range(n_chunks):
+        path = out_dir / "chunks" / f"part-{k:06d}.parquet"
+        while k not in parts:
+            if path.is_file():
+                parts[k] = pq.read_table(path)
+            elif time.monotonic() - t0 > timeout_s:
+                raise TimeoutError(f"chunk {k} never appeared in {path.parent}")
+            else:
+                time.sleep(1.0)
+    return parts
 
 
 def _optimize(scene, grasp, runner, obj, gripper, k, min_score, max_n, batch, seed, config):

@@ -130,9 +130,17 @@ def has_accelerator() -> bool:
 
 
 def make_backend(
-    name: str, scene: Scene, grasp: GraspConfig, batch_size: int, nthread: int | None = None
+    name: str,
+    scene: Scene,
+    grasp: GraspConfig,
+    batch_size: int,
+    nthread: int | None = None,
+    devices=None,
 ) -> Backend:
-    """'auto' (MJX when JAX sees a GPU or TPU, else the C engine), 'mjx' or 'mujoco'."""
+    """'auto' (MJX when JAX sees a GPU or TPU, else the C engine), 'mjx' or 'mujoco'.
+
+    devices: MJX shards each batch over these (default: every local device).
+    """
     if name not in ("auto", "mjx", "mujoco"):
         raise ConfigError(f"backend = {name!r} is not allowed: choose 'auto', 'mjx' or 'mujoco'")
     if name == "auto":
@@ -141,7 +149,7 @@ def make_backend(
     if name == "mjx":
         from mjx_pick.backend_mjx import MjxBackend
 
-        return MjxBackend(scene, grasp, batch_size)
+        return MjxBackend(scene, grasp, batch_size, devices=devices)
     from mjx_pick.backend_mujoco import MujocoBackend
 
     return MujocoBackend(scene, grasp, batch_size, nthread=nthread)

@@ -39,3 +39,25 @@ def block():
     import mjx_pick
 
     return mjx_pick.load_asset("block")
+
+
+@pytest.fixture()
+def count_compiles():
+    """count_compiles(fn): how many XLA backend compilations running fn() caused."""
+    from jax._src import monitoring
+
+    def count(fn) -> int:
+        events = []
+
+        def listener(name, secs, **kw):
+            if name == "/jax/core/compile/backend_compile_duration":
+                events.append(secs)
+
+        monitoring.register_event_duration_secs_listener(listener)
+        try:
+            fn()
+        finally:
+            monitoring.unregister_event_duration_listener(listener)
+        return len(events)
+
+    return count
