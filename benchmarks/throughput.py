@@ -28,9 +28,10 @@ from mjx_pick.grasp import GraspConfig
 from mjx_pick.simulate import make_backend, make_inputs
 
 
-def device_name() -> str:
+def device_name(n: int | None = None) -> str:
     d = jax.devices()[0]
-    return f"{len(jax.devices())}x {d.device_kind}" if d.platform != "cpu" else "cpu"
+    n = n or len(jax.devices())
+    return f"{n}x {d.device_kind}" if d.platform != "cpu" else "cpu"
 
 
 def peak_bytes() -> int | None:
@@ -43,11 +44,12 @@ def tile_picks(picks: pp.PickBatch, n: int, offset: int) -> pp.PickBatch:
     return picks.take(idx)
 
 
-def bench(obj_name, gripper, backend_name, batch, repeats, grasp, solver):
+def bench(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_devices=None):
     obj = mp.load_object(obj_name)
     scene = mp.build_scene(obj, gripper, solver=solver)
     pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0)
-    backend = make_backend(backend_name, scene, grasp, batch_size=batch)
+    devices = jax.local_devices()[:n_devices] if n_devices else None
+    backend = make_backend(backend_name, scene, grasp, batch_size=batch, devices=devices)
     steps = grasp.n_ticks() * grasp.substeps(scene.solver)
     first = make_inputs(scene, grasp, tile_picks(pool, batch, 0))
     t0 = time.perf_counter()
@@ -65,7 +67,7 @@ def bench(obj_name, gripper, backend_name, batch, repeats, grasp, solver):
     return {
         "object": obj_name,
         "backend": backend.name,
-        "device": device_name() if backend.name == "mjx" else backend.device,
+        "device": device_name(n_devices) if backend.name == "mjx" else backend.device,
         "batch": batch,
         "compile_s": round(compile_s, 2),
         "first_call_s": round(first_wall, 2),
@@ -93,6 +95,9 @@ def main() -> None:
     ap.add_argument("--solver", help="SolverParams TOML (default: SolverParams())")
     ap.add_argument("--out", default="benchmarks/out")
     ap.add_argument("--tag", default="", help="free text recorded with each row")
+    ap.add_argument(
+        "--devices", default="", help="comma-separated device counts to shard over (default: all)"
+    )
     args = ap.parse_args()
     from mjx_pick.config import load_toml
 
@@ -108,15 +113,28 @@ def main() -> None:
     for obj_name in args.objects.split(","):
         for backend_name in args.backends.split(","):
             for batch in (int(b) for b in args.batch_sizes.split(",")):
-                row = bench(obj_name, gripper, backend_name, batch, args.repeats, grasp, solver)
-                row.update({"date": time.strftime("%Y-%m-%d"), "commit": commit, "tag": args.tag})
-                new = not path.exists()
-                with path.open("a", newline="") as fh:
-                    w = csv.DictWriter(fh, fieldnames=list(row))
-                    if new:
-                        w.writeheader()
-                    w.writerow(row)
-                print(" ".join(f"{k}={v}" for k, v in row.items()), flush=True)
+                for nd in [int(x) for x in args.devices.split(",")] if args.devices else [None]:
+                    row = bench(
+                        obj_name,
+                        gripper,
+                        backend_name,
+                        batch * (nd or 1),
+                        args.repeats,
+                        grasp,
+                        solver,
+                        nd,
+                    )
+                    row["n_devices"] = nd or len(jax.local_devices())
+                    row.update(
+                        {"date": time.strftime("%Y-%m-%d"), "commit": commit, "tag": args.tag}
+                    )
+                    new = not path.exists()
+                    with path.open("a", newline="") as fh:
+                        w = csv.DictWriter(fh, fieldnames=list(row))
+                        if new:
+                            w.writeheader()
+                        w.writerow(row)
+                    print(" ".join(f"{k}={v}" for k, v in row.items()), flush=True)
 
 
 if __name__ == "__main__":
