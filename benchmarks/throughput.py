@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import os
 import statistics
 import subprocess
 import time
@@ -104,7 +105,8 @@ def main() -> None:
     grasp = load_toml(GraspConfig, args.grasp) if args.grasp else GraspConfig()
     solver = load_toml(mp.SolverParams, args.solver) if args.solver else mp.SolverParams()
     gripper = mp.load_gripper(args.gripper)
-    commit = subprocess.run(
+    # a device machine gets the tree without .git: pass the commit in MJX_PICK_COMMIT
+    commit = os.environ.get("MJX_PICK_COMMIT") or subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
     ).stdout.strip()
     out = Path(args.out)
