@@ -106,9 +106,12 @@ def main() -> None:
     solver = load_toml(mp.SolverParams, args.solver) if args.solver else mp.SolverParams()
     gripper = mp.load_gripper(args.gripper)
     # a device machine gets the tree without .git: pass the commit in MJX_PICK_COMMIT
-    commit = os.environ.get("MJX_PICK_COMMIT") or subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-    ).stdout.strip()
+    commit = (
+        os.environ.get("MJX_PICK_COMMIT")
+        or subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        ).stdout.strip()
+    )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "throughput.csv"

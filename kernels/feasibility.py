@@ -89,8 +89,13 @@ def _columns(band: GripperBand, res_mm: float) -> np.ndarray:
     return (np.arange(-n_half, n_half) + 0.5) * res_mm
 
 
-def _check_one(stack: SilhouetteStack, band: GripperBand, x_mm, y_mm, yaw_rad):
-    """Checks for one candidate. Returns (reason, opening_mm, coverage, gap_l, gap_r)."""
+def _check_one(stack: SilhouetteStack, band: GripperBand, x_mm, y_mm, yaw_rad, opening_mm):
+    """Checks for one candidate. Returns (reason, opening_mm, coverage, gap_l, gap_r).
+
+    opening_mm: NaN to choose the opening (``safety_zone`` outside the object); else the
+    fingers are at this opening (a plan made for another pose), and an object reaching
+    to or past a finger's inner face fails clearance: the finger would land on it.
+    """
     cum = stack.cum_rows
     n_bins, n_rows1, n_cols = cum.shape
     res, g0 = stack.res_mm, stack.x0_mm
@@ -122,13 +127,17 @@ def _check_one(stack: SilhouetteStack, band: GripperBand, x_mm, y_mm, yaw_rad):
     # outer edges of the outermost occupied columns between the open fingers
     x_right = jnp.max(jnp.where(inner, px + 0.5 * res, -jnp.inf))
     x_left = jnp.min(jnp.where(inner, px - 0.5 * res, jnp.inf))
-    half_open = jnp.maximum(x_right, -x_left) + band.safety_zone_mm
+    fixed = jnp.isfinite(opening_mm)
+    half_open = jnp.where(
+        fixed, 0.5 * opening_mm, jnp.maximum(x_right, -x_left) + band.safety_zone_mm
+    )
     opening = 2.0 * half_open
     too_wide = opening > band.stroke_mm + 1e-6
+    landed = fixed & (jnp.maximum(x_right, -x_left) >= half_open)
     depth = band.finger_depth_mm
     under_right = (px >= half_open) & (px <= half_open + depth)
     under_left = (px <= -half_open) & (px >= -half_open - depth)
-    blocked = jnp.any(occupied & (under_right | under_left))
+    blocked = jnp.any(occupied & (under_right | under_left)) | landed
     between = jnp.abs(px) < half_open
     area = jnp.sum(jnp.where(between, counts, 0)) * res * res
     coverage = area / jnp.maximum(opening * band.finger_width_mm, 1e-9)
@@ -156,18 +165,23 @@ def _check_one(stack: SilhouetteStack, band: GripperBand, x_mm, y_mm, yaw_rad):
 
 
 @functools.partial(jax.jit, static_argnames=("band", "res_mm", "x0_mm"))
-def _check_batch(cum_rows, x_mm, y_mm, yaw_rad, band, res_mm, x0_mm):
+def _check_batch(cum_rows, x_mm, y_mm, yaw_rad, opening_mm, band, res_mm, x0_mm):
     stack = SilhouetteStack(cum_rows, res_mm, x0_mm)
-    return jax.vmap(lambda a, b, c: _check_one(stack, band, a, b, c))(x_mm, y_mm, yaw_rad)
+    return jax.vmap(lambda a, b, c, d: _check_one(stack, band, a, b, c, d))(
+        x_mm, y_mm, yaw_rad, opening_mm
+    )
 
 
-def check_candidates(stack: SilhouetteStack, band: GripperBand, x_mm, y_mm, yaw_rad):
+def check_candidates(
+    stack: SilhouetteStack, band: GripperBand, x_mm, y_mm, yaw_rad, opening_mm=None
+):
     """Feasibility of N candidates at once.
 
     Args:
       stack: from build_stack.
       band: gripper geometry and thresholds.
       x_mm, y_mm, yaw_rad: (N,) pick-point poses (object frame relative to the gripper).
+      opening_mm: (N,) fixed starting openings (NaN: choose), or None to choose all.
 
     Returns:
       reason (N,) int32 in REASONS order, opening_mm (N,), coverage (N,), and the gaps
@@ -176,11 +190,18 @@ def check_candidates(stack: SilhouetteStack, band: GripperBand, x_mm, y_mm, yaw_
     x = jnp.asarray(x_mm, jnp.float32)
     y = jnp.asarray(y_mm, jnp.float32)
     yaw = jnp.asarray(yaw_rad, jnp.float32)
-    return _check_batch(stack.cum_rows, x, y, yaw, band, stack.res_mm, stack.x0_mm)
+    if opening_mm is None:
+        opening = jnp.full(x.shape, jnp.nan, jnp.float32)
+    else:
+        opening = jnp.broadcast_to(jnp.asarray(opening_mm, jnp.float32), x.shape)
+    return _check_batch(stack.cum_rows, x, y, yaw, opening, band, stack.res_mm, stack.x0_mm)
 
 
-def reference_check(polygon, band: GripperBand, x_mm, y_mm, yaw_rad, res_mm=0.1):
-    """Plain per-candidate reference: exact polygon, fine point sampling, no yaw bins."""
+def reference_check(polygon, band: GripperBand, x_mm, y_mm, yaw_rad, res_mm=0.1, opening_mm=None):
+    """Plain per-candidate reference: exact polygon, fine point sampling, no yaw bins.
+
+    opening_mm: a fixed starting opening (see _check_one), or None to choose it.
+    """
     import shapely
 
     px = _columns(band, res_mm)
@@ -201,17 +222,19 @@ def reference_check(polygon, band: GripperBand, x_mm, y_mm, yaw_rad, res_mm=0.1)
         return OFF_OBJECT, math.nan, 0.0
     x_right = px[inner].max() + 0.5 * res_mm
     x_left = px[inner].min() - 0.5 * res_mm
-    half_open = max(x_right, -x_left) + band.safety_zone_mm
+    extent = max(x_right, -x_left)
+    half_open = extent + band.safety_zone_mm if opening_mm is None else 0.5 * opening_mm
     opening = 2 * half_open
     if opening > band.stroke_mm + 1e-6:
         return TOO_WIDE, opening, 0.0
+    landed = opening_mm is not None and extent >= half_open
     depth = band.finger_depth_mm
     under = ((px >= half_open) & (px <= half_open + depth)) | (
         (px <= -half_open) & (px >= -half_open - depth)
     )
     area = counts[np.abs(px) < half_open].sum() * res_mm * res_mm
     coverage = area / (opening * band.finger_width_mm)
-    if (occupied & under).any():
+    if landed or (occupied & under).any():
         return CLEARANCE, opening, coverage
     if coverage < band.min_coverage:
         return COVERAGE, opening, coverage

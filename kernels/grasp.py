@@ -385,6 +385,10 @@ def tick(p: GraspParams, ad: Addresses, s, a, qpos, qvel, cfrc_ext, pos0, quat0)
             m.object_pos[1],
             m.object_pos[2],
             _yaw(m.object_quat),
+            m.object_quat[0],
+            m.object_quat[1],
+            m.object_quat[2],
+            m.object_quat[3],
             qpos[ad.finger_left_qpos],
             qpos[ad.finger_right_qpos],
             m.lift,
@@ -394,7 +398,9 @@ def tick(p: GraspParams, ad: Addresses, s, a, qpos, qvel, cfrc_ext, pos0, quat0)
     return s_next, a_next, command(ad, s_next, qpos), row
 
 
-# one row per control tick of a recorded pick, SI units, in tick()'s order
+# one row per control tick of a recorded pick, SI units, in tick()'s order; with the
+# object's quaternion, a row holds every joint of the scene, so a trace can be replayed
+# (rendered) without simulating again
 TRACE_FIELDS = (
     "t_s",
     "force_left_n",
@@ -404,6 +410,10 @@ TRACE_FIELDS = (
     "object_y_m",
     "object_z_m",
     "object_yaw_rad",
+    "object_qw",
+    "object_qx",
+    "object_qy",
+    "object_qz",
     "finger_left_m",
     "finger_right_m",
     "lift_m",

@@ -3,6 +3,16 @@
 Data flow: object -> gripper -> scene -> pick-points -> batched simulation -> metrics.
 """
 
+import os as _os
+import sys as _sys
+
+# MuJoCo picks its OpenGL back end when it is first imported; without a display, the
+# offscreen renderer (animations) needs EGL. Set before mujoco is imported, never
+# overriding a user's choice.
+if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY"):
+    _os.environ.setdefault("MUJOCO_GL", "egl")
+
+from mjx_pick.compare import compare, design_search
 from mjx_pick.config import ConfigError
 from mjx_pick.evaluate import Evaluation, evaluate
 from mjx_pick.grasp import GraspConfig, min_grasp_force_n
@@ -25,7 +35,10 @@ from mjx_pick.pickpoints import (
     generate_normal,
     optimize,
 )
+from mjx_pick.robustness import min_grip_force, robustness
 from mjx_pick.scene import Scene, build_scene
+from mjx_pick.simulate import Settings, Simulator
+from mjx_pick.sweep import ParamSpec, sweep
 
 __version__ = "0.1.0"
 
@@ -38,11 +51,16 @@ __all__ = [
     "GripperSpec",
     "ObjectModel",
     "PickBatch",
+    "ParamSpec",
     "PickConfig",
     "Scene",
+    "Settings",
+    "Simulator",
     "SolverParams",
     "asset_names",
     "build_scene",
+    "compare",
+    "design_search",
     "evaluate",
     "generate_grid",
     "generate_normal",
@@ -51,8 +69,11 @@ __all__ = [
     "load_asset",
     "load_gripper",
     "load_object",
+    "min_grip_force",
     "object_from_image",
     "object_from_mesh",
     "object_from_polygon",
     "preset_names",
+    "robustness",
+    "sweep",
 ]

@@ -2,6 +2,11 @@
 
   mjx-pick evaluate OBJECT [--gripper robotiq-2f85] [--n 1000] [--seed 0] --out DIR
   mjx-pick picks OBJECT --n 500 --out DIR          (pick-points and their pictures only)
+  mjx-pick sweep OBJECT --param contact.pad_friction=0.4:1.0:7 [--param ...] --out DIR
+  mjx-pick compare OBJECT --grippers robotiq-2f85,onrobot-rg2 --out DIR
+  mjx-pick design OBJECT --bound finger_width_mm=10:40 --bound stroke_mm=60:140 --out DIR
+  mjx-pick robust OBJECT [--results DIR] --top-k 10 --m 32 --out DIR
+  mjx-pick report DIR                               (plots, maps, animations, template, HTML)
   mjx-pick presets | assets                          (what is shipped)
 
 OBJECT is a shipped asset name (``mjx-pick assets``), a top-down image (with
@@ -146,8 +151,235 @@ def cmd_evaluate(args) -> int:
         until=args.until,
         min_score=args.min_score,
         max_n=args.max,
+        chunk_size=args.chunk_size,
+        min_force=args.min_force,
     )
     print_summary(ev.summary, args.out)
+    return 0
+
+
+def _base_settings(args):
+    """Object, Settings (gripper + physics flags) and PickConfig from the shared options."""
+    from mjx_pick.simulate import Settings
+
+    obj, gripper = _objects(args)
+    contact, solver, grasp, picks_cfg = _settings(args)
+    return obj, Settings(gripper, contact, solver, grasp), picks_cfg
+
+
+def _print_rows(rows: list[dict], keys: list[str]) -> None:
+    width = {k: max(len(k), *(len(_fmt(r.get(k))) for r in rows)) for k in keys}
+    print("  ".join(f"{k:<{width[k]}}" for k in keys))
+    for r in rows:
+        print("  ".join(f"{_fmt(r.get(k)):<{width[k]}}" for k in keys))
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.3f}"
+    if isinstance(v, list | tuple) and len(v) == 2:
+        return f"[{v[0]:.2f}, {v[1]:.2f}]"
+    return str(v)
+
+
+def cmd_sweep(args) -> int:
+    from mjx_pick.sweep import ParamSpec, sweep
+
+    if not args.param:
+        raise ConfigError("sweep needs at least one --param NAME=LO:HI:N (`mjx-pick params`)")
+    obj, base, picks_cfg = _base_settings(args)
+    params = [ParamSpec.parse(p) for p in args.param]
+    res = sweep(
+        obj,
+        params,
+        base,
+        n=args.n,
+        seed=args.seed,
+        random=args.random,
+        pick_config=picks_cfg,
+        backend=args.backend,
+        batch_size=args.batch_size,
+        out=args.out,
+    )
+    _print_rows(
+        res.variants,
+        [
+            "variant",
+            *[p.name for p in params],
+            "n",
+            "success_rate",
+            "success_ci",
+            "score_mean",
+            "diverged",
+        ],
+    )
+    if args.out:
+        print(f"results in {args.out}/ (results.parquet, variants.json, sweep.png, config.json)")
+    return 0
+
+
+def _grippers(text: str):
+    from mjx_pick.gripper import load_gripper
+
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    if not names:
+        raise ConfigError(f"--grippers {text!r}: give comma-separated presets or TOML files")
+    return [load_gripper(n) for n in names]
+
+
+def cmd_compare(args) -> int:
+    from mjx_pick.compare import compare
+
+    obj, base, picks_cfg = _base_settings(args)
+    res = compare(
+        obj,
+        _grippers(args.grippers),
+        base,
+        n=args.n,
+        seed=args.seed,
+        rank_by=args.rank_by,
+        pick_config=picks_cfg,
+        backend=args.backend,
+        batch_size=args.batch_size,
+        out=args.out,
+    )
+    _print_rows(
+        res.ranking,
+        [
+            "rank",
+            "gripper",
+            "success_rate",
+            "success_ci",
+            "score_mean",
+            "feasible",
+            "grip_force_n",
+            "p_vs_best",
+        ],
+    )
+    if args.out:
+        print(f"results in {args.out}/ (ranking.json, ranking.png, maps.png, results.parquet)")
+    return 0
+
+
+def _bounds(items: list[str]) -> dict:
+    out = {}
+    for item in items:
+        name, sep, rng = item.partition("=")
+        lo, sep2, hi = rng.partition(":")
+        try:
+            if not sep or not sep2:
+                raise ValueError("write FIELD=LO:HI")
+            out[name.strip()] = (float(lo), float(hi))
+        except ValueError as err:
+            raise ConfigError(f"--bound {item!r}: {err} (e.g. finger_width_mm=10:40)") from err
+    return out
+
+
+def cmd_design(args) -> int:
+    from mjx_pick.compare import design_search
+
+    obj, base, picks_cfg = _base_settings(args)
+    bounds = _bounds(args.bound or [])
+    res = design_search(
+        obj,
+        bounds,
+        base,
+        variants=args.variants,
+        n=args.n,
+        rounds=args.rounds,
+        seed=args.seed,
+        rank_by=args.rank_by,
+        pick_config=picks_cfg,
+        backend=args.backend,
+        batch_size=args.batch_size,
+        out=args.out,
+    )
+    print(f"best variant: {res.best.name}")
+    for field in bounds:
+        print(f"  {field}: {getattr(res.best, field):g} (base {getattr(res.base, field):g})")
+    _print_rows(
+        res.final.ranking,
+        ["rank", "gripper", "success_rate", "success_ci", "score_mean", "p_vs_best"],
+    )
+    if args.out:
+        print(f"results in {args.out}/ (design.json, best_gripper.toml, ranking.png, maps.png)")
+    return 0
+
+
+def cmd_robust(args) -> int:
+    import pyarrow.parquet as pq
+
+    from mjx_pick import pickpoints as pp
+    from mjx_pick.robustness import robustness
+    from mjx_pick.simulate import Simulator
+
+    obj, base, picks_cfg = _base_settings(args)
+    sim = Simulator(obj, args.backend, args.batch_size)
+    checker = pp.FeasibilityChecker(obj, base.gripper, picks_cfg)
+    if args.results:
+        table = pq.read_table(
+            Path(args.results) / "results.parquet" if Path(args.results).is_dir() else args.results
+        )
+        for col in ("x_mm", "y_mm", "yaw_deg", "score", "success"):
+            if col not in table.column_names:
+                raise ConfigError(f"--results {args.results}: no column {col!r}")
+        x, y, yaw = (np.asarray(table[c], float) for c in ("x_mm", "y_mm", "yaw_deg"))
+        score = np.where(np.asarray(table["success"]), np.asarray(table["score"], float), -1)
+        ids = np.asarray(table["pick_id"]) if "pick_id" in table.column_names else np.arange(len(x))
+    else:
+        picks = pp.generate_normal(obj, base.gripper, args.n, args.seed, picks_cfg)
+        (out,) = sim.run([(base, picks)])
+        x, y, yaw, ids = picks.x_mm, picks.y_mm, picks.yaw_deg, picks.pick_id
+        score = np.where(out["success"], np.nan_to_num(out["score"], nan=-1), -1)
+    top = np.argsort(-score, kind="stable")[: args.top_k]
+    top = top[score[top] >= 0]
+    if len(top) == 0:
+        raise ConfigError("no successful pick-point to test: evaluate more pick-points first")
+    picks = checker.batch(ids[top], x[top], y[top], yaw[top], "robustness")
+    table = robustness(
+        obj,
+        picks,
+        base,
+        m=args.m,
+        sigma_xy_mm=args.sigma_xy_mm,
+        sigma_yaw_deg=args.sigma_yaw_deg,
+        seed=args.seed,
+        pick_config=picks_cfg,
+        simulator=sim,
+        out=args.out,
+    )
+    _print_rows(
+        table.slice(0, 20).to_pylist(),
+        ["rank", "pick_id", "x_mm", "y_mm", "yaw_deg", "robust_p", "robust_ci_low", "landed"],
+    )
+    if args.out:
+        print(f"results in {args.out}/ (robustness.parquet, robustness.json)")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from mjx_pick.report import report
+
+    frame = None
+    if args.frame:
+        try:
+            frame = [float(v) for v in args.frame.split(",")]
+        except ValueError as err:
+            raise ConfigError(f"--frame {args.frame!r}: {err}") from err
+    written = report(
+        args.run,
+        args.out,
+        n=args.n,
+        k=args.k,
+        frame=frame,
+        animations=not args.no_animations,
+        anim_every=args.anim_every,
+    )
+    print(f"report: {written['html']}")
+    for key in ("forces", "animations"):
+        print(f"  {key}: {len(written[key])} files")
+    print(f"  templates: {', '.join(written['templates'].values())}")
+    print(f"  robot export: {written['robot_picks']}")
     return 0
 
 
@@ -236,6 +468,13 @@ def cmd_presets(_args) -> int:
     return 0
 
 
+def cmd_params(_args) -> int:
+    from mjx_pick.sweep import sweepable
+
+    print("\n".join(sweepable()))
+    return 0
+
+
 def cmd_assets(_args) -> int:
     from mjx_pick.objects import asset_manifest
 
@@ -259,14 +498,71 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--picks", help="CSV of your own pick-points (x_mm, y_mm, yaw_deg)")
     ev.add_argument("--out", help="output folder")
     ev.add_argument("--resume", action="store_true", help="continue an interrupted run")
-    ev.add_argument("--chunk-size", type=int,
-                    help="pick-points per chunk written to disk (default: from device memory)")
+    ev.add_argument(
+        "--chunk-size",
+        type=int,
+        help="pick-points per chunk written to disk (default: from device memory)",
+    )
     ev.add_argument("--traces", type=int, default=3, help="traces of the n best and n worst")
     ev.add_argument("--until", type=int, help="Optimization mode: stop after K good pick-points")
     ev.add_argument("--min-score", type=float, default=0.9, help="Optimization threshold")
     ev.add_argument("--max", type=int, help="Optimization mode: most pick-points to simulate")
     ev.add_argument("--no-progress", action="store_true")
+    ev.add_argument(
+        "--min-force",
+        action="store_true",
+        help="add min_force_n: each pick-point's smallest successful F_d (bisection)",
+    )
     ev.set_defaults(func=cmd_evaluate)
+
+    def study(name, help_text):
+        p = sub.add_parser(name, help=help_text)
+        _add_object_args(p)
+        _add_gripper_args(p)
+        _add_physics_args(p)
+        _add_pick_args(p)
+        p.add_argument("--out", help="output folder")
+        return p
+
+    sw = study("sweep", "sweep contact, controller, gripper or solver parameters")
+    sw.add_argument(
+        "--param",
+        action="append",
+        metavar="NAME=LO:HI:N",
+        help="a swept parameter: LO:HI:N grid, A,B,C list, LO:HI (random); repeat",
+    )
+    sw.add_argument(
+        "--random",
+        type=int,
+        metavar="K",
+        help="K random variants within the LO:HI ranges instead of a grid",
+    )
+    sw.set_defaults(func=cmd_sweep, n=200)
+
+    cp = study("compare", "rank grippers on one shared pick-point set")
+    cp.add_argument("--grippers", required=True, help="comma-separated presets or TOML files")
+    cp.add_argument("--rank-by", choices=("success", "score"), default="success")
+    cp.set_defaults(func=cmd_compare, n=200)
+
+    ds = study("design", "search finger width, finger depth, stroke (any gripper field)")
+    ds.add_argument(
+        "--bound",
+        action="append",
+        metavar="FIELD=LO:HI",
+        help="a searched gripper field and its bounds; repeat",
+    )
+    ds.add_argument("--variants", type=int, default=12, help="variants sampled")
+    ds.add_argument("--rounds", type=int, default=3, help="successive-halving rounds")
+    ds.add_argument("--rank-by", choices=("success", "score"), default="success")
+    ds.set_defaults(func=cmd_design, n=64)
+
+    rb = study("robust", "robust success probability of the top pick-points under vision error")
+    rb.add_argument("--results", help="an evaluate output folder or results.parquet to rank")
+    rb.add_argument("--top-k", type=int, default=10)
+    rb.add_argument("--m", type=int, default=32, help="perturbed draws per pick-point")
+    rb.add_argument("--sigma-xy-mm", type=float, default=2.0)
+    rb.add_argument("--sigma-yaw-deg", type=float, default=3.0)
+    rb.set_defaults(func=cmd_robust, n=200)
 
     pk = sub.add_parser("picks", help="generate feasible pick-points and draw them")
     _add_object_args(pk)
@@ -275,7 +571,22 @@ def build_parser() -> argparse.ArgumentParser:
     pk.add_argument("--out", required=True)
     pk.set_defaults(func=cmd_picks)
 
+    rp = sub.add_parser("report", help="plots, maps, animations, 1:1 template, robot export, HTML")
+    rp.add_argument("run", help="an evaluate output folder")
+    rp.add_argument("--out", help="write here instead of into the run folder")
+    rp.add_argument("--n", type=int, default=3, help="best and worst pick-points on the template")
+    rp.add_argument("--k", type=int, default=10, help="pick-points in the robot export")
+    rp.add_argument(
+        "--frame",
+        metavar="X,Y,Z,ROLL,PITCH,YAW",
+        help="object frame's pose in your robot frame (mm, deg) for the export",
+    )
+    rp.add_argument("--anim-every", type=int, default=8, help="control ticks per frame")
+    rp.add_argument("--no-animations", action="store_true")
+    rp.set_defaults(func=cmd_report)
+
     sub.add_parser("presets", help="list gripper presets").set_defaults(func=cmd_presets)
+    sub.add_parser("params", help="list the parameters sweep accepts").set_defaults(func=cmd_params)
     sub.add_parser("assets", help="list shipped objects").set_defaults(func=cmd_assets)
     return ap
 

@@ -178,3 +178,13 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
 def write_json(path: str | os.PathLike, obj: Any) -> Path:
     """Atomically write obj (dataclasses allowed) as indented JSON."""
     return write_atomic(path, json.dumps(to_dict(obj), indent=2, sort_keys=False) + "\n")
+
+
+def write_parquet(path: str | os.PathLike, table) -> Path:
+    """Atomically write a pyarrow Table as Parquet."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    return write_atomic(path, sink.getvalue().to_pybytes())

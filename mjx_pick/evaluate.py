@@ -32,7 +32,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from mjx_pick import pickpoints as pp
-from mjx_pick.config import ConfigError, to_dict, write_atomic, write_json
+from mjx_pick.config import ConfigError, to_dict, write_atomic, write_json, write_parquet
 from mjx_pick.grasp import GraspConfig, min_grasp_force_n
 from mjx_pick.gripper import GripperSpec, load_gripper
 from mjx_pick.kernels import grasp as gk
@@ -146,6 +146,7 @@ def evaluate(
     min_score: float = 0.9,
     max_n: int | None = None,
     chunk_size: int | None = None,
+    min_force: bool = False,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
@@ -165,6 +166,9 @@ def evaluate(
       until, min_score, max_n: Optimization mode -- simulate batches until `until`
         pick-points reach min_score or max_n are spent.
       chunk_size: pick-points per chunk written to disk (default: from device memory).
+      min_force: add a min_force_n column: each pick-point's smallest successful F_d
+        within the gripper's force range (a batched bisection, about 10 more
+        simulations per pick-point; see mjx_pick.robustness.min_grip_force).
     """
     obj, gripper = _resolve(obj, gripper)
     contact = contact or ContactParams()
@@ -256,12 +260,26 @@ def evaluate(
             "physics_steps_per_pick": grasp.n_ticks() * grasp.substeps(solver),
         }
     )
+    if min_force:
+        from mjx_pick.robustness import min_grip_force
+        from mjx_pick.simulate import Settings, Simulator
+
+        settings = Settings(gripper, contact, solver, grasp)
+        sim = Simulator(obj, runner.name, runner.batch_size)
+        sim.adopt(settings, runner)
+        t1 = time.perf_counter()
+        forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
+        table = table.append_column("min_force_n", pa.array(forces))
+        summary["min_force_s"] = round(time.perf_counter() - t1, 3)
+        summary["min_force_n_median"] = (
+            float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
+        )
     traces = _traces(scene, grasp, runner, picks_batch, table, n_traces) if n_traces else None
     if out_dir is not None:
-        _write_table(out_dir / "results.parquet", table)
+        write_parquet(out_dir / "results.parquet", table)
         write_json(out_dir / "summary.json", summary)
         if traces is not None:
-            _write_table(out_dir / "traces.parquet", traces)
+            write_parquet(out_dir / "traces.parquet", traces)
     return Evaluation(table, summary, config, traces, out_dir)
 
 
@@ -303,12 +321,6 @@ def _check_resume(out_dir: Path, key: str, resume: bool) -> None:
         )
 
 
-def _write_table(path: Path, table: pa.Table) -> None:
-    sink = pa.BufferOutputStream()
-    pq.write_table(table, sink)
-    write_atomic(path, sink.getvalue().to_pybytes())
-
-
 class Progress:
     """Which chunks are finished, checkpointed with orbax so a killed run resumes.
 
@@ -346,8 +358,9 @@ class Progress:
         if self._mngr is not None:
             import orbax.checkpoint as ocp
 
-            self._mngr.save(int(self.done.sum()), args=ocp.args.StandardSave(self._state()),
-                            force=True)
+            self._mngr.save(
+                int(self.done.sum()), args=ocp.args.StandardSave(self._state()), force=True
+            )
             self._mngr.wait_until_finished()
 
     def close(self) -> None:
@@ -384,7 +397,7 @@ def _run_chunks(scene, grasp, runner, picks, chunk, out_dir, progress) -> pa.Tab
                 out, _ = runner.run(make_inputs(scene, grasp, sub))
                 parts[k] = results_table(sub, out)
                 if path is not None:
-                    _write_table(path, parts[k])
+                    write_parquet(path, parts[k])
                 state.finish(k, runner.stats.run_s - before)
             if bar is not None:
                 bar.update(len(sub))

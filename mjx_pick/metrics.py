@@ -6,6 +6,8 @@ Columns are stable and named with units. Per-pick metrics come from the shared k
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pyarrow as pa
 
@@ -104,3 +106,42 @@ def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
     centre = (p + z * z / (2 * n)) / denom
     half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
     return (float(max(0.0, centre - half)), float(min(1.0, centre + half)))
+
+
+def mean_interval(values, z: float = 1.959964) -> tuple[float, float, float]:
+    """Mean of the finite values and its 95% normal-approximation interval."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if len(v) == 0:
+        return (float("nan"), float("nan"), float("nan"))
+    m = float(v.mean())
+    half = z * float(v.std(ddof=1)) / math.sqrt(len(v)) if len(v) > 1 else math.inf
+    return (m, m - half, m + half)
+
+
+def mcnemar_p(a, b) -> float:
+    """Exact McNemar test of paired binary outcomes a, b (N,): two-sided p-value that
+    both have the same success probability (binomial test on the discordant pairs)."""
+    from scipy.stats import binomtest
+
+    a, b = np.asarray(a, bool), np.asarray(b, bool)
+    only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
+    if only_a + only_b == 0:
+        return 1.0
+    return float(binomtest(only_a, only_a + only_b, 0.5).pvalue)
+
+
+def rate_summary(success, score) -> dict:
+    """Success rate with its Wilson interval and mean score with its interval."""
+    success = np.asarray(success, bool)
+    k, n = int(success.sum()), len(success)
+    lo, hi = wilson_interval(k, n)
+    m, mlo, mhi = mean_interval(score)
+    return {
+        "n": n,
+        "successes": k,
+        "success_rate": k / n if n else float("nan"),
+        "success_ci": [lo, hi],
+        "score_mean": m,
+        "score_ci": [mlo, mhi],
+    }

@@ -116,6 +116,8 @@ class ObjectModel:
             "n_collision_pieces": len(self.pieces),
             "material": self.material,
             "source": self.source,
+            # the silhouette, so that reports can draw it from config.json alone
+            "outline_wkt": shapely.to_wkt(self.polygon, rounding_precision=4),
         }
 
 

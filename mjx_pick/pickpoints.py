@@ -134,10 +134,14 @@ class FeasibilityChecker:
         )
         self.stack = _stack(obj, config.resolution_mm)
 
-    def __call__(self, x_mm, y_mm, yaw_deg) -> dict[str, np.ndarray]:
-        """Check (N,) candidates; returns reason, opening_mm, coverage, gap_*_mm arrays."""
+    def __call__(self, x_mm, y_mm, yaw_deg, opening_mm=None) -> dict[str, np.ndarray]:
+        """Check (N,) candidates; returns reason, opening_mm, coverage, gap_*_mm arrays.
+
+        opening_mm: (N,) fixed starting openings (the fingers of a plan made for another
+        pose; an object reaching a finger fails clearance), or None to choose them.
+        """
         reason, opening, coverage, gap_l, gap_r = fk.check_candidates(
-            self.stack, self.band, x_mm, y_mm, np.deg2rad(np.asarray(yaw_deg, float))
+            self.stack, self.band, x_mm, y_mm, np.deg2rad(np.asarray(yaw_deg, float)), opening_mm
         )
         return {
             "reason": np.asarray(reason),
@@ -184,7 +188,8 @@ def _stack(obj: ObjectModel, res_mm: float) -> fk.SilhouetteStack:
     return _stack_cached((obj.name, obj.polygon.wkb), obj.polygon, float(res_mm))
 
 
-def _draw_block(rng: np.random.Generator, xr: float, yr: float, config: PickConfig, n: int):
+def draw_block(rng: np.random.Generator, xr: float, yr: float, config: PickConfig, n: int):
+    """n uniform candidate poses: x in +-xr, y in +-yr (mm), yaw in the config's range."""
     x = rng.uniform(-xr, xr, n)
     y = rng.uniform(-yr, yr, n)
     yaw = rng.uniform(config.yaw_min_deg, config.yaw_max_deg, n)
@@ -199,7 +204,7 @@ def candidate_stream(checker: FeasibilityChecker, seed: int):
     xr, yr = checker.ranges()
     start = 0
     while True:
-        x, y, yaw = _draw_block(rng, xr, yr, checker.config, CANDIDATE_BLOCK)
+        x, y, yaw = draw_block(rng, xr, yr, checker.config, CANDIDATE_BLOCK)
         ids = np.arange(start, start + CANDIDATE_BLOCK)
         start += CANDIDATE_BLOCK
         yield checker.batch(ids, x, y, yaw, mode="normal")

@@ -34,7 +34,19 @@ REASON_COLOURS = {
 }
 
 
-def _add_polygon(ax, poly, **kw):
+def save_png(fig, path: str | os.PathLike, dpi: int = 120) -> None:
+    """Save a figure atomically (never a half-written PNG) and close it."""
+    import io
+
+    from mjx_pick.config import write_atomic
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    plt.close(fig)
+    write_atomic(path, buf.getvalue())
+
+
+def add_polygon(ax, poly, **kw):
     geoms = getattr(poly, "geoms", [poly])
     for g in geoms:
         ax.add_patch(MplPolygon(np.asarray(g.exterior.coords)[:, :2], closed=True, **kw))
@@ -65,7 +77,7 @@ def draw_pick(
         shapely.affinity.rotate(obj.polygon, yaw_deg, origin=(0, 0)), x_mm, y_mm
     )
     fig, ax = plt.subplots(figsize=(6, 5))
-    _add_polygon(ax, posed, fc="#4a78b5", ec="k", lw=1, alpha=0.9)
+    add_polygon(ax, posed, fc="#4a78b5", ec="k", lw=1, alpha=0.9)
     x0, y0, x1, y1 = posed.bounds
     ax.add_patch(
         Rectangle(
@@ -114,8 +126,7 @@ def draw_pick(
     )
     ax.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def gripper_in_object_frame(x_mm, y_mm, yaw_deg):
@@ -130,7 +141,7 @@ def gripper_in_object_frame(x_mm, y_mm, yaw_deg):
 
 
 def draw_candidates(
-    obj: ObjectModel,
+    obj: ObjectModel | shapely.Polygon,
     x_mm,
     y_mm,
     yaw_deg,
@@ -141,12 +152,16 @@ def draw_candidates(
     title: str | None = None,
     max_points: int = 4000,
 ) -> None:
-    """Many pick-points on the silhouette (object frame): by reason label or by value."""
+    """Many pick-points on the silhouette (object frame): by reason label or by value.
+
+    obj: the object, or just its silhouette polygon (mm, object frame).
+    """
+    outline = getattr(obj, "polygon", obj)
     centre, axis = gripper_in_object_frame(x_mm, y_mm, yaw_deg)
     n = len(centre)
     keep = np.arange(n) if n <= max_points else np.linspace(0, n - 1, max_points).astype(int)
     fig, ax = plt.subplots(figsize=(7, 5.5))
-    _add_polygon(ax, obj.polygon, fc="#dddddd", ec="k", lw=1)
+    add_polygon(ax, outline, fc="#dddddd", ec="k", lw=1)
     seg = 3.0
     if values is not None:
         v = np.asarray(values, float)[keep]
@@ -175,14 +190,16 @@ def draw_candidates(
         alpha=0.4,
         zorder=2,
     )
-    x0, y0, x1, y1 = obj.polygon.bounds
+    x0, y0, x1, y1 = outline.bounds
     r = 0.5 * math.hypot(x1 - x0, y1 - y0) + 10
     ax.set_xlim(-r, r)
     ax.set_ylim(-r, r)
     ax.set_aspect("equal")
     ax.set_xlabel("object x, mm")
     ax.set_ylabel("object y, mm")
-    ax.set_title(title or f"{obj.name}: {n} pick-points (gripper centres, closing axes)")
+    ax.set_title(
+        title
+        or f"{getattr(obj, 'name', 'object')}: {n} pick-points (gripper centres, closing axes)"
+    )
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_png(fig, path)

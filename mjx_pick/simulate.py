@@ -16,9 +16,12 @@ import numpy as np
 
 from mjx_pick.config import ConfigError
 from mjx_pick.grasp import GraspConfig, broadcast_params
+from mjx_pick.gripper import GripperSpec
 from mjx_pick.kernels import grasp as gk
+from mjx_pick.objects import ObjectModel
+from mjx_pick.physics import ContactParams, SolverParams, mujoco_contact
 from mjx_pick.pickpoints import PickBatch
-from mjx_pick.scene import Scene
+from mjx_pick.scene import Scene, build_scene
 
 # per-pick contact overrides accepted by make_inputs (besides GraspParams' fields)
 CONTACT_OVERRIDES = ("pad_friction", "table_friction", "pad_solref", "table_solref", "solimp")
@@ -119,6 +122,8 @@ class Backend(Protocol):
     name: str
     device: str
     stats: RunStats
+    scene: Scene
+    batch_size: int
 
     def run(self, inputs: PickInputs, record: bool = False) -> tuple[dict, np.ndarray | None]:
         """Per-pick results (numpy, (N,) each) and, with record, traces (N, T, F)."""
@@ -153,3 +158,106 @@ def make_backend(
     from mjx_pick.backend_mujoco import MujocoBackend
 
     return MujocoBackend(scene, grasp, batch_size, nthread=nthread)
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """Every physical setting of one simulated variant: gripper, contact, solver, grasp.
+
+    Sweeps, gripper comparisons, design searches, robustness and calibration all run
+    lists of (Settings, PickBatch) jobs through one :class:`Simulator`.
+    """
+
+    gripper: GripperSpec = dataclasses.field(default_factory=GripperSpec)
+    contact: ContactParams = dataclasses.field(default_factory=ContactParams)
+    solver: SolverParams = dataclasses.field(default_factory=SolverParams)
+    grasp: GraspConfig = dataclasses.field(default_factory=GraspConfig)
+
+    def structure(self) -> tuple:
+        """What fixes the compiled simulation: the scene (gripper, solver) and the scan
+        length. Everything else (contact, controller, phases) is per-pick data."""
+        return (self.gripper, self.solver, self.grasp.n_ticks(), self.grasp.substeps(self.solver))
+
+    def overrides(self, obj: ObjectModel, n: int) -> dict:
+        """Per-pick overrides for make_inputs that give n pick-points these settings."""
+        mjc = mujoco_contact(self.contact, self.solver, obj.mass_kg, self.gripper.pad_friction)
+        out = {
+            name: np.full(n, v, np.float32) for name, v in self.grasp.params(obj)._asdict().items()
+        }
+        out["pad_friction"] = np.full(n, mjc.pad_friction, np.float32)
+        out["table_friction"] = np.full(n, mjc.table_friction, np.float32)
+        out["pad_solref"] = np.tile(np.asarray(mjc.pad_solref, np.float32), (n, 1))
+        out["table_solref"] = np.tile(np.asarray(mjc.table_solref, np.float32), (n, 1))
+        out["solimp"] = np.tile(np.asarray(mjc.solimp, np.float32), (n, 1))
+        return out
+
+
+class Simulator:
+    """Runs (Settings, PickBatch) jobs for one object, batching what can share a program.
+
+    Jobs whose settings share a structure (``Settings.structure``) run as ONE batch of
+    pick-points x variants with per-pick parameters -- one compile, one call (chunked by
+    the backend's batch size). Scenes and backends are cached, so a loop that calls
+    ``run`` again (a bisection, an optimiser) compiles nothing new.
+    """
+
+    def __init__(
+        self, obj: ObjectModel, backend: str = "auto", batch_size: int | None = None
+    ) -> None:
+        self.object = obj
+        self.backend_name = backend
+        self.batch_size = batch_size
+        self._backends: dict[tuple, Backend] = {}
+        self.rollouts = 0  # pick-point simulations run so far
+
+    def adopt(self, settings: Settings, backend: Backend) -> None:
+        """Reuse a backend built elsewhere for settings' structure (no new compile)."""
+        self._backends[settings.structure()] = backend
+
+    def backend(self, settings: Settings) -> Backend:
+        key = settings.structure()
+        if key not in self._backends:
+            from mjx_pick.evaluate import default_batch_size
+
+            settings.grasp.check_gripper(settings.gripper)
+            scene = build_scene(self.object, settings.gripper, settings.contact, settings.solver)
+            size = self.batch_size or default_batch_size(self.backend_name)
+            self._backends[key] = make_backend(self.backend_name, scene, settings.grasp, size)
+        return self._backends[key]
+
+    def run(self, jobs: list[tuple[Settings, PickBatch]]) -> list[dict]:
+        """Per-job results (the dict of ``kernels.grasp.finalize``, (len(picks),) arrays)."""
+        for settings, _ in jobs:
+            settings.grasp.check_gripper(settings.gripper)
+        groups: dict[tuple, list[int]] = {}
+        for j, (settings, _) in enumerate(jobs):
+            groups.setdefault(settings.structure(), []).append(j)
+        results: list[dict | None] = [None] * len(jobs)
+        for members in groups.values():
+            live = [j for j in members if len(jobs[j][1])]
+            for j in members:
+                if not len(jobs[j][1]):
+                    results[j] = {}
+            if not live:
+                continue
+            backend = self.backend(jobs[live[0]][0])
+            parts = []
+            for j in live:
+                settings, picks = jobs[j]
+                parts.append(
+                    make_inputs(
+                        backend.scene,
+                        settings.grasp,
+                        picks,
+                        settings.overrides(self.object, len(picks)),
+                    )
+                )
+            inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
+            out, _ = backend.run(inputs)
+            self.rollouts += len(inputs)
+            start = 0
+            for j in live:
+                n = len(jobs[j][1])
+                results[j] = {k: v[start : start + n] for k, v in out.items()}
+                start += n
+        return results

@@ -105,6 +105,25 @@ def test_kernel_agrees_with_reference(door_opener):
     assert mismatches <= 0.05 * n
 
 
+def test_fixed_opening_detects_a_finger_landing_on_the_object(block):
+    # the 40 x 20 mm block, centred at yaw 0: the plan opens 40 + 2 x 5 = 50 mm
+    checker = pp.FeasibilityChecker(block, GRIPPER)
+    planned = checker([0.0], [0.0], [0.0])
+    assert planned["opening_mm"][0] == pytest.approx(50.0, abs=1.0)
+    # the object is really 3 mm to the right: fingers 25 mm out still clear it ...
+    shifted = checker([3.0], [0.0], [0.0], opening_mm=planned["opening_mm"])
+    assert shifted["reason"][0] == fk.FEASIBLE
+    assert shifted["opening_mm"][0] == pytest.approx(planned["opening_mm"][0])
+    assert shifted["gap_right_mm"][0] == pytest.approx(2.0, abs=0.6)
+    # ... 6 mm to the right, the right finger comes down on it
+    landed = checker([6.0], [0.0], [0.0], opening_mm=planned["opening_mm"])
+    assert landed["reason"][0] == fk.CLEARANCE
+    ref = fk.reference_check(block.polygon, checker.band, 6.0, 0.0, 0.0, opening_mm=50.0)
+    assert ref[0] == fk.CLEARANCE
+    ref = fk.reference_check(block.polygon, checker.band, 3.0, 0.0, 0.0, opening_mm=50.0)
+    assert ref[0] == fk.FEASIBLE
+
+
 def test_yaw_symmetry(door_opener):
     # a symmetric gripper: (x, y, yaw + 180) is (-x, -y, yaw) with the fingers swapped
     checker = pp.FeasibilityChecker(door_opener, GRIPPER)

@@ -1,0 +1,130 @@
+"""Reports: each file is checked for its content (pages, scale, frames, poses), not
+only for being there."""
+
+import json
+import math
+import re
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import mjx_pick as mp
+from mjx_pick.cli import main
+from mjx_pick.grasp import GraspConfig
+from mjx_pick.report import PAPERS_MM, Run, report
+
+FAST = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.2)
+MM = 72.0 / 25.4  # PDF points per millimetre
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory, door_opener):
+    out = tmp_path_factory.mktemp("run")
+    mp.evaluate(door_opener, n=16, seed=0, grasp=FAST, backend="mujoco", out=out, n_traces=1)
+    return out
+
+
+@pytest.fixture(scope="module")
+def written(run_dir):
+    return report(run_dir, n=2, k=4, anim_every=25, anim_size=(160, 120))
+
+
+def _pdf_streams(path):
+    data = path.read_bytes()
+    for m in re.finditer(rb"stream\r?\n(.*?)\r?\nendstream", data, re.S):
+        try:
+            yield zlib.decompress(m.group(1))
+        except zlib.error:
+            continue
+
+
+def test_template_pages_and_true_scale(written):
+    for paper, (w_mm, h_mm) in PAPERS_MM.items():
+        path = Path(written["templates"][paper])
+        data = path.read_bytes()
+        # 2 best + 2 worst pick-points, one page each
+        assert len(re.findall(rb"/Type /Page\b(?!s)", data)) == 4
+        box = re.search(rb"/MediaBox \[ ?0 0 ([\d.]+) ([\d.]+) ?\]", data)
+        assert float(box.group(1)) == pytest.approx(w_mm * MM, abs=0.1)
+        assert float(box.group(2)) == pytest.approx(h_mm * MM, abs=0.1)
+        # the scale bar: the one stroke in its colour, 100 mm long on the page
+        bars = []
+        for text in _pdf_streams(path):
+            for m in re.finditer(
+                rb"0\.0039215686\s+0\.0078431373\s+0\.0117647059 RG.*?"
+                rb"([\d.]+) ([\d.]+) m\s+([\d.]+) ([\d.]+) l",
+                text,
+                re.S,
+            ):
+                x0, y0, x1, y1 = map(float, m.groups())
+                bars.append(math.hypot(x1 - x0, y1 - y0))
+        assert bars, "no scale bar found"
+        assert max(bars) == pytest.approx(100 * MM, abs=0.05)
+
+
+def test_animations_have_the_frames_asked_for(written, run_dir):
+    run = Run.load(run_dir)
+    assert len(written["animations"]) == len(run.traced()) == 2
+    for path in written["animations"]:
+        pid = int(path.split("_")[-1].split(".")[0])
+        ticks = len(run.trace(pid)["t_s"])
+        with Image.open(path) as gif:
+            assert gif.n_frames == math.ceil(ticks / 25)
+            assert gif.size == (320, 120)  # top and side views side by side
+            gif.seek(gif.n_frames // 2)
+            pixels = np.asarray(gif.convert("RGB"), float)
+        assert pixels.std() > 10, "a blank frame"
+
+
+def test_force_plots_and_maps(written):
+    assert len(written["forces"]) == 2
+    for key in ("score_map", "success_by_yaw", "score_hist", "failures", *written["forces"]):
+        path = written.get(key, key)
+        with Image.open(path) as im:
+            assert im.size[0] > 400 and np.asarray(im.convert("L")).std() > 5
+
+
+def test_robot_export_poses_invert_the_pick_points(run_dir, written):
+    data = json.loads(Path(written["robot_picks"]).read_text())
+    picks = data["picks"]
+    assert 1 <= len(picks) <= 4
+    scores = [p["score"] for p in picks]
+    assert scores == sorted(scores, reverse=True) and all(p["success"] for p in picks)
+    for p in picks:
+        t = np.asarray(p["gripper_pose"]["matrix"])
+        o = p["object_in_gripper"]
+        # the object's origin seen from the gripper must be the pick-point
+        obj_in_grip = np.linalg.inv(t) @ np.array([0.0, 0.0, 0.0, 1.0])
+        assert obj_in_grip[:2] == pytest.approx([o["x_mm"], o["y_mm"]], abs=1e-3)
+        assert math.degrees(math.atan2(t[1, 0], t[0, 0])) == pytest.approx(
+            -o["yaw_deg"] if o["yaw_deg"] <= 180 else 360 - o["yaw_deg"], abs=1e-3
+        )
+    # in a user frame 100 mm along x and turned 90 degrees about z
+    shifted = report(
+        run_dir, run_dir / "framed", n=1, k=1, frame=(100, 0, 0, 0, 0, 90), animations=False
+    )
+    moved = json.loads(Path(shifted["robot_picks"]).read_text())["picks"][0]["gripper_pose"]
+    px, py, pz = picks[0]["gripper_pose"]["position_mm"]
+    assert moved["position_mm"] == pytest.approx([100 - py, px, pz], abs=1e-3)
+
+
+def test_html_embeds_everything(written):
+    text = Path(written["html"]).read_text()
+    assert text.count("data:image/png;base64,") == 4 + 2  # maps + force plots
+    assert text.count("data:image/gif;base64,") == 2
+    assert text.count("data:application/pdf;base64,") == 2
+    assert 'src="/' not in text and 'href="/' not in text, "nothing points outside the file"
+
+
+def test_cli_report_and_bad_input(run_dir, tmp_path, capsys):
+    assert (
+        main(["report", str(run_dir), "--out", str(tmp_path / "r"), "--no-animations", "--n", "1"])
+        == 0
+    )
+    assert (tmp_path / "r" / "report.html").is_file()
+    assert main(["report", str(tmp_path)]) == 2
+    assert "not an evaluate output folder" in capsys.readouterr().err
+    assert main(["report", str(run_dir), "--frame", "1,2,x"]) == 2

@@ -1,0 +1,239 @@
+"""Sweeps, gripper comparison and design search, robustness, minimum grip force:
+each against a case whose answer is known."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from shapely.geometry import box
+
+import mjx_pick as mp
+from mjx_pick import pickpoints as pp
+from mjx_pick.cli import main
+from mjx_pick.config import to_toml
+from mjx_pick.grasp import GraspConfig, min_grasp_force_n
+from mjx_pick.sweep import ParamSpec, apply, variants
+
+# short procedure: 30 mm lift, 0.2 s hold
+FAST = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.2)
+LIGHT = mp.GripperSpec(name="light-gripper", force_min_n=1.0)
+
+
+@pytest.fixture(scope="module")
+def heavy_block():
+    # 1 kg, 40 x 20 x 20 mm: friction decides, eq. (1) is ~10 N at mu 0.5
+    return mp.object_from_polygon(box(-20, -10, 20, 10), thickness_mm=20, mass_g=1000, name="heavy")
+
+
+def test_param_parsing():
+    p = ParamSpec.parse("contact.pad_friction=0.4:1.0:4")
+    assert p.name == "contact.pad_friction" and np.allclose(p.values, [0.4, 0.6, 0.8, 1.0])
+    assert ParamSpec.parse("controller.force_n=20,40").name == "grasp.grip_force_n"
+    log = ParamSpec.parse("contact.pad_stiffness_n_per_mm=1:100:3:log")
+    assert np.allclose(log.values, [1, 10, 100])
+    rnd = ParamSpec.parse("gripper.stroke_mm=40:90")
+    assert rnd.values == () and (rnd.low, rnd.high) == (40, 90)
+    combos = variants([p, ParamSpec.parse("controller.force_n=20,40")])
+    assert len(combos) == 8
+    drawn = variants([rnd], random=5, seed=1)
+    assert len(drawn) == 5 and all(40 <= c["gripper.stroke_mm"] <= 90 for c in drawn)
+    with pytest.raises(mp.ConfigError, match="unknown parameter 'contact.nope'"):
+        ParamSpec.parse("contact.nope=1:2:3")
+    with pytest.raises(mp.ConfigError, match="write NAME=LO:HI:N"):
+        ParamSpec.parse("contact.pad_friction")
+    with pytest.raises(mp.ConfigError, match="a grid sweep needs"):
+        variants([rnd])
+    # values are validated by the settings themselves, naming the field
+    with pytest.raises(mp.ConfigError, match="contact.pad_friction = -0.5 is out of range"):
+        apply(mp.Settings(), "contact.pad_friction", -0.5)
+    with pytest.raises(mp.ConfigError, match="fingers cannot fit the stroke"):
+        apply(mp.Settings(), "gripper.stroke_mm", 10)
+
+
+def test_sweep_success_rises_with_pad_friction(heavy_block, tmp_path):
+    base = mp.Settings(gripper=LIGHT, grasp=dataclasses.replace(FAST, grip_force_n=20.0))
+    sim = mp.Simulator(heavy_block, "mujoco")
+    res = mp.sweep(
+        heavy_block,
+        [ParamSpec.parse("contact.pad_friction=0.1,0.2,0.5,1.0")],
+        base,
+        n=8,
+        seed=0,
+        simulator=sim,
+        out=tmp_path,
+    )
+    rates = [v["success_rate"] for v in res.variants]
+    # m (g + a) / (2 F_d) = 0.30: below it nothing holds, above it the centred grasps do
+    assert rates[0] == 0.0 and rates[1] == 0.0
+    assert rates[3] >= rates[2] > 0.0
+    assert len(sim._backends) == 1, "contact sweeps share one compiled simulation"
+    table = pq.read_table(tmp_path / "results.parquet")
+    assert table.num_rows == 32 and "contact.pad_friction" in table.column_names
+    assert sorted(set(table["variant"].to_pylist())) == [0, 1, 2, 3]
+    assert (tmp_path / "sweep.png").stat().st_size > 10_000
+    assert json.loads((tmp_path / "variants.json").read_text())[3]["n"] == 8
+
+
+def test_sweep_of_gripper_geometry_builds_a_scene_per_value(block):
+    sim = mp.Simulator(block, "mujoco")
+    res = mp.sweep(
+        block,
+        [ParamSpec.parse("gripper.finger_width_mm=12,30"), ParamSpec.parse("controller.kp=1,3")],
+        mp.Settings(grasp=FAST),
+        n=4,
+        simulator=sim,
+    )
+    assert len(res.variants) == 4 and len(sim._backends) == 2
+    assert res.table.num_rows == 16
+
+
+def test_compare_ranks_a_gripper_too_small_for_the_object_last(block, tmp_path):
+    tiny = dataclasses.replace(mp.GripperSpec(), name="tiny", stroke_mm=18.0, finger_depth_mm=4)
+    grippers = [tiny, mp.load_gripper("robotiq-2f85"), mp.load_gripper("onrobot-rg2")]
+    res = mp.compare(block, grippers, mp.Settings(grasp=FAST), n=12, backend="mujoco", out=tmp_path)
+    assert res.ranking[-1]["gripper"] == "tiny"
+    assert res.ranking[-1]["success_rate"] == 0.0 and res.ranking[-1]["feasible"] == 0
+    assert res.ranking[0]["success_rate"] > 0.5
+    assert res.ranking[-1]["p_vs_best"] < 0.01  # McNemar on the shared pick-points
+    lo, hi = res.ranking[0]["success_ci"]
+    assert lo <= res.ranking[0]["success_rate"] <= hi
+    # the RG2 cannot squeeze 50 N: it is compared at its strongest
+    rg2 = next(r for r in res.ranking if r["gripper"] == "onrobot-rg2")
+    assert rg2["grip_force_n"] == 40.0
+    for name in ("ranking.json", "ranking.png", "maps.png", "results.parquet"):
+        assert (tmp_path / name).is_file(), name
+
+
+def test_design_search_finds_a_stroke_that_fits(block, tmp_path):
+    base = mp.Settings(gripper=dataclasses.replace(mp.GripperSpec(), name="narrow", stroke_mm=28))
+    res = mp.design_search(
+        block,
+        {"stroke_mm": (20.0, 85.0)},
+        base,
+        variants=4,
+        n=8,
+        rounds=2,
+        final_n=12,
+        backend="mujoco",
+        out=tmp_path,
+    )
+    # the block is 20 mm wide: a 28 mm stroke leaves no room for the 2 x 5 mm safety zone
+    assert res.best.stroke_mm > 30
+    best, narrow = (
+        next(r for r in res.final.ranking if r["gripper"] == g.name) for g in (res.best, res.base)
+    )
+    assert best["success_rate"] > narrow["success_rate"]
+    assert mp.load_gripper(tmp_path / "best_gripper.toml") == res.best
+
+
+def test_min_grip_force_of_a_centred_block_matches_eq1(heavy_block):
+    mu = 0.5
+    grasp = GraspConfig(close_timeout_s=1.0, lift_accel_mm_s2=1000.0)
+    base = mp.Settings(gripper=LIGHT, contact=mp.ContactParams(pad_friction=mu), grasp=grasp)
+    picks = pp.FeasibilityChecker(heavy_block, LIGHT).batch(
+        np.arange(1), np.zeros(1), np.zeros(1), np.zeros(1), "user"
+    )
+    force = mp.min_grip_force(heavy_block, picks, base, hi_n=60.0, backend="mujoco")
+    eq1 = min_grasp_force_n(heavy_block, mu, grasp.safety_factor)  # S_f = 1.1
+    assert force[0] == pytest.approx(eq1, rel=0.10)
+
+
+def test_robust_probability_of_centred_and_edge_grasps():
+    # a 120 mm bar gripped across its middle is robust; 40 mm from its centre of mass
+    # with low friction it swings out of the grip under most draws
+    bar = mp.object_from_polygon(box(-60, -5, 60, 5), thickness_mm=10, mass_g=300, name="bar")
+    gripper = mp.GripperSpec()
+    picks = pp.FeasibilityChecker(bar, gripper).batch(
+        np.arange(2), np.zeros(2), np.array([0.0, 40.0]), np.full(2, 90.0), "user"
+    )
+    base = mp.Settings(
+        contact=mp.ContactParams(pad_friction=0.3),
+        grasp=dataclasses.replace(FAST, grip_force_n=20.0, hold_s=0.3),
+    )
+    table = mp.robustness(bar, picks, base, m=16, seed=0, backend="mujoco").to_pylist()
+    by_id = {row["pick_id"]: row for row in table}
+    assert by_id[0]["robust_p"] >= 0.9
+    assert by_id[1]["robust_p"] <= 0.5
+    assert table[0]["pick_id"] == 0 and table[0]["rank"] == 1
+    assert by_id[1]["robust_ci_low"] <= by_id[1]["robust_p"] <= by_id[1]["robust_ci_high"]
+
+
+def test_cli_studies(tmp_path, capsys):
+    grasp = tmp_path / "grasp.toml"
+    grasp.write_text(to_toml(FAST))
+    common = ["block", "--grasp", str(grasp), "--backend", "mujoco", "--seed", "0"]
+    assert (
+        main(
+            [
+                "sweep",
+                *common,
+                "--n",
+                "4",
+                "--param",
+                "controller.force_n=20,40",
+                "--out",
+                str(tmp_path / "sw"),
+            ]
+        )
+        == 0
+    )
+    assert (tmp_path / "sw" / "results.parquet").is_file()
+    assert (
+        main(
+            [
+                "compare",
+                *common,
+                "--n",
+                "6",
+                "--grippers",
+                "robotiq-2f85,franka-hand",
+                "--out",
+                str(tmp_path / "cmp"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "robust",
+                *common,
+                "--n",
+                "6",
+                "--top-k",
+                "2",
+                "--m",
+                "4",
+                "--out",
+                str(tmp_path / "rb"),
+            ]
+        )
+        == 0
+    )
+    assert pq.read_table(tmp_path / "rb" / "robustness.parquet").num_rows == 2
+    assert (
+        main(
+            [
+                "evaluate",
+                *common,
+                "--n",
+                "3",
+                "--min-force",
+                "--traces",
+                "0",
+                "--no-progress",
+                "--out",
+                str(tmp_path / "ev"),
+            ]
+        )
+        == 0
+    )
+    forces = pq.read_table(tmp_path / "ev" / "results.parquet")["min_force_n"].to_numpy()
+    found = forces[np.isfinite(forces)]
+    assert len(found) and np.all((found >= 20.0) & (found <= 235.0))
+    assert main(["sweep", *common, "--param", "contact.nope=1:2:3"]) == 2
+    assert "unknown parameter 'contact.nope'" in capsys.readouterr().err
+    assert main(["design", *common, "--bound", "stroke=1:2"]) == 2
+    assert "not a numeric gripper field" in capsys.readouterr().err
