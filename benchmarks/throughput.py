@@ -15,74 +15,15 @@ from __future__ import annotations
 import argparse
 import csv
 import os
-import statistics
 import subprocess
 import time
 from pathlib import Path
 
 import jax
-import numpy as np
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
 from mjx_pick.grasp import GraspConfig
-from mjx_pick.simulate import make_backend, make_inputs
-
-
-def device_name(n: int | None = None) -> str:
-    d = jax.devices()[0]
-    n = n or len(jax.devices())
-    return f"{n}x {d.device_kind}" if d.platform != "cpu" else "cpu"
-
-
-def peak_bytes() -> int | None:
-    stats = jax.devices()[0].memory_stats() if jax.devices()[0].platform != "cpu" else None
-    return None if not stats else int(stats.get("peak_bytes_in_use", 0))
-
-
-def tile_picks(picks: pp.PickBatch, n: int, offset: int) -> pp.PickBatch:
-    idx = (np.arange(n) + offset) % len(picks)
-    return picks.take(idx)
-
-
-def bench(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_devices=None):
-    obj = mp.load_object(obj_name)
-    scene = mp.build_scene(obj, gripper, solver=solver)
-    pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0)
-    devices = jax.local_devices()[:n_devices] if n_devices else None
-    backend = make_backend(backend_name, scene, grasp, batch_size=batch, devices=devices)
-    steps = grasp.n_ticks() * grasp.substeps(scene.solver)
-    first = make_inputs(scene, grasp, tile_picks(pool, batch, 0))
-    t0 = time.perf_counter()
-    out, _ = backend.run(first)  # compiles, then runs once (warm-up)
-    first_wall = time.perf_counter() - t0
-    compile_s = backend.stats.compile_s
-    times = []
-    for r in range(repeats):
-        inputs = make_inputs(scene, grasp, tile_picks(pool, batch, (r + 1) * 7919))
-        before = backend.stats.run_s
-        out, _ = backend.run(inputs)
-        times.append(backend.stats.run_s - before)
-    run_s = statistics.median(times)
-    peak = peak_bytes()
-    return {
-        "object": obj_name,
-        "backend": backend.name,
-        "device": device_name(n_devices) if backend.name == "mjx" else backend.device,
-        "batch": batch,
-        "compile_s": round(compile_s, 2),
-        "first_call_s": round(first_wall, 2),
-        "run_s_median": round(run_s, 3),
-        "picks_per_s": round(batch / run_s, 1),
-        "physics_steps_per_s": round(batch * steps / run_s),
-        "steps_per_pick": steps,
-        "peak_mem_mb_per_pick": round(peak / batch / 2**20, 3) if peak else None,
-        "success_rate": round(float(np.mean(out["success"])), 4),
-        "diverged": int(np.sum(out["diverged"])),
-        "timestep_s": scene.solver.timestep_s,
-        "cone": scene.solver.cone,
-        "iterations": scene.solver.iterations,
-    }
+from mjx_pick.throughput import measure
 
 
 def main() -> None:
@@ -119,7 +60,7 @@ def main() -> None:
         for backend_name in args.backends.split(","):
             for batch in (int(b) for b in args.batch_sizes.split(",")):
                 for nd in [int(x) for x in args.devices.split(",")] if args.devices else [None]:
-                    row = bench(
+                    row = measure(
                         obj_name,
                         gripper,
                         backend_name,

@@ -12,6 +12,7 @@ import sys as _sys
 if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY"):
     _os.environ.setdefault("MUJOCO_GL", "egl")
 
+from mjx_pick import calibrate  # the calibration module: calibrate.calibrate, .Problem, ...
 from mjx_pick.compare import compare, design_search
 from mjx_pick.config import ConfigError
 from mjx_pick.evaluate import Evaluation, evaluate
@@ -35,6 +36,7 @@ from mjx_pick.pickpoints import (
     generate_normal,
     optimize,
 )
+from mjx_pick.report import report
 from mjx_pick.robustness import min_grip_force, robustness
 from mjx_pick.scene import Scene, build_scene
 from mjx_pick.simulate import Settings, Simulator
@@ -59,6 +61,7 @@ __all__ = [
     "SolverParams",
     "asset_names",
     "build_scene",
+    "calibrate",
     "compare",
     "design_search",
     "evaluate",
@@ -74,6 +77,7 @@ __all__ = [
     "object_from_mesh",
     "object_from_polygon",
     "preset_names",
+    "report",
     "robustness",
     "sweep",
 ]

@@ -7,6 +7,7 @@
   mjx-pick design OBJECT --bound finger_width_mm=10:40 --bound stroke_mm=60:140 --out DIR
   mjx-pick robust OBJECT [--results DIR] --top-k 10 --m 32 --out DIR
   mjx-pick report DIR                               (plots, maps, animations, template, HTML)
+  mjx-pick calibrate OUTCOMES.csv OBJECT --params pad_friction,stiffness --out DIR
   mjx-pick presets | assets                          (what is shipped)
 
 OBJECT is a shipped asset name (``mjx-pick assets``), a top-down image (with
@@ -357,6 +358,64 @@ def cmd_robust(args) -> int:
     return 0
 
 
+def cmd_calibrate(args) -> int:
+    from mjx_pick import calibrate as cal
+
+    obj, base, picks_cfg = _base_settings(args)
+    outcomes = cal.read_outcomes(args.outcomes)
+    names = cal.canonical_params(args.params)
+    backend = "mjx" if args.estimator == "jvp" else args.backend
+    problem = cal.Problem(
+        obj,
+        outcomes,
+        names,
+        base,
+        temperature_mm=args.temperature_mm,
+        pick_config=picks_cfg,
+        backend=backend,
+    )
+    holdout = None
+    if args.holdout:
+        holdout = cal.Problem(
+            obj,
+            cal.read_outcomes(args.holdout),
+            names,
+            base,
+            temperature_mm=args.temperature_mm,
+            pick_config=picks_cfg,
+            backend=args.backend,
+        )
+
+    def log(entry):
+        if entry["step"] % args.log_every == 0:
+            values = ", ".join(f"{k} {v:.4g}" for k, v in entry["values"].items())
+            print(f"step {entry['step']:4d}  loss {entry['loss']:.4f}  {values}", flush=True)
+
+    res = cal.calibrate(
+        problem,
+        steps=args.steps,
+        learning_rate=args.lr,
+        estimator=args.estimator,
+        samples=args.samples,
+        sigma=args.sigma,
+        checkpoint_every=args.checkpoint_every,
+        out=args.out,
+        resume=args.resume,
+        holdout=holdout,
+        log=log,
+    )
+    for name in names:
+        print(f"{name}: {res.initial[name]:.4g} -> {res.values[name]:.4g}")
+    for label, acc in (("before", res.accuracy_before), ("after", res.accuracy_after)):
+        if acc:
+            print(f"held-out accuracy {label}: {acc['correct']}/{acc['total']}")
+    print(
+        f"results in {args.out}/ (contact.toml, calibration.json, loss.png, report.md); "
+        f"use: mjx-pick evaluate ... --contact {args.out}/contact.toml"
+    )
+    return 0
+
+
 def cmd_report(args) -> int:
     from mjx_pick.report import report
 
@@ -570,6 +629,40 @@ def build_parser() -> argparse.ArgumentParser:
     _add_pick_args(pk)
     pk.add_argument("--out", required=True)
     pk.set_defaults(func=cmd_picks)
+
+    cb = sub.add_parser("calibrate", help="fit contact parameters to measured outcomes")
+    cb.add_argument("outcomes", help="measured outcomes CSV (see mjx_pick.calibrate)")
+    _add_object_args(cb)
+    _add_gripper_args(cb)
+    _add_physics_args(cb)
+    _add_pick_args(cb)
+    cb.add_argument(
+        "--params",
+        default="pad_friction",
+        help="comma-separated: pad_friction, table_friction, stiffness, damping, ...",
+    )
+    cb.add_argument("--steps", type=int, default=100)
+    cb.add_argument("--lr", type=float, default=0.1, help="Adam step in the bounded space")
+    cb.add_argument(
+        "--estimator",
+        choices=("smoothed", "jvp"),
+        default="smoothed",
+        help="smoothed: antithetic Gaussian smoothing (any backend); jvp: forward-mode through MJX",
+    )
+    cb.add_argument(
+        "--samples",
+        type=int,
+        default=2,
+        help="quadrature node pairs per parameter and step (smoothed)",
+    )
+    cb.add_argument("--sigma", type=float, default=0.2, help="smoothing spread (bounded space)")
+    cb.add_argument("--temperature-mm", type=float, default=2.0)
+    cb.add_argument("--holdout", help="held-out outcomes CSV for accuracy before/after")
+    cb.add_argument("--checkpoint-every", type=int, default=10)
+    cb.add_argument("--log-every", type=int, default=10)
+    cb.add_argument("--resume", action="store_true")
+    cb.add_argument("--out", required=True)
+    cb.set_defaults(func=cmd_calibrate)
 
     rp = sub.add_parser("report", help="plots, maps, animations, 1:1 template, robot export, HTML")
     rp.add_argument("run", help="an evaluate output folder")

@@ -39,6 +39,11 @@ class PickInputs(NamedTuple):
     def __len__(self) -> int:
         return len(self.qpos0)
 
+    def replace(self, **fields) -> PickInputs:
+        """A copy with some fields replaced (NamedTuple's _replace relies on len()
+        counting the fields, which __len__ redefines)."""
+        return PickInputs(**{**self._asdict(), **fields})
+
     def take(self, index) -> PickInputs:
         return jax.tree.map(lambda a: a[index], self)
 
