@@ -214,6 +214,11 @@ def cmd_sweep(args) -> int:
             "diverged",
         ],
     )
+    t = res.timing
+    print(
+        f"{t['simulations']} simulations, {t['scenes']} scene(s): compile {t['compile_s']:.1f} s, "
+        f"run {t['run_s']:.1f} s ({t['simulations_per_s']} per s)"
+    )
     if args.out:
         print(f"results in {args.out}/ (results.parquet, variants.json, sweep.png, config.json)")
     return 0

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import time
 import typing
 from pathlib import Path
 
@@ -174,6 +175,7 @@ def variants(params: list[ParamSpec], random: int | None = None, seed: int = 0) 
 class SweepResult:
     table: pa.Table  # one row per pick-point x variant, with one column per parameter
     variants: list[dict]  # per variant: parameter values and rate_summary()
+    timing: dict  # simulations, scenes built, compile_s apart from run_s, per second
     out_dir: Path | None
 
 
@@ -206,7 +208,24 @@ def sweep(
         if s.gripper not in picks_for:
             picks_for[s.gripper] = pp.generate_normal(obj, s.gripper, n, seed, pick_config)
     jobs = [(s, picks_for[s.gripper]) for s in settings]
+    before = {id(b): (b.stats.compile_s, b.stats.run_s) for b in sim._backends.values()}
+    t0 = time.perf_counter()
     outs = sim.run(jobs)
+    wall = time.perf_counter() - t0
+    compile_s = run_s = 0.0
+    for b in sim._backends.values():
+        c0, r0 = before.get(id(b), (0.0, 0.0))
+        compile_s += b.stats.compile_s - c0
+        run_s += b.stats.run_s - r0
+    n_sims = sum(len(p) for _, p in jobs)
+    timing = {
+        "simulations": n_sims,
+        "scenes": len(sim._backends),
+        "compile_s": round(compile_s, 3),
+        "run_s": round(run_s, 3),
+        "wall_s": round(wall, 3),
+        "simulations_per_s": round(n_sims / run_s, 2) if run_s > 0 else None,
+    }
     tables, summaries = [], []
     for v, ((_, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
         extra = {"variant": np.full(len(picks), v)}
@@ -234,12 +253,14 @@ def sweep(
                 "n": n,
                 "seed": seed,
                 "backend": next(iter(sim._backends.values())).name if sim._backends else backend,
+                "device": next(iter(sim._backends.values())).device if sim._backends else None,
+                "timing": timing,
             },
         )
         write_parquet(out_dir / "results.parquet", table)
         write_json(out_dir / "variants.json", summaries)
         plot_sweep(summaries, table, [p.name for p in params], out_dir / "sweep.png")
-    return SweepResult(table, summaries, out_dir)
+    return SweepResult(table, summaries, timing, out_dir)
 
 
 def marginal(table: pa.Table, name: str) -> list[dict]:
