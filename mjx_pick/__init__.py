@@ -3,14 +3,21 @@
 Data flow: object -> gripper -> scene -> pick-points -> batched simulation -> metrics.
 """
 
+import ctypes.util as _ctypes_util
 import os as _os
 import sys as _sys
 
 # MuJoCo picks its OpenGL back end when it is first imported; without a display, the
 # offscreen renderer (animations) needs EGL. Set before mujoco is imported, never
-# overriding a user's choice.
-if _sys.platform.startswith("linux") and not _os.environ.get("DISPLAY"):
-    _os.environ.setdefault("MUJOCO_GL", "egl")
+# overriding a user's choice, and only where libEGL exists: with MUJOCO_GL=egl and no
+# libEGL, `import mujoco` itself fails.
+if (
+    _sys.platform.startswith("linux")
+    and not _os.environ.get("DISPLAY")
+    and "MUJOCO_GL" not in _os.environ
+    and _ctypes_util.find_library("EGL")
+):
+    _os.environ["MUJOCO_GL"] = "egl"
 
 from mjx_pick import calibrate  # the calibration module: calibrate.calibrate, .Problem, ...
 from mjx_pick.compare import compare, design_search
