@@ -168,6 +168,18 @@ def _base_settings(args):
     return obj, Settings(gripper, contact, solver, grasp), picks_cfg
 
 
+def _study_options(args, picks_cfg) -> dict:
+    """The keyword arguments every study (sweep, compare, design) takes from the CLI."""
+    return {
+        "n": args.n,
+        "seed": args.seed,
+        "pick_config": picks_cfg,
+        "backend": args.backend,
+        "batch_size": args.batch_size,
+        "out": args.out,
+    }
+
+
 def _print_rows(rows: list[dict], keys: list[str]) -> None:
     width = {k: max(len(k), *(len(_fmt(r.get(k))) for r in rows)) for k in keys}
     print("  ".join(f"{k:<{width[k]}}" for k in keys))
@@ -190,18 +202,7 @@ def cmd_sweep(args) -> int:
         raise ConfigError("sweep needs at least one --param NAME=LO:HI:N (`mjx-pick params`)")
     obj, base, picks_cfg = _base_settings(args)
     params = [ParamSpec.parse(p) for p in args.param]
-    res = sweep(
-        obj,
-        params,
-        base,
-        n=args.n,
-        seed=args.seed,
-        random=args.random,
-        pick_config=picks_cfg,
-        backend=args.backend,
-        batch_size=args.batch_size,
-        out=args.out,
-    )
+    res = sweep(obj, params, base, random=args.random, **_study_options(args, picks_cfg))
     _print_rows(
         res.variants,
         [
@@ -238,16 +239,7 @@ def cmd_compare(args) -> int:
 
     obj, base, picks_cfg = _base_settings(args)
     res = compare(
-        obj,
-        _grippers(args.grippers),
-        base,
-        n=args.n,
-        seed=args.seed,
-        rank_by=args.rank_by,
-        pick_config=picks_cfg,
-        backend=args.backend,
-        batch_size=args.batch_size,
-        out=args.out,
+        obj, _grippers(args.grippers), base, rank_by=args.rank_by, **_study_options(args, picks_cfg)
     )
     _print_rows(
         res.ranking,
@@ -291,14 +283,9 @@ def cmd_design(args) -> int:
         bounds,
         base,
         variants=args.variants,
-        n=args.n,
         rounds=args.rounds,
-        seed=args.seed,
         rank_by=args.rank_by,
-        pick_config=picks_cfg,
-        backend=args.backend,
-        batch_size=args.batch_size,
-        out=args.out,
+        **_study_options(args, picks_cfg),
     )
     print(f"best variant: {res.best.name}")
     for field in bounds:
