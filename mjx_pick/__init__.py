@@ -4,8 +4,27 @@ Data flow: object -> gripper -> scene -> pick-points -> batched simulation -> me
 """
 
 import ctypes.util as _ctypes_util
+import importlib.util as _importlib_util
 import os as _os
 import sys as _sys
+from pathlib import Path as _Path
+
+# Installed, kernels/ and assets/ are the subpackages mjx_pick.kernels and
+# mjx_pick.assets (pyproject's package-dir). Run from a source checkout (python -m
+# mjx_pick.cli in the repository root), they sit beside this folder: load them under
+# the same names.
+for _name in ("kernels", "assets"):
+    _beside = _Path(__file__).resolve().parent.parent / _name
+    if (
+        not (_Path(__file__).resolve().parent / _name).is_dir()
+        and (_beside / "__init__.py").is_file()
+    ):
+        _spec = _importlib_util.spec_from_file_location(
+            f"mjx_pick.{_name}", _beside / "__init__.py", submodule_search_locations=[str(_beside)]
+        )
+        _module = _importlib_util.module_from_spec(_spec)
+        _sys.modules[f"mjx_pick.{_name}"] = _module
+        _spec.loader.exec_module(_module)
 
 # MuJoCo picks its OpenGL back end when it is first imported; without a display, the
 # offscreen renderer (animations) needs EGL. Set before mujoco is imported, never

@@ -79,7 +79,9 @@ def test_kill_mid_run_then_resume_equals_uninterrupted(tmp_path, block):
     env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": ""}
     log = tmp_path / "killed.log"
     with log.open("wb") as sink:
-        proc = subprocess.Popen(cmd, env=env, stdout=sink, stderr=subprocess.STDOUT)
+        # cwd outside the checkout: "-m mjx_pick.cli" must find the installed package,
+        # not the source folder (whose kernels/ lives beside it)
+        proc = subprocess.Popen(cmd, env=env, stdout=sink, stderr=subprocess.STDOUT, cwd=tmp_path)
         deadline = time.monotonic() + 300
         chunks = out / "chunks"
         while time.monotonic() < deadline and proc.poll() is None:
