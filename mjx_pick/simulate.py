@@ -215,6 +215,11 @@ class Simulator:
         self._backends: dict[tuple, Backend] = {}
         self.rollouts = 0  # pick-point simulations run so far
 
+    @property
+    def backends(self) -> list[Backend]:
+        """The backends built so far: one per scene structure (one compile each on MJX)."""
+        return list(self._backends.values())
+
     def adopt(self, settings: Settings, backend: Backend) -> None:
         """Reuse a backend built elsewhere for settings' structure (no new compile)."""
         self._backends[settings.structure()] = backend

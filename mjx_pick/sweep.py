@@ -208,19 +208,19 @@ def sweep(
         if s.gripper not in picks_for:
             picks_for[s.gripper] = pp.generate_normal(obj, s.gripper, n, seed, pick_config)
     jobs = [(s, picks_for[s.gripper]) for s in settings]
-    before = {id(b): (b.stats.compile_s, b.stats.run_s) for b in sim._backends.values()}
+    before = {id(b): (b.stats.compile_s, b.stats.run_s) for b in sim.backends}
     t0 = time.perf_counter()
     outs = sim.run(jobs)
     wall = time.perf_counter() - t0
     compile_s = run_s = 0.0
-    for b in sim._backends.values():
+    for b in sim.backends:
         c0, r0 = before.get(id(b), (0.0, 0.0))
         compile_s += b.stats.compile_s - c0
         run_s += b.stats.run_s - r0
     n_sims = sum(len(p) for _, p in jobs)
     timing = {
         "simulations": n_sims,
-        "scenes": len(sim._backends),
+        "scenes": len(sim.backends),
         "compile_s": round(compile_s, 3),
         "run_s": round(run_s, 3),
         "wall_s": round(wall, 3),
@@ -252,8 +252,8 @@ def sweep(
                 "random": random,
                 "n": n,
                 "seed": seed,
-                "backend": next(iter(sim._backends.values())).name if sim._backends else backend,
-                "device": next(iter(sim._backends.values())).device if sim._backends else None,
+                "backend": sim.backends[0].name if sim.backends else backend,
+                "device": sim.backends[0].device if sim.backends else None,
                 "timing": timing,
             },
         )

@@ -68,7 +68,7 @@ def test_sweep_success_rises_with_pad_friction(heavy_block, tmp_path):
     # m (g + a) / (2 F_d) = 0.30: below it nothing holds, above it the centred grasps do
     assert rates[0] == 0.0 and rates[1] == 0.0
     assert rates[3] >= rates[2] > 0.0
-    assert len(sim._backends) == 1, "contact sweeps share one compiled simulation"
+    assert len(sim.backends) == 1, "contact sweeps share one compiled simulation"
     table = pq.read_table(tmp_path / "results.parquet")
     assert table.num_rows == 32 and "contact.pad_friction" in table.column_names
     assert sorted(set(table["variant"].to_pylist())) == [0, 1, 2, 3]
@@ -85,7 +85,7 @@ def test_sweep_of_gripper_geometry_builds_a_scene_per_value(block):
         n=4,
         simulator=sim,
     )
-    assert len(res.variants) == 4 and len(sim._backends) == 2
+    assert len(res.variants) == 4 and len(sim.backends) == 2
     assert res.table.num_rows == 16
 
 
