@@ -444,12 +444,12 @@ class Problem:
         return loss, p
 
     # --- backends
-    def _c_backend(self):
+    def _forward_backend(self):
+        """The backend of plain simulations (loss values, accuracy): as chosen ("auto":
+        MJX on an accelerator, else the C engine)."""
         if self._backend is None:
             self._backend = make_backend(
-                "mujoco"
-                if self.backend_name in ("auto", "mujoco") and not _accel()
-                else self.backend_name,
+                self.backend_name,
                 self.scene,
                 self.settings.grasp,
                 batch_size=max(256, len(self.outcomes)),
@@ -467,7 +467,7 @@ class Problem:
             pair_friction=np.concatenate([np.asarray(f) for f in frs]),
             pair_solref=np.concatenate([np.asarray(x) for x in refs]),
         )
-        out, rows = self._c_backend().run(inputs, record=self.record)
+        out, rows = self._forward_backend().run(inputs, record=self.record)
         self.rollouts += len(inputs)
         res = {k: np.asarray(v).reshape(s_n, r) for k, v in out.items()}
         if rows is not None:
@@ -554,12 +554,6 @@ def _entropy(y):
     y = jnp.clip(y, 1e-7, 1 - 1e-7)
     h = -(y * jnp.log(y) + (1 - y) * jnp.log(1 - y))
     return jnp.where((y <= 1e-6) | (y >= 1 - 1e-6), 0.0, h)
-
-
-def _accel() -> bool:
-    from mjx_pick.simulate import has_accelerator
-
-    return has_accelerator()
 
 
 # -------------------------------------------------------------------------------- fit
