@@ -32,7 +32,9 @@ def main() -> None:
     ap.add_argument("--gripper", default="robotiq-2f85")
     ap.add_argument("--backends", default="mjx")
     ap.add_argument("--batch-sizes", default="1024,4096,16384")
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument(
+        "--repeats", type=int, default=3, help="timed runs after a warm-up; 0: time the first run"
+    )
     ap.add_argument("--grasp", help="GraspConfig TOML (default: GraspConfig())")
     ap.add_argument("--solver", help="SolverParams TOML (default: SolverParams())")
     ap.add_argument("--out", default="benchmarks/out")

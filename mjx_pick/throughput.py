@@ -41,7 +41,10 @@ def tile_picks(picks: pp.PickBatch, n: int, offset: int) -> pp.PickBatch:
 def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_devices=None):
     """One throughput row: compile time apart from run time (median of repeats over
     distinct pick-point sets, after a warm-up run), pick-points and physics steps per
-    second, peak device memory per pick-point (MJX on GPU), success rate."""
+    second, peak device memory per pick-point (MJX on GPU), success rate.
+
+    repeats = 0 times the first run itself (its compile is already apart: MJX compiles
+    ahead of time), for runs where device time is short."""
     obj = mp.load_object(obj_name)
     scene = mp.build_scene(obj, gripper, solver=solver)
     pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0)
@@ -53,7 +56,7 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
     out, _ = backend.run(first)  # compiles, then runs once (warm-up)
     first_wall = time.perf_counter() - t0
     compile_s = backend.stats.compile_s
-    times = []
+    times = [] if repeats else [backend.stats.run_s]
     for r in range(repeats):
         inputs = make_inputs(scene, grasp, tile_picks(pool, batch, (r + 1) * 7919))
         before = backend.stats.run_s
