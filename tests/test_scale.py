@@ -34,6 +34,11 @@ def test_mjx_sharded_over_four_devices_matches_one_and_does_not_recompile(block,
     first, _ = sharded.run(make_inputs(scene, FAST, picks.take(slice(0, 8))))
     n = count_compiles(lambda: sharded.run(make_inputs(scene, FAST, picks.take(slice(8, 16)))))
     assert n == 0, f"{n} compilations on the second batch"
+    # each device runs its own slice: no cross-device collective in the program (the
+    # partitioner used to all-reduce the solver loop's test at every iteration)
+    hlo = next(iter(sharded._compiled.values())).as_text()
+    for op in ("all-reduce", "all-gather", "collective-permute", "all-to-all"):
+        assert op not in hlo, f"{op} in the sharded rollout"
     single = make_backend("mjx", scene, FAST, batch_size=8, devices=jax.local_devices()[:1])
     alone, _ = single.run(make_inputs(scene, FAST, picks.take(slice(0, 8))))
     for key in ("success", "failure", "t_reached_s"):
