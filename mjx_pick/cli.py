@@ -303,6 +303,7 @@ def cmd_robust(args) -> int:
     import pyarrow.parquet as pq
 
     from mjx_pick import pickpoints as pp
+    from mjx_pick.metrics import best_successes
     from mjx_pick.robustness import robustness
     from mjx_pick.simulate import Simulator
 
@@ -310,22 +311,22 @@ def cmd_robust(args) -> int:
     sim = Simulator(obj, args.backend, args.batch_size)
     checker = pp.FeasibilityChecker(obj, base.gripper, picks_cfg)
     if args.results:
-        table = pq.read_table(
-            Path(args.results) / "results.parquet" if Path(args.results).is_dir() else args.results
-        )
-        for col in ("x_mm", "y_mm", "yaw_deg", "score", "success"):
+        path = Path(args.results)
+        path = path / "results.parquet" if path.is_dir() else path
+        if not path.is_file():
+            raise ConfigError(f"--results {args.results}: no results.parquet there")
+        table = pq.read_table(path)
+        for col in ("pick_id", "x_mm", "y_mm", "yaw_deg", "score", "success"):
             if col not in table.column_names:
                 raise ConfigError(f"--results {args.results}: no column {col!r}")
-        x, y, yaw = (np.asarray(table[c], float) for c in ("x_mm", "y_mm", "yaw_deg"))
-        score = np.where(np.asarray(table["success"]), np.asarray(table["score"], float), -1)
-        ids = np.asarray(table["pick_id"]) if "pick_id" in table.column_names else np.arange(len(x))
+        x, y, yaw, ids = (np.asarray(table[c]) for c in ("x_mm", "y_mm", "yaw_deg", "pick_id"))
+        success, score = np.asarray(table["success"]), np.asarray(table["score"], float)
     else:
         picks = pp.generate_normal(obj, base.gripper, args.n, args.seed, picks_cfg)
         (out,) = sim.run([(base, picks)])
         x, y, yaw, ids = picks.x_mm, picks.y_mm, picks.yaw_deg, picks.pick_id
-        score = np.where(out["success"], np.nan_to_num(out["score"], nan=-1), -1)
-    top = np.argsort(-score, kind="stable")[: args.top_k]
-    top = top[score[top] >= 0]
+        success, score = out["success"], out["score"]
+    top = best_successes(success, score, args.top_k)
     if len(top) == 0:
         raise ConfigError("no successful pick-point to test: evaluate more pick-points first")
     picks = checker.batch(ids[top], x[top], y[top], yaw[top], "robustness")

@@ -65,34 +65,38 @@ def shared_candidates(
     """
     check_range("compare", "n", n, 1, 1e8)
     checkers = [pp.FeasibilityChecker(obj, g, config) for g in grippers]
-    rng = np.random.default_rng(seed)
-    xr, yr = checkers[0].ranges()
-    cand = {"x_mm": [], "y_mm": [], "yaw_deg": [], "pick_id": []}
-    reasons, found, start = [], 0, 0
-    max_candidates = checkers[0].config.max_candidates
-    while found < n and start < max_candidates:
-        x, y, yaw = pp.draw_block(rng, xr, yr, checkers[0].config, pp.CANDIDATE_BLOCK)
-        r = np.stack([c(x, y, yaw)["reason"] for c in checkers])
+    parts, found, drawn = [], 0, 0
+    for ids, x, y, yaw in pp.candidate_blocks(checkers[0], seed):
+        if found >= n or drawn >= checkers[0].config.max_candidates:
+            break
+        drawn += len(ids)
+        checks = [c(x, y, yaw) for c in checkers]
+        r = np.stack([res["reason"] for res in checks])
         keep = np.flatnonzero((r == 0).any(axis=0))[: n - found]
-        for key, v in zip(cand, (x, y, yaw, np.arange(start, start + len(x))), strict=True):
-            cand[key].append(v[keep])
-        reasons.append(r[:, keep])
         found += len(keep)
-        start += pp.CANDIDATE_BLOCK
+        parts.append(
+            (
+                ids[keep],
+                x[keep],
+                y[keep],
+                yaw[keep],
+                [{k: v[keep] for k, v in res.items()} for res in checks],
+            )
+        )
     if found == 0:
         raise ConfigError(
             f"none of {', '.join(g.name for g in grippers)} can take {obj.name} at any of "
-            f"{start} candidate poses: check the strokes against the object's size"
+            f"{drawn} candidate poses: check the strokes against the object's size"
         )
-    cand = {k: np.concatenate(v) for k, v in cand.items()}
-    reasons = np.concatenate(reasons, axis=1)
+    ids, x, y, yaw = (np.concatenate([p[i] for p in parts]) for i in range(4))
+    cand = {"x_mm": x, "y_mm": y, "yaw_deg": yaw, "pick_id": ids}
     batches = []
-    for g, checker in enumerate(checkers):
-        ok = reasons[g] == 0
-        b = checker.batch(
-            cand["pick_id"][ok], cand["x_mm"][ok], cand["y_mm"][ok], cand["yaw_deg"][ok], "compare"
-        )
-        batches.append(b)
+    for g in range(len(grippers)):
+        res = {k: np.concatenate([p[4][g][k] for p in parts]) for k in parts[0][4][g]}
+        batches.append(pp.feasible_batch(ids, x, y, yaw, res, "compare"))
+    reasons = np.stack(
+        [np.concatenate([p[4][g]["reason"] for p in parts]) for g in range(len(grippers))]
+    )
     return cand, batches, reasons
 
 

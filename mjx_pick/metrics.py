@@ -145,3 +145,12 @@ def rate_summary(success, score) -> dict:
         "score_mean": m,
         "score_ci": [mlo, mhi],
     }
+
+
+def best_successes(success, score, k: int) -> np.ndarray:
+    """Indices of the k best-scoring successful pick-points, best first (ties: earlier
+    first); diverged ones (score NaN) are never successes."""
+    success, score = np.asarray(success, bool), np.asarray(score, float)
+    key = np.where(success & np.isfinite(score), score, -np.inf)
+    order = np.argsort(-key, kind="stable")[:k]
+    return order[np.isfinite(key[order])]

@@ -160,22 +160,27 @@ class FeasibilityChecker:
 
     def batch(self, pick_id, x_mm, y_mm, yaw_deg, mode: str) -> PickBatch:
         """Check candidates and keep the feasible ones as a PickBatch."""
-        res = self(x_mm, y_mm, yaw_deg)
-        ok = res["reason"] == fk.FEASIBLE
-        counts = np.bincount(res["reason"], minlength=len(REASONS))
-        return PickBatch(
-            pick_id=np.asarray(pick_id, np.int64)[ok],
-            x_mm=np.asarray(x_mm, float)[ok],
-            y_mm=np.asarray(y_mm, float)[ok],
-            yaw_deg=np.asarray(yaw_deg, float)[ok],
-            opening_mm=res["opening_mm"][ok],
-            coverage=res["coverage"][ok],
-            gap_left_mm=res["gap_left_mm"][ok],
-            gap_right_mm=res["gap_right_mm"][ok],
-            rejected={REASONS[i]: int(counts[i]) for i in range(1, len(REASONS))},
-            n_candidates=len(ok),
-            mode=mode,
-        )
+        return feasible_batch(pick_id, x_mm, y_mm, yaw_deg, self(x_mm, y_mm, yaw_deg), mode)
+
+
+def feasible_batch(pick_id, x_mm, y_mm, yaw_deg, res: dict, mode: str) -> PickBatch:
+    """The feasible candidates of a FeasibilityChecker result `res`, with the counts of
+    the rejected ones."""
+    ok = res["reason"] == fk.FEASIBLE
+    counts = np.bincount(res["reason"], minlength=len(REASONS))
+    return PickBatch(
+        pick_id=np.asarray(pick_id, np.int64)[ok],
+        x_mm=np.asarray(x_mm, float)[ok],
+        y_mm=np.asarray(y_mm, float)[ok],
+        yaw_deg=np.asarray(yaw_deg, float)[ok],
+        opening_mm=res["opening_mm"][ok],
+        coverage=res["coverage"][ok],
+        gap_left_mm=res["gap_left_mm"][ok],
+        gap_right_mm=res["gap_right_mm"][ok],
+        rejected={REASONS[i]: int(counts[i]) for i in range(1, len(REASONS))},
+        n_candidates=len(ok),
+        mode=mode,
+    )
 
 
 @functools.lru_cache(maxsize=8)
@@ -198,15 +203,22 @@ def draw_block(rng: np.random.Generator, xr: float, yr: float, config: PickConfi
     return x, y, yaw
 
 
-def candidate_stream(checker: FeasibilityChecker, seed: int):
-    """Feasible PickBatches from an endless, seeded stream of candidate blocks."""
+def candidate_blocks(checker: FeasibilityChecker, seed: int):
+    """An endless, seeded stream of candidate blocks: (pick_id, x_mm, y_mm, yaw_deg),
+    CANDIDATE_BLOCK each. The poses depend on the object and settings only, so every
+    gripper sees the same stream for the same seed."""
     rng = np.random.default_rng(seed)
     xr, yr = checker.ranges()
     start = 0
     while True:
         x, y, yaw = draw_block(rng, xr, yr, checker.config, CANDIDATE_BLOCK)
-        ids = np.arange(start, start + CANDIDATE_BLOCK)
+        yield np.arange(start, start + CANDIDATE_BLOCK), x, y, yaw
         start += CANDIDATE_BLOCK
+
+
+def candidate_stream(checker: FeasibilityChecker, seed: int):
+    """Feasible PickBatches from the seeded stream of candidate blocks."""
+    for ids, x, y, yaw in candidate_blocks(checker, seed):
         yield checker.batch(ids, x, y, yaw, mode="normal")
 
 

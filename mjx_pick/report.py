@@ -203,13 +203,10 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
     out["success_by_yaw"] = out_dir / "success_by_yaw.png"
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    valid = np.asarray(t["score"], float)
-    valid = valid[np.isfinite(valid)]
+    raw = np.asarray(t["score"], float)
+    scored = np.isfinite(raw)  # diverged pick-points have no score
     ax.hist(
-        [
-            valid[success[np.isfinite(np.asarray(t["score"], float))]],
-            valid[~success[np.isfinite(np.asarray(t["score"], float))]],
-        ],
+        [raw[scored & success], raw[scored & ~success]],
         bins=np.linspace(0, 1, 26),
         stacked=True,
         color=["#2ca02c", "#d62728"],
@@ -452,8 +449,10 @@ def robot_picks(
         order = [r["pick_id"] for r in robust.to_pylist() if r["pick_id"] in by_id]
         prob = {r["pick_id"]: r for r in robust.to_pylist()}
     else:
-        good = [r for r in rows if r["success"] and r["score"] is not None]
-        order = [r["pick_id"] for r in sorted(good, key=lambda r: -r["score"])]
+        from mjx_pick.metrics import best_successes
+
+        best = best_successes(np.asarray(table["success"]), np.asarray(table["score"], float), k)
+        order = [rows[i]["pick_id"] for i in best]
         prob = {}
     user = frame_matrix(frame) if frame is not None else None
     out = []

@@ -229,7 +229,6 @@ class Simulator:
         if key not in self._backends:
             from mjx_pick.evaluate import default_batch_size
 
-            settings.grasp.check_gripper(settings.gripper)
             scene = build_scene(self.object, settings.gripper, settings.contact, settings.solver)
             size = self.batch_size or default_batch_size(self.backend_name)
             self._backends[key] = make_backend(self.backend_name, scene, settings.grasp, size)
