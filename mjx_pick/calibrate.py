@@ -388,6 +388,7 @@ class Problem:
         self._backend = None
         self._rollout = None
         self.rollouts = 0
+        self.diverged = np.zeros(0, int)  # diverged rows per theta of the last loss()
 
     # --- per-pick contact arrays from parameter values (jnp: differentiable)
     def contact_arrays(self, values):
@@ -479,8 +480,10 @@ class Problem:
         return res
 
     def loss(self, thetas: np.ndarray) -> np.ndarray:
-        """Loss at each theta (S,) (no derivatives)."""
+        """Loss at each theta (S,) (no derivatives). Diverged rows are left out of the
+        loss and counted: ``diverged`` holds their number per theta (S,)."""
         out = self.simulate(thetas)
+        self.diverged = out["diverged"].sum(axis=-1)
         loss, _ = self.loss_terms(
             out["lift_height_mm"], out["t_reached_s"], out["diverged"], out.get("force")
         )
@@ -545,6 +548,8 @@ class Problem:
             "correct": int(np.sum(predicted == observed)),
             "total": len(self.outcomes),
             "predicted": predicted.tolist(),
+            # a blown-up simulation predicts no success; counted so it is never silent
+            "diverged": int(out["diverged"][0].sum()),
         }
 
 
@@ -670,6 +675,8 @@ def calibrate(
                 "loss": loss,
                 "values": space.as_dict(theta),
                 "grad_norm": float(np.linalg.norm(grad)),
+                # rows left out of the loss because they blew up (at theta itself)
+                "diverged": int(problem.diverged[0]) if estimator == "smoothed" else None,
                 "wall_s": round(time.perf_counter() - t0, 3),
                 "rollouts": problem.rollouts,
             }

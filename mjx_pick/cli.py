@@ -382,7 +382,8 @@ def cmd_calibrate(args) -> int:
     def log(entry):
         if entry["step"] % args.log_every == 0:
             values = ", ".join(f"{k} {v:.4g}" for k, v in entry["values"].items())
-            print(f"step {entry['step']:4d}  loss {entry['loss']:.4f}  {values}", flush=True)
+            blown = f"  ({entry['diverged']} rows diverged)" if entry.get("diverged") else ""
+            print(f"step {entry['step']:4d}  loss {entry['loss']:.4f}  {values}{blown}", flush=True)
 
     res = cal.calibrate(
         problem,
