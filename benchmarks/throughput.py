@@ -8,12 +8,24 @@ One CSV row per configuration.
 
   python benchmarks/throughput.py --objects door_opener,block --backends mjx \\
       --batch-sizes 1024,4096,16384,65536 --out benchmarks/out
+
+Side by side (--run, repeated): each run takes the first n of ONE shared set of
+pick-points; MuJoCo C runs first and the others' labels are compared with its labels
+on the pick-points both ran; rows go to side_by_side.jsonl (see
+mjx_pick.throughput.side_by_side for the fields):
+
+  python benchmarks/throughput.py --objects door_opener \\
+      --run mujoco:n=4096:batch=1024 \\
+      --run warp:n=16384:batch=16384:refill=0:warmup=1024 \\
+      --run warp:n=65536:batch=16384:warmup=16384 \\
+      --run mjx:n=2048:batch=2048 --out benchmarks/out
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import subprocess
 import time
@@ -23,7 +35,7 @@ import jax
 
 import mjx_pick as mp
 from mjx_pick.grasp import GraspConfig
-from mjx_pick.throughput import measure
+from mjx_pick.throughput import RunSpec, measure, side_by_side
 
 
 def main() -> None:
@@ -42,6 +54,14 @@ def main() -> None:
     ap.add_argument(
         "--devices", default="", help="comma-separated device counts to shard over (default: all)"
     )
+    ap.add_argument(
+        "--run",
+        action="append",
+        default=[],
+        help="side by side: BACKEND:n=N[:batch=B][:refill=0|1][:ticks_per_call=K]"
+        "[:graph_mode=M][:warmup=W] (repeat; replaces --backends/--batch-sizes)",
+    )
+    ap.add_argument("--seed", type=int, default=0, help="pick-point seed (side by side)")
     args = ap.parse_args()
     from mjx_pick.config import load_toml
 
@@ -57,6 +77,18 @@ def main() -> None:
     )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    stamp = {"date": time.strftime("%Y-%m-%d"), "commit": commit, "tag": args.tag}
+    if args.run:
+        specs = [RunSpec.parse(r) for r in args.run]
+        for obj_name in args.objects.split(","):
+
+            def keep(row, path=out / "side_by_side.jsonl"):
+                row.update(stamp)
+                _append(path, row)
+                print(" ".join(f"{k}={v}" for k, v in row.items()), flush=True)
+
+            side_by_side(obj_name, gripper, specs, grasp, solver, seed=args.seed, on_row=keep)
+        return
     path = out / "throughput.csv"
     for obj_name in args.objects.split(","):
         for backend_name in args.backends.split(","):
@@ -73,16 +105,24 @@ def main() -> None:
                         nd,
                     )
                     row["n_devices"] = nd or len(jax.local_devices())
-                    row.update(
-                        {"date": time.strftime("%Y-%m-%d"), "commit": commit, "tag": args.tag}
-                    )
-                    new = not path.exists()
-                    with path.open("a", newline="") as fh:
-                        w = csv.DictWriter(fh, fieldnames=list(row))
-                        if new:
-                            w.writeheader()
-                        w.writerow(row)
+                    row.update(stamp)
+                    _append(path, row)
                     print(" ".join(f"{k}={v}" for k, v in row.items()), flush=True)
+
+
+def _append(path: Path, row: dict) -> None:
+    """Append a row: CSV (header from the file's first row) or, for .jsonl, one JSON
+    object per line (side-by-side rows differ in fields: Warp adds its buffers)."""
+    if path.suffix == ".jsonl":
+        with path.open("a") as fh:
+            fh.write(json.dumps(row) + "\n")
+        return
+    new = not path.exists()
+    with path.open("a", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(row))
+        if new:
+            w.writeheader()
+        w.writerow(row)
 
 
 if __name__ == "__main__":

@@ -72,7 +72,7 @@ def build_stack(rasterize, polygon, res_mm: float, radius_mm: float) -> Silhouet
     masks = []
     x0 = None
     for k in range(n_bins):
-        mask, (gx0, _) = rasterize(polygon, res_mm, k * math.pi / n_bins)
+        mask, (gx0, _) = rasterize(polygon, res_mm, k * math.pi / n_bins, radius_mm=radius_mm)
         masks.append(mask)
         x0 = gx0
     stack = np.stack(masks).astype(np.int32)

@@ -8,11 +8,15 @@ definition.
 
 Phases: SETTLE (object comes to rest) -> CLOSE (P force controller) -> DWELL (optional)
 -> LIFT -> HOLD -> DONE. The P controller (the paper's Fig. 6) commands each finger's
-closing speed v = clip(kp * (F_d - F), -v_open, v_close) from the mean pad force F; the
+closing speed v = clip(kp * (F_d - F), -v_open, v_close) from the mean pad force F
+once a pad touches (v_close before: the approach at the set closing speed); the
 speed is integrated into the finger servos' position target, so the force loop has
-integral action and holds F_d without steady-state error. Lifting starts as soon as F
-reaches reach_fraction * F_d (the paper's rule against slip before the lift), after the
-optional dwell.
+integral action and holds F_d without steady-state error. Like the real gripper's
+current limit, the integrated target never runs more than F_lim / k_drive ahead
+of the slower finger: when the object slips or turns and the measured force drops, the
+drive cannot wind up and slam the pads beyond the limit once it catches again. Lifting
+starts as soon as F reaches reach_fraction * F_d (the paper's rule against slip before
+the lift), after the optional dwell.
 """
 
 from __future__ import annotations
@@ -41,10 +45,14 @@ class GraspParams(NamedTuple):
     """Per-pick controller and phase settings, SI units (each a traced scalar)."""
 
     force_n: jax.Array  # F_d, desired pad force
+    force_limit_fraction: jax.Array  # drive force limit / F_d while the force loop runs
+    force_max_n: jax.Array  # the gripper's largest force
+    drive_stiffness_n_per_m: jax.Array  # finger servo stiffness (force per m of lag)
     kp: jax.Array  # (m/s)/N, finger speed per newton of force error
     v_close: jax.Array  # m/s, each finger's largest closing speed
     v_open: jax.Array  # m/s, each finger's largest opening speed
     reach_fraction: jax.Array  # F >= reach_fraction * F_d counts as reached
+    reach_settle_s: jax.Array  # ...once F has stayed in [reach, limit] this long
     dwell_s: jax.Array
     settle_s: jax.Array
     close_timeout_s: jax.Array
@@ -52,7 +60,9 @@ class GraspParams(NamedTuple):
     lift_speed_m_s: jax.Array
     lift_accel_m_s2: jax.Array  # trapezoidal lift: accelerate, cruise, decelerate
     hold_s: jax.Array
-    pad_contact_n: jax.Array  # a pad touches when its force exceeds this
+    # a pad touches when its force exceeds this fraction of F_d (a fraction, so that a
+    # per-pick F_d override moves the threshold with it)
+    pad_contact_fraction: jax.Array
     table_contact_n: jax.Array  # the object touches the table when its force exceeds this
     success_height_fraction: jax.Array
     max_rotation_rad: jax.Array
@@ -66,6 +76,7 @@ class ControlState(NamedTuple):
     finger_target: jax.Array  # m, each finger's closing-travel target
     lift_target: jax.Array  # m, gripper lift target
     lift_velocity: jax.Array  # m/s, of the lift target
+    t_steady: jax.Array  # s the force has stayed between reach and limit while closing
 
 
 class Measurement(NamedTuple):
@@ -74,6 +85,8 @@ class Measurement(NamedTuple):
     force_left: jax.Array  # N, normal force on the left pad (its x component)
     force_right: jax.Array  # N
     force_table: jax.Array  # N, vertical table force on the object
+    finger_left: jax.Array  # m, the left finger's closing travel
+    finger_right: jax.Array  # m
     object_pos: jax.Array  # (3,) m, object frame origin
     object_quat: jax.Array  # (4,) w, x, y, z
     lift: jax.Array  # m, gripper lift joint position
@@ -108,7 +121,7 @@ def initial_state(finger_travel0) -> ControlState:
     """Start: settling, fingers at their starting travel, gripper not lifted."""
     z = jnp.zeros_like(finger_travel0)
     phase = jnp.int32(SETTLE) + jnp.zeros_like(finger_travel0, jnp.int32)
-    return ControlState(phase, z, finger_travel0, z, z)
+    return ControlState(phase, z, finger_travel0, z, z, z)
 
 
 def initial_accumulators(like) -> Accumulators:
@@ -147,7 +160,13 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
     force = 0.5 * (m.force_left + m.force_right)
     t = s.t_phase + p.dt
     ph = s.phase
-    reached = force >= p.reach_fraction * p.force_n
+    f_lim = jnp.minimum(p.force_limit_fraction * p.force_n, p.force_max_n)
+    # "reached" once the force has stayed between reach_fraction * F_d and the limit
+    # for reach_settle_s: the impact of the approaching pads (a light part bounces
+    # between them) must not start the lift (reach_settle_s = 0: the paper's rule)
+    steady = (ph == CLOSE) & (force >= p.reach_fraction * p.force_n) & (force <= f_lim)
+    t_steady = jnp.where(steady, s.t_steady + p.dt, 0.0)
+    reached = steady & (t_steady >= p.reach_settle_s - 1e-6)
     nxt = jnp.select(
         [
             (ph == SETTLE) & (t >= p.settle_s),
@@ -167,7 +186,17 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
         (ph != SETTLE) & ~((ph == CLOSE) & (nxt == DONE)) & ~((ph == DONE) & (s.lift_target <= 0))
     )
     v = jnp.clip(p.kp * (p.force_n - force), -p.v_open, p.v_close)
+    # until a pad touches, the fingers approach at the set closing speed, as the real
+    # gripper does (the P law alone would creep in at kp * F_d: 1.6 mm/s for F_d = 0.8 N)
+    touching = jnp.maximum(m.force_left, m.force_right) > p.pad_contact_fraction * p.force_n
+    v = jnp.where(touching, v, p.v_close)
     finger_target = s.finger_target + jnp.where(active, v * p.dt, 0.0)
+    # anti-windup once engaged (touching, or holding: a pad bouncing off a sliding part
+    # reads zero force for a tick): the servo pushes k_drive * (target - travel), at
+    # most F_lim. In free approach the target leads by the drive's tracking lag only.
+    engaged = touching | (ph == DWELL) | (ph == LIFT) | (ph == HOLD)
+    capped = jnp.minimum(m.finger_left, m.finger_right) + f_lim / p.drive_stiffness_n_per_m
+    finger_target = jnp.where(engaged, jnp.minimum(finger_target, capped), finger_target)
     # the lift runs in LIFT only: trapezoidal profile, the speed rises by a*dt, never
     # above the cruise speed, and never above what still allows a stop at the top
     lifting = nxt == LIFT
@@ -179,7 +208,7 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
     # within a micrometre of the top counts as arrived (the stopping speed tends to 0)
     lift_target = jnp.where(p.lift_height_m - lift_target < 1e-6, p.lift_height_m, lift_target)
     lift_target = jnp.where(lifting, jnp.minimum(lift_target, p.lift_height_m), s.lift_target)
-    return ControlState(nxt, t_next, finger_target, lift_target, v_lift)
+    return ControlState(nxt, t_next, finger_target, lift_target, v_lift, t_steady)
 
 
 def lift_duration(p: GraspParams):
@@ -234,8 +263,9 @@ def accumulate(
     quat = jnp.where(live, m.object_quat, quat0)
     pos = jnp.where(live, m.object_pos, pos0)
 
-    contact = jnp.maximum(fl, fr) > p.pad_contact_n
-    gripping = jnp.minimum(fl, fr) > p.pad_contact_n
+    pad_contact_n = p.pad_contact_fraction * p.force_n
+    contact = jnp.maximum(fl, fr) > pad_contact_n
+    gripping = jnp.minimum(fl, fr) > pad_contact_n
     on_table = ft > p.table_contact_n
     just_reached = (s.phase == CLOSE) & ((s_next.phase == LIFT) | (s_next.phase == DWELL))
     reached = a.reached | (live & just_reached)
@@ -350,6 +380,8 @@ def measure(ad: Addresses, qpos, qvel, cfrc_ext) -> Measurement:
         force_left=-f_left[0],
         force_right=f_right[0],
         force_table=f_obj[2] + f_left[2] + f_right[2],
+        finger_left=qpos[ad.finger_left_qpos],
+        finger_right=qpos[ad.finger_right_qpos],
         object_pos=qpos[o : o + 3],
         object_quat=qpos[o + 3 : o + 7],
         lift=qpos[ad.lift_qpos],

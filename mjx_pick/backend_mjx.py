@@ -1,10 +1,23 @@
 """MJX backend: every pick-point of a batch in ONE jitted computation (GPU, or CPU).
 
+Two MJX implementations run the same program: ``impl='jax'`` (MJX's JAX physics: any
+device, forward-mode derivatives) and ``impl='warp'`` (MuJoCo Warp kernels called from
+JAX, NVIDIA GPUs; ``mjx_pick.backend_warp`` builds it). :class:`Physics` holds what
+differs: the device model, the initial data and how to read buffer overflow.
+
 ``rollout_one`` simulates one pick-point: ``lax.scan`` over control periods, each
 running the shared tick (measure, P controller, phase machine, metrics) and
 ``n_substeps`` MJX physics steps. The batch is ``vmap`` of it, jitted once per batch
 shape; per-pick contact-pair parameters enter as traced model fields, so sweeps and
 gradients need no new code.
+
+Slot refill (``refill=True``): instead of simulating every pick-point for the longest
+possible pick, a fixed pool of simulation slots is stepped ``ticks_per_call`` control
+periods per device call; each slot whose pick ended (DONE, diverged, or out of ticks)
+is refilled with the next pick-point before the next call. A pick's accumulators stop
+changing once it is DONE or diverged (``kernels.grasp.accumulate``), so a refilled run
+gives the same results as one that simulates every pick to the end; results are put
+back in pick-point order.
 
 With several local devices the batch axis is sharded over all of them (a one-axis
 ``Mesh``, ``NamedSharding`` for the data and ``shard_map`` for the program):
@@ -20,10 +33,14 @@ re-simulated: a trace of every pick of a large batch would not fit in memory).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from mujoco import mjx
@@ -36,63 +53,306 @@ from mjx_pick.simulate import PickInputs, RunStats, addresses
 # TF32 matrix products would change contact solutions on GPUs
 jax.config.update("jax_default_matmul_precision", os.environ.get("MJX_PICK_MATMUL", "highest"))
 
+# control periods per device call of a refilled pool: a finished slot idles at most
+# this many ticks before it is refilled (0.1 s of simulated time at the 5 ms period,
+# ~6 % of a median 1.6 s pick), while the host's work between calls (refill, copies)
+# stays small next to a call's ~100 physics steps per slot
+DEFAULT_TICKS_PER_CALL = 20
 
-def make_rollout(scene: Scene, grasp: GraspConfig, record: bool, mesh: Mesh | None = None):
-    """The batched rollout: (qpos0, params, friction, solref, solimp) -> results, jitted.
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Physics:
+    """What a rollout program closes over: the device model and initial data.
+
+    impl: 'jax' or 'warp'. overflow(d) -> int32 bitmask of buffer overflows of one
+    simulation (a warp ``OverflowType`` subset; always 0 for 'jax', whose buffers hold
+    every possible contact). nefc(d) -> int32 constraint rows in use (-1 for 'jax').
+    nacon(d) -> int32 contacts in use over ALL simulations of the call (-1 for 'jax').
+    """
+
+    model: mjx.Model
+    data0: mjx.Data
+    impl: str
+    overflow: Callable = lambda d: jnp.int32(0)
+    nefc: Callable = lambda d: jnp.int32(-1)
+    nacon: Callable = lambda d: jnp.int32(-1)
+
+
+def jax_physics(scene: Scene) -> Physics:
+    """MJX's JAX implementation on JAX's default device."""
+    mx = mjx.put_model(scene.model, impl="jax")
+    return Physics(mx, mjx.make_data(mx), "jax")
+
+
+class Diagnostics(NamedTuple):
+    """Per-simulation buffer use, read after a run (int32 each)."""
+
+    overflow: jax.Array  # OR of the overflow bits raised at any step
+    nefc_max: jax.Array  # most constraint rows in use at any step (-1: not tracked)
+    nacon_max: jax.Array  # most contacts of the whole call in use at any step (-1: not tracked)
+
+
+def _physics_steps(phys: Physics, m, d, diag: Diagnostics, n_sub: int):
+    """n_sub physics steps, folding each step's buffer use into diag."""
+
+    def physics(carry, _):
+        d, g = carry
+        d = mjx.step(m, d)
+        g = Diagnostics(
+            g.overflow | phys.overflow(d),
+            jnp.maximum(g.nefc_max, phys.nefc(d)),
+            jnp.maximum(g.nacon_max, phys.nacon(d)),
+        )
+        return (d, g), None
+
+    (d, diag), _ = jax.lax.scan(physics, (d, diag), None, length=n_sub)
+    return d, diag
+
+
+def _initial(
+    phys: Physics, ad: gk.Addresses, qpos0, params, pair_friction, pair_solref, pair_solimp
+):
+    """One pick's model, data (after mj_forward), control state and accumulators."""
+    m = phys.model.replace(
+        pair_friction=pair_friction, pair_solref=pair_solref, pair_solimp=pair_solimp
+    )
+    travel0 = qpos0[ad.finger_left_qpos]
+    s = gk.initial_state(travel0)
+    a = gk.initial_accumulators(travel0)
+    d = phys.data0.replace(qpos=qpos0, ctrl=gk.command(ad, s, qpos0))
+    d = mjx.forward(m, d)
+    diag = Diagnostics(phys.overflow(d), phys.nefc(d), phys.nacon(d))
+    return m, d, s, a, diag
+
+
+def make_rollout(
+    scene: Scene,
+    grasp: GraspConfig,
+    record: bool,
+    mesh: Mesh | None = None,
+    phys: Physics | None = None,
+    diagnostics: bool = False,
+):
+    """The batched rollout: (qpos0, params, friction, solref, solimp) -> (results,
+    traces), or (results, traces, Diagnostics) with diagnostics, jitted. Every pick
+    runs all ``grasp.n_ticks()`` ticks; traces are None unless record.
 
     mesh: with several devices, each runs its slice of the batch as its own program
     (``shard_map``). Left to the SPMD partitioner, the vmapped constraint solver's
     while-loop test ("is any simulation still iterating?") became an all-reduce across
     devices at every solver iteration of every physics step (seen in the compiled HLO):
     a synchronisation that cost 10-16 % of the time on 2-8 H200s.
+    phys: the MJX implementation (default: the JAX one).
     """
-    mx = mjx.put_model(scene.model)
-    d0 = mjx.make_data(mx)
+    phys = phys or jax_physics(scene)
     ad = addresses(scene)
     n_sub = grasp.substeps(scene.solver)
     n_ticks = grasp.n_ticks()
     o = ad.object_qpos
 
     def rollout_one(qpos0, params, pair_friction, pair_solref, pair_solimp):
-        m = mx.replace(
-            pair_friction=pair_friction, pair_solref=pair_solref, pair_solimp=pair_solimp
+        m, d, s, a, diag = _initial(
+            phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp
         )
-        travel0 = qpos0[ad.finger_left_qpos]
-        s = gk.initial_state(travel0)
-        a = gk.initial_accumulators(travel0)
-        d = d0.replace(qpos=qpos0, ctrl=gk.command(ad, s, qpos0))
-        d = mjx.forward(m, d)
         pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
 
-        def physics(d, _):
-            return mjx.step(m, d), None
-
         def control_period(carry, _):
-            d, s, a = carry
+            d, s, a, g = carry
             s, a, ctrl, row = gk.tick(
                 params, ad, s, a, d.qpos, d.qvel, d._impl.cfrc_ext, pos0, quat0
             )
-            d, _ = jax.lax.scan(physics, d.replace(ctrl=ctrl), None, length=n_sub)
-            return (d, s, a), (row if record else None)
+            d, g = _physics_steps(phys, m, d.replace(ctrl=ctrl), g, n_sub)
+            return (d, s, a, g), (row if record else None)
 
-        (_, _, a), rows = jax.lax.scan(control_period, (d, s, a), None, length=n_ticks)
+        (_, _, a, diag), rows = jax.lax.scan(control_period, (d, s, a, diag), None, length=n_ticks)
+        if diagnostics:
+            return gk.finalize(params, a), rows, diag
         return gk.finalize(params, a), rows
 
-    batched = jax.vmap(rollout_one)
-    if mesh is not None and mesh.size > 1:
-        spec = PartitionSpec("batch")
-        # check_vma off: MJX's solver mixes device-varying and uniform values in
-        # lax.cond branches, which the varying-axis type check rejects
-        batched = jax.shard_map(batched, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
-    return jax.jit(batched)
+    return jax.jit(_shard(jax.vmap(rollout_one), mesh))
+
+
+def _shard(batched, mesh: Mesh | None):
+    if mesh is None or mesh.size <= 1:
+        return batched
+    spec = PartitionSpec("batch")
+    # check_vma off: MJX's solver mixes device-varying and uniform values in
+    # lax.cond branches, which the varying-axis type check rejects
+    return jax.shard_map(batched, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
+
+
+class Slot(NamedTuple):
+    """One simulation slot of a refilled pool (batched along the pool axis)."""
+
+    d: tuple  # the leaves of its mjx.Data (an mjx.Data inside a call)
+    pair_friction: jax.Array  # (npair, 5)
+    pair_solref: jax.Array  # (npair, 2)
+    pair_solimp: jax.Array  # (npair, 5)
+    params: gk.GraspParams
+    s: gk.ControlState
+    a: gk.Accumulators
+    pos0: jax.Array  # (3,) m, the object's initial position
+    quat0: jax.Array  # (4,) its initial orientation
+    k: jax.Array  # int32, control ticks this pick has run
+    diag: Diagnostics
+
+
+def _slot_axes(phys: Physics):
+    """vmap axes of a Slot, whose Data is carried as its tuple of leaves: 0 everywhere,
+    except (Warp) the Data fields that Warp keeps once for all simulations of a call --
+    the contact buffer and its counters. Mapped like the rest, the pool's carried state
+    would hold a copy of the whole contact buffer per slot (slots x naconmax contacts).
+    (A Data-shaped axes tree is no help: vmap cannot match a prefix tree against
+    Warp's Data node.)"""
+    if phys.impl != "warp":
+        return 0
+    from mujoco.mjx._src.types import tree_path_to_attr_str
+    from mujoco.mjx.warp import types as mjxw_types
+
+    batched = mjxw_types._BATCH_DIM["Data"]  # the rule Data.where follows
+    paths = jax.tree_util.tree_flatten_with_path(phys.data0)[0]
+    d_axes = tuple(0 if batched.get(tree_path_to_attr_str(p), True) else None for p, _ in paths)
+    return Slot(d_axes, *([0] * (len(Slot._fields) - 1)))
+
+
+def make_pool(
+    scene: Scene,
+    grasp: GraspConfig,
+    ticks_per_call: int,
+    mesh: Mesh | None = None,
+    phys: Physics | None = None,
+):
+    """A refilled pool's program, jitted, and the shapes of its state: (advance, shapes).
+
+    advance(slots, fresh, qpos0, params, friction, solref, solimp) -> (slots, results,
+    finished, ticks, diag): slots where ``fresh`` (bool (S,)) start the given pick (the
+    other rows of the inputs are ignored), then every slot runs ``ticks_per_call``
+    control periods. A slot's pick freezes once it is finished (DONE, diverged, or
+    ``grasp.n_ticks()`` ticks run): its control state and accumulators no longer
+    change, exactly as in ``make_rollout`` where nothing accumulates after DONE, though
+    its physics keeps stepping (a vmapped program steps every slot) until it is
+    refilled. results: ``finalize`` of every slot (final for finished ones); finished
+    (bool (S,)); ticks (int32 (S,), control periods run by the slot's pick).
+
+    shapes(*inputs): the Slot pytree's shapes and dtypes for those inputs; the first
+    call passes zeros of these with every slot fresh (no separate start program to
+    compile).
+    """
+    phys = phys or jax_physics(scene)
+    ad = addresses(scene)
+    n_sub = grasp.substeps(scene.solver)
+    n_ticks = grasp.n_ticks()
+    o = ad.object_qpos
+    axes = _slot_axes(phys)
+    d_tree = jax.tree.structure(phys.data0)
+
+    def start(qpos0, params, pair_friction, pair_solref, pair_solimp) -> Slot:
+        _, d, s, a, diag = _initial(
+            phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp
+        )
+        pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
+        args = (pair_friction, pair_solref, pair_solimp, params, s, a, pos0, quat0)
+        return Slot(tuple(d_tree.flatten_up_to(d)), *args, jnp.int32(0), diag)
+
+    def done(slot: Slot):
+        return (slot.s.phase == gk.DONE) | slot.a.diverged | (slot.k >= n_ticks)
+
+    def advance_one(slot: Slot, fresh, *inputs):
+        new = start(*inputs)
+        # Data goes through Data.where: Warp's shared contact buffer is kept, not merged
+        d = d_tree.unflatten(slot.d).where(fresh, d_tree.unflatten(new.d))
+        rest = jax.tree.map(
+            lambda n, c: jnp.where(fresh, n, c), new._replace(d=None), slot._replace(d=None)
+        )
+        slot = rest._replace(d=d)
+        m = phys.model.replace(
+            pair_friction=slot.pair_friction,
+            pair_solref=slot.pair_solref,
+            pair_solimp=slot.pair_solimp,
+        )
+
+        def control_period(slot: Slot, _):
+            s, a, ctrl, _ = gk.tick(
+                slot.params,
+                ad,
+                slot.s,
+                slot.a,
+                slot.d.qpos,
+                slot.d.qvel,
+                slot.d._impl.cfrc_ext,
+                slot.pos0,
+                slot.quat0,
+            )
+            # a finished pick's control state, metrics and buffer counts stay as they are
+            frozen = done(slot)
+            keep = lambda old, new: jax.tree.map(lambda x, y: jnp.where(frozen, x, y), old, new)
+            d, diag = _physics_steps(
+                phys, m, slot.d.replace(ctrl=jnp.where(frozen, slot.d.ctrl, ctrl)), slot.diag, n_sub
+            )
+            k = slot.k + jnp.where(frozen, 0, 1).astype(jnp.int32)
+            slot = slot._replace(
+                d=d, s=keep(slot.s, s), a=keep(slot.a, a), k=k, diag=keep(slot.diag, diag)
+            )
+            return slot, None
+
+        slot, _ = jax.lax.scan(control_period, slot, None, length=ticks_per_call)
+        slot = slot._replace(d=tuple(d_tree.flatten_up_to(slot.d)))
+        return slot, gk.finalize(slot.params, slot.a), done(slot), slot.k, slot.diag
+
+    advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 6, out_axes=(axes, 0, 0, 0, 0))
+    starts = jax.vmap(start, out_axes=axes)
+    # the pool state is consumed by each call: donate it (no second copy on the device;
+    # the CPU cannot reuse donated buffers and would warn)
+    on_cpu = next(iter(phys.data0.qpos.devices())).platform == "cpu"
+    donate = () if on_cpu else (0,)
+    advance = jax.jit(_shard(advance, mesh), donate_argnums=donate)
+    shapes = lambda *inputs: jax.eval_shape(_shard(starts, mesh), *inputs)
+    return advance, shapes
+
+
+@dataclasses.dataclass
+class PoolStats:
+    """Work of refilled runs: how much of the pool's stepping simulated live picks."""
+
+    calls: int = 0  # device calls
+    slot_ticks: int = 0  # pool size x ticks per call, summed over calls
+    pick_ticks: int = 0  # ticks run by picks up to their end, summed over picks
+    picks: int = 0
+
+    @property
+    def occupancy(self) -> float:
+        """Fraction of slot-ticks that simulated a pick that had not ended."""
+        return self.pick_ticks / self.slot_ticks if self.slot_ticks else float("nan")
+
+    @property
+    def ticks_per_pick(self) -> float:
+        return self.pick_ticks / self.picks if self.picks else float("nan")
 
 
 class MjxBackend:
-    """Runs PickInputs in fixed-size batches (padded), one compile per batch size."""
+    """Runs PickInputs in fixed-size batches (padded), one compile per batch size.
+
+    refill: run through a pool of ``batch_size`` slots refilled as picks end (see the
+    module docstring); a run of fewer picks than the pool uses a smaller pool (rounded
+    up to a multiple of ``POOL_QUANTUM`` so that small runs of different sizes share
+    compiles). Traces (``record=True``) always use the full-length rollout.
+    """
 
     name = "mjx"
+    impl = "jax"
+    POOL_QUANTUM = 256
 
-    def __init__(self, scene: Scene, grasp: GraspConfig, batch_size: int, devices=None):
+    def __init__(
+        self,
+        scene: Scene,
+        grasp: GraspConfig,
+        batch_size: int,
+        devices=None,
+        refill: bool = False,
+        ticks_per_call: int = DEFAULT_TICKS_PER_CALL,
+    ):
+        if int(ticks_per_call) < 1:
+            raise ValueError(f"ticks_per_call = {ticks_per_call} must be >= 1")
         self.scene, self.grasp = scene, grasp
         self.devices = list(devices) if devices is not None else jax.local_devices()
         n_dev = len(self.devices)
@@ -102,45 +362,166 @@ class MjxBackend:
         self.device = f"{d0.platform}:{d0.device_kind}" + (f" x{n_dev}" if n_dev > 1 else "")
         self.mesh = Mesh(np.asarray(self.devices), ("batch",))
         self.sharding = NamedSharding(self.mesh, PartitionSpec("batch"))
+        self.refill = bool(refill)
+        self.ticks_per_call = int(ticks_per_call)
         self.stats = RunStats()
-        self._fns = {}
+        self.pool_stats = PoolStats()
+        self.last_diagnostics: Diagnostics | None = None
         self._compiled = {}
 
+    # --- what an implementation changes
+    def physics(self, n_worlds: int) -> Physics:
+        """The MJX model and data for programs of n_worlds simulations per device."""
+        return jax_physics(self.scene)
+
+    def check_diagnostics(self, diag: Diagnostics, inputs: PickInputs) -> None:
+        """Called after each run with every pick's Diagnostics (numpy)."""
+
+    # --- full-length batches
     def _compiled_for(self, args, record: bool):
-        key = (len(args[0]), record)
+        key = ("rollout", len(args[0]), record)
         if key not in self._compiled:
-            if record not in self._fns:
-                self._fns[record] = make_rollout(self.scene, self.grasp, record, self.mesh)
             t0 = time.perf_counter()
-            self._compiled[key] = self._fns[record].lower(*args).compile()
+            per_device = len(args[0]) // len(self.devices)
+            phys = self.physics(per_device)
+            fn = make_rollout(self.scene, self.grasp, record, self.mesh, phys, diagnostics=True)
+            self._compiled[key] = fn.lower(*args).compile()
             self.stats.compile_s += time.perf_counter() - t0
         return self._compiled[key]
 
     def device_bytes_per_pick(self) -> int:
         """Rough device memory of one simulation: 4x its mjx.Data (measured peak on an H100
         at batch 16384: 1.5x; at 4096: 3x -- fixed overheads)."""
-        d = mjx.make_data(mjx.put_model(self.scene.model))
+        d = self.physics(1).data0
         return 4 * sum(int(x.nbytes) for x in jax.tree.leaves(d) if hasattr(x, "nbytes"))
 
     def run(self, inputs: PickInputs, record: bool = False):
         """Simulate all inputs; returns (results dict of (N,) arrays, traces (N, T, F) or None)."""
+        if self.refill and not record and len(inputs):
+            merged, diag = self._run_pool(inputs)
+            traces = None
+        else:
+            merged, traces, diag = self._run_batches(inputs, record)
+        self.last_diagnostics = diag
+        self.check_diagnostics(diag, inputs)
+        self.stats.n += len(inputs)
+        return merged, traces
+
+    def _run_batches(self, inputs: PickInputs, record: bool):
         n = len(inputs)
         n_dev = len(self.devices)
         size = self.batch_size
         if record:  # a few re-simulated pick-points: a small batch
             size = min(size, -(-max(n, 1) // n_dev) * n_dev)
-        results, traces = [], []
+        results, traces, diags = [], [], []
         for start in range(0, n, size):
             chunk = inputs.take(slice(start, start + size))
             m = len(chunk)
             args = tuple(jax.device_put(a, self.sharding) for a in chunk.pad_to(size))
             fn = self._compiled_for(args, record)
             t0 = time.perf_counter()
-            out, rows = jax.block_until_ready(fn(*args))
+            out, rows, diag = jax.block_until_ready(fn(*args))
             self.stats.run_s += time.perf_counter() - t0
             results.append({k: np.asarray(v)[:m] for k, v in out.items()})
+            diags.append(jax.tree.map(lambda x, m=m: np.asarray(x)[:m], diag))
             if record:
                 traces.append(np.asarray(rows)[:m])
-        self.stats.n += n
         merged = {k: np.concatenate([r[k] for r in results]) for k in results[0]}
-        return merged, (np.concatenate(traces) if record else None)
+        diag = jax.tree.map(lambda *x: np.concatenate(x), *diags)
+        return merged, (np.concatenate(traces) if record else None), diag
+
+    # --- refilled pool
+    def pool_size(self, n: int) -> int:
+        """Slots for a run of n picks: the batch size, or fewer for a small run."""
+        n_dev = len(self.devices)
+        q = self.POOL_QUANTUM * n_dev
+        return min(self.batch_size, -(-n // q) * q)
+
+    def _pool_fns(self, size: int, args):
+        """The compiled pool program for `size` slots and zero slots to start it with."""
+        key = ("pool", size)
+        if key not in self._compiled:
+            t0 = time.perf_counter()
+            phys = self.physics(size // len(self.devices))
+            advance, shapes = make_pool(
+                self.scene, self.grasp, self.ticks_per_call, self.mesh, phys
+            )
+            slot_shapes = shapes(*args)
+            fresh = jax.device_put(np.zeros(size, bool), self.sharding)
+            zeros = self._zeros(slot_shapes)
+            self._compiled[key] = (advance.lower(zeros, fresh, *args).compile(), slot_shapes)
+            self.stats.compile_s += time.perf_counter() - t0
+        advance, slot_shapes = self._compiled[key]
+        return advance, self._zeros(slot_shapes)
+
+    def _zeros(self, shapes):
+        """Device zeros of a pytree of shapes, split over the devices like the batch."""
+        one = len(self.devices) == 1
+        replicated = NamedSharding(self.mesh, PartitionSpec())
+
+        def zero(s):
+            where = (
+                self.sharding
+                if s.ndim and (one or s.shape[0] % len(self.devices) == 0)
+                else replicated
+            )
+            return jax.device_put(np.zeros(s.shape, s.dtype), where)
+
+        return jax.tree.map(zero, shapes)
+
+    def _run_pool(self, inputs: PickInputs):
+        """Every pick through a pool of slots refilled as picks end; (results, Diagnostics)
+        in pick-point order."""
+        n = len(inputs)
+        size = self.pool_size(n)
+        host = inputs.take(slice(0, size)).pad_to(size)  # the pool's current inputs
+        host = jax.tree.map(np.array, host)  # writable copies
+        slot_pick = np.full(size, -1, np.int64)  # which pick each slot runs (-1: none)
+        slot_pick[: min(size, n)] = np.arange(min(size, n))
+        next_pick = min(size, n)
+        put = lambda a: jax.device_put(a, self.sharding)
+        args = tuple(put(a) for a in host)
+        advance, slots = self._pool_fns(size, args)
+
+        results: dict[str, np.ndarray] = {}
+        diag_out = Diagnostics(*(np.zeros(n, np.int32) for _ in Diagnostics._fields))
+        t0 = time.perf_counter()
+        fresh = np.ones(size, bool)  # the first call starts every slot
+        while True:
+            slots, out, finished, ticks, diag = advance(slots, put(fresh), *args)
+            finished, ticks = np.asarray(finished), np.asarray(ticks)
+            self.pool_stats.calls += 1
+            self.pool_stats.slot_ticks += size * self.ticks_per_call
+            ended = np.flatnonzero(finished & (slot_pick >= 0))
+            if len(ended):
+                picks = slot_pick[ended]
+                for k, v in out.items():
+                    v = np.asarray(v)
+                    if k not in results:
+                        results[k] = np.zeros((n,) + v.shape[1:], v.dtype)
+                    results[k][picks] = v[ended]
+                for field, v in zip(Diagnostics._fields, diag, strict=True):
+                    getattr(diag_out, field)[picks] = np.asarray(v)[ended]
+                self.pool_stats.pick_ticks += int(ticks[ended].sum())
+                self.pool_stats.picks += len(ended)
+                slot_pick[ended] = -1
+            # refill the ended slots with the next picks, in order
+            fresh[:] = False
+            take = min(len(ended), n - next_pick)
+            if take:
+                fill = ended[:take]
+                new = inputs.take(slice(next_pick, next_pick + take))
+                for dst, src in zip(host, new, strict=True):
+                    if isinstance(dst, tuple):  # GraspParams
+                        for dd, ss in zip(dst, src, strict=True):
+                            dd[fill] = ss
+                    else:
+                        dst[fill] = src
+                slot_pick[fill] = np.arange(next_pick, next_pick + take)
+                fresh[fill] = True
+                next_pick += take
+                args = tuple(put(a) for a in host)
+            if (slot_pick < 0).all():
+                break
+        self.stats.run_s += time.perf_counter() - t0
+        return results, diag_out

@@ -360,9 +360,9 @@ class Problem:
         self.picks = checker.batch(
             np.arange(len(outcomes)), outcomes.x_mm, outcomes.y_mm, outcomes.yaw_deg, "calibration"
         )
-        self.scene = build_scene(obj, g, s.contact, s.solver)
+        self.scene = build_scene(obj, g, s.contact, s.solver, s.grasp)
         per_row = [
-            dataclasses.replace(s.grasp, grip_force_n=float(f)).params(obj)
+            dataclasses.replace(s.grasp, grip_force_n=float(f)).params(obj, g)
             for f in outcomes.grip_force_n
         ]
         stacked = {k: np.array([getattr(p, k) for p in per_row]) for k in per_row[0]._fields}
@@ -401,6 +401,9 @@ class Problem:
             pairs = pads if name.startswith("pad") else table
             if name.endswith("friction"):
                 fr = fr.at[:, pairs, 0].set(v).at[:, pairs, 1].set(v)
+                if pairs is pads:  # the pads' torsional friction is mu_pad * r_mean
+                    c = self.scene.contact
+                    fr = fr.at[:, pairs, 2].set(v * (c.pad_torsion_m / c.pad_friction))
             elif "stiffness" in name:
                 ref = ref.at[:, pairs, 0].set(-v * 1e3 / m)
             else:

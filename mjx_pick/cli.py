@@ -38,7 +38,9 @@ def _add_object_args(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--pose", choices=("as_given", "stable"), default="as_given", help="mesh resting pose"
     )
-    g.add_argument("--pick-height-mm", type=float, help="fingertip height (default: half)")
+    g.add_argument(
+        "--pick-height-mm", type=float, help="fingertip height (default: --grasp-height's rule)"
+    )
     g.add_argument("--simplify-mm", type=float, help="outline tolerance (images)")
     g.add_argument("--material", help="object material name (recorded)")
 
@@ -61,10 +63,20 @@ def _add_physics_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--lift-height-mm", type=float)
     g.add_argument("--hold-s", type=float)
     g.add_argument(
+        "--grasp-height",
+        choices=("mid_band", "fingertip_mid"),
+        help="mid_band (default): pads centred on the object's mid-height; fingertip_mid: "
+        "fingertips at half height (the paper's literal rule)",
+    )
+    g.add_argument(
+        "--fingertip-clearance-mm", type=float, help="lowest fingertip height (mid_band), mm"
+    )
+    g.add_argument(
         "--backend",
-        choices=("auto", "mjx", "mujoco"),
+        choices=("auto", "warp", "mjx", "mujoco"),
         default="auto",
-        help="auto: MJX when JAX sees a GPU/TPU, else the MuJoCo C engine",
+        help="warp: MuJoCo Warp on an NVIDIA GPU (pip install '.[gpu]'); mjx: MJX's JAX "
+        "physics; mujoco: the C engine on CPU threads; auto: warp where it can run, else mujoco",
     )
     g.add_argument("--batch-size", type=int, help="simulations per backend call")
 
@@ -111,6 +123,8 @@ def _settings(args):
         grip_force_n=args.grip_force_n,
         lift_height_mm=args.lift_height_mm,
         hold_s=args.hold_s,
+        grasp_height=args.grasp_height,
+        fingertip_clearance_mm=args.fingertip_clearance_mm,
     )
     return contact, solver, grasp, _pick_config(args)
 
@@ -309,7 +323,7 @@ def cmd_robust(args) -> int:
 
     obj, base, picks_cfg = _base_settings(args)
     sim = Simulator(obj, args.backend, args.batch_size)
-    checker = pp.FeasibilityChecker(obj, base.gripper, picks_cfg)
+    checker = pp.FeasibilityChecker(obj, base.gripper, picks_cfg, base.grasp)
     if args.results:
         path = Path(args.results)
         path = path / "results.parquet" if path.is_dir() else path
@@ -322,7 +336,7 @@ def cmd_robust(args) -> int:
         x, y, yaw, ids = (np.asarray(table[c]) for c in ("x_mm", "y_mm", "yaw_deg", "pick_id"))
         success, score = np.asarray(table["success"]), np.asarray(table["score"], float)
     else:
-        picks = pp.generate_normal(obj, base.gripper, args.n, args.seed, picks_cfg)
+        picks = pp.generate_normal(obj, base.gripper, args.n, args.seed, picks_cfg, base.grasp)
         (out,) = sim.run([(base, picks)])
         x, y, yaw, ids = picks.x_mm, picks.y_mm, picks.yaw_deg, picks.pick_id
         success, score = out["success"], out["score"]

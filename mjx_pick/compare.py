@@ -56,6 +56,7 @@ def shared_candidates(
     n: int,
     seed: int = 0,
     config: pp.PickConfig | None = None,
+    grasp=None,
 ) -> tuple[dict, list[pp.PickBatch], np.ndarray]:
     """The first n candidates of the seeded stream that some gripper can take.
 
@@ -64,7 +65,7 @@ def shared_candidates(
       its feasible candidates (pick_id = candidate id), and reasons (G, n) int.
     """
     check_range("compare", "n", n, 1, 1e8)
-    checkers = [pp.FeasibilityChecker(obj, g, config) for g in grippers]
+    checkers = [pp.FeasibilityChecker(obj, g, config, grasp) for g in grippers]
     parts, found, drawn = [], 0, 0
     for ids, x, y, yaw in pp.candidate_blocks(checkers[0], seed):
         if found >= n or drawn >= checkers[0].config.max_candidates:
@@ -137,7 +138,7 @@ def compare(
     if len(set(names)) != len(names):
         raise ConfigError(f"gripper names must differ: {names}")
     base = base or Settings()
-    cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config)
+    cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
     n_cand = len(cand["pick_id"])
     sim = simulator or Simulator(obj, backend, batch_size)
     jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]

@@ -92,9 +92,11 @@ def read_picks_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return a[:, 0], a[:, 1], a[:, 2]
 
 
-def user_picks(obj: ObjectModel, gripper: GripperSpec, x, y, yaw, config=None) -> pp.PickBatch:
+def user_picks(
+    obj: ObjectModel, gripper: GripperSpec, x, y, yaw, config=None, grasp=None
+) -> pp.PickBatch:
     """Check user pick-points; infeasible ones are an error naming rows and reasons."""
-    checker = pp.FeasibilityChecker(obj, gripper, config)
+    checker = pp.FeasibilityChecker(obj, gripper, config, grasp)
     ids = np.arange(len(x))
     res = checker(x, y, yaw)
     bad = np.flatnonzero(res["reason"] != 0)
@@ -176,7 +178,7 @@ def evaluate(
     grasp = grasp or GraspConfig()
     pick_config = pick_config or pp.PickConfig()
     grasp.check_gripper(gripper)
-    scene = build_scene(obj, gripper, contact, solver)
+    scene = build_scene(obj, gripper, contact, solver, grasp)
     batch = batch_size or default_batch_size(backend)
     runner = make_backend(backend, scene, grasp, batch)
     out_dir = Path(out) if out is not None else None
@@ -197,11 +199,15 @@ def evaluate(
         )
     else:
         if picks is None:
-            picks_batch = pp.generate_normal(obj, gripper, n, seed=seed, config=pick_config)
+            picks_batch = pp.generate_normal(
+                obj, gripper, n, seed=seed, config=pick_config, grasp=grasp
+            )
         elif isinstance(picks, pp.PickBatch):
             picks_batch = picks
         else:
-            picks_batch = user_picks(obj, gripper, *read_picks_csv(picks), config=pick_config)
+            picks_batch = user_picks(
+                obj, gripper, *read_picks_csv(picks), config=pick_config, grasp=grasp
+            )
         results = None
 
     chunk = int(chunk_size or _auto_chunk(runner, runner.batch_size))
@@ -212,6 +218,11 @@ def evaluate(
         "gripper": to_dict(gripper),
         "contact": to_dict(contact),
         "contact_in_mujoco": to_dict(scene.contact),
+        "scene": {
+            # where the pads grip (GraspConfig.grasp_height) and their contact patch
+            "fingertip_height_mm": round(scene.index.pad_bottom_z0_m * 1e3, 6),
+            "pad_patch_mm": [round(v, 6) for v in scene.pad_patch_mm],
+        },
         "solver": to_dict(solver),
         "grasp": to_dict(grasp),
         "picks": to_dict(pick_config),
@@ -446,6 +457,7 @@ def _optimize(scene, grasp, runner, obj, gripper, k, min_score, max_n, batch, se
         batch_size=min(batch, max_n),
         seed=seed,
         config=config,
+        grasp=grasp,
     )
     merged = {name: np.concatenate(v) for name, v in collected.items()}
     return res.picks, merged

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from mjx_pick.config import ConfigError, check_range
+from mjx_pick.config import ConfigError, check_choice, check_range
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.objects import ObjectModel
@@ -32,7 +32,10 @@ class GraspConfig:
     closing_speed_mm_s: float = 100.0
     opening_speed_mm_s: float = 10.0  # largest rate of opening (force overshoot)
     control_period_s: float = 0.005  # the paper's Simulink sample time
-    reach_fraction: float = 0.95  # F >= 0.95 F_d counts as "force reached"
+    reach_fraction: float = 0.95  # F >= 0.95 F_d counts as "force reached"...
+    # ...once it has stayed between that and the drive's limit this long (the pads'
+    # impact on a light part is a spike, not a grasp); 0 is the paper's literal rule
+    reach_settle_s: float = 0.02
     dwell_s: float = 0.0  # wait between reaching F_d and lifting (paper: none)
     settle_s: float = 0.02  # the object settles on the table before closing
     close_timeout_s: float = 1.5  # a symmetric gripper may travel its half stroke
@@ -48,6 +51,17 @@ class GraspConfig:
     # |qvel| above this (m/s, rad/s) is a blow-up; a light block squeezed out of a
     # corner pinch legitimately spins at ~60 rad/s, a blow-up reaches 1e3+ or NaN
     divergence_speed: float = 200.0
+    # where the pads grip (the paper: "picked at half the object depth"): "mid_band"
+    # centres the pads on the object's mid-height, the fingertips no lower than
+    # fingertip_clearance_mm above the table; "fingertip_mid" puts the fingertips at
+    # half height (the paper's literal rule: the pads then cover the upper half only).
+    # An object's own pick_height_mm (the CLI's --pick-height-mm) overrides both.
+    grasp_height: str = "mid_band"
+    fingertip_clearance_mm: float = 2.0
+    # the drive's force limit relative to F_d while the force loop runs: the real
+    # gripper's current limit. The integrated speed command cannot wind the finger
+    # servo up beyond it when the object slips or turns in the grasp.
+    force_limit_fraction: float = 1.15
 
     def __post_init__(self):
         o = "grasp"
@@ -57,6 +71,7 @@ class GraspConfig:
         check_range(o, "opening_speed_mm_s", self.opening_speed_mm_s, 0, 2000)
         check_range(o, "control_period_s", self.control_period_s, 1e-4, 0.05)
         check_range(o, "reach_fraction", self.reach_fraction, 0.5, 1.0)
+        check_range(o, "reach_settle_s", self.reach_settle_s, 0, 1)
         check_range(o, "dwell_s", self.dwell_s, 0, 10)
         check_range(o, "settle_s", self.settle_s, 0, 10)
         check_range(o, "close_timeout_s", self.close_timeout_s, 0, 60, lo_open=True)
@@ -70,6 +85,9 @@ class GraspConfig:
         check_range(o, "table_contact_fraction", self.table_contact_fraction, 0, 1, lo_open=True)
         check_range(o, "safety_factor", self.safety_factor, 1.0)
         check_range(o, "divergence_speed", self.divergence_speed, 0.1, lo_open=False)
+        check_choice(o, "grasp_height", self.grasp_height, ("mid_band", "fingertip_mid"))
+        check_range(o, "fingertip_clearance_mm", self.fingertip_clearance_mm, 0, 100)
+        check_range(o, "force_limit_fraction", self.force_limit_fraction, 1.0, 3.0)
 
     @property
     def duration_s(self) -> float:
@@ -110,15 +128,19 @@ class GraspConfig:
                 f"<= {gripper.speed_max_mm_s:g}"
             )
 
-    def params(self, obj: ObjectModel) -> gk.GraspParams:
+    def params(self, obj: ObjectModel, gripper: GripperSpec) -> gk.GraspParams:
         """The kernels' parameters (float32 scalars, SI)."""
         f32 = np.float32
         return gk.GraspParams(
             force_n=f32(self.grip_force_n),
+            force_limit_fraction=f32(self.force_limit_fraction),
+            force_max_n=f32(gripper.force_max_n),
+            drive_stiffness_n_per_m=f32(gripper.drive_stiffness_n_per_mm * 1e3),
             kp=f32(self.kp_mm_s_per_n * 1e-3),
             v_close=f32(0.5 * self.closing_speed_mm_s * 1e-3),
             v_open=f32(0.5 * self.opening_speed_mm_s * 1e-3),
             reach_fraction=f32(self.reach_fraction),
+            reach_settle_s=f32(self.reach_settle_s),
             dwell_s=f32(self.dwell_s),
             settle_s=f32(self.settle_s),
             close_timeout_s=f32(self.close_timeout_s),
@@ -126,13 +148,39 @@ class GraspConfig:
             lift_speed_m_s=f32(self.lift_speed_mm_s * 1e-3),
             lift_accel_m_s2=f32(self.lift_accel_mm_s2 * 1e-3),
             hold_s=f32(self.hold_s),
-            pad_contact_n=f32(self.pad_contact_fraction * self.grip_force_n),
+            pad_contact_fraction=f32(self.pad_contact_fraction),
             table_contact_n=f32(self.table_contact_fraction * obj.mass_kg * G),
             success_height_fraction=f32(self.success_height_fraction),
             max_rotation_rad=f32(math.radians(self.max_rotation_deg)),
             divergence_speed=f32(self.divergence_speed),
             dt=f32(self.control_period_s),
         )
+
+
+def fingertip_height_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig) -> float:
+    """Height of the fingertips (the pads' lower edges) above the table at the grasp, mm.
+
+    The object's own pick_height_mm wins; otherwise grasp.grasp_height's rule. With
+    "mid_band" the pad centre is at half the object's height, except where the pad is
+    taller than that allows: then the fingertips stop fingertip_clearance_mm (at most a
+    quarter of the object's height) above the table, and the pads still cover the
+    mid-height band (a lying cylinder's equator).
+    """
+    if obj.pick_height_mm is not None:
+        return float(obj.pick_height_mm)
+    half = 0.5 * obj.height_mm
+    if grasp.grasp_height == "fingertip_mid":
+        return half
+    # the clearance never exceeds a quarter of the height, so that the pads always
+    # cover a thin part's mid-height (a 3 mm plate is gripped from 0.75 mm up)
+    clearance = min(grasp.fingertip_clearance_mm, 0.25 * obj.height_mm)
+    return max(clearance, half - 0.5 * gripper.pad_height_mm)
+
+
+def pad_band_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
+    """(bottom, top) heights of the pads above the table at the grasp, mm."""
+    z = fingertip_height_mm(obj, gripper, grasp)
+    return z, z + gripper.pad_height_mm
 
 
 def min_grasp_force_n(obj: ObjectModel, pad_friction: float, safety_factor: float) -> float:

@@ -51,7 +51,8 @@ class ObjectModel:
       inertia_kg_m2: (3, 3) inertia about the centre of mass, object-frame axes.
       mesh: watertight visual/mass mesh in the object frame, m.
       pieces: convex collision pieces, each (V, 3) vertices in the object frame, m.
-      pick_height_mm: height of the fingertips above the table (default: half height).
+      pick_height_mm: fingertip height above the table set by the user, or None for
+        the grasp-height rule of the procedure (``mjx_pick.grasp.fingertip_height_mm``).
       material: the object's material name (recorded with results).
       source: where it came from (file path and import settings).
     """
@@ -64,7 +65,7 @@ class ObjectModel:
     inertia_kg_m2: np.ndarray
     mesh: trimesh.Trimesh
     pieces: tuple[np.ndarray, ...]
-    pick_height_mm: float
+    pick_height_mm: float | None
     material: str = "pla"
     source: str = ""
     # prisms only: the outline the pieces were cut from (mm), and the thickness (m)
@@ -92,6 +93,47 @@ class ObjectModel:
         filled = Polygon(self.outline.exterior, kept)
         height = float(self.pieces[0][:, 2].max())
         return tuple(_prism(p, height) for p in convex_partition(filled, MAX_PIECE_CORNERS))
+
+    def band_outline(self, z_lo_mm: float, z_hi_mm: float) -> Polygon:
+        """Top-down outline of the part of the object between two heights, mm.
+
+        What fingers whose pads span z_lo..z_hi can touch or hit: a prism's silhouette
+        wherever the band meets it; for a mesh, the projection of its slice (an L-part
+        standing on its edge has a narrower outline in a band than its whole shadow).
+        Empty when the band misses the object.
+        """
+        key = (round(float(z_lo_mm), 6), round(float(z_hi_mm), 6))
+        cache = self.__dict__.setdefault("_band_cache", {})
+        if key not in cache:
+            z_lo, z_hi = max(key[0], 0.0), min(key[1], self.height_mm)
+            if z_hi <= z_lo:
+                cache[key] = Polygon()
+            elif self.outline is not None or (z_lo <= 0.0 and z_hi >= self.height_mm):
+                cache[key] = self.polygon  # a prism, or the whole height
+            else:
+                cache[key] = _mesh_outline(self.mesh, z_lo * 1e-3, z_hi * 1e-3)
+        return cache[key]
+
+    def wall_height_mm(self, z_lo_mm: float, z_hi_mm: float, slices: int = 24) -> float:
+        """Height of the object's side wall within a band, mm: how tall a rigid pad's
+        contact patch on it can be.
+
+        A prism's wall is vertical over its whole thickness: the band's overlap with it.
+        A curved side (a lying cylinder) touches a flat pad only near its widest
+        cross-section: the band is sliced, and the slices whose cross-section is within
+        5 % of the widest one (by area; for a cylinder of radius R a strip of 0.62 R,
+        close to the contact of a ~1 mm deep rubber pad) count as wall.
+        """
+        z_lo, z_hi = max(z_lo_mm, 0.0), min(z_hi_mm, self.height_mm)
+        if z_hi <= z_lo:
+            return 0.0
+        if self.outline is not None:
+            return z_hi - z_lo
+        zs = np.linspace(z_lo, z_hi, slices + 2)[1:-1]
+        areas = np.array([_section_area_mm2(self.mesh, z * 1e-3) for z in zs])
+        if areas.max() <= 0:
+            return 0.0
+        return float((z_hi - z_lo) * np.mean(areas >= 0.95 * areas.max()))
 
     @property
     def area_mm2(self) -> float:
@@ -256,7 +298,8 @@ def object_from_image(
       mass_g: mass; give this or density_kg_m3.
       density_kg_m3: density, used when mass_g is not given.
       simplify_mm: polygon simplification tolerance.
-      pick_height_mm: fingertip height above the table; default half the thickness.
+      pick_height_mm: fingertip height above the table; default: the grasp-height
+        rule of the procedure (``GraspConfig.grasp_height``).
       material: material name recorded with the results.
       name: defaults to the file stem.
     """
@@ -348,9 +391,9 @@ def _finish(name, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, mat
     mesh.density = mass_kg / mesh.volume
     com = np.asarray(mesh.center_mass, dtype=float)
     inertia = np.asarray(mesh.moment_inertia, dtype=float)  # about the centre of mass
-    if pick_height_mm is None:
-        pick_height_mm = 0.5 * height_mm  # the paper's assumption (1)
-    check_range("object", "pick_height_mm", pick_height_mm, 0, height_mm, lo_open=True)
+    if pick_height_mm is not None:
+        check_range("object", "pick_height_mm", pick_height_mm, 0, height_mm, lo_open=True)
+        pick_height_mm = float(pick_height_mm)
     return ObjectModel(
         name=name,
         polygon=polygon,
@@ -360,7 +403,7 @@ def _finish(name, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, mat
         inertia_kg_m2=inertia,
         mesh=mesh,
         pieces=pieces,
-        pick_height_mm=float(pick_height_mm),
+        pick_height_mm=pick_height_mm,
         material=material,
         source=source,
     )
@@ -483,7 +526,7 @@ def object_from_mesh(
       mass_g / density_kg_m3: one of them.
       pose: "as_given" (keep the file's orientation, z up) or "stable" (the most
         probable resting pose, trimesh.poses.compute_stable_poses).
-      pick_height_mm: fingertip height; default half the object's height.
+      pick_height_mm: fingertip height; default: the procedure's grasp-height rule.
       coacd_threshold: CoACD concavity threshold (smaller keeps finer concave detail).
     """
     path = Path(path)
@@ -524,13 +567,47 @@ def object_from_mesh(
             "check the unit (allowed size 1 mm to 1 m)"
         )
     mass_kg = _mass_kg(label, mesh.volume, mass_g, density_kg_m3)
-    outline = trimesh.path.polygons.projected(mesh, normal=[0, 0, 1], apad=1e-9)
-    polygon = _largest_polygon(shapely.affinity.scale(outline, 1e3, 1e3, origin=(0, 0)))
+    polygon = _mesh_outline(mesh, 0.0, float(mesh.bounds[1, 2]))
     pieces = _coacd_pieces(mesh, coacd_threshold)
     source = f"{path} (unit={unit}, pose={pose})"
     return _finish(
         label, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
     )
+
+
+def _mesh_outline(mesh: trimesh.Trimesh, z_lo_m: float, z_hi_m: float) -> Polygon:
+    """Top-down outline (mm) of the part of a watertight mesh between two heights (m).
+
+    The shadow of a solid is the union of its triangles' shadows. That union is taken
+    directly, because trimesh's projected outline came apart into dozens of slivers on
+    real scanned meshes (a YCB marker kept a third of its length). The band's part is
+    the mesh cut by two capped planes.
+    """
+    part = mesh
+    lo, hi = mesh.bounds[:, 2]
+    if z_lo_m > lo + 1e-9:
+        part = part.slice_plane([0, 0, z_lo_m], [0, 0, 1], cap=True)
+    if z_hi_m < hi - 1e-9 and part is not None and len(part.faces):
+        part = part.slice_plane([0, 0, z_hi_m], [0, 0, -1], cap=True)
+    if part is None or not len(part.faces):
+        return Polygon()
+    tri = np.asarray(part.triangles)[:, :, :2] * 1e3
+    # drop triangles seen edge-on (vertical walls): their shadow has no area
+    u, v = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    area = 0.5 * np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    shadows = shapely.polygons(tri[area > 1e-9])
+    # a hair of growth closes the cracks between neighbouring triangles' shadows
+    union = shapely.union_all(shapely.buffer(shadows, 1e-4)).buffer(-1e-4)
+    return _largest_polygon(shapely.make_valid(union))
+
+
+def _section_area_mm2(mesh: trimesh.Trimesh, z_m: float) -> float:
+    """Area of a mesh's horizontal cross-section at height z_m, mm^2 (0 if none)."""
+    section = mesh.section(plane_origin=[0, 0, z_m], plane_normal=[0, 0, 1])
+    if section is None:
+        return 0.0
+    planar, _ = section.to_2D()
+    return float(sum(p.area for p in planar.polygons_full)) * 1e6
 
 
 def _coacd_pieces(mesh: trimesh.Trimesh, threshold: float) -> tuple[np.ndarray, ...]:
@@ -565,8 +642,18 @@ def _reduce_hull(v: np.ndarray, k: int) -> np.ndarray:
     return v[chosen]
 
 
-def rasterize(polygon: Polygon, mm_per_px: float, yaw_rad: float = 0.0, pad_px: int = 2):
+def rasterize(
+    polygon: Polygon,
+    mm_per_px: float,
+    yaw_rad: float = 0.0,
+    pad_px: int = 2,
+    radius_mm: float | None = None,
+):
     """Rasterize a (rotated) polygon on a grid centred on the object origin.
+
+    radius_mm: the grid's half size before padding (default: the polygon's largest
+    distance from the origin). Give it to get one grid size for every yaw: the rotated
+    corners' distances differ in the last bits, and ceil() can turn that into a pixel.
 
     Pixel (i, j) covers x in [x0 + j*s, x0 + (j+1)*s), y in [y0 + i*s, ...) (row = +y);
     a pixel is object when its centre is inside.
@@ -575,8 +662,9 @@ def rasterize(polygon: Polygon, mm_per_px: float, yaw_rad: float = 0.0, pad_px: 
       mask (H, W) uint8 and (x0, y0) of the grid's lower-left corner, mm.
     """
     rot = shapely.affinity.rotate(polygon, yaw_rad, origin=(0, 0), use_radians=True)
-    radius = max(math.hypot(x, y) for x, y in rot.exterior.coords)
-    half = int(math.ceil(radius / mm_per_px)) + pad_px
+    if radius_mm is None:
+        radius_mm = max(math.hypot(x, y) for x, y in rot.exterior.coords)
+    half = int(math.ceil(radius_mm / mm_per_px)) + pad_px
     x0 = y0 = -half * mm_per_px
     centres = x0 + (np.arange(2 * half) + 0.5) * mm_per_px
     xs, ys = np.meshgrid(centres, centres)

@@ -23,6 +23,16 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   contact: critically damped with time constant ``SolverParams.timeconst_s``.
   Softer values (e.g. from calibration) pass through unclamped. ``mujoco_contact``
   reports what was clamped.
+* Pad contacts are soft-finger contacts (``condim`` 4): besides Coulomb friction in
+  the pad plane they resist spinning about the contact normal -- the grip axis -- up
+  to a torque of mu_t * N. A point contact (condim 3) cannot: a part held off its
+  centre of mass turned in the grasp and slid out at any force. A real pad carries that
+  torque with its contact patch: under uniform pressure p = N / A, the friction of each
+  patch element acts at its distance r from the patch centre, so the largest torque is
+  mu * N * mean(r). Hence mu_t = mu_pad * r_mean(patch), with the patch a rectangle: the
+  pad's width (or the object's, if narrower) by the height of the object's side wall
+  within the pads' band (``ObjectModel.wall_height_mm``; a rigid curved side touches a
+  flat rubber pad only near its widest section). ``pad_torsion_mm`` sets mu_t directly.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
   the impedance instead), the penetration depth for full damping (solimp's width plays a
   similar role), the static/dynamic split and the stiction/friction transition
@@ -32,6 +42,8 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
 from __future__ import annotations
 
 import dataclasses
+
+import numpy as np
 
 from mjx_pick.config import ConfigError, check_choice, check_range
 
@@ -61,13 +73,24 @@ class ContactParams:
     pad_damping_ns_per_mm: float = 5.5
     table_stiffness_n_per_mm: float = 1e5
     table_damping_ns_per_mm: float = 10.0
-    # MuJoCo impedance (dmin, dmax, width[m], midpoint, power); MuJoCo's defaults
-    solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
+    # torsional friction of the pad contacts (length: torque limit per newton of
+    # normal force); None: derived from the pad's contact patch (module docstring)
+    pad_torsion_mm: float | None = None
+    # MuJoCo impedance (dmin, dmax, width[m], midpoint, power). The pads: 0.99 instead
+    # of MuJoCo's default 0.9-0.95: a soft constraint's regularisation lets a held part
+    # creep down through friction at a rate that grows with (1 - d) / d; at 0.99 the
+    # creep over lift and hold dropped 5-10x. The table keeps MuJoCo's default: made
+    # as stiff, a part pushed and spun over it by the first pad changed its label with
+    # the time step in 3.5 % of door-opener picks (0 % so). benchmarks/RESULTS.md, "creep".
+    pad_solimp: tuple[float, float, float, float, float] = (0.99, 0.99, 0.001, 0.5, 2.0)
+    table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
 
     def __post_init__(self):
         o = "contact"
         check_range(o, "pad_friction", self.pad_friction, 0, 5, lo_open=True)
         check_range(o, "table_friction", self.table_friction, 0, 5)
+        if self.pad_torsion_mm is not None:
+            check_range(o, "pad_torsion_mm", self.pad_torsion_mm, 0, 100)
         for field in (
             "pad_stiffness_n_per_mm",
             "pad_damping_ns_per_mm",
@@ -75,14 +98,16 @@ class ContactParams:
             "table_damping_ns_per_mm",
         ):
             check_range(o, field, getattr(self, field), 0, lo_open=True)
-        if len(self.solimp) != 5:
-            raise ConfigError(f"contact.solimp = {self.solimp!r} must have 5 numbers")
-        dmin, dmax, width, mid, power = self.solimp
-        check_range(o, "solimp[0] (dmin)", dmin, 0, 1, lo_open=True, hi_open=True)
-        check_range(o, "solimp[1] (dmax)", dmax, dmin, 1, hi_open=True)
-        check_range(o, "solimp[2] (width)", width, 0, lo_open=True)
-        check_range(o, "solimp[3] (midpoint)", mid, 0, 1, lo_open=True, hi_open=True)
-        check_range(o, "solimp[4] (power)", power, 1)
+        for name in ("pad_solimp", "table_solimp"):
+            value = getattr(self, name)
+            if len(value) != 5:
+                raise ConfigError(f"contact.{name} = {value!r} must have 5 numbers")
+            dmin, dmax, width, mid, power = value
+            check_range(o, f"{name}[0] (dmin)", dmin, 0, 1, lo_open=True, hi_open=True)
+            check_range(o, f"{name}[1] (dmax)", dmax, dmin, 1, hi_open=True)
+            check_range(o, f"{name}[2] (width)", width, 0, lo_open=True)
+            check_range(o, f"{name}[3] (midpoint)", mid, 0, 1, lo_open=True, hi_open=True)
+            check_range(o, f"{name}[4] (power)", power, 1)
 
     @classmethod
     def for_material(cls, material: str, **overrides) -> ContactParams:
@@ -141,10 +166,12 @@ class MujocoContact:
     """What ContactParams become in MuJoCo for one object (see the module docstring)."""
 
     pad_friction: float
+    pad_torsion_m: float  # torsional friction coefficient of the pad contacts, m
     table_friction: float
     pad_solref: tuple[float, float]  # negative form (-k [1/s^2], -b [1/s])
     table_solref: tuple[float, float]
-    solimp: tuple[float, float, float, float, float]
+    pad_solimp: tuple[float, float, float, float, float]
+    table_solimp: tuple[float, float, float, float, float]
     clamped: tuple[str, ...]  # which Table-1 values were limited by the time step
 
 
@@ -168,10 +195,27 @@ def spring_solref(
     return (-k, -b), tuple(clamped)
 
 
+def patch_mean_radius_mm(width_mm: float, height_mm: float, n: int = 200) -> float:
+    """Mean distance from the centre of a uniformly loaded width x height rectangle, mm.
+
+    (For a square of side s it is 0.383 s; for a line of length L, L / 4.)
+    """
+    u = (np.arange(n) + 0.5) / n - 0.5
+    x, y = np.meshgrid(u * width_mm, u * height_mm)
+    return float(np.mean(np.hypot(x, y)))
+
+
 def mujoco_contact(
-    contact: ContactParams, solver: SolverParams, mass_kg: float, pad_friction: float | None = None
+    contact: ContactParams,
+    solver: SolverParams,
+    mass_kg: float,
+    patch_mm: tuple[float, float],
+    pad_friction: float | None = None,
 ) -> MujocoContact:
-    """Map ContactParams to MuJoCo pair parameters for an object of mass_kg."""
+    """Map ContactParams to MuJoCo pair parameters for an object of mass_kg.
+
+    patch_mm: (width, height) of the pads' contact patch on this object, mm.
+    """
     tc = solver.timeconst_s
     pad_ref, pad_c = spring_solref(
         contact.pad_stiffness_n_per_mm, contact.pad_damping_ns_per_mm, mass_kg, tc
@@ -179,11 +223,18 @@ def mujoco_contact(
     tab_ref, tab_c = spring_solref(
         contact.table_stiffness_n_per_mm, contact.table_damping_ns_per_mm, mass_kg, tc
     )
+    mu = contact.pad_friction if pad_friction is None else pad_friction
+    if contact.pad_torsion_mm is not None:
+        torsion_mm = contact.pad_torsion_mm
+    else:
+        torsion_mm = mu * patch_mean_radius_mm(*patch_mm)
     return MujocoContact(
-        pad_friction=contact.pad_friction if pad_friction is None else pad_friction,
+        pad_friction=mu,
+        pad_torsion_m=torsion_mm * 1e-3,
         table_friction=contact.table_friction,
         pad_solref=pad_ref,
         table_solref=tab_ref,
-        solimp=tuple(contact.solimp),
+        pad_solimp=tuple(contact.pad_solimp),
+        table_solimp=tuple(contact.table_solimp),
         clamped=tuple(f"pad_{c}" for c in pad_c) + tuple(f"table_{c}" for c in tab_c),
     )

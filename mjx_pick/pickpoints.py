@@ -18,6 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mjx_pick.config import ConfigError, check_range
+from mjx_pick.grasp import GraspConfig, pad_band_mm
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.kernels import feasibility as fk
 from mjx_pick.objects import ObjectModel, rasterize
@@ -115,9 +116,21 @@ def concat(batches: list[PickBatch]) -> PickBatch:
 
 
 class FeasibilityChecker:
-    """The paper's three checks for one (object, gripper, settings), batched."""
+    """The paper's three checks for one (object, gripper, settings), batched.
 
-    def __init__(self, obj: ObjectModel, gripper: GripperSpec, config: PickConfig | None = None):
+    The checks see the object's outline within the band the pads span at the grasp
+    (``ObjectModel.band_outline``; the procedure's grasp-height rule places the band):
+    for a prism its silhouette, for a mesh the shadow of its slice, so a part that is
+    narrower at the pads' height than its whole shadow is judged by what the pads meet.
+    """
+
+    def __init__(
+        self,
+        obj: ObjectModel,
+        gripper: GripperSpec,
+        config: PickConfig | None = None,
+        grasp: GraspConfig | None = None,
+    ):
         config = config or PickConfig()
         if config.safety_zone_mm >= 0.5 * gripper.stroke_mm:
             raise ConfigError(
@@ -132,7 +145,14 @@ class FeasibilityChecker:
             safety_zone_mm=float(config.safety_zone_mm),
             min_coverage=float(config.min_coverage),
         )
-        self.stack = _stack(obj, config.resolution_mm)
+        lo, hi = pad_band_mm(obj, gripper, grasp or GraspConfig())
+        self.silhouette = obj.band_outline(lo, hi)
+        if self.silhouette.is_empty:
+            raise ConfigError(
+                f"the pads of {gripper.name} span {lo:g}-{hi:g} mm above the table and miss "
+                f"{obj.name!r} ({obj.height_mm:g} mm high): lower pick_height_mm"
+            )
+        self.stack = _stack(obj.name, self.silhouette, config.resolution_mm)
 
     def __call__(self, x_mm, y_mm, yaw_deg, opening_mm=None) -> dict[str, np.ndarray]:
         """Check (N,) candidates; returns reason, opening_mm, coverage, gap_*_mm arrays.
@@ -189,8 +209,8 @@ def _stack_cached(key, polygon, res_mm: float):
     return fk.build_stack(rasterize, polygon, res_mm, radius)
 
 
-def _stack(obj: ObjectModel, res_mm: float) -> fk.SilhouetteStack:
-    return _stack_cached((obj.name, obj.polygon.wkb), obj.polygon, float(res_mm))
+def _stack(name: str, silhouette, res_mm: float) -> fk.SilhouetteStack:
+    return _stack_cached((name, silhouette.wkb), silhouette, float(res_mm))
 
 
 def draw_block(rng: np.random.Generator, xr: float, yr: float, config: PickConfig, n: int):
@@ -228,10 +248,11 @@ def generate_normal(
     n: int,
     seed: int = 0,
     config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
 ) -> PickBatch:
     """Normal mode: the first n feasible pick-points of the seeded candidate stream."""
     check_range("picks", "n", n, 1, 1e9)
-    checker = FeasibilityChecker(obj, gripper, config)
+    checker = FeasibilityChecker(obj, gripper, config, grasp)
     batches, found, drawn = [], 0, 0
     for block in candidate_stream(checker, seed):
         batches.append(block)
@@ -261,12 +282,13 @@ def generate_grid(
     y_step_mm: float,
     yaw_step_deg: float,
     config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
 ) -> PickBatch:
     """Grid mode: every feasible pick of a systematic x, y, yaw grid (ranges as Normal)."""
     check_range("grid", "x_step_mm", x_step_mm, 0, lo_open=True)
     check_range("grid", "y_step_mm", y_step_mm, 0, lo_open=True)
     check_range("grid", "yaw_step_deg", yaw_step_deg, 0, 360, lo_open=True)
-    checker = FeasibilityChecker(obj, gripper, config)
+    checker = FeasibilityChecker(obj, gripper, config, grasp)
     xr, yr = checker.ranges()
     xs = np.arange(-xr, xr + 1e-9, x_step_mm)
     ys = np.arange(-yr, yr + 1e-9, y_step_mm)
@@ -315,6 +337,7 @@ def optimize(
     batch_size: int = 256,
     seed: int = 0,
     config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
 ) -> OptimizationResult:
     """Optimization mode: evaluate feasible batches until k reach min_score or max_n are spent.
 
@@ -327,7 +350,7 @@ def optimize(
     check_range("optimize", "k", k, 1)
     check_range("optimize", "max_n", max_n, 1)
     check_range("optimize", "batch_size", batch_size, 1)
-    checker = FeasibilityChecker(obj, gripper, config)
+    checker = FeasibilityChecker(obj, gripper, config, grasp)
     pending: list[PickBatch] = []
     evaluated, scores, good = [], [], 0
     stream = candidate_stream(checker, seed)

@@ -562,7 +562,8 @@ def report(
 
     robust_path = run.path / "robustness.parquet"
     robust = pq.read_table(robust_path) if robust_path.is_file() else None
-    picks = robot_picks(run.table, float(run.config["object"]["pick_height_mm"]), k, frame, robust)
+    tip_mm = float(run.config["scene"]["fingertip_height_mm"])
+    picks = robot_picks(run.table, tip_mm, k, frame, robust)
     write_json(
         out_dir / "robot_picks.json",
         {

@@ -71,7 +71,7 @@ def robustness(
     base = base or Settings()
     k = len(picks)
     x, y, yaw, idx = perturb(picks, m, sigma_xy_mm, sigma_yaw_deg, seed)
-    checker = pp.FeasibilityChecker(obj, base.gripper, pick_config)
+    checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
     planned = picks.opening_mm[idx]
     res = checker(x, y, yaw, opening_mm=planned)
     # coverage is a planning rule, not physics: a real pose with little object between

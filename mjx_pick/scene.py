@@ -3,7 +3,8 @@
 The model compiles for the MuJoCo C engine and for MJX (``mujoco.mjx.put_model``).
 Only the contacts that matter exist: every geom has contype = conaffinity = 0 and the
 contacts are explicit ``<pair>``s -- each pad against each convex collision piece of the
-object, and the table against the object's convex hull (a rigid body on a plane touches
+object (soft-finger contacts with torsional friction, see ``mjx_pick.physics``), and
+the table against the object's convex hull (a rigid body on a plane touches
 it only on its hull, so one pair replaces one per piece). Fingers never collide with the
 table or each
 other, which keeps MJX's fixed-size contact buffers small.
@@ -22,6 +23,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
+from mjx_pick.grasp import GraspConfig, pad_band_mm
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, MujocoContact, SolverParams, mujoco_contact
@@ -55,6 +57,22 @@ class SceneIndex:
     stroke_m: float
 
 
+def pad_patch_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
+    """(width, height) of a pad's contact patch on the object, mm (``mjx_pick.physics``).
+
+    Width: the pad's, or the object's smallest width in the pads' band if narrower.
+    Height: the object's side wall within the band.
+    """
+    lo, hi = pad_band_mm(obj, gripper, grasp)
+    band = obj.band_outline(lo, hi)
+    width = gripper.finger_width_mm
+    if not band.is_empty:
+        rect = np.asarray(band.minimum_rotated_rectangle.exterior.coords)
+        sides = np.linalg.norm(np.diff(rect[:3], axis=0), axis=1)
+        width = min(width, float(sides.min()))
+    return width, obj.wall_height_mm(lo, hi)
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Scene:
     """A compiled scene: the model, its MJCF text, the index, and what built it."""
@@ -66,6 +84,7 @@ class Scene:
     object: ObjectModel
     gripper: GripperSpec
     solver: SolverParams
+    pad_patch_mm: tuple[float, float]  # (width, height) of the pads' contact patch
 
     def initial_qpos(self, x_m, y_m, yaw_rad, opening_m) -> np.ndarray:
         """Initial joint positions for picks (N,) arrays -> (N, nq)."""
@@ -94,15 +113,18 @@ def _fmt(values) -> str:
 
 
 def scene_xml(
-    obj: ObjectModel, gripper: GripperSpec, mjc: MujocoContact, solver: SolverParams
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    mjc: MujocoContact,
+    solver: SolverParams,
+    fingertip_height_mm: float,
 ) -> str:
     """MJCF text of the scene (deterministic: same inputs, same text)."""
     stroke = gripper.stroke_mm * 1e-3
     depth = gripper.finger_depth_mm * 1e-3
     width = gripper.finger_width_mm * 1e-3
     pad_h = gripper.pad_height_mm * 1e-3
-    pick_h = obj.pick_height_mm * 1e-3
-    z_grip = pick_h + 0.5 * pad_h  # pad centres: pad bottoms at the pick height
+    z_grip = fingertip_height_mm * 1e-3 + 0.5 * pad_h  # pad centres
     fmass = gripper.finger_mass_g * 1e-3
     kp = gripper.drive_stiffness_n_per_mm * 1e3
     kv = gripper.drive_damping_ns_per_mm * 1e3
@@ -129,19 +151,20 @@ def scene_xml(
     full = _fmt(
         [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
     )
-    pad_fr = _fmt([mjc.pad_friction, mjc.pad_friction, 0.005, 0.0001, 0.0001])
+    pad_fr = _fmt([mjc.pad_friction, mjc.pad_friction, mjc.pad_torsion_m, 0.0001, 0.0001])
     tab_fr = _fmt([mjc.table_friction, mjc.table_friction, 0.005, 0.0001, 0.0001])
-    solimp = _fmt(mjc.solimp)
     pairs = []
     for i in range(len(pad_pieces)):
         for pad in ("pad_left", "pad_right"):
             pairs.append(
-                f'    <pair name="{pad}_piece{i}" geom1="{pad}" geom2="piece{i}" condim="3" '
-                f'friction="{pad_fr}" solref="{_fmt(mjc.pad_solref)}" solimp="{solimp}"/>'
+                f'    <pair name="{pad}_piece{i}" geom1="{pad}" geom2="piece{i}" condim="4" '
+                f'friction="{pad_fr}" solref="{_fmt(mjc.pad_solref)}" '
+                f'solimp="{_fmt(mjc.pad_solimp)}"/>'
             )
     pairs.append(
         f'    <pair name="table_hull" geom1="table" geom2="hull" condim="3" '
-        f'friction="{tab_fr}" solref="{_fmt(mjc.table_solref)}" solimp="{solimp}"/>'
+        f'friction="{tab_fr}" solref="{_fmt(mjc.table_solref)}" '
+        f'solimp="{_fmt(mjc.table_solimp)}"/>'
     )
     finger_link_h = 0.03
     pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
@@ -222,12 +245,19 @@ def build_scene(
     gripper: GripperSpec,
     contact: ContactParams | None = None,
     solver: SolverParams | None = None,
+    grasp: GraspConfig | None = None,
 ) -> Scene:
-    """Compile the scene for (object, gripper, contact parameters, solver settings)."""
+    """Compile the scene for (object, gripper, contact, solver settings, procedure).
+
+    The procedure (grasp) sets the fingertips' height (its grasp-height rule).
+    """
     contact = contact or ContactParams()
     solver = solver or SolverParams()
-    mjc = mujoco_contact(contact, solver, obj.mass_kg, gripper.pad_friction)
-    xml = scene_xml(obj, gripper, mjc, solver)
+    grasp = grasp or GraspConfig()
+    patch = pad_patch_mm(obj, gripper, grasp)
+    mjc = mujoco_contact(contact, solver, obj.mass_kg, patch, gripper.pad_friction)
+    tip_mm, _ = pad_band_mm(obj, gripper, grasp)
+    xml = scene_xml(obj, gripper, mjc, solver, tip_mm)
     model = mujoco.MjModel.from_xml_string(xml)
     model.qpos0[:] = 0.0
     model.qpos0[model.jnt_qposadr[model.joint("object").id] + 3] = 1.0
@@ -250,9 +280,16 @@ def build_scene(
         finger_right_actuator=model.actuator("finger_right").id,
         pad_pairs=pairs(("pad_left", "pad_right")),
         table_pairs=pairs(("table",)),
-        pad_bottom_z0_m=obj.pick_height_mm * 1e-3,
+        pad_bottom_z0_m=tip_mm * 1e-3,
         stroke_m=gripper.stroke_mm * 1e-3,
     )
     return Scene(
-        model=model, xml=xml, index=index, contact=mjc, object=obj, gripper=gripper, solver=solver
+        model=model,
+        xml=xml,
+        index=index,
+        contact=mjc,
+        object=obj,
+        gripper=gripper,
+        solver=solver,
+        pad_patch_mm=tuple(float(v) for v in patch),
     )

@@ -21,10 +21,18 @@ from mjx_pick.kernels import grasp as gk
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams, mujoco_contact
 from mjx_pick.pickpoints import PickBatch
-from mjx_pick.scene import Scene, build_scene
+from mjx_pick.scene import Scene, build_scene, pad_patch_mm
 
 # per-pick contact overrides accepted by make_inputs (besides GraspParams' fields)
-CONTACT_OVERRIDES = ("pad_friction", "table_friction", "pad_solref", "table_solref", "solimp")
+CONTACT_OVERRIDES = (
+    "pad_friction",
+    "pad_torsion",
+    "table_friction",
+    "pad_solref",
+    "table_solref",
+    "pad_solimp",
+    "table_solimp",
+)
 
 
 class PickInputs(NamedTuple):
@@ -78,7 +86,10 @@ def make_inputs(
     """Batched inputs for picks; overrides maps a parameter to one value or (N,) values.
 
     Override names: GraspParams fields (SI: force_n, kp, ...) and CONTACT_OVERRIDES
-    (pad_friction, table_friction, pad_solref (2,), table_solref (2,), solimp (5,)).
+    (pad_friction, pad_torsion [m], table_friction, pad_solref (2,), table_solref (2,),
+    pad_solimp (5,), table_solimp (5,)). A pad_friction override scales the scene's
+    torsional friction with it (both come from the same Coulomb coefficient) unless
+    pad_torsion is given too.
     """
     overrides = dict(overrides or {})
     n = len(picks)
@@ -86,7 +97,7 @@ def make_inputs(
         picks.x_mm * 1e-3, picks.y_mm * 1e-3, np.deg2rad(picks.yaw_deg), picks.opening_mm * 1e-3
     ).astype(np.float32)
     contact = {k: overrides.pop(k) for k in CONTACT_OVERRIDES if k in overrides}
-    params = broadcast_params(grasp.params(scene.object), n, **overrides)
+    params = broadcast_params(grasp.params(scene.object, scene.gripper), n, **overrides)
     m = scene.model
     friction = np.broadcast_to(m.pair_friction, (n, m.npair, 5)).astype(np.float32).copy()
     solref = np.broadcast_to(m.pair_solref, (n, m.npair, 2)).astype(np.float32).copy()
@@ -96,6 +107,10 @@ def make_inputs(
         mu = np.broadcast_to(np.asarray(contact["pad_friction"], np.float32), (n,))
         friction[:, pads, 0] = mu[:, None]
         friction[:, pads, 1] = mu[:, None]
+        friction[:, pads, 2] *= mu[:, None] / np.float32(scene.contact.pad_friction)
+    if "pad_torsion" in contact:
+        torsion = np.broadcast_to(np.asarray(contact["pad_torsion"], np.float32), (n,))
+        friction[:, pads, 2] = torsion[:, None]
     if "table_friction" in contact:
         mu = np.broadcast_to(np.asarray(contact["table_friction"], np.float32), (n,))
         friction[:, table, 0] = mu[:, None]
@@ -107,8 +122,10 @@ def make_inputs(
     if "table_solref" in contact:
         ref = np.broadcast_to(np.asarray(contact["table_solref"], np.float32), (n, 2))
         solref[:, table] = ref[:, None]
-    if "solimp" in contact:
-        solimp[:] = np.broadcast_to(np.asarray(contact["solimp"], np.float32), (n, 5))[:, None]
+    for name, pairs in (("pad_solimp", pads), ("table_solimp", table)):
+        if name in contact:
+            imp = np.broadcast_to(np.asarray(contact[name], np.float32), (n, 5))
+            solimp[:, pairs] = imp[:, None]
     if np.any(friction[..., 0] < 0) or np.any(~np.isfinite(friction)):
         raise ConfigError("friction overrides must be finite and >= 0")
     return PickInputs(qpos0, params, friction, solref, solimp)
@@ -136,7 +153,11 @@ class Backend(Protocol):
 
 
 def has_accelerator() -> bool:
+    """Whether JAX sees a GPU or TPU (device batches are sized for it)."""
     return any(d.platform in ("gpu", "tpu", "cuda", "rocm") for d in jax.devices())
+
+
+BACKENDS = ("auto", "warp", "mjx", "mujoco")
 
 
 def make_backend(
@@ -146,20 +167,38 @@ def make_backend(
     batch_size: int,
     nthread: int | None = None,
     devices=None,
+    **options,
 ) -> Backend:
-    """'auto' (MJX when JAX sees a GPU or TPU, else the C engine), 'mjx' or 'mujoco'.
+    """A backend by name: 'warp', 'mjx', 'mujoco' or 'auto'.
 
-    devices: MJX shards each batch over these (default: every local device).
+    'warp': MJX with MuJoCo Warp physics on an NVIDIA GPU (needs warp-lang, the gpu
+    extra; a ConfigError says what is missing). 'mjx': MJX's JAX physics on JAX's
+    devices (forward-mode derivatives). 'mujoco': the C engine on CPU threads. 'auto':
+    'warp' where it can run (an NVIDIA GPU and warp-lang), else 'mujoco' -- on a GPU
+    without warp-lang the C engine's threads beat MJX's JAX physics (issue 17).
+
+    devices: MJX/Warp shard each batch over these (default: every local device; Warp:
+    every CUDA device). nthread: the C engine's threads. options: passed to the MJX or
+    Warp backend (refill, ticks_per_call; Warp: buffers, graph_mode).
     """
-    if name not in ("auto", "mjx", "mujoco"):
-        raise ConfigError(f"backend = {name!r} is not allowed: choose 'auto', 'mjx' or 'mujoco'")
+    if name not in BACKENDS:
+        allowed = ", ".join(repr(b) for b in BACKENDS)
+        raise ConfigError(f"backend = {name!r} is not allowed: choose one of {allowed}")
     if name == "auto":
-        name = "mjx" if has_accelerator() else "mujoco"
+        from mjx_pick.backend_warp import warp_problem
+
+        name = "mujoco" if warp_problem() else "warp"
     grasp.substeps(scene.solver)  # validates the control period against the time step
+    if name == "warp":
+        from mjx_pick.backend_warp import WarpBackend
+
+        return WarpBackend(scene, grasp, batch_size, devices=devices, **options)
     if name == "mjx":
         from mjx_pick.backend_mjx import MjxBackend
 
-        return MjxBackend(scene, grasp, batch_size, devices=devices)
+        return MjxBackend(scene, grasp, batch_size, devices=devices, **options)
+    if options:
+        raise ConfigError(f"backend 'mujoco' takes no options {sorted(options)}")
     from mjx_pick.backend_mujoco import MujocoBackend
 
     return MujocoBackend(scene, grasp, batch_size, nthread=nthread)
@@ -181,19 +220,30 @@ class Settings:
     def structure(self) -> tuple:
         """What fixes the compiled simulation: the scene (gripper, solver) and the scan
         length. Everything else (contact, controller, phases) is per-pick data."""
-        return (self.gripper, self.solver, self.grasp.n_ticks(), self.grasp.substeps(self.solver))
+        return (
+            self.gripper,
+            self.solver,
+            self.grasp.n_ticks(),
+            self.grasp.substeps(self.solver),
+            self.grasp.grasp_height,
+            self.grasp.fingertip_clearance_mm,
+        )
 
     def overrides(self, obj: ObjectModel, n: int) -> dict:
         """Per-pick overrides for make_inputs that give n pick-points these settings."""
-        mjc = mujoco_contact(self.contact, self.solver, obj.mass_kg, self.gripper.pad_friction)
-        out = {
-            name: np.full(n, v, np.float32) for name, v in self.grasp.params(obj)._asdict().items()
-        }
+        patch = pad_patch_mm(obj, self.gripper, self.grasp)
+        mjc = mujoco_contact(
+            self.contact, self.solver, obj.mass_kg, patch, self.gripper.pad_friction
+        )
+        params = self.grasp.params(obj, self.gripper)._asdict()
+        out = {name: np.full(n, v, np.float32) for name, v in params.items()}
         out["pad_friction"] = np.full(n, mjc.pad_friction, np.float32)
+        out["pad_torsion"] = np.full(n, mjc.pad_torsion_m, np.float32)
         out["table_friction"] = np.full(n, mjc.table_friction, np.float32)
         out["pad_solref"] = np.tile(np.asarray(mjc.pad_solref, np.float32), (n, 1))
         out["table_solref"] = np.tile(np.asarray(mjc.table_solref, np.float32), (n, 1))
-        out["solimp"] = np.tile(np.asarray(mjc.solimp, np.float32), (n, 1))
+        out["pad_solimp"] = np.tile(np.asarray(mjc.pad_solimp, np.float32), (n, 1))
+        out["table_solimp"] = np.tile(np.asarray(mjc.table_solimp, np.float32), (n, 1))
         return out
 
 
@@ -229,7 +279,9 @@ class Simulator:
         if key not in self._backends:
             from mjx_pick.evaluate import default_batch_size
 
-            scene = build_scene(self.object, settings.gripper, settings.contact, settings.solver)
+            scene = build_scene(
+                self.object, settings.gripper, settings.contact, settings.solver, settings.grasp
+            )
             size = self.batch_size or default_batch_size(self.backend_name)
             self._backends[key] = make_backend(self.backend_name, scene, settings.grasp, size)
         return self._backends[key]

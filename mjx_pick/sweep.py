@@ -206,7 +206,9 @@ def sweep(
     picks_for: dict[GripperSpec, pp.PickBatch] = {}
     for s in settings:
         if s.gripper not in picks_for:
-            picks_for[s.gripper] = pp.generate_normal(obj, s.gripper, n, seed, pick_config)
+            picks_for[s.gripper] = pp.generate_normal(
+                obj, s.gripper, n, seed, pick_config, grasp=s.grasp
+            )
     jobs = [(s, picks_for[s.gripper]) for s in settings]
     before = {id(b): (b.stats.compile_s, b.stats.run_s) for b in sim.backends}
     t0 = time.perf_counter()

@@ -1,11 +1,14 @@
 """Throughput measurement: pick-points per second against batch size, per backend.
 
 Used by ``benchmarks/throughput.py`` (CSV rows for RESULTS.md) and the throughput
-notebook; ``plot_throughput`` draws rows against the paper's figures.
+notebook; ``plot_throughput`` draws rows against the paper's figures. ``side_by_side``
+runs several backends (Warp, MJX's JAX physics, MuJoCo C) on the same pick-points and
+compares their labels with MuJoCo C's.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import statistics
 import time
 
@@ -67,7 +70,7 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
     return {
         "object": obj_name,
         "backend": backend.name,
-        "device": device_name(n_devices) if backend.name == "mjx" else backend.device,
+        "device": backend.device if backend.name == "mujoco" else device_name(n_devices),
         "batch": batch,
         "compile_s": round(compile_s, 2),
         "first_call_s": round(first_wall, 2),
@@ -82,6 +85,178 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
         "cone": scene.solver.cone,
         "iterations": scene.solver.iterations,
     }
+
+
+@dataclasses.dataclass(frozen=True)
+class RunSpec:
+    """One backend run of a side-by-side comparison.
+
+    n: pick-points (the first n of the shared set); batch: the backend's batch size
+    (MJX/Warp: slots of the pool with refill); options: make_backend options (refill,
+    ticks_per_call, graph_mode); warmup: pick-points run once before the timed run
+    (MJX/Warp: a full-length first call also builds Warp's kernels and captures its
+    CUDA graphs; 0: none).
+    """
+
+    backend: str
+    n: int
+    batch: int
+    options: tuple = ()
+    warmup: int = 0
+
+    @property
+    def label(self) -> str:
+        opts = "".join(f",{k}={v}" for k, v in self.options)
+        return f"{self.backend}{opts}"
+
+    @classmethod
+    def parse(cls, text: str) -> RunSpec:
+        """'warp:n=65536:batch=16384:refill=1:ticks_per_call=20:warmup=16384'."""
+        name, *parts = text.split(":")
+        fields: dict = {}
+        options = []
+        for part in parts:
+            key, sep, value = part.partition("=")
+            if not sep:
+                raise ValueError(f"run {text!r}: {part!r} is not key=value")
+            if key in ("n", "batch", "warmup"):
+                fields[key] = int(value)
+            elif key in ("refill",):
+                options.append((key, value.lower() in ("1", "true", "yes")))
+            elif key in ("ticks_per_call",):
+                options.append((key, int(value)))
+            elif key in ("graph_mode",):
+                options.append((key, value))
+            else:
+                raise ValueError(f"run {text!r}: unknown key {key!r}")
+        if "n" not in fields:
+            raise ValueError(f"run {text!r} needs n=")
+        fields.setdefault("batch", fields["n"])
+        return cls(name, options=tuple(options), **fields)
+
+
+def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, on_row=None):
+    """Run each RunSpec on the first n of one shared set of pick-points; one row each.
+
+    Row fields: pick-points/s (timed run only: compile, Warp's buffer sizing and the
+    warm-up apart), physics steps/s the device performed (every slot steps, finished or
+    not), steps per pick-point actually simulated (to its end; refill only: the
+    full-length rollout simulates n_ticks x substeps for every pick), slot occupancy
+    (refill: the fraction of slot-steps spent on picks that had not ended), peak device
+    memory per pick (JAX's allocator; Warp's own scratch is not in it), success rate,
+    and labels (success, failure reason) agreeing with MuJoCo C's on the pick-points
+    both ran (when a 'mujoco' run is among the runs). on_row(row) is called as each
+    row is done (a long benchmark keeps what it measured if it is cut short).
+    """
+    obj = mp.load_object(obj_name)
+    scene = mp.build_scene(obj, gripper, solver=solver)
+    n_max = max(r.n for r in runs)
+    picks = pp.generate_normal(obj, gripper, n_max, seed=seed)
+    inputs = make_inputs(scene, grasp, picks)
+    n_sub = grasp.substeps(scene.solver)
+    full_steps = grasp.n_ticks() * n_sub
+    results: dict[str, dict] = {}
+    rows = []
+    # MuJoCo C first: the reference the others' labels are compared with
+    order = sorted(runs, key=lambda r: r.backend != "mujoco")
+    for spec in order:
+        n = min(spec.n, len(inputs))
+        t_build = time.perf_counter()
+        backend = make_backend(
+            spec.backend, scene, grasp, batch_size=spec.batch, **dict(spec.options)
+        )
+        build_s = time.perf_counter() - t_build
+        warm_s = 0.0
+        if spec.warmup:
+            t0 = time.perf_counter()
+            backend.run(inputs.take(slice(0, min(spec.warmup, n))))
+            warm_s = time.perf_counter() - t0
+        pool = getattr(backend, "pool_stats", None)
+        before = dataclasses.replace(pool) if pool is not None else None
+        run_before, compile_before = backend.stats.run_s, backend.stats.compile_s
+        t0 = time.perf_counter()
+        out, _ = backend.run(inputs.take(slice(0, n)))
+        wall = time.perf_counter() - t0
+        run_s = backend.stats.run_s - run_before
+        results[spec.label] = out
+        refilled = pool is not None and pool.calls > before.calls
+        if refilled:
+            slot_ticks = pool.slot_ticks - before.slot_ticks
+            pick_ticks = pool.pick_ticks - before.pick_ticks
+            device_steps = slot_ticks * n_sub
+            steps_per_pick = pick_ticks * n_sub / n
+            occupancy = pick_ticks / slot_ticks
+        elif spec.backend == "mujoco":
+            device_steps = steps_per_pick = occupancy = None  # it stops finished picks
+        else:
+            padded = -(-n // backend.batch_size) * backend.batch_size
+            device_steps = padded * full_steps
+            steps_per_pick = full_steps
+            occupancy = n / padded
+        peak = peak_bytes() if spec.backend != "mujoco" else None
+        row = {
+            "object": obj_name,
+            "run": spec.label,
+            "backend": backend.name,
+            "device": backend.device,
+            "n": n,
+            "batch": backend.batch_size,
+            "setup_s": round(build_s, 2),
+            "compile_s": round(backend.stats.compile_s, 2),
+            "compile_in_run_s": round(backend.stats.compile_s - compile_before, 2),
+            "warmup_s": round(warm_s, 2),
+            "run_s": round(run_s, 3),
+            "wall_s": round(wall, 3),
+            "picks_per_s": round(n / run_s, 1),
+            "physics_steps_per_s": round(device_steps / run_s) if device_steps else None,
+            "steps_per_pick": round(steps_per_pick, 1) if steps_per_pick else None,
+            "full_steps_per_pick": full_steps,
+            "occupancy": round(occupancy, 4) if occupancy is not None else None,
+            "peak_mem_mb_per_pick": round(peak / backend.batch_size / 2**20, 3) if peak else None,
+            "success_rate": round(float(np.mean(out["success"])), 4),
+            "diverged": int(np.sum(out["diverged"])),
+        }
+        buffers = getattr(backend, "buffers", None)
+        if buffers is not None:
+            diag = backend.last_diagnostics
+            row.update(
+                {
+                    "buffer_contacts": buffers.contacts,
+                    "buffer_rows": buffers.rows,
+                    "measured_contacts_c": buffers.measured_contacts,
+                    "measured_rows_c": buffers.measured_rows,
+                    "max_rows_used": int(diag.nefc_max.max()),
+                    "max_contacts_used_per_world": round(
+                        float(diag.nacon_max.max()) / backend.pool_size(n)
+                        if backend.refill
+                        else float(diag.nacon_max.max()) / backend.batch_size,
+                        2,
+                    ),
+                    "buffer_growths": backend.growths,
+                }
+            )
+        ref = next((k for k in results if k.startswith("mujoco")), None)
+        if ref is not None and ref != spec.label:
+            m = min(n, len(results[ref]["success"]))
+            c = results[ref]
+            row["labels_vs_c_n"] = m
+            row["labels_agree_vs_c"] = round(
+                float(np.mean(out["success"][:m] == c["success"][:m])), 4
+            )
+            row["failure_agree_vs_c"] = round(
+                float(np.mean(out["failure"][:m] == c["failure"][:m])), 4
+            )
+        row.update(
+            {
+                "timestep_s": scene.solver.timestep_s,
+                "cone": scene.solver.cone,
+                "iterations": scene.solver.iterations,
+            }
+        )
+        rows.append(row)
+        if on_row is not None:
+            on_row(row)
+    return rows
 
 
 def plot_throughput(rows: list[dict], path) -> None:

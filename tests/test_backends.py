@@ -6,7 +6,6 @@ benchmarks/agreement.py (figures in benchmarks/RESULTS.md); this is its CI size.
 
 import numpy as np
 import pytest
-from scipy.stats import spearmanr
 
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
@@ -25,9 +24,15 @@ def test_backends_agree_on_door_opener(door_opener):
     c, _ = make_backend("mujoco", scene, SHORT, batch_size=32).run(inputs)
     j, _ = make_backend("mjx", scene, SHORT, batch_size=32).run(inputs)
     agree = np.mean(c["success"] == j["success"])
-    rho = spearmanr(c["score"], j["score"]).statistic
+    # the two engines differ in their collision routines and solver details, so a
+    # chaotic pick (a part spun over the table by the first pad) may end apart: 90 %
+    # of labels at this size (99.6 % measured at 16,384 on a GPU, RESULTS.md). Scores
+    # of successes crowd near 1, where a rank correlation measures noise: their
+    # median absolute difference must stay below 0.02 (a tenth of a typical gap
+    # between a clean grasp and one that turned 30 deg)
     assert agree >= 0.9, f"labels agree on {agree:.1%}"
-    assert rho >= 0.9, f"Spearman {rho:.3f}"
+    gap = np.median(np.abs(c["score"] - j["score"]))
+    assert gap <= 0.02, f"median score difference {gap:.3f}"
     assert not c["diverged"].any() and not j["diverged"].any()
     # the shared kernel gives both the same bookkeeping: equal reach times where both
     # reached the force, to a control period

@@ -97,9 +97,13 @@ def test_parameters_stay_in_their_bounds(heavy_block):
 
 def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_block, synthetic):
     assert 0 < synthetic.successes.sum() < len(synthetic), "the data must hold both outcomes"
-    base = mp.Settings(LIGHT, mp.ContactParams(), grasp=GRASP)  # pad friction 0.86
+    # the fit starts below the hidden value: with the soft-finger pads this data's
+    # outcome + lift-time loss is not monotone between 0.62 and Table 1's 0.86 (loss
+    # 0.21 at 0.62, 3.48 at 0.75, 2.97 at 0.86), where a local gradient fit stalls;
+    # below 0.62 it falls monotonically (5.0 at 0.4, 3.7 at 0.5)
+    base = mp.Settings(LIGHT, mp.ContactParams(pad_friction=0.45), grasp=GRASP)
     problem = cal.Problem(heavy_block, synthetic, ["pad_friction"], base, backend="mujoco")
-    before = problem.loss(problem.space.theta([0.86])[None])[0]
+    before = problem.loss(problem.space.theta([0.45])[None])[0]
     kw = dict(steps=12, checkpoint_every=6)
     whole = cal.calibrate(problem, **kw)
     mu = whole.values["pad_friction"]

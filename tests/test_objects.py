@@ -137,7 +137,7 @@ def test_mesh_import_with_notch_keeps_it(tmp_path):
     mesh.export(path)
     obj = mp.object_from_mesh(path, unit="mm", density_kg_m3=1000)
     assert obj.height_mm == pytest.approx(10.0, abs=0.01)
-    assert obj.pick_height_mm == pytest.approx(5.0, abs=0.01)
+    assert obj.pick_height_mm is None  # the procedure's grasp-height rule applies
     assert obj.area_mm2 == pytest.approx(1000, rel=0.01)
     assert obj.mass_kg == pytest.approx(1000 * 10 * 1e-9 * 1000, rel=1e-6)
     # the notch centre, (30, 20) in the drawing, moved into the object frame
@@ -246,7 +246,7 @@ def test_contact_mapping_clamps_table1_stiffness():
     from mjx_pick.physics import mujoco_contact
 
     solver = mp.SolverParams(timestep_s=0.001)
-    mjc = mujoco_contact(mp.ContactParams(), solver, mass_kg=0.013)
+    mjc = mujoco_contact(mp.ContactParams(), solver, mass_kg=0.013, patch_mm=(22.0, 5.0))
     # Table 1's 1e5 N/mm cannot be integrated at 1 ms: clamped to tc = 2 ms, critical
     assert mjc.pad_solref == pytest.approx((-1 / 0.002**2, -2 / 0.002))
     assert "pad_stiffness" in mjc.clamped
@@ -254,6 +254,7 @@ def test_contact_mapping_clamps_table1_stiffness():
         mp.ContactParams(pad_stiffness_n_per_mm=1e-3, pad_damping_ns_per_mm=1e-5),
         solver,
         mass_kg=0.01,
+        patch_mm=(22.0, 5.0),
     )
     assert soft.pad_solref == pytest.approx((-100.0, -1.0))
     assert not any(c.startswith("pad") for c in soft.clamped)

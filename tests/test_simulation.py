@@ -130,7 +130,8 @@ def _params(**kw):
     base = GraspConfig(
         lift_height_mm=100, lift_speed_mm_s=200, lift_accel_mm_s2=2000, hold_s=0.4, grip_force_n=50
     )
-    p = base.params(mp.object_from_polygon(box(0, 0, 10, 10), thickness_mm=5, mass_g=10))
+    obj = mp.object_from_polygon(box(0, 0, 10, 10), thickness_mm=5, mass_g=10)
+    p = base.params(obj, mp.GripperSpec())
     return p._replace(**{k: jnp.float32(v) for k, v in kw.items()})
 
 
@@ -142,14 +143,16 @@ def _replay(p, phases, forces, table, z, quats):
         s = gk.initial_state(jnp.float32(0))._replace(phase=jnp.int32(phases[k]))
         s_next = s._replace(phase=jnp.int32(phases[k + 1]))
         m = gk.Measurement(
-            jnp.float32(forces[k][0]),
-            jnp.float32(forces[k][1]),
-            jnp.float32(table[k]),
-            jnp.array([0.0, 0.0, z[k]]),
-            jnp.asarray(quats[k], jnp.float32),
-            jnp.float32(z[k]),
-            jnp.float32(0.0),
-            jnp.bool_(True),
+            force_left=jnp.float32(forces[k][0]),
+            force_right=jnp.float32(forces[k][1]),
+            force_table=jnp.float32(table[k]),
+            finger_left=jnp.float32(0.01),
+            finger_right=jnp.float32(0.01),
+            object_pos=jnp.array([0.0, 0.0, z[k]]),
+            object_quat=jnp.asarray(quats[k], jnp.float32),
+            lift=jnp.float32(z[k]),
+            speed_max=jnp.float32(0.0),
+            finite=jnp.bool_(True),
         )
         a = gk.accumulate(p, a, s, s_next, m, pos0, quat0)
     return {k: np.asarray(v) for k, v in gk.finalize(p, a).items()}
@@ -215,7 +218,7 @@ def test_metrics_on_hand_made_failures():
     a = gk.initial_accumulators(jnp.float32(0))
     s = gk.initial_state(jnp.float32(0))._replace(phase=jnp.int32(gk.CLOSE))
     m = gk.Measurement(
-        *[jnp.float32(0)] * 3,
+        *[jnp.float32(0)] * 5,
         jnp.zeros(3),
         jnp.array([1.0, 0, 0, 0]),
         jnp.float32(0),

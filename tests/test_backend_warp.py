@@ -1,0 +1,233 @@
+"""The Warp backend's CPU-testable parts: backend choice and its errors, buffer sizing,
+and slot refill (run with MJX's JAX implementation, the program Warp runs too).
+
+CI has no GPU and no warp-lang; the GPU figures come from benchmarks/throughput.py.
+With warp-lang installed, MJX_PICK_WARP_CPU=1 runs the Warp backend itself on the CPU
+(LLVM-compiled kernels, minutes): the last test.
+"""
+
+import importlib.metadata
+import importlib.util
+import os
+
+import mujoco
+import mujoco.batch
+import numpy as np
+import pytest
+
+import mjx_pick as mp
+from mjx_pick import backend_warp as bw
+from mjx_pick import pickpoints as pp
+from mjx_pick.grasp import GraspConfig
+from mjx_pick.simulate import make_backend, make_inputs
+
+SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=10.0, hold_s=0.1)
+
+
+@pytest.fixture()
+def block_scene(block):
+    return mp.build_scene(block, mp.GripperSpec())
+
+
+@pytest.fixture()
+def fresh_probe():
+    """warp_problem() is cached per process: clear it around a test that fakes the
+    machine."""
+    bw.warp_problem.cache_clear()
+    yield
+    bw.warp_problem.cache_clear()
+
+
+# --------------------------------------------------------------------------- choice
+def test_backend_names_and_options(block_scene):
+    with pytest.raises(mp.ConfigError, match="'auto', 'warp', 'mjx', 'mujoco'"):
+        make_backend("gpu", block_scene, SHORT, batch_size=4)
+    with pytest.raises(mp.ConfigError, match="takes no options"):
+        make_backend("mujoco", block_scene, SHORT, batch_size=4, refill=True)
+
+
+def test_warp_without_gpu_is_a_clear_error(block_scene, fresh_probe, monkeypatch):
+    monkeypatch.delenv(bw.ALLOW_CPU_ENV, raising=False)
+    if bw.nvidia_gpus():
+        pytest.skip("this machine has a CUDA GPU")
+    with pytest.raises(mp.ConfigError, match=r'no NVIDIA \(CUDA\) GPU.*pip install "\.\[gpu\]"'):
+        make_backend("warp", block_scene, SHORT, batch_size=4)
+    # auto falls back to the C engine, quietly: warp is not even imported
+    assert make_backend("auto", block_scene, SHORT, batch_size=4).name == "mujoco"
+
+
+def _fake_gpu(monkeypatch, warp_spec, version="1.18.0"):
+    monkeypatch.delenv(bw.ALLOW_CPU_ENV, raising=False)
+    monkeypatch.setattr(bw, "nvidia_gpus", lambda: ["cuda:0"])
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(
+        bw.importlib.util,
+        "find_spec",
+        lambda name, *a: warp_spec if name == "warp" else find_spec(name, *a),
+    )
+    real_version = importlib.metadata.version
+    monkeypatch.setattr(
+        bw.importlib.metadata,
+        "version",
+        lambda name: version if name == "warp-lang" else real_version(name),
+    )
+
+
+def test_gpu_without_warp_lang_names_the_extra(block_scene, fresh_probe, monkeypatch):
+    _fake_gpu(monkeypatch, warp_spec=None)
+    with pytest.raises(
+        mp.ConfigError, match=r'warp-lang is not installed.*pip install "\.\[gpu\]"'
+    ):
+        make_backend("warp", block_scene, SHORT, batch_size=4)
+    # auto on a GPU without warp-lang: the C engine (faster there than MJX's JAX physics)
+    bw.warp_problem.cache_clear()
+    assert make_backend("auto", block_scene, SHORT, batch_size=4).name == "mujoco"
+
+
+def test_wrong_warp_version_is_named(block_scene, fresh_probe, monkeypatch):
+    pin = bw._warp_pin()
+    if pin is None:
+        pytest.skip("mujoco-mjx declares no warp-lang pin")
+    _fake_gpu(monkeypatch, warp_spec=object(), version="0.1.0")
+    with pytest.raises(mp.ConfigError, match=rf"warp-lang 0\.1\.0 is installed.*warp-lang{pin}"):
+        make_backend("warp", block_scene, SHORT, batch_size=4)
+
+
+def test_gpu_extra_pins_warp_like_mujoco_mjx():
+    pin = bw._warp_pin()  # e.g. "==1.18.0"
+    if pin is None:
+        pytest.skip("mujoco-mjx declares no warp-lang pin")
+    import tomllib
+    from pathlib import Path
+
+    from packaging.requirements import Requirement
+
+    pyproject = Path(__file__).parents[1] / "pyproject.toml"
+    extras = tomllib.loads(pyproject.read_text())["project"]["optional-dependencies"]
+    (req,) = [Requirement(r) for r in extras["gpu"] if r.startswith("warp-lang")]
+    mjx_version = pin.lstrip("=")
+    assert mjx_version in req.specifier, f"gpu extra {req} excludes mujoco-mjx's {pin}"
+
+
+# --------------------------------------------------------------------------- buffers
+def test_buffer_margin_and_sizes():
+    contacts, rows = bw.buffer_margin(15, 60)
+    assert contacts >= 1.5 * 15 and contacts % 4 == 0
+    assert rows >= 1.5 * 60 and rows % 8 == 0
+    assert bw.buffer_margin(0, 0) == (4, 16)
+    b = bw.BufferSizes(contacts, rows, 15, 60, 32)
+    assert b.naconmax(1000) == contacts * 1000  # Warp's contact buffer: all worlds
+    assert b.grown(contacts=True, rows=False) == bw.BufferSizes(2 * contacts, rows, 15, 60, 32)
+    assert b.grown(contacts=False, rows=True).rows == 2 * rows
+    with pytest.raises(mp.ConfigError, match="buffers.rows"):
+        bw.BufferSizes(8, 0)
+    with pytest.raises(mp.ConfigError, match="buffers.contacts"):
+        bw.BufferSizes(2.5, 8)
+
+
+def test_counting_batch_sees_every_step():
+    # a box dropped onto a plane: its contacts appear at one physics step and change
+    # with the bounce; the counting batch must see the same maxima as stepping one
+    # MjData step by step, though the backend asks for several substeps per call
+    xml = """<mujoco><option timestep="0.002"/><worldbody>
+      <geom type="plane" size="1 1 .1"/>
+      <body pos="0 0 .06"><freejoint/><geom type="box" size=".05 .03 .02"/></body>
+      <body pos=".3 0 .5"><freejoint/><geom type="sphere" size=".02"/></body>
+    </worldbody></mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    b = bw._CountingBatch(mujoco.batch.Batch(model, nsim=2, nthread=1))
+    qpos = b.bind("qpos")
+    qpos[1, 2] = 0.3  # the second simulation's box starts higher
+    for _ in range(60):
+        b.step(nstep=5)
+    for sim in range(2):
+        data = mujoco.MjData(model)
+        data.qpos[2] = 0.3 if sim == 1 else data.qpos[2]
+        most_con = most_efc = 0
+        for _ in range(300):
+            mujoco.mj_step(model, data)
+            most_con, most_efc = max(most_con, data.ncon), max(most_efc, data.nefc)
+        assert (b.max_ncon[sim], b.max_nefc[sim]) == (most_con, most_efc)
+    assert b.max_ncon.min() > 0
+
+
+def test_size_buffers_measures_the_scene(block_scene):
+    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 3, seed=0)
+    inputs = make_inputs(block_scene, SHORT, picks)
+    ncon, nefc = bw.measure_buffers(block_scene, SHORT, inputs, nthread=1)
+    assert ncon.shape == nefc.shape == (3,)
+    # the block rests on the table from the start, and the pads touch it in the close
+    assert (ncon > 0).all() and (nefc >= ncon).all()
+    sizes = bw.size_buffers(block_scene, SHORT, inputs, nthread=1)
+    assert (sizes.measured_contacts, sizes.measured_rows) == (ncon.max(), nefc.max())
+    assert (sizes.contacts, sizes.rows) == bw.buffer_margin(ncon.max(), nefc.max())
+    assert sizes.sample == 3
+
+
+# --------------------------------------------------------------------------- refill
+def test_small_run_gets_a_small_pool(block_scene):
+    backend = make_backend("mjx", block_scene, SHORT, batch_size=8192, refill=True)
+    n_dev = len(backend.devices)
+    assert backend.pool_size(200) == 256 * n_dev  # not 8192 padded simulations
+    assert backend.pool_size(10**6) == backend.batch_size
+    with pytest.raises(ValueError, match="ticks_per_call"):
+        make_backend("mjx", block_scene, SHORT, batch_size=8, ticks_per_call=0)
+
+
+@pytest.mark.mjx
+def test_refill_reassembles_in_order_and_equals_a_run_without_refill(block_scene):
+    # 10 picks through a pool of 4 slots (one per CPU device): slots are refilled as
+    # picks end -- pick 1 blows up at once, so its slot takes pick 4 long before the
+    # others end -- and the results come back in pick-point order, bit for bit those
+    # of the same program with every pick in a slot of its own from start to end
+    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 10, seed=0)
+    inputs = make_inputs(block_scene, SHORT, picks)
+    inputs.qpos0[1, block_scene.index.object_qpos + 2] = np.inf
+    backend = make_backend("mjx", block_scene, SHORT, batch_size=4, refill=True, ticks_per_call=9)
+    out, traces = backend.run(inputs)
+    assert traces is None
+    stats = backend.pool_stats
+    assert stats.picks == 10 and stats.calls * 9 * 4 == stats.slot_ticks
+    assert 0 < stats.occupancy <= 1
+    # 10 picks never fit in 4 slots at once: without refill this would take 3 rounds
+    # of full-length picks (3 x n_ticks); with it the pool stops when the last ends
+    assert stats.calls * 9 < 3 * SHORT.n_ticks()
+    alone = [backend.run(inputs.take(slice(i, i + 4)))[0] for i in range(0, 10, 4)]
+    for key in out:
+        expect = np.concatenate([part[key] for part in alone])
+        np.testing.assert_array_equal(out[key], expect, err_msg=key)
+    assert out["diverged"][1] and not out["diverged"][[0, 2, 3]].any()
+    assert np.isnan(out["score"][1])
+    # the C engine on the same picks: the same procedure, so the same labels for a
+    # centred block (the exact floats differ between engines)
+    c, _ = make_backend("mujoco", block_scene, SHORT, batch_size=10).run(inputs)
+    np.testing.assert_array_equal(out["diverged"], c["diverged"])
+    assert np.mean(out["success"] == c["success"]) >= 0.8
+
+
+# --------------------------------------------------------------------------- warp
+@pytest.mark.mjx
+@pytest.mark.skipif(
+    os.environ.get(bw.ALLOW_CPU_ENV) != "1" or importlib.util.find_spec("warp") is None,
+    reason="Warp on the CPU: needs warp-lang and MJX_PICK_WARP_CPU=1 (minutes)",
+)
+def test_warp_on_cpu_agrees_with_c_and_grows_overflowing_buffers(door_opener, fresh_probe):
+    gripper = mp.load_gripper("robotiq-2f85")
+    scene = mp.build_scene(door_opener, gripper)
+    picks = pp.generate_normal(door_opener, gripper, 6, seed=3)
+    inputs = make_inputs(scene, SHORT, picks)
+    c, _ = make_backend("mujoco", scene, SHORT, batch_size=6).run(inputs)
+    warp = make_backend("warp", scene, SHORT, batch_size=4, ticks_per_call=20)
+    w, _ = warp.run(inputs)
+    assert warp.name == "warp" and warp.growths == 0
+    assert (warp.last_diagnostics.overflow == 0).all()
+    assert (warp.last_diagnostics.nefc_max <= warp.buffers.rows).all()
+    assert np.mean(w["success"] == c["success"]) >= 0.8
+    # buffers far too small: detected, grown, re-simulated -- the same labels
+    tiny = make_backend(
+        "warp", scene, SHORT, batch_size=4, ticks_per_call=20, buffers=bw.BufferSizes(2, 8)
+    )
+    t, _ = tiny.run(inputs)
+    assert tiny.growths >= 1 and (tiny.last_diagnostics.overflow == 0).all()
+    assert "NEFC" in bw.describe_overflow(bw.overflow_masks()[1])
+    np.testing.assert_array_equal(t["success"], w["success"])

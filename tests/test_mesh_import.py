@@ -1,0 +1,169 @@
+"""Mesh import: outlines with holes, the stable resting pose, the shipped YCB meshes.
+
+These paths need trimesh's optional imports (networkx, rtree), so they also check that
+the project declares them: CI installs the project into a fresh environment.
+"""
+
+import math
+import tomllib
+from importlib import resources
+
+import numpy as np
+import pytest
+import shapely
+import trimesh
+from shapely.geometry import Point, Polygon
+
+import mjx_pick as mp
+from mjx_pick import cli
+
+YCB = resources.files("mjx_pick.assets") / "objects" / "ycb"
+
+
+def ycb_manifest() -> dict:
+    return tomllib.loads((YCB / "manifest.toml").read_text())
+
+
+@pytest.fixture()
+def hull_pieces(monkeypatch):
+    """Replace the CoACD decomposition with the convex hull.
+
+    CoACD takes 5-40 s per mesh here on a 2-core CPU (a 256-face washer: 5.5 s) and
+    only sets the collision pieces; the tests using this check the outline and the
+    pose, which do not depend on it.
+    """
+    from mjx_pick import objects
+
+    def hull(mesh, threshold):
+        return (np.asarray(mesh.convex_hull.vertices, dtype=float),)
+
+    monkeypatch.setattr(objects, "_coacd_pieces", hull)
+
+
+def shadow_from_sections(mesh: trimesh.Trimesh, n: int = 40) -> Polygon:
+    """Top-down shadow (mm) of a mesh, as the union of n horizontal cross-sections.
+
+    Independent of trimesh's path code and of mjx_pick's outline: the sections are
+    built with shapely from the raw plane-triangle intersection segments.
+    """
+    lo, hi = mesh.bounds[:, 2]
+    areas = []
+    for z in np.linspace(lo, hi, n + 2)[1:-1]:
+        seg = trimesh.intersections.mesh_plane(mesh, [0, 0, 1], [0, 0, z])
+        lines = shapely.set_precision(shapely.multilinestrings(seg[:, :, :2] * 1e3), 1e-4)
+        areas.append(shapely.build_area(shapely.union_all(lines)))
+    return shapely.union_all(areas)
+
+
+# ------------------------------------------------------------------ outline with a hole
+
+
+def test_washer_outline_keeps_its_hole(tmp_path, hull_pieces):
+    # a washer: 40 mm outside, 20 mm hole, 5 mm thick, in mm; a 128-gon per circle
+    ring = Point(0, 0).buffer(20.0, quad_segs=32).difference(Point(0, 0).buffer(10.0, quad_segs=32))
+    path = tmp_path / "washer.stl"
+    trimesh.creation.extrude_polygon(ring, 5.0).export(path)
+    obj = mp.load_object(path, unit="mm", mass_g=9.0)
+    assert isinstance(obj.polygon, Polygon)
+    assert len(obj.polygon.interiors) == 1
+    assert obj.polygon.area == pytest.approx(math.pi * (20.0**2 - 10.0**2), rel=0.02)
+    hole = Polygon(obj.polygon.interiors[0])
+    assert hole.area == pytest.approx(math.pi * 10.0**2, rel=0.02)
+    assert hole.contains(Point(0, 0))  # the object frame is centred on the centre of mass
+    assert obj.height_mm == pytest.approx(5.0, rel=1e-3)
+    assert obj.mass_kg == pytest.approx(9.0e-3)
+
+
+# --------------------------------------------------------------------- stable pose
+
+
+def standing_box(tmp_path):
+    """A 10 x 30 x 60 mm box standing on its smallest face, turned about z."""
+    box = trimesh.creation.box([10.0, 30.0, 60.0])
+    box.apply_transform(trimesh.transformations.rotation_matrix(0.4, [0, 0, 1]))
+    path = tmp_path / "box.stl"
+    box.export(path)
+    return path
+
+
+def test_stable_pose_lays_a_standing_box_flat(tmp_path):
+    path = standing_box(tmp_path)
+    given = mp.load_object(path, unit="mm", mass_g=50.0)
+    assert given.height_mm == pytest.approx(60.0, rel=0.01)
+    obj = mp.load_object(path, unit="mm", mass_g=50.0, pose="stable")
+    assert obj.height_mm == pytest.approx(10.0, rel=0.01)
+    assert obj.polygon.area == pytest.approx(30.0 * 60.0, rel=0.02)
+    assert obj.mass_kg == pytest.approx(50.0e-3)
+    # resting on the table, centre of mass over the origin
+    assert obj.mesh.bounds[0, 2] == pytest.approx(0.0, abs=1e-9)
+    assert obj.com_m[:2] == pytest.approx([0.0, 0.0], abs=1e-9)
+
+
+def test_cli_pose_stable_reaches_the_importer(tmp_path):
+    path = standing_box(tmp_path)
+    args = cli.build_parser().parse_args(
+        ["picks", str(path), "--unit", "mm", "--mass-g", "50", "--pose", "stable"]
+        + ["--out", str(tmp_path / "out")]
+    )
+    obj, _ = cli._objects(args)
+    assert obj.height_mm == pytest.approx(10.0, rel=0.01)
+
+
+# ------------------------------------------------------------------ shipped YCB meshes
+
+
+def test_ycb_manifest_matches_the_files():
+    man = ycb_manifest()
+    assert len(man) >= 5
+    files = {p.name for p in YCB.iterdir() if p.name.endswith(".stl")}
+    assert files == {entry["file"] for entry in man.values()}
+    assert "CC BY 4.0" in (YCB / "README.md").read_text()
+    for name, entry in man.items():
+        assert entry["unit"] == "m", name
+        assert entry["mass_g"] > 0, name
+        assert entry["description"], name
+
+
+@pytest.mark.parametrize("name", sorted(ycb_manifest()))
+def test_ycb_mesh_is_small_watertight_and_plausible(name):
+    entry = ycb_manifest()[name]
+    data = (YCB / entry["file"]).read_bytes()
+    assert len(data) < 200_000  # small files: a few thousand faces at most
+    with resources.as_file(YCB / entry["file"]) as path:
+        mesh = trimesh.load(str(path), force="mesh")
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    assert mesh.body_count == 1
+    assert len(mesh.faces) == entry["faces"]
+    assert mesh.volume * 1e6 == pytest.approx(entry["volume_cm3"], rel=1e-3)
+    assert mesh.extents * 1e3 == pytest.approx(entry["extents_mm"], abs=0.1)
+    # metres, not millimetres: a hand-held object, 1 to 40 cm across ...
+    assert 0.01 < mesh.extents.max() < 0.4
+    # ... and the published mass over the mesh volume is a real material's density
+    density_g_cm3 = entry["mass_g"] / (mesh.volume * 1e6)
+    assert 0.1 < density_g_cm3 < 10.0
+    # a 2F-85 (85 mm stroke) can close across it lying as given
+    assert mesh.extents[2] < 0.085
+
+
+@pytest.mark.parametrize("name", ["040_large_marker", "037_scissors"])
+def test_ycb_outline_is_the_whole_shadow(name, hull_pieces):
+    # the top-down outline of a real scanned mesh is one piece: the whole shadow with
+    # its real holes (the scissors' finger loops), not a fragment of it
+    entry = ycb_manifest()[name]
+    with resources.as_file(YCB / entry["file"]) as path:
+        obj = mp.load_object(path, unit="m", mass_g=entry["mass_g"])
+        mesh = trimesh.load(str(path), force="mesh")
+    shadow = shadow_from_sections(mesh)
+    assert isinstance(shadow, Polygon)
+    assert obj.polygon.area == pytest.approx(shadow.area, rel=0.02)
+    # every real hole (over 10 mm^2; the scissors have three), at its size
+    holes = sorted(a for r in obj.polygon.interiors if (a := Polygon(r).area) > 10.0)
+    expected = sorted(a for r in shadow.interiors if (a := Polygon(r).area) > 10.0)
+    assert len(holes) == len(expected)
+    assert holes == pytest.approx(expected, rel=0.05)
+    # its length is the object's: nothing cut off
+    rect = np.asarray(obj.polygon.minimum_rotated_rectangle.exterior.coords)
+    sides = sorted(np.linalg.norm(np.diff(rect[:3], axis=0), axis=1))
+    shadow_rect = np.asarray(shadow.minimum_rotated_rectangle.exterior.coords)
+    shadow_sides = sorted(np.linalg.norm(np.diff(shadow_rect[:3], axis=0), axis=1))
+    assert sides == pytest.approx(shadow_sides, rel=0.02)
