@@ -7,6 +7,11 @@ must be explained physically (benchmarks/RESULTS.md, "Real objects").
 
     python benchmarks/real_objects.py --n 48 --out benchmarks/results/real_objects.json
     python benchmarks/real_objects.py --n 16 --objects 040_large_marker --mjx
+    python benchmarks/real_objects.py --n 32 --pictures benchmarks/out/real_objects
+
+With --pictures, one PNG per (object, failure class): the first pick-point of that
+class re-simulated on MuJoCo C with its trace -- the pick in the gripper frame, the pad
+forces, the object's lift against the gripper's (slip), and its rotation.
 """
 
 from __future__ import annotations
@@ -16,9 +21,13 @@ import collections
 import time
 import tomllib
 from importlib import resources
+from pathlib import Path
 
+import matplotlib
 import numpy as np
+import shapely.affinity
 from mjx_pick.kernels import grasp as gk
+from shapely.geometry import box
 
 import mjx_pick as mp
 from mjx_pick.config import write_json
@@ -30,7 +39,60 @@ def ycb_manifest() -> dict:
     return tomllib.loads((folder / "manifest.toml").read_text())
 
 
-def run_object(name: str, entry: dict, n: int, seed: int, force_n: float, mjx: bool) -> dict:
+def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
+    """Re-simulate the first pick of a failure class with its trace and draw why."""
+    import matplotlib.pyplot as plt
+
+    from mjx_pick import pickpoints as pp
+    from mjx_pick.plots import add_polygon
+    from mjx_pick.simulate import make_backend, make_inputs
+
+    gripper = mp.load_gripper("robotiq-2f85")
+    r = table[table["failure"] == failure].iloc[0]
+    checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
+    picks = checker.batch(np.arange(1), [r.x_mm], [r.y_mm], [r.yaw_deg], "user")
+    scene = mp.build_scene(obj, gripper, None, None, grasp)
+    _, traces = make_backend("mujoco", scene, grasp, 1).run(
+        make_inputs(scene, grasp, picks), record=True
+    )
+    tr = {f: traces[0, :, i] for i, f in enumerate(gk.TRACE_FIELDS)}
+    fig, (a0, a1, a2) = plt.subplots(1, 3, figsize=(15, 4.2))
+    posed = shapely.affinity.translate(
+        shapely.affinity.rotate(obj.polygon, r.yaw_deg, origin=(0, 0)), r.x_mm, r.y_mm
+    )
+    add_polygon(a0, posed, fc="#4a78b5", ec="k", lw=1, alpha=0.9)
+    half, d, w = 0.5 * r.opening_mm, gripper.finger_depth_mm, 0.5 * gripper.finger_width_mm
+    for x0, x1 in ((-half - d, -half), (half, half + d)):
+        add_polygon(a0, box(x0, -w, x1, w), fc="#d62728", ec="k", alpha=0.8)
+    a0.set_aspect("equal")
+    a0.autoscale_view()
+    a0.set_title(f"gripper frame: x {r.x_mm:.1f}, y {r.y_mm:.1f} mm, yaw {r.yaw_deg:.0f} deg")
+    t = tr["t_s"]
+    a1.plot(t, tr["force_left_n"], label="left pad")
+    a1.plot(t, tr["force_right_n"], label="right pad", ls="-.")
+    a1.plot(t, tr["force_table_n"], label="table", color="0.5")
+    a1.axhline(grasp.grip_force_n, color="k", ls="--", lw=1, label="F_d")
+    a1.set_xlabel("t, s")
+    a1.set_ylabel("N")
+    a1.legend(fontsize=8)
+    a1.set_title("forces")
+    a2.plot(t, 1e3 * tr["lift_m"], label="gripper lift, mm")
+    a2.plot(t, 1e3 * (tr["object_z_m"] - tr["object_z_m"][0]), label="object lift, mm")
+    q = np.stack([tr["object_qw"], tr["object_qx"], tr["object_qy"], tr["object_qz"]], 1)
+    turn = np.degrees(2 * np.arccos(np.clip(np.abs(q @ q[0]), 0, 1)))
+    a2.plot(t, turn, label="rotation from start, deg")
+    a2.set_xlabel("t, s")
+    a2.legend(fontsize=8)
+    a2.set_title(f"{obj.name}: {failure}")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def run_object(
+    name: str, entry: dict, n: int, seed: int, force_n: float, mjx: bool, pictures: str = ""
+) -> dict:
     folder = resources.files("mjx_pick.assets") / "objects" / "ycb"
     with resources.as_file(folder / entry["file"]) as path:
         t0 = time.perf_counter()
@@ -45,6 +107,10 @@ def run_object(name: str, entry: dict, n: int, seed: int, force_n: float, mjx: b
         k, m = int(table["success"].sum()), len(table)
         lo, hi = wilson_interval(k, m)
         labels[backend] = table["success"].to_numpy()
+        if pictures and backend == "mujoco":
+            for failure in sorted(set(table["failure"]) - {"none"}):
+                png = Path(pictures) / f"{name}_{failure}.png"
+                failure_picture(obj, table, failure, grasp, png)
         row[backend] = {
             "n": m,
             "success_rate": k / m,
@@ -63,6 +129,7 @@ def run_object(name: str, entry: dict, n: int, seed: int, force_n: float, mjx: b
 
 
 def main() -> None:
+    matplotlib.use("Agg")  # a script: pictures go to files
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=48, help="pick-points per object")
     ap.add_argument("--seed", type=int, default=0)
@@ -70,12 +137,15 @@ def main() -> None:
     ap.add_argument("--objects", default="", help="comma-separated names (default: all)")
     ap.add_argument("--mjx", action="store_true", help="also run MJX and compare labels")
     ap.add_argument("--out", default="", help="JSON file for the figures")
+    ap.add_argument("--pictures", default="", help="folder for one PNG per failure class")
     args = ap.parse_args()
     manifest = ycb_manifest()
     names = [s for s in args.objects.split(",") if s] or list(manifest)
     rows = []
     for name in names:
-        row = run_object(name, manifest[name], args.n, args.seed, args.force_n, args.mjx)
+        row = run_object(
+            name, manifest[name], args.n, args.seed, args.force_n, args.mjx, args.pictures
+        )
         rows.append(row)
         c = row["mujoco"]
         print(

@@ -118,10 +118,11 @@ def concat(batches: list[PickBatch]) -> PickBatch:
 class FeasibilityChecker:
     """The paper's three checks for one (object, gripper, settings), batched.
 
-    The checks see the object's outline within the band the pads span at the grasp
-    (``ObjectModel.band_outline``; the procedure's grasp-height rule places the band):
-    for a prism its silhouette, for a mesh the shadow of its slice, so a part that is
-    narrower at the pads' height than its whole shadow is judged by what the pads meet.
+    The checks see the object's outline above the fingertips at the grasp
+    (``ObjectModel.band_outline``; the procedure's grasp-height rule places them): for
+    a prism its silhouette, for a mesh the shadow of its part above that height --
+    what a descending finger can hit and what the pads can meet. A foot below the
+    fingertips (an L-part standing on its edge) is no longer taken for a grip.
     """
 
     def __init__(
@@ -146,7 +147,7 @@ class FeasibilityChecker:
             min_coverage=float(config.min_coverage),
         )
         lo, hi = pad_band_mm(obj, gripper, grasp or GraspConfig())
-        self.silhouette = obj.band_outline(lo, hi)
+        self.silhouette = obj.band_outline(lo, max(hi, obj.height_mm))
         if self.silhouette.is_empty:
             raise ConfigError(
                 f"the pads of {gripper.name} span {lo:g}-{hi:g} mm above the table and miss "

@@ -210,3 +210,30 @@ def test_grasp_height_rule():
     assert scene.index.pad_bottom_z0_m == pytest.approx(0.011)
     with pytest.raises(mp.ConfigError, match="grasp_height"):
         GraspConfig(grasp_height="top")
+
+
+def test_checks_see_only_what_is_above_the_fingertips(tmp_path):
+    # an L-part standing on its edge: a 60 x 5 mm foot on the table, a 10 x 40 mm leg
+    # up, 20 mm deep. Fingertips at half height (the paper's rule) are above the foot:
+    # the checks must not offer pick-points on the foot, whose pads would touch nothing
+    import trimesh
+    from shapely.geometry import Polygon
+
+    ell = Polygon([(0, 0), (60, 0), (60, 5), (10, 5), (10, 40), (0, 40)])
+    mesh = trimesh.creation.extrude_polygon(ell, 20.0)
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    path = tmp_path / "ell.stl"
+    mesh.export(path)
+    obj = mp.load_object(path, unit="mm", mass_g=30)
+    assert obj.height_mm == pytest.approx(40.0, abs=0.01)
+    assert obj.polygon.area == pytest.approx(60 * 20, rel=0.02)  # the whole shadow
+    paper = GraspConfig(
+        grasp_height="fingertip_mid", close_timeout_s=1.0, lift_height_mm=30, hold_s=0.2
+    )
+    gripper = mp.GripperSpec()
+    checker = pp.FeasibilityChecker(obj, gripper, grasp=paper)
+    assert checker.silhouette.area == pytest.approx(10 * 20, rel=0.05)  # the leg only
+    picks = pp.generate_normal(obj, gripper, 6, seed=0, grasp=paper)
+    scene = mp.build_scene(obj, gripper, grasp=paper)
+    out, _ = make_backend("mujoco", scene, paper, 6).run(make_inputs(scene, paper, picks))
+    assert not np.any(out["failure"] == gk.FAILURES.index("no_contact")), out["failure"]
