@@ -772,14 +772,10 @@ def write_result(result: CalibrationResult, problem: Problem, out_dir: Path) -> 
             "history": result.history,
         },
     )
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from mjx_pick.plots import new_figure, save_png
 
-    from mjx_pick.plots import save_png
-
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig, ax = new_figure(figsize=(6, 3.5))
     ax.plot([h["step"] for h in result.history], [h["loss"] for h in result.history])
     ax.set_xlabel("step")
     ax.set_ylabel("loss")

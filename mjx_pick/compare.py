@@ -196,16 +196,12 @@ def compare(
 def plot_comparison(obj: ObjectModel, result: Comparison, out_dir: Path) -> None:
     """ranking.png (rates and scores with intervals) and maps.png (per-gripper success
     on the silhouette: where the gripper centre lands, object frame)."""
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from mjx_pick.plots import add_polygon, gripper_in_object_frame, save_png
+    from mjx_pick.plots import add_polygon, gripper_in_object_frame, new_figure, save_png
 
     r = result.ranking
     names = [row["gripper"] for row in r]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 0.5 * len(r) + 2.5))
+    fig, axes = new_figure(1, 2, figsize=(10, 0.5 * len(r) + 2.5))
     for ax, key, ci, label in (
         (axes[0], "success_rate", "success_ci", "success rate (Wilson 95%)"),
         (axes[1], "score_mean", "score_ci", "mean score (95%), infeasible = 0"),
@@ -223,7 +219,7 @@ def plot_comparison(obj: ObjectModel, result: Comparison, out_dir: Path) -> None
 
     cols = min(3, len(r))
     rows = math.ceil(len(r) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.5 * cols, 4 * rows), squeeze=False)
+    fig, axes = new_figure(rows, cols, figsize=(4.5 * cols, 4 * rows), squeeze=False)
     c = result.candidates
     centre, _ = gripper_in_object_frame(c["x_mm"], c["y_mm"], c["yaw_deg"])
     for ax in axes.ravel():

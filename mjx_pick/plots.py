@@ -1,4 +1,4 @@
-"""Pictures of pick-points on the silhouette (PNG, matplotlib's Agg backend).
+"""Pictures of pick-points on the silhouette (PNG, matplotlib figures without pyplot).
 
 ``draw_pick`` is the paper's Fig. 9 for one pick-point, in the gripper frame: the object
 at its pose, both finger footprints at the starting opening, the coverage region
@@ -12,18 +12,15 @@ from __future__ import annotations
 import math
 import os
 
-import matplotlib
+import numpy as np
+import shapely
+import shapely.affinity
+from matplotlib.figure import Figure
+from matplotlib.patches import Polygon as MplPolygon
+from matplotlib.patches import Rectangle
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import shapely  # noqa: E402
-import shapely.affinity  # noqa: E402
-from matplotlib.patches import Polygon as MplPolygon  # noqa: E402
-from matplotlib.patches import Rectangle  # noqa: E402
-
-from mjx_pick.gripper import GripperSpec  # noqa: E402
-from mjx_pick.objects import ObjectModel  # noqa: E402
+from mjx_pick.gripper import GripperSpec
+from mjx_pick.objects import ObjectModel
 
 REASON_COLOURS = {
     "feasible": "#2ca02c",
@@ -34,15 +31,21 @@ REASON_COLOURS = {
 }
 
 
+def new_figure(nrows: int = 1, ncols: int = 1, *, figsize=None, **subplots_kw):
+    """(figure, axes) without pyplot: no global backend is chosen or changed, so a
+    user's interactive session keeps its own (a Figure renders to PNG by itself)."""
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(nrows, ncols, **subplots_kw)
+
+
 def save_png(fig, path: str | os.PathLike, dpi: int = 120) -> None:
-    """Save a figure atomically (never a half-written PNG) and close it."""
+    """Save a figure atomically (never a half-written PNG)."""
     import io
 
     from mjx_pick.config import write_atomic
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)
-    plt.close(fig)
     write_atomic(path, buf.getvalue())
 
 
@@ -76,7 +79,7 @@ def draw_pick(
     posed = shapely.affinity.translate(
         shapely.affinity.rotate(obj.polygon, yaw_deg, origin=(0, 0)), x_mm, y_mm
     )
-    fig, ax = plt.subplots(figsize=(6, 5))
+    fig, ax = new_figure(figsize=(6, 5))
     add_polygon(ax, posed, fc="#4a78b5", ec="k", lw=1, alpha=0.9)
     x0, y0, x1, y1 = posed.bounds
     ax.add_patch(
@@ -160,7 +163,7 @@ def draw_candidates(
     centre, axis = gripper_in_object_frame(x_mm, y_mm, yaw_deg)
     n = len(centre)
     keep = np.arange(n) if n <= max_points else np.linspace(0, n - 1, max_points).astype(int)
-    fig, ax = plt.subplots(figsize=(7, 5.5))
+    fig, ax = new_figure(figsize=(7, 5.5))
     add_polygon(ax, outline, fc="#dddddd", ec="k", lw=1)
     seg = 3.0
     if values is not None:

@@ -34,20 +34,16 @@ import math
 import os
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import shapely
+import shapely.affinity
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pyarrow as pa  # noqa: E402
-import pyarrow.parquet as pq  # noqa: E402
-import shapely  # noqa: E402
-import shapely.affinity  # noqa: E402
-
-from mjx_pick.config import ConfigError, from_mapping, write_atomic, write_json  # noqa: E402
-from mjx_pick.gripper import GripperSpec  # noqa: E402
-from mjx_pick.kernels import grasp as gk  # noqa: E402
-from mjx_pick.plots import add_polygon, draw_candidates, save_png  # noqa: E402
+from mjx_pick.config import ConfigError, from_mapping, write_atomic, write_json
+from mjx_pick.gripper import GripperSpec
+from mjx_pick.kernels import grasp as gk
+from mjx_pick.plots import add_polygon, draw_candidates, new_figure, save_png
 
 PAPERS_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4)}
 SCALE_BAR_COLOUR = "#010203"  # a colour nothing else uses: tests find the bar by it
@@ -135,7 +131,7 @@ def phase_events(t: np.ndarray, phase: np.ndarray) -> list[tuple[float, str]]:
 def force_plot(trace: dict, grip_force_n: float, path, title: str = "") -> None:
     """Pad forces and object-table force against time, F_d dashed, phases marked."""
     t = trace["t_s"]
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = new_figure(figsize=(8, 4))
     ax.plot(t, trace["force_left_n"], label="left finger", color="#1f77b4")
     ax.plot(t, trace["force_right_n"], label="right finger", color="#d62728", ls="-.")
     ax.plot(t, trace["force_table_n"], label="object-table", color="#7f7f7f")
@@ -183,7 +179,7 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
     # the gripper is symmetric: yaw and yaw + 180 are the same grasp
     folded = np.mod(yaw, 180.0)
     edges = np.linspace(0.0, 180.0, yaw_bins + 1)
-    fig, axes = plt.subplots(1, yaw_bins, figsize=(3.6 * yaw_bins, 3.6), squeeze=False)
+    fig, axes = new_figure(1, yaw_bins, figsize=(3.6 * yaw_bins, 3.6), squeeze=False)
     lim = max(np.abs(x).max(), np.abs(y).max(), 1.0)
     bins = np.linspace(-lim, lim, 13)
     for k, ax in enumerate(axes[0]):
@@ -202,7 +198,7 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
     save_png(fig, out_dir / "success_by_yaw.png")
     out["success_by_yaw"] = out_dir / "success_by_yaw.png"
 
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig, ax = new_figure(figsize=(6, 3.5))
     raw = np.asarray(t["score"], float)
     scored = np.isfinite(raw)  # diverged pick-points have no score
     ax.hist(
@@ -222,7 +218,7 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
     names = list(gk.FAILURES)
     failures = np.asarray(t["failure"].to_pylist(), dtype=object)
     counts = [int(np.sum(failures == name)) for name in names]
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig, ax = new_figure(figsize=(6, 3.5))
     ax.barh(
         names[::-1],
         counts[::-1],
@@ -336,7 +332,8 @@ def positioning_template(
     printed at 100 % ("actual size").
     """
     from matplotlib.backends.backend_pdf import PdfPages
-    from matplotlib.patches import Rectangle
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle, Rectangle
 
     if paper not in PAPERS_MM:
         raise ConfigError(f"paper = {paper!r} is not allowed: choose {', '.join(PAPERS_MM)}")
@@ -345,7 +342,7 @@ def positioning_template(
     buf = io.BytesIO()
     with PdfPages(buf) as pdf:
         for number, pick in enumerate(picks, start=1):
-            fig = plt.figure(figsize=(pw / 25.4, ph / 25.4))
+            fig = Figure(figsize=(pw / 25.4, ph / 25.4))
             ax = fig.add_axes((0, 0, 1, 1))
             ax.set_xlim(0, pw)
             ax.set_ylim(0, ph)
@@ -367,7 +364,7 @@ def positioning_template(
                 )
             ax.plot([cx - 12, cx + 12], [cy, cy], color="r", lw=0.6)
             ax.plot([cx, cx], [cy - 12, cy + 12], color="r", lw=0.6)
-            ax.add_patch(plt.Circle((cx, cy), 2.0, fill=False, ec="r", lw=0.6))
+            ax.add_patch(Circle((cx, cy), 2.0, fill=False, ec="r", lw=0.6))
             ax.annotate(
                 "",
                 xy=(cx + half + d + 10, cy + w / 2 + 8),
@@ -399,7 +396,6 @@ def positioning_template(
                 fontsize=7,
             )
             pdf.savefig(fig)
-            plt.close(fig)
     write_atomic(path, buf.getvalue())
     return len(picks)
 

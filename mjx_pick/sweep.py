@@ -278,12 +278,9 @@ def marginal(table: pa.Table, name: str) -> list[dict]:
 
 def plot_sweep(summaries: list[dict], table: pa.Table, names: list[str], path) -> None:
     """Success rate (Wilson 95%) and mean score (95%) against each parameter, PNG."""
-    import matplotlib
+    from mjx_pick.plots import new_figure, save_png
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(len(names), 2, figsize=(9, 3.2 * len(names)), squeeze=False)
+    fig, axes = new_figure(len(names), 2, figsize=(9, 3.2 * len(names)), squeeze=False)
     for row, name in zip(axes, names, strict=True):
         m = marginal(table, name)
         x = np.array([r["value"] for r in m])
@@ -305,6 +302,4 @@ def plot_sweep(summaries: list[dict], table: pa.Table, names: list[str], path) -
             ax.grid(alpha=0.3)
     fig.suptitle(f"sweep: {len(summaries)} variants, {table.num_rows} simulations")
     fig.tight_layout()
-    from mjx_pick.plots import save_png
-
     save_png(fig, path)
