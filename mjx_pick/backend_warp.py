@@ -283,7 +283,7 @@ def size_buffers(
 
         if n_sample < 1:
             raise ConfigError(f"n_sample = {n_sample} must be >= 1")
-        picks = pp.generate_normal(scene.object, scene.gripper, n_sample, seed=seed)
+        picks = pp.generate_normal(scene.object, scene.gripper, n_sample, seed=seed, grasp=grasp)
         if not len(picks):
             raise ConfigError("no feasible pick-point to size Warp's buffers with")
         inputs = make_inputs(scene, grasp, picks)

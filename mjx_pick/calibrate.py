@@ -55,7 +55,7 @@ import optax
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_choice, check_range, to_dict, write_json
 from mjx_pick.objects import ObjectModel
-from mjx_pick.physics import ContactParams
+from mjx_pick.physics import ContactParams, per_unit_mass, stiffest_spring
 from mjx_pick.simulate import Settings, make_backend, make_inputs
 
 REQUIRED = ("x_mm", "y_mm", "yaw_deg", "grip_force_n", "trials", "successes")
@@ -283,9 +283,7 @@ def canonical_params(names) -> tuple[str, ...]:
 def param_space(names, settings: Settings, mass_kg: float, bounds: dict | None = None):
     """Default bounds: frictions 0.05-2 (table 0.01-2); stiffness and damping from 1/100
     of the stiffest stable contact to it (see the module docstring)."""
-    tc = settings.solver.timeconst_s
-    k_max = mass_kg / tc**2 * 1e-3  # N/mm: k [1/s^2] = K * 1e3 / m
-    b_max = 2.0 * mass_kg / tc * 1e-3  # N s/mm
+    k_max, b_max = stiffest_spring(mass_kg, settings.solver.timeconst_s)  # N/mm, N s/mm
     default = {
         "pad_friction": (0.05, 2.0),
         "table_friction": (0.01, 2.0),
@@ -405,9 +403,9 @@ class Problem:
                     c = self.scene.contact
                     fr = fr.at[:, pairs, 2].set(v * (c.pad_torsion_m / c.pad_friction))
             elif "stiffness" in name:
-                ref = ref.at[:, pairs, 0].set(-v * 1e3 / m)
+                ref = ref.at[:, pairs, 0].set(-per_unit_mass(v, m))
             else:
-                ref = ref.at[:, pairs, 1].set(-v * 1e3 / m)
+                ref = ref.at[:, pairs, 1].set(-per_unit_mass(v, m))
         return fr, ref
 
     # --- the loss of simulated outputs

@@ -250,7 +250,7 @@ def evaluate(
         table = results_table(picks_batch, results)
     wall = time.perf_counter() - t0
     summary = summarize(table)
-    mu = gripper.pad_friction if gripper.pad_friction is not None else contact.pad_friction
+    mu = contact.pad_friction
     summary.update(
         {
             "object": obj.name,

@@ -37,8 +37,6 @@ class GripperSpec:
     drive_stiffness_n_per_mm: float = 10.0
     drive_damping_ns_per_mm: float = 0.02
     pad_material: str = "nbr"
-    # overrides ContactParams.pad_friction for this gripper's pads when set
-    pad_friction: float | None = None
     source: str = "Bencak et al. 2023, Fig. 10; Robotiq 2F-85 datasheet"
 
     def __post_init__(self):
@@ -59,8 +57,6 @@ class GripperSpec:
         check_range(o, "force_min_n", self.force_min_n, 0, self.force_max_n)
         check_range(o, "speed_min_mm_s", self.speed_min_mm_s, 0, self.speed_max_mm_s)
         check_range(o, "drive_damping_ns_per_mm", self.drive_damping_ns_per_mm, 0)
-        if self.pad_friction is not None:
-            check_range(o, "pad_friction", self.pad_friction, 0, 5, lo_open=True)
         # the two pads must fit side by side in the gripper body when fully open, and
         # a pad must be thinner than half the stroke so the fingers can close fully
         if 2 * self.finger_depth_mm >= self.stroke_mm:

@@ -47,19 +47,6 @@ import numpy as np
 
 from mjx_pick.config import ConfigError, check_choice, check_range
 
-# Handbook friction of common object materials against NBR pads and a steel/laminate
-# table top: rough guides for a first run, to be refined by calibration. PLA matches
-# the paper's Table 1 (its test object was 3D printed).
-MATERIALS = {
-    # material: (pad_friction, table_friction)
-    "pla": (0.86, 0.2),
-    "abs": (0.8, 0.25),
-    "steel": (0.6, 0.15),
-    "aluminium": (0.6, 0.2),
-    "wood": (0.7, 0.3),
-    "cardboard": (0.7, 0.35),
-}
-
 
 @dataclasses.dataclass(frozen=True)
 class ContactParams:
@@ -108,17 +95,6 @@ class ContactParams:
             check_range(o, f"{name}[2] (width)", width, 0, lo_open=True)
             check_range(o, f"{name}[3] (midpoint)", mid, 0, 1, lo_open=True, hi_open=True)
             check_range(o, f"{name}[4] (power)", power, 1)
-
-    @classmethod
-    def for_material(cls, material: str, **overrides) -> ContactParams:
-        """Defaults with the friction of a material from MATERIALS."""
-        if material not in MATERIALS:
-            raise ConfigError(
-                f"unknown material {material!r}: choose one of {', '.join(sorted(MATERIALS))} "
-                "or set pad_friction/table_friction yourself"
-            )
-        pad, table = MATERIALS[material]
-        return cls(**{"pad_friction": pad, "table_friction": table, **overrides})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -175,6 +151,19 @@ class MujocoContact:
     clamped: tuple[str, ...]  # which Table-1 values were limited by the time step
 
 
+def per_unit_mass(n_per_mm, mass_kg):
+    """A spring's stiffness (N/mm) or damping (N s/mm) per kg of the body it holds: the
+    magnitude of MuJoCo's negative solref terms (1/s^2, 1/s). Works on arrays (jnp too:
+    calibration differentiates through it)."""
+    return n_per_mm * 1e3 / mass_kg
+
+
+def stiffest_spring(mass_kg: float, timeconst_s: float) -> tuple[float, float]:
+    """(stiffness N/mm, damping N s/mm) of the critically damped contact with that time
+    constant on a body of mass_kg: the stiffest one MuJoCo integrates stably."""
+    return mass_kg / timeconst_s**2 * 1e-3, 2.0 * mass_kg / timeconst_s * 1e-3
+
+
 def spring_solref(
     stiffness_n_per_mm: float, damping_ns_per_mm: float, mass_kg: float, timeconst_s: float
 ) -> tuple[tuple[float, float], tuple[str, ...]]:
@@ -183,10 +172,9 @@ def spring_solref(
     Returns:
       (-k, -b) with k in 1/s^2 and b in 1/s, and the names of the clamped terms.
     """
-    k = stiffness_n_per_mm * 1e3 / mass_kg
-    b = damping_ns_per_mm * 1e3 / mass_kg
-    k_max = 1.0 / timeconst_s**2  # critically damped spring of that time constant
-    b_max = 2.0 / timeconst_s
+    k = per_unit_mass(stiffness_n_per_mm, mass_kg)
+    b = per_unit_mass(damping_ns_per_mm, mass_kg)
+    k_max, b_max = (per_unit_mass(v, mass_kg) for v in stiffest_spring(mass_kg, timeconst_s))
     clamped = []
     if k > k_max:
         k, clamped = k_max, clamped + ["stiffness"]
@@ -210,7 +198,6 @@ def mujoco_contact(
     solver: SolverParams,
     mass_kg: float,
     patch_mm: tuple[float, float],
-    pad_friction: float | None = None,
 ) -> MujocoContact:
     """Map ContactParams to MuJoCo pair parameters for an object of mass_kg.
 
@@ -223,7 +210,7 @@ def mujoco_contact(
     tab_ref, tab_c = spring_solref(
         contact.table_stiffness_n_per_mm, contact.table_damping_ns_per_mm, mass_kg, tc
     )
-    mu = contact.pad_friction if pad_friction is None else pad_friction
+    mu = contact.pad_friction
     if contact.pad_torsion_mm is not None:
         torsion_mm = contact.pad_torsion_mm
     else:

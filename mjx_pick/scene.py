@@ -25,7 +25,7 @@ import numpy as np
 
 from mjx_pick.grasp import GraspConfig, pad_band_mm
 from mjx_pick.gripper import GripperSpec
-from mjx_pick.objects import ObjectModel
+from mjx_pick.objects import MAX_HULL_VERTICES, ObjectModel
 from mjx_pick.physics import ContactParams, MujocoContact, SolverParams, mujoco_contact
 
 # the robot arm carrying the gripper: a stiff, well-damped vertical servo
@@ -135,13 +135,14 @@ def scene_xml(
     ]
     pad_pieces = obj.pad_pieces(gripper.finger_depth_mm, gripper.finger_width_mm)
     meshes += [
-        f'<mesh name="piece{i}" vertex="{_fmt(v)}" maxhullvert="32"/>'
+        f'<mesh name="piece{i}" vertex="{_fmt(v)}" maxhullvert="{MAX_HULL_VERTICES}"/>'
         for i, v in enumerate(pad_pieces)
     ]
     # a rigid body on a plane touches it only on its convex hull: one table pair. The
-    # hull is capped at 32 vertices (MuJoCo/MJX want no face of more than 20); for a
+    # hull is capped at MAX_HULL_VERTICES (32) (MuJoCo/MJX want no face of more than 20); for a
     # flat object that trims the support polygon's corners by well under a millimetre
-    meshes.append(f'<mesh name="hull" vertex="{_fmt(np.vstack(obj.pieces))}" maxhullvert="32"/>')
+    hull = _fmt(np.vstack(obj.pieces))
+    meshes.append(f'<mesh name="hull" vertex="{hull}" maxhullvert="{MAX_HULL_VERTICES}"/>')
     pieces = "\n".join(
         f'      <geom name="piece{i}" type="mesh" mesh="piece{i}" group="3" rgba=".9 .5 .1 .5"/>'
         for i in range(len(pad_pieces))
@@ -255,7 +256,7 @@ def build_scene(
     solver = solver or SolverParams()
     grasp = grasp or GraspConfig()
     patch = pad_patch_mm(obj, gripper, grasp)
-    mjc = mujoco_contact(contact, solver, obj.mass_kg, patch, gripper.pad_friction)
+    mjc = mujoco_contact(contact, solver, obj.mass_kg, patch)
     tip_mm, _ = pad_band_mm(obj, gripper, grasp)
     xml = scene_xml(obj, gripper, mjc, solver, tip_mm)
     model = mujoco.MjModel.from_xml_string(xml)

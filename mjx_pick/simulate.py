@@ -232,9 +232,7 @@ class Settings:
     def overrides(self, obj: ObjectModel, n: int) -> dict:
         """Per-pick overrides for make_inputs that give n pick-points these settings."""
         patch = pad_patch_mm(obj, self.gripper, self.grasp)
-        mjc = mujoco_contact(
-            self.contact, self.solver, obj.mass_kg, patch, self.gripper.pad_friction
-        )
+        mjc = mujoco_contact(self.contact, self.solver, obj.mass_kg, patch)
         params = self.grasp.params(obj, self.gripper)._asdict()
         out = {name: np.full(n, v, np.float32) for name, v in params.items()}
         out["pad_friction"] = np.full(n, mjc.pad_friction, np.float32)

@@ -49,8 +49,8 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
     repeats = 0 times the first run itself (its compile is already apart: MJX compiles
     ahead of time), for runs where device time is short."""
     obj = mp.load_object(obj_name)
-    scene = mp.build_scene(obj, gripper, solver=solver)
-    pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0)
+    scene = mp.build_scene(obj, gripper, solver=solver, grasp=grasp)
+    pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0, grasp=grasp)
     devices = jax.local_devices()[:n_devices] if n_devices else None
     backend = make_backend(backend_name, scene, grasp, batch_size=batch, devices=devices)
     steps = grasp.n_ticks() * grasp.substeps(scene.solver)
@@ -149,9 +149,9 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
     row is done (a long benchmark keeps what it measured if it is cut short).
     """
     obj = mp.load_object(obj_name)
-    scene = mp.build_scene(obj, gripper, solver=solver)
+    scene = mp.build_scene(obj, gripper, solver=solver, grasp=grasp)
     n_max = max(r.n for r in runs)
-    picks = pp.generate_normal(obj, gripper, n_max, seed=seed)
+    picks = pp.generate_normal(obj, gripper, n_max, seed=seed, grasp=grasp)
     inputs = make_inputs(scene, grasp, picks)
     n_sub = grasp.substeps(scene.solver)
     full_steps = grasp.n_ticks() * n_sub
