@@ -40,7 +40,7 @@ from mjx_pick.metrics import results_table, summarize
 from mjx_pick.objects import ObjectModel, load_object
 from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.scene import Scene, build_scene
-from mjx_pick.simulate import make_backend, make_inputs
+from mjx_pick.simulate import default_batch_size, make_backend, make_inputs
 
 
 @dataclasses.dataclass
@@ -52,15 +52,6 @@ class Evaluation:
     config: dict
     traces: pa.Table | None
     out_dir: Path | None
-
-
-def default_batch_size(backend_name: str) -> int:
-    """Simulations per backend call: MJX fills a GPU; the C engine a thread pool."""
-    from mjx_pick.simulate import has_accelerator
-
-    if backend_name == "mujoco" or (backend_name == "auto" and not has_accelerator()):
-        return 1024  # measured: 80 pick-points/s at 256, 92 at 1024 (2 cores, RESULTS.md)
-    return 8192 if has_accelerator() else 64
 
 
 def read_picks_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
