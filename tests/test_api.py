@@ -1,14 +1,21 @@
 """The public API: every name in __all__ imports, and nothing private leaks in."""
 
+import inspect
+
 import mjx_pick
 
 
 def test_public_names_import():
-    for name in mjx_pick.__all__:
-        assert getattr(mjx_pick, name) is not None, name
-    assert sorted(mjx_pick.__all__) == mjx_pick.__all__ or len(set(mjx_pick.__all__)) == len(
-        mjx_pick.__all__
-    )
+    names = mjx_pick.__all__
+    assert len(set(names)) == len(names), "duplicate names in __all__"
+    assert not [n for n in names if n.startswith("_")], "private names in __all__"
+    for name in names:
+        assert hasattr(mjx_pick, name), f"__all__ names {name!r}, which does not import"
+        value = getattr(mjx_pick, name)
+        # every public name is a class, a function or a module of the package
+        assert callable(value) or inspect.ismodule(value), (name, type(value))
+        owner = getattr(value, "__module__", getattr(value, "__name__", ""))
+        assert owner.startswith("mjx_pick"), f"{name} comes from {owner}, not mjx_pick"
 
 
 def test_kernels_install_under_the_package():
