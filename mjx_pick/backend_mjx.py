@@ -219,24 +219,29 @@ def make_pool(
     scene: Scene,
     grasp: GraspConfig,
     ticks_per_call: int,
+    slots: int,
     mesh: Mesh | None = None,
     phys: Physics | None = None,
 ):
-    """A refilled pool's program, jitted, and the shapes of its state: (advance, shapes).
+    """A refilled pool of `slots` simulations as ONE jitted program:
+    (valid, qpos0, params, friction, solref, solimp) -> (results, ticks, Diagnostics,
+    rounds).
 
-    advance(slots, fresh, qpos0, params, friction, solref, solimp) -> (slots, results,
-    finished, ticks, diag): slots where ``fresh`` (bool (S,)) start the given pick (the
-    other rows of the inputs are ignored), then every slot runs ``ticks_per_call``
-    control periods. A slot's pick freezes once it is finished (DONE, diverged, or
-    ``grasp.n_ticks()`` ticks run): its control state and accumulators no longer
+    The inputs hold N pick-points (valid (N,) bool: False for padding, which comes
+    last). Every slot starts a pick; then, in a ``lax.while_loop`` until every pick has
+    ended, all slots run ``ticks_per_call`` control periods (a round), the picks that
+    ended write their results to row pick-id of the (N,) outputs, and their slots take
+    the next picks in order. A slot's pick freezes once it is finished (DONE, diverged,
+    or ``grasp.n_ticks()`` ticks run): its control state and accumulators no longer
     change, exactly as in ``make_rollout`` where nothing accumulates after DONE, though
     its physics keeps stepping (a vmapped program steps every slot) until it is
-    refilled. results: ``finalize`` of every slot (final for finished ones); finished
-    (bool (S,)); ticks (int32 (S,), control periods run by the slot's pick).
+    refilled. ticks: (N,) int32 control periods each pick ran; rounds: (1,) int32
+    rounds run (per device).
 
-    shapes(*inputs): the Slot pytree's shapes and dtypes for those inputs; the first
-    call passes zeros of these with every slot fresh (no separate start program to
-    compile).
+    Why on the device: refilling from the host, a device call per round, cost ~70 ms
+    per call on an H100 (Warp re-captures its CUDA graphs when a call's buffers move,
+    and kept each capture's scratch memory until the run ran out of memory); one
+    program per run keeps the host out of the loop, as the full-length rollout does.
     """
     phys = phys or jax_physics(scene)
     ad = addresses(scene)
@@ -301,21 +306,59 @@ def make_pool(
 
     advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 6, out_axes=(axes, 0, 0, 0, 0))
     starts = jax.vmap(start, out_axes=axes)
-    # the pool state is consumed by each call: donate it (no second copy on the device;
-    # the CPU cannot reuse donated buffers and would warn)
-    on_cpu = next(iter(phys.data0.qpos.devices())).platform == "cpu"
-    donate = () if on_cpu else (0,)
-    advance = jax.jit(_shard(advance, mesh), donate_argnums=donate)
-    shapes = lambda *inputs: jax.eval_shape(_shard(starts, mesh), *inputs)
-    return advance, shapes
+
+    def run_queue(valid, *inputs):
+        n = valid.shape[0]
+        size = slots // (mesh.size if mesh is not None and mesh.size > 1 else 1)
+        n_valid = jnp.sum(valid.astype(jnp.int32))
+        ids = jnp.arange(size, dtype=jnp.int32)
+
+        def gather(pick):
+            i = jnp.clip(pick, 0, n - 1)
+            return tuple(jax.tree.map(lambda x: x[i], inputs))
+
+        pick0 = jnp.where(ids < n_valid, ids, -1)
+        fresh0 = jnp.ones(size, bool)
+        # every slot is fresh in the first round: zeros of the right shapes will do
+        zeros = jax.tree.map(
+            lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(starts, *gather(pick0))
+        )
+        shapes = jax.eval_shape(advance, zeros, fresh0, *gather(pick0))
+        _, out_s, _, ticks_s, diag_s = shapes
+        rows = jax.tree.map(
+            lambda x: jnp.zeros((n,) + x.shape[1:], x.dtype), (out_s, ticks_s, diag_s)
+        )
+
+        def cond(c):
+            return jnp.any(c[1] >= 0)
+
+        def body(c):
+            state, pick, fresh, nxt, rows, rounds = c
+            state, out, finished, ticks, diag = advance(state, fresh, *gather(pick))
+            ended = finished & (pick >= 0)
+            at = jnp.where(ended, pick, n)  # row n is out of range: dropped
+            rows = jax.tree.map(lambda r, v: r.at[at].set(v, mode="drop"), rows, (out, ticks, diag))
+            # the ended slots take the next picks, in slot order
+            new = nxt + jnp.cumsum(ended.astype(jnp.int32)) - 1
+            ok = ended & (new < n_valid)
+            pick = jnp.where(ended, jnp.where(ok, new, -1), pick)
+            nxt = nxt + jnp.sum(ok.astype(jnp.int32))
+            return state, pick, ok, nxt, rows, rounds + 1
+
+        carry = (zeros, pick0, fresh0, jnp.minimum(size, n_valid), rows, jnp.int32(0))
+        *_, rows, rounds = jax.lax.while_loop(cond, body, carry)
+        out, ticks, diag = rows
+        return out, ticks, diag, rounds[None]
+
+    return jax.jit(_shard(run_queue, mesh))
 
 
 @dataclasses.dataclass
 class PoolStats:
     """Work of refilled runs: how much of the pool's stepping simulated live picks."""
 
-    calls: int = 0  # device calls
-    slot_ticks: int = 0  # pool size x ticks per call, summed over calls
+    rounds: int = 0  # rounds of ticks_per_call control periods (summed over devices)
+    slot_ticks: int = 0  # slots x ticks per round, summed over rounds
     pick_ticks: int = 0  # ticks run by picks up to their end, summed over picks
     picks: int = 0
 
@@ -437,91 +480,36 @@ class MjxBackend:
         q = self.POOL_QUANTUM * n_dev
         return min(self.batch_size, -(-n // q) * q)
 
-    def _pool_fns(self, size: int, args):
-        """The compiled pool program for `size` slots and zero slots to start it with."""
-        key = ("pool", size)
+    def _pool_fn(self, size: int, args):
+        """The compiled pool program for `size` slots and these inputs' shapes."""
+        key = ("pool", size, len(args[0]))
         if key not in self._compiled:
             t0 = time.perf_counter()
             phys = self.physics(size // len(self.devices))
-            advance, shapes = make_pool(
-                self.scene, self.grasp, self.ticks_per_call, self.mesh, phys
-            )
-            slot_shapes = shapes(*args)
-            fresh = jax.device_put(np.zeros(size, bool), self.sharding)
-            zeros = self._zeros(slot_shapes)
-            self._compiled[key] = (advance.lower(zeros, fresh, *args).compile(), slot_shapes)
+            fn = make_pool(self.scene, self.grasp, self.ticks_per_call, size, self.mesh, phys)
+            self._compiled[key] = fn.lower(*args).compile()
             self.stats.compile_s += time.perf_counter() - t0
-        advance, slot_shapes = self._compiled[key]
-        return advance, self._zeros(slot_shapes)
-
-    def _zeros(self, shapes):
-        """Device zeros of a pytree of shapes, split over the devices like the batch."""
-        one = len(self.devices) == 1
-        replicated = NamedSharding(self.mesh, PartitionSpec())
-
-        def zero(s):
-            where = (
-                self.sharding
-                if s.ndim and (one or s.shape[0] % len(self.devices) == 0)
-                else replicated
-            )
-            return jax.device_put(np.zeros(s.shape, s.dtype), where)
-
-        return jax.tree.map(zero, shapes)
+        return self._compiled[key]
 
     def _run_pool(self, inputs: PickInputs):
-        """Every pick through a pool of slots refilled as picks end; (results, Diagnostics)
-        in pick-point order."""
+        """Every pick through a pool of slots refilled as picks end, in one device call;
+        (results, Diagnostics) in pick-point order."""
         n = len(inputs)
         size = self.pool_size(n)
-        host = inputs.take(slice(0, size)).pad_to(size)  # the pool's current inputs
-        host = jax.tree.map(np.array, host)  # writable copies
-        slot_pick = np.full(size, -1, np.int64)  # which pick each slot runs (-1: none)
-        slot_pick[: min(size, n)] = np.arange(min(size, n))
-        next_pick = min(size, n)
+        # the queue is padded to a whole number of pools: runs of similar size (the
+        # chunks of a long evaluation) share one compiled program
+        n_pad = -(-n // size) * size
         put = lambda a: jax.device_put(a, self.sharding)
-        args = tuple(put(a) for a in host)
-        advance, slots = self._pool_fns(size, args)
-
-        results: dict[str, np.ndarray] = {}
-        diag_out = Diagnostics(*(np.zeros(n, np.int32) for _ in Diagnostics._fields))
+        args = (put(np.arange(n_pad) < n),) + tuple(put(a) for a in inputs.pad_to(n_pad))
+        fn = self._pool_fn(size, args)
         t0 = time.perf_counter()
-        fresh = np.ones(size, bool)  # the first call starts every slot
-        while True:
-            slots, out, finished, ticks, diag = advance(slots, put(fresh), *args)
-            finished, ticks = np.asarray(finished), np.asarray(ticks)
-            self.pool_stats.calls += 1
-            self.pool_stats.slot_ticks += size * self.ticks_per_call
-            ended = np.flatnonzero(finished & (slot_pick >= 0))
-            if len(ended):
-                picks = slot_pick[ended]
-                for k, v in out.items():
-                    v = np.asarray(v)
-                    if k not in results:
-                        results[k] = np.zeros((n,) + v.shape[1:], v.dtype)
-                    results[k][picks] = v[ended]
-                for field, v in zip(Diagnostics._fields, diag, strict=True):
-                    getattr(diag_out, field)[picks] = np.asarray(v)[ended]
-                self.pool_stats.pick_ticks += int(ticks[ended].sum())
-                self.pool_stats.picks += len(ended)
-                slot_pick[ended] = -1
-            # refill the ended slots with the next picks, in order
-            fresh[:] = False
-            take = min(len(ended), n - next_pick)
-            if take:
-                fill = ended[:take]
-                new = inputs.take(slice(next_pick, next_pick + take))
-                for dst, src in zip(host, new, strict=True):
-                    if isinstance(dst, tuple):  # GraspParams
-                        for dd, ss in zip(dst, src, strict=True):
-                            dd[fill] = ss
-                    else:
-                        dst[fill] = src
-                slot_pick[fill] = np.arange(next_pick, next_pick + take)
-                fresh[fill] = True
-                next_pick += take
-                args = tuple(put(a) for a in host)
-            if (slot_pick < 0).all():
-                break
+        out, ticks, diag, rounds = jax.block_until_ready(fn(*args))
         self.stats.run_s += time.perf_counter() - t0
-        return results, diag_out
+        rounds, ticks = np.asarray(rounds), np.asarray(ticks)[:n]
+        st = self.pool_stats
+        st.rounds += int(rounds.sum())
+        st.slot_ticks += int(rounds.sum()) * (size // len(self.devices)) * self.ticks_per_call
+        st.pick_ticks += int(ticks.sum())
+        st.picks += n
+        results = {k: np.array(v)[:n] for k, v in out.items()}
+        return results, Diagnostics(*(np.array(x)[:n] for x in diag))

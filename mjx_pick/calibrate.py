@@ -56,6 +56,7 @@ from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_choice, check_range, to_dict, write_json
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, per_unit_mass, stiffest_spring
+from mjx_pick.rundir import claim, config_hash, finish
 from mjx_pick.simulate import Settings, make_backend, make_inputs
 
 REQUIRED = ("x_mm", "y_mm", "yaw_deg", "grip_force_n", "trials", "successes")
@@ -643,9 +644,12 @@ def calibrate(
     out_dir = Path(out) if out is not None else None
     ckpt = None
     if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
         if (out_dir / "checkpoint").is_dir() and not resume:
             raise ConfigError(f"{out_dir} holds an earlier fit: pass --resume or another --out")
+        request = {"object": problem.object.summary(), "names": list(problem.names)}
+        request.update(settings=to_dict(problem.settings), steps=steps, estimator=estimator)
+        request.update(learning_rate=learning_rate, samples=samples, sigma=sigma)
+        claim(out_dir, "calibrate", config_hash(request), resume=resume)
         ckpt = _Checkpoints(out_dir / "checkpoint")
         saved = ckpt.latest() if resume else None
         if saved is not None:
@@ -703,6 +707,7 @@ def calibrate(
     result = CalibrationResult(contact, values, initial, history, acc_before, acc_after, out_dir)
     if out_dir is not None:
         write_result(result, problem, out_dir)
+        finish(out_dir)
     return result
 
 

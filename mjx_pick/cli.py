@@ -168,6 +168,7 @@ def cmd_evaluate(args) -> int:
         max_n=args.max,
         chunk_size=args.chunk_size,
         min_force=args.min_force,
+        overwrite=args.overwrite,
     )
     print_summary(ev.summary, args.out)
     return 0
@@ -191,6 +192,7 @@ def _study_options(args, picks_cfg) -> dict:
         "backend": args.backend,
         "batch_size": args.batch_size,
         "out": args.out,
+        "overwrite": args.overwrite,
     }
 
 
@@ -355,6 +357,7 @@ def cmd_robust(args) -> int:
         pick_config=picks_cfg,
         simulator=sim,
         out=args.out,
+        overwrite=args.overwrite,
     )
     _print_rows(
         table.slice(0, 20).to_pylist(),
@@ -479,13 +482,15 @@ def print_summary(s: dict, out) -> None:
 def cmd_picks(args) -> int:
     from mjx_pick import pickpoints as pp
     from mjx_pick import plots
-    from mjx_pick.config import write_atomic
+    from mjx_pick.config import to_dict, write_atomic
+    from mjx_pick.rundir import claim, config_hash, finish
 
     obj, gripper = _objects(args)
     cfg = _pick_config(args)
+    request = {"object": obj.summary(), "gripper": to_dict(gripper), "picks": to_dict(cfg)}
+    request.update(n=args.n, seed=args.seed)
+    out = claim(args.out, "picks", config_hash(request), overwrite=args.overwrite)
     picks = pp.generate_normal(obj, gripper, args.n, seed=args.seed, config=cfg)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     lines = ["pick_id,x_mm,y_mm,yaw_deg,opening_mm,coverage"]
     lines += [
         f"{i},{x:.4f},{y:.4f},{w:.4f},{o:.4f},{c:.4f}"
@@ -511,10 +516,10 @@ def cmd_picks(args) -> int:
     )
     rng = np.random.default_rng(args.seed)
     checker = pp.FeasibilityChecker(obj, gripper, cfg)
-    xr, yr = checker.ranges()
-    cx, cy, cyaw = rng.uniform(-xr, xr, 2000), rng.uniform(-yr, yr, 2000), rng.uniform(0, 360, 2000)
+    cx, cy, cyaw = pp.draw_block(rng, *checker.ranges(), cfg, 2000)  # the configured ranges
     labels = np.asarray(pp.REASONS)[checker(cx, cy, cyaw)["reason"]]
     plots.draw_candidates(obj, cx, cy, cyaw, out / "candidates.png", labels=labels)
+    finish(out)
     print(
         f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates; rejected "
         f"{picks.rejected}; written to {out}/ (picks.csv, pick_0.png, candidates.png)"
@@ -553,6 +558,14 @@ def cmd_assets(_args) -> int:
     return 0
 
 
+def _add_overwrite(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace what another command (or another configuration) wrote in --out",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="mjx-pick", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -565,6 +578,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--picks", help="CSV of your own pick-points (x_mm, y_mm, yaw_deg)")
     ev.add_argument("--out", help="output folder")
     ev.add_argument("--resume", action="store_true", help="continue an interrupted run")
+    _add_overwrite(ev)
     ev.add_argument(
         "--chunk-size",
         type=int,
@@ -589,6 +603,7 @@ def build_parser() -> argparse.ArgumentParser:
         _add_physics_args(p)
         _add_pick_args(p)
         p.add_argument("--out", help="output folder")
+        _add_overwrite(p)
         return p
 
     sw = study("sweep", "sweep contact, controller, gripper or solver parameters")
@@ -636,6 +651,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_gripper_args(pk)
     _add_pick_args(pk)
     pk.add_argument("--out", required=True)
+    _add_overwrite(pk)
     pk.set_defaults(func=cmd_picks)
 
     cb = sub.add_parser("calibrate", help="fit contact parameters to measured outcomes")
@@ -699,6 +715,15 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as err:
         print(f"mjx-pick: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        out = getattr(args, "out", None)
+        hint = (
+            f"; what finished is kept: run the same command with --resume to continue in {out}"
+            if out and hasattr(args, "resume")
+            else ""
+        )
+        print(f"mjx-pick: interrupted{hint}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

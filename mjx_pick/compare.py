@@ -33,6 +33,7 @@ from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.objects import ObjectModel
+from mjx_pick.rundir import claim, config_hash, finish
 from mjx_pick.simulate import Settings, Simulator
 
 
@@ -128,8 +129,9 @@ def compare(
     batch_size: int | None = None,
     simulator: Simulator | None = None,
     out: str | Path | None = None,
+    overwrite: bool = False,
 ) -> Comparison:
-    """Simulate one shared candidate set on every gripper and rank them."""
+    """Simulate one shared candidate set on every gripper and rank them (out: as sweep's)."""
     if rank_by not in ("success", "score"):
         raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
     if len(grippers) < 1:
@@ -138,6 +140,10 @@ def compare(
     if len(set(names)) != len(names):
         raise ConfigError(f"gripper names must differ: {names}")
     base = base or Settings()
+    if out is not None:
+        request = {"object": obj.summary(), "grippers": to_dict(grippers), "base": to_dict(base)}
+        request.update(n=n, seed=seed, rank_by=rank_by, picks=to_dict(pick_config))
+        claim(out, "compare", config_hash(request), overwrite=overwrite)
     cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
     n_cand = len(cand["pick_id"])
     sim = simulator or Simulator(obj, backend, batch_size)
@@ -174,7 +180,6 @@ def compare(
     result = Comparison(ranking, table, names, success, score, reasons == 0, cand, None)
     if out is not None:
         out_dir = Path(out)
-        out_dir.mkdir(parents=True, exist_ok=True)
         write_json(
             out_dir / "config.json",
             {
@@ -190,6 +195,7 @@ def compare(
         write_parquet(out_dir / "results.parquet", table)
         plot_comparison(obj, result, out_dir)
         result.out_dir = out_dir
+        finish(out_dir)
     return result
 
 
@@ -312,6 +318,7 @@ def design_search(
     backend: str = "auto",
     batch_size: int | None = None,
     out: str | Path | None = None,
+    overwrite: bool = False,
 ) -> DesignResult:
     """Search gripper geometry within bounds; see the module docstring.
 
@@ -321,6 +328,11 @@ def design_search(
     """
     base = base or Settings()
     check_range("design", "rounds", rounds, 1, 20)
+    if out is not None:
+        request = {"object": obj.summary(), "bounds": {k: list(v) for k, v in bounds.items()}}
+        request.update(base=to_dict(base), variants=variants, n=n, rounds=rounds, seed=seed)
+        request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
+        claim(out, "design", config_hash(request), overwrite=overwrite)
     pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
     sim = Simulator(obj, backend, batch_size)
     history = []
@@ -354,7 +366,6 @@ def design_search(
     result = DesignResult(best, base.gripper, final, history, None)
     if out is not None:
         out_dir = Path(out)
-        out_dir.mkdir(parents=True, exist_ok=True)
         write_json(
             out_dir / "design.json",
             {
@@ -374,4 +385,5 @@ def design_search(
         write_parquet(out_dir / "results.parquet", final.table)
         plot_comparison(obj, final, out_dir)
         result.out_dir = out_dir
+        finish(out_dir)
     return result

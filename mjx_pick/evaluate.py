@@ -39,6 +39,7 @@ from mjx_pick.kernels import grasp as gk
 from mjx_pick.metrics import results_table, summarize
 from mjx_pick.objects import ObjectModel, load_object
 from mjx_pick.physics import ContactParams, SolverParams
+from mjx_pick.rundir import claim, config_hash, finish
 from mjx_pick.scene import Scene, build_scene
 from mjx_pick.simulate import default_batch_size, make_backend, make_inputs
 
@@ -140,6 +141,7 @@ def evaluate(
     max_n: int | None = None,
     chunk_size: int | None = None,
     min_force: bool = False,
+    overwrite: bool = False,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
@@ -156,6 +158,7 @@ def evaluate(
       n_traces: traces kept for the n best and n worst pick-points.
       progress: show a progress bar.
       resume: skip chunks an interrupted run with the same configuration finished.
+      overwrite: replace what another command (or another configuration) wrote in out.
       until, min_score, max_n: Optimization mode -- simulate batches until `until`
         pick-points reach min_score or max_n are spent.
       chunk_size: pick-points per chunk written to disk (default: from device memory).
@@ -173,6 +176,24 @@ def evaluate(
     batch = batch_size or default_batch_size(backend)
     runner = make_backend(backend, scene, grasp, batch)
     out_dir = Path(out) if out is not None else None
+    if out_dir is not None:  # before any simulation: a folder it may not use is refused now
+        request = {
+            "object": obj.summary(),
+            "gripper": to_dict(gripper),
+            "contact": to_dict(contact),
+            "solver": to_dict(solver),
+            "grasp": to_dict(grasp),
+            "picks": to_dict(pick_config),
+            "source": _picks_source(picks),
+            "n": n,
+            "seed": seed,
+            "until": until,
+            "min_score": min_score,
+            "max_n": max_n,
+            "min_force": min_force,
+            "backend": backend,
+        }
+        claim(out_dir, "evaluate", config_hash(request), resume=resume, overwrite=overwrite)
 
     if until is not None:
         picks_batch, results = _optimize(
@@ -229,14 +250,18 @@ def evaluate(
     config["config_key"] = key
     config["versions"] = versions()
     if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
         _check_resume(out_dir, key, resume)
         write_json(out_dir / "config.json", config)
         write_atomic(out_dir / "scene.xml", scene.xml)
 
     t0 = time.perf_counter()
     if results is None:
-        table = _run_chunks(scene, grasp, runner, picks_batch, chunk, out_dir, progress)
+        try:
+            table = _run_chunks(scene, grasp, runner, picks_batch, chunk, out_dir, progress)
+        except KeyboardInterrupt:
+            if out_dir is not None:
+                finish(out_dir, "interrupted")  # finished chunks stay for --resume
+            raise
     else:
         table = results_table(picks_batch, results)
     wall = time.perf_counter() - t0
@@ -282,7 +307,19 @@ def evaluate(
         write_json(out_dir / "summary.json", summary)
         if traces is not None:
             write_parquet(out_dir / "traces.parquet", traces)
+        finish(out_dir)
     return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _picks_source(picks) -> str:
+    """What the pick-points come from, for the output folder's configuration hash."""
+    if picks is None:
+        return "generated"
+    if isinstance(picks, pp.PickBatch):
+        data = np.stack([picks.x_mm, picks.y_mm, picks.yaw_deg]).astype(np.float64)
+        return "batch:" + config_hash(data.tobytes().hex())
+    path = Path(picks)
+    return "csv:" + (config_hash(path.read_text()) if path.is_file() else str(path))
 
 
 def _auto_chunk(runner, batch: int) -> int:

@@ -30,6 +30,7 @@ from mjx_pick import pickpoints as pp
 from mjx_pick.config import check_range, to_dict, write_json, write_parquet
 from mjx_pick.metrics import wilson_interval
 from mjx_pick.objects import ObjectModel
+from mjx_pick.rundir import claim, config_hash, finish, read_manifest
 from mjx_pick.simulate import Settings, Simulator
 
 
@@ -58,8 +59,12 @@ def robustness(
     batch_size: int | None = None,
     simulator: Simulator | None = None,
     out: str | Path | None = None,
+    overwrite: bool = False,
 ) -> pa.Table:
     """Robust success probability of each pick-point; rows ranked best first.
+
+    out: a new folder, or the evaluate folder the pick-points came from (its files
+    stay; robustness.parquet and robustness.json join them).
 
     Returns a table with pick_id, x_mm, y_mm, yaw_deg, robust_p, robust_ci_low,
     robust_ci_high, trials, successes, landed (draws where a finger lands on the
@@ -69,6 +74,10 @@ def robustness(
     check_range("robustness", "sigma_xy_mm", sigma_xy_mm, 0, 100)
     check_range("robustness", "sigma_yaw_deg", sigma_yaw_deg, 0, 180)
     base = base or Settings()
+    if out is not None:
+        request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
+        request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, k=len(picks))
+        claim(out, "robust", config_hash(request), overwrite=overwrite, joins=("evaluate",))
     k = len(picks)
     x, y, yaw, idx = perturb(picks, m, sigma_xy_mm, sigma_yaw_deg, seed)
     checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
@@ -127,7 +136,6 @@ def robustness(
     ).take(pa.array(order))
     if out is not None:
         out_dir = Path(out)
-        out_dir.mkdir(parents=True, exist_ok=True)
         write_parquet(out_dir / "robustness.parquet", table)
         write_json(
             out_dir / "robustness.json",
@@ -141,6 +149,8 @@ def robustness(
                 "ranking": table.slice(0, 50).to_pylist(),
             },
         )
+        if (read_manifest(out_dir) or {}).get("command") == "robust":
+            finish(out_dir)
     return table
 
 

@@ -37,6 +37,7 @@ from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import rate_summary, results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams
+from mjx_pick.rundir import claim, config_hash, finish
 from mjx_pick.simulate import Settings, Simulator
 
 SECTIONS = {
@@ -192,9 +193,18 @@ def sweep(
     batch_size: int | None = None,
     simulator: Simulator | None = None,
     out: str | Path | None = None,
+    overwrite: bool = False,
 ) -> SweepResult:
-    """Simulate n pick-points under every parameter variant; see the module docstring."""
+    """Simulate n pick-points under every parameter variant; see the module docstring.
+
+    out: folder for the results (refused before any simulation when another command
+    wrote it, unless overwrite).
+    """
     base = base or Settings()
+    if out is not None:
+        request = {"object": obj.summary(), "base": to_dict(base), "params": to_dict(params)}
+        request.update(n=n, seed=seed, random=random, picks=to_dict(pick_config))
+        claim(out, "sweep", config_hash(request), overwrite=overwrite)
     combos = variants(params, random, seed)
     settings = []
     for combo in combos:
@@ -244,7 +254,6 @@ def sweep(
     table = pa.concat_tables(tables)
     out_dir = Path(out) if out is not None else None
     if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
         write_json(
             out_dir / "config.json",
             {
@@ -262,6 +271,7 @@ def sweep(
         write_parquet(out_dir / "results.parquet", table)
         write_json(out_dir / "variants.json", summaries)
         plot_sweep(summaries, table, [p.name for p in params], out_dir / "sweep.png")
+        finish(out_dir)
     return SweepResult(table, summaries, timing, out_dir)
 
 

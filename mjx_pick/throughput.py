@@ -179,7 +179,7 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
         wall = time.perf_counter() - t0
         run_s = backend.stats.run_s - run_before
         results[spec.label] = out
-        refilled = pool is not None and pool.calls > before.calls
+        refilled = pool is not None and pool.rounds > before.rounds
         if refilled:
             slot_ticks = pool.slot_ticks - before.slot_ticks
             pick_ticks = pool.pick_ticks - before.pick_ticks

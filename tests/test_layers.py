@@ -23,6 +23,7 @@ LAYERS = {
         "pickpoints",
         "metrics",
         "plots",
+        "rundir",
         "kernels",
         "assets",
     ),
