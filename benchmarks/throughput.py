@@ -16,9 +16,12 @@ mjx_pick.throughput.side_by_side for the fields):
 
   python benchmarks/throughput.py --objects door_opener \\
       --run mujoco:n=4096:batch=1024 \\
-      --run warp:n=16384:batch=16384:refill=0:warmup=1024 \\
-      --run warp:n=65536:batch=16384:warmup=16384 \\
-      --run mjx:n=2048:batch=2048 --out benchmarks/out
+      --run warp:n=16384:batch=16384:refill=0:warmup=16384 \\
+      --run warp:n=65536:batch=16384:warmup=65536 \\
+      --run mjx:n=2048:batch=2048:refill=0 --out benchmarks/out
+
+A warm-up of the same n compiles and captures exactly the program the timed run uses
+(a refilled run's program depends on its pool size and its padded queue length).
 """
 
 from __future__ import annotations

@@ -12,12 +12,12 @@ shape; per-pick contact-pair parameters enter as traced model fields, so sweeps 
 gradients need no new code.
 
 Slot refill (``refill=True``): instead of simulating every pick-point for the longest
-possible pick, a fixed pool of simulation slots is stepped ``ticks_per_call`` control
-periods per device call; each slot whose pick ended (DONE, diverged, or out of ticks)
-is refilled with the next pick-point before the next call. A pick's accumulators stop
-changing once it is DONE or diverged (``kernels.grasp.accumulate``), so a refilled run
-gives the same results as one that simulates every pick to the end; results are put
-back in pick-point order.
+possible pick, a fixed pool of simulation slots runs rounds of ``ticks_per_call``
+control periods inside ONE device program (``make_pool``); after each round, each slot
+whose pick ended (DONE, diverged, or out of ticks) takes the next pick-point. A pick's
+accumulators stop changing once it is DONE or diverged (``kernels.grasp.accumulate``),
+so a refilled run gives the same results as one that simulates every pick to the end;
+results are written in pick-point order.
 
 With several local devices the batch axis is sharded over all of them (a one-axis
 ``Mesh``, ``NamedSharding`` for the data and ``shard_map`` for the program):
@@ -53,10 +53,11 @@ from mjx_pick.simulate import PickInputs, RunStats, addresses
 # TF32 matrix products would change contact solutions on GPUs
 jax.config.update("jax_default_matmul_precision", os.environ.get("MJX_PICK_MATMUL", "highest"))
 
-# control periods per device call of a refilled pool: a finished slot idles at most
-# this many ticks before it is refilled (0.1 s of simulated time at the 5 ms period,
-# ~6 % of a median 1.6 s pick), while the host's work between calls (refill, copies)
-# stays small next to a call's ~100 physics steps per slot
+# control periods per refill round of a pool: a finished slot idles up to this many
+# ticks before it is refilled (0.1 s of simulated time at the 5 ms period), while the
+# round's fixed work (a restart forward, merges, gathers) stays small next to its ~100
+# physics steps per slot. Measured on an H100 (door opener, 16,384 slots): 20 ticks
+# 3,176 pick-points/s, 40 ticks 3,079/s (RESULTS.md, issue 17)
 DEFAULT_TICKS_PER_CALL = 20
 
 
@@ -238,10 +239,13 @@ def make_pool(
     refilled. ticks: (N,) int32 control periods each pick ran; rounds: (1,) int32
     rounds run (per device).
 
-    Why on the device: refilling from the host, a device call per round, cost ~70 ms
-    per call on an H100 (Warp re-captures its CUDA graphs when a call's buffers move,
-    and kept each capture's scratch memory until the run ran out of memory); one
-    program per run keeps the host out of the loop, as the full-length rollout does.
+    Why on the device: refilled from the host, a device call per round, the pool ran
+    at 5.2 M physics steps/s on an H100 against the full-length rollout's 6.7 M (~70 ms
+    lost per call), and a 32,768-slot pool ran out of memory inside Warp. The likely
+    cause (not isolated): Warp's 'WARP' graph mode re-captures its CUDA graphs when a
+    call's buffers move and caches up to 32 captures with their scratch memory. One
+    program per run keeps the host out of the loop, as the full-length rollout does
+    (6.3 M steps/s, no memory trouble at 32,768 slots).
     """
     phys = phys or jax_physics(scene)
     ad = addresses(scene)

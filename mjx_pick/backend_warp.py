@@ -10,16 +10,19 @@ unchanged; per-pick contact-pair parameters stay batched model fields. What diff
   :func:`size_buffers` sizes them from the scene by measurement (a sample of
   pick-points simulated on the MuJoCo C engine, the largest counts seen, plus a
   margin). Warp raises an overflow bit in a simulation whose contacts or rows did not
-  fit (and drops them); the rollout ORs those bits over every step, and a run with an
-  overflow is re-simulated with doubled buffers (``MAX_GROWTH`` times at most, then
-  :class:`BufferOverflowError`): no result ever comes from a dropped contact.
+  fit (and drops them); the rollout ORs those bits over every step, and the picks
+  that overflowed are re-simulated with doubled buffers (``MAX_GROWTH`` times at most,
+  then :class:`BufferOverflowError`): no result ever comes from a dropped contact.
 * **cfrc_ext**, which the pad-force measurement reads, is computed by Warp only with
   the option ``run_rne_postconstraint`` on; it is switched on here.
 * **No gradients** through Warp: MJX's JAX implementation (``backend='mjx'``) stays for
   forward-mode derivatives.
 * **CUDA graphs.** ``graph_mode`` 'WARP' (Warp captures each call's kernels as a CUDA
-  graph) measured fastest on an H100 (issue 17: 2,218 pick-points/s against 1,265 with
-  'WARP_STAGED_EX').
+  graph and replays it while the buffers stay where they are) measured fastest on an
+  H100 (issue 17: 2,218 pick-points/s against 1,265 with 'WARP_STAGED_EX'). Hence the
+  refilled pool runs as one device program per run (``backend_mjx.make_pool``): with
+  a device call per refill round it lost ~70 ms per call and ran out of memory at
+  32,768 slots (likely re-captured graphs, which Warp caches with their scratch).
 
 Requirements: warp-lang at mujoco-mjx's own pin (``pip install ".[gpu]"``) and a CUDA
 GPU that both JAX and Warp see. ``MJX_PICK_WARP_CPU=1`` lets Warp run on the CPU
@@ -63,7 +66,9 @@ MAX_GROWTH = 3
 # buffer margin over the largest counts measured on the sample (see size_buffers)
 CONTACT_MARGIN = 1.5
 CONTACT_SLACK = 4
-ROW_MARGIN = 1.5
+# rows x2: on an H100 Warp used up to 114 rows per world where the C sample's maximum
+# was 72 (door opener, condim-4 pads; RESULTS.md, issue 17)
+ROW_MARGIN = 2.0
 ROW_SLACK = 16
 ALLOW_CPU_ENV = "MJX_PICK_WARP_CPU"
 
@@ -185,15 +190,18 @@ class BufferSizes:
 
 
 def buffer_margin(measured_contacts: int, measured_rows: int) -> tuple[int, int]:
-    """Buffer sizes from the largest measured counts: x1.5 plus a few, rounded up to
-    a multiple of 4 (contacts) and 8 (rows).
+    """Buffer sizes from the largest measured counts: contacts x1.5 + 4, rows x2 + 16,
+    rounded up to a multiple of 4 (contacts) and 8 (rows).
 
     Why a margin: the sample does not hold every pick-point, per-pick contact settings
     (a friction sweep) move contacts a little, and Warp's collision functions need not
     return as many contacts per geom pair as MuJoCo C's (box-box, convex-convex with
-    multi-contact). Too large costs time (Warp launches some kernels over every row:
-    96 rows per world ran 8 % faster than 320 on an H100, issue 17); too small costs a
-    re-run, never a wrong result (overflow is detected).
+    multi-contact): measured on an H100, Warp used up to 114 constraint rows per world
+    where C's sample peaked at 72 (contacts are pooled over all worlds, so their margin
+    matters less: 5.5 per world on average against 24 allocated). Too large costs time
+    (Warp launches some kernels over every row: 96 rows per world ran 8 % faster than
+    320 on an H100, issue 17); too small costs a re-run, never a wrong result (overflow
+    is detected).
     """
 
     def up(x: float, q: int) -> int:

@@ -326,7 +326,7 @@ def _auto_chunk(runner, batch: int) -> int:
     """Chunk size: what fits in half the free device memory (MJX on an accelerator),
     capped at 65536 pick-points, a whole number of batches; else one batch."""
     stats = None
-    if runner.name == "mjx":
+    if runner.name in ("mjx", "warp"):
         dev = runner.devices[0]
         stats = dev.memory_stats() if dev.platform != "cpu" else None
     if not stats or "bytes_limit" not in stats:

@@ -10,7 +10,7 @@ import pytest
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
 from mjx_pick.grasp import GraspConfig
-from mjx_pick.simulate import has_accelerator, make_backend, make_inputs
+from mjx_pick.simulate import make_backend, make_inputs
 
 SHORT = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.3)
 
@@ -45,7 +45,10 @@ def test_backends_agree_on_door_opener(door_opener):
 def test_auto_backend_choice(block):
     scene = mp.build_scene(block, mp.GripperSpec())
     backend = make_backend("auto", scene, SHORT, batch_size=4)
-    assert backend.name == ("mjx" if has_accelerator() else "mujoco")
+    # warp where it can run (an NVIDIA GPU with warp-lang), else the C engine
+    from mjx_pick.backend_warp import warp_problem
+
+    assert backend.name == ("warp" if warp_problem() is None else "mujoco")
     with pytest.raises(mp.ConfigError, match="backend = 'gpu'"):
         make_backend("gpu", scene, SHORT, batch_size=4)
 
