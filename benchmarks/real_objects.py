@@ -1,12 +1,12 @@
 """Real-object benchmark (issue 16): the shipped YCB meshes grasped by a Robotiq 2F-85.
 
 Per object: success rate with its Wilson 95 % interval, failure reasons, and (with
---mjx) the labels of MuJoCo C against MJX on the same pick-points. Light rigid parts
-grasped across by a 2F-85 at 50 N must mostly succeed; every failure class that remains
-must be explained physically (benchmarks/RESULTS.md, "Real objects").
+--backends) the labels of MuJoCo C against another backend on the same pick-points.
+Light rigid parts grasped across by a 2F-85 at 50 N must mostly succeed; every failure
+class that remains must be explained physically (benchmarks/RESULTS.md, "Real objects").
 
     python benchmarks/real_objects.py --n 48 --out benchmarks/results/real_objects.json
-    python benchmarks/real_objects.py --n 16 --objects 040_large_marker --mjx
+    python benchmarks/real_objects.py --n 256 --backends mujoco,warp   # on a GPU machine
     python benchmarks/real_objects.py --n 32 --pictures benchmarks/out/real_objects
 
 With --pictures, one PNG per (object, failure class): the first pick-point of that
@@ -91,8 +91,9 @@ def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
 
 
 def run_object(
-    name: str, entry: dict, n: int, seed: int, force_n: float, mjx: bool, pictures: str = ""
+    name: str, entry: dict, n: int, seed: int, force_n: float, backends, pictures: str = ""
 ) -> dict:
+    """One object on each backend (the first is the reference for label agreement)."""
     folder = resources.files("mjx_pick.assets") / "objects" / "ycb"
     with resources.as_file(folder / entry["file"]) as path:
         t0 = time.perf_counter()
@@ -101,7 +102,7 @@ def run_object(
     grasp = mp.GraspConfig(grip_force_n=force_n)
     row = {"object": name, "mass_g": entry["mass_g"], "height_mm": round(obj.height_mm, 2)}
     labels = {}
-    for backend in ("mujoco", "mjx") if mjx else ("mujoco",):
+    for backend in backends:
         ev = mp.evaluate(obj, "robotiq-2f85", n=n, seed=seed, grasp=grasp, backend=backend)
         table = ev.table.to_pandas()
         k, m = int(table["success"].sum()), len(table)
@@ -122,8 +123,10 @@ def run_object(
             "fingertip_height_mm": ev.config["scene"]["fingertip_height_mm"],
             "pad_patch_mm": ev.config["scene"]["pad_patch_mm"],
         }
-    if mjx:
-        row["labels_agree"] = float(np.mean(labels["mujoco"] == labels["mjx"]))
+    ref = backends[0]
+    row["labels_agree"] = {
+        b: float(np.mean(labels[ref] == labels[b])) for b in backends[1:] if b in labels
+    }
     row["load_s"] = round(t_load, 1)
     return row
 
@@ -135,23 +138,28 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--force-n", type=float, default=50.0, help="F_d, N")
     ap.add_argument("--objects", default="", help="comma-separated names (default: all)")
-    ap.add_argument("--mjx", action="store_true", help="also run MJX and compare labels")
+    ap.add_argument(
+        "--backends",
+        default="mujoco",
+        help="comma-separated; labels of the others are compared with the first's",
+    )
     ap.add_argument("--out", default="", help="JSON file for the figures")
     ap.add_argument("--pictures", default="", help="folder for one PNG per failure class")
     args = ap.parse_args()
     manifest = ycb_manifest()
     names = [s for s in args.objects.split(",") if s] or list(manifest)
+    backends = [b for b in args.backends.split(",") if b]
     rows = []
     for name in names:
         row = run_object(
-            name, manifest[name], args.n, args.seed, args.force_n, args.mjx, args.pictures
+            name, manifest[name], args.n, args.seed, args.force_n, backends, args.pictures
         )
         rows.append(row)
-        c = row["mujoco"]
+        c = row[backends[0]]
         print(
             f"{name:24s} {c['success_rate']:6.1%} [{c['wilson95'][0]:.2f}, "
             f"{c['wilson95'][1]:.2f}] {c['failures']}"
-            + (f" C-vs-MJX labels {row['labels_agree']:.1%}" if args.mjx else ""),
+            + "".join(f" labels {b}={backends[0]} {v:.1%}" for b, v in row["labels_agree"].items()),
             flush=True,
         )
     if args.out:
