@@ -50,8 +50,21 @@ from mjx_pick.kernels import grasp as gk
 from mjx_pick.scene import Scene
 from mjx_pick.simulate import PickInputs, RunStats, addresses
 
-# TF32 matrix products would change contact solutions on GPUs
-jax.config.update("jax_default_matmul_precision", os.environ.get("MJX_PICK_MATMUL", "highest"))
+# TF32 matrix products would change contact solutions on GPUs: the rollouts are traced
+# with full-precision products, without changing the process-wide default (a user's own
+# JAX code keeps its setting)
+MATMUL_PRECISION = os.environ.get("MJX_PICK_MATMUL", "highest")
+
+
+def _precise(fn):
+    """fn, traced with MATMUL_PRECISION for its matrix products (scoped to it alone)."""
+
+    def traced(*args):
+        with jax.default_matmul_precision(MATMUL_PRECISION):
+            return fn(*args)
+
+    return traced
+
 
 # control periods per refill round of a pool: a finished slot idles up to this many
 # ticks before it is refilled (0.1 s of simulated time at the 5 ms period), while the
@@ -170,7 +183,7 @@ def make_rollout(
             return gk.finalize(params, a), rows, diag
         return gk.finalize(params, a), rows
 
-    return jax.jit(_shard(jax.vmap(rollout_one), mesh))
+    return jax.jit(_precise(_shard(jax.vmap(rollout_one), mesh)))
 
 
 def _shard(batched, mesh: Mesh | None):
@@ -354,7 +367,7 @@ def make_pool(
         out, ticks, diag = rows
         return out, ticks, diag, rounds[None]
 
-    return jax.jit(_shard(run_queue, mesh))
+    return jax.jit(_precise(_shard(run_queue, mesh)))
 
 
 @dataclasses.dataclass
