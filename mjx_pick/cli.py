@@ -169,6 +169,7 @@ def cmd_evaluate(args) -> int:
         chunk_size=args.chunk_size,
         min_force=args.min_force,
         overwrite=args.overwrite,
+        skip_infeasible=args.skip_infeasible,
     )
     print_summary(ev.summary, args.out)
     return 0
@@ -576,6 +577,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_physics_args(ev)
     _add_pick_args(ev)
     ev.add_argument("--picks", help="CSV of your own pick-points (x_mm, y_mm, yaw_deg)")
+    ev.add_argument(
+        "--skip-infeasible",
+        action="store_true",
+        help="leave infeasible rows of --picks out (listed) instead of refusing the file",
+    )
     ev.add_argument("--out", help="output folder")
     ev.add_argument("--resume", action="store_true", help="continue an interrupted run")
     _add_overwrite(ev)

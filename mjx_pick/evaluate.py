@@ -24,6 +24,7 @@ import json
 import platform
 import sys
 import time
+import warnings
 from importlib import metadata
 from pathlib import Path
 
@@ -85,19 +86,32 @@ def read_picks_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def user_picks(
-    obj: ObjectModel, gripper: GripperSpec, x, y, yaw, config=None, grasp=None
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    x,
+    y,
+    yaw,
+    config=None,
+    grasp=None,
+    skip_infeasible: bool = False,
 ) -> pp.PickBatch:
-    """Check user pick-points; infeasible ones are an error naming rows and reasons."""
+    """Check user pick-points. Infeasible ones are an error naming rows and reasons, or,
+    with skip_infeasible, left out with a warning that names them (pick_id keeps each
+    kept row's index in the file, so results map back to it)."""
     checker = pp.FeasibilityChecker(obj, gripper, config, grasp)
     ids = np.arange(len(x))
     res = checker(x, y, yaw)
     bad = np.flatnonzero(res["reason"] != 0)
     if len(bad):
         shown = ", ".join(f"row {i + 2} ({pp.REASONS[res['reason'][i]]})" for i in bad[:8])
-        raise ConfigError(
+        message = (
             f"{len(bad)} of {len(x)} pick-points are infeasible for {gripper.name}: {shown}"
             + (" ..." if len(bad) > 8 else "")
         )
+        if not skip_infeasible or len(bad) == len(x):
+            hint = "" if skip_infeasible else " (--skip-infeasible leaves them out)"
+            raise ConfigError(message + hint)
+        warnings.warn(message + "; left out", stacklevel=2)
     return checker.batch(ids, x, y, yaw, mode="user")
 
 
@@ -142,6 +156,7 @@ def evaluate(
     chunk_size: int | None = None,
     min_force: bool = False,
     overwrite: bool = False,
+    skip_infeasible: bool = False,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
@@ -159,6 +174,8 @@ def evaluate(
       progress: show a progress bar.
       resume: skip chunks an interrupted run with the same configuration finished.
       overwrite: replace what another command (or another configuration) wrote in out.
+      skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
+        them) instead of refusing the file.
       until, min_score, max_n: Optimization mode -- simulate batches until `until`
         pick-points reach min_score or max_n are spent.
       chunk_size: pick-points per chunk written to disk (default: from device memory).
@@ -218,7 +235,12 @@ def evaluate(
             picks_batch = picks
         else:
             picks_batch = user_picks(
-                obj, gripper, *read_picks_csv(picks), config=pick_config, grasp=grasp
+                obj,
+                gripper,
+                *read_picks_csv(picks),
+                config=pick_config,
+                grasp=grasp,
+                skip_infeasible=skip_infeasible,
             )
         results = None
 
@@ -297,6 +319,11 @@ def evaluate(
         t1 = time.perf_counter()
         forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
         table = table.append_column("min_force_n", pa.array(forces))
+        # holding at the gripper's smallest force says only that the true minimum is at
+        # or below it: flagged, never presented as the minimum itself
+        at_floor = np.isfinite(forces) & (forces <= gripper.force_min_n + 1e-9)
+        table = table.append_column("min_force_at_floor", pa.array(at_floor))
+        summary["min_force_at_floor"] = int(at_floor.sum())
         summary["min_force_s"] = round(time.perf_counter() - t1, 3)
         summary["min_force_n_median"] = (
             float(np.nanmedian(forces)) if np.isfinite(forces).any() else None

@@ -162,3 +162,17 @@ def test_cli_picks_and_listings(tmp_path, capsys):
     assert (tmp_path / "candidates.png").stat().st_size > 10_000
     assert cli.main(["presets"]) == 0 and "robotiq-2f85" in capsys.readouterr().out
     assert cli.main(["assets"]) == 0 and "door_opener" in capsys.readouterr().out
+
+
+def test_picks_file_with_an_infeasible_row(tmp_path, block):
+    picks = tmp_path / "picks.csv"
+    picks.write_text("x_mm,y_mm,yaw_deg\n0,0,0\n300,0,0\n1,0,10\n")
+    grasp = GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
+    with pytest.raises(mp.ConfigError, match=r"row 3 \(off_object\).*--skip-infeasible"):
+        evaluate(block, picks=picks, grasp=grasp, backend="mujoco", n_traces=0)
+    with pytest.warns(UserWarning, match=r"1 of 3 .*row 3 \(off_object\); left out"):
+        ev = evaluate(
+            block, picks=picks, grasp=grasp, backend="mujoco", n_traces=0, skip_infeasible=True
+        )
+    # the kept rows keep their index in the file
+    assert ev.table["pick_id"].to_pylist() == [0, 2]

@@ -235,9 +235,14 @@ def test_cli_studies(tmp_path, capsys):
         )
         == 0
     )
-    forces = pq.read_table(tmp_path / "ev" / "results.parquet")["min_force_n"].to_numpy()
-    found = forces[np.isfinite(forces)]
-    assert len(found) and np.all((found >= 20.0) & (found <= 235.0))
+    table = pq.read_table(tmp_path / "ev" / "results.parquet")
+    forces = table["min_force_n"].to_numpy()
+    found = np.isfinite(forces)
+    # the 43 g block needs ~0.3 N (eq. 1): every pick that holds at all already holds at
+    # the 2F-85's 20 N floor, and is flagged so instead of reading as "needs 20 N"
+    assert found.any()
+    assert np.all(forces[found] == 20.0)
+    assert np.all(table["min_force_at_floor"].to_numpy()[found])
     assert main(["sweep", *common, "--param", "contact.nope=1:2:3"]) == 2
     assert "unknown parameter 'contact.nope'" in capsys.readouterr().err
     assert main(["design", *common, "--bound", "stroke=1:2"]) == 2
