@@ -30,7 +30,7 @@ from mjx_pick.kernels import grasp as gk
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick.config import write_json
+from mjx_pick.config import load_toml, write_json
 from mjx_pick.metrics import wilson_interval
 
 
@@ -91,7 +91,15 @@ def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
 
 
 def run_object(
-    name: str, entry: dict, n: int, seed: int, force_n: float, backends, pictures: str = ""
+    name: str,
+    entry: dict,
+    n: int,
+    seed: int,
+    force_n: float,
+    backends,
+    pictures: str = "",
+    contact=None,
+    solver=None,
 ) -> dict:
     """One object on each backend (the first is the reference for label agreement)."""
     folder = resources.files("mjx_pick.assets") / "objects" / "ycb"
@@ -103,7 +111,16 @@ def run_object(
     row = {"object": name, "mass_g": entry["mass_g"], "height_mm": round(obj.height_mm, 2)}
     labels = {}
     for backend in backends:
-        ev = mp.evaluate(obj, "robotiq-2f85", n=n, seed=seed, grasp=grasp, backend=backend)
+        ev = mp.evaluate(
+            obj,
+            "robotiq-2f85",
+            n=n,
+            seed=seed,
+            grasp=grasp,
+            contact=contact,
+            solver=solver,
+            backend=backend,
+        )
         table = ev.table.to_pandas()
         k, m = int(table["success"].sum()), len(table)
         lo, hi = wilson_interval(k, m)
@@ -145,6 +162,8 @@ def main() -> None:
     )
     ap.add_argument("--out", default="", help="JSON file for the figures")
     ap.add_argument("--pictures", default="", help="folder for one PNG per failure class")
+    ap.add_argument("--contact", help="ContactParams TOML (default: the shipped defaults)")
+    ap.add_argument("--solver", help="SolverParams TOML (default: the shipped defaults)")
     args = ap.parse_args()
     manifest = ycb_manifest()
     names = [s for s in args.objects.split(",") if s] or list(manifest)
@@ -152,7 +171,15 @@ def main() -> None:
     rows = []
     for name in names:
         row = run_object(
-            name, manifest[name], args.n, args.seed, args.force_n, backends, args.pictures
+            name,
+            manifest[name],
+            args.n,
+            args.seed,
+            args.force_n,
+            backends,
+            args.pictures,
+            load_toml(mp.ContactParams, args.contact) if args.contact else None,
+            load_toml(mp.SolverParams, args.solver) if args.solver else None,
         )
         rows.append(row)
         c = row[backends[0]]
