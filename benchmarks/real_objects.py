@@ -23,11 +23,8 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
-import matplotlib
 import numpy as np
-import shapely.affinity
 from mjx_pick.kernels import grasp as gk
-from shapely.geometry import box
 
 import mjx_pick as mp
 from mjx_pick.config import load_toml, write_json
@@ -41,10 +38,8 @@ def ycb_manifest() -> dict:
 
 def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
     """Re-simulate the first pick of a failure class with its trace and draw why."""
-    import matplotlib.pyplot as plt
-
     from mjx_pick import pickpoints as pp
-    from mjx_pick.plots import add_polygon
+    from mjx_pick.plots import new_figure, pick_on_axes, save_png
     from mjx_pick.simulate import make_backend, make_inputs
 
     gripper = mp.load_gripper("robotiq-2f85")
@@ -56,17 +51,8 @@ def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
         make_inputs(scene, grasp, picks), record=True
     )
     tr = {f: traces[0, :, i] for i, f in enumerate(gk.TRACE_FIELDS)}
-    fig, (a0, a1, a2) = plt.subplots(1, 3, figsize=(15, 4.2))
-    posed = shapely.affinity.translate(
-        shapely.affinity.rotate(obj.polygon, r.yaw_deg, origin=(0, 0)), r.x_mm, r.y_mm
-    )
-    add_polygon(a0, posed, fc="#4a78b5", ec="k", lw=1, alpha=0.9)
-    half, d, w = 0.5 * r.opening_mm, gripper.finger_depth_mm, 0.5 * gripper.finger_width_mm
-    for x0, x1 in ((-half - d, -half), (half, half + d)):
-        add_polygon(a0, box(x0, -w, x1, w), fc="#d62728", ec="k", alpha=0.8)
-    a0.set_aspect("equal")
-    a0.autoscale_view()
-    a0.set_title(f"gripper frame: x {r.x_mm:.1f}, y {r.y_mm:.1f} mm, yaw {r.yaw_deg:.0f} deg")
+    fig, (a0, a1, a2) = new_figure(1, 3, figsize=(15, 4.2))
+    pick_on_axes(a0, obj, gripper, r.x_mm, r.y_mm, r.yaw_deg, r.opening_mm)
     t = tr["t_s"]
     a1.plot(t, tr["force_left_n"], label="left pad")
     a1.plot(t, tr["force_right_n"], label="right pad", ls="-.")
@@ -85,9 +71,7 @@ def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
     a2.legend(fontsize=8)
     a2.set_title(f"{obj.name}: {failure}")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_png(fig, path, dpi=90)
 
 
 def run_object(
@@ -149,7 +133,6 @@ def run_object(
 
 
 def main() -> None:
-    matplotlib.use("Agg")  # a script: pictures go to files
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=48, help="pick-points per object")
     ap.add_argument("--seed", type=int, default=0)

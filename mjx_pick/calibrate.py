@@ -347,7 +347,7 @@ class Problem:
                 f"outcomes {shown}, column grip_force_n: outside {g.name}'s range "
                 f"{g.force_min_n:g}-{g.force_max_n:g} N"
             )
-        checker = pp.FeasibilityChecker(obj, g, pick_config)
+        checker = pp.FeasibilityChecker(obj, g, pick_config, s.grasp)
         res = checker(outcomes.x_mm, outcomes.y_mm, outcomes.yaw_deg)
         bad = np.flatnonzero(res["reason"] != pp.fk.FEASIBLE)
         if len(bad):
@@ -367,7 +367,7 @@ class Problem:
         stacked = {k: np.array([getattr(p, k) for p in per_row]) for k in per_row[0]._fields}
         params = broadcast_params(per_row[0], len(outcomes), **stacked)
         self.inputs = make_inputs(
-            self.scene, s.grasp, self.picks, s.overrides(obj, len(outcomes))
+            self.scene, s.grasp, self.picks, s.overrides(self.scene, len(outcomes))
         ).replace(params=params)
         self.high_mm = s.grasp.success_height_fraction * s.grasp.lift_height_mm
         self.temperature_mm = float(temperature_mm)
@@ -400,9 +400,8 @@ class Problem:
             pairs = pads if name.startswith("pad") else table
             if name.endswith("friction"):
                 fr = fr.at[:, pairs, 0].set(v).at[:, pairs, 1].set(v)
-                if pairs is pads:  # the pads' torsional friction is mu_pad * r_mean
-                    c = self.scene.contact
-                    fr = fr.at[:, pairs, 2].set(v * (c.pad_torsion_m / c.pad_friction))
+                if pairs is pads:  # the pads' torsional friction follows mu_pad
+                    fr = fr.at[:, pairs, 2].set(v * self.scene.contact.torsion_per_friction_m)
             elif "stiffness" in name:
                 ref = ref.at[:, pairs, 0].set(-per_unit_mass(v, m))
             else:

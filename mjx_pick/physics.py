@@ -150,6 +150,12 @@ class MujocoContact:
     table_solimp: tuple[float, float, float, float, float]
     clamped: tuple[str, ...]  # which Table-1 values were limited by the time step
 
+    @property
+    def torsion_per_friction_m(self) -> float:
+        """Torsional friction per unit of pad friction, m (the patch's mean radius, or
+        the ratio a user's pad_torsion_mm set): another pad friction scales mu_t by it."""
+        return self.pad_torsion_m / self.pad_friction
+
 
 def per_unit_mass(n_per_mm, mass_kg):
     """A spring's stiffness (N/mm) or damping (N s/mm) per kg of the body it holds: the

@@ -76,10 +76,18 @@ def draw_pick(
     title: str | None = None,
 ) -> None:
     """One pick-point in the gripper frame (the paper's Fig. 9), saved as PNG."""
+    fig, ax = new_figure(figsize=(6, 5))
+    pick_on_axes(ax, obj, gripper, x_mm, y_mm, yaw_deg, opening_mm, title)
+    fig.tight_layout()
+    save_png(fig, path)
+
+
+def pick_on_axes(ax, obj, gripper, x_mm, y_mm, yaw_deg, opening_mm, title=None) -> None:
+    """Draw one pick-point in the gripper frame on ax: the posed silhouette, its bounding
+    box, the coverage region, the fingers at the starting opening, the stroke."""
     posed = shapely.affinity.translate(
         shapely.affinity.rotate(obj.polygon, yaw_deg, origin=(0, 0)), x_mm, y_mm
     )
-    fig, ax = new_figure(figsize=(6, 5))
     add_polygon(ax, posed, fc="#4a78b5", ec="k", lw=1, alpha=0.9)
     x0, y0, x1, y1 = posed.bounds
     ax.add_patch(
@@ -128,8 +136,6 @@ def draw_pick(
         or f"x={x_mm:.1f} mm, y={y_mm:.1f} mm, yaw={yaw_deg:.1f} deg, opening={opening_mm:.1f} mm"
     )
     ax.legend(loc="upper right", fontsize=7)
-    fig.tight_layout()
-    save_png(fig, path)
 
 
 def gripper_in_object_frame(x_mm, y_mm, yaw_deg):

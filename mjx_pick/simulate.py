@@ -21,7 +21,7 @@ from mjx_pick.kernels import grasp as gk
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams, mujoco_contact
 from mjx_pick.pickpoints import PickBatch
-from mjx_pick.scene import Scene, build_scene, pad_patch_mm
+from mjx_pick.scene import Scene, build_scene
 
 # per-pick contact overrides accepted by make_inputs (besides GraspParams' fields)
 CONTACT_OVERRIDES = (
@@ -107,7 +107,7 @@ def make_inputs(
         mu = np.broadcast_to(np.asarray(contact["pad_friction"], np.float32), (n,))
         friction[:, pads, 0] = mu[:, None]
         friction[:, pads, 1] = mu[:, None]
-        friction[:, pads, 2] *= mu[:, None] / np.float32(scene.contact.pad_friction)
+        friction[:, pads, 2] = mu[:, None] * np.float32(scene.contact.torsion_per_friction_m)
     if "pad_torsion" in contact:
         torsion = np.broadcast_to(np.asarray(contact["pad_torsion"], np.float32), (n,))
         friction[:, pads, 2] = torsion[:, None]
@@ -245,10 +245,14 @@ class Settings:
             self.grasp.fingertip_clearance_mm,
         )
 
-    def overrides(self, obj: ObjectModel, n: int) -> dict:
-        """Per-pick overrides for make_inputs that give n pick-points these settings."""
-        patch = pad_patch_mm(obj, self.gripper, self.grasp)
-        mjc = mujoco_contact(self.contact, self.solver, obj.mass_kg, patch)
+    def overrides(self, scene: Scene, n: int) -> dict:
+        """Per-pick overrides for make_inputs that give n pick-points these settings.
+
+        scene: the compiled scene of these settings' structure (its object and pad
+        patch are these settings' too: the patch depends on gripper and grasp height).
+        """
+        obj = scene.object
+        mjc = mujoco_contact(self.contact, self.solver, obj.mass_kg, scene.pad_patch_mm)
         params = self.grasp.params(obj, self.gripper)._asdict()
         out = {name: np.full(n, v, np.float32) for name, v in params.items()}
         out["pad_friction"] = np.full(n, mjc.pad_friction, np.float32)
@@ -322,7 +326,7 @@ class Simulator:
                         backend.scene,
                         settings.grasp,
                         picks,
-                        settings.overrides(self.object, len(picks)),
+                        settings.overrides(backend.scene, len(picks)),
                     )
                 )
             inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
