@@ -3,6 +3,7 @@
     python benchmarks/pad_contact.py creep        # slip over lift + hold vs pad solimp
     python benchmarks/pad_contact.py convergence  # door-opener labels, dt 1 vs 0.5 ms
     python benchmarks/pad_contact.py torque       # off-centre bar: where it turns
+    python benchmarks/pad_contact.py coulomb --backend warp   # tests' Coulomb grid, any backend
 
 Each prints a table; the figures are in benchmarks/RESULTS.md ("Pad contact").
 """
@@ -30,9 +31,9 @@ def _centred(obj, grasp, y_mm):
     return checker.batch(np.arange(n), np.zeros(n), np.asarray(y_mm), np.zeros(n), "user")
 
 
-def _run(obj, picks, grasp, contact, solver=None, **per_pick):
+def _run(obj, picks, grasp, contact, solver=None, backend="mujoco", **per_pick):
     scene = mp.build_scene(obj, FREE, contact, solver, grasp)
-    runner = make_backend("mujoco", scene, grasp, batch_size=len(picks))
+    runner = make_backend(backend, scene, grasp, batch_size=len(picks))
     return runner.run(make_inputs(scene, grasp, picks, per_pick))[0], scene
 
 
@@ -101,10 +102,52 @@ def torque() -> None:
         )
 
 
+def coulomb(backend: str) -> None:
+    """tests/test_physics.py's Coulomb grid on a backend: hold at 1.3x the force against
+    m (g + a), fail at 0.8x the force against m g; forces within 0.5-235 N."""
+    grasp = mp.GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.3)
+    accel = grasp.lift_accel_mm_s2 * 1e-3
+    wrong, total = [], 0
+    for thick in (3.0, 20.0, 60.0):
+        for mass in (0.01, 0.3, 2.0):
+            rows = []
+            for mu in (0.05, 0.2, 0.5, 1.0):
+                for force, holds in (
+                    (1.3 * mass * (G + accel) / (2 * mu), True),
+                    (0.8 * mass * G / (2 * mu), False),
+                ):
+                    if 0.5 <= force <= 235.0:
+                        rows.append((mu, force, holds))
+            block = mp.object_from_polygon(
+                box(-25, -15, 25, 15), thickness_mm=thick, mass_g=mass * 1e3
+            )
+            out, _ = _run(
+                block,
+                _centred(block, grasp, np.zeros(len(rows))),
+                grasp,
+                None,
+                backend=backend,
+                pad_friction=np.array([r[0] for r in rows], np.float32),
+                force_n=np.array([r[1] for r in rows], np.float32),
+            )
+            total += len(rows)
+            for r, ok, fail in zip(rows, out["success"], out["failure"], strict=True):
+                if bool(ok) != r[2]:
+                    wrong.append((thick, mass, *r, gk.FAILURES[int(fail)]))
+    print(f"{backend}: {len(wrong)} wrong labels of {total}", flush=True)
+    for w in wrong:
+        print("  thickness %g mm, mass %g kg, mu %g, F %.2f N, expected hold %s: %s" % w)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("creep", "convergence", "torque"))
-    {"creep": creep, "convergence": convergence, "torque": torque}[ap.parse_args().what]()
+    ap.add_argument("what", choices=("creep", "convergence", "torque", "coulomb"))
+    ap.add_argument("--backend", default="mujoco", help="coulomb: the backend to test")
+    args = ap.parse_args()
+    if args.what == "coulomb":
+        coulomb(args.backend)
+    else:
+        {"creep": creep, "convergence": convergence, "torque": torque}[args.what]()
 
 
 if __name__ == "__main__":
