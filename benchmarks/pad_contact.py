@@ -135,8 +135,8 @@ def coulomb(backend: str) -> None:
                 if bool(ok) != r[2]:
                     wrong.append((thick, mass, *r, gk.FAILURES[int(fail)]))
     print(f"{backend}: {len(wrong)} wrong labels of {total}", flush=True)
-    for w in wrong:
-        print("  thickness %g mm, mass %g kg, mu %g, F %.2f N, expected hold %s: %s" % w)
+    for thick, mass, mu, force, holds, failure in wrong:
+        print(f"  {thick:g} mm, {mass:g} kg, mu {mu:g}, F {force:.2f} N, holds? {holds}: {failure}")
 
 
 def main() -> None:
