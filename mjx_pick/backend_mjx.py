@@ -72,6 +72,11 @@ def _precise(fn):
 # physics steps per slot. Measured on an H100 (door opener, 16,384 slots): 20 ticks
 # 3,176 pick-points/s, 40 ticks 3,079/s (RESULTS.md, issue 17)
 DEFAULT_TICKS_PER_CALL = 20
+# halvings of a pool in a run's tail (make_pool). Predicted with a schedule model fitted
+# to the H100 figures (RESULTS.md, issue 17): 3 levels lift 109,770 door-opener picks
+# in 32,768 slots from 0.78 to 0.93 slot occupancy (+15 %), 40,000 picks (one evaluate
+# chunk) from 0.55 to 0.89
+DEFAULT_SHRINK_LEVELS = 3
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -229,13 +234,23 @@ def _slot_axes(phys: Physics):
     return Slot(d_axes, *([0] * (len(Slot._fields) - 1)))
 
 
+def shrink_sizes(slots: int, levels: int) -> tuple[int, ...]:
+    """Pool sizes of a run's tail: slots, halved up to `levels` times while the halves
+    stay whole numbers (slots per device)."""
+    sizes = [int(slots)]
+    while len(sizes) <= levels and sizes[-1] % 2 == 0 and sizes[-1] > 1:
+        sizes.append(sizes[-1] // 2)
+    return tuple(sizes)
+
+
 def make_pool(
     scene: Scene,
     grasp: GraspConfig,
     ticks_per_call: int,
     slots: int,
     mesh: Mesh | None = None,
-    phys: Physics | None = None,
+    physics_for: Callable[[int], Physics] | None = None,
+    shrink_levels: int = 0,
 ):
     """A refilled pool of `slots` simulations as ONE jitted program:
     (valid, qpos0, params, friction, solref, solimp) -> (results, ticks, Diagnostics,
@@ -249,18 +264,26 @@ def make_pool(
     or ``grasp.n_ticks()`` ticks run): its control state and accumulators no longer
     change, exactly as in ``make_rollout`` where nothing accumulates after DONE, though
     its physics keeps stepping (a vmapped program steps every slot) until it is
-    refilled. ticks: (N,) int32 control periods each pick ran; rounds: (1,) int32
-    rounds run (per device).
+    refilled. ticks: (N,) int32 control periods each pick ran; rounds: (L,) int32
+    rounds run at each pool size of ``shrink_sizes(slots per device, shrink_levels)``
+    (per device).
 
-    Why on the device: refilled from the host, a device call per round, the pool ran
-    at 5.2 M physics steps/s on an H100 against the full-length rollout's 6.7 M (~70 ms
-    lost per call), and a 32,768-slot pool ran out of memory inside Warp. The likely
-    cause (not isolated): Warp's 'WARP' graph mode re-captures its CUDA graphs when a
-    call's buffers move and caches up to 32 captures with their scratch memory. One
-    program per run keeps the host out of the loop, as the full-length rollout does
-    (6.3 M steps/s, no memory trouble at 32,768 slots).
+    The tail (``shrink_levels`` > 0): once every pick has been handed out, the pool
+    keeps stepping slots whose last pick has ended until the longest-running pick
+    ends. When at most half of the slots are still live, the live ones are moved into
+    a pool of half the size (their state gathered; for Warp, a fresh contact buffer of
+    the smaller size -- contacts are found anew at every step), up to
+    ``shrink_levels`` times. A pick's physics and control do not depend on which slot
+    or pool size runs it, so the results are those of a run without shrinking.
+
+    physics_for(n_worlds) -> Physics: the device model and initial data for a pool of
+    n_worlds simulations per device (Warp sizes its contact buffer by it; default: MJX's
+    JAX physics).
     """
-    phys = phys or jax_physics(scene)
+    physics_for = physics_for or (lambda n_worlds: jax_physics(scene))
+    n_dev = mesh.size if mesh is not None and mesh.size > 1 else 1
+    sizes = shrink_sizes(slots // n_dev, shrink_levels)
+    phys = physics_for(sizes[0])
     ad = addresses(scene)
     n_sub = grasp.substeps(scene.solver)
     n_ticks = grasp.n_ticks()
@@ -324,10 +347,21 @@ def make_pool(
     advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 6, out_axes=(axes, 0, 0, 0, 0))
     starts = jax.vmap(start, out_axes=axes)
 
+    def compact(state: Slot, order, size: int) -> Slot:
+        """The slots at `order` (live ones first) as a pool of `size` slots."""
+        small = d_tree.flatten_up_to(physics_for(size).data0)
+        d_axes = axes.d if isinstance(axes, Slot) else (axes,) * len(small)
+        d = tuple(
+            x[order] if axis == 0 else fresh_leaf
+            for x, axis, fresh_leaf in zip(state.d, d_axes, small, strict=True)
+        )
+        rest = jax.tree.map(lambda x: x[order], state._replace(d=None))
+        return rest._replace(d=d)
+
     def run_queue(valid, *inputs):
         n = valid.shape[0]
-        size = slots // (mesh.size if mesh is not None and mesh.size > 1 else 1)
         n_valid = jnp.sum(valid.astype(jnp.int32))
+        size = sizes[0]
         ids = jnp.arange(size, dtype=jnp.int32)
 
         def gather(pick):
@@ -346,9 +380,6 @@ def make_pool(
             lambda x: jnp.zeros((n,) + x.shape[1:], x.dtype), (out_s, ticks_s, diag_s)
         )
 
-        def cond(c):
-            return jnp.any(c[1] >= 0)
-
         def body(c):
             state, pick, fresh, nxt, rows, rounds = c
             state, out, finished, ticks, diag = advance(state, fresh, *gather(pick))
@@ -363,9 +394,26 @@ def make_pool(
             return state, pick, ok, nxt, rows, rounds + 1
 
         carry = (zeros, pick0, fresh0, jnp.minimum(size, n_valid), rows, jnp.int32(0))
-        *_, rows, rounds = jax.lax.while_loop(cond, body, carry)
+        rounds = []
+        for level, size in enumerate(sizes):
+            last = level == len(sizes) - 1
+
+            def cond(c, last=last, half=size // 2):
+                live = c[1] >= 0
+                # leave for the next, smaller pool once the queue is empty and at most
+                # half of the slots are live
+                shrink = (c[3] >= n_valid) & (jnp.sum(live.astype(jnp.int32)) <= half)
+                return jnp.any(live) & (last | ~shrink)
+
+            state, pick, fresh, nxt, rows, k = jax.lax.while_loop(cond, body, carry)
+            rounds.append(k)
+            if not last:
+                # live slots first, in slot order; the rest of the smaller pool is idle
+                order = jnp.argsort(pick < 0, stable=True)[: sizes[level + 1]]
+                state = compact(state, order, sizes[level + 1])
+                carry = (state, pick[order], fresh[order], nxt, rows, jnp.int32(0))
         out, ticks, diag = rows
-        return out, ticks, diag, rounds[None]
+        return out, ticks, diag, jnp.stack(rounds)
 
     return jax.jit(_precise(_shard(run_queue, mesh)))
 
@@ -395,7 +443,8 @@ class MjxBackend:
     refill: run through a pool of ``batch_size`` slots refilled as picks end (see the
     module docstring); a run of fewer picks than the pool uses a smaller pool (rounded
     up to a multiple of ``POOL_QUANTUM`` so that small runs of different sizes share
-    compiles). Traces (``record=True``) always use the full-length rollout.
+    compiles). shrink_levels: halvings of the pool in a run's tail (see make_pool).
+    Traces (``record=True``) always use the full-length rollout.
     """
 
     name = "mjx"
@@ -410,9 +459,12 @@ class MjxBackend:
         devices=None,
         refill: bool = False,
         ticks_per_call: int = DEFAULT_TICKS_PER_CALL,
+        shrink_levels: int = DEFAULT_SHRINK_LEVELS,
     ):
         if int(ticks_per_call) < 1:
             raise ValueError(f"ticks_per_call = {ticks_per_call} must be >= 1")
+        if int(shrink_levels) < 0:
+            raise ValueError(f"shrink_levels = {shrink_levels} must be >= 0")
         self.scene, self.grasp = scene, grasp
         self.devices = list(devices) if devices is not None else jax.local_devices()
         n_dev = len(self.devices)
@@ -424,6 +476,7 @@ class MjxBackend:
         self.sharding = NamedSharding(self.mesh, PartitionSpec("batch"))
         self.refill = bool(refill)
         self.ticks_per_call = int(ticks_per_call)
+        self.shrink_levels = int(shrink_levels)
         self.stats = RunStats()
         self.pool_stats = PoolStats()
         self.last_diagnostics: Diagnostics | None = None
@@ -502,8 +555,15 @@ class MjxBackend:
         key = ("pool", size, len(args[0]))
         if key not in self._compiled:
             t0 = time.perf_counter()
-            phys = self.physics(size // len(self.devices))
-            fn = make_pool(self.scene, self.grasp, self.ticks_per_call, size, self.mesh, phys)
+            fn = make_pool(
+                self.scene,
+                self.grasp,
+                self.ticks_per_call,
+                size,
+                self.mesh,
+                self.physics,
+                self.shrink_levels,
+            )
             self._compiled[key] = fn.lower(*args).compile()
             self.stats.compile_s += time.perf_counter() - t0
         return self._compiled[key]
@@ -522,11 +582,91 @@ class MjxBackend:
         t0 = time.perf_counter()
         out, ticks, diag, rounds = jax.block_until_ready(fn(*args))
         self.stats.run_s += time.perf_counter() - t0
-        rounds, ticks = np.asarray(rounds), np.asarray(ticks)[:n]
+        n_dev = len(self.devices)
+        sizes = np.asarray(shrink_sizes(size // n_dev, self.shrink_levels))
+        rounds = np.asarray(rounds, np.int64).reshape(n_dev, len(sizes))
+        ticks = np.asarray(ticks)[:n]
         st = self.pool_stats
         st.rounds += int(rounds.sum())
-        st.slot_ticks += int(rounds.sum()) * (size // len(self.devices)) * self.ticks_per_call
+        st.slot_ticks += int((rounds * sizes).sum()) * self.ticks_per_call
         st.pick_ticks += int(ticks.sum())
         st.picks += n
         results = {k: np.array(v)[:n] for k, v in out.items()}
         return results, Diagnostics(*(np.array(x)[:n] for x in diag))
+
+
+class DeviceThreads:
+    """Several single-device backends as one: each runs a contiguous share of the
+    pick-points on its own device, from its own host thread, and nothing passes between
+    devices. Results come back in pick-point order.
+
+    Why threads and not one sharded program: Warp's contact buffer is one array for all
+    simulations of a call, which the pool carries unsharded, and each device's
+    program should run (and be refilled) at its own pace -- a device whose picks end
+    sooner must not wait for another's. JAX releases the GIL while a device program
+    runs, so the devices work at the same time.
+
+    parts: backends of one class, one device each, built for the same scene and
+    procedure.
+    """
+
+    def __init__(self, parts: list):
+        if len(parts) < 2:
+            raise ValueError(f"DeviceThreads needs >= 2 backends, got {len(parts)}")
+        self.parts = list(parts)
+        p0 = self.parts[0]
+        self.name, self.scene, self.grasp = p0.name, p0.scene, p0.grasp
+        self.batch_size = sum(p.batch_size for p in self.parts)
+        self.devices = [d for p in self.parts for d in p.devices]
+        self.device = f"{p0.device} x{len(self.parts)}"
+        self.refill = p0.refill
+        self.stats = RunStats()
+        self.pool_stats = PoolStats()
+        self.last_diagnostics: Diagnostics | None = None
+
+    def shares(self, n: int) -> list[slice]:
+        """Contiguous, near-equal shares of n pick-points, one per device."""
+        bounds = np.linspace(0, n, len(self.parts) + 1).round().astype(int)
+        return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+    def pool_size(self, n: int) -> int:
+        return sum(
+            p.pool_size(s.stop - s.start) for p, s in zip(self.parts, self.shares(n), strict=True)
+        )
+
+    @property
+    def growths(self) -> int:
+        return sum(getattr(p, "growths", 0) for p in self.parts)
+
+    @property
+    def buffers(self):
+        return getattr(self.parts[0], "buffers", None)
+
+    def run(self, inputs: PickInputs, record: bool = False):
+        from concurrent.futures import ThreadPoolExecutor
+
+        shares = self.shares(len(inputs))
+        compile0 = [p.stats.compile_s for p in self.parts]
+        before = [dataclasses.replace(p.pool_stats) for p in self.parts]
+        t0 = time.perf_counter()
+        with ThreadPoolExecutor(len(self.parts)) as pool:
+            futures = [
+                pool.submit(p.run, inputs.take(s), record)
+                for p, s in zip(self.parts, shares, strict=True)
+            ]
+            outs = [f.result() for f in futures]  # re-raises a part's error
+        wall = time.perf_counter() - t0
+        # compiles run side by side too: the run is the wall time less the longest
+        compiled = [p.stats.compile_s - c for p, c in zip(self.parts, compile0, strict=True)]
+        self.stats.compile_s += max(compiled)
+        self.stats.run_s += max(wall - max(compiled), 0.0)
+        self.stats.n += len(inputs)
+        for p, b in zip(self.parts, before, strict=True):
+            for f in dataclasses.fields(PoolStats):
+                now = getattr(p.pool_stats, f.name) - getattr(b, f.name)
+                setattr(self.pool_stats, f.name, getattr(self.pool_stats, f.name) + now)
+        merged = {k: np.concatenate([o[0][k] for o in outs]) for k in outs[0][0]}
+        traces = np.concatenate([o[1] for o in outs]) if record else None
+        diags = [p.last_diagnostics for p in self.parts]
+        self.last_diagnostics = Diagnostics(*(np.concatenate(x) for x in zip(*diags, strict=True)))
+        return merged, traces

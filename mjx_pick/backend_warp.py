@@ -324,14 +324,19 @@ def describe_overflow(bits: int) -> str:
 
 @functools.cache
 def _warp_backend_class():
-    from mjx_pick.backend_mjx import DEFAULT_TICKS_PER_CALL, MjxBackend, Physics
+    from mjx_pick.backend_mjx import (
+        DEFAULT_SHRINK_LEVELS,
+        DEFAULT_TICKS_PER_CALL,
+        MjxBackend,
+        Physics,
+    )
 
     class WarpBackend(MjxBackend):
         """The MJX backend with ``impl='warp'``; refills its slots by default.
 
         buffers: Warp's buffer sizes (default: :func:`size_buffers` on the scene, measured
         when the backend is built). devices: one device (default: the first CUDA GPU;
-        several GPUs are not supported yet). graph_mode: one of GRAPH_MODES (default
+        :func:`make_warp_backend` runs several GPUs). graph_mode: one of GRAPH_MODES (default
         'WARP' on a GPU, 'JAX' on the CPU, MJX's own defaults).
         """
 
@@ -346,6 +351,7 @@ def _warp_backend_class():
             devices=None,
             refill: bool = True,
             ticks_per_call: int = DEFAULT_TICKS_PER_CALL,
+            shrink_levels: int = DEFAULT_SHRINK_LEVELS,
             buffers: BufferSizes | None = None,
             graph_mode: str | None = None,
         ):
@@ -355,12 +361,13 @@ def _warp_backend_class():
             if devices is None:
                 devices = (nvidia_gpus() or jax.devices("cpu"))[:1]
             if len(devices) != 1:
-                # the refilled pool carries Warp's shared contact buffer unsharded; several
-                # GPUs (issue 17, item 6) are not built yet
+                # several GPUs: make_warp_backend gives each its own WarpBackend
                 raise ConfigError(
-                    f"backend 'warp' runs on one GPU; got {len(devices)} devices: pass one"
+                    f"WarpBackend runs on one device; got {len(devices)}: use make_warp_backend"
                 )
-            super().__init__(scene, grasp, batch_size, devices, refill, ticks_per_call)
+            super().__init__(
+                scene, grasp, batch_size, devices, refill, ticks_per_call, shrink_levels
+            )
             self.graph_mode = graph_mode
             if buffers is None:
                 t0 = time.perf_counter()
@@ -460,6 +467,31 @@ def _warp_backend_class():
             return merged, traces
 
     return WarpBackend
+
+
+def make_warp_backend(scene: Scene, grasp: GraspConfig, batch_size: int, devices=None, **options):
+    """The Warp backend on `devices` (default: every CUDA GPU JAX sees; the CPU with
+    MJX_PICK_WARP_CPU=1 and no GPU). One device: a WarpBackend with batch_size slots.
+    Several: one WarpBackend per device with batch_size / n slots each, run side by side
+    (``backend_mjx.DeviceThreads``: contiguous shares of the pick-points, nothing
+    communicated); their buffers are sized once, on the C engine, for all."""
+    check_warp()
+    if devices is None:
+        devices = nvidia_gpus() or jax.devices("cpu")[:1]
+    devices = list(devices)
+    if not devices:
+        raise ConfigError("backend 'warp': no device given")
+    WarpBackend = _warp_backend_class()
+    if len(devices) == 1:
+        return WarpBackend(scene, grasp, batch_size, devices=devices, **options)
+    from mjx_pick.backend_mjx import DeviceThreads
+
+    if options.get("buffers") is None:
+        options["buffers"] = size_buffers(scene, grasp)
+    per_device = -(-int(batch_size) // len(devices))
+    return DeviceThreads(
+        [WarpBackend(scene, grasp, per_device, devices=[d], **options) for d in devices]
+    )
 
 
 def __getattr__(name: str):

@@ -115,6 +115,10 @@ class SolverParams:
     impratio: float = 1.0
     iterations: int = 10
     ls_iterations: int = 8
+    # the solver stops once its improvement or gradient falls below this (MuJoCo's
+    # default; MuJoCo Warp keeps iterating every simulation of a call until the last
+    # one is there or the iteration cap is hit)
+    tolerance: float = 1e-8
     integrator: str = "implicitfast"
     # softest-allowed contact time constant: stiffer requests (Table 1) are clamped to
     # it. Fixed in seconds, so halving the time step refines the integration of the
@@ -128,6 +132,7 @@ class SolverParams:
         check_range(o, "impratio", self.impratio, 1, 100)
         check_range(o, "iterations", self.iterations, 1, 1000)
         check_range(o, "ls_iterations", self.ls_iterations, 1, 1000)
+        check_range(o, "tolerance", self.tolerance, 0, 1e-2)
         check_choice(o, "integrator", self.integrator, ("implicitfast", "euler"))
         check_range(o, "contact_timeconst_s", self.contact_timeconst_s, 0, 1, lo_open=True)
 

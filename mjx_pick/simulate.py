@@ -179,14 +179,14 @@ def make_backend(
 
     devices: MJX/Warp shard each batch over these (default: every local device; Warp:
     every CUDA device). nthread: the C engine's threads. options: passed to the MJX or
-    Warp backend (refill, ticks_per_call; Warp: buffers, graph_mode).
+    Warp backend (refill, ticks_per_call, shrink_levels; Warp: buffers, graph_mode).
     """
     name = resolve_backend(name)
     grasp.substeps(scene.solver)  # validates the control period against the time step
     if name == "warp":
-        from mjx_pick.backend_warp import WarpBackend
+        from mjx_pick.backend_warp import make_warp_backend
 
-        return WarpBackend(scene, grasp, batch_size, devices=devices, **options)
+        return make_warp_backend(scene, grasp, batch_size, devices=devices, **options)
     if name == "mjx":
         from mjx_pick.backend_mjx import MjxBackend
 
@@ -216,7 +216,11 @@ def default_batch_size(backend_name: str) -> int:
     if name == "mujoco":
         return 1024  # 80 pick-points/s at 256, 92 at 1024 (2 cores, RESULTS.md)
     if name == "warp":
-        return 32768  # H100: 3,523/s at 32,768 slots, 3,176/s at 16,384 (RESULTS.md)
+        # per GPU (every GPU runs its own pool): H100, 3,523/s at 32,768 slots, 3,176/s
+        # at 16,384 (RESULTS.md)
+        from mjx_pick.backend_warp import nvidia_gpus
+
+        return 32768 * max(len(nvidia_gpus()), 1)
     return 8192 if has_accelerator() else 64
 
 

@@ -103,36 +103,60 @@ class RunSpec:
     batch: int
     options: tuple = ()
     warmup: int = 0
+    solver: tuple = ()  # SolverParams fields replaced for this run (iterations, ...)
+    devices: int | None = None  # the first this many local devices (default: the backend's)
 
     @property
     def label(self) -> str:
-        opts = "".join(f",{k}={v}" for k, v in self.options)
-        return f"{self.backend}{opts}"
+        opts = "".join(f",{k}={v}" for k, v in self.options + self.solver)
+        gpus = f",devices={self.devices}" if self.devices else ""
+        return f"{self.backend}{opts}{gpus}"
 
     @classmethod
     def parse(cls, text: str) -> RunSpec:
-        """'warp:n=65536:batch=16384:refill=1:ticks_per_call=20:warmup=16384'."""
+        """'warp:n=65536:batch=16384:refill=1:ticks_per_call=20:warmup=16384'.
+
+        Keys: n, batch, warmup, devices (ints); backend options refill, ticks_per_call,
+        shrink_levels, graph_mode, rows (Warp's constraint rows per simulation; contacts
+        sized as usual); solver settings iterations, ls_iterations, tolerance."""
         name, *parts = text.split(":")
         fields: dict = {}
-        options = []
+        options, solver = [], []
         for part in parts:
             key, sep, value = part.partition("=")
             if not sep:
                 raise ValueError(f"run {text!r}: {part!r} is not key=value")
-            if key in ("n", "batch", "warmup"):
+            if key in ("n", "batch", "warmup", "devices"):
                 fields[key] = int(value)
             elif key in ("refill",):
                 options.append((key, value.lower() in ("1", "true", "yes")))
-            elif key in ("ticks_per_call",):
+            elif key in ("ticks_per_call", "shrink_levels", "rows"):
                 options.append((key, int(value)))
             elif key in ("graph_mode",):
                 options.append((key, value))
+            elif key in ("iterations", "ls_iterations"):
+                solver.append((key, int(value)))
+            elif key in ("tolerance",):
+                solver.append((key, float(value)))
             else:
                 raise ValueError(f"run {text!r}: unknown key {key!r}")
         if "n" not in fields:
             raise ValueError(f"run {text!r} needs n=")
         fields.setdefault("batch", fields["n"])
-        return cls(name, options=tuple(options), **fields)
+        return cls(name, options=tuple(options), solver=tuple(solver), **fields)
+
+    def backend_options(self, scene, grasp) -> dict:
+        """make_backend options; 'rows' becomes Warp buffers sized on the C engine with
+        that many constraint rows."""
+        opts = dict(self.options)
+        if "rows" in opts:
+            from mjx_pick.backend_warp import size_buffers
+
+            sized = size_buffers(scene, grasp)
+            opts["buffers"] = dataclasses.replace(sized, rows=opts.pop("rows"))
+        if self.devices:
+            opts["devices"] = jax.local_devices()[: self.devices]
+        return opts
 
 
 def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, on_row=None):
@@ -149,21 +173,29 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
     row is done (a long benchmark keeps what it measured if it is cut short).
     """
     obj = mp.load_object(obj_name)
-    scene = mp.build_scene(obj, gripper, solver=solver, grasp=grasp)
     n_max = max(r.n for r in runs)
     picks = pp.generate_normal(obj, gripper, n_max, seed=seed, grasp=grasp)
-    inputs = make_inputs(scene, grasp, picks)
-    n_sub = grasp.substeps(scene.solver)
-    full_steps = grasp.n_ticks() * n_sub
+    scenes: dict = {}  # per solver variant: (scene, inputs)
+
+    def scene_for(spec: RunSpec):
+        if spec.solver not in scenes:
+            variant = dataclasses.replace(solver, **dict(spec.solver))
+            scene = mp.build_scene(obj, gripper, solver=variant, grasp=grasp)
+            scenes[spec.solver] = (scene, make_inputs(scene, grasp, picks))
+        return scenes[spec.solver]
+
     results: dict[str, dict] = {}
     rows = []
     # MuJoCo C first: the reference the others' labels are compared with
     order = sorted(runs, key=lambda r: r.backend != "mujoco")
     for spec in order:
+        scene, inputs = scene_for(spec)
+        n_sub = grasp.substeps(scene.solver)
+        full_steps = grasp.n_ticks() * n_sub
         n = min(spec.n, len(inputs))
         t_build = time.perf_counter()
         backend = make_backend(
-            spec.backend, scene, grasp, batch_size=spec.batch, **dict(spec.options)
+            spec.backend, scene, grasp, batch_size=spec.batch, **spec.backend_options(scene, grasp)
         )
         build_s = time.perf_counter() - t_build
         warm_s = 0.0
@@ -251,6 +283,10 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
                 "timestep_s": scene.solver.timestep_s,
                 "cone": scene.solver.cone,
                 "iterations": scene.solver.iterations,
+                "ls_iterations": scene.solver.ls_iterations,
+                "tolerance": scene.solver.tolerance,
+                "shrink_levels": getattr(backend, "shrink_levels", None),
+                "devices": len(getattr(backend, "devices", [])) or None,
             }
         )
         rows.append(row)
