@@ -34,6 +34,7 @@ re-simulated: a trace of every pick of a large batch would not fit in memory).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import time
 from collections.abc import Callable
@@ -288,68 +289,77 @@ def make_pool(
     n_sub = grasp.substeps(scene.solver)
     n_ticks = grasp.n_ticks()
     o = ad.object_qpos
-    axes = _slot_axes(phys)
-    d_tree = jax.tree.structure(phys.data0)
-
-    def start(qpos0, params, pair_friction, pair_solref, pair_solimp) -> Slot:
-        _, d, s, a, diag = _initial(
-            phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp
-        )
-        pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
-        args = (pair_friction, pair_solref, pair_solimp, params, s, a, pos0, quat0)
-        return Slot(tuple(d_tree.flatten_up_to(d)), *args, jnp.int32(0), diag)
 
     def done(slot: Slot):
         return (slot.s.phase == gk.DONE) | slot.a.diverged | (slot.k >= n_ticks)
 
-    def advance_one(slot: Slot, fresh, *inputs):
-        new = start(*inputs)
-        # Data goes through Data.where: Warp's shared contact buffer is kept, not merged
-        d = d_tree.unflatten(slot.d).where(fresh, d_tree.unflatten(new.d))
-        rest = jax.tree.map(
-            lambda n, c: jnp.where(fresh, n, c), new._replace(d=None), slot._replace(d=None)
-        )
-        slot = rest._replace(d=d)
-        m = phys.model.replace(
-            pair_friction=slot.pair_friction,
-            pair_solref=slot.pair_solref,
-            pair_solimp=slot.pair_solimp,
-        )
+    def programs(phys: Physics):
+        """(batched start, batched advance, Slot axes) of a pool run with phys (Warp's
+        Data tree holds its contact buffer's size: one set per pool size)."""
+        axes = _slot_axes(phys)
+        d_tree = jax.tree.structure(phys.data0)
 
-        def control_period(slot: Slot, _):
-            s, a, ctrl, _ = gk.tick(
-                slot.params,
-                ad,
-                slot.s,
-                slot.a,
-                slot.d.qpos,
-                slot.d.qvel,
-                slot.d._impl.cfrc_ext,
-                slot.pos0,
-                slot.quat0,
+        def start(qpos0, params, pair_friction, pair_solref, pair_solimp) -> Slot:
+            _, d, s, a, diag = _initial(
+                phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp
             )
-            # a finished pick's control state, metrics and buffer counts stay as they are
-            frozen = done(slot)
-            keep = lambda old, new: jax.tree.map(lambda x, y: jnp.where(frozen, x, y), old, new)
-            d, diag = _physics_steps(
-                phys, m, slot.d.replace(ctrl=jnp.where(frozen, slot.d.ctrl, ctrl)), slot.diag, n_sub
+            pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
+            args = (pair_friction, pair_solref, pair_solimp, params, s, a, pos0, quat0)
+            return Slot(tuple(d_tree.flatten_up_to(d)), *args, jnp.int32(0), diag)
+
+        def advance_one(slot: Slot, fresh, *inputs):
+            new = start(*inputs)
+            # Data goes through Data.where: Warp's shared contact buffer is kept, not merged
+            d = d_tree.unflatten(slot.d).where(fresh, d_tree.unflatten(new.d))
+            rest = jax.tree.map(
+                lambda n, c: jnp.where(fresh, n, c), new._replace(d=None), slot._replace(d=None)
             )
-            k = slot.k + jnp.where(frozen, 0, 1).astype(jnp.int32)
-            slot = slot._replace(
-                d=d, s=keep(slot.s, s), a=keep(slot.a, a), k=k, diag=keep(slot.diag, diag)
+            slot = rest._replace(d=d)
+            m = phys.model.replace(
+                pair_friction=slot.pair_friction,
+                pair_solref=slot.pair_solref,
+                pair_solimp=slot.pair_solimp,
             )
-            return slot, None
 
-        slot, _ = jax.lax.scan(control_period, slot, None, length=ticks_per_call)
-        slot = slot._replace(d=tuple(d_tree.flatten_up_to(slot.d)))
-        return slot, gk.finalize(slot.params, slot.a), done(slot), slot.k, slot.diag
+            def control_period(slot: Slot, _):
+                s, a, ctrl, _ = gk.tick(
+                    slot.params,
+                    ad,
+                    slot.s,
+                    slot.a,
+                    slot.d.qpos,
+                    slot.d.qvel,
+                    slot.d._impl.cfrc_ext,
+                    slot.pos0,
+                    slot.quat0,
+                )
+                # a finished pick's control state, metrics and buffer counts stay as they are
+                frozen = done(slot)
+                keep = lambda old, new: jax.tree.map(lambda x, y: jnp.where(frozen, x, y), old, new)
+                ctrl = jnp.where(frozen, slot.d.ctrl, ctrl)
+                d, diag = _physics_steps(phys, m, slot.d.replace(ctrl=ctrl), slot.diag, n_sub)
+                k = slot.k + jnp.where(frozen, 0, 1).astype(jnp.int32)
+                slot = slot._replace(
+                    d=d, s=keep(slot.s, s), a=keep(slot.a, a), k=k, diag=keep(slot.diag, diag)
+                )
+                return slot, None
 
-    advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 6, out_axes=(axes, 0, 0, 0, 0))
-    starts = jax.vmap(start, out_axes=axes)
+            slot, _ = jax.lax.scan(control_period, slot, None, length=ticks_per_call)
+            slot = slot._replace(d=tuple(d_tree.flatten_up_to(slot.d)))
+            return slot, gk.finalize(slot.params, slot.a), done(slot), slot.k, slot.diag
 
-    def compact(state: Slot, order, size: int) -> Slot:
-        """The slots at `order` (live ones first) as a pool of `size` slots."""
-        small = d_tree.flatten_up_to(physics_for(size).data0)
+        advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 6, out_axes=(axes, 0, 0, 0, 0))
+        return jax.vmap(start, out_axes=axes), advance, axes
+
+    physes = [phys] + [physics_for(size) for size in sizes[1:]]
+    levels = [programs(p) for p in physes]
+    starts = levels[0][0]
+
+    def compact(state: Slot, order, level: int) -> Slot:
+        """The slots at `order` (live ones first) as the pool of `level`: gathered state;
+        for Data fields kept once per call (Warp's contact buffer), that pool's own."""
+        small = jax.tree.leaves(physes[level].data0)
+        axes = levels[level][2]
         d_axes = axes.d if isinstance(axes, Slot) else (axes,) * len(small)
         d = tuple(
             x[order] if axis == 0 else fresh_leaf
@@ -374,13 +384,13 @@ def make_pool(
         zeros = jax.tree.map(
             lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(starts, *gather(pick0))
         )
-        shapes = jax.eval_shape(advance, zeros, fresh0, *gather(pick0))
+        shapes = jax.eval_shape(levels[0][1], zeros, fresh0, *gather(pick0))
         _, out_s, _, ticks_s, diag_s = shapes
         rows = jax.tree.map(
             lambda x: jnp.zeros((n,) + x.shape[1:], x.dtype), (out_s, ticks_s, diag_s)
         )
 
-        def body(c):
+        def body(c, advance):
             state, pick, fresh, nxt, rows, rounds = c
             state, out, finished, ticks, diag = advance(state, fresh, *gather(pick))
             ended = finished & (pick >= 0)
@@ -405,12 +415,13 @@ def make_pool(
                 shrink = (c[3] >= n_valid) & (jnp.sum(live.astype(jnp.int32)) <= half)
                 return jnp.any(live) & (last | ~shrink)
 
-            state, pick, fresh, nxt, rows, k = jax.lax.while_loop(cond, body, carry)
+            step = functools.partial(body, advance=levels[level][1])
+            state, pick, fresh, nxt, rows, k = jax.lax.while_loop(cond, step, carry)
             rounds.append(k)
             if not last:
                 # live slots first, in slot order; the rest of the smaller pool is idle
                 order = jnp.argsort(pick < 0, stable=True)[: sizes[level + 1]]
-                state = compact(state, order, sizes[level + 1])
+                state = compact(state, order, level + 1)
                 carry = (state, pick[order], fresh[order], nxt, rows, jnp.int32(0))
         out, ticks, diag = rows
         return out, ticks, diag, jnp.stack(rounds)
