@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import statistics
 import time
+import warnings
 
 import jax
 import numpy as np
@@ -174,7 +175,14 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
     """
     obj = mp.load_object(obj_name)
     n_max = max(r.n for r in runs)
-    picks = pp.generate_normal(obj, gripper, n_max, seed=seed, grasp=grasp)
+    with warnings.catch_warnings():  # fewer feasible than asked: repeated below
+        warnings.simplefilter("ignore", UserWarning)
+        picks = pp.generate_normal(obj, gripper, n_max, seed=seed, grasp=grasp)
+    distinct = len(picks)
+    if distinct < n_max:
+        # the generator stops at its candidate limit: repeat the set (each pick-point is
+        # simulated on its own, so a repeat costs what a new one would)
+        picks = tile_picks(picks, n_max, 0)
     scenes: dict = {}  # per solver variant: (scene, inputs)
 
     def scene_for(spec: RunSpec):
@@ -232,6 +240,7 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
             "backend": backend.name,
             "device": backend.device,
             "n": n,
+            "distinct_picks": min(n, distinct),
             "batch": backend.batch_size,
             "setup_s": round(build_s, 2),
             "compile_s": round(backend.stats.compile_s, 2),
