@@ -181,7 +181,11 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
     # "reached" once the force has stayed between reach_fraction * F_d and the limit
     # for reach_settle_s: the impact of the approaching pads (a light part bounces
     # between them) must not start the lift (reach_settle_s = 0: the paper's rule)
-    steady = (ph == CLOSE) & (force >= p.reach_fraction * p.force_n) & (force <= f_lim)
+    # the band reaches at least as far above F_d as below it: with F_d at the gripper's
+    # limit (f_lim = F_d) a force held at F_d dithers across f_lim by float noise (an
+    # MJCF drive, whose force limit is not exactly F_d at the pads, showed it)
+    upper = jnp.maximum(f_lim, (2.0 - p.reach_fraction) * p.force_n)
+    steady = (ph == CLOSE) & (force >= p.reach_fraction * p.force_n) & (force <= upper)
     t_steady = jnp.where(steady, s.t_steady + p.dt, 0.0)
     reached = steady & (t_steady >= p.reach_settle_s - 1e-6)
     nxt = jnp.select(
@@ -191,7 +195,9 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
             (ph == CLOSE) & reached,
             (ph == CLOSE) & (t >= p.close_timeout_s),
             (ph == DWELL) & (t >= p.dwell_s),
-            (ph == LIFT) & (s.lift_target - s.lift_start >= p.lift_height_m),
+            # the same sum as the lift's top below (float32: lift_start + h - lift_start
+            # may fall short of h)
+            (ph == LIFT) & (s.lift_target >= s.lift_start + p.lift_height_m),
             (ph == HOLD) & (t >= p.hold_s),
         ],
         [CLOSE, DWELL, LIFT, DONE, LIFT, HOLD, DONE],

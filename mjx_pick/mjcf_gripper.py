@@ -407,10 +407,6 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
     right = [m.geom(PREFIX + g).id for g in mjcf.pad_right_geoms]
     body_l = _pad_body(m, mjcf.pad_left_geoms, "pad_left_geoms")
     body_r = _pad_body(m, mjcf.pad_right_geoms, "pad_right_geoms")
-    driven = _drive_joints(m, a)
-    mujoco.mj_forward(m, d)
-    j_left = _finger_joint(m, d, driven, "left", mjcf.actuator)
-    j_right = _finger_joint(m, d, driven, "right", mjcf.actuator)
     lo, hi = m.actuator_ctrlrange[a] if m.actuator_ctrllimited[a] else (-1.0, 1.0)
 
     def settle(ctrl):
@@ -448,7 +444,11 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
             "approaches along -z); turn the gripper over"
         )
     mujoco.mj_resetData(m, d)
-    jids = [j for j in range(m.njnt)]
+    mujoco.mj_forward(m, d)
+    driven = _drive_joints(m, a)
+    j_left = _finger_joint(m, d, driven, "left", mjcf.actuator)
+    j_right = _finger_joint(m, d, driven, "right", mjcf.actuator)
+    jids = list(range(m.njnt))
     names = tuple(m.joint(j).name[len(PREFIX) :] for j in jids)
     rows = []
     for ctrl in np.linspace(c_open, c_closed, N_SAMPLES):
