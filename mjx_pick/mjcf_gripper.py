@@ -63,6 +63,7 @@ class MjcfGripper:
       finger); the object touches these and nothing else.
     actuator: the actuator that closes the fingers (a position servo: fixed gain, affine
       bias, on a joint or a tendon).
+    link_contacts: let the other collision geoms (links) touch the object too.
     actuator_kp / actuator_kv / actuator_forcerange: overrides of that servo's stiffness
       (force per unit length of its transmission), damping and symmetric force limit, in
       the actuator's units; None keeps the file's. The control range still means the
@@ -78,6 +79,11 @@ class MjcfGripper:
     actuator_kp: float | None = None
     actuator_kv: float | None = None
     actuator_forcerange: float | None = None
+    # also let the file's other collision geoms (the link meshes) touch the object: one
+    # contact pair per link geom and object piece. Off by default: MJX compiles every
+    # pair's mesh-mesh collision (benchmarks/linkage.py links measures the cost), and
+    # the table force is then the object's external force less the pads' AND the links'
+    link_contacts: bool = False
 
     def __post_init__(self):
         o = "gripper.mjcf"
@@ -244,6 +250,8 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
     for texture in spec.textures:
         if texture.file:
             texture.file = str((folder / spec.texturedir / texture.file).resolve())
+    for name, geom in zip(_link_names(spec, mjcf), _link_geoms(spec, mjcf), strict=True):
+        geom.name = name
     for geom in spec.geoms:
         geom.contype = 0
         geom.conaffinity = 0
@@ -273,6 +281,24 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
         ):
             setattr(spec.option, name, getattr(option, name))
     return spec
+
+
+def _link_geoms(spec: mujoco.MjSpec, mjcf: MjcfGripper) -> list:
+    """The file's collision geoms (contype or conaffinity set) other than the pads."""
+    pads = set(mjcf.pad_left_geoms) | set(mjcf.pad_right_geoms)
+    return [g for g in spec.geoms if (g.contype or g.conaffinity) and g.name not in pads]
+
+
+def _link_names(spec: mujoco.MjSpec, mjcf: MjcfGripper) -> list[str]:
+    return [g.name or f"link{k}" for k, g in enumerate(_link_geoms(spec, mjcf))]
+
+
+@functools.cache
+def link_geoms(mjcf: MjcfGripper) -> tuple[str, ...]:
+    """Names (unprefixed) of the gripper's link collision geoms, as attached (unnamed
+    ones are named link0, link1, ...)."""
+    spec = mujoco.MjSpec.from_file(mjcf.file)
+    return tuple(_link_names(spec, mjcf))
 
 
 def attach(scene: mujoco.MjSpec, mjcf: MjcfGripper, parent_body: str, pos=(0.0, 0.0, 0.0)):

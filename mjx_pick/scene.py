@@ -216,6 +216,14 @@ def scene_xml(
                 f'friction="{pad_fr}" solref="{_fmt(mjc.pad_solref)}" '
                 f'solimp="{_fmt(mjc.pad_solimp)}"/>'
             )
+    if gripper.mjcf is not None and gripper.mjcf.link_contacts:
+        for i in range(len(pad_pieces)):
+            for k, link in enumerate(mjcf_gripper.link_geoms(gripper.mjcf)):
+                pairs.append(
+                    f'    <pair name="link{k}_piece{i}" geom1="{mjcf_gripper.PREFIX + link}" '
+                    f'geom2="piece{i}" condim="3" friction="{pad_fr}" '
+                    f'solref="{_fmt(mjc.pad_solref)}" solimp="{_fmt(mjc.pad_solimp)}"/>'
+                )
     pairs.append(
         f'    <pair name="table_hull" geom1="table" geom2="hull" condim="3" '
         f'friction="{tab_fr}" solref="{_fmt(mjc.table_solref)}" '
