@@ -53,6 +53,9 @@ class GripperSpec:
 
     def __post_init__(self):
         o = f"gripper[{self.name}]"
+        if isinstance(self.mjcf, dict):  # from a saved config (JSON) or a TOML table
+            mjcf = from_mapping(mjcf_gripper.MjcfGripper, self.mjcf, where=f"{o}.mjcf")
+            object.__setattr__(self, "mjcf", mjcf)
         for field in (
             "stroke_mm",
             "finger_width_mm",
