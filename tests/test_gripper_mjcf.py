@@ -8,7 +8,9 @@ the C engine; errors on every input a user can get wrong, before any simulation.
 """
 
 import dataclasses
+import json
 import math
+import tomllib
 from importlib import resources
 from pathlib import Path
 
@@ -361,3 +363,49 @@ def test_linkage_closes_alike_in_mjx_and_mujoco_c(linkage, block):
     # 0.05 mm over 16 mm of travel: MJX runs in float32 (the C engine in float64) and
     # solves the loop constraints with its own solver iterations
     assert worst < 0.05e-3, f"{worst * 1e3:.4f} mm"
+
+
+# ------------------------------------------------------------------ every asset, configs
+
+
+YCB = resources.files("mjx_pick.assets") / "objects" / "ycb"
+
+
+@pytest.mark.parametrize("name", sorted(tomllib.loads((YCB / "manifest.toml").read_text())))
+def test_every_ycb_mesh_compiles_with_the_linkage(name, linkage, monkeypatch):
+    """The image assets x every preset: tests/test_objects.py. Here the meshes, with
+    their convex hull as the one collision piece (CoACD takes 5-40 s per mesh here and
+    does not change what this checks: the gripper attached over a mesh object)."""
+    from mjx_pick import objects
+
+    monkeypatch.setattr(
+        objects, "_coacd_pieces", lambda mesh, threshold: (np.asarray(mesh.convex_hull.vertices),)
+    )
+    entry = tomllib.loads((YCB / "manifest.toml").read_text())[name]
+    with resources.as_file(YCB / entry["file"]) as path:
+        obj = mp.load_object(path, unit=entry["unit"], mass_g=entry["mass_g"])
+    scene = mp.build_scene(obj, linkage)
+    data = mujoco.MjData(scene.model)
+    mujoco.mj_forward(scene.model, data)
+    assert data.warning.number.sum() == 0
+    # 4 pad boxes x 1 piece, and the table
+    assert len(scene.index.pad_pairs) == 4 and len(scene.index.table_pairs) == 1
+
+
+def test_link_contacts_add_one_pair_per_link_and_piece(linkage, block):
+    links = mjcf_gripper.link_geoms(linkage.mjcf)
+    assert len(links) == 10  # Menagerie's collision meshes: mount, base, 2 x 4 links
+    on = dataclasses.replace(linkage, mjcf=dataclasses.replace(linkage.mjcf, link_contacts=True))
+    plain, colliding = mp.build_scene(block, linkage), mp.build_scene(block, on)
+    assert colliding.model.npair - plain.model.npair == len(links) * len(block.pad_pieces(8, 22))
+    def pad_pairs(scene):
+        return [scene.model.pair(i).name for i in scene.index.pad_pairs]
+
+    assert pad_pairs(colliding) == pad_pairs(plain)
+
+
+def test_mjcf_gripper_round_trips_through_a_saved_config(linkage):
+    from mjx_pick.config import from_mapping, to_dict
+
+    again = from_mapping(mp.GripperSpec, json.loads(json.dumps(to_dict(linkage))))
+    assert again == linkage
