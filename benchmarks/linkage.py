@@ -84,7 +84,10 @@ def ycb_objects() -> dict:
 
 
 def changes(obj, grippers, result, seed: int) -> dict:
-    """Label changes between the two grippers on the candidates both could take."""
+    """Label changes between the two grippers on the candidates both could take, and
+    on each, how much higher the linkage's near pad is when it reaches the part than
+    at the grasp (pickpoints.FeasibilityChecker.near_pad_rise_mm) against the part's
+    top above its fingertips."""
     table = result.table.to_pandas()
     both = result.feasible.all(axis=0)
     ids = result.candidates["pick_id"][both]
@@ -94,6 +97,16 @@ def changes(obj, grippers, result, seed: int) -> dict:
     par, lin = rows[PARALLEL], rows[LINKAGE]
     lost = par["success"].to_numpy() & ~lin["success"].to_numpy()
     won = ~par["success"].to_numpy() & lin["success"].to_numpy()
+    kept = par["success"].to_numpy() & lin["success"].to_numpy()
+    checker = pp.FeasibilityChecker(obj, grippers[1], pp.PickConfig(pad_path_check=True))
+    res = checker(lin["x_mm"].to_numpy(), lin["y_mm"].to_numpy(), lin["yaw_deg"].to_numpy())
+    rise = checker.near_pad_rise_mm(res["opening_mm"], res["gap_left_mm"], res["gap_right_mm"])
+    rides = rise >= checker.room_mm
+
+    def quantiles(mask):
+        if not mask.any():
+            return []
+        return [round(float(v), 2) for v in np.quantile(rise[mask], [0, 0.5, 1])]
 
     def describe(mask, failing):
         sub_par, sub_lin = par[mask], lin[mask]
@@ -132,6 +145,15 @@ def changes(obj, grippers, result, seed: int) -> dict:
         "median_tilt_max_deg_all": {
             PARALLEL: float(np.nanmedian(par["tilt_max_deg"])),
             LINKAGE: float(np.nanmedian(lin["tilt_max_deg"])),
+        },
+        "near_pad_rise_mm": {
+            "room_mm (part top above the fingertips)": round(checker.room_mm, 2),
+            "lost min/median/max": quantiles(lost),
+            "both_ok min/median/max": quantiles(kept),
+            "lost_with_rise_over_room": int((lost & rides).sum()),
+            "both_ok_with_rise_over_room": int((kept & rides).sum()),
+            "rise_over_room": int(rides.sum()),
+            "linkage_fails_of_those": int((rides & ~lin["success"].to_numpy()).sum()),
         },
         "seed": seed,
     }
@@ -194,7 +216,10 @@ def run_compare(args) -> None:
     rows = []
     for name, obj in objects.items():
         t0 = time.perf_counter()
-        result = compare(obj, grippers, n=args.n, seed=args.seed, backend="mujoco")
+        config = pp.PickConfig(pad_path_check=not args.no_pad_path_check)
+        result = compare(
+            obj, grippers, n=args.n, seed=args.seed, backend="mujoco", pick_config=config
+        )
         row = changes(obj, grippers, result, args.seed)
         row["wall_s"] = round(time.perf_counter() - t0, 1)
         rows.append(row)
@@ -289,6 +314,11 @@ def main() -> None:
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--out", default="")
     c.add_argument("--pictures", default="")
+    c.add_argument(
+        "--no-pad-path-check",
+        action="store_true",
+        help="simulate the poses whose near linkage pad rides over the part too",
+    )
     k = sub.add_parser("links", help="colliding link meshes: compile and step time")
     k.add_argument("--object", default="door_opener")
     k.add_argument("--backends", default="mujoco")

@@ -398,6 +398,7 @@ def test_link_contacts_add_one_pair_per_link_and_piece(linkage, block):
     on = dataclasses.replace(linkage, mjcf=dataclasses.replace(linkage.mjcf, link_contacts=True))
     plain, colliding = mp.build_scene(block, linkage), mp.build_scene(block, on)
     assert colliding.model.npair - plain.model.npair == len(links) * len(block.pad_pieces(8, 22))
+
     def pad_pairs(scene):
         return [scene.model.pair(i).name for i in scene.index.pad_pairs]
 
@@ -409,3 +410,35 @@ def test_mjcf_gripper_round_trips_through_a_saved_config(linkage):
 
     again = from_mapping(mp.GripperSpec, json.loads(json.dumps(to_dict(linkage))))
     assert again == linkage
+
+
+def test_pad_path_check_rejects_poses_whose_near_pad_rides_over_the_part(linkage, door_opener):
+    """Off-centre on the 5 mm door opener, the near pad reaches the part at a wider
+    opening, higher than at the grasp; where that lifts its tip above the part's top
+    the pose is rejected, and simulated anyway, it fails (a centred pose does not)."""
+    from mjx_pick.kernels import feasibility as fk
+
+    on = pp.FeasibilityChecker(door_opener, linkage, grasp=PROC)
+    off = pp.FeasibilityChecker(door_opener, linkage, pp.PickConfig(pad_path_check=False), PROC)
+    ids, x, y, yaw = next(pp.candidate_blocks(on, seed=0))
+    with_check, without = on(x, y, yaw), off(x, y, yaw)
+    rides = with_check["reason"] == fk.PAD_PATH
+    assert rides.any() and (without["reason"][rides] == fk.FEASIBLE).all()
+    rise = on.near_pad_rise_mm(
+        with_check["opening_mm"], with_check["gap_left_mm"], with_check["gap_right_mm"]
+    )
+    assert (rise[rides] >= on.room_mm).all()
+    # the worst such pose against the most centred feasible one, simulated
+    worst = int(np.flatnonzero(rides)[np.argmax(rise[rides])])
+    ok = with_check["reason"] == fk.FEASIBLE
+    centred_pose = int(np.flatnonzero(ok)[np.argmin(rise[ok])])
+    picks = off.batch(
+        ids[[worst, centred_pose]],
+        x[[worst, centred_pose]],
+        y[[worst, centred_pose]],
+        yaw[[worst, centred_pose]],
+        "user",
+    )
+    scene = mp.build_scene(door_opener, linkage, None, None, PROC)
+    out, _ = make_backend("mujoco", scene, PROC, batch_size=2).run(make_inputs(scene, PROC, picks))
+    assert list(out["success"]) == [False, True]
