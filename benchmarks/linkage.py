@@ -159,14 +159,14 @@ def changes(obj, grippers, result, seed: int) -> dict:
     }
 
 
-def picture(obj, grippers, cand_row, grasp, path: Path) -> None:
+def picture(obj, grippers, cand_row, grasp, config, path: Path) -> None:
     """One pick re-simulated on both grippers with traces: the pick, pad forces, the
     object's lift and tilt."""
     from mjx_pick.plots import new_figure, pick_on_axes, save_png
 
     fig, axes = new_figure(2, 3, figsize=(15, 8))
     for row, gripper in zip(axes, grippers, strict=True):
-        checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
+        checker = pp.FeasibilityChecker(obj, gripper, config, grasp)
         picks = checker.batch(
             np.arange(1), [cand_row["x_mm"]], [cand_row["y_mm"]], [cand_row["yaw_deg"]], "user"
         )
@@ -223,6 +223,8 @@ def run_compare(args) -> None:
         row = changes(obj, grippers, result, args.seed)
         row["wall_s"] = round(time.perf_counter() - t0, 1)
         rows.append(row)
+        if args.out:
+            write_json(args.out, {"args": vars(args), "rows": rows})
         print(
             f"{name:24s} both feasible {row['both_feasible']:4d}  success "
             f"{row['success_rate_on_both'][PARALLEL]:.3f} -> "
@@ -241,10 +243,8 @@ def run_compare(args) -> None:
                 k = int(np.flatnonzero(result.candidates["pick_id"] == ids[0])[0])
                 cand = {c: float(result.candidates[c][k]) for c in ("x_mm", "y_mm", "yaw_deg")}
                 png = Path(args.pictures) / f"{name}_{key}.png"
-                picture(obj, grippers, cand, grasp, png)
+                picture(obj, grippers, cand, grasp, config, png)
                 print("  picture", png, flush=True)
-    if args.out:
-        write_json(args.out, {"args": vars(args), "rows": rows})
 
 
 def run_links(args) -> None:
