@@ -11,8 +11,9 @@ parallel-jaw 2F-85 on the same pick-points.
         --pictures benchmarks/results/linkage_pictures
     python benchmarks/linkage.py compare --ycb --n 48 \\
         --out benchmarks/results/linkage_vs_parallel_ycb.json
-    # what colliding link meshes cost: MuJoCo C step time, MJX compile time (one step)
-    python benchmarks/linkage.py links --backends mujoco,mjx --out benchmarks/out/links.json
+    # what colliding link meshes cost: MuJoCo C step time; MJX / Warp compile time and
+    # pick-points per second of a batched rollout (on a GPU machine)
+    python benchmarks/linkage.py links --backends mujoco,warp,mjx --out benchmarks/out/links.json
 
 Compile time and throughput on the GPU backends: benchmarks/throughput.py with
 --gripper robotiq-2f85-linkage (benchmarks/RESULTS.md gives the command).
@@ -248,8 +249,12 @@ def run_compare(args) -> None:
 
 
 def run_links(args) -> None:
-    """Compile and step time with the link meshes colliding with the object or not."""
-    obj = mp.load_asset(args.object)
+    """What colliding link meshes cost: the same scene with the linkage's 10 link
+    meshes paired with every object piece or not. MuJoCo C: microseconds per physics
+    step of one simulation; MJX / Warp: a full batched rollout through the backend
+    (compile time apart from run time, pick-points per second; mjx_pick.throughput)."""
+    from mjx_pick.throughput import measure
+
     base = mp.load_gripper(LINKAGE)
     grasp = mp.GraspConfig()
     rows = []
@@ -257,49 +262,38 @@ def run_links(args) -> None:
         gripper = dataclasses.replace(
             base, mjcf=dataclasses.replace(base.mjcf, link_contacts=links)
         )
+        obj = mp.load_asset(args.object)
         scene = mp.build_scene(obj, gripper, None, None, grasp)
-        picks = pp.generate_normal(obj, gripper, 1, seed=0, grasp=grasp)
-        qpos0 = make_inputs(scene, grasp, picks).qpos0[0]
         row = {"object": args.object, "link_contacts": links, "npair": int(scene.model.npair)}
         for backend in args.backends.split(","):
-            row.update(_time_steps(scene, qpos0, backend, args.steps))
+            if backend == "mujoco":
+                row["mujoco_us_per_step"] = _c_step_us(scene, obj, gripper, grasp, args.steps)
+                continue
+            m = measure(args.object, gripper, backend, args.batch, 1, grasp, mp.SolverParams())
+            for key in ("compile_s", "picks_per_s", "physics_steps_per_s", "success_rate"):
+                row[f"{backend}_{key}"] = m[key]
+            row[f"{backend}_device"] = m["device"]
         rows.append(row)
         print(row, flush=True)
-    if args.out:
-        write_json(args.out, {"args": vars(args), "rows": rows})
+        if args.out:
+            write_json(args.out, {"args": vars(args), "rows": rows})
 
 
-def _time_steps(scene, qpos0, backend: str, steps: int) -> dict:
+def _c_step_us(scene, obj, gripper, grasp, steps: int) -> float:
+    """MuJoCo C, one pick's start state, microseconds per physics step."""
     import mujoco
 
+    picks = pp.generate_normal(obj, gripper, 1, seed=0, grasp=grasp)
+    qpos0 = make_inputs(scene, grasp, picks).qpos0[0]
     model = scene.model
     data = mujoco.MjData(model)
     data.qpos[:] = qpos0
     data.ctrl[scene.index.lift_actuator] = qpos0[scene.index.lift_qpos]
     mujoco.mj_forward(model, data)
-    if backend == "mujoco":
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            mujoco.mj_step(model, data)
-        return {"mujoco_us_per_step": round((time.perf_counter() - t0) / steps * 1e6, 1)}
-    import jax
-    from mujoco import mjx
-
-    impl = "warp" if backend == "warp" else "jax"
-    mx = mjx.put_model(model, impl=impl)
-    dx = mjx.put_data(model, data, impl=impl)
-    t0 = time.perf_counter()
-    step = jax.jit(mjx.step).lower(mx, dx).compile()
-    compile_s = time.perf_counter() - t0
-    dx = jax.block_until_ready(step(mx, dx))
     t0 = time.perf_counter()
     for _ in range(steps):
-        dx = step(mx, dx)
-    jax.block_until_ready(dx)
-    return {
-        f"{backend}_compile_s": round(compile_s, 1),
-        f"{backend}_us_per_step": round((time.perf_counter() - t0) / steps * 1e6, 1),
-    }
+        mujoco.mj_step(model, data)
+    return round((time.perf_counter() - t0) / steps * 1e6, 1)
 
 
 def main() -> None:
@@ -322,7 +316,8 @@ def main() -> None:
     k = sub.add_parser("links", help="colliding link meshes: compile and step time")
     k.add_argument("--object", default="door_opener")
     k.add_argument("--backends", default="mujoco")
-    k.add_argument("--steps", type=int, default=200)
+    k.add_argument("--steps", type=int, default=200, help="MuJoCo C steps timed")
+    k.add_argument("--batch", type=int, default=1024, help="MJX / Warp batch")
     k.add_argument("--out", default="")
     args = ap.parse_args()
     if args.command == "path":
