@@ -56,6 +56,26 @@ class GripperSpec:
         if isinstance(self.mjcf, dict):  # from a saved config (JSON) or a TOML table
             mjcf = from_mapping(mjcf_gripper.MjcfGripper, self.mjcf, where=f"{o}.mjcf")
             object.__setattr__(self, "mjcf", mjcf)
+        if self.mjcf is not None:
+            kin = mjcf_gripper.characterise(self.mjcf)
+            weakest = float(kin.force_limit_n.min())
+            if self.force_max_n > weakest * (1 + 1e-6):
+                at = float(kin.opening[np.argmin(kin.force_limit_n)]) * 1e3
+                raise ConfigError(
+                    f"{o}.force_max_n = {self.force_max_n:g} is more than the actuator "
+                    f"{self.mjcf.actuator!r} can push: its force limit gives {weakest:.1f} N "
+                    f"per pad at a {at:.1f} mm opening; raise mjcf.actuator_forcerange or "
+                    "lower force_max_n"
+                )
+            # an MJCF gripper's geometry is its model's: a sweep or design variant that
+            # changes it would simulate a gripper other than the one it names
+            for field, value in measured_fields(kin).items():
+                if abs(getattr(self, field) - value) > 1e-9 * max(1.0, abs(value)):
+                    raise ConfigError(
+                        f"{o}.{field} = {getattr(self, field)!r} cannot be set: an MJCF "
+                        f"gripper's {field} is measured from its model ({value:g}); "
+                        "change the MJCF file instead"
+                    )
         for field in (
             "stroke_mm",
             "finger_width_mm",
@@ -135,27 +155,21 @@ def mjcf_gripper_spec(data: dict, path: Path) -> GripperSpec:
     )
     kin = mjcf_gripper.characterise(mjcf)
     spec = from_mapping(GripperSpec, data, where=path.name)
-    spec = dataclasses.replace(
-        spec,
-        mjcf=mjcf,
-        stroke_mm=round(kin.stroke_m * 1e3, 3),
-        finger_width_mm=round(kin.pad_width_m * 1e3, 3),
-        finger_depth_mm=round(kin.pad_depth_m * 1e3, 3),
-        pad_height_mm=round(kin.pad_height_m * 1e3, 3),
-        finger_mass_g=round(kin.finger_mass_kg * 1e3, 3),
-        body_mass_g=round(kin.mass_kg * 1e3, 3),
+    return dataclasses.replace(spec, mjcf=mjcf, **measured_fields(kin))
+
+
+def measured_fields(kin: mjcf_gripper.Kinematics) -> dict[str, float]:
+    """The GripperSpec fields an MJCF gripper's model sets (geometry, masses, drive)."""
+    return {
+        "stroke_mm": round(kin.stroke_m * 1e3, 3),
+        "finger_width_mm": round(kin.pad_width_m * 1e3, 3),
+        "finger_depth_mm": round(kin.pad_depth_m * 1e3, 3),
+        "pad_height_mm": round(kin.pad_height_m * 1e3, 3),
+        "finger_mass_g": round(kin.finger_mass_kg * 1e3, 3),
+        "body_mass_g": round(kin.mass_kg * 1e3, 3),
         # where the stroke is stiffest (the kernels use the table along the stroke)
-        drive_stiffness_n_per_mm=round(float(kin.stiffness_n_per_m.max()) * 1e-3, 6),
-    )
-    weakest = float(kin.force_limit_n.min())
-    if spec.force_max_n > weakest * (1 + 1e-6):
-        at = float(kin.opening[np.argmin(kin.force_limit_n)]) * 1e3
-        raise ConfigError(
-            f"{path.name}: force_max_n = {spec.force_max_n:g} is more than the actuator "
-            f"{mjcf.actuator!r} can push: its force limit gives {weakest:.1f} N per pad at a "
-            f"{at:.1f} mm opening; raise mjcf.actuator_forcerange or lower force_max_n"
-        )
-    return spec
+        "drive_stiffness_n_per_mm": round(float(kin.stiffness_n_per_m.max()) * 1e-3, 6),
+    }
 
 
 # besides the geometry: measured from an MJCF model, never set by its TOML

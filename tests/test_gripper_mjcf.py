@@ -442,3 +442,12 @@ def test_pad_path_check_rejects_poses_whose_near_pad_rides_over_the_part(linkage
     scene = mp.build_scene(door_opener, linkage, None, None, PROC)
     out, _ = make_backend("mujoco", scene, PROC, batch_size=2).run(make_inputs(scene, PROC, picks))
     assert list(out["success"]) == [False, True]
+
+
+def test_an_mjcf_grippers_geometry_cannot_be_varied(linkage):
+    # a sweep or design variant (dataclasses.replace) would simulate another gripper
+    with pytest.raises(ConfigError, match="finger_width_mm = 30.0 cannot be set.*measured"):
+        dataclasses.replace(linkage, finger_width_mm=30.0)
+    assert dataclasses.replace(linkage, force_max_n=200.0).force_max_n == 200.0
+    with pytest.raises(ConfigError, match="force_max_n = 300 is more than the actuator"):
+        dataclasses.replace(linkage, force_max_n=300.0)
