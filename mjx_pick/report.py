@@ -533,9 +533,7 @@ def report(
         forces.append((p, label))
         if animations:
             g = out_dir / f"anim_{pid}.gif"
-            frames = animate(
-                run.path / "scene.xml", trace, g, anim_every, anim_size, run.gripper
-            )
+            frames = animate(run.path / "scene.xml", trace, g, anim_every, anim_size, run.gripper)
             anims.append((g, f"{label} ({frames} frames)"))
     written["forces"] = [str(p) for p, _ in forces]
     written["animations"] = [str(p) for p, _ in anims]
