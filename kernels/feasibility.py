@@ -33,8 +33,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-FEASIBLE, OFF_OBJECT, TOO_WIDE, CLEARANCE, COVERAGE = range(5)
-REASONS = ("feasible", "off_object", "too_wide", "clearance", "coverage")
+FEASIBLE, OFF_OBJECT, TOO_WIDE, CLEARANCE, COVERAGE, PAD_PATH = range(6)
+# pad_path: a linkage's near pad rides over the part (mjx_pick.pickpoints; not checked
+# in these kernels, which see the gripper's footprint only)
+REASONS = ("feasible", "off_object", "too_wide", "clearance", "coverage", "pad_path")
 
 
 class GripperBand(NamedTuple):

@@ -17,6 +17,17 @@ of the slower finger: when the object slips or turns and the measured force drop
 drive cannot wind up and slam the pads beyond the limit once it catches again. Lifting
 starts as soon as F reaches reach_fraction * F_d (the paper's rule against slip before
 the lift), after the optional dwell.
+
+Grippers: a parametric parallel jaw has one slide joint and one position servo per
+finger, whose coordinate IS the finger's closing travel. A gripper from an MJCF file (a
+linkage such as the Robotiq 2F-85) has neither: its fingers are driven through joints
+and tendons, and its pads travel along a curve. :class:`DriveMap` (static tables
+measured on the MuJoCo C model, ``mjx_pick.mjcf_gripper``) maps its finger joints to
+each pad's closing travel, the commanded travel to the actuator's control, and the
+travel to the drive's stiffness at the pads; the controller itself still works in
+travel, so the same code regulates both. The gripper's starting lift may be non-zero
+(the linkage's height compensation raises it per pick-point): the lift is measured
+from where it started.
 """
 
 from __future__ import annotations
@@ -77,6 +88,7 @@ class ControlState(NamedTuple):
     lift_target: jax.Array  # m, gripper lift target
     lift_velocity: jax.Array  # m/s, of the lift target
     t_steady: jax.Array  # s the force has stayed between reach and limit while closing
+    lift_start: jax.Array  # m, the gripper's starting lift (height compensation)
 
 
 class Measurement(NamedTuple):
@@ -92,6 +104,9 @@ class Measurement(NamedTuple):
     lift: jax.Array  # m, gripper lift joint position
     speed_max: jax.Array  # largest |qvel|
     finite: jax.Array  # bool, state is finite
+    # N per m of target lead, the drive's stiffness at the pads at this travel (an MJCF
+    # linkage's lever changes along its stroke); None: GraspParams' constant
+    drive_stiffness_n_per_m: jax.Array | None = None
 
 
 class Accumulators(NamedTuple):
@@ -117,11 +132,13 @@ class Accumulators(NamedTuple):
     t: jax.Array  # s since start
 
 
-def initial_state(finger_travel0) -> ControlState:
-    """Start: settling, fingers at their starting travel, gripper not lifted."""
+def initial_state(finger_travel0, lift0=None) -> ControlState:
+    """Start: settling, fingers at their starting travel (m), the lift where it starts
+    (m; None: 0, the gripper's nominal height)."""
     z = jnp.zeros_like(finger_travel0)
+    lift0 = z if lift0 is None else jnp.asarray(lift0, z.dtype)
     phase = jnp.int32(SETTLE) + jnp.zeros_like(finger_travel0, jnp.int32)
-    return ControlState(phase, z, finger_travel0, z, z, z)
+    return ControlState(phase, z, finger_travel0, lift0, z, z, lift0)
 
 
 def initial_accumulators(like) -> Accumulators:
@@ -164,7 +181,11 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
     # "reached" once the force has stayed between reach_fraction * F_d and the limit
     # for reach_settle_s: the impact of the approaching pads (a light part bounces
     # between them) must not start the lift (reach_settle_s = 0: the paper's rule)
-    steady = (ph == CLOSE) & (force >= p.reach_fraction * p.force_n) & (force <= f_lim)
+    # the band reaches at least as far above F_d as below it: with F_d at the gripper's
+    # limit (f_lim = F_d) a force held at F_d dithers across f_lim by float noise (an
+    # MJCF drive, whose force limit is not exactly F_d at the pads, showed it)
+    upper = jnp.maximum(f_lim, (2.0 - p.reach_fraction) * p.force_n)
+    steady = (ph == CLOSE) & (force >= p.reach_fraction * p.force_n) & (force <= upper)
     t_steady = jnp.where(steady, s.t_steady + p.dt, 0.0)
     reached = steady & (t_steady >= p.reach_settle_s - 1e-6)
     nxt = jnp.select(
@@ -174,7 +195,9 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
             (ph == CLOSE) & reached,
             (ph == CLOSE) & (t >= p.close_timeout_s),
             (ph == DWELL) & (t >= p.dwell_s),
-            (ph == LIFT) & (s.lift_target >= p.lift_height_m),
+            # the same sum as the lift's top below (float32: lift_start + h - lift_start
+            # may fall short of h)
+            (ph == LIFT) & (s.lift_target >= s.lift_start + p.lift_height_m),
             (ph == HOLD) & (t >= p.hold_s),
         ],
         [CLOSE, DWELL, LIFT, DONE, LIFT, HOLD, DONE],
@@ -183,7 +206,9 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
     t_next = jnp.where(nxt == ph, t, 0.0)
     # P force controller: on from CLOSE on; a failed close (DONE without a lift) stops
     active = (
-        (ph != SETTLE) & ~((ph == CLOSE) & (nxt == DONE)) & ~((ph == DONE) & (s.lift_target <= 0))
+        (ph != SETTLE)
+        & ~((ph == CLOSE) & (nxt == DONE))
+        & ~((ph == DONE) & (s.lift_target <= s.lift_start))
     )
     v = jnp.clip(p.kp * (p.force_n - force), -p.v_open, p.v_close)
     # until a pad touches, the fingers approach at the set closing speed, as the real
@@ -195,20 +220,26 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
     # reads zero force for a tick): the servo pushes k_drive * (target - travel), at
     # most F_lim. In free approach the target leads by the drive's tracking lag only.
     engaged = touching | (ph == DWELL) | (ph == LIFT) | (ph == HOLD)
-    capped = jnp.minimum(m.finger_left, m.finger_right) + f_lim / p.drive_stiffness_n_per_m
+    k_drive = (
+        p.drive_stiffness_n_per_m
+        if m.drive_stiffness_n_per_m is None
+        else m.drive_stiffness_n_per_m
+    )
+    capped = jnp.minimum(m.finger_left, m.finger_right) + f_lim / k_drive
     finger_target = jnp.where(engaged, jnp.minimum(finger_target, capped), finger_target)
     # the lift runs in LIFT only: trapezoidal profile, the speed rises by a*dt, never
     # above the cruise speed, and never above what still allows a stop at the top
     lifting = nxt == LIFT
-    remaining = jnp.maximum(p.lift_height_m - s.lift_target, 0.0)
+    top = s.lift_start + p.lift_height_m
+    remaining = jnp.maximum(top - s.lift_target, 0.0)
     v_stop = jnp.sqrt(2.0 * p.lift_accel_m_s2 * remaining)
     v_lift = jnp.minimum(s.lift_velocity + p.lift_accel_m_s2 * p.dt, p.lift_speed_m_s)
     v_lift = jnp.where(lifting, jnp.clip(v_lift, 0.0, v_stop), 0.0)
     lift_target = s.lift_target + v_lift * p.dt
     # within a micrometre of the top counts as arrived (the stopping speed tends to 0)
-    lift_target = jnp.where(p.lift_height_m - lift_target < 1e-6, p.lift_height_m, lift_target)
-    lift_target = jnp.where(lifting, jnp.minimum(lift_target, p.lift_height_m), s.lift_target)
-    return ControlState(nxt, t_next, finger_target, lift_target, v_lift, t_steady)
+    lift_target = jnp.where(top - lift_target < 1e-6, top, lift_target)
+    lift_target = jnp.where(lifting, jnp.minimum(lift_target, top), s.lift_target)
+    return ControlState(nxt, t_next, finger_target, lift_target, v_lift, t_steady, s.lift_start)
 
 
 def lift_duration(p: GraspParams):
@@ -291,7 +322,9 @@ def accumulate(
         force_right_max=jnp.maximum(a.force_right_max, fr),
         lift_after_lift=jnp.where(lift_end, obj_lift, a.lift_after_lift),
         table_after_lift=jnp.where(lift_end, on_table, a.table_after_lift),
-        slip_max=jnp.maximum(a.slip_max, jnp.where(in_window, m.lift - obj_lift, 0.0)),
+        slip_max=jnp.maximum(
+            a.slip_max, jnp.where(in_window, m.lift - s.lift_start - obj_lift, 0.0)
+        ),
         lift_final=jnp.where(hold_end, obj_lift, a.lift_final),
         table_final=jnp.where(hold_end, on_table, a.table_final),
         rot_final=jnp.where(hold_end, rot, a.rot_final),
@@ -349,8 +382,38 @@ def finalize(p: GraspParams, a: Accumulators) -> dict:
     }
 
 
+class DriveMap(NamedTuple):
+    """How an MJCF gripper's joints and actuator relate to its pads' closing travel.
+
+    Static under jit (tuples of floats, hashable): tables sampled along the stroke by a
+    quasi-static close of the MuJoCo C model (``mjx_pick.mjcf_gripper``), each ascending
+    in its first column, interpolated linearly. Travel is each pad's closing distance
+    from fully open, m, in the free (parallel) mode of the linkage.
+    """
+
+    q_left: tuple[float, ...]  # (K,) left finger joint position (rad or m)
+    travel_left: tuple[float, ...]  # (K,) left pad travel there, m
+    q_right: tuple[float, ...]  # (K,) right finger joint position
+    travel_right: tuple[float, ...]  # (K,) m
+    travel: tuple[float, ...]  # (K,) mean pad travel, m
+    length: tuple[float, ...]  # (K,) actuator length there (tendon or joint units)
+    stiffness_n_per_m: tuple[float, ...]  # (K,) pad force per m of travel lead
+    ctrl_per_length: float  # ctrl = ctrl_at_zero_length + ctrl_per_length * length
+    ctrl_at_zero_length: float
+
+
+def _interp(x, xs: tuple, ys: tuple):
+    """Piecewise-linear table lookup, clamped at the ends (jnp.interp on constants)."""
+    return jnp.interp(x, jnp.asarray(xs, x.dtype), jnp.asarray(ys, x.dtype))
+
+
 class Addresses(NamedTuple):
-    """Where the kernels read and write in MuJoCo's arrays (ints: static under jit)."""
+    """Where the kernels read and write in MuJoCo's arrays (ints: static under jit).
+
+    finger_*_qpos: the finger's slide joint (parallel jaw) or the joint whose angle
+    ``drive`` maps to the pad's travel (MJCF gripper); finger_*_body: the body holding
+    the pad; finger_*_actuator: the same actuator twice when one drives both fingers.
+    """
 
     object_qpos: int
     lift_qpos: int
@@ -363,6 +426,16 @@ class Addresses(NamedTuple):
     finger_left_actuator: int
     finger_right_actuator: int
     nu: int
+    drive: DriveMap | None = None  # None: the joints' coordinates are the travel
+
+
+def finger_travel(ad: Addresses, qpos):
+    """(left, right) pads' closing travel, m, from qpos (nq,)."""
+    ql, qr = qpos[ad.finger_left_qpos], qpos[ad.finger_right_qpos]
+    if ad.drive is None:
+        return ql, qr
+    d = ad.drive
+    return _interp(ql, d.q_left, d.travel_left), _interp(qr, d.q_right, d.travel_right)
 
 
 def measure(ad: Addresses, qpos, qvel, cfrc_ext) -> Measurement:
@@ -376,26 +449,42 @@ def measure(ad: Addresses, qpos, qvel, cfrc_ext) -> Measurement:
     f_left = cfrc_ext[ad.finger_left_body, 3:]
     f_right = cfrc_ext[ad.finger_right_body, 3:]
     o = ad.object_qpos
+    travel_left, travel_right = finger_travel(ad, qpos)
+    stiffness = None
+    if ad.drive is not None:
+        slower = jnp.minimum(travel_left, travel_right)
+        stiffness = _interp(slower, ad.drive.travel, ad.drive.stiffness_n_per_m)
     return Measurement(
         force_left=-f_left[0],
         force_right=f_right[0],
         force_table=f_obj[2] + f_left[2] + f_right[2],
-        finger_left=qpos[ad.finger_left_qpos],
-        finger_right=qpos[ad.finger_right_qpos],
+        finger_left=travel_left,
+        finger_right=travel_right,
         object_pos=qpos[o : o + 3],
         object_quat=qpos[o + 3 : o + 7],
         lift=qpos[ad.lift_qpos],
         speed_max=jnp.max(jnp.abs(qvel)),
         finite=jnp.all(jnp.isfinite(qpos)) & jnp.all(jnp.isfinite(qvel)),
+        drive_stiffness_n_per_m=stiffness,
     )
 
 
 def command(ad: Addresses, s: ControlState, like):
-    """Actuator controls (nu,) for the state's targets."""
+    """Actuator controls (nu,) for the state's targets.
+
+    An MJCF gripper's actuator is a position servo on its drive (a tendon or a joint):
+    the travel target becomes the drive length that gives it (the table), then the
+    control that sets that length as the servo's reference.
+    """
     ctrl = jnp.zeros(ad.nu, like.dtype)
     ctrl = ctrl.at[ad.lift_actuator].set(s.lift_target)
-    ctrl = ctrl.at[ad.finger_left_actuator].set(s.finger_target)
-    return ctrl.at[ad.finger_right_actuator].set(s.finger_target)
+    finger = s.finger_target
+    if ad.drive is not None:
+        d = ad.drive
+        length = _interp(finger, d.travel, d.length)
+        finger = d.ctrl_at_zero_length + d.ctrl_per_length * length
+    ctrl = ctrl.at[ad.finger_left_actuator].set(finger)
+    return ctrl.at[ad.finger_right_actuator].set(finger)
 
 
 def tick(p: GraspParams, ad: Addresses, s, a, qpos, qvel, cfrc_ext, pos0, quat0):
@@ -421,8 +510,8 @@ def tick(p: GraspParams, ad: Addresses, s, a, qpos, qvel, cfrc_ext, pos0, quat0)
             m.object_quat[1],
             m.object_quat[2],
             m.object_quat[3],
-            qpos[ad.finger_left_qpos],
-            qpos[ad.finger_right_qpos],
+            m.finger_left,
+            m.finger_right,
             m.lift,
             s.phase.astype(m.lift.dtype),
         ]
@@ -431,8 +520,9 @@ def tick(p: GraspParams, ad: Addresses, s, a, qpos, qvel, cfrc_ext, pos0, quat0)
 
 
 # one row per control tick of a recorded pick, SI units, in tick()'s order; with the
-# object's quaternion, a row holds every joint of the scene, so a trace can be replayed
-# (rendered) without simulating again
+# object's quaternion, a row holds every joint of a parallel-jaw scene, so a trace can be
+# replayed (rendered) without simulating again. finger_*_m is each pad's closing travel
+# (for an MJCF gripper, through its DriveMap)
 TRACE_FIELDS = (
     "t_s",
     "force_left_n",
@@ -451,3 +541,11 @@ TRACE_FIELDS = (
     "lift_m",
     "phase",
 )
+
+
+def initial(ad: Addresses, qpos0) -> tuple[ControlState, Accumulators]:
+    """One pick's starting control state and accumulators from its initial qpos (nq,):
+    the fingers' travel (through the DriveMap of an MJCF gripper) and the lift where it
+    starts (raised by an MJCF linkage's height compensation)."""
+    travel0, _ = finger_travel(ad, qpos0)
+    return initial_state(travel0, qpos0[ad.lift_qpos]), initial_accumulators(travel0)

@@ -136,9 +136,7 @@ def _initial(
     m = phys.model.replace(
         pair_friction=pair_friction, pair_solref=pair_solref, pair_solimp=pair_solimp
     )
-    travel0 = qpos0[ad.finger_left_qpos]
-    s = gk.initial_state(travel0)
-    a = gk.initial_accumulators(travel0)
+    s, a = gk.initial(ad, qpos0)
     d = phys.data0.replace(qpos=qpos0, ctrl=gk.command(ad, s, qpos0))
     d = mjx.forward(m, d)
     diag = Diagnostics(phys.overflow(d), phys.nefc(d), phys.nacon(d))

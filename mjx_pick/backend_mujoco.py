@@ -101,8 +101,7 @@ class MujocoBackend:
         o = ad.object_qpos
         pos0 = inputs.qpos0[:, o : o + 3]
         quat0 = inputs.qpos0[:, o + 3 : o + 7]
-        s = jax.vmap(gk.initial_state)(inputs.qpos0[:, ad.finger_left_qpos])
-        a = jax.vmap(gk.initial_accumulators)(inputs.qpos0[:, ad.finger_left_qpos])
+        s, a = jax.vmap(lambda q: gk.initial(ad, q))(inputs.qpos0)
         ctrl[:] = np.asarray(jax.vmap(lambda st, q: gk.command(ad, st, q))(s, inputs.qpos0))
         b.forward()
         tick = _tick_fn(ad)

@@ -4,16 +4,25 @@ Gripper frame: the gripper centre is the origin, fingers close along x, the grip
 approaches along -z. Each finger is a pad box: ``finger_depth_mm`` along x (the closing
 direction), ``finger_width_mm`` along y, ``pad_height_mm`` along z. ``stroke_mm`` is the
 largest distance between the pads' inner faces.
+
+A gripper TOML with an ``[mjcf]`` table is a real gripper's MJCF model instead
+(``mjx_pick.mjcf_gripper``): its stroke and pad geometry are measured from the model,
+and the TOML gives its name, force and speed ranges and which geoms and actuator are
+its pads and drive.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
+import tomllib
 from importlib import resources
 from pathlib import Path
 
-from mjx_pick.config import ConfigError, check_range, load_toml
+import numpy as np
+
+from mjx_pick import mjcf_gripper
+from mjx_pick.config import ConfigError, check_range, from_mapping, load_toml
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,9 +47,35 @@ class GripperSpec:
     drive_damping_ns_per_mm: float = 0.02
     pad_material: str = "nbr"
     source: str = "Bencak et al. 2023, Fig. 10; Robotiq 2F-85 datasheet"
+    # a real gripper's MJCF model (None: the parametric parallel jaw above); its
+    # geometry fields are then measured from it
+    mjcf: mjcf_gripper.MjcfGripper | None = None
 
     def __post_init__(self):
         o = f"gripper[{self.name}]"
+        if isinstance(self.mjcf, dict):  # from a saved config (JSON) or a TOML table
+            mjcf = from_mapping(mjcf_gripper.MjcfGripper, self.mjcf, where=f"{o}.mjcf")
+            object.__setattr__(self, "mjcf", mjcf)
+        if self.mjcf is not None:
+            kin = mjcf_gripper.characterise(self.mjcf)
+            weakest = float(kin.force_limit_n.min())
+            if self.force_max_n > weakest * (1 + 1e-6):
+                at = float(kin.opening[np.argmin(kin.force_limit_n)]) * 1e3
+                raise ConfigError(
+                    f"{o}.force_max_n = {self.force_max_n:g} is more than the actuator "
+                    f"{self.mjcf.actuator!r} can push: its force limit gives {weakest:.1f} N "
+                    f"per pad at a {at:.1f} mm opening; raise mjcf.actuator_forcerange or "
+                    "lower force_max_n"
+                )
+            # an MJCF gripper's geometry is its model's: a sweep or design variant that
+            # changes it would simulate a gripper other than the one it names
+            for field, value in measured_fields(kin).items():
+                if abs(getattr(self, field) - value) > 1e-9 * max(1.0, abs(value)):
+                    raise ConfigError(
+                        f"{o}.{field} = {getattr(self, field)!r} cannot be set: an MJCF "
+                        f"gripper's {field} is measured from its model ({value:g}); "
+                        "change the MJCF file instead"
+                    )
         for field in (
             "stroke_mm",
             "finger_width_mm",
@@ -81,9 +116,7 @@ def load_gripper(name_or_path: str | os.PathLike) -> GripperSpec:
     """A preset by name (e.g. "robotiq-2f85") or a gripper TOML file by path."""
     text = str(name_or_path)
     if text.endswith(".toml") or os.sep in text:
-        path = Path(text)
-        spec = load_toml(GripperSpec, path)
-        return spec
+        return _load_file(Path(text))
     names = preset_names()
     if text not in names:
         raise ConfigError(
@@ -91,4 +124,53 @@ def load_gripper(name_or_path: str | os.PathLike) -> GripperSpec:
             "or pass a gripper TOML file"
         )
     with resources.as_file(resources.files("mjx_pick.assets") / "grippers" / f"{text}.toml") as p:
-        return load_toml(GripperSpec, p)
+        return _load_file(p)
+
+
+def _load_file(path: Path) -> GripperSpec:
+    if path.is_file():
+        try:
+            data = tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as err:
+            raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
+        if "mjcf" in data:
+            return mjcf_gripper_spec(data, path)
+    return load_toml(GripperSpec, path)
+
+
+def mjcf_gripper_spec(data: dict, path: Path) -> GripperSpec:
+    """A GripperSpec for an MJCF gripper TOML (already parsed): the [mjcf] table checked
+    against the model, geometry and masses measured from it (a quasi-static close)."""
+    data = dict(data)
+    table = data.pop("mjcf")
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path.name}: mjcf must be a table ([mjcf])")
+    given = sorted(set(data) & set(mjcf_gripper.GEOMETRY_FIELDS + MJCF_MEASURED))
+    if given:
+        raise ConfigError(
+            f"{path.name}: {', '.join(given)} are measured from the MJCF model; remove them"
+        )
+    mjcf = mjcf_gripper.resolve(
+        from_mapping(mjcf_gripper.MjcfGripper, table, where=f"{path.name} [mjcf]"), path.parent
+    )
+    kin = mjcf_gripper.characterise(mjcf)
+    spec = from_mapping(GripperSpec, data, where=path.name)
+    return dataclasses.replace(spec, mjcf=mjcf, **measured_fields(kin))
+
+
+def measured_fields(kin: mjcf_gripper.Kinematics) -> dict[str, float]:
+    """The GripperSpec fields an MJCF gripper's model sets (geometry, masses, drive)."""
+    return {
+        "stroke_mm": round(kin.stroke_m * 1e3, 3),
+        "finger_width_mm": round(kin.pad_width_m * 1e3, 3),
+        "finger_depth_mm": round(kin.pad_depth_m * 1e3, 3),
+        "pad_height_mm": round(kin.pad_height_m * 1e3, 3),
+        "finger_mass_g": round(kin.finger_mass_kg * 1e3, 3),
+        "body_mass_g": round(kin.mass_kg * 1e3, 3),
+        # where the stroke is stiffest (the kernels use the table along the stroke)
+        "drive_stiffness_n_per_mm": round(float(kin.stiffness_n_per_m.max()) * 1e-3, 6),
+    }
+
+
+# besides the geometry: measured from an MJCF model, never set by its TOML
+MJCF_MEASURED = ("finger_mass_g", "body_mass_g", "drive_stiffness_n_per_mm")

@@ -40,6 +40,9 @@ class PickConfig:
     yaw_max_deg: float = 360.0
     resolution_mm: float = 0.5  # silhouette raster for the checks
     max_candidates: int = 1_000_000  # Normal mode gives up after drawing this many
+    # a linkage gripper (MJCF) only: reject poses whose near pad rides over the part
+    # (FeasibilityChecker); off, such poses are simulated (and fail)
+    pad_path_check: bool = True
 
     def __post_init__(self):
         o = "picks"
@@ -123,6 +126,16 @@ class FeasibilityChecker:
     a prism its silhouette, for a mesh the shadow of its part above that height --
     what a descending finger can hit and what the pads can meet. A foot below the
     fingertips (an L-part standing on its edge) is no longer taken for a grip.
+
+    An MJCF linkage's pads descend while they close (``mjx_pick.mjcf_gripper``); the
+    scene starts each pick raised by the height compensation for the final grasp gap,
+    so the pads grip at the grasp height. But with the part off-centre the near pad
+    reaches it first, at a wider opening, where it rides higher by the drop between
+    that opening and the grasp gap; if that lifts its tip above the part's top, it
+    passes over the part and lands on it (the door opener: 29 of the 30 such poses
+    failed in simulation, benchmarks/RESULTS.md). A fourth check rejects those poses
+    as "pad_path" (the part's full height is taken as its top: optimistic for a mesh
+    lower under the near pad).
     """
 
     def __init__(
@@ -154,6 +167,12 @@ class FeasibilityChecker:
                 f"{obj.name!r} ({obj.height_mm:g} mm high): lower pick_height_mm"
             )
         self.stack = _stack(obj.name, self.silhouette, config.resolution_mm)
+        self.kinematics = None
+        if gripper.mjcf is not None and config.pad_path_check:
+            from mjx_pick import mjcf_gripper
+
+            self.kinematics = mjcf_gripper.characterise(gripper.mjcf)
+            self.room_mm = obj.height_mm - lo  # the part's top above the fingertips
 
     def __call__(self, x_mm, y_mm, yaw_deg, opening_mm=None) -> dict[str, np.ndarray]:
         """Check (N,) candidates; returns reason, opening_mm, coverage, gap_*_mm arrays.
@@ -164,13 +183,26 @@ class FeasibilityChecker:
         reason, opening, coverage, gap_l, gap_r = fk.check_candidates(
             self.stack, self.band, x_mm, y_mm, np.deg2rad(np.asarray(yaw_deg, float)), opening_mm
         )
+        reason = np.asarray(reason)
+        if self.kinematics is not None:
+            rides = self.near_pad_rise_mm(opening, gap_l, gap_r) >= self.room_mm
+            reason = np.where((reason == fk.FEASIBLE) & rides, fk.PAD_PATH, reason)
         return {
-            "reason": np.asarray(reason),
+            "reason": reason,
             "opening_mm": np.asarray(opening, float),
             "coverage": np.asarray(coverage, float),
             "gap_left_mm": np.asarray(gap_l, float),
             "gap_right_mm": np.asarray(gap_r, float),
         }
+
+    def near_pad_rise_mm(self, opening_mm, gap_left_mm, gap_right_mm) -> np.ndarray:
+        """(N,) how much higher than at the grasp the near pad is when it reaches the
+        part (an MJCF linkage; mm): the pads' drop between the first-contact opening
+        and the grasp gap."""
+        o, gl, gr = (np.asarray(a, float) * 1e-3 for a in (opening_mm, gap_left_mm, gap_right_mm))
+        first, final = o - 2.0 * np.minimum(gl, gr), o - gl - gr
+        kin = self.kinematics
+        return 1e3 * (kin.pad_centre_drop_m(final) - kin.pad_centre_drop_m(first))
 
     def ranges(self) -> tuple[float, float]:
         """The x and y offset ranges in mm (defaults: half the object's length)."""
@@ -394,6 +426,10 @@ def _empty_message(obj, gripper, config, picks: PickBatch) -> str:
         ),
         "clearance": "the fingers land on the object everywhere; use a larger stroke",
         "coverage": f"lower min_coverage (now {config.min_coverage:g})",
+        "pad_path": (
+            "the linkage's near pad rides over the part at every tried pose (its pads "
+            "descend while closing); a parallel-jaw gripper or centred poses may take it"
+        ),
     }[top]
     return (
         f"no feasible pick-point for {obj.name} with {gripper.name} after "

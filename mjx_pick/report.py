@@ -43,6 +43,7 @@ import shapely.affinity
 from mjx_pick.config import ConfigError, from_mapping, write_atomic, write_json
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.kernels import grasp as gk
+from mjx_pick.mjcf_gripper import PREFIX, characterise
 from mjx_pick.plots import add_polygon, draw_candidates, new_figure, save_png
 
 PAPERS_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4)}
@@ -240,8 +241,12 @@ def animate(
     path: str | os.PathLike,
     every: int = 8,
     size: tuple[int, int] = (320, 240),
+    gripper: GripperSpec | None = None,
 ) -> int:
     """Replay a trace in MuJoCo's offscreen renderer as a GIF; returns the frame count.
+
+    An MJCF gripper (gripper.mjcf) is posed from the traced pad travel through its
+    measured close (``mjx_pick.mjcf_gripper``).
 
     Each frame is the top camera beside the side camera (each ``size`` = (width,
     height) pixels), with the time and phase written on it; one frame every ``every``
@@ -260,10 +265,11 @@ def animate(
             "MuJoCo's offscreen renderer could not start: set MUJOCO_GL=egl (or osmesa) "
             "before Python starts and install libegl1 (or libosmesa6)"
         ) from err
-    adr = {
-        j: int(model.jnt_qposadr[model.joint(j).id])
-        for j in ("object", "lift", "finger_left", "finger_right")
-    }
+    linkage = None if gripper is None or gripper.mjcf is None else characterise(gripper.mjcf)
+    fingers = () if linkage else ("finger_left", "finger_right")
+    adr = {j: int(model.jnt_qposadr[model.joint(j).id]) for j in ("object", "lift", *fingers)}
+    if linkage:
+        links = [int(model.jnt_qposadr[model.joint(PREFIX + j).id]) for j in linkage.joint_names]
     cams = []
     for elevation, distance, lookat_z in ((-90.0, 0.25, 0.02), (-8.0, 0.38, 0.07)):
         cam = mujoco.MjvCamera()
@@ -282,8 +288,12 @@ def animate(
             data.qpos[o : o + 3] = [trace[f"object_{c}_m"][k] for c in "xyz"]
             data.qpos[o + 3 : o + 7] = [trace[f"object_q{c}"][k] for c in "wxyz"]
             data.qpos[adr["lift"]] = trace["lift_m"][k]
-            data.qpos[adr["finger_left"]] = trace["finger_left_m"][k]
-            data.qpos[adr["finger_right"]] = trace["finger_right_m"][k]
+            if linkage:
+                travel = 0.5 * (trace["finger_left_m"][k] + trace["finger_right_m"][k])
+                data.qpos[links] = linkage.joint_positions(travel)[0]
+            else:
+                data.qpos[adr["finger_left"]] = trace["finger_left_m"][k]
+                data.qpos[adr["finger_right"]] = trace["finger_right_m"][k]
             mujoco.mj_forward(model, data)
             views = []
             for cam, option in cams:
@@ -523,7 +533,7 @@ def report(
         forces.append((p, label))
         if animations:
             g = out_dir / f"anim_{pid}.gif"
-            frames = animate(run.path / "scene.xml", trace, g, anim_every, anim_size)
+            frames = animate(run.path / "scene.xml", trace, g, anim_every, anim_size, run.gripper)
             anims.append((g, f"{label} ({frames} frames)"))
     written["forces"] = [str(p) for p, _ in forces]
     written["animations"] = [str(p) for p, _ in anims]

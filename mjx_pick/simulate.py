@@ -77,6 +77,7 @@ def addresses(scene: Scene) -> gk.Addresses:
         finger_left_actuator=i.finger_left_actuator,
         finger_right_actuator=i.finger_right_actuator,
         nu=scene.model.nu,
+        drive=i.drive,
     )
 
 
@@ -93,8 +94,15 @@ def make_inputs(
     """
     overrides = dict(overrides or {})
     n = len(picks)
+    # the gap the pads close to (the object's width between them): the MJCF linkage's
+    # height compensation
+    grasp_gap_m = (picks.opening_mm - picks.gap_left_mm - picks.gap_right_mm) * 1e-3
     qpos0 = scene.initial_qpos(
-        picks.x_mm * 1e-3, picks.y_mm * 1e-3, np.deg2rad(picks.yaw_deg), picks.opening_mm * 1e-3
+        picks.x_mm * 1e-3,
+        picks.y_mm * 1e-3,
+        np.deg2rad(picks.yaw_deg),
+        picks.opening_mm * 1e-3,
+        grasp_gap_m,
     ).astype(np.float32)
     contact = {k: overrides.pop(k) for k in CONTACT_OVERRIDES if k in overrides}
     params = broadcast_params(grasp.params(scene.object, scene.gripper), n, **overrides)

@@ -17,6 +17,7 @@ LAYERS = {
         "config",
         "objects",
         "gripper",
+        "mjcf_gripper",
         "physics",
         "grasp",
         "scene",
