@@ -224,10 +224,10 @@ class Page:
         self.upload_error.set_text("")
         name = e.file.name
         data = await e.file.read()
+        self.upload.reset()  # a corrected file of the same name may follow
         problem = check_upload(name, len(data), data)
         if problem:
             self.upload_error.set_text(problem)
-            self.upload.reset()
             return
         try:
             self.upload_path = await run.io_bound(save_upload, data, name, self.uploads)
@@ -337,15 +337,19 @@ class Page:
                         ["auto", "mujoco", "warp", "mjx"], value="mujoco", label="backend"
                     ).classes("w-40")
                 with ui.row().classes("items-center"):
-                    ui.upload(
-                        label="or load a gripper TOML",
-                        auto_upload=True,
-                        max_file_size=TOML_MAX_BYTES,
-                        on_upload=self.on_gripper_toml,
-                        on_rejected=lambda: self.toml_error.set_text(
-                            f"file refused: a .toml file of at most {TOML_MAX_BYTES // 2**10} KB"
-                        ),
-                    ).props('accept=".toml" data-testid="gripper-upload"').classes("w-72")
+                    self.toml_upload = (
+                        ui.upload(
+                            label="or load a gripper TOML",
+                            auto_upload=True,
+                            max_file_size=TOML_MAX_BYTES,
+                            on_upload=self.on_gripper_toml,
+                            on_rejected=lambda: self.toml_error.set_text(
+                                f"file refused: a .toml file of at most {TOML_MAX_BYTES // 2**10} KB"
+                            ),
+                        )
+                        .props('accept=".toml" data-testid="gripper-upload"')
+                        .classes("w-72")
+                    )
                     self.toml_error = self.error_label().props('data-testid="toml-error"')
                 self.settings_error = self.error_label()
                 for title, group in (
@@ -399,6 +403,7 @@ class Page:
         self.toml_error.set_text("")
         name = e.file.name
         data = await e.file.read()
+        self.toml_upload.reset()  # a corrected file of the same name may follow
         if not name.lower().endswith(".toml"):
             self.toml_error.set_text(f"{name}: not a .toml file")
             return
@@ -714,9 +719,9 @@ class Page:
             "",
             f"- score (eq. 2): **{_fmt(full['score'])}**, success: **{full['success']}**, "
             f"outcome: {full['failure']}",
-            f"- t_grasp: {_fmt(full['t_grasp'])} (grip force held, fraction of the window)",
-            f"- phi_max: {_fmt(full['phi_max_deg'], 1)} deg (largest rotation)",
-            f"- t_grasp_nc: {_fmt(full['t_grasp_nc'])} (off the table, fraction)",
+            f"- `t_grasp`: {_fmt(full['t_grasp'])} (grip force held, fraction of the window)",
+            f"- `phi_max`: {_fmt(full['phi_max_deg'], 1)} deg (largest rotation)",
+            f"- `t_grasp_nc`: {_fmt(full['t_grasp_nc'])} (off the table, fraction)",
             f"- pad forces max {_fmt(full['max_force_left_n'], 1)} / "
             f"{_fmt(full['max_force_right_n'], 1)} N, lift {_fmt(full['lift_height_mm'], 1)} "
             f"mm, slip {_fmt(full['slip_mm'], 2)} mm",
@@ -944,8 +949,8 @@ def test_simulation(obj, settings: forms.Settings, x: float, y: float, yaw: floa
     head += [
         f"- score (eq. 2): **{_fmt(r['score'])}**, success: **{r['success']}**, outcome: "
         f"{r['failure']}",
-        f"- t_grasp {_fmt(r['t_grasp'])}, phi_max {_fmt(r['phi_max_deg'], 1)} deg, "
-        f"t_grasp_nc {_fmt(r['t_grasp_nc'])}",
+        f"- `t_grasp` {_fmt(r['t_grasp'])}, `phi_max` {_fmt(r['phi_max_deg'], 1)} deg, "
+        f"`t_grasp_nc` {_fmt(r['t_grasp_nc'])}",
         f"- F_Gmin, eq. (1): {_fmt(ev.summary['f_gmin_n'])} N at F_d = "
         f"{settings.grasp.grip_force_n:g} N",
     ]
