@@ -133,6 +133,11 @@ def wait_job(page, timeout_ms: int = TIMEOUT_MS) -> str:
     return status.inner_text()
 
 
+def choose(page, label: str, option: str) -> None:
+    page.get_by_label(label, exact=True).click()
+    page.get_by_role("option", name=option, exact=True).click()
+
+
 def field_error(page, label: str) -> str:
     """The message Quasar shows under a field (its q-field__messages)."""
     field = page.locator("label.q-field").filter(has=page.get_by_label(label, exact=True))
@@ -282,10 +287,10 @@ def test_bad_inputs_are_shown_in_the_page(page, tmp_path):
 
     # an object is needed before the settings are checked: a shipped one
     page.get_by_text("1 Import object model").click()
-    page.get_by_test_id("import").click()  # the upload failed: nothing to import
+    choose(page, "object", "(uploaded file)")
+    page.get_by_test_id("import").click()  # the uploads failed: nothing to import
     page.get_by_test_id("import-error").filter(has_text="upload an image").wait_for()
-    page.get_by_label("object", exact=True).click()
-    page.get_by_role("option", name="block", exact=True).click()
+    choose(page, "object", "block")
     page.get_by_test_id("import").click()
     page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
 

@@ -206,7 +206,10 @@ class Page:
                     'data-testid="object-info"'
                 )
                 self.object_image = (
-                    ui.image().classes("w-full max-w-3xl").props('data-testid="object-image"')
+                    ui.image()
+                    .props("no-transition no-spinner")
+                    .classes("w-full max-w-3xl")
+                    .props('data-testid="object-image"')
                 )
                 self.object_image.set_visibility(False)
 
@@ -344,7 +347,8 @@ class Page:
                             max_file_size=TOML_MAX_BYTES,
                             on_upload=self.on_gripper_toml,
                             on_rejected=lambda: self.toml_error.set_text(
-                                f"file refused: a .toml file of at most {TOML_MAX_BYTES // 2**10} KB"
+                                "file refused: a .toml file of at most "
+                                f"{TOML_MAX_BYTES // 2**10} KB"
                             ),
                         )
                         .props('accept=".toml" data-testid="gripper-upload"')
@@ -378,7 +382,9 @@ class Page:
                 )
                 self.test_error = self.error_label()
                 self.test_info = ui.markdown("").props('data-testid="test-info"')
-                self.test_plot = ui.image().classes("w-full max-w-2xl")
+                self.test_plot = (
+                    ui.image().props("no-transition no-spinner").classes("w-full max-w-2xl")
+                )
                 self.test_plot.set_visibility(False)
 
     def fill_settings(self, gripper) -> None:
@@ -489,7 +495,9 @@ class Page:
                 self.generate_error = self.error_label().props('data-testid="generate-error"')
             with ui.column().classes("grow"):
                 self.picks_info = ui.label("").props('data-testid="picks-info"')
-                self.picks_image = ui.image().classes("w-full max-w-2xl")
+                self.picks_image = (
+                    ui.image().props("no-transition no-spinner").classes("w-full max-w-2xl")
+                )
                 self.picks_image.set_visibility(False)
                 self.run_summary = ui.markdown("").props('data-testid="run-summary"')
 
@@ -639,9 +647,19 @@ class Page:
                 self.downloads = ui.row()
             with ui.column().classes("grow"):
                 self.detail = ui.markdown("Select a pick-point.").props('data-testid="pick-detail"')
-                with ui.row().classes("w-full no-wrap"):
-                    self.force_image = ui.image().classes("w-1/2").props('data-testid="force-plot"')
-                    self.replay_image = ui.image().classes("w-1/2").props('data-testid="replay"')
+                with ui.column().classes("w-full"):
+                    self.force_image = (
+                        ui.image()
+                        .props("no-transition no-spinner")
+                        .classes("w-full max-w-2xl")
+                        .props('data-testid="force-plot"')
+                    )
+                    self.replay_image = (
+                        ui.image()
+                        .props("no-transition no-spinner")
+                        .classes("w-full max-w-2xl")
+                        .props('data-testid="replay"')
+                    )
                 self.force_image.set_visibility(False)
                 self.replay_image.set_visibility(False)
         self.refresh_runs()
@@ -815,7 +833,9 @@ class Page:
                 self.sweep_table = ui.table(columns=[], rows=[], row_key="variant").props(
                     'dense data-testid="sweep-table"'
                 )
-                self.sweep_image = ui.image().classes("w-full max-w-3xl")
+                self.sweep_image = (
+                    ui.image().props("no-transition no-spinner").classes("w-full max-w-3xl")
+                )
                 self.sweep_image.set_visibility(False)
 
     def start_sweep(self) -> None:
@@ -901,6 +921,8 @@ class Page:
         self.job_status.set_text(", ".join(parts))
         if p.state != "running":
             self.job_bar.props(remove="indeterminate")
+            if p.state == "complete":
+                self.job_bar.set_value(1.0)
             self.cancel_button.set_visibility(False)
             job, on_end = self.job, self.on_job_end
             self.job, self.on_job_end = None, None
@@ -951,7 +973,7 @@ def test_simulation(obj, settings: forms.Settings, x: float, y: float, yaw: floa
         f"{r['failure']}",
         f"- `t_grasp` {_fmt(r['t_grasp'])}, `phi_max` {_fmt(r['phi_max_deg'], 1)} deg, "
         f"`t_grasp_nc` {_fmt(r['t_grasp_nc'])}",
-        f"- F_Gmin, eq. (1): {_fmt(ev.summary['f_gmin_n'])} N at F_d = "
+        f"- `F_Gmin`, eq. (1): {_fmt(ev.summary['f_gmin_n'])} N at `F_d` = "
         f"{settings.grasp.grip_force_n:g} N",
     ]
     plot = views.force_png(trace, settings.grasp.grip_force_n, f"test pick ({x:g}, {y:g}, {yaw:g})")
