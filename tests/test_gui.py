@@ -126,8 +126,9 @@ def number(page, label: str, value) -> None:
     box.blur()
 
 
-def wait_job(page, timeout_ms: int = TIMEOUT_MS) -> str:
-    """Wait until the job panel says complete (or failed/cancelled); returns its text."""
+def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
+    """Wait until the job panel shows the run `title` ended; returns its status line."""
+    page.get_by_test_id("job-title").filter(has_text=title).wait_for()
     status = page.get_by_test_id("job-status")
     status.filter(has_text=re.compile(r"^(complete|failed|cancelled)")).wait_for(timeout=timeout_ms)
     return status.inner_text()
@@ -190,7 +191,7 @@ def test_paper_workflow(page, server):
         timeout=60_000
     )
     page.get_by_test_id("start-batch").click()
-    status = wait_job(page)
+    status = wait_job(page, "evaluate gui-run")
     assert status.startswith("complete") and "6/6 pick-points" in status, status
     page.get_by_test_id("run-summary").filter(has_text="success rate").wait_for()
     shot(page, "3_generate")
@@ -236,7 +237,7 @@ def test_paper_workflow(page, server):
     assert replay.get_attribute("src").startswith("data:image/gif;base64,")
     number(page, "n best and n worst", 2)
     page.get_by_test_id("export").click()
-    assert wait_job(page).startswith("complete")
+    assert wait_job(page, "report gui-run").startswith("complete")
     with page.expect_download() as info_dl:
         page.get_by_test_id("download-template_a4.pdf").click()
     pdf = Path(info_dl.value.path())
@@ -254,7 +255,7 @@ def test_paper_workflow(page, server):
     number(page, "simulations per value", 4)
     page.get_by_label("run folder name").last.fill("gui-sweep")
     page.get_by_test_id("start-sweep").click()
-    assert wait_job(page).startswith("complete")
+    assert wait_job(page, "sweep gui-sweep").startswith("complete")
     sweep_rows = page.get_by_test_id("sweep-table").locator("tbody tr")
     sweep_rows.first.wait_for()
     assert sweep_rows.count() == 2

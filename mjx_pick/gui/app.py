@@ -141,7 +141,7 @@ class Page:
 
         with ui.card().classes("w-full") as card:
             with ui.row().classes("items-center w-full"):
-                self.job_title = ui.label("").classes("font-bold")
+                self.job_title = ui.label("").classes("font-bold").props('data-testid="job-title"')
                 self.job_status = ui.label("").props('data-testid="job-status"')
                 ui.space()
                 self.cancel_button = ui.button("Cancel", on_click=self.cancel_job, color="red")
