@@ -72,7 +72,7 @@ class Job:
 
     def start(self) -> Job:
         self.log.parent.mkdir(parents=True, exist_ok=True)
-        self._chunks_before = self._chunks()
+        self._chunks_before = len(self._chunks())
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         with self.log.open("wb") as fh:
             fh.write(f"$ {self.command_line}\n".encode())
@@ -100,10 +100,10 @@ class Job:
     def wait(self, timeout: float | None = None) -> int:
         return self._proc.wait(timeout)
 
-    def _chunks(self) -> int:
+    def _chunks(self) -> list[Path]:
         if self.out is None:
-            return 0
-        return len(list((self.out / "chunks").glob("part-*.parquet")))
+            return []
+        return list((self.out / "chunks").glob("part-*.parquet"))
 
     def poll(self) -> Progress:
         """The run's state now; a stopped run that was asked to cancel is killed late."""
@@ -115,11 +115,13 @@ class Job:
         done = rate = eta = None
         if self.chunk and self.total:
             files = self._chunks()
-            done = min(self.total, files * self.chunk)
-            new = (files - self._chunks_before) * self.chunk
+            done = min(self.total, len(files) * self.chunk)
+            new = (len(files) - self._chunks_before) * self.chunk
             started = self._run_started()
-            if new > 0 and started is not None and time.time() > started:
-                rate = new / max(time.time() - started, 1e-3)
+            if new > 0 and started is not None:
+                # from the simulation's start to its newest finished chunk
+                last = max(f.stat().st_mtime for f in files)
+                rate = new / max(last - started, 1e-3)
                 eta = max(0.0, (self.total - done) / rate)
         code = self._proc.poll() if self._proc is not None else None
         if code is None:
