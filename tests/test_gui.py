@@ -264,6 +264,20 @@ def test_paper_workflow(page, server):
     assert all(v["n"] == 4 for v in variants)
     shot(page, "5_sweep")
 
+    # studies: robustness of the run's 2 best pick-points under vision error
+    page.get_by_text("Studies", exact=True).click()
+    page.get_by_text("Robustness of the best pick-points").click()
+    number(page, "top pick-points", 2)
+    number(page, "perturbed draws each", 4)
+    page.get_by_test_id("start-robust").click()
+    assert wait_job(page, "robust gui-run").startswith("complete")
+    robust_rows = page.get_by_test_id("robust-table").locator("tbody tr")
+    robust_rows.first.wait_for()
+    assert robust_rows.count() == 2
+    ranking = json.loads((run / "robustness.json").read_text())["ranking"]
+    assert {r["pick_id"] for r in ranking} <= set(np.asarray(table["pick_id"]).tolist())
+    assert all(r["trials"] == 4 for r in ranking)
+
 
 def test_bad_inputs_are_shown_in_the_page(page, tmp_path):
     """A wrong file type, a fake image, a malformed TOML and bad fields: messages only."""
@@ -307,3 +321,49 @@ def test_bad_inputs_are_shown_in_the_page(page, tmp_path):
     page.get_by_test_id("test-pick").click()
     assert "out of range for robotiq-2f85" in field_error(page, "grip force F_d (N)")
     assert "Traceback" not in page.content()
+
+
+def test_studies_compare_and_calibrate(page, server):
+    """Gripper comparison and calibration from an outcomes CSV, on a 1 kg block."""
+    _, work = server
+    number(page, "mass (g)", 1000)  # the shipped outcomes are of a 1 kg block, RG2
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="mass 1000.0 g").wait_for(timeout=60_000)
+    page.get_by_text("2 Set gripper parameters").click()
+    choose(page, "gripper preset", "onrobot-rg2")
+    assert page.get_by_label("grip force F_d (N)", exact=True).input_value() == "40"  # RG2 max
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+
+    page.get_by_text("Studies", exact=True).click()
+    number(page, "pick-points", 4)
+    page.get_by_label("run folder name").filter(visible=True).first.fill("gui-compare")
+    page.get_by_test_id("start-compare").click()
+    assert wait_job(page, "compare gui-compare").startswith("complete")
+    rows = page.get_by_test_id("compare-table").locator("tbody tr")
+    rows.first.wait_for()
+    assert rows.count() == 2
+    ranking = json.loads((work / "gui-compare" / "ranking.json").read_text())
+    assert sorted(r["gripper"] for r in ranking) == ["onrobot-rg2", "robotiq-2f85"]
+    assert rows.first.inner_text().split()[1] == ranking[0]["gripper"]
+
+    page.get_by_text("Calibrate contact parameters").click()
+    outcomes = ROOT / "assets" / "outcomes" / "block_1kg_rg2.csv"
+    page.get_by_test_id("outcomes-upload").locator("input[type=file]").set_input_files(
+        str(outcomes)
+    )
+    page.get_by_test_id("calibrate-info").filter(has_text="24 tested pick-points").wait_for()
+    number(page, "optimiser steps", 2)
+    page.get_by_label("run folder name").filter(visible=True).last.fill("gui-calibrate")
+    page.get_by_test_id("start-calibrate").click()
+    status = wait_job(page, "calibrate gui-calibrate")
+    assert status.startswith("complete") and "2/2" in status, status
+    fitted = json.loads((work / "gui-calibrate" / "calibration.json").read_text())["fitted"]
+    info = page.get_by_test_id("calibrate-info")
+    assert f"{fitted['pad_friction']:.4f}" in info.inner_text()
+    page.get_by_test_id("use-calibration").click()
+    page.get_by_text("In use in tab 2").wait_for()
+    shot(page, "6_studies")
+    page.get_by_text("2 Set gripper parameters").click()
+    shown = float(page.get_by_label("pad friction", exact=True).input_value())
+    assert shown == pytest.approx(fitted["pad_friction"], rel=1e-6)

@@ -25,6 +25,7 @@ from mjx_pick.objects import IMAGE_SUFFIXES, MESH_SUFFIXES
 IMAGE_MAX_BYTES = 20 * 2**20
 MESH_MAX_BYTES = 50 * 2**20
 TOML_MAX_BYTES = 64 * 2**10
+OUTCOMES_MAX_BYTES = 5 * 2**20
 UPLOAD_TYPES = IMAGE_SUFFIXES + MESH_SUFFIXES
 NAME_OK = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$")
 TABLE_COLUMNS = (
@@ -53,6 +54,12 @@ def _fmt(v, digits: int = 3) -> str:
     if isinstance(v, float):
         return "NaN" if math.isnan(v) else f"{v:.{digits}f}"
     return str(v)
+
+
+def _fmt_cell(v) -> str:
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    return _fmt(v)
 
 
 def save_upload(data: bytes, name: str, folder: Path) -> Path:
@@ -101,6 +108,8 @@ class Page:
         self.upload_path: Path | None = None
         self.settings: forms.Settings | None = None
         self.base_gripper = None
+        self.base_contact = None  # calibrated contact parameters, once adopted
+        self.outcomes_path: Path | None = None
         self.picks = None
         self.job: jobs.Job | None = None
         self.on_job_end = None
@@ -120,6 +129,7 @@ class Page:
             t3 = ui.tab("generate", "3 Generate input data")
             t4 = ui.tab("analyze", "4 Analyze results")
             t5 = ui.tab("sweep", "Parameter sweep")
+            t6 = ui.tab("studies", "Studies")
         self.tabs = tabs
         self.job_panel()
         with ui.tab_panels(tabs, value=t1).classes("w-full"):
@@ -133,6 +143,8 @@ class Page:
                 self.analyze_tab()
             with ui.tab_panel(t5):
                 self.sweep_tab()
+            with ui.tab_panel(t6):
+                self.studies_tab()
         ui.timer(0.5, self.poll_job)
 
     def job_panel(self) -> None:
@@ -431,7 +443,7 @@ class Page:
     def read_settings(self) -> forms.Settings | None:
         """The settings on the gripper tab, or None with each error next to its field."""
         values = {k: w.value for k, w in self.inputs.items()}
-        settings, errors = forms.build(values, self.base_gripper)
+        settings, errors = forms.build(values, self.base_gripper, self.base_contact)
         for key, widget in self.inputs.items():
             widget.error = errors.get(key)
         self.settings_error.set_text(errors.get("", ""))
@@ -878,6 +890,281 @@ class Page:
         self.sweep_table.update()
         self.sweep_image.set_source(views.data_uri((out / "sweep.png").read_bytes(), "image/png"))
         self.sweep_image.set_visibility(True)
+
+    # ----------------------------------------------------------- tab 6: studies
+    def studies_tab(self) -> None:
+        from nicegui import ui
+
+        from mjx_pick.calibrate import FITTABLE
+        from mjx_pick.gripper import preset_names
+
+        ui.label(
+            "Each study runs on the object of tab 1 with the settings of tab 2, and writes "
+            "the folder of its CLI command."
+        ).classes("text-sm")
+        with ui.expansion("Compare grippers", value=True).classes("w-full"):
+            with ui.row().classes("w-full no-wrap items-start"):
+                with ui.column().classes("w-96"):
+                    self.cmp_grippers = ui.select(
+                        preset_names(),
+                        value=["robotiq-2f85", "onrobot-rg2"],
+                        multiple=True,
+                        label="presets",
+                    ).classes("w-full")
+                    self.cmp_current = ui.checkbox("and the gripper of tab 2")
+                    self.cmp_n = ui.number("pick-points", value=200, step=1)
+                    self.cmp_rank = ui.select(
+                        ["success", "score"], value="success", label="rank by"
+                    )
+                    self.cmp_name = ui.input("run folder name", value=f"compare-{_stamp()}")
+                    ui.button("Start comparison", on_click=self.start_compare).props(
+                        'data-testid="start-compare"'
+                    )
+                    self.cmp_error = self.error_label().props('data-testid="compare-error"')
+                with ui.column().classes("grow"):
+                    self.cmp_table = ui.table(columns=[], rows=[], row_key="rank").props(
+                        'dense data-testid="compare-table"'
+                    )
+                    self.cmp_image = (
+                        ui.image().props("no-transition no-spinner").classes("w-full max-w-3xl")
+                    )
+                    self.cmp_image.set_visibility(False)
+        with ui.expansion("Robustness of the best pick-points (run of tab 4)").classes("w-full"):
+            with ui.row().classes("w-full no-wrap items-start"):
+                with ui.column().classes("w-96"):
+                    self.rob_k = ui.number("top pick-points", value=10, step=1)
+                    self.rob_m = ui.number("perturbed draws each", value=32, step=1)
+                    self.rob_xy = ui.number("position error sigma (mm)", value=2.0, step=0.5)
+                    self.rob_yaw = ui.number("yaw error sigma (deg)", value=3.0, step=0.5)
+                    ui.button("Start robustness study", on_click=self.start_robust).props(
+                        'data-testid="start-robust"'
+                    )
+                    self.rob_error = self.error_label().props('data-testid="robust-error"')
+                with ui.column().classes("grow"):
+                    self.rob_table = ui.table(columns=[], rows=[], row_key="rank").props(
+                        'dense data-testid="robust-table"'
+                    )
+        with ui.expansion("Calibrate contact parameters from measured outcomes").classes("w-full"):
+            with ui.row().classes("w-full no-wrap items-start"):
+                with ui.column().classes("w-96"):
+                    ui.label(
+                        "A CSV of tested pick-points and their outcomes (format: "
+                        "assets/outcomes/README.md), up to 5 MB."
+                    ).classes("text-sm")
+                    self.outcomes_upload = (
+                        ui.upload(
+                            label="upload outcomes CSV",
+                            auto_upload=True,
+                            max_file_size=OUTCOMES_MAX_BYTES,
+                            on_upload=self.on_outcomes_upload,
+                            on_rejected=lambda: self.cal_error.set_text(
+                                "file refused: a .csv file of at most "
+                                f"{OUTCOMES_MAX_BYTES // 2**20} MB"
+                            ),
+                        )
+                        .props('accept=".csv" data-testid="outcomes-upload"')
+                        .classes("w-full")
+                    )
+                    self.cal_params = ui.select(
+                        list(FITTABLE),
+                        value=["pad_friction"],
+                        multiple=True,
+                        label="parameters to fit",
+                    ).classes("w-full")
+                    self.cal_steps = ui.number("optimiser steps", value=60, step=1)
+                    self.cal_name = ui.input("run folder name", value=f"calibrate-{_stamp()}")
+                    ui.button("Start calibration", on_click=self.start_calibrate).props(
+                        'data-testid="start-calibrate"'
+                    )
+                    self.cal_error = self.error_label().props('data-testid="calibrate-error"')
+                with ui.column().classes("grow"):
+                    self.cal_info = ui.markdown("").props('data-testid="calibrate-info"')
+                    self.cal_use = ui.button(
+                        "Use the fitted contact parameters in tab 2", on_click=self.use_calibration
+                    ).props('data-testid="use-calibration"')
+                    self.cal_use.set_visibility(False)
+                    self.cal_image = (
+                        ui.image().props("no-transition no-spinner").classes("w-full max-w-2xl")
+                    )
+                    self.cal_image.set_visibility(False)
+
+    def whole(self, widget, lo: int, hi: int) -> int | None:
+        """A whole number field in [lo, hi], or None with the message under it."""
+        v = widget.value
+        widget.error = None
+        if v is None or v != int(v) or not lo <= v <= hi:
+            widget.error = f"a whole number from {lo} to {hi:,}"
+            return None
+        return int(v)
+
+    def show_rows(self, table, rows: list[dict], keys: list[str]) -> None:
+        table.columns = [{"name": k, "label": k, "field": k, "align": "left"} for k in keys]
+        table.rows = [{k: _fmt_cell(r.get(k)) for k in keys} for r in rows]
+        table.update()
+
+    def start_compare(self) -> None:
+        self.cmp_error.set_text("")
+        if self.busy(self.cmp_error) or not self.need_object(self.cmp_error):
+            return
+        n = self.whole(self.cmp_n, 1, 1_000_000)
+        settings = self.read_settings()
+        out = self.run_folder(self.cmp_name, self.cmp_error)
+        if n is None or settings is None or out is None:
+            return
+        flags = self.settings_flags(settings, out)
+        names = list(self.cmp_grippers.value or [])
+        if self.cmp_current.value:
+            names.append(flags[flags.index("--gripper-file") + 1])
+        if len(names) < 2:
+            self.cmp_error.set_text("choose at least two grippers")
+            return
+        argv = ["compare", *self.obj_args, *flags, "--grippers", ",".join(names)]
+        argv += ["--n", str(n), "--rank-by", self.cmp_rank.value, "--out", str(out)]
+
+        def done(progress):
+            if progress.state == "complete":
+                rows = json.loads((out / "ranking.json").read_text())
+                keys = ["rank", "gripper", "success_rate", "success_ci", "score_mean"]
+                self.show_rows(self.cmp_table, rows, keys + ["feasible", "p_vs_best"])
+                self.cmp_image.set_source(
+                    views.data_uri((out / "maps.png").read_bytes(), "image/png")
+                )
+                self.cmp_image.set_visibility(True)
+
+        job = jobs.Job(argv, self.workdir / "logs" / f"{out.name}.log", out)
+        self.start_job(f"compare {out.name} ({len(names)} grippers x {n})", job, done)
+        self.cmp_name.value = f"compare-{_stamp()}"
+
+    def start_robust(self) -> None:
+        self.rob_error.set_text("")
+        if self.busy(self.rob_error) or not self.need_object(self.rob_error):
+            return
+        if self.run is None:
+            self.rob_error.set_text("open an evaluate output folder in tab 4 first")
+            return
+        k = self.whole(self.rob_k, 1, 1000)
+        m = self.whole(self.rob_m, 2, 10_000)
+        sig = []
+        for w in (self.rob_xy, self.rob_yaw):
+            w.error = None
+            if w.value is None or not 0 <= w.value <= 100:
+                w.error = "from 0 to 100"
+            sig.append(w.value)
+        settings = self.read_settings()
+        if k is None or m is None or settings is None or self.rob_xy.error or self.rob_yaw.error:
+            return
+        s = self.run.summary
+        if (s.get("object"), s.get("gripper")) != (self.obj.name, settings.gripper.name):
+            self.rob_error.set_text(
+                f"the run of tab 4 is of {s.get('object')} / {s.get('gripper')}: import that "
+                f"object and set that gripper (now {self.obj.name} / {settings.gripper.name})"
+            )
+            return
+        out = self.run.path
+        argv = ["robust", *self.obj_args, *self.settings_flags(settings, out)]
+        argv += ["--results", str(out), "--top-k", str(k), "--m", str(m)]
+        argv += ["--sigma-xy-mm", repr(float(sig[0])), "--sigma-yaw-deg", repr(float(sig[1]))]
+        argv += ["--out", str(out)]
+
+        def done(progress):
+            if progress.state == "complete":
+                rows = json.loads((out / "robustness.json").read_text())["ranking"]
+                keys = ["rank", "pick_id", "x_mm", "y_mm", "yaw_deg", "robust_p"]
+                self.show_rows(self.rob_table, rows, keys + ["robust_ci_low", "landed"])
+
+        job = jobs.Job(argv, self.workdir / "logs" / f"{out.name}-robust.log", out)
+        self.start_job(f"robust {out.name} (top {k} x {m} draws)", job, done)
+
+    async def on_outcomes_upload(self, e) -> None:
+        from nicegui import run
+
+        self.cal_error.set_text("")
+        name = e.file.name
+        data = await e.file.read()
+        self.outcomes_upload.reset()
+        if not name.lower().endswith(".csv") or len(data) > OUTCOMES_MAX_BYTES:
+            self.cal_error.set_text(f"{name}: not a .csv file of at most 5 MB")
+            return
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError:
+            self.cal_error.set_text(f"{name}: not a UTF-8 text file")
+            return
+        path = await run.io_bound(save_upload, data, name, self.uploads)
+        try:
+            from mjx_pick.calibrate import read_outcomes
+
+            outcomes = await run.io_bound(read_outcomes, str(path))
+        except ConfigError as err:
+            self.cal_error.set_text(str(err))
+            return
+        self.outcomes_path = path
+        self.cal_info.set_content(
+            f"outcomes: {name}, {len(outcomes)} tested pick-points "
+            f"({int(np.sum(outcomes.trials))} trials)"
+        )
+
+    def start_calibrate(self) -> None:
+        self.cal_error.set_text("")
+        if self.busy(self.cal_error) or not self.need_object(self.cal_error):
+            return
+        if self.outcomes_path is None:
+            self.cal_error.set_text("upload an outcomes CSV first")
+            return
+        steps = self.whole(self.cal_steps, 1, 100_000)
+        settings = self.read_settings()
+        out = self.run_folder(self.cal_name, self.cal_error)
+        params = list(self.cal_params.value or [])
+        self.cal_params.error = None if params else "choose at least one parameter"
+        if steps is None or settings is None or out is None or not params:
+            return
+        argv = ["calibrate", str(self.outcomes_path), *self.obj_args]
+        argv += self.settings_flags(settings, out)
+        argv += ["--params", ",".join(params), "--steps", str(steps), "--log-every", "1"]
+        argv += ["--out", str(out)]
+
+        def done(progress):
+            if progress.state == "complete":
+                self.show_calibration(out)
+
+        job = jobs.Job(
+            argv,
+            self.workdir / "logs" / f"{out.name}.log",
+            out,
+            steps,
+            steps_logged=r"(?m)^step\s+(\d+)\s",
+        )
+        self.start_job(f"calibrate {out.name} ({steps} steps)", job, done)
+        self.cal_name.value = f"calibrate-{_stamp()}"
+
+    def show_calibration(self, out: Path) -> None:
+        c = json.loads((out / "calibration.json").read_text())
+        lines = [f"**{out.name}**: fitted contact parameters (`{out / 'contact.toml'}`)", ""]
+        lines += [
+            f"- `{k}`: {_fmt(c['initial'][k], 4)} -> **{_fmt(c['fitted'][k], 4)}**"
+            for k in c["parameters"]
+        ]
+        self.cal_info.set_content("\n".join(lines))
+        self.cal_image.set_source(views.data_uri((out / "loss.png").read_bytes(), "image/png"))
+        self.cal_image.set_visibility(True)
+        self.cal_contact = out / "contact.toml"
+        self.cal_use.set_visibility(True)
+
+    def use_calibration(self) -> None:
+        from mjx_pick.config import load_toml
+        from mjx_pick.physics import ContactParams
+
+        try:
+            contact = load_toml(ContactParams, self.cal_contact)
+        except ConfigError as err:
+            self.cal_error.set_text(str(err))
+            return
+        self.base_contact = contact
+        for key in ("contact.pad_friction", "contact.table_friction"):
+            self.inputs[key].value = float(getattr(contact, key.split(".")[1]))
+        self.cal_info.set_content(
+            self.cal_info.content + "\n\nIn use in tab 2 (all fitted parameters)."
+        )
 
     # -------------------------------------------------------------------- jobs
     def busy(self, where) -> bool:

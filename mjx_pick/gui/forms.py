@@ -109,20 +109,26 @@ def field_of(message: str, section: str) -> str | None:
     return key if any(f.key == key for f in SETTINGS_FIELDS) else None
 
 
-def build(values: dict[str, float | None], gripper: GripperSpec) -> tuple[Settings | None, dict]:
+def build(
+    values: dict[str, float | None],
+    gripper: GripperSpec,
+    contact: ContactParams | None = None,
+) -> tuple[Settings | None, dict]:
     """Settings from form values, or None and {key: message} for every bad field.
 
     Args:
       values: {section.field: number or None (left empty)}.
       gripper: the gripper the form started from (name, masses, drive: the fields the
         form does not show).
+      contact: the contact parameters it started from (e.g. calibrated ones; default:
+        the paper's), for the fields the form does not show (stiffness, damping, ...).
     Returns:
       (settings, {}) or (None, errors); errors may hold "" for a message that names no
       field (shown above the form).
     """
     errors: dict[str, str] = {}
     base = {"gripper": gripper, "picks": PickConfig(), "grasp": GraspConfig()}
-    base["contact"] = ContactParams()
+    base["contact"] = contact or ContactParams()
     changes: dict[str, dict] = {s: {} for s in SECTIONS}
     for f in SETTINGS_FIELDS:
         value = values.get(f.key)

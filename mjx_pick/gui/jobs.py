@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import shlex
 import signal
 import subprocess
@@ -54,8 +55,14 @@ class Job:
         out: Path | None = None,
         total: int | None = None,
         chunk: int | None = None,
+        steps_logged: str | None = None,
     ):
+        """total, chunk: pick-points and chunk size of an evaluate run (progress from its
+        chunk files); steps_logged: a regular expression whose group 1 is the number of
+        the last finished step in the run's output (calibrate's "step 12 loss ..."),
+        with total the number of steps."""
         self.argv = list(argv)
+        self.steps_logged = re.compile(steps_logged) if steps_logged else None
         self.log = Path(log)
         self.out = Path(out) if out is not None else None
         self.total = total
@@ -123,13 +130,16 @@ class Job:
                 last = max(f.stat().st_mtime for f in files)
                 rate = new / max(last - started, 1e-3)
                 eta = max(0.0, (self.total - done) / rate)
+        if self.steps_logged is not None and self.total:
+            found = self.steps_logged.findall(self._log_text())
+            done = min(self.total, int(found[-1]) + 1) if found else 0
         code = self._proc.poll() if self._proc is not None else None
         if code is None:
             state = "running"
             message = "stopping: finishing the current chunk" if self._cancelled_at else ""
         elif code == 0:
             state, message = "complete", ""
-            if self.chunk and self.total:
+            if self.total:
                 done = self.total
         elif self._cancelled_at is not None:
             state, message = "cancelled", "cancelled; what finished is kept"
@@ -146,12 +156,15 @@ class Job:
         except OSError:
             return None
 
+    def _log_text(self) -> str:
+        try:
+            return self.log.read_text(errors="replace")
+        except OSError:
+            return ""
+
     def error_message(self, code: int) -> str:
         """One line for the page: the CLI's own error line, else the exception's."""
-        try:
-            lines = self.log.read_text(errors="replace").splitlines()
-        except OSError:
-            lines = []
+        lines = self._log_text().splitlines()
         for line in reversed(lines):
             if "error: " in line and line.startswith("mjx-pick"):
                 return line.split("error: ", 1)[1].strip()
