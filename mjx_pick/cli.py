@@ -739,6 +739,9 @@ def cmd_gui(args) -> int:
             "machine can use the GUI and read and write its work folder",
             file=sys.stderr,
         )
+    busy = gui.port_problem(args.host, args.port)  # port 0: can the interface be used?
+    if busy:
+        raise ConfigError(f"--host {args.host} --port {args.port}: {busy}")
     port = args.port or gui.free_port(args.host)
     shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     print(f"mjx-pick gui: http://{shown}:{port}/ (work folder {args.workdir}; Ctrl-C stops)")

@@ -279,7 +279,7 @@ def test_paper_workflow(page, server):
     assert all(r["trials"] == 4 for r in ranking)
 
 
-def test_bad_inputs_are_shown_in_the_page(page, tmp_path):
+def test_bad_inputs_are_shown_in_the_page(page, server, tmp_path):
     """A wrong file type, a fake image, a malformed TOML and bad fields: messages only."""
     upload = page.get_by_test_id("object-upload").locator("input[type=file]")
     text = tmp_path / "notes.txt"
@@ -320,6 +320,32 @@ def test_bad_inputs_are_shown_in_the_page(page, tmp_path):
     number(page, "grip force F_d (N)", 500)  # beyond the 2F-85's 235 N
     page.get_by_test_id("test-pick").click()
     assert "out of range for robotiq-2f85" in field_error(page, "grip force F_d (N)")
+    number(page, "grip force F_d (N)", 40)
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+
+    # a bad run name, then a long run cancelled from the page: what finished is kept
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 40)
+    number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+    page.get_by_label("run folder name").fill("../outside")
+    page.get_by_test_id("start-batch").click()
+    assert "letters, digits" in field_error(page, "run folder name")
+    page.get_by_label("run folder name").fill("gui-cancel")
+    page.get_by_test_id("start-batch").click()
+    page.get_by_test_id("job-title").filter(has_text="evaluate gui-cancel").wait_for()
+    status = page.get_by_test_id("job-status")
+    status.filter(
+        has_text=re.compile(
+            r"^running, ([2-9]|[1-3]\d)/40 pick-points, .* per s, "
+            r"about \d+ s left"
+        )
+    ).wait_for(timeout=TIMEOUT_MS)
+    page.get_by_role("button", name="Cancel").click()
+    assert wait_job(page, "evaluate gui-cancel").startswith("cancelled")
+    run = server[1] / "gui-cancel"
+    assert json.loads((run / "mjx_pick_run.json").read_text())["status"] == "interrupted"
+    assert 1 <= len(list((run / "chunks").glob("part-*.parquet"))) < 20
     assert "Traceback" not in page.content()
 
 

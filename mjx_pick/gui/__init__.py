@@ -22,6 +22,17 @@ def free_port(host: str = LOOPBACK) -> int:
         return int(s.getsockname()[1])
 
 
+def port_problem(host: str, port: int) -> str | None:
+    """Why the app cannot listen on host:port (in use, no such interface), or None."""
+    try:
+        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            s.bind((host, port))
+    except OSError as err:
+        return f"cannot listen on {host}:{port} ({err.strerror or err})"
+    return None
+
+
 def is_loopback(host: str) -> bool:
     if host == "localhost":
         return True
