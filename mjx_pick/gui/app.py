@@ -146,6 +146,15 @@ class Page:
             with ui.tab_panel(t6):
                 self.studies_tab()
         ui.timer(0.5, self.poll_job)
+        # a bug in a handler: one line in the page, the traceback only in the server log
+        ui.on_exception(
+            lambda e: ui.notify(
+                f"unexpected error: {type(e).__name__}: {str(e)[:300]} (details in the "
+                "server's log)",
+                type="negative",
+                multi_line=True,
+            )
+        )
 
     def job_panel(self) -> None:
         """The running job: progress bar, rate, time left, cancel, the CLI command."""
