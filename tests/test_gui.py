@@ -117,6 +117,7 @@ def page(server, browser):
 
 def shot(page, name: str) -> None:
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.evaluate("window.scrollTo(0, 0)")  # the header is fixed: keep it on top
     page.screenshot(path=str(ARTIFACTS / f"{name}.png"), full_page=True)
 
 
@@ -383,7 +384,7 @@ def test_studies_compare_and_calibrate(page, server):
     page.get_by_label("run folder name").filter(visible=True).last.fill("gui-calibrate")
     page.get_by_test_id("start-calibrate").click()
     status = wait_job(page, "calibrate gui-calibrate")
-    assert status.startswith("complete") and "2/2" in status, status
+    assert status.startswith("complete") and "2/2 steps" in status, status
     fitted = json.loads((work / "gui-calibrate" / "calibration.json").read_text())["fitted"]
     info = page.get_by_test_id("calibrate-info")
     assert f"{fitted['pad_friction']:.4f}" in info.inner_text()

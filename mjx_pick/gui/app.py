@@ -1142,6 +1142,7 @@ class Page:
             out,
             steps,
             steps_logged=r"(?m)^step\s+(\d+)\s",
+            unit="steps",
         )
         self.start_job(f"calibrate {out.name} ({steps} steps)", job, done)
         self.cal_name.value = f"calibrate-{_stamp()}"
@@ -1206,7 +1207,7 @@ class Page:
             self.job_bar.set_value(p.fraction)
         parts = [p.state]
         if p.done is not None:
-            parts.append(f"{p.done}/{p.total} pick-points")
+            parts.append(f"{p.done}/{p.total} {p.unit}")
         if p.rate:
             parts.append(f"{p.rate:.1f} per s")
         if p.eta_s is not None and p.state == "running":

@@ -37,6 +37,7 @@ class Progress:
     eta_s: float | None
     elapsed_s: float
     message: str = ""
+    unit: str = "pick-points"
 
     @property
     def fraction(self) -> float | None:
@@ -56,6 +57,7 @@ class Job:
         total: int | None = None,
         chunk: int | None = None,
         steps_logged: str | None = None,
+        unit: str = "pick-points",
     ):
         """total, chunk: pick-points and chunk size of an evaluate run (progress from its
         chunk files); steps_logged: a regular expression whose group 1 is the number of
@@ -63,6 +65,7 @@ class Job:
         with total the number of steps."""
         self.argv = list(argv)
         self.steps_logged = re.compile(steps_logged) if steps_logged else None
+        self.unit = unit
         self.log = Path(log)
         self.out = Path(out) if out is not None else None
         self.total = total
@@ -145,7 +148,7 @@ class Job:
             state, message = "cancelled", "cancelled; what finished is kept"
         else:
             state, message = "failed", self.error_message(code)
-        return Progress(state, done, self.total, rate, eta, elapsed, message)
+        return Progress(state, done, self.total, rate, eta, elapsed, message, self.unit)
 
     def _run_started(self) -> float | None:
         """When the simulation started: evaluate writes config.json just before it."""
