@@ -90,6 +90,8 @@ def server(tmp_path_factory):
         proc.wait(30)
     except subprocess.TimeoutExpired:
         proc.kill()
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    shutil.copy(work.parent / "gui_server.log", ARTIFACTS / "gui_server.log")
 
 
 @pytest.fixture(scope="module")
@@ -103,14 +105,17 @@ def browser():
 
 
 @pytest.fixture()
-def page(server, browser):
+def page(server, browser, request):
     url, _ = server
     context = browser.new_context(viewport={"width": 1500, "height": 1000}, accept_downloads=True)
     pg = context.new_page()
-    pg.set_default_timeout(30_000)
+    pg.set_default_timeout(60_000)  # a page update on a busy 2-core machine
     pg.goto(url)
     pg.get_by_text("1 Import object model").wait_for()
+    failed = request.session.testsfailed
     yield pg
+    if request.session.testsfailed > failed:  # keep what the page showed
+        shot(pg, f"FAILED-{request.node.name}")
     assert "Traceback" not in pg.content()
     context.close()
 

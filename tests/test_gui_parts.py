@@ -154,3 +154,18 @@ def test_a_failed_run_reports_the_cli_error_line(tmp_path):
     assert p.state == "failed"
     assert "holds files that mjx-pick did not write" in p.message
     assert "Traceback" not in p.message
+
+
+def test_run_inputs_never_replace_the_files_of_another_run(tmp_path):
+    g = load_gripper("robotiq-2f85")
+    a, _ = forms.build(values(), g)
+    b, _ = forms.build(values(grasp__grip_force_n=30.0), g)
+    first = forms.write_inputs(a, tmp_path / "run")
+    same = forms.write_inputs(a, tmp_path / "run")
+    other = forms.write_inputs(b, tmp_path / "run")
+    assert first == same and first["grasp"].parent == tmp_path / "run"
+    assert other["grasp"].parent == tmp_path / "run-2"
+    assert "grip_force_n = 50.0" in first["grasp"].read_text()
+    assert "grip_force_n = 30.0" in other["grasp"].read_text()
+    flags = forms.cli_flags(b, other)
+    assert flags[flags.index("--grasp") + 1] == str(other["grasp"])

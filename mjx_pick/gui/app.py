@@ -10,7 +10,6 @@ their output folders are the CLI's.
 from __future__ import annotations
 
 import datetime
-import hashlib
 import json
 import math
 import re
@@ -70,7 +69,7 @@ def save_upload(data: bytes, name: str, folder: Path) -> Path:
         path = folder / (f"{stem}{suffix}" if k == 0 else f"{stem}-{k + 1}{suffix}")
         if not path.exists():
             return write_atomic(path, data)
-        if hashlib.sha256(path.read_bytes()).digest() == hashlib.sha256(data).digest():
+        if path.read_bytes() == data:
             return path  # the same file uploaded again
     raise ConfigError(f"too many uploads named {name!r} in {folder}")
 
@@ -522,16 +521,10 @@ class Page:
                 self.picks_image.set_visibility(False)
                 self.run_summary = ui.markdown("").props('data-testid="run-summary"')
 
-    def pick_numbers(self, where) -> tuple[int, int] | None:
-        n, seed = self.n.value, self.seed.value
-        self.n.error = self.seed.error = None
-        if n is None or n < 1 or n != int(n) or n > 10_000_000:
-            self.n.error = "pick-points: a whole number from 1 to 10,000,000"
-            return None
-        if seed is None or seed != int(seed) or seed < 0:
-            self.seed.error = "seed: a whole number >= 0"
-            return None
-        return int(n), int(seed)
+    def pick_numbers(self) -> tuple[int, int] | None:
+        n = self.whole(self.n, 1, 10_000_000)
+        seed = self.whole(self.seed, 0, 2**31 - 1)
+        return None if n is None or seed is None else (n, seed)
 
     async def generate(self) -> None:
         from nicegui import run
@@ -542,7 +535,7 @@ class Page:
         if not self.need_object(self.generate_error):
             return
         settings = self.read_settings()
-        numbers = self.pick_numbers(self.generate_error)
+        numbers = self.pick_numbers()
         if settings is None or numbers is None:
             return
         n, seed = numbers
@@ -571,7 +564,7 @@ class Page:
         self.picks_image.set_source(views.data_uri(png, "image/png"))
         self.picks_image.set_visibility(True)
 
-    def run_folder(self, name_widget, where) -> Path | None:
+    def run_folder(self, name_widget) -> Path | None:
         name = (name_widget.value or "").strip()
         name_widget.error = None
         if not NAME_OK.match(name):
@@ -589,8 +582,8 @@ class Page:
         if self.busy(self.generate_error) or not self.need_object(self.generate_error):
             return
         settings = self.read_settings()
-        numbers = self.pick_numbers(self.generate_error)
-        out = self.run_folder(self.run_name, self.generate_error)
+        numbers = self.pick_numbers()
+        out = self.run_folder(self.run_name)
         if settings is None or numbers is None or out is None:
             return
         n, seed = numbers
@@ -797,10 +790,8 @@ class Page:
             return
         if self.busy(self.analyze_error):
             return
-        n = self.export_n.value
-        self.export_n.error = None
-        if n is None or n != int(n) or not 1 <= n <= 50:
-            self.export_n.error = "a whole number from 1 to 50"
+        n = self.whole(self.export_n, 1, 50)
+        if n is None:
             return
         argv = ["report", str(self.run.path), "--n", str(int(n))]
         if not self.export_anim.value:
@@ -867,13 +858,11 @@ class Page:
         values, errors = forms.sweep_values(*(w.value for w in fields.values()))
         for key, widget in fields.items():
             widget.error = errors.get(key)
-        n = self.sweep_n.value
-        self.sweep_n.error = None
-        if n is None or n != int(n) or n < 1:
-            self.sweep_n.error = "a whole number >= 1"
+        n = self.whole(self.sweep_n, 1, 1_000_000)
+        if n is None:
             return
         settings = self.read_settings()
-        out = self.run_folder(self.sweep_name, self.sweep_error)
+        out = self.run_folder(self.sweep_name)
         if values is None or settings is None or out is None:
             return
         if not self.sweep_param.value:
@@ -1017,7 +1006,7 @@ class Page:
             return
         n = self.whole(self.cmp_n, 1, 1_000_000)
         settings = self.read_settings()
-        out = self.run_folder(self.cmp_name, self.cmp_error)
+        out = self.run_folder(self.cmp_name)
         if n is None or settings is None or out is None:
             return
         flags = self.settings_flags(settings, out)
@@ -1122,7 +1111,7 @@ class Page:
             return
         steps = self.whole(self.cal_steps, 1, 100_000)
         settings = self.read_settings()
-        out = self.run_folder(self.cal_name, self.cal_error)
+        out = self.run_folder(self.cal_name)
         params = list(self.cal_params.value or [])
         self.cal_params.error = None if params else "choose at least one parameter"
         if steps is None or settings is None or out is None or not params:
@@ -1221,9 +1210,8 @@ class Page:
             if p.state == "complete":
                 self.job_bar.set_value(1.0)
             self.cancel_button.set_visibility(False)
-            job, on_end = self.job, self.on_job_end
+            on_end = self.on_job_end
             self.job, self.on_job_end = None, None
-            self.finished_job = job
             try:
                 if on_end is not None:
                     on_end(p)

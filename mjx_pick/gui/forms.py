@@ -14,7 +14,7 @@ import re
 import tomllib
 from pathlib import Path
 
-from mjx_pick.config import ConfigError, from_mapping, to_toml
+from mjx_pick.config import ConfigError, from_mapping, to_toml, write_atomic
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.physics import ContactParams
@@ -76,7 +76,6 @@ CONTACT_FIELDS = (
 SETTINGS_FIELDS = GRIPPER_FIELDS + PICK_FIELDS + PROCEDURE_FIELDS + CONTACT_FIELDS
 
 _NAMED = re.compile(r"^(?:gripper\[[^\]]*\]|grasp|picks|contact)\.(\w+)")
-_OWNER = {"gripper": "gripper", "grasp": "grasp", "picks": "picks", "contact": "contact"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -185,13 +184,21 @@ def gripper_from_toml(text: str, where: str = "gripper TOML") -> GripperSpec:
 
 
 def write_inputs(settings: Settings, folder: Path) -> dict[str, Path]:
-    """The settings as the TOML files the CLI reads (--gripper-file, --grasp, --contact)."""
-    from mjx_pick.config import write_atomic
+    """The settings as the TOML files the CLI reads (--gripper-file, --grasp, --contact).
 
-    paths = {}
-    for name in ("gripper", "grasp", "contact"):
-        paths[name] = write_atomic(folder / f"{name}.toml", to_toml(getattr(settings, name)))
-    return paths
+    Files that a run already reads are never replaced: when folder holds other
+    settings, they go to folder-2, folder-3, ...
+    """
+    texts = {name: to_toml(getattr(settings, name)) for name in ("gripper", "grasp", "contact")}
+    for k in range(1, 1000):
+        where = folder if k == 1 else folder.with_name(f"{folder.name}-{k}")
+        paths = {name: where / f"{name}.toml" for name in texts}
+        if all(not p.exists() or p.read_text() == texts[n] for n, p in paths.items()):
+            for name, path in paths.items():
+                if not path.exists():
+                    write_atomic(path, texts[name])
+            return paths
+    raise ConfigError(f"{folder}: too many different settings for one run name")
 
 
 def cli_flags(settings: Settings, paths: dict[str, Path]) -> list[str]:

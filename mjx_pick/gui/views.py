@@ -82,7 +82,3 @@ def replay_gif(scene_xml: Path, trace: dict, every: int = 12) -> bytes:
     from mjx_pick.report import animate
 
     return _render(lambda path: animate(scene_xml, trace, path, every=every), ".gif")
-
-
-def sweep_png(path: Path) -> bytes:
-    return Path(path).read_bytes()
