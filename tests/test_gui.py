@@ -399,3 +399,22 @@ def test_studies_compare_and_calibrate(page, server):
     page.get_by_text("2 Set gripper parameters").click()
     shown = float(page.get_by_label("pad friction", exact=True).input_value())
     assert shown == pytest.approx(fitted["pad_friction"], rel=1e-6)
+
+
+def test_mesh_import_shows_its_outline(page, server):
+    """A mesh (here a YCB marker in metres) instead of an image: its top-down outline."""
+    marker = ROOT / "assets" / "objects" / "ycb" / "040_large_marker.stl"
+    page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(marker))
+    page.get_by_text("uploaded 040_large_marker.stl").wait_for()
+    choose(page, "mesh unit", "m")
+    number(page, "mass (g)", 15.8)
+    page.get_by_test_id("import").click()
+    info = page.get_by_test_id("object-info")
+    info.filter(has_text="outline").wait_for(timeout=TIMEOUT_MS)
+    import mjx_pick as mp
+
+    expect = mp.load_object(marker, unit="m", mass_g=15.8)
+    area = float(re.search(r"outline (\d+) mm", info.inner_text()).group(1))
+    assert area == pytest.approx(expect.area_mm2, abs=1)
+    assert "mass 15.8 g" in info.inner_text()
+    assert page.get_by_test_id("object-image").locator("img").is_visible()
