@@ -352,6 +352,13 @@ def test_bad_inputs_are_shown_in_the_page(page, server, tmp_path):
     run = server[1] / "gui-cancel"
     assert json.loads((run / "mjx_pick_run.json").read_text())["status"] == "interrupted"
     assert 1 <= len(list((run / "chunks").glob("part-*.parquet"))) < 20
+    # the page is ready to continue it: same folder, resume ticked
+    assert page.get_by_label("run folder name").input_value() == "gui-cancel"
+    page.get_by_test_id("start-batch").click()
+    page.get_by_test_id("job-status").filter(has_text="running").wait_for()
+    assert wait_job(page, "evaluate gui-cancel").startswith("complete")
+    assert pq.read_table(run / "results.parquet").num_rows == 40
+    assert json.loads((run / "mjx_pick_run.json").read_text())["status"] == "complete"
     assert "Traceback" not in page.content()
 
 

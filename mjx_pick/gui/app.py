@@ -597,8 +597,17 @@ class Page:
         self.run_summary.set_content("")
 
         def done(progress):
+            if progress.state == "cancelled":  # ready to continue: same folder, resume
+                self.run_name.value = out.name
+                self.resume.value = True
+                self.run_summary.set_content(
+                    f"**{out.name}**: cancelled; its finished chunks are kept. Start the "
+                    "batch again (resume is ticked) to continue it."
+                )
+                return
             if progress.state != "complete":
                 return
+            self.resume.value = False
             s = json.loads((out / "summary.json").read_text())
             self.run_summary.set_content(
                 f"**{out.name}**: success rate {s['success_rate']:.3f} "
