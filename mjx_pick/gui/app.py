@@ -99,17 +99,17 @@ def check_upload(name: str, size: int, data: bytes | None = None) -> str:
 class Page:
     """One browser tab's state and widgets."""
 
-    def __init__(self, workdir: Path):
+    def __init__(self, workdir: Path, started: set | None = None):
+        """started: the server's set of the jobs it started that may still run."""
         self.workdir = workdir
+        self.started = started if started is not None else set()
         self.uploads = workdir / "inputs" / "uploads"
         self.obj = None
         self.obj_args: list[str] = []
         self.upload_path: Path | None = None
-        self.settings: forms.Settings | None = None
         self.base_gripper = None
         self.base_contact = None  # calibrated contact parameters, once adopted
         self.outcomes_path: Path | None = None
-        self.picks = None
         self.job: jobs.Job | None = None
         self.on_job_end = None
         self.run = None
@@ -325,7 +325,7 @@ class Page:
             self.object_info.set_text("No object imported.")
             self.import_error.set_text(f"{Path(source).name}: cannot be imported ({err})")
             return
-        self.obj, self.obj_args, self.picks = obj, args, None
+        self.obj, self.obj_args = obj, args
         self.object_info.set_text(
             f"{obj.name}: outline {obj.area_mm2:.0f} mm^2, length {obj.length_mm:.1f} mm, "
             f"height {obj.height_mm:g} mm, mass {obj.mass_kg * 1e3:.1f} g"
@@ -555,7 +555,6 @@ class Page:
             self.picks_info.set_text("")
             self.generate_error.set_text(str(err))
             return
-        self.picks = picks
         rejected = ", ".join(f"{k} {v}" for k, v in picks.rejected.items() if v)
         self.picks_info.set_text(
             f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates checked "
@@ -1183,6 +1182,8 @@ class Page:
 
     def start_job(self, title: str, job: jobs.Job, on_end) -> None:
         self.job, self.on_job_end = job.start(), on_end
+        self.started.difference_update([j for j in self.started if not j.running])
+        self.started.add(job)
         self.job_title.set_text(title)
         self.job_status.set_text("starting ...")
         self.job_command.set_content(job.command_line)
@@ -1280,18 +1281,15 @@ def serve(host: str, port: int, workdir: Path, show: bool) -> None:
 
     workdir = Path(workdir).resolve()
     workdir.mkdir(parents=True, exist_ok=True)
-    pages: list[Page] = []
+    started: set[jobs.Job] = set()  # kept while running, also after its tab closed
 
     @ui.page("/")
     def index() -> None:
-        page = Page(workdir)
-        pages.append(page)
-        page.build()
+        Page(workdir, started).build()
 
     def stop_jobs() -> None:  # the server stops: runs stop as on Ctrl-C, keeping their parts
-        for page in pages:
-            if page.job is not None:
-                page.job.cancel()
+        for job in list(started):
+            job.cancel()
 
     app.on_shutdown(stop_jobs)
     ui.run(
