@@ -711,7 +711,43 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("presets", help="list gripper presets").set_defaults(func=cmd_presets)
     sub.add_parser("params", help="list the parameters sweep accepts").set_defaults(func=cmd_params)
     sub.add_parser("assets", help="list shipped objects").set_defaults(func=cmd_assets)
+    _add_gui_parser(sub)
     return ap
+
+
+# --------------------------------------------------------------------------- gui
+def _add_gui_parser(sub) -> None:
+    gp = sub.add_parser("gui", help="the web GUI: the paper's four tabs and a sweep tab")
+    gp.add_argument("--host", default="127.0.0.1", help="interface to listen on")
+    gp.add_argument("--port", type=int, default=0, help="TCP port (0: a free one)")
+    gp.add_argument("--workdir", default="runs/gui", help="folder for uploads and runs")
+    gp.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    gp.set_defaults(func=cmd_gui)
+
+
+def cmd_gui(args) -> int:
+    from mjx_pick import gui
+
+    problem = gui.missing_framework()
+    if problem:
+        raise ConfigError(problem)
+    if not 0 <= args.port <= 65535:
+        raise ConfigError(f"--port {args.port}: allowed 0-65535")
+    if not gui.is_loopback(args.host):
+        print(
+            f"mjx-pick gui: warning: listening on {args.host}: anyone who reaches this "
+            "machine can use the GUI and read and write its work folder",
+            file=sys.stderr,
+        )
+    busy = gui.port_problem(args.host, args.port)  # port 0: can the interface be used?
+    if busy:
+        raise ConfigError(f"--host {args.host} --port {args.port}: {busy}")
+    port = args.port or gui.free_port(args.host)
+    shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
+    print(f"mjx-pick gui: http://{shown}:{port}/ (work folder {args.workdir}; Ctrl-C stops)")
+    sys.stdout.flush()
+    gui.serve(args.host, port, args.workdir, show=not args.no_browser and gui.has_browser())
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -49,6 +49,8 @@ def modules():
         yield path.stem, path
     for path in sorted((ROOT / "kernels").glob("*.py")):
         yield "kernels", path
+    for path in sorted((ROOT / "mjx_pick" / "gui").glob("*.py")):
+        yield "gui", path  # the GUI package: the interface layer, like the CLI
 
 
 def imported(path: Path) -> set[str]:

@@ -1,0 +1,239 @@
+"""The GUI's form fields and their validation, apart from any web framework.
+
+Each field names the settings dataclass field it sets (``section.field``). Values are
+checked by the dataclasses themselves (their ``__post_init__`` range checks), one field
+at a time so that every bad field gets its own message, then together (cross-field
+rules such as "two fingers must fit the stroke"). A :class:`ConfigError` is mapped back
+to the field it names; the page shows it next to that field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import tomllib
+from pathlib import Path
+
+from mjx_pick.config import ConfigError, from_mapping, to_toml, write_atomic
+from mjx_pick.grasp import GraspConfig
+from mjx_pick.gripper import GripperSpec
+from mjx_pick.physics import ContactParams
+from mjx_pick.pickpoints import PickConfig
+
+SECTIONS = {
+    "gripper": GripperSpec,
+    "picks": PickConfig,
+    "grasp": GraspConfig,
+    "contact": ContactParams,
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class Field:
+    """One number on a form: the dataclass field it sets, its label and its unit."""
+
+    key: str  # section.field
+    label: str
+    unit: str = ""
+    step: float = 1.0
+
+    @property
+    def section(self) -> str:
+        return self.key.split(".", 1)[0]
+
+    @property
+    def name(self) -> str:
+        return self.key.split(".", 1)[1]
+
+
+# the paper's "Set gripper parameters" tab (Fig. 10), in its order
+GRIPPER_FIELDS = (
+    Field("gripper.stroke_mm", "stroke width", "mm"),
+    Field("gripper.finger_width_mm", "finger width", "mm"),
+    Field("gripper.finger_depth_mm", "finger depth", "mm"),
+    Field("gripper.pad_height_mm", "pad height", "mm"),
+    Field("gripper.force_min_n", "smallest force", "N"),
+    Field("gripper.force_max_n", "largest force", "N"),
+    Field("gripper.speed_min_mm_s", "slowest closing", "mm/s"),
+    Field("gripper.speed_max_mm_s", "fastest closing", "mm/s"),
+)
+PICK_FIELDS = (
+    Field("picks.safety_zone_mm", "safety zone", "mm", 0.5),
+    Field("picks.min_coverage", "minimum coverage", "", 0.05),
+)
+PROCEDURE_FIELDS = (
+    Field("grasp.grip_force_n", "grip force F_d", "N"),
+    Field("grasp.kp_mm_s_per_n", "P gain", "mm/s per N", 0.1),
+    Field("grasp.closing_speed_mm_s", "closing speed", "mm/s"),
+    Field("grasp.safety_factor", "safety margin S_f", "", 0.05),
+    Field("grasp.lift_height_mm", "lift height", "mm"),
+    Field("grasp.hold_s", "hold", "s", 0.05),
+)
+CONTACT_FIELDS = (
+    Field("contact.pad_friction", "pad friction", "", 0.01),
+    Field("contact.table_friction", "table friction", "", 0.01),
+)
+SETTINGS_FIELDS = GRIPPER_FIELDS + PICK_FIELDS + PROCEDURE_FIELDS + CONTACT_FIELDS
+
+_NAMED = re.compile(r"^(?:gripper\[[^\]]*\]|grasp|picks|contact)\.(\w+)")
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """Everything the gripper tab sets: the four dataclasses of the CLI's flags."""
+
+    gripper: GripperSpec
+    picks: PickConfig
+    grasp: GraspConfig
+    contact: ContactParams
+
+
+def defaults(gripper: GripperSpec) -> dict[str, float]:
+    """Field values for a gripper with the paper's other settings."""
+    objs = {
+        "gripper": gripper,
+        "picks": PickConfig(),
+        "grasp": GraspConfig(),
+        "contact": ContactParams(),
+    }
+    return {f.key: float(getattr(objs[f.section], f.name)) for f in SETTINGS_FIELDS}
+
+
+def field_of(message: str, section: str) -> str | None:
+    """The form key a ConfigError message names (``grasp.grip_force_n = ...``), if any."""
+    m = _NAMED.match(message)
+    if m is None:
+        return None
+    key = f"{section}.{m.group(1)}"
+    return key if any(f.key == key for f in SETTINGS_FIELDS) else None
+
+
+def build(
+    values: dict[str, float | None],
+    gripper: GripperSpec,
+    contact: ContactParams | None = None,
+) -> tuple[Settings | None, dict]:
+    """Settings from form values, or None and {key: message} for every bad field.
+
+    Args:
+      values: {section.field: number or None (left empty)}.
+      gripper: the gripper the form started from (name, masses, drive: the fields the
+        form does not show).
+      contact: the contact parameters it started from (e.g. calibrated ones; default:
+        the paper's), for the fields the form does not show (stiffness, damping, ...).
+    Returns:
+      (settings, {}) or (None, errors); errors may hold "" for a message that names no
+      field (shown above the form).
+    """
+    errors: dict[str, str] = {}
+    base = {"gripper": gripper, "picks": PickConfig(), "grasp": GraspConfig()}
+    base["contact"] = contact or ContactParams()
+    changes: dict[str, dict] = {s: {} for s in SECTIONS}
+    for f in SETTINGS_FIELDS:
+        value = values.get(f.key)
+        if value is None or value == "":
+            errors[f.key] = f"{f.label} is required"
+            continue
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            errors[f.key] = f"{f.label}: {value!r} is not a number"
+            continue
+        try:  # alone on the defaults: the field's own range
+            dataclasses.replace(base[f.section], **{f.name: value})
+        except ConfigError as err:
+            errors[f.key] = str(err)
+            continue
+        changes[f.section][f.name] = value
+    if errors:
+        return None, errors
+    built = {}
+    for section, obj in base.items():
+        try:
+            built[section] = dataclasses.replace(obj, **changes[section])
+        except ConfigError as err:  # cross-field rules
+            errors[field_of(str(err), section) or _cross_field(section, str(err))] = str(err)
+    if errors:
+        return None, errors
+    if built["gripper"] != gripper and built["gripper"].name == gripper.name:
+        # an edited preset is another gripper: results must not carry the preset's name
+        built["gripper"] = dataclasses.replace(built["gripper"], name=f"{gripper.name}-edited")
+    try:
+        built["grasp"].check_gripper(built["gripper"])
+    except ConfigError as err:
+        errors[field_of(str(err), "grasp") or ""] = str(err)
+        return None, errors
+    return Settings(**built), {}
+
+
+def _cross_field(section: str, message: str) -> str:
+    if section == "gripper" and "fingers cannot fit the stroke" in message:
+        return "gripper.finger_depth_mm"
+    return ""
+
+
+def gripper_from_toml(text: str, where: str = "gripper TOML") -> GripperSpec:
+    """A GripperSpec from TOML text; ConfigError names the line or the field."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{where} is not valid TOML: {err}") from err
+    if not data:
+        raise ConfigError(f"{where} is empty: give at least name and stroke_mm")
+    return from_mapping(GripperSpec, data, where=where)
+
+
+def write_inputs(settings: Settings, folder: Path) -> dict[str, Path]:
+    """The settings as the TOML files the CLI reads (--gripper-file, --grasp, --contact).
+
+    Files that a run already reads are never replaced: when folder holds other
+    settings, they go to folder-2, folder-3, ...
+    """
+    texts = {name: to_toml(getattr(settings, name)) for name in ("gripper", "grasp", "contact")}
+    for k in range(1, 1000):
+        where = folder if k == 1 else folder.with_name(f"{folder.name}-{k}")
+        paths = {name: where / f"{name}.toml" for name in texts}
+        if all(not p.exists() or p.read_text() == texts[n] for n, p in paths.items()):
+            for name, path in paths.items():
+                if not path.exists():
+                    write_atomic(path, texts[name])
+            return paths
+    raise ConfigError(f"{folder}: too many different settings for one run name")
+
+
+def cli_flags(settings: Settings, paths: dict[str, Path]) -> list[str]:
+    """The CLI flags that give `mjx-pick evaluate/sweep` these settings."""
+    return [
+        "--gripper-file",
+        str(paths["gripper"]),
+        "--grasp",
+        str(paths["grasp"]),
+        "--contact",
+        str(paths["contact"]),
+        "--safety-zone-mm",
+        repr(float(settings.picks.safety_zone_mm)),
+        "--min-coverage",
+        repr(float(settings.picks.min_coverage)),
+    ]
+
+
+def sweep_values(start, end, step) -> tuple[tuple[float, ...] | None, dict]:
+    """The paper's sweep tab (start, end, step) as values, or errors by field."""
+    errors = {}
+    for key, v in (("start", start), ("end", end), ("step", step)):
+        if v is None or v == "":
+            errors[key] = f"{key} is required"
+    if errors:
+        return None, errors
+    start, end, step = float(start), float(end), float(step)
+    if step <= 0:
+        return None, {"step": f"step = {step:g} must be > 0"}
+    if end < start:
+        return None, {"end": f"end = {end:g} must be >= start = {start:g}"}
+    count = (end - start) / step
+    if abs(count - round(count)) > 1e-6 * max(1.0, count):
+        return None, {"step": f"step = {step:g} does not divide end - start = {end - start:g}"}
+    n = int(round(count)) + 1
+    if n > 50:
+        return None, {"step": f"{n} values: at most 50 per sweep here (use the CLI for more)"}
+    return tuple(round(start + i * step, 12) for i in range(n)), {}

@@ -1,0 +1,176 @@
+"""Long runs started from the GUI: the CLI command itself, in a child process.
+
+A run is ``python -m mjx_pick.cli <command> ...`` with exactly the flags a user would
+type, so its output folder is the CLI's own (the CLI can report, resume or compare it)
+and the command is shown in the page to be copied. A child process, not a thread: a
+cancel is a SIGINT, which the CLI turns into a clean stop (evaluate keeps every
+finished chunk and marks the folder "interrupted", so ``--resume`` continues it), and
+whatever the run does to memory or the GL context cannot take the page down with it.
+
+Progress of an evaluate run is read from its folder: each finished chunk is a file
+``chunks/part-*.parquet`` of ``chunk`` pick-points (``evaluate --chunk-size``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import re
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+CANCEL_GRACE_S = 15.0  # after a SIGINT, how long a run may take to write and stop
+
+
+@dataclasses.dataclass
+class Progress:
+    """What the page shows about a run."""
+
+    state: str  # running | complete | cancelled | failed
+    done: int | None  # pick-points finished (None: unknown, e.g. a sweep)
+    total: int | None
+    rate: float | None  # pick-points per second
+    eta_s: float | None
+    elapsed_s: float
+    message: str = ""
+    unit: str = "pick-points"
+
+    @property
+    def fraction(self) -> float | None:
+        if self.done is None or not self.total:
+            return None
+        return min(1.0, self.done / self.total)
+
+
+class Job:
+    """One CLI command running in a child process, its log in ``log``."""
+
+    def __init__(
+        self,
+        argv: list[str],
+        log: Path,
+        out: Path | None = None,
+        total: int | None = None,
+        chunk: int | None = None,
+        steps_logged: str | None = None,
+        unit: str = "pick-points",
+    ):
+        """total, chunk: pick-points and chunk size of an evaluate run (progress from its
+        chunk files); steps_logged: a regular expression whose group 1 is the number of
+        the last finished step in the run's output (calibrate's "step 12 loss ..."),
+        with total the number of steps."""
+        self.argv = list(argv)
+        self.steps_logged = re.compile(steps_logged) if steps_logged else None
+        self.unit = unit
+        self.log = Path(log)
+        self.out = Path(out) if out is not None else None
+        self.total = total
+        self.chunk = chunk
+        self._proc: subprocess.Popen | None = None
+        self._t0 = 0.0
+        self._cancelled_at: float | None = None
+        self._chunks_before = 0
+
+    @property
+    def command_line(self) -> str:
+        """The same run typed at a shell."""
+        return shlex.join(["mjx-pick", *self.argv])
+
+    def start(self) -> Job:
+        self.log.parent.mkdir(parents=True, exist_ok=True)
+        self._chunks_before = len(self._chunks())
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        with self.log.open("wb") as fh:
+            fh.write(f"$ {self.command_line}\n".encode())
+            fh.flush()
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "mjx_pick.cli", *self.argv],
+                stdout=fh,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                env=env,
+            )
+        self._t0 = time.monotonic()
+        return self
+
+    @property
+    def running(self) -> bool:
+        return self._proc is not None and self._proc.poll() is None
+
+    def cancel(self) -> None:
+        """Ask the run to stop as Ctrl-C would; it keeps what finished."""
+        if self.running and self._cancelled_at is None:
+            self._proc.send_signal(signal.SIGINT)
+            self._cancelled_at = time.monotonic()
+
+    def wait(self, timeout: float | None = None) -> int:
+        return self._proc.wait(timeout)
+
+    def _chunks(self) -> list[Path]:
+        if self.out is None:
+            return []
+        return list((self.out / "chunks").glob("part-*.parquet"))
+
+    def poll(self) -> Progress:
+        """The run's state now; a stopped run that was asked to cancel is killed late."""
+        now = time.monotonic()
+        elapsed = now - self._t0
+        if self._cancelled_at is not None and self.running:
+            if now - self._cancelled_at > CANCEL_GRACE_S:
+                self._proc.kill()
+        done = rate = eta = None
+        if self.chunk and self.total:
+            files = self._chunks()
+            done = min(self.total, len(files) * self.chunk)
+            new = (len(files) - self._chunks_before) * self.chunk
+            started = self._run_started()
+            if new > 0 and started is not None:
+                # from the simulation's start to its newest finished chunk
+                last = max(f.stat().st_mtime for f in files)
+                rate = new / max(last - started, 1e-3)
+                eta = max(0.0, (self.total - done) / rate)
+        if self.steps_logged is not None and self.total:
+            found = self.steps_logged.findall(self._log_text())
+            done = min(self.total, int(found[-1]) + 1) if found else 0
+        code = self._proc.poll() if self._proc is not None else None
+        if code is None:
+            state = "running"
+            message = "stopping: finishing the current chunk" if self._cancelled_at else ""
+        elif code == 0:
+            state, message = "complete", ""
+            if self.total:
+                done = self.total
+        elif self._cancelled_at is not None:
+            state, message = "cancelled", "cancelled; what finished is kept"
+        else:
+            state, message = "failed", self.error_message(code)
+        return Progress(state, done, self.total, rate, eta, elapsed, message, self.unit)
+
+    def _run_started(self) -> float | None:
+        """When the simulation started: evaluate writes config.json just before it."""
+        if self.out is None:
+            return None
+        try:
+            return (self.out / "config.json").stat().st_mtime
+        except OSError:
+            return None
+
+    def _log_text(self) -> str:
+        try:
+            return self.log.read_text(errors="replace")
+        except OSError:
+            return ""
+
+    def error_message(self, code: int) -> str:
+        """One line for the page: the CLI's own error line, else the exception's."""
+        lines = self._log_text().splitlines()
+        for line in reversed(lines):
+            if "error: " in line and line.startswith("mjx-pick"):
+                return line.split("error: ", 1)[1].strip()
+        last = next((ln.strip() for ln in reversed(lines) if ln.strip()), "")
+        # the exception's last line, never the traceback; the log keeps the rest
+        return f"the run stopped (exit code {code}): {last[-300:]}; full log: {self.log}"

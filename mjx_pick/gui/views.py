@@ -1,0 +1,84 @@
+"""Pictures the GUI shows, as PNG/GIF bytes: drawn by the project's own plotting code.
+
+Nothing here simulates: the outline is the ObjectModel's, the pick-point map is
+``plots.draw_candidates``, the force plot ``report.force_plot`` and the 3-D replay
+``report.animate`` (MuJoCo's offscreen renderer replaying a recorded trace in the very
+``scene.xml`` that was simulated).
+"""
+
+from __future__ import annotations
+
+import base64
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pick import plots
+from mjx_pick.objects import ObjectModel, segment_image
+from mjx_pick.pickpoints import PickBatch
+
+
+def data_uri(data: bytes, mime: str) -> str:
+    return f"data:{mime};base64," + base64.b64encode(data).decode()
+
+
+def _render(draw, suffix: str = ".png") -> bytes:
+    """Bytes of a file that draw(path) writes (the plotting code writes files)."""
+    with tempfile.TemporaryDirectory(prefix="mjx_pick_gui_") as tmp:
+        path = Path(tmp) / f"view{suffix}"
+        draw(path)
+        return path.read_bytes()
+
+
+def object_png(obj: ObjectModel, image: Path | None = None) -> bytes:
+    """The segmentation (mask over the image, when there is one) and the outline in mm."""
+
+    def draw(path):
+        ncols = 2 if image is not None else 1
+        fig, axes = plots.new_figure(1, ncols, figsize=(5.2 * ncols, 4.6))
+        axes = np.atleast_1d(axes)
+        if image is not None:
+            import cv2
+
+            img = cv2.imread(str(image), cv2.IMREAD_COLOR)
+            mask = segment_image(image)
+            shown = img[..., ::-1].copy()
+            shown[mask] = (0.5 * shown[mask] + 0.5 * np.array([40, 160, 60])).astype(np.uint8)
+            axes[0].imshow(shown)
+            axes[0].set_title(f"segmentation: {int(mask.sum())} object pixels")
+            axes[0].set_axis_off()
+        ax = axes[-1]
+        plots.add_polygon(ax, obj.polygon, fc="#cfe0f5", ec="k", lw=1.2)
+        ax.plot([0], [0], "r+", ms=12)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x, mm")
+        ax.set_ylabel("y, mm")
+        ax.set_title(
+            f"outline: {obj.area_mm2:.0f} mm^2, {len(obj.polygon.exterior.coords) - 1} "
+            "corners (+ centre of mass)"
+        )
+        fig.tight_layout()
+        plots.save_png(fig, path)
+
+    return _render(draw)
+
+
+def picks_png(obj: ObjectModel, picks: PickBatch) -> bytes:
+    """Generated pick-points on the silhouette: gripper centres and closing axes."""
+    return _render(
+        lambda path: plots.draw_candidates(obj, picks.x_mm, picks.y_mm, picks.yaw_deg, path)
+    )
+
+
+def force_png(trace: dict, grip_force_n: float, title: str) -> bytes:
+    from mjx_pick.report import force_plot
+
+    return _render(lambda path: force_plot(trace, grip_force_n, path, title=title))
+
+
+def replay_gif(scene_xml: Path, trace: dict, every: int = 12) -> bytes:
+    """The recorded pick replayed in 3-D (top and side cameras), an animated GIF."""
+    from mjx_pick.report import animate
+
+    return _render(lambda path: animate(scene_xml, trace, path, every=every), ".gif")

@@ -1,0 +1,427 @@
+"""The web GUI, driven in a real headless Chromium through the paper's workflow.
+
+`mjx-pick gui` runs as a child process on a free port with a temporary work folder;
+Playwright drives the system's Chromium (Debian's ``chromium`` package: Playwright's own
+browser download is not used). Small object (the 40 x 20 mm block), 6 pick-points and a
+short procedure (20 mm lift, 0.1 s hold) on the MuJoCo C backend. Screenshots of every
+tab go to ``tests/artifacts/gui/`` (git-ignored; ``MJX_PICK_GUI_ARTIFACTS`` moves them).
+
+A missing browser or GUI extra is an error, never a skip: the README's test command
+installs both.
+"""
+
+import json
+import os
+import re
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BLOCK = ROOT / "assets" / "objects" / "block.png"
+ARTIFACTS = Path(os.environ.get("MJX_PICK_GUI_ARTIFACTS", ROOT / "tests" / "artifacts" / "gui"))
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+TIMEOUT_MS = 180_000  # a run on a busy 2-core CI machine
+
+
+def chromium_path() -> str:
+    """The system Chromium: $MJX_PICK_CHROMIUM, else the first of BROWSERS on PATH."""
+    given = os.environ.get("MJX_PICK_CHROMIUM")
+    if given:
+        if not Path(given).is_file():
+            pytest.fail(f"MJX_PICK_CHROMIUM={given}: no such file")
+        return given
+    for name in BROWSERS:
+        found = shutil.which(name)
+        if found:
+            return found
+    pytest.fail(
+        "no Chromium found for the GUI tests (looked for "
+        + ", ".join(BROWSERS)
+        + "): apt-get install -y chromium, or set MJX_PICK_CHROMIUM to its executable"
+    )
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    import nicegui  # noqa: F401 - the extras are required (never skipped): fail here
+    import playwright  # noqa: F401
+
+    from mjx_pick.gui import free_port
+
+    work = tmp_path_factory.mktemp("gui_work")
+    port = free_port()
+    # the server runs as a user would start it: NiceGUI switches to its own test mode
+    # when it sees pytest's variable
+    env = {k: v for k, v in os.environ.items() if k != "PYTEST_CURRENT_TEST"}
+    with (work.parent / "gui_server.log").open("wb") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "mjx_pick.cli", "gui", "--no-browser", "--port", str(port)]
+            + ["--workdir", str(work)],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=env,
+        )
+    url = f"http://127.0.0.1:{port}/"
+    deadline = time.monotonic() + 120
+    while True:
+        try:
+            with urllib.request.urlopen(url, timeout=5) as r:
+                assert r.status == 200
+            break
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                proc.kill()
+                text = (work.parent / "gui_server.log").read_text()
+                pytest.fail(f"the GUI did not start: {text}")
+            time.sleep(0.5)
+    yield url, work
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    shutil.copy(work.parent / "gui_server.log", ARTIFACTS / "gui_server.log")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
+        yield b
+        b.close()
+
+
+@pytest.fixture()
+def page(server, browser, request):
+    url, _ = server
+    context = browser.new_context(viewport={"width": 1500, "height": 1000}, accept_downloads=True)
+    pg = context.new_page()
+    pg.set_default_timeout(60_000)  # a page update on a busy 2-core machine
+    pg.goto(url)
+    pg.get_by_text("1 Import object model").wait_for()
+    failed = request.session.testsfailed
+    yield pg
+    if request.session.testsfailed > failed:  # keep what the page showed
+        shot(pg, f"FAILED-{request.node.name}")
+    assert "Traceback" not in pg.content()
+    context.close()
+
+
+def shot(page, name: str) -> None:
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.evaluate("window.scrollTo(0, 0)")  # the header is fixed: keep it on top
+    page.screenshot(path=str(ARTIFACTS / f"{name}.png"), full_page=True)
+
+
+def number(page, label: str, value) -> None:
+    box = page.get_by_label(label, exact=True)
+    box.fill(str(value))
+    box.blur()
+
+
+def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
+    """Wait until the job panel shows the run `title` ended; returns its status line."""
+    page.get_by_test_id("job-title").filter(has_text=title).wait_for()
+    status = page.get_by_test_id("job-status")
+    status.filter(has_text=re.compile(r"^(complete|failed|cancelled)")).wait_for(timeout=timeout_ms)
+    return status.inner_text()
+
+
+def choose(page, label: str, option: str) -> None:
+    page.get_by_label(label, exact=True).click()
+    page.get_by_role("option", name=option, exact=True).click()
+
+
+def field_error(page, label: str) -> str:
+    """The message Quasar shows under a field (its q-field__messages)."""
+    field = page.locator("label.q-field").filter(has=page.get_by_label(label, exact=True))
+    return field.locator(".q-field__messages").inner_text()
+
+
+def test_paper_workflow(page, server):
+    """Upload, outline, gripper, test pick, pick-points, run, best pick, plot, PDF, sweep."""
+    _, work = server
+    # 1 import: upload the block's top-down image, see segmentation and outline
+    page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(BLOCK))
+    page.get_by_text("uploaded block.png").wait_for()
+    number(page, "image scale (px per mm)", 10)
+    number(page, "thickness (mm)", 20)
+    number(page, "mass (g)", 43.2)
+    page.get_by_test_id("import").click()
+    info = page.get_by_test_id("object-info")
+    info.filter(has_text="outline").wait_for(timeout=60_000)
+    area = float(re.search(r"outline (\d+) mm", info.inner_text()).group(1))
+    assert abs(area - 800) < 10  # the block is 40 x 20 mm
+    assert (
+        page.get_by_test_id("object-image")
+        .locator("img")
+        .get_attribute("src")
+        .startswith("data:image/png;base64,")
+    )
+    assert (work / "inputs" / "uploads" / "block.png").read_bytes() == BLOCK.read_bytes()
+    shot(page, "1_import")
+
+    # 2 gripper: a short procedure, then one test pick-point
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "grip force F_d (N)", 40)
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+    page.get_by_test_id("test-pick").click()
+    test_info = page.get_by_test_id("test-info")
+    test_info.filter(has_text="score").wait_for(timeout=TIMEOUT_MS)
+    text = test_info.inner_text()
+    assert "check: feasible" in text and "height compensation" in text
+    shot(page, "2_gripper")
+
+    # 3 generate: 6 pick-points, see them, run the batch
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 6)
+    number(page, "traced best and worst (force plots)", 2)
+    number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+    page.get_by_label("run folder name").fill("gui-run")
+    page.get_by_test_id("generate").click()
+    page.get_by_test_id("picks-info").filter(has_text="6 feasible pick-points").wait_for(
+        timeout=60_000
+    )
+    page.get_by_test_id("start-batch").click()
+    status = wait_job(page, "evaluate gui-run")
+    assert status.startswith("complete") and "6/6 pick-points" in status, status
+    page.get_by_test_id("run-summary").filter(has_text="success rate").wait_for()
+    shot(page, "3_generate")
+    run = work / "gui-run"
+    manifest = json.loads((run / "mjx_pick_run.json").read_text())
+    assert manifest["command"] == "evaluate" and manifest["status"] == "complete"
+    table = pq.read_table(run / "results.parquet")
+    assert table.num_rows == 6
+    assert len(list((run / "chunks").glob("part-*.parquet"))) == 3
+    config = json.loads((run / "config.json").read_text())
+    assert config["grasp"]["grip_force_n"] == 40 and config["grasp"]["hold_s"] == 0.1
+    assert config["backend"] == "mujoco"
+
+    # the command the page shows resumes the GUI's folder from the CLI
+    shown = page.locator("code").filter(has_text="mjx-pick evaluate").first.inner_text().strip()
+    argv = shlex.split(shown)
+    assert argv[0] == "mjx-pick" and argv[argv.index("--out") + 1] == str(run)
+    cli = subprocess.run(
+        [sys.executable, "-m", "mjx_pick.cli", *argv[1:], "--resume"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert cli.returncode == 0, cli.stderr
+    assert pq.read_table(run / "results.parquet").equals(table)
+
+    # 4 analyze: ranked table, the best pick-point's metrics, force plot and 3-D replay
+    page.get_by_text("4 Analyze results").click()
+    rows = page.get_by_test_id("picks-table").locator("tbody tr")
+    rows.first.wait_for()
+    assert rows.count() == 6
+    score = np.asarray(table["score"], float)
+    best = int(np.asarray(table["pick_id"])[np.nanargmax(score)])
+    rows.first.locator(".q-checkbox").click()
+    detail = page.get_by_test_id("pick-detail")
+    detail.filter(has_text=f"pick {best} (rank 1)").wait_for()
+    assert f"{np.nanmax(score):.3f}" in detail.inner_text()
+    for name in ("t_grasp", "phi_max", "t_grasp_nc"):
+        assert name in detail.inner_text()
+    page.get_by_test_id("force-plot").locator("img").wait_for(timeout=60_000)
+    replay = page.get_by_test_id("replay").locator("img")
+    replay.wait_for(timeout=TIMEOUT_MS)
+    assert replay.get_attribute("src").startswith("data:image/gif;base64,")
+    number(page, "n best and n worst", 2)
+    page.get_by_test_id("export").click()
+    assert wait_job(page, "report gui-run").startswith("complete")
+    with page.expect_download() as info_dl:
+        page.get_by_test_id("download-template_a4.pdf").click()
+    pdf = Path(info_dl.value.path())
+    assert pdf.read_bytes()[:5] == b"%PDF-"
+    from pypdf import PdfReader
+
+    assert len(PdfReader(pdf).pages) == 4  # 2 best + 2 worst
+    shot(page, "4_analyze")
+
+    # sweep: 2 values of the pad friction, 4 pick-points each
+    page.get_by_text("Parameter sweep").click()
+    number(page, "start", 0.5)
+    number(page, "end", 0.9)
+    number(page, "step", 0.4)
+    number(page, "simulations per value", 4)
+    page.get_by_label("run folder name").last.fill("gui-sweep")
+    page.get_by_test_id("start-sweep").click()
+    assert wait_job(page, "sweep gui-sweep").startswith("complete")
+    sweep_rows = page.get_by_test_id("sweep-table").locator("tbody tr")
+    sweep_rows.first.wait_for()
+    assert sweep_rows.count() == 2
+    variants = json.loads((work / "gui-sweep" / "variants.json").read_text())
+    assert [v["contact.pad_friction"] for v in variants] == [0.5, 0.9]
+    assert all(v["n"] == 4 for v in variants)
+    shot(page, "5_sweep")
+
+    # studies: robustness of the run's 2 best pick-points under vision error
+    page.get_by_text("Studies", exact=True).click()
+    page.get_by_text("Robustness of the best pick-points").click()
+    number(page, "top pick-points", 2)
+    number(page, "perturbed draws each", 4)
+    page.get_by_test_id("start-robust").click()
+    assert wait_job(page, "robust gui-run").startswith("complete")
+    robust_rows = page.get_by_test_id("robust-table").locator("tbody tr")
+    robust_rows.first.wait_for()
+    assert robust_rows.count() == 2
+    ranking = json.loads((run / "robustness.json").read_text())["ranking"]
+    assert {r["pick_id"] for r in ranking} <= set(np.asarray(table["pick_id"]).tolist())
+    assert all(r["trials"] == 4 for r in ranking)
+
+
+def test_bad_inputs_are_shown_in_the_page(page, server, tmp_path):
+    """A wrong file type, a fake image, a malformed TOML and bad fields: messages only."""
+    upload = page.get_by_test_id("object-upload").locator("input[type=file]")
+    text = tmp_path / "notes.txt"
+    text.write_text("not an object")
+    upload.set_input_files(str(text))
+    page.get_by_test_id("upload-error").filter(has_text="file refused").wait_for()
+    fake = tmp_path / "photo.png"
+    fake.write_bytes(b"this is not a PNG" * 10)
+    upload.set_input_files(str(fake))
+    page.get_by_test_id("upload-error").filter(has_text="cannot be read as an image").wait_for()
+
+    page.get_by_text("2 Set gripper parameters").click()
+    toml = tmp_path / "gripper.toml"
+    toml.write_text('name = "g"\nstroke_mm = = 85\n')
+    page.get_by_test_id("gripper-upload").locator("input[type=file]").set_input_files(str(toml))
+    page.get_by_test_id("toml-error").filter(has_text="not valid TOML").wait_for()
+    toml.write_text('name = "g"\nstroke_mm = -5\n')
+    page.get_by_test_id("gripper-upload").locator("input[type=file]").set_input_files(str(toml))
+    page.get_by_test_id("toml-error").filter(has_text="stroke_mm = -5 is out of range").wait_for()
+
+    # an object is needed before the settings are checked: a shipped one
+    page.get_by_text("1 Import object model").click()
+    choose(page, "object", "(uploaded file)")
+    page.get_by_test_id("import").click()  # the uploads failed: nothing to import
+    page.get_by_test_id("import-error").filter(has_text="upload an image").wait_for()
+    choose(page, "object", "block")
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "stroke width (mm)", -5)
+    page.get_by_label("P gain (mm/s per N)", exact=True).fill("")
+    page.get_by_test_id("test-pick").click()
+    assert "stroke_mm = -5.0 is out of range" in field_error(page, "stroke width (mm)")
+    assert "P gain is required" in field_error(page, "P gain (mm/s per N)")
+    number(page, "stroke width (mm)", 85)
+    number(page, "P gain (mm/s per N)", 2)
+    number(page, "grip force F_d (N)", 500)  # beyond the 2F-85's 235 N
+    page.get_by_test_id("test-pick").click()
+    assert "out of range for robotiq-2f85" in field_error(page, "grip force F_d (N)")
+    number(page, "grip force F_d (N)", 40)
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+
+    # a bad run name, then a long run cancelled from the page: what finished is kept
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 40)
+    number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+    page.get_by_label("run folder name").fill("../outside")
+    page.get_by_test_id("start-batch").click()
+    assert "letters, digits" in field_error(page, "run folder name")
+    page.get_by_label("run folder name").fill("gui-cancel")
+    page.get_by_test_id("start-batch").click()
+    page.get_by_test_id("job-title").filter(has_text="evaluate gui-cancel").wait_for()
+    status = page.get_by_test_id("job-status")
+    status.filter(
+        has_text=re.compile(
+            r"^running, ([2-9]|[1-3]\d)/40 pick-points, .* per s, "
+            r"about \d+ s left"
+        )
+    ).wait_for(timeout=TIMEOUT_MS)
+    page.get_by_role("button", name="Cancel").click()
+    assert wait_job(page, "evaluate gui-cancel").startswith("cancelled")
+    run = server[1] / "gui-cancel"
+    assert json.loads((run / "mjx_pick_run.json").read_text())["status"] == "interrupted"
+    assert 1 <= len(list((run / "chunks").glob("part-*.parquet"))) < 20
+    # the page is ready to continue it: same folder, resume ticked
+    assert page.get_by_label("run folder name").input_value() == "gui-cancel"
+    page.get_by_test_id("start-batch").click()
+    page.get_by_test_id("job-status").filter(has_text="running").wait_for()
+    assert wait_job(page, "evaluate gui-cancel").startswith("complete")
+    assert pq.read_table(run / "results.parquet").num_rows == 40
+    assert json.loads((run / "mjx_pick_run.json").read_text())["status"] == "complete"
+    assert "Traceback" not in page.content()
+
+
+def test_studies_compare_and_calibrate(page, server):
+    """Gripper comparison and calibration from an outcomes CSV, on a 1 kg block."""
+    _, work = server
+    number(page, "mass (g)", 1000)  # the shipped outcomes are of a 1 kg block, RG2
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="mass 1000.0 g").wait_for(timeout=60_000)
+    page.get_by_text("2 Set gripper parameters").click()
+    choose(page, "gripper preset", "onrobot-rg2")
+    assert page.get_by_label("grip force F_d (N)", exact=True).input_value() == "40"  # RG2 max
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+
+    page.get_by_text("Studies", exact=True).click()
+    number(page, "pick-points", 4)
+    page.get_by_label("run folder name").filter(visible=True).first.fill("gui-compare")
+    page.get_by_test_id("start-compare").click()
+    assert wait_job(page, "compare gui-compare").startswith("complete")
+    rows = page.get_by_test_id("compare-table").locator("tbody tr")
+    rows.first.wait_for()
+    assert rows.count() == 2
+    ranking = json.loads((work / "gui-compare" / "ranking.json").read_text())
+    assert sorted(r["gripper"] for r in ranking) == ["onrobot-rg2", "robotiq-2f85"]
+    assert rows.first.inner_text().split()[1] == ranking[0]["gripper"]
+
+    page.get_by_text("Calibrate contact parameters").click()
+    outcomes = ROOT / "assets" / "outcomes" / "block_1kg_rg2.csv"
+    page.get_by_test_id("outcomes-upload").locator("input[type=file]").set_input_files(
+        str(outcomes)
+    )
+    page.get_by_test_id("calibrate-info").filter(has_text="24 tested pick-points").wait_for()
+    number(page, "optimiser steps", 2)
+    page.get_by_label("run folder name").filter(visible=True).last.fill("gui-calibrate")
+    page.get_by_test_id("start-calibrate").click()
+    status = wait_job(page, "calibrate gui-calibrate")
+    assert status.startswith("complete") and "2/2 steps" in status, status
+    fitted = json.loads((work / "gui-calibrate" / "calibration.json").read_text())["fitted"]
+    info = page.get_by_test_id("calibrate-info")
+    assert f"{fitted['pad_friction']:.4f}" in info.inner_text()
+    page.get_by_test_id("use-calibration").click()
+    page.get_by_text("In use in tab 2").wait_for()
+    shot(page, "6_studies")
+    page.get_by_text("2 Set gripper parameters").click()
+    shown = float(page.get_by_label("pad friction", exact=True).input_value())
+    assert shown == pytest.approx(fitted["pad_friction"], rel=1e-6)
+
+
+def test_mesh_import_shows_its_outline(page, server):
+    """A mesh (here a YCB marker in metres) instead of an image: its top-down outline."""
+    marker = ROOT / "assets" / "objects" / "ycb" / "040_large_marker.stl"
+    page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(marker))
+    page.get_by_text("uploaded 040_large_marker.stl").wait_for()
+    choose(page, "mesh unit", "m")
+    number(page, "mass (g)", 15.8)
+    page.get_by_test_id("import").click()
+    info = page.get_by_test_id("object-info")
+    info.filter(has_text="outline").wait_for(timeout=TIMEOUT_MS)
+    import mjx_pick as mp
+
+    expect = mp.load_object(marker, unit="m", mass_g=15.8)
+    area = float(re.search(r"outline (\d+) mm", info.inner_text()).group(1))
+    assert area == pytest.approx(expect.area_mm2, abs=1)
+    assert "mass 15.8 g" in info.inner_text()
+    assert page.get_by_test_id("object-image").locator("img").is_visible()

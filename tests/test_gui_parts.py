@@ -1,0 +1,171 @@
+"""The GUI's parts without a browser: form validation, uploads, runs and their cancel."""
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from mjx_pick.config import ConfigError
+from mjx_pick.gripper import load_gripper
+from mjx_pick.gui import forms, is_loopback, jobs
+from mjx_pick.gui.app import check_upload, save_upload
+
+
+def test_importing_the_package_does_not_import_the_web_framework():
+    code = (
+        "import sys, mjx_pick, mjx_pick.cli, mjx_pick.gui, mjx_pick.gui.app; "
+        "print('nicegui' in sys.modules, 'fastapi' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "False"]
+
+
+def values(**changes):
+    v = forms.defaults(load_gripper("robotiq-2f85"))
+    v.update({k.replace("__", "."): x for k, x in changes.items()})
+    return v
+
+
+def test_the_form_builds_the_settings_it_shows():
+    g = load_gripper("robotiq-2f85")
+    settings, errors = forms.build(values(grasp__grip_force_n=40.0, contact__pad_friction=0.6), g)
+    assert errors == {}
+    assert settings.grasp.grip_force_n == 40.0 and settings.contact.pad_friction == 0.6
+    assert settings.gripper == g  # untouched: still the preset, under its name
+    edited, _ = forms.build(values(gripper__stroke_mm=70.0), g)
+    assert edited.gripper.stroke_mm == 70.0 and edited.gripper.name == "robotiq-2f85-edited"
+
+
+def test_every_bad_field_gets_its_own_message():
+    g = load_gripper("robotiq-2f85")
+    settings, errors = forms.build(
+        values(gripper__stroke_mm=-5.0, picks__min_coverage=1.5, grasp__kp_mm_s_per_n=None), g
+    )
+    assert settings is None
+    assert set(errors) == {"gripper.stroke_mm", "picks.min_coverage", "grasp.kp_mm_s_per_n"}
+    assert "stroke_mm = -5.0 is out of range" in errors["gripper.stroke_mm"]
+    assert "min_coverage = 1.5 is out of range" in errors["picks.min_coverage"]
+    assert errors["grasp.kp_mm_s_per_n"] == "P gain is required"
+
+
+def test_cross_field_rules_land_on_a_field():
+    g = load_gripper("robotiq-2f85")
+    _, errors = forms.build(values(gripper__finger_depth_mm=50.0), g)
+    assert "fingers cannot fit the stroke" in errors["gripper.finger_depth_mm"]
+    _, errors = forms.build(values(grasp__grip_force_n=500.0), g)
+    assert "out of range for robotiq-2f85" in errors["grasp.grip_force_n"]
+
+
+def test_gripper_toml_errors_name_the_problem():
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        forms.gripper_from_toml("stroke_mm = = 1")
+    with pytest.raises(ConfigError, match="unknown setting"):
+        forms.gripper_from_toml('name = "g"\nstrok_mm = 80\n')
+    with pytest.raises(ConfigError, match="empty"):
+        forms.gripper_from_toml("")
+    assert forms.gripper_from_toml('name = "g"\nstroke_mm = 80.0\n').stroke_mm == 80.0
+
+
+@pytest.mark.parametrize(
+    "start,end,step,expect",
+    [
+        (0.5, 0.9, 0.4, (0.5, 0.9)),
+        (20, 50, 10, (20.0, 30.0, 40.0, 50.0)),
+        (1, 1, 1, (1.0,)),
+        (0.5, 0.9, 0.3, "step"),
+        (0.9, 0.5, 0.1, "end"),
+        (0.5, 0.9, 0, "step"),
+        (None, 0.9, 0.1, "start"),
+    ],
+)
+def test_sweep_values_from_start_end_step(start, end, step, expect):
+    got, errors = forms.sweep_values(start, end, step)
+    if isinstance(expect, tuple):
+        assert errors == {} and got == pytest.approx(expect)
+    else:
+        assert got is None and list(errors) == [expect]
+
+
+def test_uploads_are_checked_and_never_replace_another_file(tmp_path):
+    data = (Path(__file__).resolve().parents[1] / "assets" / "objects" / "block.png").read_bytes()
+    assert check_upload("block.png", len(data), data) == ""
+    assert "not an image" in check_upload("notes.txt", 10)
+    assert "too large" in check_upload("big.png", 21 * 2**20)
+    assert "too large" not in check_upload("big.stl", 21 * 2**20)
+    assert "cannot be read as an image" in check_upload("x.png", 5, b"hello")
+    first = save_upload(data, "my part.png", tmp_path)
+    again = save_upload(data, "my part.png", tmp_path)
+    other = save_upload(b"other", "my part.png", tmp_path)
+    assert first == again == tmp_path / "my_part.png"
+    assert other == tmp_path / "my_part-2.png" and first.read_bytes() == data
+
+
+def test_is_loopback():
+    assert is_loopback("127.0.0.1") and is_loopback("localhost") and is_loopback("::1")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.5")
+
+
+def test_a_cancelled_run_keeps_its_chunks_and_resumes_from_the_cli(tmp_path):
+    """Cancel = SIGINT to the CLI child: the folder is 'interrupted', chunks stay."""
+    out = tmp_path / "run"
+    argv = ["evaluate", "block", "--n", "30", "--seed", "1", "--backend", "mujoco"]
+    argv += ["--lift-height-mm", "20", "--hold-s", "0.1", "--traces", "1", "--no-progress"]
+    argv += ["--chunk-size", "2", "--out", str(out)]
+    job = jobs.Job(argv, tmp_path / "run.log", out, total=30, chunk=2).start()
+    deadline = time.monotonic() + 240
+    while not list((out / "chunks").glob("part-*.parquet")):
+        assert job.running, (tmp_path / "run.log").read_text()
+        assert time.monotonic() < deadline
+        time.sleep(0.2)
+    progress = job.poll()
+    assert progress.state == "running" and 2 <= progress.done < 30
+    job.cancel()
+    job.wait(60)
+    progress = job.poll()
+    assert progress.state == "cancelled", (tmp_path / "run.log").read_text()
+    kept = len(list((out / "chunks").glob("part-*.parquet")))
+    assert 1 <= kept < 15
+    assert json.loads((out / "mjx_pick_run.json").read_text())["status"] == "interrupted"
+    assert job.command_line.startswith("mjx-pick evaluate block")
+    done = subprocess.run(
+        [sys.executable, "-m", "mjx_pick.cli", *argv, "--resume"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    table = pq.read_table(out / "results.parquet")
+    assert table.num_rows == 30 and len(np.unique(np.asarray(table["pick_id"]))) == 30
+
+
+def test_a_failed_run_reports_the_cli_error_line(tmp_path):
+    out = tmp_path / "taken"
+    out.mkdir()
+    (out / "mine.txt").write_text("not mjx-pick's")
+    job = jobs.Job(["evaluate", "block", "--n", "2", "--out", str(out)], tmp_path / "x.log", out)
+    job.start().wait(120)
+    p = job.poll()
+    assert p.state == "failed"
+    assert "holds files that mjx-pick did not write" in p.message
+    assert "Traceback" not in p.message
+
+
+def test_run_inputs_never_replace_the_files_of_another_run(tmp_path):
+    g = load_gripper("robotiq-2f85")
+    a, _ = forms.build(values(), g)
+    b, _ = forms.build(values(grasp__grip_force_n=30.0), g)
+    first = forms.write_inputs(a, tmp_path / "run")
+    same = forms.write_inputs(a, tmp_path / "run")
+    other = forms.write_inputs(b, tmp_path / "run")
+    assert first == same and first["grasp"].parent == tmp_path / "run"
+    assert other["grasp"].parent == tmp_path / "run-2"
+    assert "grip_force_n = 50.0" in first["grasp"].read_text()
+    assert "grip_force_n = 30.0" in other["grasp"].read_text()
+    flags = forms.cli_flags(b, other)
+    assert flags[flags.index("--grasp") + 1] == str(other["grasp"])
