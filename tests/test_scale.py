@@ -44,8 +44,10 @@ def test_mjx_sharded_over_four_devices_matches_one_and_does_not_recompile(block,
     for key in ("success", "failure", "t_reached_s"):
         np.testing.assert_array_equal(first[key], alone[key], err_msg=key)
     # not bitwise: the sharded program reduces in another order (float32), and contact
-    # dynamics amplify that; labels and timings above are equal, scores within 0.01
-    np.testing.assert_allclose(first["score"], alone["score"], atol=0.01)
+    # dynamics amplify that; labels and timings above are equal. Scores: 0.0166 apart at
+    # most on one 2-core machine, under 0.01 on another (XLA's CPU code differs by
+    # CPU): within 0.03, a tenth of one of eq. 2's three terms
+    np.testing.assert_allclose(first["score"], alone["score"], atol=0.03)
 
 
 def test_uneven_batch_rounds_up_to_devices(block):
