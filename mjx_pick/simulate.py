@@ -225,7 +225,7 @@ def default_batch_size(backend_name: str) -> int:
         return 1024  # 80 pick-points/s at 256, 92 at 1024 (2 cores, RESULTS.md)
     if name == "warp":
         # per GPU (every GPU runs its own pool): H100, 3,523/s at 32,768 slots, 3,176/s
-        # at 16,384 (RESULTS.md)
+        # at 16,384 (before the pool shrank in its tail; RESULTS.md)
         from mjx_pick.backend_warp import nvidia_gpus
 
         return 32768 * max(len(nvidia_gpus()), 1)
