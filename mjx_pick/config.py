@@ -79,8 +79,37 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], *, where: str = "") -> T
             value = from_mapping(sub, value, where=f"{label}.{key}")
         elif isinstance(value, list):
             value = tuple(value)
+        _check_kind(f"{label}.{key}", value, fields[key])
         kwargs[key] = value
-    return cls(**kwargs)
+    try:
+        return cls(**kwargs)
+    except TypeError as err:  # a value of a kind the checks above do not know
+        raise ConfigError(f"{label}: {err}") from err
+
+
+def _check_kind(name: str, value: Any, field: dataclasses.Field) -> None:
+    """Reject a value whose kind (list, text, number, true/false) differs from the
+    field's default's -- before the dataclass's own range checks meet it."""
+    if field.default is not dataclasses.MISSING:
+        default = field.default
+    elif field.default_factory is not dataclasses.MISSING:
+        default = field.default_factory()
+    else:
+        return
+    if default is None or dataclasses.is_dataclass(default):
+        return
+    kinds = (
+        (bool, "true or false"),
+        (tuple, "a list"),
+        (str, "text"),
+        (int | float, "a number"),
+    )
+    for kind, words in kinds:
+        if isinstance(default, kind):
+            ok = isinstance(value, kind) and (kind is bool or not isinstance(value, bool))
+            if not ok:
+                raise ConfigError(f"{name} = {value!r} must be {words}")
+            return
 
 
 def _dataclass_type(cls: type, key: str, ftype: Any) -> type | None:
