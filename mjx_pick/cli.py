@@ -567,8 +567,23 @@ def _add_overwrite(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _version_line() -> str:
+    """mjx-pick's version and the physics engines it runs on."""
+    import importlib.metadata as md
+
+    def version(dist: str) -> str:
+        try:
+            return md.version(dist)
+        except md.PackageNotFoundError:
+            return "not installed"
+
+    parts = ", ".join(f"{d} {version(d)}" for d in ("mujoco", "mujoco-mjx", "jax", "warp-lang"))
+    return f"mjx-pick {version('mjx-pick')} ({parts})"
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="mjx-pick", description=__doc__.splitlines()[0])
+    ap.add_argument("--version", action="version", version=_version_line())
     sub = ap.add_subparsers(dest="command", required=True)
 
     ev = sub.add_parser("evaluate", help="simulate pick-points and write results")

@@ -23,3 +23,18 @@ def test_kernels_install_under_the_package():
     import mjx_pick.kernels.grasp as g
 
     assert f.REASONS[0] == "feasible" and g.FAILURES[0] == "none"
+
+
+def test_cli_version_names_the_engines(capsys):
+    import importlib.metadata
+
+    import pytest
+
+    from mjx_pick import cli
+
+    with pytest.raises(SystemExit) as done:
+        cli.main(["--version"])
+    assert done.value.code == 0
+    line = capsys.readouterr().out.strip()
+    assert line.startswith(f"mjx-pick {importlib.metadata.version('mjx-pick')} (")
+    assert f"mujoco {importlib.metadata.version('mujoco')}" in line and "jax " in line
