@@ -420,8 +420,17 @@ class Problem:
         logit = jnp.clip((lift_mm - self.high_mm) / self.temperature_mm, -5.0, 5.0)
         p = jax.nn.sigmoid(logit)
         bce = w * (optax.sigmoid_binary_cross_entropy(logit, y) - _entropy(y))
+        # a diverged simulation is a failure of the parameters, never a fit: its row
+        # costs what the most wrong prediction the clipped logit allows would
+        worst = w * (
+            jnp.maximum(
+                optax.sigmoid_binary_cross_entropy(jnp.full(shape, -5.0), y),
+                optax.sigmoid_binary_cross_entropy(jnp.full(shape, 5.0), y),
+            )
+            - _entropy(y)
+        )
         ok = ~diverged
-        loss = jnp.sum(jnp.where(ok, bce, 0.0), axis=-1) / float(o.trials.sum())
+        loss = jnp.sum(jnp.where(ok, bce, worst), axis=-1) / float(o.trials.sum())
         if self.time_weight and np.isfinite(o.lift_time_s).any():
             meas = jnp.broadcast_to(jnp.asarray(np.nan_to_num(o.lift_time_s), jnp.float32), shape)
             has = jnp.broadcast_to(jnp.asarray(np.isfinite(o.lift_time_s)), shape) & ok
@@ -670,7 +679,13 @@ def calibrate(
                 frac = step / max(1, steps - 1)
                 spread = sigma * (0.3 + 0.7 * 0.5 * (1 + math.cos(math.pi * frac)))
                 loss, grad = problem.smoothed_grad(theta, samples, spread)
-            grad = np.nan_to_num(grad)  # a diverged lane must not poison the fit
+            if not np.isfinite(grad).all():
+                # a zeroed NaN would be a silent "no change": stop and say where
+                raise ConfigError(
+                    f"calibration step {step}: the {estimator!r} gradient is not finite at "
+                    f"{space.as_dict(theta)} (a simulation diverged or its derivative "
+                    "blew up); narrow the parameter ranges or use estimator 'smoothed'"
+                )
             updates, opt_state = opt.update(jnp.asarray(grad, jnp.float32), opt_state)
             theta = np.asarray(optax.apply_updates(jnp.asarray(theta), updates), np.float32)
             thetas.append(theta)

@@ -95,6 +95,31 @@ def test_parameters_stay_in_their_bounds(heavy_block):
     assert v == pytest.approx([0.62, 50.0], rel=1e-4)
 
 
+def test_a_diverged_row_costs_the_worst_fit_not_a_perfect_one(heavy_block, synthetic):
+    # the loss of outputs that match every row's measured outcome, then the same with
+    # rows flagged diverged: each such row must cost what the most wrong prediction
+    # costs (it once cost nothing -- a fit could prefer parameters that blow up)
+    s = mp.Settings(LIGHT, grasp=GRASP)
+    problem = cal.Problem(
+        heavy_block, synthetic, ["pad_friction"], s, time_weight=0.0, force_weight=0.0
+    )
+    held = synthetic.fraction >= 0.5
+    high = problem.high_mm
+    lift = np.where(held, high + 50.0, high - 50.0).astype(np.float32)  # clearly right
+    t = np.zeros_like(lift)
+    none = np.zeros(len(lift), bool)
+    good, _ = problem.loss_terms(lift, t, none)
+    wrong, _ = problem.loss_terms(
+        np.where(held, high - 50.0, high + 50.0).astype(np.float32), t, none
+    )
+    some = none.copy()
+    some[:3] = True
+    blown, _ = problem.loss_terms(lift, t, some)
+    every, _ = problem.loss_terms(lift, t, ~none)
+    assert float(good) < float(blown) < float(every)
+    assert float(every) == pytest.approx(float(wrong), rel=1e-5)
+
+
 def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_block, synthetic):
     assert 0 < synthetic.successes.sum() < len(synthetic), "the data must hold both outcomes"
     # the fit starts below the hidden value: with the soft-finger pads this data's
