@@ -6,6 +6,7 @@ Thresholds are theory's (eq. 1 with the lift acceleration), not fitted to the ru
 """
 
 import itertools
+import os
 
 import numpy as np
 import pytest
@@ -32,7 +33,12 @@ def centred(obj, n, gripper=FREE, grasp=PROC, y_mm=None):
     return picks
 
 
-def simulate(obj, picks, backend="mujoco", contact=None, grasp=PROC, record=False, **per_pick):
+# the engine the C-engine tests run on; MJX_PICK_TEST_BACKEND=warp runs them on MuJoCo
+# Warp on a GPU machine (issue 16: the same properties on every backend)
+BACKEND = os.environ.get("MJX_PICK_TEST_BACKEND", "mujoco")
+
+
+def simulate(obj, picks, backend=BACKEND, contact=None, grasp=PROC, record=False, **per_pick):
     scene = mp.build_scene(obj, FREE, contact, None, grasp)
     runner = make_backend(backend, scene, grasp, batch_size=len(picks))
     out, traces = runner.run(make_inputs(scene, grasp, picks, per_pick), record=record)
