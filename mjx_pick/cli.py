@@ -320,9 +320,9 @@ def cmd_robust(args) -> int:
     import pyarrow.parquet as pq
 
     from mjx_pick import pickpoints as pp
+    from mjx_pick.engine import Simulator
     from mjx_pick.metrics import best_successes
     from mjx_pick.robustness import robustness
-    from mjx_pick.simulate import Simulator
 
     obj, base, picks_cfg = _base_settings(args)
     sim = Simulator(obj, args.backend, args.batch_size)

@@ -30,11 +30,12 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
+from mjx_pick.engine import Simulator
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.rundir import claim, config_hash, finish
-from mjx_pick.simulate import Settings, Simulator
+from mjx_pick.simulate import Settings
 
 
 @dataclasses.dataclass

@@ -28,10 +28,11 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import check_range, to_dict, write_json, write_parquet
+from mjx_pick.engine import Simulator
 from mjx_pick.metrics import wilson_interval
 from mjx_pick.objects import ObjectModel
 from mjx_pick.rundir import claim, config_hash, finish, read_manifest
-from mjx_pick.simulate import Settings, Simulator
+from mjx_pick.simulate import Settings
 
 
 def perturb(picks: pp.PickBatch, m: int, sigma_xy_mm: float, sigma_yaw_deg: float, seed: int):

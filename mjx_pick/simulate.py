@@ -1,9 +1,12 @@
-"""What both backends share: batched inputs, per-pick overrides, backend choice.
+"""What every backend shares: batched inputs, per-pick overrides, the Backend protocol
+and backend choice.
 
 A backend turns :class:`PickInputs` (N pick-points: initial joint positions, per-pick
 controller parameters and contact-pair parameters) into per-pick results (the dict of
-``mjx_pick.kernels.grasp.finalize``) and, on request, traces. MJX (GPU) and the MuJoCo
-C engine (CPU) implement it; ``make_backend`` picks one.
+``mjx_pick.kernels.grasp.finalize``) and, on request, traces. MuJoCo Warp and MJX's JAX
+physics (GPU) and the MuJoCo C engine (CPU) implement it; ``make_backend`` picks one.
+Callers do not run backends themselves: ``mjx_pick.engine`` does (chunks, progress,
+cancellation, timing).
 """
 
 from __future__ import annotations
@@ -18,10 +21,9 @@ from mjx_pick.config import ConfigError
 from mjx_pick.grasp import GraspConfig, broadcast_params
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams, mujoco_contact
 from mjx_pick.pickpoints import PickBatch
-from mjx_pick.scene import Scene, build_scene
+from mjx_pick.scene import Scene
 
 # per-pick contact overrides accepted by make_inputs (besides GraspParams' fields)
 CONTACT_OVERRIDES = (
@@ -237,7 +239,7 @@ class Settings:
     """Every physical setting of one simulated variant: gripper, contact, solver, grasp.
 
     Sweeps, gripper comparisons, design searches, robustness and calibration all run
-    lists of (Settings, PickBatch) jobs through one :class:`Simulator`.
+    lists of (Settings, PickBatch) jobs through one ``engine.Simulator``.
     """
 
     gripper: GripperSpec = dataclasses.field(default_factory=GripperSpec)
@@ -275,78 +277,3 @@ class Settings:
         out["pad_solimp"] = np.tile(np.asarray(mjc.pad_solimp, np.float32), (n, 1))
         out["table_solimp"] = np.tile(np.asarray(mjc.table_solimp, np.float32), (n, 1))
         return out
-
-
-class Simulator:
-    """Runs (Settings, PickBatch) jobs for one object, batching what can share a program.
-
-    Jobs whose settings share a structure (``Settings.structure``) run as ONE batch of
-    pick-points x variants with per-pick parameters -- one compile, one call (chunked by
-    the backend's batch size). Scenes and backends are cached, so a loop that calls
-    ``run`` again (a bisection, an optimiser) compiles nothing new.
-    """
-
-    def __init__(
-        self, obj: ObjectModel, backend: str = "auto", batch_size: int | None = None
-    ) -> None:
-        self.object = obj
-        self.backend_name = backend
-        self.batch_size = batch_size
-        self._backends: dict[tuple, Backend] = {}
-        self.rollouts = 0  # pick-point simulations run so far
-
-    @property
-    def backends(self) -> list[Backend]:
-        """The backends built so far: one per scene structure (one compile each on MJX)."""
-        return list(self._backends.values())
-
-    def adopt(self, settings: Settings, backend: Backend) -> None:
-        """Reuse a backend built elsewhere for settings' structure (no new compile)."""
-        self._backends[settings.structure()] = backend
-
-    def backend(self, settings: Settings) -> Backend:
-        key = settings.structure()
-        if key not in self._backends:
-            scene = build_scene(
-                self.object, settings.gripper, settings.contact, settings.solver, settings.grasp
-            )
-            size = self.batch_size or default_batch_size(self.backend_name)
-            self._backends[key] = make_backend(self.backend_name, scene, settings.grasp, size)
-        return self._backends[key]
-
-    def run(self, jobs: list[tuple[Settings, PickBatch]]) -> list[dict]:
-        """Per-job results (the dict of ``kernels.grasp.finalize``, (len(picks),) arrays)."""
-        for settings, _ in jobs:
-            settings.grasp.check_gripper(settings.gripper)
-        groups: dict[tuple, list[int]] = {}
-        for j, (settings, _) in enumerate(jobs):
-            groups.setdefault(settings.structure(), []).append(j)
-        results: list[dict | None] = [None] * len(jobs)
-        for members in groups.values():
-            live = [j for j in members if len(jobs[j][1])]
-            for j in members:
-                if not len(jobs[j][1]):
-                    results[j] = {}
-            if not live:
-                continue
-            backend = self.backend(jobs[live[0]][0])
-            parts = []
-            for j in live:
-                settings, picks = jobs[j]
-                parts.append(
-                    make_inputs(
-                        backend.scene,
-                        settings.grasp,
-                        picks,
-                        settings.overrides(backend.scene, len(picks)),
-                    )
-                )
-            inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
-            out, _ = backend.run(inputs)
-            self.rollouts += len(inputs)
-            start = 0
-            for j in live:
-                n = len(jobs[j][1])
-                results[j] = {k: v[start : start + n] for k, v in out.items()}
-                start += n
-        return results

@@ -12,7 +12,7 @@ grip_force_n, kp_mm_s_per_n, closing_speed_mm_s and opening_speed_mm_s. Values:
 
 Contact, controller and phase settings are per-pick data of one compiled simulation,
 so every variant that shares the scene and the scan length runs in ONE batch of
-pick-points x variants (``simulate.Simulator``). Gripper geometry and solver settings
+pick-points x variants (``engine.Simulator``). Gripper geometry and solver settings
 change the scene: each such value is a batch (and, on MJX, a compile) of its own.
 Pick-points are drawn per gripper geometry with the same seed, so variants that share
 a gripper see the same pick-points (paired).
@@ -32,13 +32,14 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, to_dict, write_json, write_parquet
+from mjx_pick.engine import Simulator
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import rate_summary, results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.rundir import claim, config_hash, finish
-from mjx_pick.simulate import Settings, Simulator
+from mjx_pick.simulate import Settings
 
 SECTIONS = {
     "contact": ContactParams,
