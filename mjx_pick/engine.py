@@ -452,7 +452,8 @@ class Simulator:
             offset = done
 
             def progress(k: int, _n: int, offset=offset) -> None:
-                if report is not None:
+                # a group's start (k = 0) is where the previous one ended: said already
+                if report is not None and k > 0:
                     report(offset + k, total)
 
             out = self.engine.run(backend, inputs, on_progress=progress).results

@@ -181,7 +181,8 @@ def evaluate(
       n_traces: traces kept for the n best and n worst pick-points.
       progress: show a progress bar (tqdm, on stderr).
       on_progress: called as on_progress(done, total) with the pick-points simulated
-        (or read back on resume) of the main run, before the first chunk and after each.
+        (or read back on resume) of the main run, before the first chunk and after each
+        (Optimization mode, whose total is not known ahead, reports nothing).
       cancel: a threading.Event; once set, the run stops before its next chunk with
         mjx_pick.engine.Cancelled (the output folder keeps its finished chunks).
       resume: skip chunks an interrupted run with the same configuration finished.
@@ -202,7 +203,7 @@ def evaluate(
     pick_config = pick_config or pp.PickConfig()
     grasp.check_gripper(gripper)
     scene = build_scene(obj, gripper, contact, solver, grasp)
-    engine = Engine(backend, batch_size, chunk_size=chunk_size, cancel=cancel)
+    engine = Engine(backend, batch_size, chunk_size=chunk_size or None, cancel=cancel)
     runner = engine.make(scene, grasp)
     out_dir = Path(out) if out is not None else None
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
@@ -225,18 +226,22 @@ def evaluate(
         claim(out_dir, "evaluate", config_hash(request), resume=resume, overwrite=overwrite)
 
     if until is not None:
-        picks_batch, results = _optimize(
-            engine,
-            runner,
-            grasp,
-            obj,
-            gripper,
-            until,
-            min_score,
-            max_n or 10 * until,
-            seed,
-            pick_config,
-        )
+        try:
+            picks_batch, results = _optimize(
+                engine,
+                runner,
+                grasp,
+                obj,
+                gripper,
+                until,
+                min_score,
+                max_n or 10 * until,
+                seed,
+                pick_config,
+            )
+        except (KeyboardInterrupt, Cancelled) as stop:
+            _stopped(out_dir, stop)
+            raise
     else:
         if picks is None:
             picks_batch = pp.generate_normal(
@@ -334,8 +339,7 @@ def evaluate(
             )
         traces = _traces(engine, runner, grasp, picks_batch, table, n_traces) if n_traces else None
     except (KeyboardInterrupt, Cancelled) as stop:
-        if out_dir is not None:  # finished chunks stay for --resume
-            finish(out_dir, "cancelled" if isinstance(stop, Cancelled) else "interrupted")
+        _stopped(out_dir, stop)
         raise
     if out_dir is not None:
         write_parquet(out_dir / "results.parquet", table)
@@ -344,6 +348,12 @@ def evaluate(
             write_parquet(out_dir / "traces.parquet", traces)
         finish(out_dir)
     return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _stopped(out_dir: Path | None, stop: BaseException) -> None:
+    """Mark a folder whose run stopped early; its finished chunks stay for --resume."""
+    if out_dir is not None:
+        finish(out_dir, "cancelled" if isinstance(stop, Cancelled) else "interrupted")
 
 
 def _picks_source(picks) -> str:

@@ -1,9 +1,17 @@
 """The one simulation engine: results unchanged by the refactor that introduced it,
 progress and cancellation between chunks, every study running through it."""
 
+import ast
+import json
+import threading
+from pathlib import Path
+
 import numpy as np
+import pytest
 
 import mjx_pick as mp
+from mjx_pick import pickpoints as pp
+from mjx_pick.engine import Cancelled, Engine, Simulator
 from mjx_pick.evaluate import evaluate
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.sweep import ParamSpec, sweep
@@ -119,3 +127,104 @@ def test_sweep_results_unchanged_by_the_engine(block):
         backend="mujoco",
     )
     _check(res.table, SWEEP_BLOCK)
+
+
+def test_progress_and_cancel_between_chunks_then_resume(door_opener, tmp_path):
+    out = tmp_path / "run"
+    calls, cancel = [], threading.Event()
+
+    def stop_after_first_chunk(done, total):
+        calls.append((done, total))
+        if done >= 2:
+            cancel.set()
+
+    common = dict(n=6, seed=3, grasp=SHORT, backend="mujoco", batch_size=2, chunk_size=2)
+    with pytest.raises(Cancelled):
+        evaluate(
+            door_opener,
+            **common,
+            out=out,
+            n_traces=0,
+            on_progress=stop_after_first_chunk,
+            cancel=cancel,
+        )
+    assert calls == [(0, 6), (2, 6)]
+    chunks = sorted(p.name for p in (out / "chunks").glob("part-*.parquet"))
+    assert chunks == ["part-000000.parquet"], "the run stops before the next chunk"
+    assert json.loads((out / "mjx_pick_run.json").read_text())["status"] == "cancelled"
+    stamp = (out / "chunks" / chunks[0]).stat().st_mtime_ns
+
+    calls.clear()
+    ev = evaluate(
+        door_opener,
+        **common,
+        out=out,
+        n_traces=0,
+        resume=True,
+        on_progress=lambda d, t: calls.append((d, t)),
+    )
+    assert calls == [(0, 6), (2, 6), (4, 6), (6, 6)]
+    assert (out / "chunks" / chunks[0]).stat().st_mtime_ns == stamp, "a finished chunk was redone"
+    # chunks of 2 on batches of 2 give the pinned results of chunks of 4 on batches of 4
+    _check(ev.table, EVALUATE_DOOR_OPENER)
+
+
+def test_simulator_reports_progress_over_all_jobs_and_honours_cancel(block):
+    calls = []
+    engine = Engine("mujoco", 2, chunk_size=2, on_progress=lambda d, t: calls.append((d, t)))
+    sim = Simulator(block, engine=engine)
+    picks = pp.generate_normal(block, mp.GripperSpec(), 3, seed=1, grasp=SHORT)
+    base = mp.Settings(grasp=SHORT)
+    strong = mp.Settings(
+        grasp=GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05, grip_force_n=60.0)
+    )
+    a, b = sim.run([(base, picks), (strong, picks)])
+    # both jobs share one structure: one batch of 6 pick-points in chunks of 2
+    assert calls == [(0, 6), (2, 6), (4, 6), (6, 6)]
+    assert len(sim.backends) == 1 and sim.rollouts == engine.rollouts == 6
+    assert len(a["success"]) == len(b["success"]) == 3
+    timing = engine.timing
+    assert timing.n == 6 and timing.compile_s > 0 and timing.run_s > 0
+
+    cancel = threading.Event()
+    cancel.set()
+    stopped = Simulator(block, engine=Engine("mujoco", 2, cancel=cancel))
+    with pytest.raises(Cancelled):
+        stopped.run([(base, picks)])
+    assert stopped.engine.rollouts == 0
+
+
+ROOT = Path(__file__).resolve().parents[1]
+# only the engine layer builds and runs backends; everyone else goes through the engine
+BACKEND_NAMES = {"make_backend", "make_rollout", "MjxBackend", "MujocoBackend", "make_warp_backend"}
+ENGINE_LAYER = {"engine", "simulate", "backend_mjx", "backend_mujoco", "backend_warp"}
+
+
+def _names_used(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text())
+    used = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name):
+            used.add(node.id)
+        elif isinstance(node, ast.Attribute):
+            used.add(node.attr)
+        elif isinstance(node, ast.ImportFrom):
+            used.update(a.name for a in node.names)
+    return used
+
+
+def test_only_the_engine_builds_backends():
+    files = [p for p in (ROOT / "mjx_pick").rglob("*.py") if p.stem not in ENGINE_LAYER]
+    assert len(files) > 10
+    offenders = {str(p.relative_to(ROOT)): sorted(_names_used(p) & BACKEND_NAMES) for p in files}
+    offenders = {k: v for k, v in offenders.items() if v}
+    assert not offenders, f"simulate through mjx_pick.engine, not a backend: {offenders}"
+
+
+def test_the_backend_check_sees_a_direct_call(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text(
+        "import mjx_pick.simulate as s\n\n"
+        "def f(scene):\n    return s.make_backend('mujoco', scene)\n"
+    )
+    assert _names_used(src) & BACKEND_NAMES == {"make_backend"}
