@@ -706,7 +706,12 @@ def calibrate(
     result = CalibrationResult(contact, values, initial, history, acc_before, acc_after, out_dir)
     if out_dir is not None:
         write_result(result, problem, out_dir)
-        finish(out_dir)
+        meta = problem.engine.describe(time.perf_counter() - t0)
+        meta["timing"]["rollouts"] = problem.rollouts
+        if estimator == "jvp":  # the gradients ran on MJX's JAX physics, beside the engine
+            d = jax.devices()[0]
+            meta.update(backend="mjx", device=f"{d.platform}:{d.device_kind}")
+        finish(out_dir, command="calibrate", config=request, **meta)
     return result
 
 

@@ -520,7 +520,7 @@ def cmd_picks(args) -> int:
     cx, cy, cyaw = pp.draw_block(rng, *checker.ranges(), cfg, 2000)  # the configured ranges
     labels = np.asarray(pp.REASONS)[checker(cx, cy, cyaw)["reason"]]
     plots.draw_candidates(obj, cx, cy, cyaw, out / "candidates.png", labels=labels)
-    finish(out)
+    finish(out, command="picks", config=request, seed=args.seed)  # nothing simulated
     print(
         f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates; rejected "
         f"{picks.rejected}; written to {out}/ (picks.csv, pick_0.png, candidates.png)"

@@ -80,6 +80,9 @@ class Timing:
     def __add__(self, other: Timing) -> Timing:
         return Timing(*(a + b for a, b in zip(self.astuple(), other.astuple(), strict=True)))
 
+    def __sub__(self, other: Timing) -> Timing:
+        return Timing(*(a - b for a, b in zip(self.astuple(), other.astuple(), strict=True)))
+
     def astuple(self) -> tuple:
         return (self.compile_s, self.run_s, self.wall_s, self.n)
 
@@ -176,6 +179,22 @@ class Engine:
             (Timing(b.stats.compile_s, b.stats.run_s, 0.0, b.stats.n) for b in self.backends),
             Timing(),
         )
+
+    def describe(self, wall_s: float | None = None) -> dict:
+        """What ran, for a run's metadata (``rundir.finish``): backend, device and
+        timing (compile_s, run_s: summed over this engine's backends; simulations: the
+        pick-point simulations run; wall_s: the caller's, when given)."""
+        first = self.backends[0] if self.backends else None
+        t = self.timing
+        timing = {"compile_s": round(t.compile_s, 3), "run_s": round(t.run_s, 3)}
+        timing["simulations"] = int(t.n)
+        if wall_s is not None:
+            timing["wall_s"] = round(wall_s, 3)
+        return {
+            "backend": first.name if first is not None else self.backend_name,
+            "device": first.device if first is not None else None,
+            "timing": timing,
+        }
 
     def check_cancel(self) -> None:
         """Raise :class:`Cancelled` when the cancel event is set."""

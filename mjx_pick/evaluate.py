@@ -25,12 +25,9 @@ import csv
 import dataclasses
 import hashlib
 import json
-import platform
-import sys
 import threading
 import time
 import warnings
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +43,7 @@ from mjx_pick.metrics import results_table, summarize
 from mjx_pick.objects import ObjectModel, load_object
 from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.robustness import min_grip_force
-from mjx_pick.rundir import claim, config_hash, finish
+from mjx_pick.rundir import claim, config_hash, finish, versions
 from mjx_pick.scene import build_scene
 from mjx_pick.simulate import Settings, default_batch_size, make_inputs
 
@@ -119,16 +116,6 @@ def user_picks(
             raise ConfigError(message + hint)
         warnings.warn(message + "; left out", stacklevel=2)
     return checker.batch(ids, x, y, yaw, mode="user")
-
-
-def versions() -> dict:
-    out = {"python": sys.version.split()[0], "platform": platform.platform()}
-    for pkg in ("mjx-pick", "mujoco", "mujoco-mjx", "jax", "jaxlib", "numpy"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = None
-    return out
 
 
 def _resolve(obj, gripper) -> tuple[ObjectModel, GripperSpec]:
@@ -240,7 +227,7 @@ def evaluate(
                 pick_config,
             )
         except (KeyboardInterrupt, Cancelled) as stop:
-            _stopped(out_dir, stop)
+            _stopped(out_dir, stop, engine, seed, None)
             raise
     else:
         if picks is None:
@@ -339,21 +326,24 @@ def evaluate(
             )
         traces = _traces(engine, runner, grasp, picks_batch, table, n_traces) if n_traces else None
     except (KeyboardInterrupt, Cancelled) as stop:
-        _stopped(out_dir, stop)
+        _stopped(out_dir, stop, engine, seed, config, time.perf_counter() - t0)
         raise
     if out_dir is not None:
         write_parquet(out_dir / "results.parquet", table)
         write_json(out_dir / "summary.json", summary)
         if traces is not None:
             write_parquet(out_dir / "traces.parquet", traces)
-        finish(out_dir)
+        meta = engine.describe(time.perf_counter() - t0)
+        finish(out_dir, command="evaluate", config=config, seed=seed, **meta)
     return Evaluation(table, summary, config, traces, out_dir)
 
 
-def _stopped(out_dir: Path | None, stop: BaseException) -> None:
+def _stopped(out_dir, stop: BaseException, engine: Engine, seed, config, wall_s=None) -> None:
     """Mark a folder whose run stopped early; its finished chunks stay for --resume."""
     if out_dir is not None:
-        finish(out_dir, "cancelled" if isinstance(stop, Cancelled) else "interrupted")
+        status = "cancelled" if isinstance(stop, Cancelled) else "interrupted"
+        meta = engine.describe(wall_s)
+        finish(out_dir, status, command="evaluate", config=config, seed=seed, **meta)
 
 
 def _picks_source(picks) -> str:

@@ -152,6 +152,8 @@ def test_progress_and_cancel_between_chunks_then_resume(door_opener, tmp_path):
     chunks = sorted(p.name for p in (out / "chunks").glob("part-*.parquet"))
     assert chunks == ["part-000000.parquet"], "the run stops before the next chunk"
     assert json.loads((out / "mjx_pick_run.json").read_text())["status"] == "cancelled"
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "cancelled" and run["timing"]["simulations"] == 2
     stamp = (out / "chunks" / chunks[0]).stat().st_mtime_ns
 
     calls.clear()
@@ -165,6 +167,8 @@ def test_progress_and_cancel_between_chunks_then_resume(door_opener, tmp_path):
     )
     assert calls == [(0, 6), (2, 6), (4, 6), (6, 6)]
     assert (out / "chunks" / chunks[0]).stat().st_mtime_ns == stamp, "a finished chunk was redone"
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "complete" and run["timing"]["simulations"] == 4  # 2 were read
     # chunks of 2 on batches of 2 give the pinned results of chunks of 4 on batches of 4
     _check(ev.table, EVALUATE_DOOR_OPENER)
 
