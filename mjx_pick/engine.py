@@ -105,7 +105,7 @@ def auto_chunk(backend: Backend) -> int:
     batch (the C engine, or a device that reports no memory)."""
     batch = backend.batch_size
     stats = None
-    if backend.name in ("mjx", "warp"):
+    if hasattr(backend, "device_bytes_per_pick"):  # MJX, Warp: a device program
         dev = backend.devices[0]
         stats = dev.memory_stats() if dev.platform != "cpu" else None
     if not stats or "bytes_limit" not in stats:

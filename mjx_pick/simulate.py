@@ -12,6 +12,8 @@ cancellation, timing).
 from __future__ import annotations
 
 import dataclasses
+import importlib
+import inspect
 from typing import NamedTuple, Protocol
 
 import jax
@@ -151,14 +153,23 @@ class RunStats:
 
 
 class Backend(Protocol):
-    name: str
-    device: str
-    stats: RunStats
+    """What the engine needs of a backend (one module implements it; see FACTORIES).
+
+    A backend simulates every pick-point on its own: results must not depend on which
+    other pick-points share a call, so the engine may split a run into chunks freely.
+    A device backend may also have ``devices`` (a list of JAX devices) and
+    ``device_bytes_per_pick()``: the engine then sizes chunks from free device memory.
+    """
+
+    name: str  # as in FACTORIES
+    device: str  # what it runs on, in words ("cpu:2 threads", "gpu:NVIDIA H100 x2")
+    stats: RunStats  # compile time apart from run time, summed over calls
     scene: Scene
-    batch_size: int
+    batch_size: int  # simulations per device program (slots of a refilled pool)
 
     def run(self, inputs: PickInputs, record: bool = False) -> tuple[dict, np.ndarray | None]:
-        """Per-pick results (numpy, (N,) each) and, with record, traces (N, T, F)."""
+        """Per-pick results (numpy, (N,) each: ``kernels.grasp.finalize``'s fields) and,
+        with record, traces (N, T, F) at the control rate (``kernels.grasp.TRACE_FIELDS``)."""
         ...
 
 
@@ -167,7 +178,16 @@ def has_accelerator() -> bool:
     return any(d.platform in ("gpu", "tpu", "cuda", "rocm") for d in jax.devices())
 
 
-BACKENDS = ("auto", "warp", "mjx", "mujoco")
+# The backends: name -> "module:factory", imported only when chosen. A factory is called
+# as factory(scene, grasp, batch_size, **options) and returns a Backend; its keyword
+# parameters are the options it takes. A new backend is one module with such a factory
+# (a class implementing Backend is one), added here.
+FACTORIES = {
+    "warp": "mjx_pick.backend_warp:make_warp_backend",
+    "mjx": "mjx_pick.backend_mjx:MjxBackend",
+    "mujoco": "mjx_pick.backend_mujoco:MujocoBackend",
+}
+BACKENDS = ("auto", *FACTORIES)
 
 
 def make_backend(
@@ -193,19 +213,20 @@ def make_backend(
     """
     name = resolve_backend(name)
     grasp.substeps(scene.solver)  # validates the control period against the time step
-    if name == "warp":
-        from mjx_pick.backend_warp import make_warp_backend
-
-        return make_warp_backend(scene, grasp, batch_size, devices=devices, **options)
-    if name == "mjx":
-        from mjx_pick.backend_mjx import MjxBackend
-
-        return MjxBackend(scene, grasp, batch_size, devices=devices, **options)
-    if options:
-        raise ConfigError(f"backend 'mujoco' takes no options {sorted(options)}")
-    from mjx_pick.backend_mujoco import MujocoBackend
-
-    return MujocoBackend(scene, grasp, batch_size, nthread=nthread)
+    module, _, attr = FACTORIES[name].partition(":")
+    factory = getattr(importlib.import_module(module), attr)
+    takes = inspect.signature(factory).parameters
+    # a factory with **options checks them itself (Warp passes them on per device)
+    open_ended = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in takes.values())
+    unknown = [] if open_ended else sorted(k for k in options if k not in takes)
+    if unknown:
+        raise ConfigError(f"backend {name!r} takes no options {unknown}")
+    # devices and nthread are hints for the backends that have them (MJX/Warp shard over
+    # devices, the C engine runs threads); another backend ignores them
+    for key, value in (("devices", devices), ("nthread", nthread)):
+        if value is not None and key in takes:
+            options[key] = value
+    return factory(scene, grasp, batch_size, **options)
 
 
 def resolve_backend(name: str) -> str:
