@@ -196,6 +196,12 @@ class Engine:
             "timing": timing,
         }
 
+    def simulate(
+        self, scene: Scene, grasp: GraspConfig, inputs: PickInputs, *, record: bool = False
+    ) -> Outcome:
+        """One run on a new backend for scene and grasp: :meth:`make`, then :meth:`run`."""
+        return self.run(self.make(scene, grasp), inputs, record=record)
+
     def check_cancel(self) -> None:
         """Raise :class:`Cancelled` when the cancel event is set."""
         if self.cancel is not None and self.cancel.is_set():
