@@ -155,8 +155,9 @@ class RunStats:
 class Backend(Protocol):
     """What the engine needs of a backend (one module implements it; see FACTORIES).
 
-    A backend simulates every pick-point on its own: results must not depend on which
-    other pick-points share a call, so the engine may split a run into chunks freely.
+    A backend simulates every pick-point on its own: a pick's result must not depend on
+    which other pick-points share its call, so the engine may split a run into chunks
+    (whole numbers of batches: the same compiled programs, hence the same rounding).
     A device backend may also have ``devices`` (a list of JAX devices) and
     ``device_bytes_per_pick()``: the engine then sizes chunks from free device memory.
     """
