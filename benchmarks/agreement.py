@@ -25,8 +25,9 @@ from scipy.stats import spearmanr
 
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
+from mjx_pick.engine import Engine
 from mjx_pick.grasp import GraspConfig
-from mjx_pick.simulate import make_backend, make_inputs
+from mjx_pick.simulate import make_inputs
 
 
 def perturbed_success(scene, grasp, picks: pp.PickBatch, copies: int, seed: int) -> np.ndarray:
@@ -41,8 +42,7 @@ def perturbed_success(scene, grasp, picks: pp.PickBatch, copies: int, seed: int)
         y_mm=rep.y_mm + rng.normal(0, 0.2, len(idx)),
         yaw_deg=rep.yaw_deg + rng.normal(0, 0.2, len(idx)),
     )
-    backend = make_backend("mujoco", scene, grasp, batch_size=256)
-    out, _ = backend.run(make_inputs(scene, grasp, rep))
+    out = Engine("mujoco", 256).simulate(scene, grasp, make_inputs(scene, grasp, rep)).results
     return out["success"].reshape(n, copies).mean(axis=1)
 
 
@@ -68,9 +68,10 @@ def main() -> None:
     res = {}
     timing = {}
     for name, batch in (("mujoco", 256), ("mjx", args.mjx_batch)):
-        backend = make_backend(name, scene, grasp, batch_size=batch)
+        engine = Engine(name, batch)
+        backend = engine.make(scene, grasp)
         t0 = time.perf_counter()
-        res[name], _ = backend.run(inputs)
+        res[name] = engine.run(backend, inputs).results
         timing[name] = {
             "wall_s": round(time.perf_counter() - t0, 2),
             "compile_s": round(backend.stats.compile_s, 2),

@@ -38,7 +38,8 @@ from mjx_pick import mjcf_gripper
 from mjx_pick import pickpoints as pp
 from mjx_pick.compare import compare
 from mjx_pick.config import write_json
-from mjx_pick.simulate import make_backend, make_inputs
+from mjx_pick.engine import Engine
+from mjx_pick.simulate import make_inputs
 
 PARALLEL, LINKAGE = "robotiq-2f85", "robotiq-2f85-linkage"
 
@@ -172,8 +173,8 @@ def picture(obj, grippers, cand_row, grasp, config, path: Path) -> None:
             np.arange(1), [cand_row["x_mm"]], [cand_row["y_mm"]], [cand_row["yaw_deg"]], "user"
         )
         scene = mp.build_scene(obj, gripper, None, None, grasp)
-        out, traces = make_backend("mujoco", scene, grasp, 1).run(
-            make_inputs(scene, grasp, picks), record=True
+        out, traces, _ = Engine("mujoco", 1).simulate(
+            scene, grasp, make_inputs(scene, grasp, picks), record=True
         )
         tr = {f: traces[0, :, i] for i, f in enumerate(gk.TRACE_FIELDS)}
         label = "success" if out["success"][0] else gk.FAILURES[int(out["failure"][0])]

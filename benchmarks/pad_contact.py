@@ -19,8 +19,9 @@ from shapely.geometry import box
 
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
+from mjx_pick.engine import Engine
 from mjx_pick.grasp import G
-from mjx_pick.simulate import make_backend, make_inputs
+from mjx_pick.simulate import make_inputs
 
 FREE = mp.GripperSpec(name="test-gripper", force_min_n=0.01)
 
@@ -33,8 +34,8 @@ def _centred(obj, grasp, y_mm):
 
 def _run(obj, picks, grasp, contact, solver=None, backend="mujoco", **per_pick):
     scene = mp.build_scene(obj, FREE, contact, solver, grasp)
-    runner = make_backend(backend, scene, grasp, batch_size=len(picks))
-    return runner.run(make_inputs(scene, grasp, picks, per_pick))[0], scene
+    inputs = make_inputs(scene, grasp, picks, per_pick)
+    return Engine(backend, len(picks)).simulate(scene, grasp, inputs).results, scene
 
 
 def creep() -> None:
@@ -69,8 +70,8 @@ def convergence() -> None:
         outs = []
         for dt in (0.001, 0.0005):
             scene = mp.build_scene(obj, gripper, contact, mp.SolverParams(timestep_s=dt), grasp)
-            runner = make_backend("mujoco", scene, grasp, batch_size=len(picks))
-            outs.append(runner.run(make_inputs(scene, grasp, picks))[0])
+            inputs = make_inputs(scene, grasp, picks)
+            outs.append(Engine("mujoco", len(picks)).simulate(scene, grasp, inputs).results)
         a, b = outs
         reasons = collections.Counter(gk.FAILURES[i] for i in a["failure"])
         print(

@@ -39,16 +39,19 @@ def ycb_manifest() -> dict:
 def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
     """Re-simulate the first pick of a failure class with its trace and draw why."""
     from mjx_pick import pickpoints as pp
+    from mjx_pick.engine import Engine
     from mjx_pick.plots import new_figure, pick_on_axes, save_png
-    from mjx_pick.simulate import make_backend, make_inputs
+    from mjx_pick.simulate import make_inputs
 
     gripper = mp.load_gripper("robotiq-2f85")
     r = table[table["failure"] == failure].iloc[0]
     checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
     picks = checker.batch(np.arange(1), [r.x_mm], [r.y_mm], [r.yaw_deg], "user")
     scene = mp.build_scene(obj, gripper, None, None, grasp)
-    _, traces = make_backend("mujoco", scene, grasp, 1).run(
-        make_inputs(scene, grasp, picks), record=True
+    traces = (
+        Engine("mujoco", 1)
+        .simulate(scene, grasp, make_inputs(scene, grasp, picks), record=True)
+        .traces
     )
     tr = {f: traces[0, :, i] for i, f in enumerate(gk.TRACE_FIELDS)}
     fig, (a0, a1, a2) = new_figure(1, 3, figsize=(15, 4.2))

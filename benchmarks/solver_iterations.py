@@ -15,8 +15,9 @@ import numpy as np
 
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
+from mjx_pick.engine import Engine
 from mjx_pick.grasp import GraspConfig
-from mjx_pick.simulate import make_backend, make_inputs
+from mjx_pick.simulate import make_inputs
 
 VARIANTS = {
     "default (10/8)": {},
@@ -36,9 +37,10 @@ def main() -> None:
     base = None
     for label, kw in VARIANTS.items():
         scene = mp.build_scene(obj, gripper, solver=dataclasses.replace(mp.SolverParams(), **kw))
-        backend = make_backend("mujoco", scene, grasp, len(picks))
+        engine = Engine("mujoco", len(picks))
+        backend = engine.make(scene, grasp)
         t0 = time.perf_counter()
-        out, _ = backend.run(make_inputs(scene, grasp, picks))
+        out = engine.run(backend, make_inputs(scene, grasp, picks)).results
         base = base or out
         print(
             f"{label:15s} {time.perf_counter() - t0:6.2f} s  success {out['success'].mean():.3f}  "

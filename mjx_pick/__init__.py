@@ -41,6 +41,7 @@ if (
 from mjx_pick import calibrate  # the calibration module: calibrate.calibrate, .Problem, ...
 from mjx_pick.compare import compare, design_search
 from mjx_pick.config import ConfigError
+from mjx_pick.engine import Cancelled, Engine, Simulator
 from mjx_pick.evaluate import Evaluation, evaluate
 from mjx_pick.grasp import GraspConfig, min_grasp_force_n
 from mjx_pick.gripper import GripperSpec, load_gripper, preset_names
@@ -65,14 +66,16 @@ from mjx_pick.pickpoints import (
 from mjx_pick.report import report
 from mjx_pick.robustness import min_grip_force, robustness
 from mjx_pick.scene import Scene, build_scene
-from mjx_pick.simulate import Settings, Simulator
+from mjx_pick.simulate import Settings
 from mjx_pick.sweep import ParamSpec, sweep
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Cancelled",
     "ConfigError",
     "ContactParams",
+    "Engine",
     "Evaluation",
     "FeasibilityChecker",
     "GraspConfig",

@@ -54,10 +54,11 @@ import optax
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_choice, check_range, to_dict, write_json
+from mjx_pick.engine import Engine, differentiable_rollout
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, per_unit_mass, stiffest_spring
 from mjx_pick.rundir import claim, config_hash, finish
-from mjx_pick.simulate import Settings, make_backend, make_inputs
+from mjx_pick.simulate import Settings, make_inputs
 
 REQUIRED = ("x_mm", "y_mm", "yaw_deg", "grip_force_n", "trials", "successes")
 OPTIONAL = ("lift_time_s", "force_trace")
@@ -384,6 +385,9 @@ class Problem:
                 mask[i, inside] = 1.0
         self.trace_target, self.trace_mask = target, mask
         self.backend_name = backend
+        # plain simulations (loss values, accuracy) run through the engine; a batch holds
+        # every row of at least one theta
+        self.engine = Engine(backend, batch_size=max(256, len(outcomes)))
         self._backend = None
         self._rollout = None
         self.rollouts = 0
@@ -459,12 +463,7 @@ class Problem:
         """The backend of plain simulations (loss values, accuracy): as chosen ("auto":
         MJX on an accelerator, else the C engine)."""
         if self._backend is None:
-            self._backend = make_backend(
-                self.backend_name,
-                self.scene,
-                self.settings.grasp,
-                batch_size=max(256, len(self.outcomes)),
-            )
+            self._backend = self.engine.make(self.scene, self.settings.grasp)
         return self._backend
 
     def simulate(self, thetas: np.ndarray) -> dict:
@@ -478,7 +477,7 @@ class Problem:
             pair_friction=np.concatenate([np.asarray(f) for f in frs]),
             pair_solref=np.concatenate([np.asarray(x) for x in refs]),
         )
-        out, rows = self._forward_backend().run(inputs, record=self.record)
+        out, rows, _ = self.engine.run(self._forward_backend(), inputs, record=self.record)
         self.rollouts += len(inputs)
         res = {k: np.asarray(v).reshape(s_n, r) for k, v in out.items()}
         if rows is not None:
@@ -500,11 +499,12 @@ class Problem:
         return np.asarray(loss, float)
 
     def mjx_loss_and_grad(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
-        """Loss and its forward-mode gradient through the MJX rollout."""
-        if self._rollout is None:
-            from mjx_pick.backend_mjx import make_rollout
+        """Loss and its forward-mode gradient through the MJX rollout.
 
-            roll = make_rollout(self.scene, self.settings.grasp, self.record)
+        The one simulation outside ``Engine.run``: ``jax.jacfwd`` needs the rollout in
+        its trace (``engine.differentiable_rollout`` says why)."""
+        if self._rollout is None:
+            roll = differentiable_rollout(self.scene, self.settings.grasp, self.record)
             inp = self.inputs
 
             def loss_fn(th):
@@ -721,7 +721,12 @@ def calibrate(
     result = CalibrationResult(contact, values, initial, history, acc_before, acc_after, out_dir)
     if out_dir is not None:
         write_result(result, problem, out_dir)
-        finish(out_dir)
+        meta = problem.engine.describe(time.perf_counter() - t0)
+        meta["timing"]["rollouts"] = problem.rollouts
+        if estimator == "jvp":  # the gradients ran on MJX's JAX physics, beside the engine
+            d = jax.devices()[0]
+            meta.update(backend="mjx", device=f"{d.platform}:{d.device_kind}")
+        finish(out_dir, command="calibrate", config=request, **meta)
     return result
 
 

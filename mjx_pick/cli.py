@@ -320,9 +320,9 @@ def cmd_robust(args) -> int:
     import pyarrow.parquet as pq
 
     from mjx_pick import pickpoints as pp
+    from mjx_pick.engine import Simulator
     from mjx_pick.metrics import best_successes
     from mjx_pick.robustness import robustness
-    from mjx_pick.simulate import Simulator
 
     obj, base, picks_cfg = _base_settings(args)
     sim = Simulator(obj, args.backend, args.batch_size)
@@ -520,7 +520,7 @@ def cmd_picks(args) -> int:
     cx, cy, cyaw = pp.draw_block(rng, *checker.ranges(), cfg, 2000)  # the configured ranges
     labels = np.asarray(pp.REASONS)[checker(cx, cy, cyaw)["reason"]]
     plots.draw_candidates(obj, cx, cy, cyaw, out / "candidates.png", labels=labels)
-    finish(out)
+    finish(out, command="picks", config=request, seed=args.seed)  # nothing simulated
     print(
         f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates; rejected "
         f"{picks.rejected}; written to {out}/ (picks.csv, pick_0.png, candidates.png)"

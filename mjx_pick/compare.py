@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -30,11 +31,12 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
+from mjx_pick.engine import Simulator
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.rundir import claim, config_hash, finish
-from mjx_pick.simulate import Settings, Simulator
+from mjx_pick.simulate import Settings
 
 
 @dataclasses.dataclass
@@ -144,6 +146,7 @@ def compare(
         request = {"object": obj.summary(), "grippers": to_dict(grippers), "base": to_dict(base)}
         request.update(n=n, seed=seed, rank_by=rank_by, picks=to_dict(pick_config))
         claim(out, "compare", config_hash(request), overwrite=overwrite)
+    t0 = time.perf_counter()
     cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
     n_cand = len(cand["pick_id"])
     sim = simulator or Simulator(obj, backend, batch_size)
@@ -180,22 +183,22 @@ def compare(
     result = Comparison(ranking, table, names, success, score, reasons == 0, cand, None)
     if out is not None:
         out_dir = Path(out)
-        write_json(
-            out_dir / "config.json",
-            {
-                "object": obj.summary(),
-                "grippers": [to_dict(g) for g in grippers],
-                "base": to_dict(base),
-                "n": n,
-                "seed": seed,
-                "rank_by": rank_by,
-            },
-        )
+        config = {
+            "object": obj.summary(),
+            "grippers": [to_dict(g) for g in grippers],
+            "base": to_dict(base),
+            "n": n,
+            "seed": seed,
+            "rank_by": rank_by,
+        }
+        write_json(out_dir / "config.json", config)
         write_json(out_dir / "ranking.json", ranking)
         write_parquet(out_dir / "results.parquet", table)
         plot_comparison(obj, result, out_dir)
         result.out_dir = out_dir
-        finish(out_dir)
+        meta = sim.engine.describe(time.perf_counter() - t0)
+        config["picks"] = to_dict(pick_config)
+        finish(out_dir, command="compare", config=config, seed=seed, **meta)
     return result
 
 
@@ -328,10 +331,11 @@ def design_search(
     """
     base = base or Settings()
     check_range("design", "rounds", rounds, 1, 20)
+    t0 = time.perf_counter()
+    request = {"object": obj.summary(), "bounds": {k: list(v) for k, v in bounds.items()}}
+    request.update(base=to_dict(base), variants=variants, n=n, rounds=rounds, seed=seed)
+    request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
     if out is not None:
-        request = {"object": obj.summary(), "bounds": {k: list(v) for k, v in bounds.items()}}
-        request.update(base=to_dict(base), variants=variants, n=n, rounds=rounds, seed=seed)
-        request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
         claim(out, "design", config_hash(request), overwrite=overwrite)
     pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
     sim = Simulator(obj, backend, batch_size)
@@ -385,5 +389,6 @@ def design_search(
         write_parquet(out_dir / "results.parquet", final.table)
         plot_comparison(obj, final, out_dir)
         result.out_dir = out_dir
-        finish(out_dir)
+        meta = sim.engine.describe(time.perf_counter() - t0)
+        finish(out_dir, command="design", config=request, seed=seed, **meta)
     return result

@@ -11,8 +11,12 @@
   are re-simulated with recording on: keeping traces of every pick-point of a large
   batch would not fit in device memory).
 
-Large runs go in chunks; each finished chunk is written atomically under ``chunks/`` so
-that ``resume=True`` redoes nothing that finished.
+Every simulation runs through one ``mjx_pick.engine.Engine``: large runs go in chunks
+(``engine.run_chunks``); each finished chunk is written atomically under ``chunks/`` so
+that ``resume=True`` redoes nothing that finished. ``on_progress(done, total)`` reports
+pick-points done after each chunk; setting the ``cancel`` event stops the run before
+the next chunk (``engine.Cancelled``; the folder is marked "cancelled" and its finished
+chunks stay for ``resume``).
 """
 
 from __future__ import annotations
@@ -21,28 +25,27 @@ import csv
 import dataclasses
 import hashlib
 import json
-import platform
-import sys
+import threading
 import time
 import warnings
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, to_dict, write_atomic, write_json, write_parquet
+from mjx_pick.engine import Cancelled, Engine, ProgressFn, Simulator, auto_chunk, run_chunks
 from mjx_pick.grasp import GraspConfig, min_grasp_force_n
 from mjx_pick.gripper import GripperSpec, load_gripper
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.metrics import results_table, summarize
 from mjx_pick.objects import ObjectModel, load_object
 from mjx_pick.physics import ContactParams, SolverParams
-from mjx_pick.rundir import claim, config_hash, finish
-from mjx_pick.scene import Scene, build_scene
-from mjx_pick.simulate import default_batch_size, make_backend, make_inputs
+from mjx_pick.robustness import min_grip_force
+from mjx_pick.rundir import claim, config_hash, finish, versions
+from mjx_pick.scene import build_scene
+from mjx_pick.simulate import Settings, default_batch_size, make_inputs
 
 
 @dataclasses.dataclass
@@ -115,16 +118,6 @@ def user_picks(
     return checker.batch(ids, x, y, yaw, mode="user")
 
 
-def versions() -> dict:
-    out = {"python": sys.version.split()[0], "platform": platform.platform()}
-    for pkg in ("mjx-pick", "mujoco", "mujoco-mjx", "jax", "jaxlib", "numpy"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = None
-    return out
-
-
 def _resolve(obj, gripper) -> tuple[ObjectModel, GripperSpec]:
     if not isinstance(obj, ObjectModel):
         obj = load_object(obj)
@@ -157,6 +150,8 @@ def evaluate(
     min_force: bool = False,
     overwrite: bool = False,
     skip_infeasible: bool = False,
+    on_progress: ProgressFn | None = None,
+    cancel: threading.Event | None = None,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
@@ -171,7 +166,12 @@ def evaluate(
       batch_size: simulations per backend call (default: per backend).
       out: output folder (nothing is written without one).
       n_traces: traces kept for the n best and n worst pick-points.
-      progress: show a progress bar.
+      progress: show a progress bar (tqdm, on stderr).
+      on_progress: called as on_progress(done, total) with the pick-points simulated
+        (or read back on resume) of the main run, before the first chunk and after each
+        (Optimization mode, whose total is not known ahead, reports nothing).
+      cancel: a threading.Event; once set, the run stops before its next chunk with
+        mjx_pick.engine.Cancelled (the output folder keeps its finished chunks).
       resume: skip chunks an interrupted run with the same configuration finished.
       overwrite: replace what another command (or another configuration) wrote in out.
       skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
@@ -190,8 +190,8 @@ def evaluate(
     pick_config = pick_config or pp.PickConfig()
     grasp.check_gripper(gripper)
     scene = build_scene(obj, gripper, contact, solver, grasp)
-    batch = batch_size or default_batch_size(backend)
-    runner = make_backend(backend, scene, grasp, batch)
+    engine = Engine(backend, batch_size, chunk_size=chunk_size or None, cancel=cancel)
+    runner = engine.make(scene, grasp)
     out_dir = Path(out) if out is not None else None
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
         request = {
@@ -213,19 +213,22 @@ def evaluate(
         claim(out_dir, "evaluate", config_hash(request), resume=resume, overwrite=overwrite)
 
     if until is not None:
-        picks_batch, results = _optimize(
-            scene,
-            grasp,
-            runner,
-            obj,
-            gripper,
-            until,
-            min_score,
-            max_n or 10 * until,
-            batch,
-            seed,
-            pick_config,
-        )
+        try:
+            picks_batch, results = _optimize(
+                engine,
+                runner,
+                grasp,
+                obj,
+                gripper,
+                until,
+                min_score,
+                max_n or 10 * until,
+                seed,
+                pick_config,
+            )
+        except (KeyboardInterrupt, Cancelled) as stop:
+            _stopped(out_dir, stop, engine, seed, None)
+            raise
     else:
         if picks is None:
             picks_batch = pp.generate_normal(
@@ -244,9 +247,7 @@ def evaluate(
             )
         results = None
 
-    chunk = int(chunk_size or _auto_chunk(runner, runner.batch_size))
-    if chunk < 1:
-        raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
+    chunk = int(chunk_size or auto_chunk(runner))
     config = {
         "object": obj.summary(),
         "gripper": to_dict(gripper),
@@ -277,65 +278,72 @@ def evaluate(
         write_atomic(out_dir / "scene.xml", scene.xml)
 
     t0 = time.perf_counter()
-    if results is None:
-        try:
-            table = _run_chunks(scene, grasp, runner, picks_batch, chunk, out_dir, progress)
-        except KeyboardInterrupt:
-            if out_dir is not None:
-                finish(out_dir, "interrupted")  # finished chunks stay for --resume
-            raise
-    else:
-        table = results_table(picks_batch, results)
-    wall = time.perf_counter() - t0
-    summary = summarize(table)
-    mu = contact.pad_friction
-    summary.update(
-        {
-            "object": obj.name,
-            "gripper": gripper.name,
-            "backend": runner.name,
-            "device": runner.device,
-            "f_gmin_n": min_grasp_force_n(obj, mu, grasp.safety_factor),
-            "grip_force_n": grasp.grip_force_n,
-            "candidates_checked": int(picks_batch.n_candidates),
-            "rejected": dict(picks_batch.rejected),
-            "compile_s": round(runner.stats.compile_s, 3),
-            "run_s": round(runner.stats.run_s, 3),
-            "wall_s": round(wall, 3),
-            "picks_per_s": round(runner.stats.n / runner.stats.run_s, 2)
-            if runner.stats.run_s > 0
-            else None,
-            "simulated_s_per_pick": round(grasp.duration_s, 3),
-            "physics_steps_per_pick": grasp.n_ticks() * grasp.substeps(solver),
-        }
-    )
-    if min_force:
-        from mjx_pick.robustness import min_grip_force
-        from mjx_pick.simulate import Settings, Simulator
-
-        settings = Settings(gripper, contact, solver, grasp)
-        sim = Simulator(obj, runner.name, runner.batch_size)
-        sim.adopt(settings, runner)
-        t1 = time.perf_counter()
-        forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
-        table = table.append_column("min_force_n", pa.array(forces))
-        # holding at the gripper's smallest force says only that the true minimum is at
-        # or below it: flagged, never presented as the minimum itself
-        at_floor = np.isfinite(forces) & (forces <= gripper.force_min_n + 1e-9)
-        table = table.append_column("min_force_at_floor", pa.array(at_floor))
-        summary["min_force_at_floor"] = int(at_floor.sum())
-        summary["min_force_s"] = round(time.perf_counter() - t1, 3)
-        summary["min_force_n_median"] = (
-            float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
+    try:
+        if results is None:
+            table = _simulate(
+                engine, runner, grasp, picks_batch, chunk, out_dir, progress, on_progress
+            )
+        else:
+            table = results_table(picks_batch, results)
+        wall = time.perf_counter() - t0
+        summary = summarize(table)
+        mu = contact.pad_friction
+        summary.update(
+            {
+                "object": obj.name,
+                "gripper": gripper.name,
+                "backend": runner.name,
+                "device": runner.device,
+                "f_gmin_n": min_grasp_force_n(obj, mu, grasp.safety_factor),
+                "grip_force_n": grasp.grip_force_n,
+                "candidates_checked": int(picks_batch.n_candidates),
+                "rejected": dict(picks_batch.rejected),
+                "compile_s": round(runner.stats.compile_s, 3),
+                "run_s": round(runner.stats.run_s, 3),
+                "wall_s": round(wall, 3),
+                "picks_per_s": round(runner.stats.n / runner.stats.run_s, 2)
+                if runner.stats.run_s > 0
+                else None,
+                "simulated_s_per_pick": round(grasp.duration_s, 3),
+                "physics_steps_per_pick": grasp.n_ticks() * grasp.substeps(solver),
+            }
         )
-    traces = _traces(scene, grasp, runner, picks_batch, table, n_traces) if n_traces else None
+        if min_force:
+            settings = Settings(gripper, contact, solver, grasp)
+            sim = Simulator(obj, engine=engine)  # its bisection runs through this engine
+            sim.adopt(settings, runner)
+            t1 = time.perf_counter()
+            forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
+            table = table.append_column("min_force_n", pa.array(forces))
+            # holding at the gripper's smallest force says only that the true minimum is at
+            # or below it: flagged, never presented as the minimum itself
+            at_floor = np.isfinite(forces) & (forces <= gripper.force_min_n + 1e-9)
+            table = table.append_column("min_force_at_floor", pa.array(at_floor))
+            summary["min_force_at_floor"] = int(at_floor.sum())
+            summary["min_force_s"] = round(time.perf_counter() - t1, 3)
+            summary["min_force_n_median"] = (
+                float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
+            )
+        traces = _traces(engine, runner, grasp, picks_batch, table, n_traces) if n_traces else None
+    except (KeyboardInterrupt, Cancelled) as stop:
+        _stopped(out_dir, stop, engine, seed, config, time.perf_counter() - t0)
+        raise
     if out_dir is not None:
         write_parquet(out_dir / "results.parquet", table)
         write_json(out_dir / "summary.json", summary)
         if traces is not None:
             write_parquet(out_dir / "traces.parquet", traces)
-        finish(out_dir)
+        meta = engine.describe(time.perf_counter() - t0)
+        finish(out_dir, command="evaluate", config=config, seed=seed, **meta)
     return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _stopped(out_dir, stop: BaseException, engine: Engine, seed, config, wall_s=None) -> None:
+    """Mark a folder whose run stopped early; its finished chunks stay for --resume."""
+    if out_dir is not None:
+        status = "cancelled" if isinstance(stop, Cancelled) else "interrupted"
+        meta = engine.describe(wall_s)
+        finish(out_dir, status, command="evaluate", config=config, seed=seed, **meta)
 
 
 def _picks_source(picks) -> str:
@@ -347,20 +355,6 @@ def _picks_source(picks) -> str:
         return "batch:" + config_hash(data.tobytes().hex())
     path = Path(picks)
     return "csv:" + (config_hash(path.read_text()) if path.is_file() else str(path))
-
-
-def _auto_chunk(runner, batch: int) -> int:
-    """Chunk size: what fits in half the free device memory (MJX on an accelerator),
-    capped at 65536 pick-points, a whole number of batches; else one batch."""
-    stats = None
-    if runner.name in ("mjx", "warp"):
-        dev = runner.devices[0]
-        stats = dev.memory_stats() if dev.platform != "cpu" else None
-    if not stats or "bytes_limit" not in stats:
-        return batch
-    free = (stats["bytes_limit"] - stats.get("bytes_in_use", 0)) * len(runner.devices)
-    fits = int(0.5 * free // runner.device_bytes_per_pick())
-    return max(batch, min(65536, fits) // batch * batch)
 
 
 def _config_key(config: dict) -> str:
@@ -387,117 +381,30 @@ def _check_resume(out_dir: Path, key: str, resume: bool) -> None:
         )
 
 
-class Progress:
-    """Which chunks are finished, checkpointed with orbax so a killed run resumes.
+def _simulate(engine, runner, grasp, picks, chunk, out_dir, bar: bool, on_progress):
+    """The main run through the engine's chunked runner, with a tqdm bar if asked."""
+    if not bar:
+        return run_chunks(engine, runner, grasp, picks, chunk, out_dir, on_progress)
+    from tqdm import tqdm
 
-    The chunk files under ``chunks/`` are the data (each written atomically); this
-    record is the progress: the chunks done and the time spent, saved after every
-    chunk. A chunk file found without a record (a kill between the two writes) is
-    complete by construction and is used as is.
-    """
+    with tqdm(total=len(picks), unit="pick", desc=f"simulating ({runner.name})") as pbar:
 
-    def __init__(self, out_dir: Path | None, n_chunks: int, process: int):
-        self.done = np.zeros(n_chunks, bool)
-        self.run_s = 0.0
-        self._mngr = None
-        if out_dir is None:
-            return
-        import orbax.checkpoint as ocp
+        def report(done: int, total: int) -> None:
+            pbar.update(done - pbar.n)
+            if on_progress is not None:
+                on_progress(done, total)
 
-        path = (out_dir / "checkpoint" / f"process-{process}").absolute()
-        self._mngr = ocp.CheckpointManager(
-            path, options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True)
-        )
-        step = self._mngr.latest_step()
-        if step is not None:
-            state = self._mngr.restore(step, args=ocp.args.StandardRestore(self._state()))
-            if len(state["done"]) == n_chunks:
-                self.done = np.asarray(state["done"], bool).copy()
-                self.run_s = float(state["run_s"])
-
-    def _state(self) -> dict:
-        return {"done": self.done, "run_s": np.float64(self.run_s)}
-
-    def finish(self, k: int, run_s: float) -> None:
-        self.done[k] = True
-        self.run_s += run_s
-        if self._mngr is not None:
-            import orbax.checkpoint as ocp
-
-            self._mngr.save(
-                int(self.done.sum()), args=ocp.args.StandardSave(self._state()), force=True
-            )
-            self._mngr.wait_until_finished()
-
-    def close(self) -> None:
-        if self._mngr is not None:
-            self._mngr.close()
+        return run_chunks(engine, runner, grasp, picks, chunk, out_dir, report)
 
 
-def _run_chunks(scene, grasp, runner, picks, chunk, out_dir, progress) -> pa.Table:
-    """Simulate picks chunk by chunk; each finished chunk is a Parquet file at once.
-
-    With several JAX processes (jax.distributed), process i takes chunks k with
-    k % P == i; process 0 then waits for the others' chunk files and assembles.
-    """
-    import jax
-
-    n = len(picks)
-    n_chunks = max(1, -(-n // chunk))
-    proc, nproc = jax.process_index(), jax.process_count()
-    state = Progress(out_dir, n_chunks, proc)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n, unit="pick", desc=f"simulating ({runner.name})")
-    parts: dict[int, pa.Table] = {}
-    try:
-        for k in range(n_chunks):
-            sub = picks.take(slice(k * chunk, (k + 1) * chunk))
-            path = out_dir / "chunks" / f"part-{k:06d}.parquet" if out_dir is not None else None
-            if path is not None and path.is_file():
-                parts[k] = pq.read_table(path)  # finished by an earlier run
-            elif k % nproc == proc:
-                before = runner.stats.run_s
-                out, _ = runner.run(make_inputs(scene, grasp, sub))
-                parts[k] = results_table(sub, out)
-                if path is not None:
-                    write_parquet(path, parts[k])
-                state.finish(k, runner.stats.run_s - before)
-            if bar is not None:
-                bar.update(len(sub))
-    finally:
-        state.close()
-        if bar is not None:
-            bar.close()
-    if nproc > 1:
-        parts = _gather_chunks(out_dir, n_chunks, parts)
-    return pa.concat_tables([parts[k] for k in range(n_chunks)])
-
-
-def _gather_chunks(out_dir: Path | None, n_chunks: int, parts: dict, timeout_s: float = 86400):
-    """Multi-process: wait for every chunk file (shared file system) and read them."""
-    if out_dir is None:
-        raise ConfigError("a multi-process run needs --out on a file system all hosts share")
-    t0 = time.monotonic()
-    for k in range(n_chunks):
-        path = out_dir / "chunks" / f"part-{k:06d}.parquet"
-        while k not in parts:
-            if path.is_file():
-                parts[k] = pq.read_table(path)
-            elif time.monotonic() - t0 > timeout_s:
-                raise TimeoutError(f"chunk {k} never appeared in {path.parent}")
-            else:
-                time.sleep(1.0)
-    return parts
-
-
-def _optimize(scene, grasp, runner, obj, gripper, k, min_score, max_n, batch, seed, config):
+def _optimize(engine, runner, grasp, obj, gripper, k, min_score, max_n, seed, config):
+    """Optimization mode: batches of pick-points through the engine until k reach
+    min_score or max_n are spent; (PickBatch, results of every simulated pick)."""
     collected = {}
+    batch = engine.batch_size or default_batch_size(engine.backend_name)
 
     def score_fn(b: pp.PickBatch) -> np.ndarray:
-        out, _ = runner.run(make_inputs(scene, grasp, b))
+        out = engine.run(runner, make_inputs(runner.scene, grasp, b)).results
         for name, v in out.items():
             collected.setdefault(name, []).append(np.asarray(v))
         return np.where(out["success"], np.nan_to_num(out["score"], nan=-1.0), -1.0)
@@ -518,7 +425,7 @@ def _optimize(scene, grasp, runner, obj, gripper, k, min_score, max_n, batch, se
     return res.picks, merged
 
 
-def _traces(scene: Scene, grasp, runner, picks: pp.PickBatch, table: pa.Table, n: int):
+def _traces(engine, runner, grasp, picks: pp.PickBatch, table: pa.Table, n: int):
     """Re-simulate the n best and n worst pick-points with recording on."""
     score = np.asarray(table["score"], float)
     order = np.argsort(np.where(np.isnan(score), -np.inf, score))
@@ -526,7 +433,7 @@ def _traces(scene: Scene, grasp, runner, picks: pp.PickBatch, table: pa.Table, n
     if len(chosen) == 0:
         return None
     sub = picks.take(chosen)
-    _, rows = runner.run(make_inputs(scene, grasp, sub), record=True)
+    rows = engine.run(runner, make_inputs(runner.scene, grasp, sub), record=True).traces
     n_pick, n_tick, _ = rows.shape
     cols = {"pick_id": np.repeat(sub.pick_id, n_tick)}
     for j, name in enumerate(gk.TRACE_FIELDS):

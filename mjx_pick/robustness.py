@@ -21,6 +21,7 @@ hurts); a pick-point that fails at hi gets NaN, one that succeeds at lo gets lo.
 from __future__ import annotations
 
 import dataclasses
+import time
 from pathlib import Path
 
 import numpy as np
@@ -28,10 +29,11 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import check_range, to_dict, write_json, write_parquet
+from mjx_pick.engine import Simulator
 from mjx_pick.metrics import wilson_interval
 from mjx_pick.objects import ObjectModel
-from mjx_pick.rundir import claim, config_hash, finish, read_manifest
-from mjx_pick.simulate import Settings, Simulator
+from mjx_pick.rundir import claim, config_hash, finish
+from mjx_pick.simulate import Settings
 
 
 def perturb(picks: pp.PickBatch, m: int, sigma_xy_mm: float, sigma_yaw_deg: float, seed: int):
@@ -78,6 +80,7 @@ def robustness(
         request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
         request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, k=len(picks))
         claim(out, "robust", config_hash(request), overwrite=overwrite, joins=("evaluate",))
+    t0 = time.perf_counter()
     k = len(picks)
     x, y, yaw, idx = perturb(picks, m, sigma_xy_mm, sigma_yaw_deg, seed)
     checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
@@ -149,8 +152,12 @@ def robustness(
                 "ranking": table.slice(0, 50).to_pylist(),
             },
         )
-        if (read_manifest(out_dir) or {}).get("command") == "robust":
-            finish(out_dir)
+        config = {"object": obj.summary(), "settings": to_dict(base), "m": m, "k": k}
+        config.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, seed=seed)
+        config["picks"] = to_dict(pick_config)
+        # in an evaluate folder: run-robust.json beside evaluate's own run.json
+        meta = sim.engine.describe(time.perf_counter() - t0)
+        finish(out_dir, command="robust", config=config, seed=seed, **meta)
     return table
 
 

@@ -8,6 +8,13 @@ wrote it, or the same command with another configuration, unless the user asks t
 ``overwrite`` (the folder is emptied first) or to ``resume``. A path that cannot hold
 results -- a file, a read-only place, a folder that cannot be created -- is refused
 with one line naming the path and the reason, before anything is simulated.
+
+When the command ends -- complete, interrupted or cancelled -- :func:`finish` records the
+status in the manifest and writes the run's metadata, ``run.json``: the same record
+for every command (the merged configuration, package versions, backend, device, seed,
+compile / run / wall time, status and when). A command that adds its files to another
+command's folder (robust into an evaluate folder) writes ``run-<command>.json`` and
+leaves the folder's manifest and ``run.json`` alone.
 """
 
 from __future__ import annotations
@@ -16,13 +23,17 @@ import datetime
 import hashlib
 import json
 import os
+import platform
 import shutil
+import sys
 import tempfile
+from importlib import metadata
 from pathlib import Path
 
 from mjx_pick.config import ConfigError, write_json
 
 MANIFEST = "mjx_pick_run.json"
+RUN = "run.json"  # the run's metadata (see finish)
 
 
 def config_hash(config) -> str:
@@ -115,9 +126,61 @@ def claim(
     return path
 
 
-def finish(path: str | os.PathLike, status: str = "complete") -> None:
-    """Record that the command that claimed `path` ended (complete, or interrupted)."""
+def versions() -> dict:
+    """Python, platform and the versions of the packages that decide the results."""
+    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for pkg in ("mjx-pick", "mujoco", "mujoco-mjx", "jax", "jaxlib", "numpy"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def finish(
+    path: str | os.PathLike,
+    status: str = "complete",
+    *,
+    command: str | None = None,
+    config: dict | None = None,
+    seed: int | None = None,
+    backend: str | None = None,
+    device: str | None = None,
+    timing: dict | None = None,
+) -> Path:
+    """Record that a command's run in `path` ended, and write its metadata.
+
+    Args:
+      status: "complete", "interrupted" (Ctrl-C) or "cancelled" (a cancel event).
+      command: the command (default: the manifest's, i.e. the folder's owner).
+      config: the merged configuration of the run (JSON-able).
+      seed, backend, device: what ran ('mujoco', 'cpu:2 threads', ...).
+      timing: seconds, e.g. ``engine.Engine.describe()['timing']`` plus wall_s.
+
+    Returns:
+      the metadata file: ``run.json``, or ``run-<command>.json`` for a command that
+      joined another command's folder (whose manifest is then left as it is).
+    """
+    path = Path(path)
+    now = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     manifest = read_manifest(path) or {}
-    manifest["status"] = status
-    manifest["finished"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    write_json(Path(path) / MANIFEST, manifest)
+    command = command or manifest.get("command")
+    own = manifest.get("command") in (None, command)
+    if own:
+        manifest["status"] = status
+        manifest["finished"] = now
+        write_json(path / MANIFEST, manifest)
+    record = {
+        "command": command,
+        "status": status,
+        "config_key": manifest.get("config_key") if own else None,
+        "started": manifest.get("started") if own else None,
+        "finished": now,
+        "seed": seed,
+        "backend": backend,
+        "device": device,
+        "timing": timing,
+        "versions": versions(),
+        "config": config,
+    }
+    return write_json(path / (RUN if own else f"run-{command}.json"), record)

@@ -1,14 +1,19 @@
-"""What both backends share: batched inputs, per-pick overrides, backend choice.
+"""What every backend shares: batched inputs, per-pick overrides, the Backend protocol
+and backend choice.
 
 A backend turns :class:`PickInputs` (N pick-points: initial joint positions, per-pick
 controller parameters and contact-pair parameters) into per-pick results (the dict of
-``mjx_pick.kernels.grasp.finalize``) and, on request, traces. MJX (GPU) and the MuJoCo
-C engine (CPU) implement it; ``make_backend`` picks one.
+``mjx_pick.kernels.grasp.finalize``) and, on request, traces. MuJoCo Warp and MJX's JAX
+physics (GPU) and the MuJoCo C engine (CPU) implement it; ``make_backend`` picks one.
+Callers do not run backends themselves: ``mjx_pick.engine`` does (chunks, progress,
+cancellation, timing).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import importlib
+import inspect
 from typing import NamedTuple, Protocol
 
 import jax
@@ -18,10 +23,9 @@ from mjx_pick.config import ConfigError
 from mjx_pick.grasp import GraspConfig, broadcast_params
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams, mujoco_contact
 from mjx_pick.pickpoints import PickBatch
-from mjx_pick.scene import Scene, build_scene
+from mjx_pick.scene import Scene
 
 # per-pick contact overrides accepted by make_inputs (besides GraspParams' fields)
 CONTACT_OVERRIDES = (
@@ -149,14 +153,24 @@ class RunStats:
 
 
 class Backend(Protocol):
-    name: str
-    device: str
-    stats: RunStats
+    """What the engine needs of a backend (one module implements it; see FACTORIES).
+
+    A backend simulates every pick-point on its own: a pick's result must not depend on
+    which other pick-points share its call, so the engine may split a run into chunks
+    (whole numbers of batches: the same compiled programs, hence the same rounding).
+    A device backend may also have ``devices`` (a list of JAX devices) and
+    ``device_bytes_per_pick()``: the engine then sizes chunks from free device memory.
+    """
+
+    name: str  # as in FACTORIES
+    device: str  # what it runs on, in words ("cpu:2 threads", "gpu:NVIDIA H100 x2")
+    stats: RunStats  # compile time apart from run time, summed over calls
     scene: Scene
-    batch_size: int
+    batch_size: int  # simulations per device program (slots of a refilled pool)
 
     def run(self, inputs: PickInputs, record: bool = False) -> tuple[dict, np.ndarray | None]:
-        """Per-pick results (numpy, (N,) each) and, with record, traces (N, T, F)."""
+        """Per-pick results (numpy, (N,) each: ``kernels.grasp.finalize``'s fields) and,
+        with record, traces (N, T, F) at the control rate (``kernels.grasp.TRACE_FIELDS``)."""
         ...
 
 
@@ -165,7 +179,16 @@ def has_accelerator() -> bool:
     return any(d.platform in ("gpu", "tpu", "cuda", "rocm") for d in jax.devices())
 
 
-BACKENDS = ("auto", "warp", "mjx", "mujoco")
+# The backends: name -> "module:factory", imported only when chosen. A factory is called
+# as factory(scene, grasp, batch_size, **options) and returns a Backend; its keyword
+# parameters are the options it takes. A new backend is one module with such a factory
+# (a class implementing Backend is one), added here.
+FACTORIES = {
+    "warp": "mjx_pick.backend_warp:make_warp_backend",
+    "mjx": "mjx_pick.backend_mjx:MjxBackend",
+    "mujoco": "mjx_pick.backend_mujoco:MujocoBackend",
+}
+BACKENDS = ("auto", *FACTORIES)
 
 
 def make_backend(
@@ -191,19 +214,20 @@ def make_backend(
     """
     name = resolve_backend(name)
     grasp.substeps(scene.solver)  # validates the control period against the time step
-    if name == "warp":
-        from mjx_pick.backend_warp import make_warp_backend
-
-        return make_warp_backend(scene, grasp, batch_size, devices=devices, **options)
-    if name == "mjx":
-        from mjx_pick.backend_mjx import MjxBackend
-
-        return MjxBackend(scene, grasp, batch_size, devices=devices, **options)
-    if options:
-        raise ConfigError(f"backend 'mujoco' takes no options {sorted(options)}")
-    from mjx_pick.backend_mujoco import MujocoBackend
-
-    return MujocoBackend(scene, grasp, batch_size, nthread=nthread)
+    module, _, attr = FACTORIES[name].partition(":")
+    factory = getattr(importlib.import_module(module), attr)
+    takes = inspect.signature(factory).parameters
+    # a factory with **options checks them itself (Warp passes them on per device)
+    open_ended = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in takes.values())
+    unknown = [] if open_ended else sorted(k for k in options if k not in takes)
+    if unknown:
+        raise ConfigError(f"backend {name!r} takes no options {unknown}")
+    # devices and nthread are hints for the backends that have them (MJX/Warp shard over
+    # devices, the C engine runs threads); another backend ignores them
+    for key, value in (("devices", devices), ("nthread", nthread)):
+        if value is not None and key in takes:
+            options[key] = value
+    return factory(scene, grasp, batch_size, **options)
 
 
 def resolve_backend(name: str) -> str:
@@ -237,7 +261,7 @@ class Settings:
     """Every physical setting of one simulated variant: gripper, contact, solver, grasp.
 
     Sweeps, gripper comparisons, design searches, robustness and calibration all run
-    lists of (Settings, PickBatch) jobs through one :class:`Simulator`.
+    lists of (Settings, PickBatch) jobs through one ``engine.Simulator``.
     """
 
     gripper: GripperSpec = dataclasses.field(default_factory=GripperSpec)
@@ -275,78 +299,3 @@ class Settings:
         out["pad_solimp"] = np.tile(np.asarray(mjc.pad_solimp, np.float32), (n, 1))
         out["table_solimp"] = np.tile(np.asarray(mjc.table_solimp, np.float32), (n, 1))
         return out
-
-
-class Simulator:
-    """Runs (Settings, PickBatch) jobs for one object, batching what can share a program.
-
-    Jobs whose settings share a structure (``Settings.structure``) run as ONE batch of
-    pick-points x variants with per-pick parameters -- one compile, one call (chunked by
-    the backend's batch size). Scenes and backends are cached, so a loop that calls
-    ``run`` again (a bisection, an optimiser) compiles nothing new.
-    """
-
-    def __init__(
-        self, obj: ObjectModel, backend: str = "auto", batch_size: int | None = None
-    ) -> None:
-        self.object = obj
-        self.backend_name = backend
-        self.batch_size = batch_size
-        self._backends: dict[tuple, Backend] = {}
-        self.rollouts = 0  # pick-point simulations run so far
-
-    @property
-    def backends(self) -> list[Backend]:
-        """The backends built so far: one per scene structure (one compile each on MJX)."""
-        return list(self._backends.values())
-
-    def adopt(self, settings: Settings, backend: Backend) -> None:
-        """Reuse a backend built elsewhere for settings' structure (no new compile)."""
-        self._backends[settings.structure()] = backend
-
-    def backend(self, settings: Settings) -> Backend:
-        key = settings.structure()
-        if key not in self._backends:
-            scene = build_scene(
-                self.object, settings.gripper, settings.contact, settings.solver, settings.grasp
-            )
-            size = self.batch_size or default_batch_size(self.backend_name)
-            self._backends[key] = make_backend(self.backend_name, scene, settings.grasp, size)
-        return self._backends[key]
-
-    def run(self, jobs: list[tuple[Settings, PickBatch]]) -> list[dict]:
-        """Per-job results (the dict of ``kernels.grasp.finalize``, (len(picks),) arrays)."""
-        for settings, _ in jobs:
-            settings.grasp.check_gripper(settings.gripper)
-        groups: dict[tuple, list[int]] = {}
-        for j, (settings, _) in enumerate(jobs):
-            groups.setdefault(settings.structure(), []).append(j)
-        results: list[dict | None] = [None] * len(jobs)
-        for members in groups.values():
-            live = [j for j in members if len(jobs[j][1])]
-            for j in members:
-                if not len(jobs[j][1]):
-                    results[j] = {}
-            if not live:
-                continue
-            backend = self.backend(jobs[live[0]][0])
-            parts = []
-            for j in live:
-                settings, picks = jobs[j]
-                parts.append(
-                    make_inputs(
-                        backend.scene,
-                        settings.grasp,
-                        picks,
-                        settings.overrides(backend.scene, len(picks)),
-                    )
-                )
-            inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
-            out, _ = backend.run(inputs)
-            self.rollouts += len(inputs)
-            start = 0
-            for j in live:
-                n = len(jobs[j][1])
-                results[j] = {k: v[start : start + n] for k, v in out.items()}
-                start += n
-        return results

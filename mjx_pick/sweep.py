@@ -12,7 +12,7 @@ grip_force_n, kp_mm_s_per_n, closing_speed_mm_s and opening_speed_mm_s. Values:
 
 Contact, controller and phase settings are per-pick data of one compiled simulation,
 so every variant that shares the scene and the scan length runs in ONE batch of
-pick-points x variants (``simulate.Simulator``). Gripper geometry and solver settings
+pick-points x variants (``engine.Simulator``). Gripper geometry and solver settings
 change the scene: each such value is a batch (and, on MJX, a compile) of its own.
 Pick-points are drawn per gripper geometry with the same seed, so variants that share
 a gripper see the same pick-points (paired).
@@ -32,13 +32,14 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, to_dict, write_json, write_parquet
+from mjx_pick.engine import Simulator
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import rate_summary, results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.rundir import claim, config_hash, finish
-from mjx_pick.simulate import Settings, Simulator
+from mjx_pick.simulate import Settings
 
 SECTIONS = {
     "contact": ContactParams,
@@ -220,15 +221,12 @@ def sweep(
                 obj, s.gripper, n, seed, pick_config, grasp=s.grasp
             )
     jobs = [(s, picks_for[s.gripper]) for s in settings]
-    before = {id(b): (b.stats.compile_s, b.stats.run_s) for b in sim.backends}
+    before = sim.engine.timing
     t0 = time.perf_counter()
     outs = sim.run(jobs)
     wall = time.perf_counter() - t0
-    compile_s = run_s = 0.0
-    for b in sim.backends:
-        c0, r0 = before.get(id(b), (0.0, 0.0))
-        compile_s += b.stats.compile_s - c0
-        run_s += b.stats.run_s - r0
+    spent = sim.engine.timing - before  # this sweep's compiles and runs alone
+    compile_s, run_s = spent.compile_s, spent.run_s
     n_sims = sum(len(p) for _, p in jobs)
     timing = {
         "simulations": n_sims,
@@ -254,24 +252,25 @@ def sweep(
     table = pa.concat_tables(tables)
     out_dir = Path(out) if out is not None else None
     if out_dir is not None:
-        write_json(
-            out_dir / "config.json",
-            {
-                "object": obj.summary(),
-                "base": to_dict(base),
-                "params": [to_dict(p) for p in params],
-                "random": random,
-                "n": n,
-                "seed": seed,
-                "backend": sim.backends[0].name if sim.backends else backend,
-                "device": sim.backends[0].device if sim.backends else None,
-                "timing": timing,
-            },
-        )
+        config = {
+            "object": obj.summary(),
+            "base": to_dict(base),
+            "params": [to_dict(p) for p in params],
+            "random": random,
+            "n": n,
+            "seed": seed,
+            "picks": to_dict(pick_config),
+        }
+        meta = {
+            "backend": sim.backends[0].name if sim.backends else backend,
+            "device": sim.backends[0].device if sim.backends else None,
+            "timing": timing,
+        }
+        write_json(out_dir / "config.json", {**config, **meta})
         write_parquet(out_dir / "results.parquet", table)
         write_json(out_dir / "variants.json", summaries)
         plot_sweep(summaries, table, [p.name for p in params], out_dir / "sweep.png")
-        finish(out_dir)
+        finish(out_dir, command="sweep", config=config, seed=seed, **meta)
     return SweepResult(table, summaries, timing, out_dir)
 
 

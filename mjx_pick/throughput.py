@@ -3,7 +3,8 @@
 Used by ``benchmarks/throughput.py`` (CSV rows for RESULTS.md) and the throughput
 notebook; ``plot_throughput`` draws rows against the paper's figures. ``side_by_side``
 runs several backends (Warp, MJX's JAX physics, MuJoCo C) on the same pick-points and
-compares their labels with MuJoCo C's.
+compares their labels with MuJoCo C's. Both run through ``mjx_pick.engine.Engine``,
+each timed run as ONE backend call (one chunk), so a refilled pool is measured whole.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ import numpy as np
 
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
-from mjx_pick.simulate import make_backend, make_inputs
+from mjx_pick.engine import Engine
+from mjx_pick.simulate import make_inputs
 
 # Bencak et al. 2023: ~53 s for one simulation; ~4.5 s per simulation with 12 parallel
 # MATLAB workers, i.e. about 0.22 pick-points per second
@@ -53,19 +55,19 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
     scene = mp.build_scene(obj, gripper, solver=solver, grasp=grasp)
     pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0, grasp=grasp)
     devices = jax.local_devices()[:n_devices] if n_devices else None
-    backend = make_backend(backend_name, scene, grasp, batch_size=batch, devices=devices)
+    # one chunk per call: each timed call is one backend call of `batch` pick-points
+    engine = Engine(backend_name, batch, chunk_size=batch, devices=devices)
+    backend = engine.make(scene, grasp)
     steps = grasp.n_ticks() * grasp.substeps(scene.solver)
-    first = make_inputs(scene, grasp, tile_picks(pool, batch, 0))
-    t0 = time.perf_counter()
-    out, _ = backend.run(first)  # compiles, then runs once (warm-up)
-    first_wall = time.perf_counter() - t0
-    compile_s = backend.stats.compile_s
-    times = [] if repeats else [backend.stats.run_s]
+    first = engine.run(backend, make_inputs(scene, grasp, tile_picks(pool, batch, 0)))
+    out = first.results  # compiled, then ran once (warm-up)
+    compile_s = first.timing.compile_s
+    times = [] if repeats else [first.timing.run_s]
     for r in range(repeats):
         inputs = make_inputs(scene, grasp, tile_picks(pool, batch, (r + 1) * 7919))
-        before = backend.stats.run_s
-        out, _ = backend.run(inputs)
-        times.append(backend.stats.run_s - before)
+        timed = engine.run(backend, inputs)
+        out = timed.results
+        times.append(timed.timing.run_s)
     run_s = statistics.median(times)
     peak = peak_bytes()
     return {
@@ -74,7 +76,7 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
         "device": backend.device if backend.name == "mujoco" else device_name(n_devices),
         "batch": batch,
         "compile_s": round(compile_s, 2),
-        "first_call_s": round(first_wall, 2),
+        "first_call_s": round(first.timing.wall_s, 2),
         "run_s_median": round(run_s, 3),
         "picks_per_s": round(batch / run_s, 1),
         "physics_steps_per_s": round(batch * steps / run_s),
@@ -202,22 +204,19 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
         full_steps = grasp.n_ticks() * n_sub
         n = min(spec.n, len(inputs))
         t_build = time.perf_counter()
-        backend = make_backend(
-            spec.backend, scene, grasp, batch_size=spec.batch, **spec.backend_options(scene, grasp)
-        )
+        engine = Engine(spec.backend, spec.batch, **spec.backend_options(scene, grasp))
+        backend = engine.make(scene, grasp)
         build_s = time.perf_counter() - t_build
         warm_s = 0.0
         if spec.warmup:
-            t0 = time.perf_counter()
-            backend.run(inputs.take(slice(0, min(spec.warmup, n))))
-            warm_s = time.perf_counter() - t0
+            warm = inputs.take(slice(0, min(spec.warmup, n)))
+            warm_s = engine.run(backend, warm, chunk_size=len(warm)).timing.wall_s
         pool = getattr(backend, "pool_stats", None)
         before = dataclasses.replace(pool) if pool is not None else None
-        run_before, compile_before = backend.stats.run_s, backend.stats.compile_s
-        t0 = time.perf_counter()
-        out, _ = backend.run(inputs.take(slice(0, n)))
-        wall = time.perf_counter() - t0
-        run_s = backend.stats.run_s - run_before
+        compile_before = backend.stats.compile_s
+        # the timed run is one backend call (one chunk): a refilled pool runs it whole
+        timed = engine.run(backend, inputs.take(slice(0, n)), chunk_size=n)
+        out, wall, run_s = timed.results, timed.timing.wall_s, timed.timing.run_s
         results[spec.label] = out
         refilled = pool is not None and pool.rounds > before.rounds
         if refilled:

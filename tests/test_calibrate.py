@@ -186,6 +186,10 @@ def test_cli_calibrate(tmp_path, synthetic, capsys):
     assert main(args) == 0
     assert "pad_friction: 0.86 ->" in capsys.readouterr().out
     assert (tmp_path / "fit" / "contact.toml").is_file()
+    run = json.loads((tmp_path / "fit" / "run.json").read_text())
+    assert run["command"] == "calibrate" and run["status"] == "complete"
+    assert run["backend"] == "mujoco" and run["timing"]["simulations"] > 0
+    assert run["timing"]["rollouts"] > 0 and run["config"]["steps"] == 3
     assert main(args[:-1] + [str(tmp_path / "fit2"), "--params", "pad_friction,nope"]) == 2
     assert "unknown calibration parameter 'nope'" in capsys.readouterr().err
 

@@ -243,6 +243,19 @@ def test_cli_studies(tmp_path, capsys):
     assert found.any()
     assert np.all(forces[found] == 20.0)
     assert np.all(table["min_force_at_floor"].to_numpy()[found])
+    # one run record in every folder, written the same way by every command
+    for folder, command in (
+        ("sw", "sweep"),
+        ("cmp", "compare"),
+        ("rb", "robust"),
+        ("ev", "evaluate"),
+    ):
+        run = json.loads((tmp_path / folder / "run.json").read_text())
+        assert run["command"] == command and run["status"] == "complete", folder
+        assert run["backend"] == "mujoco" and run["device"].startswith("cpu:"), folder
+        assert run["seed"] == 0 and run["versions"]["mujoco"], folder
+        assert run["timing"]["run_s"] > 0 and run["timing"]["wall_s"] > 0, folder
+        assert run["config"]["object"]["name"] == "block", folder
     assert main(["sweep", *common, "--param", "contact.nope=1:2:3"]) == 2
     assert "unknown parameter 'contact.nope'" in capsys.readouterr().err
     assert main(["design", *common, "--bound", "stroke=1:2"]) == 2

@@ -1,0 +1,515 @@
+"""The simulation engine: the one place where pick-points are simulated.
+
+Every caller runs its simulations through an :class:`Engine`: ``evaluate`` (chunked,
+resumable: :func:`run_chunks`), the studies through :class:`Simulator` (sweep, compare,
+design search, robustness, minimum grip force), calibration (``calibrate.Problem``) and
+the throughput benchmarks (``throughput.measure``, ``side_by_side``). It owns
+
+* backend choice: ``simulate.make_backend`` ('auto', 'warp', 'mjx', 'mujoco'); a new
+  backend is one module implementing the small ``simulate.Backend`` protocol;
+* batching: inputs reach the backend in chunks, which the backend splits into its own
+  batches -- MJX/Warp run fixed-size padded batches or a pool of slots refilled as
+  picks end (the refill stays inside those backends: it is part of the device program);
+* chunking, resume and the assignment of chunks to JAX processes (:func:`run_chunks`);
+* progress: ``on_progress(done, total)`` in pick-points, called once before the first
+  chunk and after every chunk;
+* cancellation: a ``threading.Event`` checked before every chunk; once set, the run
+  stops with :class:`Cancelled` (finished chunks of an evaluate folder are kept for
+  ``resume``). A chunk that has started runs to its end: a device program cannot be
+  interrupted, and a chunk is the unit that is saved;
+* compile time apart from run time (:class:`Timing`, read from the backends' stats).
+
+Results do not depend on the chunking: every pick-point is simulated on its own
+(chunks are whole numbers of the backend's batches, which pads MJX batches with copies
+whose results are dropped; a refilled pool gives the results of full-length rollouts).
+
+The one path that does not go through :meth:`Engine.run` is calibration's forward-mode
+gradient: :func:`differentiable_rollout` says why.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from mjx_pick.config import ConfigError, write_parquet
+from mjx_pick.grasp import GraspConfig
+from mjx_pick.metrics import results_table
+from mjx_pick.objects import ObjectModel
+from mjx_pick.pickpoints import PickBatch
+from mjx_pick.scene import Scene, build_scene
+from mjx_pick.simulate import (
+    Backend,
+    PickInputs,
+    Settings,
+    default_batch_size,
+    make_backend,
+    make_inputs,
+)
+
+ProgressFn = Callable[[int, int], None]  # (pick-points done, pick-points in the run)
+
+
+class Cancelled(RuntimeError):
+    """A run stopped between chunks because its cancel event was set."""
+
+
+@dataclasses.dataclass
+class Timing:
+    """Time spent by one engine call (or summed over several), seconds.
+
+    compile_s: compiling device programs (MJX/Warp) or the per-tick controller and
+    building C-engine batches (MuJoCo C); run_s: simulating, after compiles, with the
+    device synchronised; wall_s: the whole call, host work included; n: pick-points.
+    """
+
+    compile_s: float = 0.0
+    run_s: float = 0.0
+    wall_s: float = 0.0
+    n: int = 0
+
+    def __add__(self, other: Timing) -> Timing:
+        return Timing(*(a + b for a, b in zip(self.astuple(), other.astuple(), strict=True)))
+
+    def __sub__(self, other: Timing) -> Timing:
+        return Timing(*(a - b for a, b in zip(self.astuple(), other.astuple(), strict=True)))
+
+    def astuple(self) -> tuple:
+        return (self.compile_s, self.run_s, self.wall_s, self.n)
+
+    @property
+    def picks_per_s(self) -> float | None:
+        return self.n / self.run_s if self.run_s > 0 else None
+
+
+class Outcome(NamedTuple):
+    """What :meth:`Engine.run` returns."""
+
+    results: dict  # per pick-point results (kernels.grasp.finalize), (N,) numpy arrays
+    traces: np.ndarray | None  # (N, T, F) with record (kernels.grasp.TRACE_FIELDS), else None
+    timing: Timing  # of this call
+
+
+def auto_chunk(backend: Backend) -> int:
+    """Chunk size: what fits in half the free device memory (MJX/Warp on an
+    accelerator), capped at 65536 pick-points, a whole number of batches; else one
+    batch (the C engine, or a device that reports no memory)."""
+    batch = backend.batch_size
+    stats = None
+    if hasattr(backend, "device_bytes_per_pick"):  # MJX, Warp: a device program
+        dev = backend.devices[0]
+        stats = dev.memory_stats() if dev.platform != "cpu" else None
+    if not stats or "bytes_limit" not in stats:
+        return batch
+    free = (stats["bytes_limit"] - stats.get("bytes_in_use", 0)) * len(backend.devices)
+    fits = int(0.5 * free // backend.device_bytes_per_pick())
+    return max(batch, min(65536, fits) // batch * batch)
+
+
+class Engine:
+    """Backends, chunked runs, progress, cancellation and timing for one caller.
+
+    Args:
+      backend: 'auto', 'warp', 'mjx' or 'mujoco' (``simulate.make_backend``).
+      batch_size: simulations per backend call (default: ``default_batch_size``).
+      chunk_size: pick-points per chunk, the unit of progress and cancellation
+        (default: :func:`auto_chunk` of each backend).
+      on_progress: default progress callback of :meth:`run`, ``(done, total)``.
+      cancel: an event; once set, the next chunk raises :class:`Cancelled`.
+      nthread, devices, options: passed to ``make_backend`` (C-engine threads; the
+        devices MJX/Warp shard over; refill, ticks_per_call, buffers, ...).
+    """
+
+    def __init__(
+        self,
+        backend: str = "auto",
+        batch_size: int | None = None,
+        *,
+        chunk_size: int | None = None,
+        on_progress: ProgressFn | None = None,
+        cancel: threading.Event | None = None,
+        nthread: int | None = None,
+        devices=None,
+        **options,
+    ) -> None:
+        if chunk_size is not None and int(chunk_size) < 1:
+            raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
+        self.backend_name = backend
+        self.batch_size = batch_size
+        self.chunk_size = chunk_size
+        self.on_progress = on_progress
+        self.cancel = cancel
+        self.nthread, self.devices, self.options = nthread, devices, options
+        self.backends: list[Backend] = []  # every backend this engine ran, in order built
+        self.rollouts = 0  # pick-point simulations run so far
+
+    def make(self, scene: Scene, grasp: GraspConfig) -> Backend:
+        """A new backend for scene and grasp (on MJX/Warp: one compile per batch shape)."""
+        size = self.batch_size or default_batch_size(self.backend_name)
+        backend = make_backend(
+            self.backend_name,
+            scene,
+            grasp,
+            size,
+            nthread=self.nthread,
+            devices=self.devices,
+            **self.options,
+        )
+        self.backends.append(backend)
+        return backend
+
+    def adopt(self, backend: Backend) -> None:
+        """Count a backend built by another engine (one engine's run shared by a study)."""
+        if not any(b is backend for b in self.backends):
+            self.backends.append(backend)
+
+    @property
+    def timing(self) -> Timing:
+        """Compile and run time and pick-points of every backend so far (wall_s: 0)."""
+        return sum(
+            (Timing(b.stats.compile_s, b.stats.run_s, 0.0, b.stats.n) for b in self.backends),
+            Timing(),
+        )
+
+    def describe(self, wall_s: float | None = None) -> dict:
+        """What ran, for a run's metadata (``rundir.finish``): backend, device and
+        timing (compile_s, run_s: summed over this engine's backends; simulations: the
+        pick-point simulations run; wall_s: the caller's, when given)."""
+        first = self.backends[0] if self.backends else None
+        t = self.timing
+        timing = {"compile_s": round(t.compile_s, 3), "run_s": round(t.run_s, 3)}
+        timing["simulations"] = int(t.n)
+        if wall_s is not None:
+            timing["wall_s"] = round(wall_s, 3)
+        return {
+            "backend": first.name if first is not None else self.backend_name,
+            "device": first.device if first is not None else None,
+            "timing": timing,
+        }
+
+    def simulate(
+        self, scene: Scene, grasp: GraspConfig, inputs: PickInputs, *, record: bool = False
+    ) -> Outcome:
+        """One run on a new backend for scene and grasp: :meth:`make`, then :meth:`run`."""
+        return self.run(self.make(scene, grasp), inputs, record=record)
+
+    def check_cancel(self) -> None:
+        """Raise :class:`Cancelled` when the cancel event is set."""
+        if self.cancel is not None and self.cancel.is_set():
+            raise Cancelled("cancelled")
+
+    def chunk_for(self, backend: Backend) -> int:
+        return int(self.chunk_size or auto_chunk(backend))
+
+    def run(
+        self,
+        backend: Backend,
+        inputs: PickInputs,
+        *,
+        record: bool = False,
+        chunk_size: int | None = None,
+        on_progress: ProgressFn | None = None,
+    ) -> Outcome:
+        """Simulate inputs (N pick-points) on backend, chunk by chunk.
+
+        Args:
+          record: also return traces (N, T, F) at the control rate.
+          chunk_size: pick-points per chunk for this call (default: the engine's).
+          on_progress: ``(done, total)`` after each chunk (default: the engine's).
+
+        Returns:
+          :class:`Outcome`: results ((N,) arrays), traces, this call's timing.
+        """
+        report = on_progress if on_progress is not None else self.on_progress
+        n = len(inputs)
+        chunk = int(chunk_size or self.chunk_for(backend))
+        stats = backend.stats
+        compile0, run0 = stats.compile_s, stats.run_s
+        t0 = time.perf_counter()
+        if report is not None:
+            report(0, n)
+        results, traces = [], []
+        # an empty run still calls the backend once: it says what an empty batch gives
+        for start in range(0, max(n, 1), chunk):
+            self.check_cancel()
+            out, rows = backend.run(inputs.take(slice(start, start + chunk)), record=record)
+            results.append(out)
+            traces.append(rows)
+            self.rollouts += min(chunk, n - start)
+            if report is not None:
+                report(min(start + chunk, n), n)
+        merged = results[0]
+        if len(results) > 1:
+            merged = {k: np.concatenate([r[k] for r in results]) for k in results[0]}
+        rows = None
+        if record:
+            rows = traces[0] if len(traces) == 1 else np.concatenate(traces)
+        timing = Timing(stats.compile_s - compile0, stats.run_s - run0, time.perf_counter() - t0, n)
+        return Outcome(merged, rows, timing)
+
+
+# ------------------------------------------------------------------- chunked, resumable
+
+
+class ChunkLog:
+    """Which chunks of a run are finished, checkpointed with orbax so a killed run resumes.
+
+    The chunk files under ``chunks/`` are the data (each written atomically); this
+    record is the progress: the chunks done and the time spent, saved after every
+    chunk. A chunk file found without a record (a kill between the two writes) is
+    complete by construction and is used as is.
+    """
+
+    def __init__(self, out_dir: Path | None, n_chunks: int, process: int):
+        self.done = np.zeros(n_chunks, bool)
+        self.run_s = 0.0
+        self._mngr = None
+        if out_dir is None:
+            return
+        import orbax.checkpoint as ocp
+
+        path = (out_dir / "checkpoint" / f"process-{process}").absolute()
+        self._mngr = ocp.CheckpointManager(
+            path, options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True)
+        )
+        step = self._mngr.latest_step()
+        if step is not None:
+            state = self._mngr.restore(step, args=ocp.args.StandardRestore(self._state()))
+            if len(state["done"]) == n_chunks:
+                self.done = np.asarray(state["done"], bool).copy()
+                self.run_s = float(state["run_s"])
+
+    def _state(self) -> dict:
+        return {"done": self.done, "run_s": np.float64(self.run_s)}
+
+    def finish(self, k: int, run_s: float) -> None:
+        self.done[k] = True
+        self.run_s += run_s
+        if self._mngr is not None:
+            import orbax.checkpoint as ocp
+
+            self._mngr.save(
+                int(self.done.sum()), args=ocp.args.StandardSave(self._state()), force=True
+            )
+            self._mngr.wait_until_finished()
+
+    def close(self) -> None:
+        if self._mngr is not None:
+            self._mngr.close()
+
+
+def chunk_path(out_dir: Path, k: int) -> Path:
+    """Where chunk k of a run in out_dir is written (the GUI counts these files)."""
+    return out_dir / "chunks" / f"part-{k:06d}.parquet"
+
+
+def run_chunks(
+    engine: Engine,
+    backend: Backend,
+    grasp: GraspConfig,
+    picks: PickBatch,
+    chunk: int,
+    out_dir: Path | None = None,
+    on_progress: ProgressFn | None = None,
+) -> pa.Table:
+    """Simulate picks chunk by chunk into a results table (``metrics.COLUMNS``).
+
+    With out_dir, each finished chunk is written at once (atomically) to
+    :func:`chunk_path` and recorded in a :class:`ChunkLog`; a chunk file already there
+    (an earlier, interrupted run) is read instead of simulated. With several JAX
+    processes (jax.distributed), process i takes chunks k with k % P == i; process 0
+    then waits for the others' chunk files and assembles.
+
+    on_progress(done, total): pick-points finished (read or simulated) of len(picks),
+    once before the first chunk and after each one.
+    """
+    if chunk < 1:
+        raise ConfigError(f"chunk_size = {chunk} is out of range: allowed >= 1")
+    n = len(picks)
+    n_chunks = max(1, -(-n // chunk))
+    proc, nproc = jax.process_index(), jax.process_count()
+    log = ChunkLog(out_dir, n_chunks, proc)
+    parts: dict[int, pa.Table] = {}
+    done = 0
+    if on_progress is not None:
+        on_progress(0, n)
+    try:
+        for k in range(n_chunks):
+            sub = picks.take(slice(k * chunk, (k + 1) * chunk))
+            path = chunk_path(out_dir, k) if out_dir is not None else None
+            if path is not None and path.is_file():
+                parts[k] = pq.read_table(path)  # finished by an earlier run
+            elif k % nproc == proc:
+                inputs = make_inputs(backend.scene, grasp, sub)
+                # one chunk per engine call: progress is reported here, in the run's terms
+                out = engine.run(backend, inputs, chunk_size=max(len(sub), 1), on_progress=_quiet)
+                parts[k] = results_table(sub, out.results)
+                if path is not None:
+                    write_parquet(path, parts[k])
+                log.finish(k, out.timing.run_s)
+            done += len(sub)
+            if on_progress is not None:
+                on_progress(done, n)
+    finally:
+        log.close()
+    if nproc > 1:
+        parts = _gather_chunks(out_dir, n_chunks, parts)
+    return pa.concat_tables([parts[k] for k in range(n_chunks)])
+
+
+def _quiet(done: int, total: int) -> None:
+    """No progress (the caller reports it in its own terms)."""
+
+
+def _gather_chunks(out_dir: Path | None, n_chunks: int, parts: dict, timeout_s: float = 86400):
+    """Multi-process: wait for every chunk file (shared file system) and read them."""
+    if out_dir is None:
+        raise ConfigError("a multi-process run needs --out on a file system all hosts share")
+    t0 = time.monotonic()
+    for k in range(n_chunks):
+        path = chunk_path(out_dir, k)
+        while k not in parts:
+            if path.is_file():
+                parts[k] = pq.read_table(path)
+            elif time.monotonic() - t0 > timeout_s:
+                raise TimeoutError(f"chunk {k} never appeared in {path.parent}")
+            else:
+                time.sleep(1.0)
+    return parts
+
+
+# ------------------------------------------------------------------------- studies
+
+
+class Simulator:
+    """Runs (Settings, PickBatch) jobs for one object, batching what can share a program.
+
+    Jobs whose settings share a structure (``Settings.structure``) run as ONE batch of
+    pick-points x variants with per-pick parameters -- one compile, one engine run
+    (chunked by the engine). Scenes and backends are cached, so a loop that calls
+    ``run`` again (a bisection, an optimiser) compiles nothing new.
+
+    Args:
+      obj: the object every job simulates.
+      backend, batch_size: as :class:`Engine` (ignored when engine is given).
+      engine: run through this engine (its backend choice, progress and cancel event).
+    """
+
+    def __init__(
+        self,
+        obj: ObjectModel,
+        backend: str = "auto",
+        batch_size: int | None = None,
+        *,
+        engine: Engine | None = None,
+    ) -> None:
+        self.object = obj
+        self.engine = engine or Engine(backend, batch_size)
+        self.backend_name = self.engine.backend_name
+        self.batch_size = self.engine.batch_size
+        self._backends: dict[tuple, Backend] = {}
+        self.rollouts = 0  # pick-point simulations run so far
+
+    @property
+    def backends(self) -> list[Backend]:
+        """The backends built so far: one per scene structure (one compile each on MJX)."""
+        return list(self._backends.values())
+
+    def adopt(self, settings: Settings, backend: Backend) -> None:
+        """Reuse a backend built elsewhere for settings' structure (no new compile)."""
+        self._backends[settings.structure()] = backend
+        self.engine.adopt(backend)
+
+    def backend(self, settings: Settings) -> Backend:
+        key = settings.structure()
+        if key not in self._backends:
+            scene = build_scene(
+                self.object, settings.gripper, settings.contact, settings.solver, settings.grasp
+            )
+            self._backends[key] = self.engine.make(scene, settings.grasp)
+        return self._backends[key]
+
+    def run(self, jobs: list[tuple[Settings, PickBatch]]) -> list[dict]:
+        """Per-job results (the dict of ``kernels.grasp.finalize``, (len(picks),) arrays).
+
+        The engine's on_progress gets (done, total) over all jobs of this call.
+        """
+        for settings, _ in jobs:
+            settings.grasp.check_gripper(settings.gripper)
+        groups: dict[tuple, list[int]] = {}
+        for j, (settings, _) in enumerate(jobs):
+            groups.setdefault(settings.structure(), []).append(j)
+        results: list[dict | None] = [None] * len(jobs)
+        total = sum(len(p) for _, p in jobs)
+        done = 0
+        report = self.engine.on_progress
+        if report is not None:
+            report(0, total)
+        for members in groups.values():
+            live = [j for j in members if len(jobs[j][1])]
+            for j in members:
+                if not len(jobs[j][1]):
+                    results[j] = {}
+            if not live:
+                continue
+            backend = self.backend(jobs[live[0]][0])
+            parts = []
+            for j in live:
+                settings, picks = jobs[j]
+                parts.append(
+                    make_inputs(
+                        backend.scene,
+                        settings.grasp,
+                        picks,
+                        settings.overrides(backend.scene, len(picks)),
+                    )
+                )
+            inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
+            offset = done
+
+            def progress(k: int, _n: int, offset=offset) -> None:
+                # a group's start (k = 0) is where the previous one ended: said already
+                if report is not None and k > 0:
+                    report(offset + k, total)
+
+            out = self.engine.run(backend, inputs, on_progress=progress).results
+            done += len(inputs)
+            self.rollouts += len(inputs)
+            start = 0
+            for j in live:
+                n = len(jobs[j][1])
+                results[j] = {k: v[start : start + n] for k, v in out.items()}
+                start += n
+        return results
+
+
+# ------------------------------------------------------------------------ gradients
+
+
+def differentiable_rollout(scene: Scene, grasp: GraspConfig, record: bool):
+    """The batched MJX rollout (JAX physics) as a JAX function, for forward-mode derivatives.
+
+    (qpos0 (N, nq), params (fields (N,)), pair_friction (N, npair, 5), pair_solref
+    (N, npair, 2), pair_solimp (N, npair, 5)) -> (results of (N,) arrays, traces
+    (N, T, F) or None), every pick run for all ``grasp.n_ticks()`` control periods.
+
+    Why calibration's ``jax.jacfwd`` calls this and not :meth:`Engine.run`: a
+    derivative needs the whole rollout inside the caller's trace, while a backend's
+    ``run`` hands back numpy arrays after the device finished (the trace ends there),
+    splits the work into chunks and batches on the host, may refill slots (Warp, which
+    has no derivatives at all) and records timing as it goes. It is the very program
+    ``MjxBackend`` compiles for full-length batches (``backend_mjx.make_rollout``), so
+    its values are those of backend 'mjx'.
+    """
+    from mjx_pick.backend_mjx import make_rollout
+
+    return make_rollout(scene, grasp, record)

@@ -1,0 +1,234 @@
+"""The one simulation engine: results unchanged by the refactor that introduced it,
+progress and cancellation between chunks, every study running through it."""
+
+import ast
+import json
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mjx_pick as mp
+from mjx_pick import pickpoints as pp
+from mjx_pick.engine import Cancelled, Engine, Simulator
+from mjx_pick.evaluate import evaluate
+from mjx_pick.grasp import GraspConfig
+from mjx_pick.sweep import ParamSpec, sweep
+
+SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
+
+# Results of the code BEFORE the engine refactor (commit 513b28d, MuJoCo 4.0.0, jax
+# 0.10, 2-core AMD EPYC), printed from evaluate(...).table / sweep(...).table with
+# exactly the calls below (MuJoCo C backend). Labels must match exactly; the floats to
+# 1e-6: on this machine they are bitwise equal, but the per-tick controller is XLA CPU
+# code, which XLA compiles per CPU model (float32 reductions may round differently on
+# CI's CPU), and 1e-6 is still far below any change a refactor bug would make.
+EVALUATE_DOOR_OPENER = {
+    "pick_id": [12, 30, 41, 49, 50, 53],
+    "success": [True, False, False, False, False, False],
+    "failure": ["slipped_in_lift"] + ["force_not_reached"] * 5,
+    "score": [
+        0.9564539790153503,
+        0.26396703720092773,
+        0.31415510177612305,
+        0.29422780871391296,
+        0.24497491121292114,
+        0.27547377347946167,
+    ],
+    "t_reached_s": [0.47499969601631165, -1.0, -1.0, -1.0, -1.0, -1.0],
+    "lift_height_mm": [4.89628267288208, 0.0, 0.0, 0.0, 0.0, 0.0],
+}
+SWEEP_BLOCK = {
+    "variant": [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3],
+    "pick_id": [0, 2, 4] * 4,
+    "success": [True, False, True] * 4,
+    "failure": ["slipped_in_lift", "force_not_reached", "slipped_in_lift"] * 4,
+    "score": [
+        0.9770233631134033,
+        0.25076982378959656,
+        0.940322995185852,
+        0.9769618511199951,
+        0.25417107343673706,
+        0.9610767364501953,
+        0.9765805006027222,
+        0.25076982378959656,
+        0.940322995185852,
+        0.9762338995933533,
+        0.25417107343673706,
+        0.9552550315856934,
+    ],
+    "t_reached_s": [
+        0.299999862909317,
+        -1.0,
+        0.47499969601631165,
+        0.299999862909317,
+        -1.0,
+        0.44999971985816956,
+        0.3249998390674591,
+        -1.0,
+        0.5049996972084045,
+        0.3249998390674591,
+        -1.0,
+        0.47999969124794006,
+    ],
+    "lift_height_mm": [
+        4.955718994140625,
+        0.0,
+        4.958987712860107,
+        4.944531440734863,
+        0.0,
+        4.944886207580566,
+        4.955569744110107,
+        0.0,
+        4.958508491516113,
+        4.944658279418945,
+        0.0,
+        4.945271015167236,
+    ],
+}
+FLOATS = ("score", "t_reached_s", "lift_height_mm")
+
+
+def _check(table, expected):
+    for name, want in expected.items():
+        got = table[name].to_pylist()
+        if name in FLOATS:
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-6, err_msg=name)
+        else:
+            assert got == want, name
+
+
+def test_evaluate_results_unchanged_by_the_engine(door_opener):
+    # two chunks of 4 (the second one short): the chunked path, not one batch
+    ev = evaluate(
+        door_opener,
+        n=6,
+        seed=3,
+        grasp=SHORT,
+        backend="mujoco",
+        batch_size=4,
+        chunk_size=4,
+        n_traces=0,
+    )
+    _check(ev.table, EVALUATE_DOOR_OPENER)
+
+
+def test_sweep_results_unchanged_by_the_engine(block):
+    res = sweep(
+        block,
+        [
+            ParamSpec.parse("controller.force_n=30,60"),
+            ParamSpec.parse("contact.pad_friction=0.3,0.86"),
+        ],
+        mp.Settings(grasp=SHORT),
+        n=3,
+        seed=1,
+        backend="mujoco",
+    )
+    _check(res.table, SWEEP_BLOCK)
+
+
+def test_progress_and_cancel_between_chunks_then_resume(door_opener, tmp_path):
+    out = tmp_path / "run"
+    calls, cancel = [], threading.Event()
+
+    def stop_after_first_chunk(done, total):
+        calls.append((done, total))
+        if done >= 2:
+            cancel.set()
+
+    common = dict(n=6, seed=3, grasp=SHORT, backend="mujoco", batch_size=2, chunk_size=2)
+    with pytest.raises(Cancelled):
+        evaluate(
+            door_opener,
+            **common,
+            out=out,
+            n_traces=0,
+            on_progress=stop_after_first_chunk,
+            cancel=cancel,
+        )
+    assert calls == [(0, 6), (2, 6)]
+    chunks = sorted(p.name for p in (out / "chunks").glob("part-*.parquet"))
+    assert chunks == ["part-000000.parquet"], "the run stops before the next chunk"
+    assert json.loads((out / "mjx_pick_run.json").read_text())["status"] == "cancelled"
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "cancelled" and run["timing"]["simulations"] == 2
+    stamp = (out / "chunks" / chunks[0]).stat().st_mtime_ns
+
+    calls.clear()
+    ev = evaluate(
+        door_opener,
+        **common,
+        out=out,
+        n_traces=0,
+        resume=True,
+        on_progress=lambda d, t: calls.append((d, t)),
+    )
+    assert calls == [(0, 6), (2, 6), (4, 6), (6, 6)]
+    assert (out / "chunks" / chunks[0]).stat().st_mtime_ns == stamp, "a finished chunk was redone"
+    run = json.loads((out / "run.json").read_text())
+    assert run["status"] == "complete" and run["timing"]["simulations"] == 4  # 2 were read
+    # chunks of 2 on batches of 2 give the pinned results of chunks of 4 on batches of 4
+    _check(ev.table, EVALUATE_DOOR_OPENER)
+
+
+def test_simulator_reports_progress_over_all_jobs_and_honours_cancel(block):
+    calls = []
+    engine = Engine("mujoco", 2, chunk_size=2, on_progress=lambda d, t: calls.append((d, t)))
+    sim = Simulator(block, engine=engine)
+    picks = pp.generate_normal(block, mp.GripperSpec(), 3, seed=1, grasp=SHORT)
+    base = mp.Settings(grasp=SHORT)
+    strong = mp.Settings(
+        grasp=GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05, grip_force_n=60.0)
+    )
+    a, b = sim.run([(base, picks), (strong, picks)])
+    # both jobs share one structure: one batch of 6 pick-points in chunks of 2
+    assert calls == [(0, 6), (2, 6), (4, 6), (6, 6)]
+    assert len(sim.backends) == 1 and sim.rollouts == engine.rollouts == 6
+    assert len(a["success"]) == len(b["success"]) == 3
+    timing = engine.timing
+    assert timing.n == 6 and timing.compile_s > 0 and timing.run_s > 0
+
+    cancel = threading.Event()
+    cancel.set()
+    stopped = Simulator(block, engine=Engine("mujoco", 2, cancel=cancel))
+    with pytest.raises(Cancelled):
+        stopped.run([(base, picks)])
+    assert stopped.engine.rollouts == 0
+
+
+ROOT = Path(__file__).resolve().parents[1]
+# only the engine layer builds and runs backends; everyone else goes through the engine
+BACKEND_NAMES = {"make_backend", "make_rollout", "MjxBackend", "MujocoBackend", "make_warp_backend"}
+ENGINE_LAYER = {"engine", "simulate", "backend_mjx", "backend_mujoco", "backend_warp"}
+
+
+def _names_used(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text())
+    used = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name):
+            used.add(node.id)
+        elif isinstance(node, ast.Attribute):
+            used.add(node.attr)
+        elif isinstance(node, ast.ImportFrom):
+            used.update(a.name for a in node.names)
+    return used
+
+
+def test_only_the_engine_builds_backends():
+    files = [p for p in (ROOT / "mjx_pick").rglob("*.py") if p.stem not in ENGINE_LAYER]
+    assert len(files) > 10
+    offenders = {str(p.relative_to(ROOT)): sorted(_names_used(p) & BACKEND_NAMES) for p in files}
+    offenders = {k: v for k, v in offenders.items() if v}
+    assert not offenders, f"simulate through mjx_pick.engine, not a backend: {offenders}"
+
+
+def test_the_backend_check_sees_a_direct_call(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text(
+        "import mjx_pick.simulate as s\n\n"
+        "def f(scene):\n    return s.make_backend('mujoco', scene)\n"
+    )
+    assert _names_used(src) & BACKEND_NAMES == {"make_backend"}
