@@ -24,6 +24,14 @@ import time
 from pathlib import Path
 
 CANCEL_GRACE_S = 15.0  # after a SIGINT, how long a run may take to write and stop
+# the CLI with Python's Ctrl-C handler installed whatever it inherited: a server
+# started in the background of a non-interactive shell (a service, `... &`) ignores
+# SIGINT, children inherit that, and Python then installs no KeyboardInterrupt at all --
+# cancel would be a no-op (seen: a 200-pick run ran to its end after the SIGINT)
+_CLI_OBEYING_SIGINT = (
+    "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "from mjx_pick.cli import main; sys.exit(main(sys.argv[1:]))"
+)
 
 
 @dataclasses.dataclass
@@ -88,7 +96,7 @@ class Job:
             fh.write(f"$ {self.command_line}\n".encode())
             fh.flush()
             self._proc = subprocess.Popen(
-                [sys.executable, "-m", "mjx_pick.cli", *self.argv],
+                [sys.executable, "-c", _CLI_OBEYING_SIGINT, *self.argv],
                 stdout=fh,
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
