@@ -351,8 +351,12 @@ def finalize(p: GraspParams, a: Accumulators) -> dict:
     held_to_end = a.finished & (a.lift_final >= high) & ~a.table_final
     upright = a.rot_final <= p.max_rotation_rad
     success = a.reached & held_to_end & upright & ~a.diverged
+    # a failure reason only for picks that failed: a held pick whose part lagged below
+    # the success height at the lift's end (or still touched the table there) was
+    # labelled a success with the reason "slipped_in_lift"
     failure = jnp.select(
         [
+            success,
             a.diverged,
             ~a.reached & ~a.contact_seen,
             ~a.reached,
@@ -360,7 +364,7 @@ def finalize(p: GraspParams, a: Accumulators) -> dict:
             ~held_to_end,
             ~upright,
         ],
-        [DIVERGED, NO_CONTACT, FORCE_NOT_REACHED, SLIPPED_IN_LIFT, DROPPED_IN_HOLD, ROTATED],
+        [OK, DIVERGED, NO_CONTACT, FORCE_NOT_REACHED, SLIPPED_IN_LIFT, DROPPED_IN_HOLD, ROTATED],
         OK,
     )
     nan = jnp.full_like(score, jnp.nan)
