@@ -568,17 +568,12 @@ def _add_overwrite(p: argparse.ArgumentParser) -> None:
 
 
 def _version_line() -> str:
-    """mjx-pick's version and the physics engines it runs on."""
-    import importlib.metadata as md
+    """mjx-pick's version and the physics engines it runs on (rundir.versions)."""
+    from mjx_pick.rundir import versions
 
-    def version(dist: str) -> str:
-        try:
-            return md.version(dist)
-        except md.PackageNotFoundError:
-            return "not installed"
-
-    parts = ", ".join(f"{d} {version(d)}" for d in ("mujoco", "mujoco-mjx", "jax", "warp-lang"))
-    return f"mjx-pick {version('mjx-pick')} ({parts})"
+    v = {k: x or "not installed" for k, x in versions().items()}
+    parts = ", ".join(f"{d} {v[d]}" for d in ("mujoco", "mujoco-mjx", "jax", "warp-lang"))
+    return f"mjx-pick {v['mjx-pick']} ({parts})"
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -129,7 +129,7 @@ def claim(
 def versions() -> dict:
     """Python, platform and the versions of the packages that decide the results."""
     out = {"python": sys.version.split()[0], "platform": platform.platform()}
-    for pkg in ("mjx-pick", "mujoco", "mujoco-mjx", "jax", "jaxlib", "numpy"):
+    for pkg in ("mjx-pick", "mujoco", "mujoco-mjx", "jax", "jaxlib", "numpy", "warp-lang"):
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
