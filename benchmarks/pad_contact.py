@@ -2,7 +2,7 @@
 
     python benchmarks/pad_contact.py creep        # slip over lift + hold vs pad solimp
     python benchmarks/pad_contact.py convergence  # door-opener labels, dt 1 vs 0.5 ms
-    python benchmarks/pad_contact.py torque       # off-centre bar: where it turns
+    python benchmarks/pad_contact.py torque       # off-centre bar and rod: where they turn
     python benchmarks/pad_contact.py coulomb --backend warp   # tests' Coulomb grid, any backend
 
 Each prints a table; the figures are in benchmarks/RESULTS.md ("Pad contact").
@@ -82,25 +82,62 @@ def convergence() -> None:
         )
 
 
+def _lying_rod(mass_kg: float) -> mp.ObjectModel:
+    import tempfile
+    from pathlib import Path
+
+    import trimesh
+
+    rod = trimesh.creation.cylinder(radius=0.01, height=0.2, sections=24)
+    rod.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    rod.apply_translation([0, 0, -rod.bounds[0, 2]])
+    with tempfile.TemporaryDirectory() as tmp:
+        rod.export(Path(tmp) / "rod.stl")
+        return mp.object_from_mesh(Path(tmp) / "rod.stl", unit="m", mass_g=mass_kg * 1e3)
+
+
 def torque() -> None:
-    mass, force, mu = 0.6, 30.0, 0.5
-    grasp = mp.GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.5, grip_force_n=force)
-    bar = mp.object_from_polygon(box(-10, -100, 10, 100), thickness_mm=20, mass_g=mass * 1e3)
-    d = np.linspace(0.0, 80.0, 33)
-    picks = _centred(bar, grasp, d)
-    default = mp.build_scene(bar, FREE, mp.ContactParams(pad_friction=mu), None, grasp)
-    floor = 2 * default.contact.pad_torsion_m * force  # N m, the soft-finger figure
-    for label, torsion in (("soft-finger (default)", None), ("no torsional friction", 0.0)):
-        contact = mp.ContactParams(pad_friction=mu, pad_torsion_mm=torsion)
-        out, scene = _run(bar, picks, grasp, contact)
-        d_floor = floor / (mass * (G + grasp.lift_accel_mm_s2 * 1e-3)) * 1e3
-        first_fail = d[np.argmax(~out["success"])] if (~out["success"]).any() else np.nan
-        print(
-            f"{label}: patch {scene.pad_patch_mm} mm, mu_t {scene.contact.pad_torsion_m * 1e3:.2f}"
-            f" mm; soft-finger floor d* = {d_floor:.1f} mm; first failure at d = "
-            f"{first_fail:.1f} mm ({first_fail / d_floor:.2f}x)",
-            flush=True,
+    """Off-centre parts: the lever at which they first turn out of the grasp, against
+    the capacity the model states (mjx_pick.holding) and a uniform-pressure rubber pad."""
+    from mjx_pick import holding
+
+    cases = {
+        "bar 20x20x200 mm, 0.6 kg, 30 N": (
+            mp.object_from_polygon(box(-10, -100, 10, 100), thickness_mm=20, mass_g=600),
+            0.6,
+            30.0,
+        ),
+        "rod d20x200 mm lying, 0.3 kg, 20 N": (_lying_rod(0.3), 0.3, 20.0),
+    }
+    mu = 0.5
+    for label, (part, mass, force) in cases.items():
+        grasp = mp.GraspConfig(
+            close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.5, grip_force_n=force
         )
+        weight = mass * (G + grasp.lift_accel_mm_s2 * 1e-3)
+        for torsion in (None, 0.0):
+            contact = mp.ContactParams(pad_friction=mu, pad_torsion_mm=torsion)
+            scene = mp.build_scene(part, FREE, contact, None, grasp)
+            points = holding.pad_contacts(scene)
+            mu_t = scene.contact.pad_torsion_m
+            stated = holding.hold_limit_m(points, force, weight, mu, mu_t, scene.solver.cone)
+            w, h = (v * 1e-3 for v in scene.pad_patch_mm)
+            rubber = holding.hold_limit_m(
+                holding.uniform_patch_points(w, h), force, weight, mu, 0.0, "elliptic"
+            )
+            factors = np.linspace(0.5, 1.5, 21)
+            out, _ = _run(part, _centred(part, grasp, factors * stated * 1e3), grasp, contact)
+            ok = out["success"]
+            first = factors[np.argmax(~ok)] if (~ok).any() else np.nan
+            last = factors[: np.argmax(~ok)][-1] if (~ok).any() and ok[0] else np.nan
+            print(
+                f"{label}, mu_t {mu_t * 1e3:.2f} mm: {len(points.points_m)} contact points; "
+                f"stated d* = {stated * 1e3:.1f} mm; measured threshold in "
+                f"({last:.2f}, {first:.2f}] x d*; uniform rubber pad "
+                f"{rubber * 1e3:.1f} mm (engine / rubber {stated / rubber:.2f}x); "
+                f"held {int(ok.sum())} of {len(ok)}",
+                flush=True,
+            )
 
 
 def coulomb(backend: str) -> None:

@@ -25,14 +25,20 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   reports what was clamped.
 * Pad contacts are soft-finger contacts (``condim`` 4): besides Coulomb friction in
   the pad plane they resist spinning about the contact normal -- the grip axis -- up
-  to a torque of mu_t * N. A point contact (condim 3) cannot: a part held off its
-  centre of mass turned in the grasp and slid out at any force. A real pad carries that
-  torque with its contact patch: under uniform pressure p = N / A, the friction of each
-  patch element acts at its distance r from the patch centre, so the largest torque is
-  mu * N * mean(r). Hence mu_t = mu_pad * r_mean(patch), with the patch a rectangle: the
-  pad's width (or the object's, if narrower) by the height of the object's side wall
-  within the pads' band (``ObjectModel.wall_height_mm``; a rigid curved side touches a
-  flat rubber pad only near its widest section). ``pad_torsion_mm`` sets mu_t directly.
+  to a torque of mu_t * N. A single point contact with condim 3 cannot: a part held
+  off its centre of mass turned in the grasp and slid out at any force. A real pad
+  carries that torque with its contact patch: under uniform pressure p = N / A, the
+  friction of each patch element acts at its distance r from the patch centre, so the
+  largest torque is mu * N * mean(r). Hence mu_t = mu_pad * r_mean(patch), with the
+  patch a rectangle: the pad's width (or the object's, if narrower) by the height of
+  the object's side wall within the pads' band (``ObjectModel.wall_height_mm``; a rigid
+  curved side touches a flat rubber pad only near its widest section).
+  ``pad_torsion_mm`` sets mu_t directly. Where the collider spreads a contact over
+  several points (the four corners of a pad on a flat face, the two ends of a line
+  contact), their Coulomb friction also resists spin, at the patch's edges rather than
+  its mean radius: the grasp then holds 1.5-1.9x the torque of a uniform-pressure pad.
+  ``mjx_pick.holding`` states the model's capacity from those points (the tests check
+  the simulated threshold against it); benchmarks/RESULTS.md ("Torque") gives the gap.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
   the impedance instead), the penetration depth for full damping (solimp's width plays a
   similar role), the static/dynamic split and the stiction/friction transition

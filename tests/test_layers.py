@@ -21,6 +21,7 @@ LAYERS = {
         "physics",
         "grasp",
         "scene",
+        "holding",
         "pickpoints",
         "metrics",
         "plots",
