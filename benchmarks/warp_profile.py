@@ -1,9 +1,8 @@
 """Where a MuJoCo Warp physics step spends its time, per kernel group (issue 17).
 
 The project's Warp rollout runs ~7 M slot-steps/s on an H100 (RESULTS.md); this splits
-one physics step of the same scene into MuJoCo Warp's own timed scopes (collision,
-constraint set-up, solver, smooth dynamics, ...) with Warp's EventTracer, for states
-taken from the two phases a pick spends its steps in:
+one physics step of the same scene into its main parts (collision, position stage,
+constraint solver), for states taken from the two phases a pick spends its steps in:
 
 * ``open``: the gripper around the part, pads apart (only the part on the table
   touches anything) -- the approach;
@@ -11,11 +10,13 @@ taken from the two phases a pick spends its steps in:
 
 The states come from a scripted close and lift of n feasible pick-points on MuJoCo C
 (servo targets, not the project's force controller: the contacts, not the control,
-set the physics step's cost), tiled over the worlds. Also timed: the same step captured
-in a CUDA graph, without the tracer's events (the rate the rollout can reach), and
-the rollout's own rate for comparison is in RESULTS.md.
+set the physics step's cost), tiled over the worlds. Each part is timed on its own,
+ten calls captured in one CUDA graph (Warp's EventTracer launches kernel by kernel,
+and its launch overhead swamped the GPU time: 49 ms per traced step against 4.2 ms per
+graphed one at 32,768 worlds), for the scene as shipped and for variants of it.
 
-    python benchmarks/warp_profile.py --worlds 32768 --steps 50
+    python benchmarks/warp_profile.py --worlds 32768 --variant default \
+        --variant ccd_iterations=16 --variant ccd_tolerance=1e-4
 
 Needs a CUDA GPU and warp-lang (``pip install -e '.[gpu]'``).
 """
@@ -85,14 +86,21 @@ def scripted_states(scene, grasp, n: int, seed: int) -> dict[str, tuple[np.ndarr
     return states
 
 
-def flatten(trace: dict, prefix: str = "") -> list[tuple[str, float, int]]:
-    """EventTracer's nested {name: (events ms, sub)} -> [(path, mean ms, calls)]."""
-    rows = []
-    for name, (events, sub) in trace.items():
-        path = f"{prefix}/{name}" if prefix else name
-        rows.append((path, float(np.mean(events)), len(events)))
-        rows += flatten(sub, path)
-    return rows
+def build(args, variant: dict):
+    """The scene for one variant: MuJoCo options (``ccd_iterations``, ...) set on the
+    model as built."""
+    grasp = mp.GraspConfig()
+    scene = mp.build_scene(mp.load_object(args.object), mp.load_gripper(args.gripper), grasp=grasp)
+    for key, value in variant.items():
+        setattr(scene.model.opt, key, type(getattr(scene.model.opt, key))(value))
+    return scene, grasp
+
+
+def parse_variant(text: str) -> dict:
+    """'default' or 'key=value,key=value' (ccd_iterations=16,ccd_tolerance=1e-4)."""
+    if text == "default":
+        return {}
+    return dict(kv.split("=", 1) for kv in text.split(","))
 
 
 def main() -> None:
@@ -100,65 +108,78 @@ def main() -> None:
     ap.add_argument("--object", default="door_opener")
     ap.add_argument("--gripper", default="robotiq-2f85")
     ap.add_argument("--worlds", type=int, default=32768)
-    ap.add_argument("--steps", type=int, default=50, help="traced steps per phase")
+    ap.add_argument("--launches", type=int, default=5, help="timed launches of 10 captured calls")
     ap.add_argument("--states", type=int, default=256, help="distinct pick-points tiled")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--variant",
+        action="append",
+        default=None,
+        help="'default' or key=value[,key=value]: MuJoCo options (ccd_iterations, "
+        "ccd_tolerance, ...) (repeatable)",
+    )
     args = ap.parse_args()
 
     import warp as wp
     from mujoco.mjx.third_party import mujoco_warp as mjw
-    from mujoco.mjx.third_party.mujoco_warp._src import warp_util
+    from mujoco.mjx.third_party.mujoco_warp._src import solver
 
-    grasp = mp.GraspConfig()
-    scene = mp.build_scene(mp.load_object(args.object), mp.load_gripper(args.gripper), grasp=grasp)
-    buffers = size_buffers(scene, grasp)
-    print(f"buffers: {buffers.contacts} contacts, {buffers.rows} rows per world", flush=True)
-    t0 = time.perf_counter()
-    states = scripted_states(scene, grasp, args.states, args.seed)
-    print(f"states: {args.states} picks scripted on MuJoCo C in {time.perf_counter() - t0:.1f} s")
-
-    m = scene.model
-    mw = mjw.put_model(m)
-    mw.opt.run_rne_postconstraint = True  # as the rollout (pad forces from cfrc_ext)
-    for phase, (qpos, qvel, ctrl) in states.items():
-        dw = mjw.make_data(
-            m, nworld=args.worlds, naconmax=buffers.naconmax(args.worlds), njmax=buffers.rows
-        )
-        reps = -(-args.worlds // len(qpos))
-        for field, value in (("qpos", qpos), ("qvel", qvel), ("ctrl", ctrl)):
-            getattr(dw, field).assign(np.tile(value, (reps, 1))[: args.worlds])
-        mjw.step(mw, dw)  # builds the kernels (cached by Warp)
-        wp.synchronize()
+    def graph_ms(fn) -> float:
+        """ms per call of fn, captured 10 times in one CUDA graph (no launch overhead)."""
         with wp.ScopedCapture() as capture:
             for _ in range(10):
-                mjw.step(mw, dw)
+                fn()
         wp.capture_launch(capture.graph)
         wp.synchronize()
         t0 = time.perf_counter()
-        reps_graph = max(1, args.steps // 10)
-        for _ in range(reps_graph):
+        for _ in range(args.launches):
             wp.capture_launch(capture.graph)
         wp.synchronize()
-        per_step = (time.perf_counter() - t0) / (10 * reps_graph)
-        nacon = int(dw.nacon.numpy()[0])
-        nefc = dw.nefc.numpy()
-        print(
-            f"\n[{phase}] {len(qpos)} states tiled over {args.worlds} worlds: "
-            f"{per_step * 1e3:.3f} ms per step in a CUDA graph = "
-            f"{args.worlds / per_step / 1e6:.2f} M world-steps/s; contacts "
-            f"{nacon / args.worlds:.2f} per world, constraint rows mean {nefc.mean():.1f} "
-            f"max {nefc.max()}",
-            flush=True,
-        )
-        with warp_util.EventTracer() as tracer:
-            for _ in range(args.steps):
-                mjw.step(mw, dw)
+        return (time.perf_counter() - t0) / (10 * args.launches) * 1e3
+
+    base, grasp = build(args, {})
+    buffers = size_buffers(base, grasp)
+    t0 = time.perf_counter()
+    states = scripted_states(base, grasp, args.states, args.seed)
+    print(
+        f"buffers {buffers.contacts} contacts, {buffers.rows} rows per world; states: "
+        f"{args.states} picks scripted on MuJoCo C in {time.perf_counter() - t0:.1f} s",
+        flush=True,
+    )
+    print(
+        "variant | phase | states | step ms | M world-steps/s | collision ms | "
+        "fwd_position ms | solve ms | contacts/world | rows mean / max"
+    )
+    for text in args.variant or ["default"]:
+        scene, _ = build(args, parse_variant(text))
+        m = scene.model
+        mw = mjw.put_model(m)
+        mw.opt.run_rne_postconstraint = True  # as the rollout (pad forces from cfrc_ext)
+        mw.opt.warn_overflow = 0  # overflow is read back below, not printed per step
+        for phase, (qpos, qvel, ctrl) in states.items():
+            dw = mjw.make_data(
+                m, nworld=args.worlds, naconmax=buffers.naconmax(args.worlds), njmax=buffers.rows
+            )
+            reps = -(-args.worlds // len(qpos))
+            for field, value in (("qpos", qpos), ("qvel", qvel), ("ctrl", ctrl)):
+                getattr(dw, field).assign(np.tile(value, (reps, 1))[: args.worlds])
+            t0 = time.perf_counter()
+            mjw.step(mw, dw)  # builds the kernels (cached by Warp)
             wp.synchronize()
-            rows = flatten(tracer.trace())
-        total = next((r[1] for r in rows if r[0] == "step"), None)
-        for path, ms, calls in rows:
-            share = f"{100 * ms / total:5.1f} %" if total else ""
-            print(f"  {path:60s} {ms:8.3f} ms {share}  ({calls} calls)")
+            build_s = time.perf_counter() - t0
+            step = graph_ms(lambda mw=mw, dw=dw: mjw.step(mw, dw))
+            coll = graph_ms(lambda mw=mw, dw=dw: mjw.collision(mw, dw))
+            pos = graph_ms(lambda mw=mw, dw=dw: mjw.fwd_position(mw, dw))
+            mjw.forward(mw, dw)
+            solve = graph_ms(lambda mw=mw, dw=dw: solver.solve(mw, dw))
+            nacon = int(dw.nacon.numpy()[0])
+            nefc = dw.nefc.numpy()
+            print(
+                f"{text} | {phase} | {len(qpos)} | {step:.3f} | {args.worlds / step / 1e3:.2f} | "
+                f"{coll:.3f} | {pos:.3f} | {solve:.3f} | {nacon / args.worlds:.2f} | "
+                f"{nefc.mean():.1f} / {nefc.max()}  (first step {build_s:.1f} s)",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":
