@@ -39,9 +39,15 @@ def _run(obj, picks, grasp, contact, solver=None, backend="mujoco", **per_pick):
 
 
 def creep() -> None:
+    """Slip over lift and hold of a centred block, by pad impedance and impratio."""
     grasp = mp.GraspConfig(close_timeout_s=1.0, lift_height_mm=100.0, hold_s=0.5)
-    variants = {"0.9-0.95 (MuJoCo)": (0.9, 0.95), "0.99": (0.99, 0.99)}
-    print("mu  mass_kg  F/F_Coulomb(g+a)  slip_mm per pad_solimp:", list(variants))
+    variants = {  # (pad solimp dmin, dmax, impratio)
+        "solimp 0.9-0.95 (MuJoCo), impratio 1": (0.9, 0.95, 1.0),
+        "solimp 0.99, impratio 1": (0.99, 0.99, 1.0),
+        "solimp 0.99, impratio 2": (0.99, 0.99, 2.0),
+        "solimp 0.99, impratio 3": (0.99, 0.99, 3.0),
+    }
+    print("mu  mass_kg  F/F_Coulomb(g+a)  slip_mm per variant:", list(variants))
     for mu in (0.1, 0.5, 1.0):
         for mass, thick in ((0.5, 20.0), (2.0, 60.0)):
             block = mp.object_from_polygon(
@@ -52,9 +58,10 @@ def creep() -> None:
             force = np.clip(factors * need, 0.5, 235.0).astype(np.float32)
             picks = _centred(block, grasp, np.zeros(3))
             cols = []
-            for dmin, dmax in variants.values():
+            for dmin, dmax, impratio in variants.values():
                 contact = mp.ContactParams(pad_friction=mu, pad_solimp=(dmin, dmax, 0.001, 0.5, 2))
-                out, _ = _run(block, picks, grasp, contact, force_n=force)
+                solver = mp.SolverParams(impratio=impratio)
+                out, _ = _run(block, picks, grasp, contact, solver, force_n=force)
                 cols.append(" ".join(f"{s:5.2f}" for s in out["slip_mm"]))
             print(f"{mu:4.2f} {mass:5.2f}  {factors}  " + " | ".join(cols), flush=True)
 

@@ -45,6 +45,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from mujoco import mjx
 
+from mjx_pick.config import ConfigError
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.scene import Scene
@@ -473,6 +474,13 @@ class MjxBackend:
             raise ValueError(f"ticks_per_call = {ticks_per_call} must be >= 1")
         if int(shrink_levels) < 0:
             raise ValueError(f"shrink_levels = {shrink_levels} must be >= 0")
+        if self.impl == "jax" and scene.solver.noslip_iterations > 0:
+            # MJX's JAX physics has no no-slip solver and would ignore the setting
+            raise ConfigError(
+                f"solver.noslip_iterations = {scene.solver.noslip_iterations}: the 'mjx' "
+                "backend (MJX's JAX physics) has no no-slip solver; set it to 0 or use "
+                "the 'mujoco' or 'warp' backend"
+            )
         self.scene, self.grasp = scene, grasp
         self.devices = list(devices) if devices is not None else jax.local_devices()
         n_dev = len(self.devices)

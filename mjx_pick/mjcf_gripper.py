@@ -277,6 +277,8 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
             "integrator",
             "iterations",
             "ls_iterations",
+            "tolerance",
+            "noslip_iterations",
             "gravity",
         ):
             setattr(spec.option, name, getattr(option, name))

@@ -247,7 +247,7 @@ def scene_xml(
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{solver.timestep_s:.9g}" cone="{solver.cone}" impratio="{solver.impratio:.9g}"
           iterations="{solver.iterations}" ls_iterations="{solver.ls_iterations}"
-          tolerance="{solver.tolerance:.9g}"
+          tolerance="{solver.tolerance:.9g}" noslip_iterations="{solver.noslip_iterations}"
           integrator="{ {"euler": "Euler"}.get(solver.integrator, solver.integrator) }"/>
   <default>
     <geom contype="0" conaffinity="0"/>

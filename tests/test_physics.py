@@ -286,3 +286,13 @@ def test_checks_see_only_what_is_above_the_fingertips(tmp_path):
     scene = mp.build_scene(obj, gripper, grasp=paper)
     out, _ = make_backend("mujoco", scene, paper, 6).run(make_inputs(scene, paper, picks))
     assert not np.any(out["failure"] == gk.FAILURES.index("no_contact")), out["failure"]
+
+
+def test_noslip_setting_reaches_the_model_and_is_refused_where_unsupported():
+    block = mp.object_from_polygon(box(-25, -15, 25, 15), thickness_mm=20, mass_g=300)
+    scene = mp.build_scene(block, FREE, None, mp.SolverParams(noslip_iterations=5), PROC)
+    assert scene.model.opt.noslip_iterations == 5
+    with pytest.raises(mp.ConfigError, match="noslip_iterations"):
+        mp.SolverParams(noslip_iterations=-1)
+    with pytest.raises(mp.ConfigError, match="no no-slip solver"):
+        make_backend("mjx", scene, PROC, batch_size=1)
