@@ -117,18 +117,19 @@ class SolverParams:
     Creep: MuJoCo's soft friction lets a held part slip at a steady speed of about
     (1 - d) / d * a / (b * impratio) under a tangential load a (per unit mass) -- d the
     pad impedance (solimp), b the contact's damping. A light part pushed sideways by a
-    tilted contact (a pad's edge on a rounded wall) crept out of the grasp at 2-4 mm/s
-    though Coulomb's law held it. impratio 2 halves that creep: YCB banana 71 -> 96 %
-    success, clamp 88 -> 94 %, the door opener's labels unchanged by halving the time
-    step, the Coulomb grid still exact; impratio 3 and 5 made a 10 g part at pad
-    friction 0.05 blow up. ``noslip_iterations`` (MuJoCo's no-slip post-solver) stops
-    creep on flat faces but made the pads chatter on a line contact (a lying rod), so it
-    stays off by default.
+    tilted contact (a pad's edge on a rounded wall) creeps out of the grasp at 2-4 mm/s
+    though Coulomb's law holds it. impratio 2 halves that creep (YCB banana 71 -> 96 %
+    success on MuJoCo C) but is not the default: the engines then agree less (door
+    opener labels MuJoCo Warp = C 99.6 -> 98.9 %, YCB scissors 98.4 -> 90.6 %, MJX's
+    scores 0.09 apart from C's), C diverged on 4 of 4,096 door-opener picks, and
+    impratio 3 and 5 made a 10 g part at pad friction 0.05 blow up. ``noslip_iterations``
+    (MuJoCo's no-slip post-solver; C and Warp) stops creep on flat faces but made the
+    pads chatter on a line contact (a lying rod): off by default too.
     """
 
     timestep_s: float = 0.001
     cone: str = "pyramidal"
-    impratio: float = 2.0
+    impratio: float = 1.0
     iterations: int = 10
     ls_iterations: int = 8
     # the solver stops once its improvement or gradient falls below this (MuJoCo's

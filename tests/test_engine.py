@@ -17,8 +17,8 @@ from mjx_pick.grasp import GraspConfig
 from mjx_pick.sweep import ParamSpec, sweep
 
 SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
-# the solver the pinned results were taken with (impratio 1, the default then): these
-# tests pin the engine's plumbing, not the physics, whose defaults move on
+# the solver the pinned results were taken with (impratio 1): these tests pin the
+# engine's plumbing, not the physics, whose defaults may move on
 PINNED_SOLVER = mp.SolverParams(impratio=1.0)
 
 # Results of the code BEFORE the engine refactor (commit 513b28d, MuJoCo 4.0.0, jax
