@@ -1,6 +1,7 @@
 """``mjx-pick``: the command line.
 
   mjx-pick evaluate OBJECT [--gripper robotiq-2f85] [--n 1000] [--seed 0] --out DIR
+                    [--ray auto|HOST:PORT]           (chunks on a Ray cluster)
   mjx-pick picks OBJECT --n 500 --out DIR          (pick-points and their pictures only)
   mjx-pick sweep OBJECT --param contact.pad_friction=0.4:1.0:7 [--param ...] --out DIR
   mjx-pick compare OBJECT --grippers robotiq-2f85,onrobot-rg2 --out DIR
@@ -170,6 +171,7 @@ def cmd_evaluate(args) -> int:
         min_force=args.min_force,
         overwrite=args.overwrite,
         skip_infeasible=args.skip_infeasible,
+        ray=args.ray,
     )
     print_summary(ev.summary, args.out)
     return 0
@@ -473,6 +475,13 @@ def print_summary(s: dict, out) -> None:
         ("compile / run", f"{s['compile_s']:.1f} s / {s['run_s']:.1f} s"),
         ("pick-points per s", f"{s['picks_per_s']}"),
     ]
+    cluster = s.get("cluster")
+    if cluster:
+        nodes = ", ".join(f"{k} {v['picks_per_s']:g}/s" for k, v in cluster["nodes"].items())
+        rows.append(("cluster, per node", nodes or "-"))
+        rows.append(("cluster, in all", f"{cluster['picks_per_s']} pick-points/s"))
+        if cluster["chunks_rerun"]:
+            rows.append(("chunks re-run", f"{cluster['chunks_rerun']} (an actor died)"))
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
@@ -605,6 +614,12 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--min-score", type=float, default=0.9, help="Optimization threshold")
     ev.add_argument("--max", type=int, help="Optimization mode: most pick-points to simulate")
     ev.add_argument("--no-progress", action="store_true")
+    ev.add_argument(
+        "--ray",
+        metavar="auto|ADDRESS",
+        help="run the chunks on a Ray cluster: auto, or its head's HOST:PORT (pip install "
+        "'mjx-pick[cluster]'; docs/cluster.md); this process still writes --out",
+    )
     ev.add_argument(
         "--min-force",
         action="store_true",
