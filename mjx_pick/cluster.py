@@ -30,10 +30,14 @@ import dataclasses
 import logging
 import os
 import re
+import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 
@@ -514,3 +518,104 @@ class RayExecutor:
         if self._connected:
             self._ray.shutdown()
             self._connected = False
+
+
+# ------------------------------------------------------- local clusters (one host)
+
+
+def free_ports(n: int) -> list[int]:
+    """n TCP ports free on this host now (for the nodes of a local cluster)."""
+    socks = [socket.socket() for _ in range(n)]
+    for s in socks:
+        s.bind(("127.0.0.1", 0))
+    ports = [s.getsockname()[1] for s in socks]
+    for s in socks:
+        s.close()
+    return ports
+
+
+def start_local_node(
+    temp: Path,
+    log: Path,
+    head_port: int,
+    head: bool,
+    num_cpus: int = 1,
+    env: dict | None = None,
+) -> subprocess.Popen:
+    """`ray start --block` for one node of a cluster on this host, in a session of its
+    own (:func:`stop_local_node` ends it). For tests, benchmarks and trying ``--ray``
+    on one machine; a real cluster starts its nodes with ``ray start`` (docs/cluster.md).
+
+    Args:
+      temp: the node's Ray temp folder (keep it short: Ray's socket paths must stay
+        under 107 bytes).
+      log: where the node's output goes.
+      head_port: the head's GCS port (the cluster's address is 127.0.0.1:head_port).
+      head: start the head (else a node that joins it).
+      num_cpus: CPUs the node offers (its C-engine actor runs that many threads).
+      env: variables set for the node and the actors it starts (JAX_PLATFORMS, ...).
+
+    Every port a node opens is given: nodes that share a host would collide on the
+    defaults (dashboard agent, metrics)."""
+    p = free_ports(7)
+    ray_bin = str(Path(sys.executable).with_name("ray"))  # the ray of this environment
+    args = [
+        ray_bin,
+        "start",
+        "--block",
+        f"--num-cpus={num_cpus}",
+        "--num-gpus=0",
+        f"--temp-dir={temp}",
+        "--disable-usage-stats",
+        "--node-ip-address=127.0.0.1",
+        f"--node-manager-port={p[0]}",
+        f"--object-manager-port={p[1]}",
+        f"--dashboard-agent-listen-port={p[2]}",
+        f"--dashboard-agent-grpc-port={p[3]}",
+        f"--metrics-export-port={p[4]}",
+        f"--runtime-env-agent-port={p[5]}",
+        f"--min-worker-port={p[6]}",
+        f"--max-worker-port={p[6] + 30}",
+    ]
+    if head:
+        args += ["--head", f"--port={head_port}", "--include-dashboard=false"]
+    else:
+        args += [f"--address=127.0.0.1:{head_port}"]
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", **(env or {})}
+    with log.open("wb") as sink:
+        return subprocess.Popen(
+            args, stdout=sink, stderr=subprocess.STDOUT, env=env, start_new_session=True
+        )
+
+
+def session_pids(sid: int) -> list[int]:
+    """Pids of the processes in session sid: a node's `ray start`, its raylet and the
+    workers it spawned (those get process groups of their own, not sessions)."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if os.getsid(int(entry.name)) == sid:
+                    pids.append(int(entry.name))
+            except OSError:
+                continue  # ended while we looked
+    return pids
+
+
+def stop_local_node(proc: subprocess.Popen) -> None:
+    """End one node: every process of the session its `ray start` opened, TERM then KILL."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for pid in session_pids(proc.pid):
+            try:
+                os.kill(pid, sig)
+            except ProcessLookupError:
+                pass
+        try:
+            proc.wait(timeout=5)  # reaps `ray start` (a zombie would stay in the session)
+        except subprocess.TimeoutExpired:
+            continue
+        deadline = time.monotonic() + 5
+        while session_pids(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        if not session_pids(proc.pid):
+            return

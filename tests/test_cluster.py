@@ -24,6 +24,7 @@ import pytest
 
 import mjx_pick as mp
 from mjx_pick import cli
+from mjx_pick.cluster import free_ports, session_pids, start_local_node, stop_local_node
 from mjx_pick.config import to_toml
 from mjx_pick.evaluate import evaluate
 from mjx_pick.grasp import GraspConfig
@@ -31,86 +32,8 @@ from mjx_pick.grasp import GraspConfig
 GRASP = GraspConfig(close_timeout_s=0.6, lift_height_mm=20.0, hold_s=0.2)
 N = 240  # pick-points per run
 CHUNK = 16  # 15 chunks: enough for both nodes to take several, and to kill mid-run
+CPU = {"JAX_PLATFORMS": "cpu", "XLA_FLAGS": ""}  # the nodes' actors: plain CPU JAX
 RUN = {"n": N, "seed": 3, "grasp": GRASP, "backend": "mujoco", "n_traces": 0}
-
-
-def _free_ports(n: int) -> list[int]:
-    socks = [socket.socket() for _ in range(n)]
-    for s in socks:
-        s.bind(("127.0.0.1", 0))
-    ports = [s.getsockname()[1] for s in socks]
-    for s in socks:
-        s.close()
-    return ports
-
-
-def _start_node(temp: Path, log: Path, head_port: int, head: bool) -> subprocess.Popen:
-    """`ray start --block` for one 1-CPU node, in a new process group (ended by pgid).
-
-    Every port a node opens is given (two nodes share this host: the defaults of the
-    dashboard agent and metrics would collide)."""
-    p = _free_ports(7)
-    ray_bin = str(Path(sys.executable).with_name("ray"))
-    args = [
-        ray_bin,
-        "start",
-        "--block",
-        "--num-cpus=1",
-        "--num-gpus=0",
-        f"--temp-dir={temp}",
-        "--disable-usage-stats",
-        "--node-ip-address=127.0.0.1",
-        f"--node-manager-port={p[0]}",
-        f"--object-manager-port={p[1]}",
-        f"--dashboard-agent-listen-port={p[2]}",
-        f"--dashboard-agent-grpc-port={p[3]}",
-        f"--metrics-export-port={p[4]}",
-        f"--runtime-env-agent-port={p[5]}",
-        f"--min-worker-port={p[6]}",
-        f"--max-worker-port={p[6] + 30}",
-    ]
-    if head:
-        args += ["--head", f"--port={head_port}", "--include-dashboard=false"]
-    else:
-        args += [f"--address=127.0.0.1:{head_port}"]
-    env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": "", "RAY_USAGE_STATS_ENABLED": "0"}
-    with log.open("wb") as sink:
-        return subprocess.Popen(
-            args, stdout=sink, stderr=subprocess.STDOUT, env=env, start_new_session=True
-        )
-
-
-def _session(sid: int) -> list[int]:
-    """Pids of the processes in session sid: a node's `ray start`, its raylet and the
-    workers it spawned (those get process groups of their own, not sessions)."""
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                if os.getsid(int(entry.name)) == sid:
-                    pids.append(int(entry.name))
-            except OSError:
-                continue  # ended while we looked
-    return pids
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    """End one node: every process of the session its `ray start` opened, TERM then KILL."""
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        for pid in _session(proc.pid):
-            try:
-                os.kill(pid, sig)
-            except ProcessLookupError:
-                pass
-        try:
-            proc.wait(timeout=5)  # reaps `ray start` (a zombie would stay in the session)
-        except subprocess.TimeoutExpired:
-            continue
-        deadline = time.monotonic() + 5
-        while _session(proc.pid) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        if not _session(proc.pid):
-            return
 
 
 @pytest.fixture(scope="module")
@@ -123,10 +46,10 @@ def cluster(tmp_path_factory, block):
     logs = tmp_path_factory.mktemp("ray-logs")
     # Ray's socket paths must stay short (107 bytes): its temp folders go under /tmp
     temps = [Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp")) for _ in range(2)]
-    port = _free_ports(1)[0]
+    port = free_ports(1)[0]
     nodes = []
     try:
-        nodes.append(_start_node(temps[0], logs / "head.log", port, head=True))
+        nodes.append(start_local_node(temps[0], logs / "head.log", port, head=True, env=CPU))
         deadline = time.monotonic() + 60
         while True:  # the head's GCS port answers
             try:
@@ -136,7 +59,7 @@ def cluster(tmp_path_factory, block):
                 assert nodes[0].poll() is None, (logs / "head.log").read_text()
                 assert time.monotonic() < deadline, "the Ray head did not start in 60 s"
                 time.sleep(0.2)
-        nodes.append(_start_node(temps[1], logs / "worker.log", port, head=False))
+        nodes.append(start_local_node(temps[1], logs / "worker.log", port, head=False, env=CPU))
         address = f"127.0.0.1:{port}"
         reference = evaluate(block, **RUN).table
         ray.init(address=address, logging_level="WARNING", log_to_driver=False)
@@ -151,7 +74,7 @@ def cluster(tmp_path_factory, block):
         yield address, nodes, reference
     finally:
         for proc in reversed(nodes):
-            _stop(proc)
+            stop_local_node(proc)
         for temp in temps:
             subprocess.run(["rm", "-rf", str(temp)], check=False)
 
@@ -161,7 +84,7 @@ def _chunk_workers(nodes: list[subprocess.Popen]) -> list[int]:
     ray::<class>[.<method>])."""
     pids = []
     for node in nodes:
-        for pid in _session(node.pid):
+        for pid in session_pids(node.pid):
             try:
                 title = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
             except OSError:
@@ -267,7 +190,7 @@ def test_driver_killed_then_resumed_equals_one_process(cluster, block, tmp_path)
 
 
 def test_bad_cluster_addresses_are_one_line_errors(capsys, tmp_path):
-    port = _free_ports(1)[0]  # nothing listens there
+    port = free_ports(1)[0]  # nothing listens there
     for address, message in (
         ("no address", "is not a cluster address"),
         ("host:99999", "is not a cluster address"),
