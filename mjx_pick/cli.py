@@ -1,7 +1,7 @@
 """``mjx-pick``: the command line.
 
   mjx-pick evaluate OBJECT [--gripper robotiq-2f85] [--n 1000] [--seed 0] --out DIR
-                    [--ray auto|HOST:PORT]           (chunks on a Ray cluster)
+                    [--ray auto|HOST:PORT]           (on a Ray cluster; sweep, compare too)
   mjx-pick picks OBJECT --n 500 --out DIR          (pick-points and their pictures only)
   mjx-pick sweep OBJECT --param contact.pad_friction=0.4:1.0:7 [--param ...] --out DIR
   mjx-pick compare OBJECT --grippers robotiq-2f85,onrobot-rg2 --out DIR
@@ -196,6 +196,8 @@ def _study_options(args, picks_cfg) -> dict:
         "batch_size": args.batch_size,
         "out": args.out,
         "overwrite": args.overwrite,
+        # sweep and compare take --ray (the other studies run on this machine)
+        **({"ray": args.ray} if getattr(args, "ray", None) is not None else {}),
     }
 
 
@@ -568,6 +570,15 @@ def cmd_assets(_args) -> int:
     return 0
 
 
+def _add_ray(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--ray",
+        metavar="auto|ADDRESS",
+        help="simulate on a Ray cluster: auto, or its head's HOST:PORT (pip install "
+        "'mjx-pick[cluster]'; docs/cluster.md); this process still writes --out",
+    )
+
+
 def _add_overwrite(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--overwrite",
@@ -614,12 +625,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--min-score", type=float, default=0.9, help="Optimization threshold")
     ev.add_argument("--max", type=int, help="Optimization mode: most pick-points to simulate")
     ev.add_argument("--no-progress", action="store_true")
-    ev.add_argument(
-        "--ray",
-        metavar="auto|ADDRESS",
-        help="run the chunks on a Ray cluster: auto, or its head's HOST:PORT (pip install "
-        "'mjx-pick[cluster]'; docs/cluster.md); this process still writes --out",
-    )
+    _add_ray(ev)
     ev.add_argument(
         "--min-force",
         action="store_true",
@@ -650,11 +656,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="K",
         help="K random variants within the LO:HI ranges instead of a grid",
     )
+    _add_ray(sw)
     sw.set_defaults(func=cmd_sweep, n=200)
 
     cp = study("compare", "rank grippers on one shared pick-point set")
     cp.add_argument("--grippers", required=True, help="comma-separated presets or TOML files")
     cp.add_argument("--rank-by", choices=("success", "score"), default="success")
+    _add_ray(cp)
     cp.set_defaults(func=cmd_compare, n=200)
 
     ds = study("design", "search finger width, finger depth, stroke (any gripper field)")

@@ -47,7 +47,7 @@ from mjx_pick.grasp import GraspConfig
 from mjx_pick.pickpoints import PickBatch
 from mjx_pick.rundir import versions
 from mjx_pick.scene import Scene
-from mjx_pick.simulate import BACKENDS, default_batch_size
+from mjx_pick.simulate import BACKENDS, RunStats, default_batch_size
 
 INSTALL_HINT = "pip install 'mjx-pick[cluster]'"
 # versions that must agree between driver and actors for results to be those of one
@@ -120,48 +120,81 @@ def connect(address: str) -> bool:
 # --------------------------------------------------------------------------- actors
 
 
+@dataclasses.dataclass(frozen=True)
+class Simulated:
+    """What :meth:`ChunkWorker.simulate` returns: one piece of a backend call."""
+
+    results: dict  # (N,) numpy arrays (kernels.grasp.finalize)
+    traces: np.ndarray | None  # (N, T, F) with record, else None
+    compile_s: float
+    run_s: float
+    wall_s: float
+    where: str  # the node's label
+
+
 class ChunkWorker:
-    """The body of one Ray actor: a backend for the run's scene, on one node or GPU.
+    """The body of one Ray actor: backends on one node (all its CPUs) or one GPU.
+
+    Scenes arrive by reference with each call, boxed in a list so that Ray does not
+    fetch them: the actor fetches a scene once, the first time its key is seen, and
+    keeps its backend (and so its compiled programs) for the calls that follow.
 
     Args:
-      scene: the driver's scene (its compiled MjModel included).
-      grasp: the procedure.
       backend: 'mujoco', 'warp' or 'mjx' (already resolved by the driver).
       batch_size: simulations per backend call.
       nthread: the C engine's threads (a CPU node's CPUs).
     """
 
-    def __init__(
-        self, scene: Scene, grasp: GraspConfig, backend: str, batch_size: int, nthread: int
-    ):
+    KEEP = 4  # backends kept (a sweep over gripper geometry has one scene per value)
+
+    def __init__(self, backend: str, batch_size: int, nthread: int):
         import ray
 
-        self.engine = Engine(backend, batch_size, nthread=nthread)
-        self.local = LocalExecutor(self.engine, self.engine.make(scene, grasp), grasp)
+        self.backend_name, self.batch_size, self.nthread = backend, batch_size, nthread
+        self._locals: dict[str, LocalExecutor] = {}
         node = ray.get_runtime_context().get_node_id()
         # two nodes can share a host (tests, benchmarks): the node id tells them apart
         self.label = f"{socket.gethostname()}/{node[:6]}"
         self.node_id = node
 
     def info(self) -> dict:
-        """Where this actor runs and what it runs: node id and label, pid, device,
-        the versions that decide results."""
+        """Where this actor runs and what it runs: node id and label, pid, the versions
+        that decide results."""
         return {
             "node_id": self.node_id,
             "label": self.label,
             "pid": os.getpid(),
-            "device": self.local.device,
             "versions": {k: v for k, v in versions().items() if k in SAME_VERSIONS},
         }
 
-    def run(self, k: int, picks: PickBatch) -> ChunkDone:
-        """Chunk k (its pick-points) simulated into result rows."""
-        done = next(self.local.run({k: picks}))
+    def _local(self, key: str, box: list, grasp: GraspConfig) -> LocalExecutor:
+        if key not in self._locals:
+            import ray
+
+            scene = ray.get(box[0])
+            engine = Engine(self.backend_name, self.batch_size, nthread=self.nthread)
+            if len(self._locals) >= self.KEEP:
+                self._locals.pop(next(iter(self._locals)))
+            self._locals[key] = LocalExecutor(engine, engine.make(scene, grasp), grasp)
+        return self._locals[key]
+
+    def run_chunk(self, key: str, box: list, grasp: GraspConfig, k: int, picks: PickBatch):
+        """Chunk k (its pick-points) of the scene under key, simulated into result rows."""
+        done = next(self._local(key, box, grasp).run({k: picks}))
         return dataclasses.replace(done, where=self.label)
 
-    def record(self, picks: PickBatch) -> np.ndarray:
+    def record(self, key: str, box: list, grasp: GraspConfig, picks: PickBatch) -> np.ndarray:
         """Traces (N, T, F) of picks."""
-        return self.local.record(picks)
+        return self._local(key, box, grasp).record(picks)
+
+    def simulate(self, key: str, box: list, grasp: GraspConfig, inputs, record: bool):
+        """A backend call on prepared inputs (``simulate.PickInputs``): :class:`Simulated`."""
+        local = self._local(key, box, grasp)
+        t0 = time.perf_counter()
+        out = local.engine.run(local.backend, inputs, record=record, chunk_size=len(inputs) or 1)
+        t = out.timing
+        wall = time.perf_counter() - t0
+        return Simulated(out.results, out.traces, t.compile_s, t.run_s, wall, self.label)
 
 
 @dataclasses.dataclass
@@ -218,31 +251,30 @@ def _batch_size(backend: str, batch_size: int | None, gpus: bool) -> int:
     return 8192 if gpus else 64
 
 
-class RayExecutor:
-    """Runs chunks on actors of a Ray cluster (engine.ChunkExecutor); see the module doc.
+class ActorPool:
+    """The actors of one run on a Ray cluster, and the fault-tolerant loop that feeds
+    them: see the module docstring.
 
     Connecting, resolving the backend and checking the cluster happen here, so that a
     bad address, a missing Ray or an unreachable cluster is one line before any
-    simulation. Actors start on the first :meth:`run` or :meth:`record`.
+    simulation. Actors start on the first :meth:`map`.
 
     Args:
       address: 'auto' or 'HOST:PORT' / 'ray://HOST:PORT' of the cluster's head.
-      scene, grasp: what every chunk simulates.
       backend: 'auto', 'mujoco', 'warp' or 'mjx' (:func:`cluster_backend`).
       batch_size: simulations per backend call on each actor.
-      cancel: once set, :meth:`run` stops with ``engine.Cancelled``.
-      depth: chunks queued on each actor (2: the next chunk is there while the driver
-        writes the last one).
-      max_attempts: runs of one chunk that may end in a dead actor before the run fails
-        (a chunk that kills every actor it meets is a bug, not bad luck).
+      cancel: once set, :meth:`map` stops with ``engine.Cancelled``.
+      depth: calls queued on each actor (2: the next one is there while the driver
+        handles the last).
+      max_attempts: runs of one call that may end in a dead actor before the run fails
+        (a call that kills every actor it meets is a bug, not bad luck); also the
+        actors a node may lose before it is left alone.
       start_timeout_s: how long to wait for the first actor to start.
     """
 
     def __init__(
         self,
         address: str,
-        scene: Scene,
-        grasp: GraspConfig,
         *,
         backend: str = "auto",
         batch_size: int | None = None,
@@ -252,6 +284,7 @@ class RayExecutor:
         start_timeout_s: float = 600.0,
     ):
         self.address = check_address(address)
+        self.slots: list[_Slot] = []
         self._connected = connect(self.address)
         self._ray = import_ray()
         try:
@@ -259,35 +292,47 @@ class RayExecutor:
             self.name = cluster_backend(backend, nodes)
             gpus = any(n["Resources"].get("GPU", 0) for n in nodes)
             self.batch_size = _batch_size(self.name, batch_size, gpus)
-            if not any(plan_slots(self.name, n) for n in nodes):
+            self.planned = sum(len(plan_slots(self.name, n)) for n in nodes)
+            if not self.planned:
                 raise ConfigError(f"--ray {self.address}: no node can run backend {self.name!r}")
         except BaseException:
             self.close()
             raise
-        self.scene, self.grasp, self.cancel = scene, grasp, cancel
+        self.cancel = cancel
         self.depth, self.max_attempts, self.start_timeout_s = depth, max_attempts, start_timeout_s
-        self.slots: list[_Slot] = []
-        self._scene_ref = None
+        self._scenes: dict[int, tuple[str, list, Scene]] = {}
         self._actor_class = None
         self._deaths: collections.Counter = collections.Counter()  # per node id
         self._given_up: set[str] = set()  # nodes whose actors died too often
         self._last_scan = 0.0
-        # progress and timing
+        # accounting: per node label, and in all
         self.node_picks: collections.Counter = collections.Counter()  # label -> picks
         self.node_busy_s: collections.Counter = collections.Counter()  # label -> s
         self.compile_s = self.run_s = 0.0
         self.simulated = 0
-        self.lost_chunks = 0  # chunks that were re-run because their actor died
-        self._t0: float | None = None
+        self.lost = 0  # calls that were re-run because their actor died
+        self.last_error = ""  # why the last actor that died while starting died
+        self.t0: float | None = None
 
     @property
     def device(self) -> str:
-        ready = [s.info for s in self.slots if s.info is not None]
-        nodes = len({i["node_id"] for i in ready}) or len(self._alive_nodes())
-        kinds = sorted({i["device"] for i in ready})
-        return f"ray: {nodes} nodes, {len(ready)} actors" + (
-            f" ({', '.join(kinds)})" if kinds else ""
+        ready = [s for s in self.slots if s.info is not None]
+        nodes = len({s.node_id for s in ready})
+        kind = (
+            "gpu: 1 GPU each"
+            if self.name in ("warp", "mjx") and any(s.num_gpus for s in ready)
+            else "cpu: threads = the node's CPUs"
         )
+        return f"ray: {nodes} nodes, {len(ready)} actors ({kind})"
+
+    def scene_box(self, scene: Scene) -> tuple[str, list]:
+        """(key, [ObjectRef]) of a scene in the object store, put there once."""
+        entry = self._scenes.get(id(scene))
+        if entry is None or entry[2] is not scene:
+            key = f"scene-{len(self._scenes)}"
+            entry = (key, [self._ray.put(scene)], scene)
+            self._scenes[id(scene)] = entry
+        return entry[0], entry[1]
 
     # ------------------------------------------------------------------ actors
 
@@ -298,8 +343,6 @@ class RayExecutor:
         from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
         ray = self._ray
-        if self._scene_ref is None:
-            self._scene_ref = ray.put(self.scene)  # once: every actor reads the same copy
         if self._actor_class is None:
             self._actor_class = ray.remote(ChunkWorker)
         slot.actor = self._actor_class.options(
@@ -307,7 +350,7 @@ class RayExecutor:
             num_gpus=slot.num_gpus,
             max_restarts=0,  # the driver replaces dead actors itself (and counts them)
             scheduling_strategy=NodeAffinitySchedulingStrategy(slot.node_id, soft=False),
-        ).remote(self._scene_ref, self.grasp, self.name, self.batch_size, slot.nthread)
+        ).remote(self.name, self.batch_size, slot.nthread)
         slot.ready_ref = slot.actor.info.remote()
         self.slots.append(slot)
 
@@ -335,7 +378,10 @@ class RayExecutor:
                 continue
             try:
                 slot.info = ray.get(slot.ready_ref)
-            except self._lost_errors():
+            except self._lost_errors() as err:
+                # an actor that dies while starting says why (an import error, a
+                # constructor's exception): kept for the error if no actor is left
+                self.last_error = str(err).strip().splitlines()[-1] if str(err).strip() else ""
                 self._drop(slot)
                 continue
             mine = {k: v for k, v in versions().items() if k in SAME_VERSIONS}
@@ -353,6 +399,7 @@ class RayExecutor:
 
     def _drop(self, slot: _Slot) -> None:
         """Forget a dead actor; its node gets a new one unless it failed too often."""
+        self._kill(slot)
         if slot in self.slots:
             self.slots.remove(slot)
         self._deaths[slot.node_id] += 1
@@ -360,23 +407,38 @@ class RayExecutor:
             self._given_up.add(slot.node_id)
         self._last_scan = 0.0  # rescan at once: the node may be gone, or need a new actor
 
+    def _kill(self, slot: _Slot) -> None:
+        try:
+            self._ray.kill(slot.actor)
+        except Exception:  # noqa: BLE001 -- already dead, or its node gone: nothing to end
+            pass
+
     def _lost_errors(self) -> tuple[type, ...]:
         """Exceptions that mean an actor (or its node, or its results) is gone."""
         ex = self._ray.exceptions
         names = ("RayActorError", "WorkerCrashedError", "NodeDiedError", "ObjectLostError")
         return tuple(getattr(ex, n) for n in names if hasattr(ex, n))
 
-    # ------------------------------------------------------------------ chunks
+    # ------------------------------------------------------------------ calls
 
-    def run(self, chunks: dict[int, PickBatch]) -> Iterator[ChunkDone]:
-        """Simulate chunks on the cluster's actors, yielding each as it finishes."""
+    def map(self, calls: dict, sizes: dict[object, int]) -> Iterator[tuple[object, object]]:
+        """Run calls on the actors; yield (key, result) as each finishes, in any order.
+
+        Args:
+          calls: key -> (ChunkWorker method name, its arguments).
+          sizes: key -> pick-points the call simulates (for the accounting).
+
+        A call whose actor dies goes back to the front of the queue (a new actor starts
+        on the node if it is still there); any other error of a call ends the run with
+        that error (it would happen again anywhere).
+        """
         ray = self._ray
         lost = self._lost_errors()
-        queue = collections.deque(sorted(chunks))
+        queue = collections.deque(calls)
         attempts: collections.Counter = collections.Counter()
-        inflight: dict = {}  # ObjectRef -> (k, slot)
-        if self._t0 is None:
-            self._t0 = time.monotonic()
+        inflight: dict = {}  # ObjectRef -> (key, slot)
+        if self.t0 is None:
+            self.t0 = time.monotonic()
         started = time.monotonic()
         self._scan(force=True)
         while queue or inflight:
@@ -385,10 +447,13 @@ class RayExecutor:
             self._scan()
             self._check_ready()
             ready = [s for s in self.slots if s.info is not None]
-            if not ready and not any(s.ready_ref for s in self.slots) and not inflight:
+            if not self.slots and not inflight:
+                why = (
+                    f"; the last actor that died said: {self.last_error}" if self.last_error else ""
+                )
                 raise RuntimeError(
                     f"no Ray actor is left to run backend {self.name!r}: every node failed "
-                    f"{self.max_attempts} times or left the cluster"
+                    f"{self.max_attempts} times or left the cluster{why}"
                 )
             if not ready and not inflight and time.monotonic() - started > self.start_timeout_s:
                 raise RuntimeError(
@@ -397,82 +462,60 @@ class RayExecutor:
                 )
             for slot in ready:
                 while queue and slot.inflight < self.depth:
-                    k = queue.popleft()
-                    ref = slot.actor.run.remote(k, chunks[k])
-                    inflight[ref] = (k, slot)
+                    key = queue.popleft()
+                    method, args = calls[key]
+                    ref = getattr(slot.actor, method).remote(*args)
+                    inflight[ref] = (key, slot)
                     slot.inflight += 1
             if not inflight:
                 time.sleep(0.1)  # actors still starting
                 continue
             done, _ = ray.wait(list(inflight), num_returns=1, timeout=0.5)
             for ref in done:
-                k, slot = inflight.pop(ref)
+                key, slot = inflight.pop(ref)
                 slot.inflight -= 1
                 try:
                     result = ray.get(ref)
                 except lost:
-                    # the actor (or its node) died with this chunk: run it elsewhere
-                    attempts[k] += 1
-                    self.lost_chunks += 1
-                    if attempts[k] >= self.max_attempts:
+                    # the actor (or its node) died with this call: run it elsewhere
+                    attempts[key] += 1
+                    self.lost += 1
+                    if attempts[key] >= self.max_attempts:
                         raise RuntimeError(
-                            f"chunk {k} was lost with its actor {attempts[k]} times: see the "
-                            "Ray logs of its nodes (`ray logs`)"
+                            f"call {key!r} was lost with its actor {attempts[key]} times: see "
+                            "the Ray logs of its nodes (`ray logs`)"
                         ) from None
-                    queue.appendleft(k)
+                    queue.appendleft(key)
                     if slot in self.slots:
-                        self._kill(slot)
                         self._drop(slot)
                     continue
-                self._count(result, len(chunks[k]))
-                yield result
+                wall = getattr(result, "wall_s", 0.0)
+                label = slot.info["label"]
+                self.node_picks[label] += sizes[key]
+                self.node_busy_s[label] += wall
+                self.compile_s += getattr(result, "compile_s", 0.0)
+                self.run_s += getattr(result, "run_s", 0.0)
+                self.simulated += sizes[key]
+                yield key, result
 
-    def _count(self, result: ChunkDone, n: int) -> None:
-        self.node_picks[result.where] += n
-        self.node_busy_s[result.where] += result.wall_s
-        self.compile_s += result.compile_s
-        self.run_s += result.run_s
-        self.simulated += n
-
-    def record(self, picks: PickBatch) -> np.ndarray:
-        """Traces (N, T, F) of picks, simulated on one actor (another if it dies)."""
-        ray = self._ray
-        lost = self._lost_errors()
-        started = time.monotonic()
-        while True:
-            self._scan(force=not self.slots)
-            self._check_ready()
-            ready = [s for s in self.slots if s.info is not None]
-            if not ready:
-                if time.monotonic() - started > self.start_timeout_s or not self.slots:
-                    raise RuntimeError("no Ray actor is left to record traces")
-                time.sleep(0.1)
-                continue
-            slot = ready[0]
-            try:
-                return ray.get(slot.actor.record.remote(picks))
-            except lost:
-                self._kill(slot)
-                self._drop(slot)
-
-    def _kill(self, slot: _Slot) -> None:
-        try:
-            self._ray.kill(slot.actor)
-        except Exception:  # noqa: BLE001 -- already dead, or its node gone: nothing to end
-            pass
+    def call(self, method: str, args: tuple):
+        """One call on one actor (another if it dies): its result."""
+        for _, result in self.map({0: (method, args)}, {0: 0}):
+            return result
 
     # ------------------------------------------------------------------ reporting
 
     def rates(self) -> dict[str, float]:
-        """Pick-points per second of each node (over the time its actor was busy) and,
-        under 'total', of the whole cluster (over this run's wall time)."""
+        """Pick-points per second of each node (over the time its actor was busy,
+        compiles included) and, under 'total', of the whole cluster (over the wall time
+        since the first call)."""
         out = {
             label: self.node_picks[label] / busy
             for label, busy in sorted(self.node_busy_s.items())
             if busy > 0
         }
-        if self._t0 is not None and self.simulated:
-            out["total"] = self.simulated / max(time.monotonic() - self._t0, 1e-9)
+        if self.t0 is not None and self.simulated:
+            out["total"] = self.simulated / max(time.monotonic() - self.t0, 1e-9)
         return out
 
     def progress_note(self) -> str:
@@ -484,20 +527,9 @@ class RayExecutor:
             parts.append(f"all {total:.0f}/s")
         return ", ".join(parts)
 
-    def describe(self, wall_s: float | None = None) -> dict:
-        """backend, device and timing (compile_s, run_s summed over actors)."""
-        timing = {
-            "compile_s": round(self.compile_s, 3),
-            "run_s": round(self.run_s, 3),
-            "simulations": int(self.simulated),
-        }
-        if wall_s is not None:
-            timing["wall_s"] = round(wall_s, 3)
-        return {"backend": self.name, "device": self.device, "timing": timing}
-
-    def cluster_summary(self) -> dict:
-        """For summary.json: address, nodes with their pick-points and rates, chunks
-        re-run after an actor died."""
+    def summary(self) -> dict:
+        """For summary.json: address, nodes with their pick-points and rates, calls
+        (chunks) re-run after an actor died."""
         rates = self.rates()
         return {
             "address": self.address,
@@ -506,18 +538,162 @@ class RayExecutor:
                 for label, n in sorted(self.node_picks.items())
             },
             "picks_per_s": round(rates["total"], 2) if "total" in rates else None,
-            "chunks_rerun": int(self.lost_chunks),
+            "chunks_rerun": int(self.lost),
         }
 
     def close(self) -> None:
-        """End this run's actors, and disconnect when this executor connected."""
-        for slot in list(getattr(self, "slots", [])):
+        """End this run's actors, and disconnect when this pool connected."""
+        for slot in list(self.slots):
             self._kill(slot)
-        if getattr(self, "slots", None) is not None:
-            self.slots.clear()
+        self.slots.clear()
         if self._connected:
             self._ray.shutdown()
             self._connected = False
+
+
+class RayExecutor:
+    """evaluate's chunks on a Ray cluster (``engine.ChunkExecutor``): each chunk is one
+    call on one actor; this process writes every chunk as it comes back.
+
+    Args: address, backend, batch_size, cancel: as :class:`ActorPool`; scene, grasp:
+    what every chunk simulates.
+    """
+
+    def __init__(
+        self,
+        address: str,
+        scene: Scene,
+        grasp: GraspConfig,
+        *,
+        backend: str = "auto",
+        batch_size: int | None = None,
+        cancel: threading.Event | None = None,
+        **pool_options,
+    ):
+        self.pool = ActorPool(
+            address, backend=backend, batch_size=batch_size, cancel=cancel, **pool_options
+        )
+        self.address, self.name, self.batch_size = (
+            self.pool.address,
+            self.pool.name,
+            self.pool.batch_size,
+        )
+        self.scene, self.grasp = scene, grasp
+
+    @property
+    def device(self) -> str:
+        return self.pool.device
+
+    def run(self, chunks: dict[int, PickBatch]) -> Iterator[ChunkDone]:
+        """Simulate chunks on the cluster's actors, yielding each as it finishes."""
+        key, box = self.pool.scene_box(self.scene)
+        calls = {k: ("run_chunk", (key, box, self.grasp, k, sub)) for k, sub in chunks.items()}
+        sizes = {k: len(sub) for k, sub in chunks.items()}
+        for _, result in self.pool.map(calls, sizes):
+            yield result
+
+    def record(self, picks: PickBatch) -> np.ndarray:
+        """Traces (N, T, F) of picks, simulated on one actor."""
+        key, box = self.pool.scene_box(self.scene)
+        return self.pool.call("record", (key, box, self.grasp, picks))
+
+    def progress_note(self) -> str:
+        return self.pool.progress_note()
+
+    def cluster_summary(self) -> dict:
+        return self.pool.summary()
+
+    def describe(self, wall_s: float | None = None) -> dict:
+        """backend, device and timing (compile_s, run_s summed over actors)."""
+        p = self.pool
+        timing = {
+            "compile_s": round(p.compile_s, 3),
+            "run_s": round(p.run_s, 3),
+            "simulations": int(p.simulated),
+        }
+        if wall_s is not None:
+            timing["wall_s"] = round(wall_s, 3)
+        return {"backend": self.name, "device": self.device, "timing": timing}
+
+    def close(self) -> None:
+        self.pool.close()
+
+
+class RayBackend:
+    """A ``simulate.Backend`` whose calls run on a Ray cluster: each call's inputs are
+    cut into pieces of one actor batch, spread over the actors and put back in order.
+
+    What :class:`RayEngine` makes for a scene: the studies (sweep, compare) run their
+    batches of pick-points x variants through it unchanged. ``batch_size`` is one batch
+    per planned actor, so that each engine chunk keeps every actor busy.
+    """
+
+    def __init__(self, pool: ActorPool, scene: Scene, grasp: GraspConfig):
+        self.pool, self.scene, self.grasp = pool, scene, grasp
+        self.name = pool.name
+        self.batch_size = pool.batch_size * max(pool.planned, 1)
+        self.stats = RunStats()
+
+    @property
+    def device(self) -> str:
+        return self.pool.device
+
+    def run(self, inputs, record: bool = False):
+        """Per-pick results ((N,) arrays) and, with record, traces (N, T, F)."""
+        key, box = self.pool.scene_box(self.scene)
+        size = self.pool.batch_size
+        n = len(inputs)
+        starts = list(range(0, max(n, 1), size))
+        calls = {
+            i: ("simulate", (key, box, self.grasp, inputs.take(slice(s, s + size)), record))
+            for i, s in enumerate(starts)
+        }
+        sizes = {i: min(size, n - s) for i, s in enumerate(starts)}
+        parts: dict[int, Simulated] = dict(self.pool.map(calls, sizes))
+        ordered = [parts[i] for i in range(len(starts))]
+        results = {k: np.concatenate([p.results[k] for p in ordered]) for k in ordered[0].results}
+        traces = np.concatenate([p.traces for p in ordered]) if record else None
+        self.stats.compile_s += sum(p.compile_s for p in ordered)
+        self.stats.run_s += sum(p.run_s for p in ordered)
+        self.stats.n += n
+        return results, traces
+
+
+class RayEngine(Engine):
+    """An :class:`engine.Engine` whose backends run on a Ray cluster (:class:`RayBackend`).
+
+    For the studies (``sweep(..., ray=...)``, ``compare(..., ray=...)``): everything
+    else of the engine -- chunks, progress, cancellation, timing -- is the engine's.
+    Call :meth:`close` at the end (it ends the actors).
+    """
+
+    def __init__(
+        self,
+        address: str,
+        backend: str = "auto",
+        batch_size: int | None = None,
+        *,
+        chunk_size: int | None = None,
+        on_progress=None,
+        cancel: threading.Event | None = None,
+    ):
+        self.pool = ActorPool(address, backend=backend, batch_size=batch_size, cancel=cancel)
+        super().__init__(
+            self.pool.name,
+            self.pool.batch_size,
+            chunk_size=chunk_size,
+            on_progress=on_progress,
+            cancel=cancel,
+        )
+
+    def make(self, scene: Scene, grasp: GraspConfig) -> RayBackend:
+        grasp.substeps(scene.solver)  # validates the control period, as make_backend does
+        backend = RayBackend(self.pool, scene, grasp)
+        self.backends.append(backend)
+        return backend
+
+    def close(self) -> None:
+        self.pool.close()
 
 
 # ------------------------------------------------------- local clusters (one host)
@@ -611,7 +787,7 @@ def stop_local_node(proc: subprocess.Popen) -> None:
             except ProcessLookupError:
                 pass
         try:
-            proc.wait(timeout=5)  # reaps `ray start` (a zombie would stay in the session)
+            proc.wait(timeout=2)  # reaps `ray start` (a zombie would stay in the session)
         except subprocess.TimeoutExpired:
             continue
         deadline = time.monotonic() + 5

@@ -155,6 +155,10 @@ class Engine:
         self.backends: list[Backend] = []  # every backend this engine ran, in order built
         self.rollouts = 0  # pick-point simulations run so far
 
+    def close(self) -> None:
+        """Release what the engine holds: nothing here; a cluster's actors for
+        ``cluster.RayEngine``."""
+
     def make(self, scene: Scene, grasp: GraspConfig) -> Backend:
         """A new backend for scene and grasp (on MJX/Warp: one compile per batch shape)."""
         size = self.batch_size or default_batch_size(self.backend_name)
@@ -498,6 +502,8 @@ class Simulator:
       obj: the object every job simulates.
       backend, batch_size: as :class:`Engine` (ignored when engine is given).
       engine: run through this engine (its backend choice, progress and cancel event).
+      ray: run on a Ray cluster ("auto" or "HOST:PORT": ``cluster.RayEngine``; ignored
+        when engine is given); :meth:`close` ends its actors.
     """
 
     def __init__(
@@ -507,13 +513,22 @@ class Simulator:
         batch_size: int | None = None,
         *,
         engine: Engine | None = None,
+        ray: str | None = None,
     ) -> None:
         self.object = obj
+        if engine is None and ray is not None:
+            from mjx_pick.cluster import RayEngine
+
+            engine = RayEngine(ray, backend, batch_size)
         self.engine = engine or Engine(backend, batch_size)
         self.backend_name = self.engine.backend_name
         self.batch_size = self.engine.batch_size
         self._backends: dict[tuple, Backend] = {}
         self.rollouts = 0  # pick-point simulations run so far
+
+    def close(self) -> None:
+        """Release the engine's resources (a Ray cluster's actors)."""
+        self.engine.close()
 
     @property
     def backends(self) -> list[Backend]:
