@@ -1,8 +1,9 @@
 """Ray as the distributed engine: the chunks of a run on the actors of a Ray cluster.
 
 ``evaluate(..., ray="auto" | "HOST:PORT")`` (``mjx-pick evaluate --ray``) runs its chunks
-through a :class:`RayExecutor` instead of this process's backend. Who owns what
-(docs/cluster.md says why):
+through a :class:`RayExecutor` instead of this process's backend; ``sweep`` and
+``compare`` run through a :class:`RayEngine`. Both feed one :class:`ActorPool`. Who owns
+what (docs/cluster.md says why):
 
 * the driver (the process that called evaluate) owns the experiment: it draws the
   pick-points, cuts them into chunks (``engine.ChunkPlan``), hands chunks out, and is

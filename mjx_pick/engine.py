@@ -21,9 +21,14 @@ the throughput benchmarks (``throughput.measure``, ``side_by_side``). It owns
   interrupted, and a chunk is the unit that is saved;
 * compile time apart from run time (:class:`Timing`, read from the backends' stats).
 
-Results do not depend on the chunking: every pick-point is simulated on its own
-(chunks are whole numbers of the backend's batches, which pads MJX batches with copies
-whose results are dropped; a refilled pool gives the results of full-length rollouts).
+Every pick-point is simulated on its own (MJX pads batches with copies whose results
+are dropped; a refilled pool gives the results of full-length rollouts), but the float32
+rounding of a batched program may depend on the batch's SHAPE: on the C engine, the
+per-tick kernel (XLA on the CPU) gave 149 of 1,024 scores one float32 step apart in
+batches of 64 and of 1,024 (labels equal; benchmarks/RESULTS.md, issue 20). So results
+are bitwise the same for the same batch size and chunk size -- chunks that are whole
+numbers of batches give every call the full batch but the run's last -- which is why a
+resumed run keeps its chunk plan and a cluster run chunks as one machine would.
 
 The one path that does not go through :meth:`Engine.run` is calibration's forward-mode
 gradient: :func:`differentiable_rollout` says why.

@@ -11,9 +11,12 @@
   are re-simulated with recording on: keeping traces of every pick-point of a large
   batch would not fit in device memory).
 
-Every simulation runs through one ``mjx_pick.engine.Engine``: large runs go in chunks
-(``engine.run_chunks``); each finished chunk is written atomically under ``chunks/`` so
-that ``resume=True`` redoes nothing that finished. ``on_progress(done, total)`` reports
+Every simulation runs through the engine: large runs go in chunks
+(``engine.run_chunks``) on a chunk executor -- this process's backend, or with
+``ray="auto" | "HOST:PORT"`` the actors of a Ray cluster (``mjx_pick.cluster``); either
+way this process alone writes the folder. Each finished chunk is written atomically
+under ``chunks/`` beside the chunk plan (``chunks/plan.json``), so that ``resume=True``
+redoes nothing that finished, for the same experiment (:func:`experiment_key`). ``on_progress(done, total)`` reports
 pick-points done after each chunk; setting the ``cancel`` event stops the run before
 the next chunk (``engine.Cancelled``; the folder is marked "cancelled" and its finished
 chunks stay for ``resume``).
@@ -195,7 +198,8 @@ def evaluate(
         pick-points reach min_score or max_n are spent (resumable too: batch j is
         chunk j).
       chunk_size: pick-points per chunk written to disk (default: from device memory;
-        with ray, one actor batch).
+        with ray, one actor batch). Keep it a whole number of batches: a chunk smaller
+        than a batch is a call of another shape, whose float32 rounding may differ.
       min_force: add a min_force_n column: each pick-point's smallest successful F_d
         within the gripper's force range (a batched bisection, about 10 more
         simulations per pick-point; see mjx_pick.robustness.min_grip_force).
@@ -305,10 +309,9 @@ def _evaluate(
             "max_n": max_n,
             "min_force": min_force,
             "backend": executor.name,
-            # the C engine simulates every pick-point on its own, whatever the batch
-            # (measured: equal tables at 5, 8, 32 and 96); a device program's rounding
-            # may depend on its batch shape
-            "batch_size": None if executor.name == "mujoco" else executor.batch_size,
+            # a batched program's float32 rounding depends on its batch shape, on the C
+            # engine too (its per-tick kernel: engine module docstring)
+            "batch_size": executor.batch_size,
         },
     )
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
@@ -471,8 +474,9 @@ def experiment_key(scene: Scene, settings: dict) -> str:
       replaced by a digest of the file's bytes, and the silhouette the pick-points are
       checked against (``ObjectModel.summary`` less its ``source`` path);
     * settings: gripper (an MJCF gripper's file by its digest), physics, procedure,
-      pick-point source and configuration, seed, mode, backend (and batch, see
-      evaluate) -- JSON-able values or dataclasses.
+      pick-point source and configuration, seed, mode, backend and batch size (the
+      rounding of a batched program depends on its shape) -- JSON-able values or
+      dataclasses.
 
     Never where anything is installed (the same asset read from a checkout and from
     site-packages gives the same key) nor the chunk size (derived from free device

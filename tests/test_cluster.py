@@ -39,8 +39,9 @@ RUN = {"n": N, "seed": 3, "grasp": GRASP, "backend": "mujoco", "n_traces": 0}
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory, block):
     """A two-node local Ray cluster: (address, [head, worker] processes, the reference
-    table: one uninterrupted single-process run, same seed and backend, simulated while
-    the second node starts)."""
+    table: the same command without --ray -- one uninterrupted single-process run, same
+    seed, backend and chunks (calls of one shape: engine module docstring) -- simulated
+    while the second node starts)."""
     import ray
 
     logs = tmp_path_factory.mktemp("ray-logs")
@@ -61,7 +62,7 @@ def cluster(tmp_path_factory, block):
                 time.sleep(0.2)
         nodes.append(start_local_node(temps[1], logs / "worker.log", port, head=False, env=CPU))
         address = f"127.0.0.1:{port}"
-        reference = evaluate(block, **RUN).table
+        reference = evaluate(block, **RUN, chunk_size=CHUNK).table
         ray.init(address=address, logging_level="WARNING", log_to_driver=False)
         try:
             deadline = time.monotonic() + 60
