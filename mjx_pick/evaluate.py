@@ -16,10 +16,10 @@ Every simulation runs through the engine: large runs go in chunks
 ``ray="auto" | "HOST:PORT"`` the actors of a Ray cluster (``mjx_pick.cluster``); either
 way this process alone writes the folder. Each finished chunk is written atomically
 under ``chunks/`` beside the chunk plan (``chunks/plan.json``), so that ``resume=True``
-redoes nothing that finished, for the same experiment (:func:`experiment_key`). ``on_progress(done, total)`` reports
-pick-points done after each chunk; setting the ``cancel`` event stops the run before
-the next chunk (``engine.Cancelled``; the folder is marked "cancelled" and its finished
-chunks stay for ``resume``).
+redoes nothing that finished, for the same experiment (:func:`experiment_key`).
+``on_progress(done, total)`` reports pick-points done after each chunk; setting the
+``cancel`` event stops the run before the next chunk (``engine.Cancelled``; the folder
+is marked "cancelled" and its finished chunks stay for ``resume``).
 """
 
 from __future__ import annotations
