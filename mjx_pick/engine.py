@@ -465,13 +465,16 @@ def run_chunks(
     size = plan.chunk_size
     chunks = {k: picks.take(slice(k * size, (k + 1) * size)) for k in range(plan.n_chunks)}
     parts: dict[int, pa.Table] = {}
+    done = 0
+    if on_progress is not None:
+        on_progress(0, n)
     for k, sub in chunks.items():
         table = read_chunk(out_dir, k, sub) if out_dir is not None else None
         if table is not None:
-            parts[k] = table  # finished by an earlier run
-    done = sum(len(chunks[k]) for k in parts)
-    if on_progress is not None:
-        on_progress(done, n)
+            parts[k] = table  # finished by an earlier run: reported as it is read
+            done += len(sub)
+            if on_progress is not None:
+                on_progress(done, n)
     todo = {k: sub for k, sub in chunks.items() if k not in parts}
     for result in executor.run(todo) if todo else ():
         parts[result.k] = result.table
