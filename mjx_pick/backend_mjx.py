@@ -22,8 +22,8 @@ results are written in pick-point order.
 With several local devices the batch axis is sharded over all of them (a one-axis
 ``Mesh``, ``NamedSharding`` for the data and ``shard_map`` for the program):
 pick-points are independent, so each device simulates its slice and nothing is
-communicated. Multi-host runs start with ``jax.distributed.initialize()``;
-``mjx_pick.engine.run_chunks`` then gives each process every P-th chunk.
+communicated. Runs over several machines go through Ray (``mjx_pick.cluster``: one
+actor per GPU), not ``jax.distributed``.
 
 Only per-pick summaries leave the device; full traces are produced only when asked
 (``record=True``), for the few pick-points whose plots are wanted (they are

@@ -1,6 +1,7 @@
 """``mjx-pick``: the command line.
 
   mjx-pick evaluate OBJECT [--gripper robotiq-2f85] [--n 1000] [--seed 0] --out DIR
+                    [--ray auto|HOST:PORT]           (on a Ray cluster; sweep, compare too)
   mjx-pick picks OBJECT --n 500 --out DIR          (pick-points and their pictures only)
   mjx-pick sweep OBJECT --param contact.pad_friction=0.4:1.0:7 [--param ...] --out DIR
   mjx-pick compare OBJECT --grippers robotiq-2f85,onrobot-rg2 --out DIR
@@ -170,6 +171,7 @@ def cmd_evaluate(args) -> int:
         min_force=args.min_force,
         overwrite=args.overwrite,
         skip_infeasible=args.skip_infeasible,
+        ray=args.ray,
     )
     print_summary(ev.summary, args.out)
     return 0
@@ -194,6 +196,8 @@ def _study_options(args, picks_cfg) -> dict:
         "batch_size": args.batch_size,
         "out": args.out,
         "overwrite": args.overwrite,
+        # sweep and compare take --ray (the other studies run on this machine)
+        **({"ray": args.ray} if getattr(args, "ray", None) is not None else {}),
     }
 
 
@@ -473,6 +477,13 @@ def print_summary(s: dict, out) -> None:
         ("compile / run", f"{s['compile_s']:.1f} s / {s['run_s']:.1f} s"),
         ("pick-points per s", f"{s['picks_per_s']}"),
     ]
+    cluster = s.get("cluster")
+    if cluster:
+        nodes = ", ".join(f"{k} {v['picks_per_s']:g}/s" for k, v in cluster["nodes"].items())
+        rows.append(("cluster, per node", nodes or "-"))
+        rows.append(("cluster, in all", f"{cluster['picks_per_s']} pick-points/s"))
+        if cluster["chunks_rerun"]:
+            rows.append(("chunks re-run", f"{cluster['chunks_rerun']} (an actor died)"))
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
@@ -559,6 +570,15 @@ def cmd_assets(_args) -> int:
     return 0
 
 
+def _add_ray(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--ray",
+        metavar="auto|ADDRESS",
+        help="simulate on a Ray cluster: auto, or its head's HOST:PORT (pip install "
+        "'mjx-pick[cluster]'; docs/cluster.md); this process still writes --out",
+    )
+
+
 def _add_overwrite(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--overwrite",
@@ -605,6 +625,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--min-score", type=float, default=0.9, help="Optimization threshold")
     ev.add_argument("--max", type=int, help="Optimization mode: most pick-points to simulate")
     ev.add_argument("--no-progress", action="store_true")
+    _add_ray(ev)
     ev.add_argument(
         "--min-force",
         action="store_true",
@@ -635,11 +656,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="K",
         help="K random variants within the LO:HI ranges instead of a grid",
     )
+    _add_ray(sw)
     sw.set_defaults(func=cmd_sweep, n=200)
 
     cp = study("compare", "rank grippers on one shared pick-point set")
     cp.add_argument("--grippers", required=True, help="comma-separated presets or TOML files")
     cp.add_argument("--rank-by", choices=("success", "score"), default="success")
+    _add_ray(cp)
     cp.set_defaults(func=cmd_compare, n=200)
 
     ds = study("design", "search finger width, finger depth, stroke (any gripper field)")

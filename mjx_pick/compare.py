@@ -132,8 +132,19 @@ def compare(
     simulator: Simulator | None = None,
     out: str | Path | None = None,
     overwrite: bool = False,
+    ray: str | None = None,
 ) -> Comparison:
-    """Simulate one shared candidate set on every gripper and rank them (out: as sweep's)."""
+    """Simulate one shared candidate set on every gripper and rank them (out, ray: as
+    sweep's)."""
+    if simulator is None and ray is not None:
+        sim = Simulator(obj, backend, batch_size, ray=ray)
+        try:
+            return compare(
+                obj, grippers, base, n=n, seed=seed, rank_by=rank_by,
+                pick_config=pick_config, simulator=sim, out=out, overwrite=overwrite,
+            )  # fmt: skip
+        finally:
+            sim.close()
     if rank_by not in ("success", "score"):
         raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
     if len(grippers) < 1:

@@ -10,7 +10,9 @@ the throughput benchmarks (``throughput.measure``, ``side_by_side``). It owns
 * batching: inputs reach the backend in chunks, which the backend splits into its own
   batches -- MJX/Warp run fixed-size padded batches or a pool of slots refilled as
   picks end (the refill stays inside those backends: it is part of the device program);
-* chunking, resume and the assignment of chunks to JAX processes (:func:`run_chunks`);
+* chunking and resume (:func:`run_chunks`, :class:`ChunkPlan`): chunks run on a
+  :class:`ChunkExecutor` -- this process (:class:`LocalExecutor`) or the actors of a Ray
+  cluster (``mjx_pick.cluster``); the caller alone writes the output folder;
 * progress: ``on_progress(done, total)`` in pick-points, called once before the first
   chunk and after every chunk;
 * cancellation: a ``threading.Event`` checked before every chunk; once set, the run
@@ -19,9 +21,14 @@ the throughput benchmarks (``throughput.measure``, ``side_by_side``). It owns
   interrupted, and a chunk is the unit that is saved;
 * compile time apart from run time (:class:`Timing`, read from the backends' stats).
 
-Results do not depend on the chunking: every pick-point is simulated on its own
-(chunks are whole numbers of the backend's batches, which pads MJX batches with copies
-whose results are dropped; a refilled pool gives the results of full-length rollouts).
+Every pick-point is simulated on its own (MJX pads batches with copies whose results
+are dropped; a refilled pool gives the results of full-length rollouts), but the float32
+rounding of a batched program may depend on the batch's SHAPE: on the C engine, the
+per-tick kernel (XLA on the CPU) gave 149 of 1,024 scores one float32 step apart in
+batches of 64 and of 1,024 (labels equal; benchmarks/RESULTS.md, issue 20). So results
+are bitwise the same for the same batch size and chunk size -- chunks that are whole
+numbers of batches give every call the full batch but the run's last -- which is why a
+resumed run keeps its chunk plan and a cluster run chunks as one machine would.
 
 The one path that does not go through :meth:`Engine.run` is calibration's forward-mode
 gradient: :func:`differentiable_rollout` says why.
@@ -30,18 +37,19 @@ gradient: :func:`differentiable_rollout` says why.
 from __future__ import annotations
 
 import dataclasses
+import json
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import jax
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from mjx_pick.config import ConfigError, write_parquet
+from mjx_pick.config import ConfigError, write_json, write_parquet
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.metrics import results_table
 from mjx_pick.objects import ObjectModel
@@ -152,6 +160,10 @@ class Engine:
         self.backends: list[Backend] = []  # every backend this engine ran, in order built
         self.rollouts = 0  # pick-point simulations run so far
 
+    def close(self) -> None:
+        """Release what the engine holds: nothing here; a cluster's actors for
+        ``cluster.RayEngine``."""
+
     def make(self, scene: Scene, grasp: GraspConfig) -> Backend:
         """A new backend for scene and grasp (on MJX/Warp: one compile per batch shape)."""
         size = self.batch_size or default_batch_size(self.backend_name)
@@ -260,51 +272,114 @@ class Engine:
 # ------------------------------------------------------------------- chunked, resumable
 
 
-class ChunkLog:
-    """Which chunks of a run are finished, checkpointed with orbax so a killed run resumes.
+@dataclasses.dataclass(frozen=True)
+class ChunkDone:
+    """One finished chunk, as a :class:`ChunkExecutor` hands it back."""
 
-    The chunk files under ``chunks/`` are the data (each written atomically); this
-    record is the progress: the chunks done and the time spent, saved after every
-    chunk. A chunk file found without a record (a kill between the two writes) is
-    complete by construction and is used as is.
+    k: int  # the chunk's index in its run
+    table: pa.Table  # its rows (``metrics.COLUMNS``), in pick-point order
+    run_s: float  # simulating, after compiles, s
+    compile_s: float  # compiling or building batches for it, s
+    wall_s: float  # the whole call where it ran, s
+    where: str  # who ran it: "local", or a cluster node's label
+
+
+class ChunkExecutor(Protocol):
+    """Runs chunks of pick-points for :func:`run_chunks`: in this process
+    (:class:`LocalExecutor`) or on the actors of a Ray cluster (``cluster.RayExecutor``).
+
+    An executor simulates; it never writes the output folder (the caller alone does).
     """
 
-    def __init__(self, out_dir: Path | None, n_chunks: int, process: int):
-        self.done = np.zeros(n_chunks, bool)
-        self.run_s = 0.0
-        self._mngr = None
-        if out_dir is None:
-            return
-        import orbax.checkpoint as ocp
+    name: str  # the backend every chunk runs on ('mujoco', 'warp', ...)
+    device: str  # what it runs on, in words
+    batch_size: int  # simulations per backend call
 
-        path = (out_dir / "checkpoint" / f"process-{process}").absolute()
-        self._mngr = ocp.CheckpointManager(
-            path, options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True)
-        )
-        step = self._mngr.latest_step()
-        if step is not None:
-            state = self._mngr.restore(step, args=ocp.args.StandardRestore(self._state()))
-            if len(state["done"]) == n_chunks:
-                self.done = np.asarray(state["done"], bool).copy()
-                self.run_s = float(state["run_s"])
+    def run(self, chunks: dict[int, PickBatch]) -> Iterator[ChunkDone]:
+        """Simulate every chunk, yielding each as it finishes (in any order)."""
+        ...
 
-    def _state(self) -> dict:
-        return {"done": self.done, "run_s": np.float64(self.run_s)}
+    def record(self, picks: PickBatch) -> np.ndarray:
+        """Traces (N, T, F) of picks at the control rate (``kernels.grasp.TRACE_FIELDS``)."""
+        ...
 
-    def finish(self, k: int, run_s: float) -> None:
-        self.done[k] = True
-        self.run_s += run_s
-        if self._mngr is not None:
-            import orbax.checkpoint as ocp
+    def describe(self, wall_s: float | None = None) -> dict:
+        """backend, device and timing, for ``rundir.finish`` (as :meth:`Engine.describe`)."""
+        ...
 
-            self._mngr.save(
-                int(self.done.sum()), args=ocp.args.StandardSave(self._state()), force=True
+
+class LocalExecutor:
+    """Chunks run one after another on one backend of an engine, in this process.
+
+    Cancellation is the engine's: its event is checked before every chunk.
+    """
+
+    def __init__(self, engine: Engine, backend: Backend, grasp: GraspConfig):
+        self.engine, self.backend, self.grasp = engine, backend, grasp
+        self.name, self.device = backend.name, backend.device
+        self.batch_size = int(backend.batch_size)
+
+    def run(self, chunks: dict[int, PickBatch]) -> Iterator[ChunkDone]:
+        for k in sorted(chunks):
+            sub = chunks[k]
+            inputs = make_inputs(self.backend.scene, self.grasp, sub)
+            self.engine.check_cancel()
+            # one chunk per engine call: progress is reported by the caller, in its terms
+            out = self.engine.run(
+                self.backend, inputs, chunk_size=max(len(sub), 1), on_progress=_quiet
             )
-            self._mngr.wait_until_finished()
+            t = out.timing
+            yield ChunkDone(
+                k, results_table(sub, out.results), t.run_s, t.compile_s, t.wall_s, "local"
+            )
 
-    def close(self) -> None:
-        if self._mngr is not None:
-            self._mngr.close()
+    def record(self, picks: PickBatch) -> np.ndarray:
+        inputs = make_inputs(self.backend.scene, self.grasp, picks)
+        return self.engine.run(self.backend, inputs, record=True).traces
+
+    def describe(self, wall_s: float | None = None) -> dict:
+        return self.engine.describe(wall_s)
+
+
+@dataclasses.dataclass(frozen=True)
+class ChunkPlan:
+    """How a run cuts its pick-points into chunks: the state that must survive a kill.
+
+    Saved (atomically) as ``chunks/plan.json`` before the first chunk is simulated and
+    read back by a resumed run, which keeps the plan's chunk size: the size a new start
+    would pick (from free device memory, or another ``--chunk-size``) may differ, and
+    chunk k on disk must mean the same pick-points. The chunk files are the progress
+    (each written atomically): a chunk is done exactly when its file exists.
+    """
+
+    key: str  # the experiment's resume key (evaluate's experiment_key)
+    n: int  # pick-points in the run (Optimization mode: at most)
+    chunk_size: int  # pick-points per chunk
+
+    @property
+    def n_chunks(self) -> int:
+        return max(1, -(-self.n // self.chunk_size))
+
+    @staticmethod
+    def path(out_dir: Path) -> Path:
+        return Path(out_dir) / "chunks" / "plan.json"
+
+    def save(self, out_dir: Path) -> None:
+        write_json(self.path(out_dir), dataclasses.asdict(self))
+
+    @classmethod
+    def load(cls, out_dir: Path) -> ChunkPlan | None:
+        """The saved plan, or None when there is none."""
+        path = cls.path(out_dir)
+        if not path.is_file():
+            return None
+        try:
+            data = json.loads(path.read_text())
+            return cls(str(data["key"]), int(data["n"]), int(data["chunk_size"]))
+        except (ValueError, KeyError, TypeError) as err:
+            raise ConfigError(
+                f"{path}: unreadable chunk plan ({err}); choose another --out"
+            ) from err
 
 
 def chunk_path(out_dir: Path, k: int) -> Path:
@@ -312,79 +387,112 @@ def chunk_path(out_dir: Path, k: int) -> Path:
     return out_dir / "chunks" / f"part-{k:06d}.parquet"
 
 
+def plan_chunks(out_dir: Path | None, key: str, n: int, chunk: int, resume: bool) -> ChunkPlan:
+    """The chunk plan of a run: a new one (saved in out_dir), or, resuming, the saved one.
+
+    Raises ConfigError, before anything is simulated, when out_dir holds finished chunks
+    and resume is off, or chunks of another experiment (another key).
+    """
+    if int(chunk) < 1:
+        raise ConfigError(f"chunk_size = {chunk} is out of range: allowed >= 1")
+    plan = ChunkPlan(key, int(n), int(chunk))
+    if out_dir is None:
+        return plan
+    old = ChunkPlan.load(out_dir)
+    has_chunks = any((Path(out_dir) / "chunks").glob("part-*.parquet"))
+    if has_chunks and not resume:
+        raise ConfigError(
+            f"{out_dir} holds results of an earlier run: pass --resume to continue it, "
+            "or choose another --out"
+        )
+    if has_chunks and old is None:
+        raise ConfigError(
+            f"{out_dir} holds chunks without a chunk plan (an older mjx-pick wrote them); "
+            "they cannot be resumed: choose another --out or pass --overwrite"
+        )
+    if has_chunks and (old.key != key or old.n != plan.n):
+        raise ConfigError(
+            f"{out_dir} holds a run with a different configuration; it cannot be resumed "
+            "with these settings (choose another --out)"
+        )
+    if has_chunks:
+        return old  # chunk k on disk keeps its meaning
+    plan.save(out_dir)
+    return plan
+
+
+def read_chunk(out_dir: Path, k: int, picks: PickBatch) -> pa.Table | None:
+    """Chunk k from disk, or None when it is not there; checked against its pick-points."""
+    path = chunk_path(out_dir, k)
+    if not path.is_file():
+        return None
+    table = pq.read_table(path)
+    ids = np.asarray(table["pick_id"])
+    if len(ids) != len(picks) or not np.array_equal(ids, picks.pick_id):
+        raise ConfigError(
+            f"{path} does not hold the pick-points of chunk {k}: choose another --out"
+        )
+    return table
+
+
 def run_chunks(
-    engine: Engine,
-    backend: Backend,
-    grasp: GraspConfig,
+    executor: ChunkExecutor,
     picks: PickBatch,
-    chunk: int,
+    plan: ChunkPlan,
     out_dir: Path | None = None,
     on_progress: ProgressFn | None = None,
+    on_chunk: Callable[[ChunkDone], None] | None = None,
 ) -> pa.Table:
     """Simulate picks chunk by chunk into a results table (``metrics.COLUMNS``).
 
-    With out_dir, each finished chunk is written at once (atomically) to
-    :func:`chunk_path` and recorded in a :class:`ChunkLog`; a chunk file already there
-    (an earlier, interrupted run) is read instead of simulated. With several JAX
-    processes (jax.distributed), process i takes chunks k with k % P == i; process 0
-    then waits for the others' chunk files and assembles.
+    Chunk k holds picks ``[k * plan.chunk_size, (k + 1) * plan.chunk_size)``. With
+    out_dir, each finished chunk is written at once (atomically) to :func:`chunk_path`
+    by this process alone; a chunk file already there (an earlier, interrupted run of
+    the same plan) is read instead of simulated. The executor may finish chunks in any
+    order; the table is in pick-point order.
 
     on_progress(done, total): pick-points finished (read or simulated) of len(picks),
-    once before the first chunk and after each one.
+    once before the first chunk and after each one. on_chunk: each simulated chunk.
     """
-    if chunk < 1:
-        raise ConfigError(f"chunk_size = {chunk} is out of range: allowed >= 1")
     n = len(picks)
-    n_chunks = max(1, -(-n // chunk))
-    proc, nproc = jax.process_index(), jax.process_count()
-    log = ChunkLog(out_dir, n_chunks, proc)
+    if plan.n != n:
+        raise ValueError(f"the chunk plan is for {plan.n} pick-points, not {n}")
+    if jax.process_count() > 1:
+        raise ConfigError(
+            "evaluate runs one driver process: spread a run over machines with --ray "
+            "(docs/cluster.md), not jax.distributed"
+        )
+    size = plan.chunk_size
+    chunks = {k: picks.take(slice(k * size, (k + 1) * size)) for k in range(plan.n_chunks)}
     parts: dict[int, pa.Table] = {}
     done = 0
     if on_progress is not None:
         on_progress(0, n)
-    try:
-        for k in range(n_chunks):
-            sub = picks.take(slice(k * chunk, (k + 1) * chunk))
-            path = chunk_path(out_dir, k) if out_dir is not None else None
-            if path is not None and path.is_file():
-                parts[k] = pq.read_table(path)  # finished by an earlier run
-            elif k % nproc == proc:
-                inputs = make_inputs(backend.scene, grasp, sub)
-                # one chunk per engine call: progress is reported here, in the run's terms
-                out = engine.run(backend, inputs, chunk_size=max(len(sub), 1), on_progress=_quiet)
-                parts[k] = results_table(sub, out.results)
-                if path is not None:
-                    write_parquet(path, parts[k])
-                log.finish(k, out.timing.run_s)
+    for k, sub in chunks.items():
+        table = read_chunk(out_dir, k, sub) if out_dir is not None else None
+        if table is not None:
+            parts[k] = table  # finished by an earlier run: reported as it is read
             done += len(sub)
             if on_progress is not None:
                 on_progress(done, n)
-    finally:
-        log.close()
-    if nproc > 1:
-        parts = _gather_chunks(out_dir, n_chunks, parts)
-    return pa.concat_tables([parts[k] for k in range(n_chunks)])
+    todo = {k: sub for k, sub in chunks.items() if k not in parts}
+    for result in executor.run(todo) if todo else ():
+        parts[result.k] = result.table
+        if out_dir is not None:
+            write_parquet(chunk_path(out_dir, result.k), result.table)
+        done += len(chunks[result.k])
+        if on_chunk is not None:
+            on_chunk(result)
+        if on_progress is not None:
+            on_progress(done, n)
+    missing = sorted(set(chunks) - set(parts))
+    if missing:
+        raise RuntimeError(f"the executor left chunks {missing[:8]} unfinished")
+    return pa.concat_tables([parts[k] for k in range(plan.n_chunks)])
 
 
 def _quiet(done: int, total: int) -> None:
     """No progress (the caller reports it in its own terms)."""
-
-
-def _gather_chunks(out_dir: Path | None, n_chunks: int, parts: dict, timeout_s: float = 86400):
-    """Multi-process: wait for every chunk file (shared file system) and read them."""
-    if out_dir is None:
-        raise ConfigError("a multi-process run needs --out on a file system all hosts share")
-    t0 = time.monotonic()
-    for k in range(n_chunks):
-        path = chunk_path(out_dir, k)
-        while k not in parts:
-            if path.is_file():
-                parts[k] = pq.read_table(path)
-            elif time.monotonic() - t0 > timeout_s:
-                raise TimeoutError(f"chunk {k} never appeared in {path.parent}")
-            else:
-                time.sleep(1.0)
-    return parts
 
 
 # ------------------------------------------------------------------------- studies
@@ -402,6 +510,8 @@ class Simulator:
       obj: the object every job simulates.
       backend, batch_size: as :class:`Engine` (ignored when engine is given).
       engine: run through this engine (its backend choice, progress and cancel event).
+      ray: run on a Ray cluster ("auto" or "HOST:PORT": ``cluster.RayEngine``; ignored
+        when engine is given); :meth:`close` ends its actors.
     """
 
     def __init__(
@@ -411,13 +521,22 @@ class Simulator:
         batch_size: int | None = None,
         *,
         engine: Engine | None = None,
+        ray: str | None = None,
     ) -> None:
         self.object = obj
+        if engine is None and ray is not None:
+            from mjx_pick.cluster import RayEngine
+
+            engine = RayEngine(ray, backend, batch_size)
         self.engine = engine or Engine(backend, batch_size)
         self.backend_name = self.engine.backend_name
         self.batch_size = self.engine.batch_size
         self._backends: dict[tuple, Backend] = {}
         self.rollouts = 0  # pick-point simulations run so far
+
+    def close(self) -> None:
+        """Release the engine's resources (a Ray cluster's actors)."""
+        self.engine.close()
 
     @property
     def backends(self) -> list[Backend]:

@@ -11,12 +11,15 @@
   are re-simulated with recording on: keeping traces of every pick-point of a large
   batch would not fit in device memory).
 
-Every simulation runs through one ``mjx_pick.engine.Engine``: large runs go in chunks
-(``engine.run_chunks``); each finished chunk is written atomically under ``chunks/`` so
-that ``resume=True`` redoes nothing that finished. ``on_progress(done, total)`` reports
-pick-points done after each chunk; setting the ``cancel`` event stops the run before
-the next chunk (``engine.Cancelled``; the folder is marked "cancelled" and its finished
-chunks stay for ``resume``).
+Every simulation runs through the engine: large runs go in chunks
+(``engine.run_chunks``) on a chunk executor -- this process's backend, or with
+``ray="auto" | "HOST:PORT"`` the actors of a Ray cluster (``mjx_pick.cluster``); either
+way this process alone writes the folder. Each finished chunk is written atomically
+under ``chunks/`` beside the chunk plan (``chunks/plan.json``), so that ``resume=True``
+redoes nothing that finished, for the same experiment (:func:`experiment_key`).
+``on_progress(done, total)`` reports pick-points done after each chunk; setting the
+``cancel`` event stops the run before the next chunk (``engine.Cancelled``; the folder
+is marked "cancelled" and its finished chunks stay for ``resume``).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import csv
 import dataclasses
 import hashlib
 import json
+import re
 import threading
 import time
 import warnings
@@ -35,17 +39,29 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, to_dict, write_atomic, write_json, write_parquet
-from mjx_pick.engine import Cancelled, Engine, ProgressFn, Simulator, auto_chunk, run_chunks
+from mjx_pick.engine import (
+    Cancelled,
+    ChunkExecutor,
+    Engine,
+    LocalExecutor,
+    ProgressFn,
+    Simulator,
+    auto_chunk,
+    chunk_path,
+    plan_chunks,
+    read_chunk,
+    run_chunks,
+)
 from mjx_pick.grasp import GraspConfig, min_grasp_force_n
 from mjx_pick.gripper import GripperSpec, load_gripper
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.metrics import results_table, summarize
+from mjx_pick.metrics import summarize
 from mjx_pick.objects import ObjectModel, load_object
 from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.robustness import min_grip_force
 from mjx_pick.rundir import claim, config_hash, finish, versions
-from mjx_pick.scene import build_scene
-from mjx_pick.simulate import Settings, default_batch_size, make_inputs
+from mjx_pick.scene import Scene, build_scene
+from mjx_pick.simulate import Settings
 
 
 @dataclasses.dataclass
@@ -152,6 +168,7 @@ def evaluate(
     skip_infeasible: bool = False,
     on_progress: ProgressFn | None = None,
     cancel: threading.Event | None = None,
+    ray: str | None = None,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
@@ -162,7 +179,7 @@ def evaluate(
       seed: generator seed (same seed, same pick-points).
       picks: a PickBatch or a CSV path (x_mm, y_mm, yaw_deg) instead of generating.
       contact, solver, grasp, pick_config: settings (defaults: the paper's).
-      backend: "auto", "mjx" or "mujoco".
+      backend: "auto", "warp", "mjx" or "mujoco".
       batch_size: simulations per backend call (default: per backend).
       out: output folder (nothing is written without one).
       n_traces: traces kept for the n best and n worst pick-points.
@@ -172,16 +189,22 @@ def evaluate(
         (Optimization mode, whose total is not known ahead, reports nothing).
       cancel: a threading.Event; once set, the run stops before its next chunk with
         mjx_pick.engine.Cancelled (the output folder keeps its finished chunks).
-      resume: skip chunks an interrupted run with the same configuration finished.
+      resume: continue an interrupted run of the same experiment (:func:`experiment_key`)
+        in out: finished chunks are read, not simulated; the run keeps its chunk size.
       overwrite: replace what another command (or another configuration) wrote in out.
       skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
         them) instead of refusing the file.
       until, min_score, max_n: Optimization mode -- simulate batches until `until`
-        pick-points reach min_score or max_n are spent.
-      chunk_size: pick-points per chunk written to disk (default: from device memory).
+        pick-points reach min_score or max_n are spent (resumable too: batch j is
+        chunk j).
+      chunk_size: pick-points per chunk written to disk (default: from device memory;
+        with ray, one actor batch). Keep it a whole number of batches: a chunk smaller
+        than a batch is a call of another shape, whose float32 rounding may differ.
       min_force: add a min_force_n column: each pick-point's smallest successful F_d
         within the gripper's force range (a batched bisection, about 10 more
         simulations per pick-point; see mjx_pick.robustness.min_grip_force).
+      ray: run the chunks on a Ray cluster: "auto" or the head's "HOST:PORT" (needs
+        the cluster extra; see mjx_pick.cluster). This process still writes out.
     """
     obj, gripper = _resolve(obj, gripper)
     contact = contact or ContactParams()
@@ -189,46 +212,116 @@ def evaluate(
     grasp = grasp or GraspConfig()
     pick_config = pick_config or pp.PickConfig()
     grasp.check_gripper(gripper)
+    if ray is not None and min_force:
+        raise ConfigError(
+            "--min-force does not run on a Ray cluster yet: leave out --ray or --min-force"
+        )
+    if chunk_size is not None and int(chunk_size) < 1:
+        raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
     scene = build_scene(obj, gripper, contact, solver, grasp)
-    engine = Engine(backend, batch_size, chunk_size=chunk_size or None, cancel=cancel)
-    runner = engine.make(scene, grasp)
+    engine = runner = None
+    if ray is None:
+        engine = Engine(backend, batch_size, chunk_size=chunk_size or None, cancel=cancel)
+        runner = engine.make(scene, grasp)
+        executor = LocalExecutor(engine, runner, grasp)
+    else:
+        from mjx_pick.cluster import RayExecutor
+
+        executor = RayExecutor(
+            ray, scene, grasp, backend=backend, batch_size=batch_size, cancel=cancel
+        )
+    try:
+        return _evaluate(
+            executor,
+            engine,
+            runner,
+            scene,
+            obj,
+            gripper,
+            contact,
+            solver,
+            grasp,
+            pick_config,
+            n=n,
+            seed=seed,
+            picks=picks,
+            out=out,
+            n_traces=n_traces,
+            progress=progress,
+            resume=resume,
+            until=until,
+            min_score=min_score,
+            max_n=max_n,
+            chunk_size=chunk_size,
+            min_force=min_force,
+            overwrite=overwrite,
+            skip_infeasible=skip_infeasible,
+            on_progress=on_progress,
+        )
+    finally:
+        if hasattr(executor, "close"):
+            executor.close()
+
+
+def _evaluate(
+    executor: ChunkExecutor,
+    engine: Engine | None,
+    runner,
+    scene,
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    contact: ContactParams,
+    solver: SolverParams,
+    grasp: GraspConfig,
+    pick_config: pp.PickConfig,
+    *,
+    n,
+    seed,
+    picks,
+    out,
+    n_traces,
+    progress,
+    resume,
+    until,
+    min_score,
+    max_n,
+    chunk_size,
+    min_force,
+    overwrite,
+    skip_infeasible,
+    on_progress,
+) -> Evaluation:
+    """evaluate() once its executor (this process, or a Ray cluster) is ready."""
     out_dir = Path(out) if out is not None else None
-    if out_dir is not None:  # before any simulation: a folder it may not use is refused now
-        request = {
-            "object": obj.summary(),
-            "gripper": to_dict(gripper),
-            "contact": to_dict(contact),
-            "solver": to_dict(solver),
-            "grasp": to_dict(grasp),
-            "picks": to_dict(pick_config),
+    key = experiment_key(
+        scene,
+        {
+            "gripper": gripper,
+            "contact": contact,
+            "solver": solver,
+            "grasp": grasp,
+            "picks": pick_config,
             "source": _picks_source(picks),
-            "n": n,
+            "n": n if picks is None and until is None else None,
             "seed": seed,
             "until": until,
-            "min_score": min_score,
+            "min_score": min_score if until is not None else None,
             "max_n": max_n,
             "min_force": min_force,
-            "backend": backend,
-        }
-        claim(out_dir, "evaluate", config_hash(request), resume=resume, overwrite=overwrite)
+            "backend": executor.name,
+            # a batched program's float32 rounding depends on its batch shape, on the C
+            # engine too (its per-tick kernel: engine module docstring)
+            "batch_size": executor.batch_size,
+        },
+    )
+    if out_dir is not None:  # before any simulation: a folder it may not use is refused now
+        claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite)
 
     if until is not None:
-        try:
-            picks_batch, results = _optimize(
-                engine,
-                runner,
-                grasp,
-                obj,
-                gripper,
-                until,
-                min_score,
-                max_n or 10 * until,
-                seed,
-                pick_config,
-            )
-        except (KeyboardInterrupt, Cancelled) as stop:
-            _stopped(out_dir, stop, engine, seed, None)
-            raise
+        max_n = max_n or 10 * until
+        batch = int(chunk_size or executor.batch_size)
+        plan = plan_chunks(out_dir, key, max_n, min(batch, max_n), resume)
+        picks_batch = None
     else:
         if picks is None:
             picks_batch = pp.generate_normal(
@@ -245,9 +338,14 @@ def evaluate(
                 grasp=grasp,
                 skip_infeasible=skip_infeasible,
             )
-        results = None
+        if chunk_size:
+            chunk = int(chunk_size)
+        elif runner is not None:
+            chunk = auto_chunk(runner)
+        else:
+            chunk = executor.batch_size
+        plan = plan_chunks(out_dir, key, len(picks_batch), chunk, resume)
 
-    chunk = int(chunk_size or auto_chunk(runner))
     config = {
         "object": obj.summary(),
         "gripper": to_dict(gripper),
@@ -261,53 +359,59 @@ def evaluate(
         "solver": to_dict(solver),
         "grasp": to_dict(grasp),
         "picks": to_dict(pick_config),
-        "n": int(len(picks_batch)),
+        "n": int(len(picks_batch)) if picks_batch is not None else None,
         "seed": int(seed),
-        "mode": picks_batch.mode,
-        "backend": runner.name,
-        "device": runner.device,
-        "batch_size": int(runner.batch_size),
-        "chunk_size": int(chunk),
+        "mode": picks_batch.mode if picks_batch is not None else "optimization",
+        "backend": executor.name,
+        "device": executor.device,
+        "batch_size": int(executor.batch_size),
+        "chunk_size": int(plan.chunk_size),
+        "ray": getattr(executor, "address", None),
+        "config_key": key,
+        "versions": versions(),
     }
-    key = _config_key(config)
-    config["config_key"] = key
-    config["versions"] = versions()
     if out_dir is not None:
-        _check_resume(out_dir, key, resume)
         write_json(out_dir / "config.json", config)
         write_atomic(out_dir / "scene.xml", scene.xml)
 
     t0 = time.perf_counter()
     try:
-        if results is None:
-            table = _simulate(
-                engine, runner, grasp, picks_batch, chunk, out_dir, progress, on_progress
+        if until is not None:
+            picks_batch, table = _optimize(
+                executor, plan, out_dir, obj, gripper, grasp, until, min_score, seed, pick_config
             )
+            config["n"], config["mode"] = int(len(picks_batch)), picks_batch.mode
+            if out_dir is not None:
+                write_json(out_dir / "config.json", config)
         else:
-            table = results_table(picks_batch, results)
+            table = _simulate(executor, picks_batch, plan, out_dir, progress, on_progress)
         wall = time.perf_counter() - t0
         summary = summarize(table)
         mu = contact.pad_friction
+        timing = executor.describe()["timing"]
         summary.update(
             {
                 "object": obj.name,
                 "gripper": gripper.name,
-                "backend": runner.name,
-                "device": runner.device,
+                "backend": executor.name,
+                "device": executor.device,
                 "f_gmin_n": min_grasp_force_n(obj, mu, grasp.safety_factor),
                 "grip_force_n": grasp.grip_force_n,
                 "candidates_checked": int(picks_batch.n_candidates),
                 "rejected": dict(picks_batch.rejected),
-                "compile_s": round(runner.stats.compile_s, 3),
-                "run_s": round(runner.stats.run_s, 3),
+                "compile_s": timing["compile_s"],
+                "run_s": timing["run_s"],
                 "wall_s": round(wall, 3),
-                "picks_per_s": round(runner.stats.n / runner.stats.run_s, 2)
-                if runner.stats.run_s > 0
+                # per backend (per actor on a cluster): simulations over simulating time
+                "picks_per_s": round(timing["simulations"] / timing["run_s"], 2)
+                if timing["run_s"] > 0
                 else None,
                 "simulated_s_per_pick": round(grasp.duration_s, 3),
                 "physics_steps_per_pick": grasp.n_ticks() * grasp.substeps(solver),
             }
         )
+        if hasattr(executor, "cluster_summary"):
+            summary["cluster"] = executor.cluster_summary()
         if min_force:
             settings = Settings(gripper, contact, solver, grasp)
             sim = Simulator(obj, engine=engine)  # its bisection runs through this engine
@@ -324,25 +428,25 @@ def evaluate(
             summary["min_force_n_median"] = (
                 float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
             )
-        traces = _traces(engine, runner, grasp, picks_batch, table, n_traces) if n_traces else None
+        traces = _traces(executor, picks_batch, table, n_traces) if n_traces else None
     except (KeyboardInterrupt, Cancelled) as stop:
-        _stopped(out_dir, stop, engine, seed, config, time.perf_counter() - t0)
+        _stopped(out_dir, stop, executor, seed, config, time.perf_counter() - t0)
         raise
     if out_dir is not None:
         write_parquet(out_dir / "results.parquet", table)
         write_json(out_dir / "summary.json", summary)
         if traces is not None:
             write_parquet(out_dir / "traces.parquet", traces)
-        meta = engine.describe(time.perf_counter() - t0)
+        meta = executor.describe(time.perf_counter() - t0)
         finish(out_dir, command="evaluate", config=config, seed=seed, **meta)
     return Evaluation(table, summary, config, traces, out_dir)
 
 
-def _stopped(out_dir, stop: BaseException, engine: Engine, seed, config, wall_s=None) -> None:
+def _stopped(out_dir, stop: BaseException, executor, seed, config, wall_s=None) -> None:
     """Mark a folder whose run stopped early; its finished chunks stay for --resume."""
     if out_dir is not None:
         status = "cancelled" if isinstance(stop, Cancelled) else "interrupted"
-        meta = engine.describe(wall_s)
+        meta = executor.describe(wall_s)
         finish(out_dir, status, command="evaluate", config=config, seed=seed, **meta)
 
 
@@ -357,57 +461,89 @@ def _picks_source(picks) -> str:
     return "csv:" + (config_hash(path.read_text()) if path.is_file() else str(path))
 
 
-def _config_key(config: dict) -> str:
-    text = json.dumps(
-        {k: v for k, v in config.items() if k not in ("device",)}, sort_keys=True, default=str
+def _file_digest(path: str | Path) -> str:
+    """sha256 of a file's bytes (a file the scene names: what it holds, not where)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def experiment_key(scene: Scene, settings: dict) -> str:
+    """The resume key of an evaluate run: a hash of what decides its results.
+
+    * the object's content: the simulated model (``scene.xml``: the object's meshes,
+      mass and inertia, the gripper, contact and solver), with every file it names
+      replaced by a digest of the file's bytes, and the silhouette the pick-points are
+      checked against (``ObjectModel.summary`` less its ``source`` path);
+    * settings: gripper (an MJCF gripper's file by its digest), physics, procedure,
+      pick-point source and configuration, seed, mode, backend and batch size (the
+      rounding of a batched program depends on its shape) -- JSON-able values or
+      dataclasses.
+
+    Never where anything is installed (the same asset read from a checkout and from
+    site-packages gives the same key) nor the chunk size (derived from free device
+    memory; a resumed run keeps the one on disk, ``engine.ChunkPlan``).
+    """
+    xml = re.sub(
+        r'file="([^"]+)"',
+        lambda m: f'file="sha256:{_file_digest(m[1])}"' if Path(m[1]).is_file() else m[0],
+        scene.xml,
     )
+    obj = {k: v for k, v in scene.object.summary().items() if k != "source"}
+    values = {k: to_dict(v) for k, v in settings.items()}
+    mjcf = (values.get("gripper") or {}).get("mjcf")
+    if mjcf and mjcf.get("file"):
+        file = Path(mjcf["file"])
+        mjcf["file"] = f"sha256:{_file_digest(file)}" if file.is_file() else file.name
+    text = json.dumps({"model": xml, "object": obj, **values}, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def _check_resume(out_dir: Path, key: str, resume: bool) -> None:
-    old = out_dir / "config.json"
-    chunks = sorted((out_dir / "chunks").glob("part-*.parquet"))
-    if not chunks:
-        return
-    if not resume:
-        raise ConfigError(
-            f"{out_dir} holds results of an earlier run: pass --resume to continue it, "
-            "or choose another --out"
-        )
-    if old.is_file() and json.loads(old.read_text()).get("config_key") != key:
-        raise ConfigError(
-            f"{out_dir} holds a run with a different configuration; it cannot be resumed "
-            "with these settings (choose another --out)"
-        )
-
-
-def _simulate(engine, runner, grasp, picks, chunk, out_dir, bar: bool, on_progress):
-    """The main run through the engine's chunked runner, with a tqdm bar if asked."""
+def _simulate(executor, picks, plan, out_dir, bar: bool, on_progress):
+    """The main run through the engine's chunked runner, with a tqdm bar if asked:
+    pick-points, chunks done and, on a cluster, pick-points/s per node and in all."""
     if not bar:
-        return run_chunks(engine, runner, grasp, picks, chunk, out_dir, on_progress)
+        return run_chunks(executor, picks, plan, out_dir, on_progress)
     from tqdm import tqdm
 
-    with tqdm(total=len(picks), unit="pick", desc=f"simulating ({runner.name})") as pbar:
+    chunks_done = [0]
+    note = getattr(executor, "progress_note", None)
+    with tqdm(total=len(picks), unit="pick", desc=f"simulating ({executor.name})") as pbar:
+
+        def chunk_done(result) -> None:
+            chunks_done[0] += 1
+            text = f"chunks {chunks_done[0]}/{plan.n_chunks} this run"
+            if note is not None:
+                text += f"; {note()}"
+            pbar.set_postfix_str(text, refresh=False)
 
         def report(done: int, total: int) -> None:
             pbar.update(done - pbar.n)
             if on_progress is not None:
                 on_progress(done, total)
 
-        return run_chunks(engine, runner, grasp, picks, chunk, out_dir, report)
+        return run_chunks(executor, picks, plan, out_dir, report, on_chunk=chunk_done)
 
 
-def _optimize(engine, runner, grasp, obj, gripper, k, min_score, max_n, seed, config):
-    """Optimization mode: batches of pick-points through the engine until k reach
-    min_score or max_n are spent; (PickBatch, results of every simulated pick)."""
-    collected = {}
-    batch = engine.batch_size or default_batch_size(engine.backend_name)
+def _optimize(executor, plan, out_dir, obj, gripper, grasp, k, min_score, seed, config):
+    """Optimization mode: batches of pick-points until k reach min_score or plan.n are
+    spent; (PickBatch, results table of every simulated pick).
+
+    Batch j is chunk j of the plan (the batches depend only on the seed and the batch
+    size, never on results): a resumed run reads the chunks on disk and simulates from
+    the first one missing, so it stops exactly where an uninterrupted run stops.
+    """
+    tables: list = []
 
     def score_fn(b: pp.PickBatch) -> np.ndarray:
-        out = engine.run(runner, make_inputs(runner.scene, grasp, b)).results
-        for name, v in out.items():
-            collected.setdefault(name, []).append(np.asarray(v))
-        return np.where(out["success"], np.nan_to_num(out["score"], nan=-1.0), -1.0)
+        j = len(tables)
+        table = read_chunk(out_dir, j, b) if out_dir is not None else None
+        if table is None:
+            for result in executor.run({j: b}):
+                table = result.table
+            if out_dir is not None:
+                write_parquet(chunk_path(out_dir, j), table)
+        tables.append(table)
+        score = np.asarray(table["score"], float)
+        return np.where(np.asarray(table["success"]), np.nan_to_num(score, nan=-1.0), -1.0)
 
     res = pp.optimize(
         obj,
@@ -415,17 +551,16 @@ def _optimize(engine, runner, grasp, obj, gripper, k, min_score, max_n, seed, co
         score_fn,
         k=k,
         min_score=min_score,
-        max_n=max_n,
-        batch_size=min(batch, max_n),
+        max_n=plan.n,
+        batch_size=plan.chunk_size,
         seed=seed,
         config=config,
         grasp=grasp,
     )
-    merged = {name: np.concatenate(v) for name, v in collected.items()}
-    return res.picks, merged
+    return res.picks, pa.concat_tables(tables)
 
 
-def _traces(engine, runner, grasp, picks: pp.PickBatch, table: pa.Table, n: int):
+def _traces(executor, picks: pp.PickBatch, table: pa.Table, n: int):
     """Re-simulate the n best and n worst pick-points with recording on."""
     score = np.asarray(table["score"], float)
     order = np.argsort(np.where(np.isnan(score), -np.inf, score))
@@ -433,7 +568,7 @@ def _traces(engine, runner, grasp, picks: pp.PickBatch, table: pa.Table, n: int)
     if len(chosen) == 0:
         return None
     sub = picks.take(chosen)
-    rows = engine.run(runner, make_inputs(runner.scene, grasp, sub), record=True).traces
+    rows = executor.record(sub)
     n_pick, n_tick, _ = rows.shape
     cols = {"pick_id": np.repeat(sub.pick_id, n_tick)}
     for j, name in enumerate(gk.TRACE_FIELDS):

@@ -195,12 +195,23 @@ def sweep(
     simulator: Simulator | None = None,
     out: str | Path | None = None,
     overwrite: bool = False,
+    ray: str | None = None,
 ) -> SweepResult:
     """Simulate n pick-points under every parameter variant; see the module docstring.
 
     out: folder for the results (refused before any simulation when another command
-    wrote it, unless overwrite).
+    wrote it, unless overwrite). ray: run the variants on a Ray cluster ("auto" or
+    "HOST:PORT"; mjx_pick.cluster), this process writing out.
     """
+    if simulator is None and ray is not None:
+        sim = Simulator(obj, backend, batch_size, ray=ray)
+        try:
+            return sweep(
+                obj, params, base, n=n, seed=seed, random=random, pick_config=pick_config,
+                simulator=sim, out=out, overwrite=overwrite,
+            )  # fmt: skip
+        finally:
+            sim.close()
     base = base or Settings()
     if out is not None:
         request = {"object": obj.summary(), "base": to_dict(base), "params": to_dict(params)}

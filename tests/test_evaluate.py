@@ -1,6 +1,7 @@
 """evaluate() and the mjx-pick CLI end to end: outputs, user pick-points, bad inputs."""
 
 import json
+import os
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -9,7 +10,7 @@ import pytest
 import mjx_pick as mp
 from mjx_pick import cli
 from mjx_pick.config import to_toml
-from mjx_pick.evaluate import evaluate
+from mjx_pick.evaluate import evaluate, experiment_key
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.metrics import COLUMNS
 
@@ -176,3 +177,93 @@ def test_picks_file_with_an_infeasible_row(tmp_path, block):
         )
     # the kept rows keep their index in the file
     assert ev.table["pick_id"].to_pylist() == [0, 2]
+
+
+def _key(obj, **settings):
+    """evaluate's resume key of obj with the default settings (or these)."""
+    gripper = mp.GripperSpec()
+    scene = mp.build_scene(obj, gripper, grasp=FAST)
+    values = {"gripper": gripper, "grasp": FAST, "seed": 0, "n": 100, "backend": "mujoco"}
+    return experiment_key(scene, {**values, **settings})
+
+
+def test_resume_key_is_the_experiment_not_the_install(tmp_path, block):
+    # the same asset read from two places (a checkout and site-packages: `python -m
+    # pytest` imports the first, a CLI started elsewhere the second) is one experiment
+    import shutil
+    import subprocess
+    import sys
+    import tomllib
+    from importlib import resources
+
+    entry = tomllib.loads(
+        (resources.files("mjx_pick.assets") / "objects" / "manifest.toml").read_text()
+    )["block"]
+    kwargs = {k: entry[k] for k in ("px_per_mm", "thickness_mm", "mass_g", "material")}
+    copies = []
+    for where in ("checkout", "site-packages"):
+        path = tmp_path / where / "block.png"
+        path.parent.mkdir()
+        with resources.as_file(resources.files("mjx_pick.assets") / "objects" / "block.png") as f:
+            shutil.copy(f, path)
+        copies.append(mp.object_from_image(path, name="block", **kwargs))
+    assert copies[0].source != copies[1].source
+    key = _key(block)
+    assert _key(copies[0]) == _key(copies[1]) == key
+    # a process started outside the checkout computes the same key
+    code = "import mjx_pick as mp; from tests_key import key; print(key(mp.load_asset('block')))"
+    helper = tmp_path / "tests_key.py"
+    helper.write_text(
+        "import mjx_pick as mp\n"
+        "from mjx_pick.evaluate import experiment_key\n"
+        f"from mjx_pick.grasp import GraspConfig\nFAST = {FAST!r}\n"
+        "def key(obj):\n"
+        "    g = mp.GripperSpec()\n"
+        "    scene = mp.build_scene(obj, g, grasp=FAST)\n"
+        "    values = {'gripper': g, 'grasp': FAST, 'seed': 0, 'n': 100, 'backend': 'mujoco'}\n"
+        "    return experiment_key(scene, values)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == key
+    # what decides results changes it: the object's content, physics, seed
+    heavier = mp.object_from_image(
+        tmp_path / "checkout" / "block.png",
+        name="block",
+        **{**kwargs, "mass_g": 2 * kwargs["mass_g"]},
+    )
+    assert _key(heavier) != key
+    assert _key(block, seed=1) != key
+    assert _key(block, contact=mp.ContactParams(pad_friction=0.5)) != key
+
+
+def test_optimization_mode_resumes_where_it_stopped(tmp_path, block):
+    # a killed run leaves its manifest, chunk plan and finished chunks (batches): that
+    # state, cut after two batches, resumes to the uninterrupted run's table
+    import shutil
+
+    run = dict(grasp=FAST, backend="mujoco", batch_size=8, until=20, min_score=0.9)
+    run.update(max_n=64, n_traces=0)
+    whole = evaluate(block, **run, out=tmp_path / "whole")
+    parts = sorted((tmp_path / "whole" / "chunks").glob("part-*.parquet"))
+    assert len(parts) >= 3, "the test needs a run of three batches or more"
+    cut = tmp_path / "cut"
+    (cut / "chunks").mkdir(parents=True)
+    for name in (
+        "mjx_pick_run.json",
+        "config.json",
+        "chunks/plan.json",
+        *(f"chunks/{p.name}" for p in parts[:2]),
+    ):
+        shutil.copy2(tmp_path / "whole" / name, cut / name)
+    stamps = {p.name: (cut / "chunks" / p.name).stat().st_mtime_ns for p in parts[:2]}
+    with pytest.raises(mp.ConfigError, match="--resume"):
+        evaluate(block, **run, out=cut)
+    resumed = evaluate(block, **run, out=cut, resume=True)
+    assert resumed.table.equals(whole.table)
+    for name, stamp in stamps.items():
+        assert (cut / "chunks" / name).stat().st_mtime_ns == stamp, f"{name} was redone"
+    assert len(list((cut / "chunks").glob("part-*.parquet"))) == len(parts)

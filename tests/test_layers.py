@@ -30,7 +30,7 @@ LAYERS = {
         "assets",
     ),
     # engine: backends and the runner every study simulates through
-    "engine": ("simulate", "engine", "backend_mjx", "backend_mujoco", "backend_warp"),
+    "engine": ("simulate", "engine", "backend_mjx", "backend_mujoco", "backend_warp", "cluster"),
     "studies": ("evaluate", "sweep", "compare", "robustness", "calibrate", "throughput"),
     "outputs": ("report",),
     "interfaces": ("cli", "__init__", "__main__", "gui"),

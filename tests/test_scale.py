@@ -1,6 +1,7 @@
 """Scale: sharding over several devices, chunked runs that survive a kill and resume."""
 
 import dataclasses
+import json
 import os
 import signal
 import subprocess
@@ -101,16 +102,18 @@ def test_kill_mid_run_then_resume_equals_uninterrupted(tmp_path, block):
     assert alive, f"the run ended before it could be killed: {log.read_text()}"
     done_before = len(list(chunks.glob("part-*.parquet")))
     assert 2 <= done_before < 10 and not (out / "results.parquet").exists()
-    assert (out / "checkpoint").is_dir(), "progress is checkpointed with orbax"
+    plan = json.loads((chunks / "plan.json").read_text())
+    assert plan["chunk_size"] == 8 and plan["n"] == 80, "the chunk plan survives the kill"
     stamps = {p.name: p.stat().st_mtime_ns for p in chunks.glob("part-*.parquet")}
 
+    # resumed without --chunk-size (the automatic size differs): the plan on disk is kept,
+    # so chunk k still means the same pick-points
     resumed = evaluate(
         block,
         n=80,
         grasp=grasp,
         backend="mujoco",
         batch_size=8,
-        chunk_size=8,
         out=out,
         resume=True,
         n_traces=0,

@@ -1,0 +1,253 @@
+"""Ray as the distributed engine, on a real local Ray cluster (no mock of Ray).
+
+A head and a second node are started with ``ray start`` on this machine, each with 1 CPU
+(so each gets one C-engine actor), in their own temp folders, on free ports, each in a
+process group of its own that the fixture's finalizer ends. Every run below must give
+the very table of one uninterrupted single-process run: spread over both nodes, with a
+worker killed mid-chunk, and with the driver killed and resumed.
+
+The physics is kept short (a 0.6 s close, a 20 mm lift, a 0.2 s hold: test_scale's
+kill test) so that 192 pick-points take seconds on one CPU.
+"""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+import mjx_pick as mp
+from mjx_pick import cli
+from mjx_pick.cluster import free_ports, session_pids, start_local_node, stop_local_node
+from mjx_pick.config import to_toml
+from mjx_pick.evaluate import evaluate
+from mjx_pick.grasp import GraspConfig
+
+GRASP = GraspConfig(close_timeout_s=0.6, lift_height_mm=20.0, hold_s=0.2)
+N = 192  # pick-points per run
+CHUNK = 16  # 12 chunks: enough for both nodes to take several, and to kill mid-run
+CPU = {"JAX_PLATFORMS": "cpu", "XLA_FLAGS": ""}  # the nodes' actors: plain CPU JAX
+RUN = {"n": N, "seed": 3, "grasp": GRASP, "backend": "mujoco", "n_traces": 0}
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory, block):
+    """A two-node local Ray cluster: (address, [head, worker] processes, the reference
+    table: the same command without --ray -- one uninterrupted single-process run, same
+    seed, backend and chunks (calls of one shape: engine module docstring) -- simulated
+    while the second node starts)."""
+    import ray
+
+    logs = tmp_path_factory.mktemp("ray-logs")
+    # Ray's socket paths must stay short (107 bytes): its temp folders go under /tmp
+    temps = [Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp")) for _ in range(2)]
+    port = free_ports(1)[0]
+    nodes = []
+    try:
+        nodes.append(start_local_node(temps[0], logs / "head.log", port, head=True, env=CPU))
+        deadline = time.monotonic() + 60
+        while True:  # the head's GCS port answers
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert nodes[0].poll() is None, (logs / "head.log").read_text()
+                assert time.monotonic() < deadline, "the Ray head did not start in 60 s"
+                time.sleep(0.2)
+        nodes.append(start_local_node(temps[1], logs / "worker.log", port, head=False, env=CPU))
+        address = f"127.0.0.1:{port}"
+        reference = evaluate(block, **RUN, chunk_size=CHUNK).table
+        ray.init(address=address, logging_level="WARNING", log_to_driver=False)
+        try:
+            deadline = time.monotonic() + 60
+            while sum(n["Alive"] for n in ray.nodes()) < 2:
+                assert nodes[1].poll() is None, (logs / "worker.log").read_text()
+                assert time.monotonic() < deadline, "the second node did not join in 60 s"
+                time.sleep(0.2)
+        finally:
+            ray.shutdown()
+        yield address, nodes, reference
+    finally:
+        for proc in reversed(nodes):
+            stop_local_node(proc)
+        for temp in temps:
+            subprocess.run(["rm", "-rf", str(temp)], check=False)
+
+
+def _chunk_workers(nodes: list[subprocess.Popen]) -> list[int]:
+    """Pids of this cluster's ChunkWorker actors (Ray titles an actor's process
+    ray::<class>[.<method>])."""
+    pids = []
+    for node in nodes:
+        for pid in session_pids(node.pid):
+            try:
+                title = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
+            except OSError:
+                continue
+            if title.startswith(b"ray::ChunkWorker"):
+                pids.append(pid)
+    return pids
+
+
+def test_run_spread_over_two_nodes_equals_one_process(cluster, block, tmp_path):
+    address, _, reference = cluster
+    out = tmp_path / "ray"
+    ev = evaluate(block, **RUN, out=out, chunk_size=CHUNK, ray=address)
+    assert ev.table.equals(reference)
+    assert pq.read_table(out / "results.parquet").equals(reference)
+    nodes = ev.summary["cluster"]["nodes"]
+    assert len(nodes) == 2 and all(v["picks"] > 0 for v in nodes.values()), nodes
+    assert sum(v["picks"] for v in nodes.values()) == N
+    assert ev.summary["cluster"]["chunks_rerun"] == 0
+    assert len(list((out / "chunks").glob("part-*.parquet"))) == N // CHUNK
+    assert ev.config["ray"] == address and ev.config["backend"] == "mujoco"
+    assert ev.summary["device"].startswith("ray: 2 nodes, 2 actors")
+
+
+def test_worker_killed_mid_chunk_is_rerun_elsewhere(cluster, block, tmp_path):
+    address, nodes, reference = cluster
+    killed = []
+
+    def kill_one_worker(done: int, _total: int) -> None:
+        # after the second chunk both actors are busy with more queued: kill one mid-chunk
+        if done >= 2 * CHUNK and not killed:
+            pids = _chunk_workers(nodes)
+            assert pids, "no ChunkWorker process found"
+            os.kill(pids[0], signal.SIGKILL)
+            killed.append(pids[0])
+
+    ev = evaluate(
+        block,
+        **RUN,
+        out=tmp_path / "ray",
+        chunk_size=CHUNK,
+        ray=address,
+        on_progress=kill_one_worker,
+    )
+    assert killed
+    assert ev.summary["cluster"]["chunks_rerun"] >= 1, ev.summary["cluster"]
+    assert ev.table.equals(reference)
+
+
+def test_driver_killed_then_resumed_equals_one_process(cluster, block, tmp_path):
+    address, _, reference = cluster
+    grasp_file = tmp_path / "grasp.toml"
+    grasp_file.write_text(to_toml(GRASP))
+    out = tmp_path / "killed"
+    cmd = [
+        sys.executable,
+        "-m",
+        "mjx_pick.cli",
+        "evaluate",
+        "block",
+        "--n",
+        str(N),
+        "--seed",
+        "3",
+        "--chunk-size",
+        str(CHUNK),
+        "--backend",
+        "mujoco",
+        "--grasp",
+        str(grasp_file),
+        "--out",
+        str(out),
+        "--no-progress",
+        "--traces",
+        "0",
+        "--ray",
+        address,
+    ]
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": ""}
+    log = tmp_path / "driver.log"
+    chunks = out / "chunks"
+    with log.open("wb") as sink:
+        # the driver runs outside the checkout (the installed package), as a user's would
+        driver = subprocess.Popen(cmd, env=env, stdout=sink, stderr=subprocess.STDOUT, cwd=tmp_path)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and driver.poll() is None:
+            if len(list(chunks.glob("part-*.parquet"))) >= 3:
+                break
+            time.sleep(0.05)
+        alive = driver.poll() is None
+        driver.send_signal(signal.SIGKILL)
+        driver.wait()
+    assert alive, f"the driver ended before it could be killed: {log.read_text()}"
+    before = {p.name: p.stat().st_mtime_ns for p in chunks.glob("part-*.parquet")}
+    assert 3 <= len(before) < N // CHUNK and not (out / "results.parquet").exists()
+
+    resumed = evaluate(block, **RUN, out=out, resume=True, ray=address)
+    for name, stamp in before.items():
+        assert (chunks / name).stat().st_mtime_ns == stamp, f"{name} was simulated again"
+    assert resumed.table.equals(reference)
+    assert pq.read_table(out / "results.parquet").equals(reference)
+    assert resumed.summary["cluster"]["nodes"], "the rest ran on the cluster"
+
+
+def test_sweep_on_the_cluster_equals_one_process(cluster, block):
+    # the studies run their pick-points x variants batches through a RayEngine: each
+    # engine chunk is cut into one actor batch per actor and put back in order
+    address, _, _ = cluster
+    params = [mp.ParamSpec.parse("contact.pad_friction=0.5:0.9:2")]
+    run = {"n": 32, "backend": "mujoco", "batch_size": 16, "seed": 1}
+    local = mp.sweep(block, params, mp.Settings(grasp=GRASP), **run)
+    remote = mp.sweep(block, params, mp.Settings(grasp=GRASP), **run, ray=address)
+    assert remote.table.num_rows == 64
+    assert remote.table.equals(local.table)
+
+
+def test_bad_cluster_addresses_are_one_line_errors(capsys, tmp_path):
+    port = free_ports(1)[0]  # nothing listens there
+    for address, message in (
+        ("no address", "is not a cluster address"),
+        ("host:99999", "is not a cluster address"),
+        (f"127.0.0.1:{port}", "no Ray cluster answers there"),
+    ):
+        argv = ["evaluate", "block", "--n", "8", "--backend", "mujoco", "--ray", address]
+        assert cli.main([*argv, "--out", str(tmp_path / "never")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1, err
+        assert not (tmp_path / "never").exists(), "nothing may be written before the error"
+
+
+def test_missing_ray_names_the_extra(monkeypatch, block):
+    from mjx_pick import cluster
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
+    with pytest.raises(mp.ConfigError, match=r"mjx-pick\[cluster\]"):
+        cluster.import_ray()
+    with pytest.raises(mp.ConfigError, match=r"mjx-pick\[cluster\]"):
+        evaluate(block, n=8, grasp=GRASP, backend="mujoco", ray="auto")
+
+
+def test_min_force_on_a_cluster_is_refused_before_connecting(block):
+    with pytest.raises(mp.ConfigError, match="--min-force"):
+        evaluate(block, n=8, grasp=GRASP, min_force=True, ray="127.0.0.1:1")
+
+
+def test_importing_the_package_does_not_import_ray():
+    code = "import sys, mjx_pick, mjx_pick.cluster; assert 'ray' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=tempfile.gettempdir())
+
+
+def test_cluster_backend_choice():
+    from mjx_pick.cluster import cluster_backend, plan_slots
+
+    cpu = {"NodeID": "a", "Resources": {"CPU": 8.0}}
+    gpu = {"NodeID": "b", "Resources": {"CPU": 16.0, "GPU": 4.0}}
+    assert cluster_backend("auto", [cpu]) == "mujoco"
+    assert cluster_backend("auto", [cpu, gpu]) == "warp"
+    with pytest.raises(mp.ConfigError, match="no GPU"):
+        cluster_backend("warp", [cpu])
+    # one C-engine actor per CPU node on all its CPUs; one actor per GPU for the GPU backend
+    (slot,) = plan_slots("mujoco", cpu)
+    assert (slot.num_cpus, slot.num_gpus, slot.nthread) == (8, 0, 8)
+    slots = plan_slots("warp", gpu)
+    assert len(slots) == 4 and all(s.num_gpus == 1 and s.num_cpus == 4 for s in slots)
+    assert plan_slots("warp", cpu) == []
