@@ -14,8 +14,8 @@ Estimators (benchmarks/calibration.py compares them at equal budgets; RESULTS.md
 * ``smoothed`` -- optax Adam on the gradient of the loss smoothed with a Gaussian along
   each parameter, E[L(theta + sigma Z e_i)], by Gauss-Hermite quadrature (symmetric
   node pairs; 1 + 2 x pairs x P vectors per step): deterministic, no derivatives, sees
-  across flips of an outcome. The spread shrinks over the fit; the answer averages the
-  last quarter of the iterates (Polyak-Ruppert).
+  across flips of an outcome. The spread shrinks over the fit; the answer is the
+  iterate with the lowest loss (the simulation is deterministic).
 * ``random`` -- uniform draws in the bounds, best so far.
 * ``cma`` -- CMA-ES (the ``cma`` package, N. Hansen's reference implementation) in
   theta space: a population per step, step size and covariance adapted.
@@ -89,8 +89,8 @@ class GradState(NamedTuple):
     theta: np.ndarray  # (P,) current iterate
     opt_state: Any  # optax Adam state (pytree of (P,) arrays)
     step: int
-    iterates: np.ndarray  # (step, P) every iterate so far (for the average)
-    last_loss: float  # loss at the last iterate (nan before the first step)
+    iterates: np.ndarray  # (step, P) every iterate simulated so far
+    losses: np.ndarray  # (step,) the loss at each of them
     grad: np.ndarray  # (P,) last gradient
 
 
@@ -134,7 +134,7 @@ def smoothed(steps: int, learning_rate: float = 0.1, samples: int = 2, sigma: fl
             grad = smoothed_from_losses(losses, p, samples, spread(state.step))
         return _adam_step(opt, state, grad, float(losses[0]))
 
-    return Estimator("smoothed", init, ask, tell, _polyak)
+    return Estimator("smoothed", init, ask, tell, _best_iterate)
 
 
 def jvp(steps: int, learning_rate: float = 0.1):
@@ -161,7 +161,7 @@ def jvp(steps: int, learning_rate: float = 0.1):
             raise ConfigError("the jvp estimator needs the forward-mode gradient")
         return _adam_step(opt, state, grad, float(np.asarray(losses)[0]))
 
-    return Estimator("jvp", init, ask, tell, _polyak)
+    return Estimator("jvp", init, ask, tell, _best_iterate)
 
 
 def _adam_step(opt, state: GradState, grad, loss: float) -> GradState:
@@ -170,17 +170,18 @@ def _adam_step(opt, state: GradState, grad, loss: float) -> GradState:
         raise FloatingPointError("gradient is not finite")
     updates, opt_state = opt.update(jnp.asarray(grad, jnp.float32), state.opt_state)
     theta = np.asarray(optax.apply_updates(jnp.asarray(state.theta), updates), np.float32)
-    iterates = np.concatenate([state.iterates, theta[None]])
-    return GradState(theta, opt_state, state.step + 1, iterates, loss, grad)
+    # the iterate just simulated (state.theta) and its loss
+    iterates = np.concatenate([state.iterates, state.theta[None]])
+    losses = np.append(state.losses, loss)
+    return GradState(theta, opt_state, state.step + 1, iterates, losses, grad)
 
 
-def _polyak(state: GradState) -> np.ndarray:
-    """The mean of the last quarter of the iterates: the smoothed gradient is noisy and
-    outcome data are flat near the optimum."""
-    if not len(state.iterates):
+def _best_iterate(state: GradState) -> np.ndarray:
+    """The simulated iterate with the lowest loss (the simulation is deterministic: its
+    loss needs no averaging; an unsimulated last step is no answer)."""
+    if not len(state.losses):
         return state.theta
-    k = max(1, len(state.iterates) // 4)
-    return np.mean(state.iterates[-k:], axis=0).astype(np.float32)
+    return state.iterates[int(np.nanargmin(state.losses))].astype(np.float32)
 
 
 # ------------------------------------------------------------------------- search
