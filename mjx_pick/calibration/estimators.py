@@ -120,7 +120,7 @@ def smoothed(steps: int, learning_rate: float = 0.1, samples: int = 2, sigma: fl
             opt.init(jnp.asarray(theta0)),
             0,
             np.zeros((0, p), np.float32),
-            math.nan,
+            np.zeros(0),
             np.zeros(p),
         )
 
@@ -149,7 +149,7 @@ def jvp(steps: int, learning_rate: float = 0.1):
             opt.init(jnp.asarray(theta0)),
             0,
             np.zeros((0, p), np.float32),
-            math.nan,
+            np.zeros(0),
             np.zeros(p),
         )
 
