@@ -9,6 +9,9 @@ by every estimator with the same budget of pick-point simulations:
 * 3: + the gripper's force offset and table friction;
 * 5: + pad torsional friction and pad stiffness.
 
+With ``--gradients``, also forward-mode derivatives through MJX against finite
+differences (MJX compiles for minutes on a CPU).
+
 Estimators: ``smoothed`` (the default: Gauss-Hermite smoothed gradient + Adam),
 ``random`` (uniform search), ``cma`` (CMA-ES, the ``cma`` package), ``lsq``
 (Levenberg-Marquardt on the residuals, ``mujoco.sysid``). Per fit: the best loss
@@ -123,37 +126,87 @@ def fit(obj, base, train, held, names, estimator, budget, seed):
         "held_out_before": before,
         "held_out_after": res.accuracy_after["correct"] if res.accuracy_after else None,
         "held_out_rows": len(held),
-        "curve": [(h["rollouts"], h["best_loss"]) for h in res.history],
+        "curve": [(h["rollouts"], h["best_loss"], h["wall_s"]) for h in res.history],
     }
+
+
+def gradient_quality(obj, base, train) -> dict:
+    """Forward-mode derivatives through MJX (estimator 'jvp') against central finite
+    differences of the same jitted loss, two step sizes, three parameters."""
+    names = ["pad_friction", "table_friction", "pad_stiffness_n_per_mm"]
+    sub = train.take(np.arange(0, len(train), 3))
+    problem = cal.Problem(obj, sub, names, base, backend="mjx")
+    theta = problem.space.theta([0.62, 0.2, problem.space.hi[2] / 2])
+    t0 = time.perf_counter()
+    loss, grad = problem.mjx_loss_and_grad(theta)
+    out = {
+        "names": names,
+        "rows": len(sub),
+        "loss": loss,
+        "jvp": grad.tolist(),
+        "jvp_first_call_s": time.perf_counter() - t0,
+        "fd": {},
+    }
+    f = problem._jvp
+    for h in (0.03, 0.1):
+        fd = []
+        for i in range(len(names)):
+            e = np.zeros(len(names), np.float32)
+            e[i] = h
+            fd.append((float(f(theta + e)[0]) - float(f(theta - e)[0])) / (2 * h))
+        rel = [abs(a - b) / max(abs(b), 1e-9) for a, b in zip(grad, fd, strict=True)]
+        out["fd"][str(h)] = {"grad": fd, "relative_error": rel}
+    return out
+
+
+def to_target(fits: list[dict]) -> None:
+    """Per fit, simulations and wall time until its best loss came within 10 % of the
+    way from the start's loss to the best loss ANY estimator found on that problem
+    (the hidden parameters' own loss is no reachable target: see RESULTS.md)."""
+    for p in sorted({f["hidden_parameters"] for f in fits}):
+        group = [f for f in fits if f["hidden_parameters"] == p]
+        best = min(f["best_loss"] for f in group)
+        target = best + 0.1 * (group[0]["loss_start"] - best)
+        for f in group:
+            hit = next((c for c in f["curve"] if c[1] <= target), None)
+            f["common_target"] = target
+            f["sims_to_common_target"] = hit[0] if hit else None
+            f["wall_s_to_common_target"] = hit[2] if hit else None
 
 
 def table(path: str) -> None:
     report = json.loads(Path(path).read_text())
+    to_target(report["fits"])
     print(
-        "| P | estimator | sims to target (wall s) | best loss (hidden's) | "
-        "relative error per parameter (identified?) | held-out before -> after |"
+        "| P | estimator | sims (wall s) to the common target | best loss (start; at hidden) "
+        "| relative error per parameter (n.i.: not identified) | held-out before -> after |"
     )
     print("|---|---|---|---|---|---|")
     for r in report["fits"]:
         to = (
-            f"{r['rollouts_to_target']} ({r['wall_s_to_target']:.0f} s)"
-            if r["rollouts_to_target"] is not None
-            else f"not in {r['rollouts']}"
+            f"{r['sims_to_common_target']} ({r['wall_s_to_common_target']:.0f} s)"
+            if r["sims_to_common_target"] is not None
+            else f"not in {r['rollouts']} ({r['wall_s']:.0f} s)"
         )
         err = ", ".join(
-            f"{n.split('_n')[0].replace('_', ' ')} {100 * r['relative_error'][n]:.0f} %"
+            f"{SHORT[n]} {100 * r['relative_error'][n]:.1f} %"
             f"{'' if r['identified'][n] else ' (n.i.)'}"
             for n in r["names"]
         )
-        held = (
-            f"{r['held_out_before']} -> {r['held_out_after']} / {r['held_out_rows']}"
-            if r["held_out_after"] is not None
-            else "-"
-        )
+        held = f"{r['held_out_before']} -> {r['held_out_after']} / {r['held_out_rows']}"
         print(
-            f"| {r['hidden_parameters']} | {r['estimator']} | {to} | {r['best_loss']:.3f} "
-            f"({r['loss_hidden']:.3f}) | {err} | {held} |"
+            f"| {r['hidden_parameters']} | {r['estimator']} | {to} | {r['best_loss']:.2f} "
+            f"({r['loss_start']:.1f}; {r['loss_hidden']:.2f}) | {err} | {held} |"
         )
+
+
+SHORT = {
+    "pad_friction": "mu_pad",
+    "force_offset_n": "offset",
+    "table_friction": "mu_table",
+    "pad_torsion_mm": "torsion",
+    "pad_stiffness_n_per_mm": "k_pad",
+}
 
 
 def main() -> None:
@@ -171,6 +224,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="benchmarks/out/calibration_estimators.json")
     ap.add_argument("--table", help="print the RESULTS.md table of this JSON and stop")
+    ap.add_argument(
+        "--gradients",
+        action="store_true",
+        help="also: forward-mode (MJX) gradients against finite differences",
+    )
     args = ap.parse_args()
     if args.table:
         table(args.table)
@@ -188,6 +246,10 @@ def main() -> None:
     }
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    if args.gradients:
+        obj, base, train, _ = setup(args.rows, args.seed, SETS[1])
+        report["gradient_quality"] = gradient_quality(obj, base, train)
+        print(json.dumps(report["gradient_quality"]), flush=True)
     for p in (int(x) for x in args.params.split(",")):
         obj, base, train, held = setup(args.rows, args.seed, SETS[p])
         budget = (args.budget + 60 * (p - 1)) * len(train)
