@@ -219,6 +219,14 @@ def test_fit_steers_away_from_a_diverging_region(heavy_block, synthetic, monkeyp
     assert res.values["pad_friction"] == pytest.approx(HIDDEN, abs=0.08)
 
 
+def test_a_nan_gradient_stops_the_fit_with_a_clear_error(heavy_block, synthetic, monkeypatch):
+    # a NaN turned into a zero would be a silent "no change"
+    problem = cal.Problem(heavy_block, synthetic, ["pad_friction"], mp.Settings(LIGHT, grasp=GRASP))
+    monkeypatch.setattr(problem, "mjx_loss_and_grad", lambda th: (1.0, np.array([np.nan])))
+    with pytest.raises(mp.ConfigError, match="step 0: the 'jvp' gradient is not finite at"):
+        cal.calibrate(problem, steps=3, estimator="jvp", identify=False)
+
+
 def test_estimators_on_known_losses():
     # smoothed gradient = the gradient on a quadratic; on a step, the Gaussian density
     def quad(th):
