@@ -213,7 +213,9 @@ def test_fit_steers_away_from_a_diverging_region(heavy_block, synthetic, monkeyp
         }
 
     monkeypatch.setattr(problem, "simulate", fake)
-    res = cal.calibrate(problem, steps=40, learning_rate=0.3, sigma=0.5, identify=False)
+    res = cal.calibrate(
+        problem, estimator="smoothed", steps=40, learning_rate=0.3, sigma=0.5, identify=False
+    )
     assert res.history[0]["diverged"] == len(synthetic)
     assert res.history[-1]["diverged"] == 0
     assert res.values["pad_friction"] == pytest.approx(HIDDEN, abs=0.08)
@@ -288,13 +290,14 @@ def test_identifiability_outcomes_against_traces(heavy_block):
 
 def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_block, synthetic):
     assert 0 < synthetic.successes.sum() < len(synthetic), "the data must hold both outcomes"
-    # the fit starts below the hidden value: with the soft-finger pads this data's
-    # outcome + lift-time loss is not monotone between 0.62 and Table 1's 0.86, where a
-    # local gradient fit stalls; below 0.62 it falls monotonically
+    # the fit starts below the hidden value: this loss is not monotone between 0.62 and
+    # Table 1's 0.86, where a local gradient fit stalls; below 0.62 it falls
     base = mp.Settings(LIGHT, mp.ContactParams(pad_friction=0.45), grasp=GRASP)
     problem = cal.Problem(heavy_block, synthetic, ["pad_friction"], base, backend="mujoco")
     before = problem.loss(problem.space.theta([0.45])[None])[0]
-    kw = dict(steps=12, checkpoint_every=6)
+    # the smoothed gradient from below: on these 24 outcome + lift-time rows CMA-ES (the
+    # default) stopped in 8 steps at 0.72, a local basin of this loss (RESULTS.md)
+    kw = dict(estimator="smoothed", steps=12, checkpoint_every=6)
     whole = cal.calibrate(problem, **kw)
     mu = whole.values["pad_friction"]
     assert mu == pytest.approx(HIDDEN, rel=0.15)

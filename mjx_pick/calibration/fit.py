@@ -28,7 +28,7 @@ class CalibrationResult:
     accuracy_before: dict | None
     accuracy_after: dict | None
     out_dir: Path | None
-    estimator: str = "smoothed"
+    estimator: str = "cma"
     optimum: dict[str, float] | None = None  # the estimator's answer, every parameter
     identifiability: dict | None = None
     not_identified: tuple[str, ...] = ()
@@ -66,7 +66,7 @@ def calibrate(
     *,
     steps: int = 200,
     learning_rate: float = 0.1,
-    estimator: str = "smoothed",
+    estimator: str = "cma",
     samples: int = 2,
     sigma: float = 0.2,
     batch: int | None = None,
@@ -85,7 +85,8 @@ def calibrate(
 
     Args:
       steps: estimator steps (each one engine batch).
-      estimator: 'smoothed' (default), 'random', 'cma' or 'jvp' (MJX forward mode).
+      estimator: 'cma' (default: CMA-ES won the equal-budget comparison,
+        benchmarks/RESULTS.md), 'smoothed', 'random' or 'jvp' (MJX forward mode).
       learning_rate, samples, sigma: Adam's step and the smoothing's quadrature node
         pairs per parameter and spread in theta (smoothed; learning_rate: jvp too).
       batch: draws per step (random); popsize: CMA-ES population; seed: both.
