@@ -112,9 +112,9 @@ def _objects(args):
 
 def _settings(args):
     from mjx_pick.grasp import GraspConfig
-    from mjx_pick.physics import ContactParams, SolverParams
+    from mjx_pick.physics import ContactParams, SolverParams, load_contact
 
-    contact = load_toml(ContactParams, args.contact) if args.contact else ContactParams()
+    contact = load_contact(args.contact)[0] if args.contact else ContactParams()
     solver = load_toml(SolverParams, args.solver) if args.solver else SolverParams()
     grasp = load_toml(GraspConfig, args.grasp) if args.grasp else GraspConfig()
     contact = _override(contact, pad_friction=args.pad_friction, table_friction=args.table_friction)
@@ -128,6 +128,35 @@ def _settings(args):
         fingertip_clearance_mm=args.fingertip_clearance_mm,
     )
     return contact, solver, grasp, _pick_config(args)
+
+
+def _check_contact_file(args, obj, gripper, grasp, solver) -> None:
+    """A contact.toml fitted for another object, gripper or procedure: say so (stderr)
+    before any simulation; it still runs (a user may mean it)."""
+    if not getattr(args, "contact", None):
+        return
+    from mjx_pick.calibration.outputs import mismatch
+    from mjx_pick.physics import load_contact
+
+    _, meta = load_contact(args.contact)
+    fit = meta.get("fitted_for")
+    if not fit:
+        return
+    diff = mismatch(fit, obj, gripper, grasp, solver)
+    if diff:
+        print(
+            f"warning: --contact {args.contact} was fitted for another set-up: "
+            + "; ".join(diff)
+            + ". Its parameters may not hold here.",
+            file=sys.stderr,
+        )
+    offset = (meta.get("calibrated") or {}).get("force_offset_n")
+    if offset:
+        print(
+            f"note: the fit behind --contact {args.contact} found the gripper squeezes "
+            f"F_d {offset:+.3g} N; --grip-force-n sets what is simulated",
+            file=sys.stderr,
+        )
 
 
 def _pick_config(args):
@@ -148,6 +177,7 @@ def cmd_evaluate(args) -> int:
 
     obj, gripper = _objects(args)
     contact, solver, grasp, picks_cfg = _settings(args)
+    _check_contact_file(args, obj, gripper, grasp, solver)
     ev = evaluate(
         obj,
         gripper,
@@ -183,6 +213,7 @@ def _base_settings(args):
 
     obj, gripper = _objects(args)
     contact, solver, grasp, picks_cfg = _settings(args)
+    _check_contact_file(args, obj, gripper, grasp, solver)
     return obj, Settings(gripper, contact, solver, grasp), picks_cfg
 
 
@@ -374,54 +405,88 @@ def cmd_robust(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    from mjx_pick import calibrate as cal
+    from mjx_pick import calibration as cal
 
     obj, base, picks_cfg = _base_settings(args)
     outcomes = cal.read_outcomes(args.outcomes)
     names = cal.canonical_params(args.params)
+    bounds = _name_ranges(args.bounds, "--bounds")
+    priors = _name_ranges(args.prior, "--prior")
     backend = "mjx" if args.estimator == "jvp" else args.backend
-    problem = cal.Problem(
-        obj,
-        outcomes,
-        names,
-        base,
-        temperature_mm=args.temperature_mm,
-        pick_config=picks_cfg,
-        backend=backend,
+    kw = dict(
+        temperature_mm=args.temperature_mm, pick_config=picks_cfg, bounds=bounds, priors=priors
     )
+    problem = cal.Problem(obj, outcomes, names, base, backend=backend, **kw)
     holdout = None
     if args.holdout:
         holdout = cal.Problem(
-            obj,
-            cal.read_outcomes(args.holdout),
-            names,
-            base,
-            temperature_mm=args.temperature_mm,
-            pick_config=picks_cfg,
-            backend=args.backend,
+            obj, cal.read_outcomes(args.holdout), names, base, backend=args.backend, **kw
         )
 
     def log(entry):
         if entry["step"] % args.log_every == 0:
             values = ", ".join(f"{k} {v:.4g}" for k, v in entry["values"].items())
             blown = f"  ({entry['diverged']} rows diverged)" if entry.get("diverged") else ""
-            print(f"step {entry['step']:4d}  loss {entry['loss']:.4f}  {values}{blown}", flush=True)
+            print(
+                f"step {entry['step']:4d}  loss {entry['loss']:.4f}  best {entry['best_loss']:.4f}"
+                f"  {values}{blown}",
+                flush=True,
+            )
 
-    res = cal.calibrate(
-        problem,
-        steps=args.steps,
-        learning_rate=args.lr,
-        estimator=args.estimator,
-        samples=args.samples,
-        sigma=args.sigma,
-        checkpoint_every=args.checkpoint_every,
-        out=args.out,
-        resume=args.resume,
-        holdout=holdout,
-        log=log,
-    )
+    if args.estimator == "lsq":
+        if args.resume:
+            raise ConfigError("--resume: estimator 'lsq' keeps no checkpoints; run it again")
+        from mjx_pick.rundir import claim, config_hash, finish
+
+        request = {
+            "outcomes": str(args.outcomes),
+            "names": list(names),
+            "estimator": "lsq",
+            "steps": args.steps,
+            "bounds": bounds,
+            "priors": priors,
+        }
+        claim(Path(args.out), "calibrate", config_hash(request), resume=False)
+        res = cal.least_squares(
+            problem,
+            max_iters=args.steps,
+            budget=args.budget,
+            holdout=holdout,
+            identify=not args.no_identify,
+            log=log,
+        )
+        res.out_dir = Path(args.out)
+        cal.write_result(res, problem, res.out_dir)
+        meta = problem.engine.describe(res.wall_s)
+        meta["timing"]["rollouts"] = res.rollouts
+        finish(res.out_dir, command="calibrate", config=request, **meta)
+    else:
+        res = cal.calibrate(
+            problem,
+            steps=args.steps,
+            learning_rate=args.lr,
+            estimator=args.estimator,
+            samples=args.samples,
+            sigma=args.sigma,
+            seed=args.seed,
+            budget=args.budget,
+            checkpoint_every=args.checkpoint_every,
+            out=args.out,
+            resume=args.resume,
+            holdout=holdout,
+            identify=not args.no_identify,
+            log=log,
+        )
+    ident = res.identifiability or {}
     for name in names:
-        print(f"{name}: {res.initial[name]:.4g} -> {res.values[name]:.4g}")
+        info = ident.get(name)
+        where = ""
+        if info:
+            lo, hi = info["interval"]
+            where = f"  (95 % {lo:.4g}-{hi:.4g})" + (
+                "" if info["identified"] else "  NOT identified: kept at its start"
+            )
+        print(f"{name}: {res.initial[name]:.4g} -> {res.values[name]:.4g}{where}")
     for label, acc in (("before", res.accuracy_before), ("after", res.accuracy_after)):
         if acc:
             print(f"held-out accuracy {label}: {acc['correct']}/{acc['total']}")
@@ -430,6 +495,22 @@ def cmd_calibrate(args) -> int:
         f"use: mjx-pick evaluate ... --contact {args.out}/contact.toml"
     )
     return 0
+
+
+def _name_ranges(items, flag: str) -> dict:
+    """['name=a:b', ...] -> {name: (a, b)}; a bad item is an error naming it."""
+    out = {}
+    for item in items or []:
+        name, _, rng = item.partition("=")
+        parts = rng.split(":")
+        try:
+            a, b = (float(x) for x in parts)
+        except ValueError:
+            raise ConfigError(
+                f"{flag} {item!r}: expected NAME=A:B with two numbers (e.g. pad_friction=0.3:1.2)"
+            ) from None
+        out[name.strip()] = (a, b)
+    return out
 
 
 def cmd_report(args) -> int:
@@ -702,25 +783,70 @@ def build_parser() -> argparse.ArgumentParser:
     cb.add_argument(
         "--params",
         default="pad_friction",
-        help="comma-separated: pad_friction, table_friction, stiffness, damping, ...",
+        help="comma-separated, fitted jointly: pad_friction, pad_torsion_mm, table_friction, "
+        "pad_stiffness_n_per_mm, pad_damping_ns_per_mm, table_stiffness_n_per_mm, "
+        "table_damping_ns_per_mm, force_offset_n (aliases: friction, torsion, stiffness, "
+        "damping, force_offset); default %(default)s",
     )
-    cb.add_argument("--steps", type=int, default=100)
-    cb.add_argument("--lr", type=float, default=0.1, help="Adam step in the bounded space")
+    cb.add_argument(
+        "--bounds",
+        action="append",
+        metavar="NAME=LO:HI",
+        help="a parameter's bounds, natural units (repeatable)",
+    )
+    cb.add_argument(
+        "--prior",
+        action="append",
+        metavar="NAME=MEAN:SD",
+        help="a parameter's Gaussian prior (SD in log units for stiffness, damping "
+        "and torsion; default: mean the start, SD half the bounds; repeatable)",
+    )
+    cb.add_argument(
+        "--steps",
+        type=int,
+        default=100,
+        help="estimator steps (lsq: iterations); default %(default)s",
+    )
+    cb.add_argument("--budget", type=int, help="stop after this many pick-point simulations")
+    cb.add_argument(
+        "--lr",
+        type=float,
+        default=0.1,
+        help="Adam step in the bounded space (smoothed, jvp); default %(default)s",
+    )
     cb.add_argument(
         "--estimator",
-        choices=("smoothed", "jvp"),
-        default="smoothed",
-        help="smoothed: antithetic Gaussian smoothing (any backend); jvp: forward-mode through MJX",
+        choices=("smoothed", "random", "cma", "lsq", "jvp"),
+        default="cma",
+        help="cma: CMA-ES (default: it reached the common target on 1, 3 and 5 hidden "
+        "parameters, benchmarks/RESULTS.md); smoothed: Gauss-Hermite smoothed gradient + "
+        "Adam; random: uniform search; lsq: Levenberg-Marquardt on the residuals "
+        "(mujoco.sysid); jvp: forward mode through MJX",
     )
     cb.add_argument(
         "--samples",
         type=int,
         default=2,
-        help="quadrature node pairs per parameter and step (smoothed)",
+        help="quadrature node pairs per parameter and step (smoothed); default %(default)s",
     )
-    cb.add_argument("--sigma", type=float, default=0.2, help="smoothing spread (bounded space)")
-    cb.add_argument("--temperature-mm", type=float, default=2.0)
+    cb.add_argument(
+        "--sigma",
+        type=float,
+        default=0.2,
+        help="smoothing spread (bounded space); default %(default)s",
+    )
+    cb.add_argument(
+        "--temperature-mm",
+        type=float,
+        default=2.0,
+        help="outcome smoothing, mm of final lift; default %(default)s",
+    )
     cb.add_argument("--holdout", help="held-out outcomes CSV for accuracy before/after")
+    cb.add_argument(
+        "--no-identify",
+        action="store_true",
+        help="skip the intervals / identifiability after the fit",
+    )
     cb.add_argument("--checkpoint-every", type=int, default=10)
     cb.add_argument("--log-every", type=int, default=10)
     cb.add_argument("--resume", action="store_true")

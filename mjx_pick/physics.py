@@ -203,15 +203,33 @@ def spring_solref(
     Returns:
       (-k, -b) with k in 1/s^2 and b in 1/s, and the names of the clamped terms.
     """
-    k = per_unit_mass(stiffness_n_per_mm, mass_kg)
-    b = per_unit_mass(damping_ns_per_mm, mass_kg)
+    k, b = solref_terms(stiffness_n_per_mm, damping_ns_per_mm, mass_kg, timeconst_s)
     k_max, b_max = (per_unit_mass(v, mass_kg) for v in stiffest_spring(mass_kg, timeconst_s))
     clamped = []
-    if k > k_max:
-        k, clamped = k_max, clamped + ["stiffness"]
-    if b > b_max:
-        b, clamped = b_max, clamped + ["damping"]
-    return (-k, -b), tuple(clamped)
+    if per_unit_mass(stiffness_n_per_mm, mass_kg) > k_max:
+        clamped.append("stiffness")
+    if per_unit_mass(damping_ns_per_mm, mass_kg) > b_max:
+        clamped.append("damping")
+    return (-float(k), -float(b)), tuple(clamped)
+
+
+def solref_terms(stiffness_n_per_mm, damping_ns_per_mm, mass_kg, timeconst_s, xp=np):
+    """(k [1/s^2], b [1/s]), the magnitudes of the negative solref of a spring-damper on
+    a body of mass_kg, each clamped to the stiffest stable contact. The one stiffness
+    and damping -> solref mapping: :func:`spring_solref` and calibration (arrays; xp=jnp
+    where it is differentiated) both use it."""
+    k_max, b_max = (per_unit_mass(v, mass_kg) for v in stiffest_spring(mass_kg, timeconst_s))
+    k = xp.minimum(per_unit_mass(stiffness_n_per_mm, mass_kg), k_max)
+    b = xp.minimum(per_unit_mass(damping_ns_per_mm, mass_kg), b_max)
+    return k, b
+
+
+def pad_torsion_m(pad_friction, pad_torsion_mm, patch_mm: tuple[float, float]):
+    """Torsional friction coefficient of the pad contacts, m: pad_torsion_mm when set,
+    else mu_pad * the patch's mean radius (module docstring). Works on arrays."""
+    if pad_torsion_mm is not None:
+        return pad_torsion_mm * 1e-3
+    return pad_friction * patch_mean_radius_mm(*patch_mm) * 1e-3
 
 
 def patch_mean_radius_mm(width_mm: float, height_mm: float, n: int = 200) -> float:
@@ -242,13 +260,9 @@ def mujoco_contact(
         contact.table_stiffness_n_per_mm, contact.table_damping_ns_per_mm, mass_kg, tc
     )
     mu = contact.pad_friction
-    if contact.pad_torsion_mm is not None:
-        torsion_mm = contact.pad_torsion_mm
-    else:
-        torsion_mm = mu * patch_mean_radius_mm(*patch_mm)
     return MujocoContact(
         pad_friction=mu,
-        pad_torsion_m=torsion_mm * 1e-3,
+        pad_torsion_m=float(pad_torsion_m(mu, contact.pad_torsion_mm, patch_mm)),
         table_friction=contact.table_friction,
         pad_solref=pad_ref,
         table_solref=tab_ref,
@@ -256,3 +270,26 @@ def mujoco_contact(
         table_solimp=tuple(contact.table_solimp),
         clamped=tuple(f"pad_{c}" for c in pad_c) + tuple(f"table_{c}" for c in tab_c),
     )
+
+
+# tables a calibration writes into contact.toml besides ContactParams' own keys
+CONTACT_META_TABLES = ("fitted_for", "calibrated")
+
+
+def load_contact(path) -> tuple[ContactParams, dict]:
+    """ContactParams from a TOML file, and its metadata tables (CONTACT_META_TABLES: what
+    a calibration fitted them for and its other results; empty for a plain file)."""
+    import tomllib
+    from pathlib import Path
+
+    from mjx_pick.config import from_mapping
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"ContactParams file {str(path)!r} does not exist")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
+    meta = {k: data.pop(k) for k in CONTACT_META_TABLES if isinstance(data.get(k), dict)}
+    return from_mapping(ContactParams, data, where=path.name), meta

@@ -31,7 +31,15 @@ LAYERS = {
     ),
     # engine: backends and the runner every study simulates through
     "engine": ("simulate", "engine", "backend_mjx", "backend_mujoco", "backend_warp", "cluster"),
-    "studies": ("evaluate", "sweep", "compare", "robustness", "calibrate", "throughput"),
+    "studies": (
+        "evaluate",
+        "sweep",
+        "compare",
+        "robustness",
+        "calibrate",
+        "calibration",
+        "throughput",
+    ),
     "outputs": ("report",),
     "interfaces": ("cli", "__init__", "__main__", "gui"),
 }
@@ -50,6 +58,8 @@ def modules():
         yield path.stem, path
     for path in sorted((ROOT / "kernels").glob("*.py")):
         yield "kernels", path
+    for path in sorted((ROOT / "mjx_pick" / "calibration").glob("*.py")):
+        yield "calibration", path  # the calibration package: a study
     for path in sorted((ROOT / "mjx_pick" / "gui").glob("*.py")):
         yield "gui", path  # the GUI package: the interface layer, like the CLI
 

@@ -1158,11 +1158,10 @@ class Page:
         self.cal_use.set_visibility(True)
 
     def use_calibration(self) -> None:
-        from mjx_pick.config import load_toml
-        from mjx_pick.physics import ContactParams
+        from mjx_pick.physics import load_contact
 
         try:
-            contact = load_toml(ContactParams, self.cal_contact)
+            contact, _ = load_contact(self.cal_contact)
         except ConfigError as err:
             self.cal_error.set_text(str(err))
             return

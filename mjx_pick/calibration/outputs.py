@@ -1,0 +1,193 @@
+"""What a fit writes: contact.toml (for evaluate --contact, with what it was fitted for),
+calibration.json, loss.png, report.md; and the check of a contact.toml against a run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from mjx_pick.config import to_dict, to_toml, write_atomic, write_json
+
+# procedure settings that do not change what the contact parameters mean
+_PROCEDURE_FREE = ("grip_force_n",)
+
+
+def fitted_for(problem) -> dict:
+    """What a fit's contact parameters belong to: the object, the gripper and the
+    procedure (grasp settings but F_d, which each measured row sets; the time step)."""
+    s = problem.settings
+    obj = problem.object
+    grasp = {k: v for k, v in to_dict(s.grasp).items() if k not in _PROCEDURE_FREE}
+    return {
+        "object": obj.name,
+        "object_mass_g": round(obj.mass_kg * 1e3, 4),
+        "gripper": s.gripper.name,
+        "timestep_s": s.solver.timestep_s,
+        "rows": len(problem.outcomes),
+        "procedure": grasp,
+    }
+
+
+def mismatch(meta: dict, obj, gripper, grasp, solver) -> list[str]:
+    """How a run differs from what a contact.toml was fitted for (empty: it matches).
+
+    meta: the contact file's ``fitted_for`` table (``physics.load_contact``)."""
+    out = []
+    if meta.get("object") not in (None, obj.name):
+        out.append(f"object {meta['object']!r} (this run: {obj.name!r})")
+    mass = meta.get("object_mass_g")
+    if mass is not None and abs(mass - obj.mass_kg * 1e3) > 1e-3 * max(mass, 1e-9):
+        out.append(f"object mass {mass:g} g (this run: {obj.mass_kg * 1e3:g} g)")
+    if meta.get("gripper") not in (None, gripper.name):
+        out.append(f"gripper {meta['gripper']!r} (this run: {gripper.name!r})")
+    ts = meta.get("timestep_s")
+    if ts is not None and abs(ts - solver.timestep_s) > 1e-12:
+        out.append(f"solver.timestep_s {ts:g} (this run: {solver.timestep_s:g})")
+    now = {k: v for k, v in to_dict(grasp).items() if k not in _PROCEDURE_FREE}
+    for k, v in (meta.get("procedure") or {}).items():
+        if k in now and _differs(v, now[k]):
+            out.append(f"grasp.{k} {v!r} (this run: {now[k]!r})")
+    return out
+
+
+def _differs(a, b) -> bool:
+    if isinstance(a, int | float) and isinstance(b, int | float):
+        return abs(float(a) - float(b)) > 1e-9 * max(1.0, abs(float(a)))
+    return a != b
+
+
+def contact_toml(result, problem) -> str:
+    """ContactParams as TOML, then [fitted_for] and [calibrated] (read back by
+    ``physics.load_contact``; a plain ``load_toml`` rejects them by design)."""
+    text = to_toml(result.contact)
+    meta = fitted_for(problem)
+    proc = meta.pop("procedure")
+    lines = ["", "[fitted_for]"]
+    lines += [f"{k} = {_value(v)}" for k, v in meta.items()]
+    lines += ["", "[fitted_for.procedure]"]
+    lines += [f"{k} = {_value(v)}" for k, v in proc.items() if v is not None]
+    lines += ["", "[calibrated]"]
+    lines.append(f"parameters = {_value(list(problem.names))}")
+    lines.append(f"not_identified = {_value(list(result.not_identified))}")
+    if "force_offset_n" in result.values:
+        # not a contact parameter: the gripper squeezes F_d + this when set to F_d
+        lines.append(f"force_offset_n = {result.values['force_offset_n']!r}")
+    return text + "\n".join(lines) + "\n"
+
+
+def _value(v) -> str:
+    import json
+
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int | float):
+        return repr(v)
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    return json.dumps(str(v))
+
+
+def write_result(result, problem, out_dir: Path) -> None:
+    """contact.toml, calibration.json, loss.png, report.md (each written atomically)."""
+    space = problem.space
+    write_atomic(out_dir / "contact.toml", contact_toml(result, problem))
+    write_json(
+        out_dir / "calibration.json",
+        {
+            "parameters": list(problem.names),
+            "estimator": result.estimator,
+            "initial": result.initial,
+            "fitted": result.values,
+            "optimum": result.optimum,
+            "not_identified": list(result.not_identified),
+            "identifiability": result.identifiability,
+            "bounds": {
+                n: [float(a), float(b)]
+                for n, a, b in zip(space.names, space.lo, space.hi, strict=True)
+            },
+            "priors_z": {
+                n: {"mean": float(m), "sd": float(s), "log": bool(lg)}
+                for n, m, s, lg in zip(
+                    space.names, space.prior_mean, space.prior_sd, space.log, strict=True
+                )
+            },
+            "noise": dataclasses.asdict(problem.noise),
+            "trace_kinds": list(problem.outcomes.trace_kinds()),
+            "fitted_for": fitted_for(problem),
+            "contact": to_dict(result.contact),
+            "accuracy_before": result.accuracy_before,
+            "accuracy_after": result.accuracy_after,
+            "rows": len(problem.outcomes),
+            "rollouts": result.rollouts,
+            "history": result.history,
+        },
+    )
+    _loss_plot(result, out_dir / "loss.png")
+    write_atomic(out_dir / "report.md", report_md(result, problem))
+
+
+def _loss_plot(result, path: Path) -> None:
+    from mjx_pick.plots import new_figure, save_png
+
+    fig, ax = new_figure(figsize=(6, 3.5))
+    h = result.history
+    ax.plot([e["rollouts"] for e in h], [e["loss"] for e in h], label="loss at the step")
+    ax.plot([e["rollouts"] for e in h], [e["best_loss"] for e in h], label="best so far")
+    ax.set_xlabel("pick-point simulations")
+    ax.set_ylabel("loss (negative log likelihood per trial)")
+    ax.set_yscale("symlog", linthresh=1e-3)
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    save_png(fig, path)
+
+
+def report_md(result, problem) -> str:
+    ident = result.identifiability or {}
+    lines = [
+        "# Calibration",
+        "",
+        f"{len(problem.outcomes)} measured pick-points, {result.rollouts} simulations, "
+        f"estimator `{result.estimator}`.",
+        "",
+        "| parameter | initial | optimum | 95 % interval | identified | used |",
+        "|---|---|---|---|---|---|",
+    ]
+    for n in problem.names:
+        info = ident.get(n, {})
+        iv = info.get("interval")
+        iv_text = f"{iv[0]:.4g} - {iv[1]:.4g}" if iv else "-"
+        ok = {True: "yes", False: "**no**"}.get(info.get("identified"), "-")
+        opt = (result.optimum or result.values)[n]
+        lines.append(
+            f"| {n} | {result.initial[n]:.4g} | {opt:.4g} | {iv_text} | {ok} | "
+            f"{result.values[n]:.4g} |"
+        )
+    if result.not_identified:
+        lines += [
+            "",
+            f"Not identified by these data: {', '.join(result.not_identified)} -- kept at "
+            "their starting values (the data alone do not narrow them to half their "
+            "prior's range). Measure what moves them (traces, other grip forces) to fit them.",
+        ]
+    if result.history:
+        lines += [
+            "",
+            f"Loss {result.history[0]['loss']:.4f} -> best {result.history[-1]['best_loss']:.4f}"
+            f" in {len(result.history)} steps.",
+        ]
+    for label, acc in (("before", result.accuracy_before), ("after", result.accuracy_after)):
+        if acc:
+            lines.append(f"Held-out accuracy {label}: {acc['correct']}/{acc['total']}.")
+    if "force_offset_n" in result.values:
+        lines.append(
+            f"The gripper squeezes F_d {result.values['force_offset_n']:+.3g} N: simulate "
+            "with --grip-force-n corrected by it to predict the real cell."
+        )
+    lines += [
+        "",
+        "Use: `mjx-pick evaluate OBJECT --contact contact.toml` (same object, "
+        "gripper and procedure: evaluate warns otherwise).",
+    ]
+    return "\n".join(lines) + "\n"
