@@ -31,7 +31,7 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
-from mjx_pick.engine import Simulator
+from mjx_pick.engine import Simulator, marking_stops
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.objects import ObjectModel
@@ -162,7 +162,8 @@ def compare(
     n_cand = len(cand["pick_id"])
     sim = simulator or Simulator(obj, backend, batch_size)
     jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]
-    outs = sim.run(jobs)
+    with marking_stops(out, "compare"):
+        outs = sim.run(jobs)
     success = np.zeros((len(grippers), n_cand), bool)
     score = np.zeros((len(grippers), n_cand))
     tables = []

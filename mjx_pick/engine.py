@@ -36,6 +36,7 @@ gradient: :func:`differentiable_rollout` says why.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import threading
@@ -54,6 +55,7 @@ from mjx_pick.grasp import GraspConfig
 from mjx_pick.metrics import results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.pickpoints import PickBatch
+from mjx_pick.rundir import finish
 from mjx_pick.scene import Scene, build_scene
 from mjx_pick.simulate import (
     Backend,
@@ -496,6 +498,20 @@ def _quiet(done: int, total: int) -> None:
 
 
 # ------------------------------------------------------------------------- studies
+
+
+@contextlib.contextmanager
+def marking_stops(out_dir: str | Path | None, command: str) -> Iterator[None]:
+    """Inside it, a run stopped by a cancel event (:class:`Cancelled`) or Ctrl-C marks
+    the command's output folder "cancelled" or "interrupted" before the stop goes on:
+    a folder must never be left saying "running" (out_dir None: nothing to mark)."""
+    try:
+        yield
+    except (Cancelled, KeyboardInterrupt) as stop:
+        if out_dir is not None:
+            status = "cancelled" if isinstance(stop, Cancelled) else "interrupted"
+            finish(out_dir, status, command=command)
+        raise
 
 
 class Simulator:

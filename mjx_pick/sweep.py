@@ -32,7 +32,7 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, to_dict, write_json, write_parquet
-from mjx_pick.engine import Simulator
+from mjx_pick.engine import Simulator, marking_stops
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import rate_summary, results_table
@@ -234,7 +234,8 @@ def sweep(
     jobs = [(s, picks_for[s.gripper]) for s in settings]
     before = sim.engine.timing
     t0 = time.perf_counter()
-    outs = sim.run(jobs)
+    with marking_stops(out, "sweep"):
+        outs = sim.run(jobs)
     wall = time.perf_counter() - t0
     spent = sim.engine.timing - before  # this sweep's compiles and runs alone
     compile_s, run_s = spent.compile_s, spent.run_s

@@ -240,3 +240,34 @@ def test_the_backend_check_sees_a_direct_call(tmp_path):
         "def f(scene):\n    return s.make_backend('mujoco', scene)\n"
     )
     assert _names_used(src) & BACKEND_NAMES == {"make_backend"}
+
+
+def test_a_cancelled_sweep_or_compare_marks_its_folder(block, tmp_path):
+    # issue 21: a study stopped by its cancel event leaves its folder "cancelled", not
+    # "running" (evaluate does the same and keeps its chunks for --resume)
+    from mjx_pick.compare import compare
+
+    cancel = threading.Event()
+    cancel.set()
+    params = [ParamSpec.parse("contact.pad_friction=0.3,0.86")]
+    runs = {
+        "sweep": lambda sim, out: sweep(
+            block, params, mp.Settings(grasp=SHORT), n=2, out=out, simulator=sim
+        ),
+        "compare": lambda sim, out: compare(
+            block,
+            [mp.GripperSpec(name="test-jaw"), mp.load_gripper("robotiq-2f85")],
+            mp.Settings(grasp=SHORT),
+            n=2,
+            out=out,
+            simulator=sim,
+        ),
+    }
+    for command, run in runs.items():
+        out = tmp_path / command
+        sim = Simulator(block, engine=Engine("mujoco", 2, cancel=cancel))
+        with pytest.raises(Cancelled):
+            run(sim, out)
+        manifest = json.loads((out / "mjx_pick_run.json").read_text())
+        assert manifest["command"] == command and manifest["status"] == "cancelled"
+        assert json.loads((out / "run.json").read_text())["status"] == "cancelled"
