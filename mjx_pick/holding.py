@@ -109,15 +109,18 @@ def uniform_patch_points(width_m: float, height_m: float, n: int = 15) -> PadCon
 
 def _cone_rows(cone: str, mu: float, mu_t: float) -> np.ndarray:
     """Rows a with a . (f_1, f_2, tau) <= N bounding one point's friction: the pyramid's
-    four-plus-two faces of the L1 budget, or an outer polyhedron of the elliptic cone
-    (600 directions: within 0.3 % of the round cone)."""
+    eight faces of the L1 budget, or an outer polyhedron of the elliptic cone (600
+    directions: within 0.3 % of the round cone). Without torsion (mu_t 0) tau's column
+    is 0; the caller pins tau to 0."""
     if cone == "pyramidal":
-        signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
-        return signs / np.array([mu, mu, mu_t if mu_t > 0 else np.inf])
-    k = np.arange(600) + 0.5  # Fibonacci sphere
-    polar, azim = np.arccos(1 - 2 * k / 600), np.pi * (1 + 5**0.5) * k
-    u = np.stack([np.sin(polar) * np.cos(azim), np.sin(polar) * np.sin(azim), np.cos(polar)], 1)
-    return u / np.array([mu, mu, mu_t if mu_t > 0 else np.inf])
+        directions = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    else:
+        k = np.arange(600) + 0.5  # Fibonacci sphere
+        polar, azim = np.arccos(1 - 2 * k / 600), np.pi * (1 + 5**0.5) * k
+        directions = np.stack(
+            [np.sin(polar) * np.cos(azim), np.sin(polar) * np.sin(azim), np.cos(polar)], 1
+        )
+    return directions / np.array([mu, mu, mu_t if mu_t > 0 else np.inf])
 
 
 def hold_limit_m(

@@ -115,16 +115,7 @@ def smoothed(steps: int, learning_rate: float = 0.1, samples: int = 2, sigma: fl
         return sigma * (0.3 + 0.7 * 0.5 * (1 + math.cos(math.pi * frac)))
 
     def init(theta0):
-        theta0 = np.asarray(theta0, np.float32)
-        p = len(theta0)
-        return GradState(
-            theta0,
-            opt.init(jnp.asarray(theta0)),
-            0,
-            np.zeros((0, p), np.float32),
-            np.zeros(0),
-            np.zeros(p),
-        )
+        return _adam_init(opt, theta0)
 
     def ask(state):
         return smoothing_points(state.theta, samples, spread(state.step))
@@ -144,16 +135,7 @@ def jvp(steps: int, learning_rate: float = 0.1):
     opt = _adam(learning_rate, steps)
 
     def init(theta0):
-        theta0 = np.asarray(theta0, np.float32)
-        p = len(theta0)
-        return GradState(
-            theta0,
-            opt.init(jnp.asarray(theta0)),
-            0,
-            np.zeros((0, p), np.float32),
-            np.zeros(0),
-            np.zeros(p),
-        )
+        return _adam_init(opt, theta0)
 
     def ask(state):
         return state.theta[None]
@@ -164,6 +146,20 @@ def jvp(steps: int, learning_rate: float = 0.1):
         return _adam_step(opt, state, grad, float(np.asarray(losses)[0]))
 
     return Estimator("jvp", init, ask, tell, _best_iterate)
+
+
+def _adam_init(opt, theta0) -> GradState:
+    """The gradient estimators' start: no iterate yet, Adam's state at theta0."""
+    theta0 = np.asarray(theta0, np.float32)
+    p = len(theta0)
+    return GradState(
+        theta0,
+        opt.init(jnp.asarray(theta0)),
+        0,
+        np.zeros((0, p), np.float32),
+        np.zeros(0),
+        np.zeros(p),
+    )
 
 
 def _adam_step(opt, state: GradState, grad, loss: float) -> GradState:
