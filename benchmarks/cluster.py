@@ -33,7 +33,7 @@ from pathlib import Path
 
 import mjx_pick as mp
 from mjx_pick.cluster import free_ports, start_local_node, stop_local_node
-from mjx_pick.evaluate import evaluate
+from mjx_pick.evaluation import evaluate
 
 
 def local_cluster(n_nodes: int, cpus: int, logs: Path):

@@ -31,14 +31,14 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-from mjx_pick.kernels import grasp as gk
 
 import mjx_pick as mp
 from mjx_pick import mjcf_gripper
 from mjx_pick import pickpoints as pp
-from mjx_pick.compare import compare
+from mjx_pick.comparison import compare
 from mjx_pick.config import write_json
 from mjx_pick.engine import Engine
+from mjx_pick.kernels import grasp as gk
 from mjx_pick.simulate import make_inputs
 
 PARALLEL, LINKAGE = "robotiq-2f85", "robotiq-2f85-linkage"

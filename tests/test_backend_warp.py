@@ -14,12 +14,12 @@ import mujoco
 import mujoco.batch
 import numpy as np
 import pytest
-from mjx_pick.kernels import grasp as gk
 
 import mjx_pick as mp
 from mjx_pick import backend_warp as bw
 from mjx_pick import pickpoints as pp
 from mjx_pick.grasp import GraspConfig
+from mjx_pick.kernels import grasp as gk
 from mjx_pick.simulate import make_backend, make_inputs
 
 SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=10.0, hold_s=0.1)

@@ -11,7 +11,7 @@ import pytest
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick import calibrate as cal
+from mjx_pick import calibration as cal
 from mjx_pick.calibration import estimators as E
 from mjx_pick.calibration.parameters import contact_arrays_jnp, row_inputs
 from mjx_pick.cli import main

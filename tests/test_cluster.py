@@ -26,7 +26,7 @@ import mjx_pick as mp
 from mjx_pick import cli
 from mjx_pick.cluster import free_ports, session_pids, start_local_node, stop_local_node
 from mjx_pick.config import to_toml
-from mjx_pick.evaluate import evaluate
+from mjx_pick.evaluation import evaluate
 from mjx_pick.grasp import GraspConfig
 
 GRASP = GraspConfig(close_timeout_s=0.6, lift_height_mm=20.0, hold_s=0.2)

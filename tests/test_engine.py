@@ -12,9 +12,9 @@ import pytest
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
 from mjx_pick.engine import Cancelled, Engine, Simulator
-from mjx_pick.evaluate import evaluate
+from mjx_pick.evaluation import evaluate
 from mjx_pick.grasp import GraspConfig
-from mjx_pick.sweep import ParamSpec, sweep
+from mjx_pick.sweeps import ParamSpec, sweep
 
 SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
 # the solver the pinned results were taken with (impratio 1): these tests pin the
@@ -245,7 +245,7 @@ def test_the_backend_check_sees_a_direct_call(tmp_path):
 def test_a_cancelled_sweep_or_compare_marks_its_folder(block, tmp_path):
     # issue 21: a study stopped by its cancel event leaves its folder "cancelled", not
     # "running" (evaluate does the same and keeps its chunks for --resume)
-    from mjx_pick.compare import compare
+    from mjx_pick.comparison import compare
 
     cancel = threading.Event()
     cancel.set()

@@ -10,7 +10,7 @@ import pytest
 import mjx_pick as mp
 from mjx_pick import cli
 from mjx_pick.config import to_toml
-from mjx_pick.evaluate import evaluate, experiment_key
+from mjx_pick.evaluation import evaluate, experiment_key
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.metrics import COLUMNS
 
@@ -215,7 +215,7 @@ def test_resume_key_is_the_experiment_not_the_install(tmp_path, block):
     helper = tmp_path / "tests_key.py"
     helper.write_text(
         "import mjx_pick as mp\n"
-        "from mjx_pick.evaluate import experiment_key\n"
+        "from mjx_pick.evaluation import experiment_key\n"
         f"from mjx_pick.grasp import GraspConfig\nFAST = {FAST!r}\n"
         "def key(obj):\n"
         "    g = mp.GripperSpec()\n"

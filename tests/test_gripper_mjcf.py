@@ -18,7 +18,6 @@ import jax
 import mujoco
 import numpy as np
 import pytest
-from mjx_pick.kernels import grasp as gk
 from shapely.geometry import box
 
 import mjx_pick as mp
@@ -26,6 +25,7 @@ from mjx_pick import mjcf_gripper
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError
 from mjx_pick.grasp import GraspConfig
+from mjx_pick.kernels import grasp as gk
 from mjx_pick.simulate import addresses, make_backend, make_inputs
 
 LINKAGE = "robotiq-2f85-linkage"

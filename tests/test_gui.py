@@ -27,7 +27,7 @@ import pyarrow.parquet as pq
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-BLOCK = ROOT / "assets" / "objects" / "block.png"
+BLOCK = ROOT / "mjx_pick" / "assets" / "objects" / "block.png"
 ARTIFACTS = Path(os.environ.get("MJX_PICK_GUI_ARTIFACTS", ROOT / "tests" / "artifacts" / "gui"))
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 TIMEOUT_MS = 180_000  # a run on a busy 2-core CI machine
@@ -390,7 +390,7 @@ def test_studies_compare_and_calibrate(page, server):
     assert rows.first.inner_text().split()[1] == ranking[0]["gripper"]
 
     page.get_by_text("Calibrate contact parameters").click()
-    outcomes = ROOT / "assets" / "outcomes" / "block_1kg_rg2.csv"
+    outcomes = ROOT / "mjx_pick" / "assets" / "outcomes" / "block_1kg_rg2.csv"
     page.get_by_test_id("outcomes-upload").locator("input[type=file]").set_input_files(
         str(outcomes)
     )
@@ -413,7 +413,7 @@ def test_studies_compare_and_calibrate(page, server):
 
 def test_mesh_import_shows_its_outline(page, server):
     """A mesh (here a YCB marker in metres) instead of an image: its top-down outline."""
-    marker = ROOT / "assets" / "objects" / "ycb" / "040_large_marker.stl"
+    marker = ROOT / "mjx_pick" / "assets" / "objects" / "ycb" / "040_large_marker.stl"
     page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(marker))
     page.get_by_text("uploaded 040_large_marker.stl").wait_for()
     choose(page, "mesh unit", "m")

@@ -93,7 +93,8 @@ def test_sweep_values_from_start_end_step(start, end, step, expect):
 
 
 def test_uploads_are_checked_and_never_replace_another_file(tmp_path):
-    data = (Path(__file__).resolve().parents[1] / "assets" / "objects" / "block.png").read_bytes()
+    root = Path(__file__).resolve().parents[1]
+    data = (root / "mjx_pick" / "assets" / "objects" / "block.png").read_bytes()
     assert check_upload("block.png", len(data), data) == ""
     assert "not an image" in check_upload("notes.txt", 10)
     assert "too large" in check_upload("big.png", 21 * 2**20)

@@ -16,6 +16,7 @@ from shapely.geometry import Point, Polygon
 
 import mjx_pick as mp
 from mjx_pick import cli
+from mjx_pick.cli import inputs
 
 YCB = resources.files("mjx_pick.assets") / "objects" / "ycb"
 
@@ -105,7 +106,7 @@ def test_cli_pose_stable_reaches_the_importer(tmp_path):
         ["picks", str(path), "--unit", "mm", "--mass-g", "50", "--pose", "stable"]
         + ["--out", str(tmp_path / "out")]
     )
-    obj, _ = cli._objects(args)
+    obj, _ = inputs.objects(args)
     assert obj.height_mm == pytest.approx(10.0, rel=0.01)
 
 

@@ -11,13 +11,13 @@ import os
 import numpy as np
 import pytest
 import trimesh
-from mjx_pick.kernels import grasp as gk
 from shapely.geometry import box
 
 import mjx_pick as mp
 from mjx_pick import holding
 from mjx_pick import pickpoints as pp
 from mjx_pick.grasp import G, GraspConfig, fingertip_height_mm
+from mjx_pick.kernels import grasp as gk
 from mjx_pick.simulate import make_backend, make_inputs
 
 # lift 30 mm at the default 2 m/s^2, hold 0.3 s

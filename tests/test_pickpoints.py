@@ -4,11 +4,11 @@ import math
 
 import numpy as np
 import pytest
-from mjx_pick.kernels import feasibility as fk
 from shapely.geometry import Point, box
 
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
+from mjx_pick.kernels import feasibility as fk
 
 GRIPPER = mp.GripperSpec()  # Robotiq 2F-85: stroke 85, width 22, depth 8
 

@@ -14,7 +14,7 @@ from PIL import Image
 import mjx_pick as mp
 from mjx_pick.cli import main
 from mjx_pick.grasp import GraspConfig
-from mjx_pick.report import PAPERS_MM, Run, report
+from mjx_pick.reporting import PAPERS_MM, Run, report
 
 FAST = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.2)
 MM = 72.0 / 25.4  # PDF points per millimetre

@@ -16,7 +16,7 @@ import pytest
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import to_toml
-from mjx_pick.evaluate import evaluate
+from mjx_pick.evaluation import evaluate
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.simulate import make_backend, make_inputs
 

@@ -6,12 +6,12 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from mjx_pick.kernels import grasp as gk
 from shapely.geometry import box
 
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
 from mjx_pick.grasp import GraspConfig
+from mjx_pick.kernels import grasp as gk
 from mjx_pick.simulate import make_backend, make_inputs
 
 # a short procedure for tests: lift 30 mm, hold 0.3 s

@@ -14,7 +14,7 @@ from mjx_pick import pickpoints as pp
 from mjx_pick.cli import main
 from mjx_pick.config import to_toml
 from mjx_pick.grasp import GraspConfig, min_grasp_force_n
-from mjx_pick.sweep import ParamSpec, apply, variants
+from mjx_pick.sweeps import ParamSpec, apply, variants
 
 # short procedure: 30 mm lift, 0.2 s hold
 FAST = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.2)
@@ -260,3 +260,18 @@ def test_cli_studies(tmp_path, capsys):
     assert "unknown parameter 'contact.nope'" in capsys.readouterr().err
     assert main(["design", *common, "--bound", "stroke=1:2"]) == 2
     assert "not a numeric gripper field" in capsys.readouterr().err
+
+
+def test_robust_refuses_results_of_another_object(tmp_path, capsys, door_opener):
+    # an evaluate folder of the door opener handed to `robust` for the block: refused
+    # with the two names, before anything is simulated
+    import pyarrow as pa
+
+    run = tmp_path / "door"
+    run.mkdir()
+    (run / "config.json").write_text(json.dumps({"object": door_opener.summary()}))
+    cols = {"pick_id": [0], "x_mm": [0.0], "y_mm": [0.0], "yaw_deg": [0.0], "score": [1.0]}
+    pq.write_table(pa.table({**cols, "success": [True]}), run / "results.parquet")
+    assert main(["robust", "block", "--results", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert "object 'door_opener', not this run's 'block'" in err

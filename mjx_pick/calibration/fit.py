@@ -259,6 +259,7 @@ def least_squares(
     identify: bool = True,
     holdout=None,
     log=None,
+    out: str | Path | None = None,
 ) -> CalibrationResult:
     """Levenberg-Marquardt on the residuals with ``mujoco.sysid.optimize`` (MuJoCo's
     ``minimize.least_squares``; its finite-difference Jacobian runs all P shifted
@@ -268,10 +269,23 @@ def least_squares(
     (z = z_lo + u (z_hi - z_lo)), so that one relative step ``eps`` suits them all.
     Where it fits: smooth residuals (traces, lift times). Outcome residuals are steps
     smoothed over ``temperature_mm``: a local method stalls on their plateaus.
+    With ``out``, writes the results folder as ``calibrate`` does (no checkpoints: a
+    killed fit starts again).
     """
     from mujoco import sysid
 
     check_range("calibrate", "max_iters", max_iters, 1, 10_000)
+    out_dir = None if out is None else Path(out)
+    if out_dir is not None:
+        request = {
+            "object": problem.object.summary(),
+            "names": list(problem.names),
+            "estimator": "lsq",
+            "max_iters": max_iters,
+            "bounds": [problem.space.lo.tolist(), problem.space.hi.tolist()],
+            "priors": [problem.space.prior_mean.tolist(), problem.space.prior_sd.tolist()],
+        }
+        claim(out_dir, "calibrate", config_hash(request), resume=False)
     space = problem.space
     initial = dict(problem.start)
     z0 = space.z([initial[n] for n in problem.names])
@@ -334,9 +348,16 @@ def least_squares(
         holdout,
         identify,
         "least_squares",
-        None,
+        out_dir,
         problem.settings.contact,
     )
     result.rollouts = problem.rollouts - spent0
     result.wall_s = time.perf_counter() - t0
+    if out_dir is not None:
+        from mjx_pick.calibration.outputs import write_result
+
+        write_result(result, problem, out_dir)
+        meta = problem.engine.describe(result.wall_s)
+        meta["timing"]["rollouts"] = result.rollouts
+        finish(out_dir, command="calibrate", config=request, **meta)
     return result

@@ -51,6 +51,33 @@ def mismatch(meta: dict, obj, gripper, grasp, solver) -> list[str]:
     return out
 
 
+def contact_file_notes(path, obj, gripper, grasp, solver) -> list[str]:
+    """What a user should hear before a run with ``--contact path``: the set-up the file
+    was fitted for when it differs from this run's, and a fitted force offset that the
+    run does not apply. Empty when there is nothing to say. The run still goes ahead (a
+    user may mean it); the caller prints these lines."""
+    from mjx_pick.physics import load_contact
+
+    _, meta = load_contact(path)
+    notes = []
+    diff = mismatch(meta.get("fitted_for") or {}, obj, gripper, grasp, solver)
+    if diff:
+        notes.append(
+            f"warning: --contact {path} was fitted for another set-up: "
+            + "; ".join(diff)
+            + ". Its parameters may not hold here."
+        )
+    offset = (
+        (meta.get("calibrated") or {}).get("force_offset_n") if meta.get("fitted_for") else None
+    )
+    if offset:
+        notes.append(
+            f"note: the fit behind --contact {path} found the gripper squeezes "
+            f"F_d {offset:+.3g} N; --grip-force-n sets what is simulated"
+        )
+    return notes
+
+
 def _differs(a, b) -> bool:
     if isinstance(a, int | float) and isinstance(b, int | float):
         return abs(float(a) - float(b)) > 1e-9 * max(1.0, abs(float(a)))

@@ -703,7 +703,7 @@ class Page:
             self.open_run()
 
     def open_run(self) -> None:
-        from mjx_pick.report import Run
+        from mjx_pick.reporting import Run
 
         self.analyze_error.set_text("")
         path = Path((self.run_dir.value or "").strip()).expanduser()
@@ -830,7 +830,7 @@ class Page:
     def sweep_tab(self) -> None:
         from nicegui import ui
 
-        from mjx_pick.sweep import sweepable
+        from mjx_pick.sweeps import sweepable
 
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
@@ -901,7 +901,7 @@ class Page:
     def studies_tab(self) -> None:
         from nicegui import ui
 
-        from mjx_pick.calibrate import FITTABLE
+        from mjx_pick.calibration import FITTABLE
         from mjx_pick.gripper import preset_names
 
         ui.label(
@@ -955,7 +955,7 @@ class Page:
                 with ui.column().classes("w-96"):
                     ui.label(
                         "A CSV of tested pick-points and their outcomes (format: "
-                        "assets/outcomes/README.md), up to 5 MB."
+                        "mjx_pick/assets/outcomes/README.md), up to 5 MB."
                     ).classes("text-sm")
                     self.outcomes_upload = (
                         ui.upload(
@@ -1098,7 +1098,7 @@ class Page:
             return
         path = await run.io_bound(save_upload, data, name, self.uploads)
         try:
-            from mjx_pick.calibrate import read_outcomes
+            from mjx_pick.calibration import read_outcomes
 
             outcomes = await run.io_bound(read_outcomes, str(path))
         except ConfigError as err:
@@ -1231,7 +1231,7 @@ class Page:
 def test_simulation(obj, settings: forms.Settings, x: float, y: float, yaw: float, backend):
     """The gripper tab's check of one pick-point: clearance, then a recorded simulation."""
     from mjx_pick import pickpoints as pp
-    from mjx_pick.evaluate import evaluate
+    from mjx_pick.evaluation import evaluate
     from mjx_pick.grasp import fingertip_height_mm
 
     checker = pp.FeasibilityChecker(obj, settings.gripper, settings.picks, settings.grasp)

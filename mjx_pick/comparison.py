@@ -281,7 +281,7 @@ def sample_variants(
     """k gripper variants, Latin-hypercube spread within bounds (invalid ones redrawn)."""
     from scipy.stats import qmc
 
-    from mjx_pick.sweep import numeric_fields
+    from mjx_pick.sweeps import numeric_fields
 
     fields = numeric_fields(GripperSpec)
     for name, (lo, hi) in bounds.items():

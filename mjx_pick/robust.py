@@ -28,7 +28,7 @@ import numpy as np
 import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
-from mjx_pick.config import check_range, to_dict, write_json, write_parquet
+from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
 from mjx_pick.engine import Simulator
 from mjx_pick.metrics import wilson_interval
 from mjx_pick.objects import ObjectModel
@@ -217,3 +217,76 @@ def min_grip_force(
         live = at_hi & ~at_lo & (hi - lo > tolerance_n)
     result = np.where(at_lo, lo_n, hi)
     return np.where(at_hi, result, np.nan)
+
+
+def robust_best(
+    obj: ObjectModel,
+    base: Settings,
+    *,
+    results: str | Path | None = None,
+    n: int = 1000,
+    top_k: int = 10,
+    seed: int = 0,
+    pick_config: pp.PickConfig | None = None,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    **options,
+) -> pa.Table:
+    """The robustness of the ``top_k`` best successful pick-points (``mjx-pick robust``).
+
+    results: an evaluate folder (or its results.parquet) of this object to take them
+    from; without it, ``n`` pick-points drawn with ``seed`` are simulated first.
+    options: the rest of :func:`robustness`'s keywords (m, sigma_xy_mm, sigma_yaw_deg,
+    out, overwrite). Every input is checked before anything is simulated.
+    """
+    from mjx_pick.metrics import best_successes
+
+    pick_config = pick_config or pp.PickConfig()
+    sim = Simulator(obj, backend, batch_size)
+    if results is not None:
+        table = _read_results(Path(results), obj)
+        x, y, yaw, ids = (np.asarray(table[c]) for c in ("x_mm", "y_mm", "yaw_deg", "pick_id"))
+        success, score = np.asarray(table["success"]), np.asarray(table["score"], float)
+    else:
+        picks = pp.generate_normal(obj, base.gripper, n, seed, pick_config, base.grasp)
+        (out,) = sim.run([(base, picks)])
+        x, y, yaw, ids = picks.x_mm, picks.y_mm, picks.yaw_deg, picks.pick_id
+        success, score = out["success"], out["score"]
+    top = best_successes(success, score, top_k)
+    if len(top) == 0:
+        raise ConfigError("no successful pick-point to test: evaluate more pick-points first")
+    checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
+    picks = checker.batch(ids[top], x[top], y[top], yaw[top], "robustness")
+    return robustness(
+        obj, picks, base, seed=seed, pick_config=pick_config, simulator=sim, **options
+    )
+
+
+def _read_results(path: Path, obj: ObjectModel) -> pa.Table:
+    """An evaluate folder's results table, refused when it belongs to another object."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    table_path = path / "results.parquet" if path.is_dir() else path
+    if not table_path.is_file():
+        raise ConfigError(f"--results {path}: no results.parquet there")
+    config = table_path.parent / "config.json"
+    if config.is_file():
+        theirs = json.loads(config.read_text()).get("object") or {}
+        mine = obj.summary()
+        differ = [
+            k
+            for k in ("name", "mass_g", "height_mm", "outline_wkt")
+            if k in theirs and theirs[k] != mine[k]
+        ]
+        if differ:
+            raise ConfigError(
+                f"--results {path}: its pick-points are of object {theirs.get('name')!r}, "
+                f"not this run's {mine['name']!r} (differs in {', '.join(differ)})"
+            )
+    table = pq.read_table(table_path)
+    for col in ("pick_id", "x_mm", "y_mm", "yaw_deg", "score", "success"):
+        if col not in table.column_names:
+            raise ConfigError(f"--results {path}: no column {col!r}")
+    return table

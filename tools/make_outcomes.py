@@ -1,6 +1,6 @@
 """Write the example measured-outcomes file (synthetic: simulated, not measured).
 
-Run from the repository root, with mjx_pick installed:  python assets/make_outcomes.py
+Run from the repository root, with mjx_pick installed:  python tools/make_outcomes.py
 
 It plays a real cell's test: the shipped block, made 1 kg (a lead-filled test block),
 picked 24 times near its centre by an OnRobot RG2 at grip forces from 6 to 14 N (where
@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 import mjx_pick as mp
-from mjx_pick.calibrate import synthetic_outcomes, write_outcomes
+from mjx_pick.calibration import synthetic_outcomes, write_outcomes
 
-HERE = Path(__file__).resolve().parent / "outcomes"
+HERE = Path(__file__).resolve().parents[1] / "mjx_pick" / "assets" / "outcomes"
 
 
 def main() -> None:

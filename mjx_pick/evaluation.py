@@ -24,7 +24,6 @@ is marked "cancelled" and its finished chunks stay for ``resume``).
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import hashlib
 import json
@@ -58,7 +57,8 @@ from mjx_pick.kernels import grasp as gk
 from mjx_pick.metrics import summarize
 from mjx_pick.objects import ObjectModel, load_object
 from mjx_pick.physics import ContactParams, SolverParams
-from mjx_pick.robustness import min_grip_force
+from mjx_pick.pickfiles import read_picks_csv
+from mjx_pick.robust import min_grip_force
 from mjx_pick.rundir import claim, config_hash, finish, versions
 from mjx_pick.scene import Scene, build_scene
 from mjx_pick.simulate import Settings
@@ -73,35 +73,6 @@ class Evaluation:
     config: dict
     traces: pa.Table | None
     out_dir: Path | None
-
-
-def read_picks_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """User pick-points: a CSV with columns x_mm, y_mm, yaw_deg (a header row)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"picks file {str(path)!r} does not exist")
-    with path.open(newline="") as fh:
-        reader = csv.DictReader(fh)
-        need = ("x_mm", "y_mm", "yaw_deg")
-        missing = [c for c in need if c not in (reader.fieldnames or [])]
-        if missing:
-            raise ConfigError(
-                f"picks file {path.name}: missing column(s) {', '.join(missing)}; "
-                f"found {reader.fieldnames}"
-            )
-        rows = []
-        for i, row in enumerate(reader, start=2):
-            try:
-                rows.append([float(row[c]) for c in need])
-            except (TypeError, ValueError) as err:
-                raise ConfigError(f"picks file {path.name}, row {i}: {err}") from err
-    if not rows:
-        raise ConfigError(f"picks file {path.name} has no rows")
-    a = np.asarray(rows, float)
-    if not np.isfinite(a).all():
-        bad = int(np.flatnonzero(~np.isfinite(a).all(axis=1))[0]) + 2
-        raise ConfigError(f"picks file {path.name}, row {bad}: values must be finite")
-    return a[:, 0], a[:, 1], a[:, 2]
 
 
 def user_picks(
@@ -202,7 +173,7 @@ def evaluate(
         than a batch is a call of another shape, whose float32 rounding may differ.
       min_force: add a min_force_n column: each pick-point's smallest successful F_d
         within the gripper's force range (a batched bisection, about 10 more
-        simulations per pick-point; see mjx_pick.robustness.min_grip_force).
+        simulations per pick-point; see mjx_pick.robust.min_grip_force).
       ray: run the chunks on a Ray cluster: "auto" or the head's "HOST:PORT" (needs
         the cluster extra; see mjx_pick.cluster). This process still writes out.
     """

@@ -1,0 +1,50 @@
+"""``mjx-pick``: the command line.
+
+  mjx-pick evaluate OBJECT [--gripper robotiq-2f85] [--n 1000] [--seed 0] --out DIR
+                    [--ray auto|HOST:PORT]           (on a Ray cluster; sweep, compare too)
+  mjx-pick picks OBJECT --n 500 --out DIR          (pick-points and their pictures only)
+  mjx-pick sweep OBJECT --param contact.pad_friction=0.4:1.0:7 [--param ...] --out DIR
+  mjx-pick compare OBJECT --grippers robotiq-2f85,onrobot-rg2 --out DIR
+  mjx-pick design OBJECT --bound finger_width_mm=10:40 --bound stroke_mm=60:140 --out DIR
+  mjx-pick robust OBJECT [--results DIR] --top-k 10 --m 32 --out DIR
+  mjx-pick report DIR                               (plots, maps, animations, template, HTML)
+  mjx-pick calibrate OUTCOMES.csv OBJECT --params pad_friction,stiffness --out DIR
+  mjx-pick presets | assets                          (what is shipped)
+
+OBJECT is a shipped asset name (``mjx-pick assets``), a top-down image (with
+--px-per-mm, --thickness-mm and --mass-g) or a mesh (with --unit and --mass-g).
+Every bad input ends with one line naming the input, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from mjx_pick.cli.parser import build_parser
+from mjx_pick.config import ConfigError
+from mjx_pick.display import use_offscreen_rendering
+
+__all__ = ["build_parser", "main"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    use_offscreen_rendering()  # before anything imports MuJoCo: animations on a headless host
+    try:
+        return int(args.func(args) or 0)
+    except ConfigError as err:
+        print(f"mjx-pick: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        out = getattr(args, "out", None)
+        hint = (
+            f"; what finished is kept: run the same command with --resume to continue in {out}"
+            if out and hasattr(args, "resume")
+            else ""
+        )
+        print(f"mjx-pick: interrupted{hint}", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,392 @@
+"""One function per subcommand: it turns the parsed options into one library call and
+prints what came back. No simulation, file or results logic lives here."""
+
+from __future__ import annotations
+
+import sys
+
+from mjx_pick.cli.inputs import (
+    base_settings,
+    check_contact_file,
+    design_bounds,
+    grippers,
+    name_ranges,
+    objects,
+    pick_config,
+    settings,
+    study_options,
+)
+from mjx_pick.config import ConfigError
+
+
+def cmd_evaluate(args) -> int:
+    from mjx_pick.evaluation import evaluate
+
+    obj, gripper = objects(args)
+    contact, solver, grasp, picks_cfg = settings(args)
+    check_contact_file(args, obj, gripper, grasp, solver)
+    ev = evaluate(
+        obj,
+        gripper,
+        n=args.n,
+        seed=args.seed,
+        picks=args.picks,
+        contact=contact,
+        solver=solver,
+        grasp=grasp,
+        pick_config=picks_cfg,
+        backend=args.backend,
+        batch_size=args.batch_size,
+        out=args.out,
+        n_traces=args.traces,
+        progress=not args.no_progress,
+        resume=args.resume,
+        until=args.until,
+        min_score=args.min_score,
+        max_n=args.max,
+        chunk_size=args.chunk_size,
+        min_force=args.min_force,
+        overwrite=args.overwrite,
+        skip_infeasible=args.skip_infeasible,
+        ray=args.ray,
+    )
+    print_summary(ev.summary, args.out)
+    return 0
+
+
+def _print_rows(rows: list[dict], keys: list[str]) -> None:
+    width = {k: max(len(k), *(len(_fmt(r.get(k))) for r in rows)) for k in keys}
+    print("  ".join(f"{k:<{width[k]}}" for k in keys))
+    for r in rows:
+        print("  ".join(f"{_fmt(r.get(k)):<{width[k]}}" for k in keys))
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.3f}"
+    if isinstance(v, list | tuple) and len(v) == 2:
+        return f"[{v[0]:.2f}, {v[1]:.2f}]"
+    return str(v)
+
+
+def cmd_sweep(args) -> int:
+    from mjx_pick.sweeps import ParamSpec, sweep
+
+    if not args.param:
+        raise ConfigError("sweep needs at least one --param NAME=LO:HI:N (`mjx-pick params`)")
+    obj, base, picks_cfg = base_settings(args)
+    params = [ParamSpec.parse(p) for p in args.param]
+    res = sweep(obj, params, base, random=args.random, **study_options(args, picks_cfg))
+    _print_rows(
+        res.variants,
+        [
+            "variant",
+            *[p.name for p in params],
+            "n",
+            "success_rate",
+            "success_ci",
+            "score_mean",
+            "diverged",
+        ],
+    )
+    t = res.timing
+    print(
+        f"{t['simulations']} simulations, {t['scenes']} scene(s): compile {t['compile_s']:.1f} s, "
+        f"run {t['run_s']:.1f} s ({t['simulations_per_s']} per s)"
+    )
+    if args.out:
+        print(f"results in {args.out}/ (results.parquet, variants.json, sweep.png, config.json)")
+    return 0
+
+
+def cmd_compare(args) -> int:
+    from mjx_pick.comparison import compare
+
+    obj, base, picks_cfg = base_settings(args)
+    res = compare(
+        obj, grippers(args.grippers), base, rank_by=args.rank_by, **study_options(args, picks_cfg)
+    )
+    _print_rows(
+        res.ranking,
+        [
+            "rank",
+            "gripper",
+            "success_rate",
+            "success_ci",
+            "score_mean",
+            "feasible",
+            "grip_force_n",
+            "p_vs_best",
+        ],
+    )
+    if args.out:
+        print(f"results in {args.out}/ (ranking.json, ranking.png, maps.png, results.parquet)")
+    return 0
+
+
+def cmd_design(args) -> int:
+    from mjx_pick.comparison import design_search
+
+    obj, base, picks_cfg = base_settings(args)
+    bounds = design_bounds(args.bound or [])
+    res = design_search(
+        obj,
+        bounds,
+        base,
+        variants=args.variants,
+        rounds=args.rounds,
+        rank_by=args.rank_by,
+        **study_options(args, picks_cfg),
+    )
+    print(f"best variant: {res.best.name}")
+    for field in bounds:
+        print(f"  {field}: {getattr(res.best, field):g} (base {getattr(res.base, field):g})")
+    _print_rows(
+        res.final.ranking,
+        ["rank", "gripper", "success_rate", "success_ci", "score_mean", "p_vs_best"],
+    )
+    if args.out:
+        print(f"results in {args.out}/ (design.json, best_gripper.toml, ranking.png, maps.png)")
+    return 0
+
+
+def cmd_robust(args) -> int:
+    from mjx_pick.robust import robust_best
+
+    obj, base, picks_cfg = base_settings(args)
+    table = robust_best(
+        obj,
+        base,
+        results=args.results,
+        n=args.n,
+        top_k=args.top_k,
+        seed=args.seed,
+        pick_config=picks_cfg,
+        backend=args.backend,
+        batch_size=args.batch_size,
+        m=args.m,
+        sigma_xy_mm=args.sigma_xy_mm,
+        sigma_yaw_deg=args.sigma_yaw_deg,
+        out=args.out,
+        overwrite=args.overwrite,
+    )
+    _print_rows(
+        table.slice(0, 20).to_pylist(),
+        ["rank", "pick_id", "x_mm", "y_mm", "yaw_deg", "robust_p", "robust_ci_low", "landed"],
+    )
+    if args.out:
+        print(f"results in {args.out}/ (robustness.parquet, robustness.json)")
+    return 0
+
+
+def cmd_calibrate(args) -> int:
+    from mjx_pick import calibration as cal
+
+    obj, base, picks_cfg = base_settings(args)
+    outcomes = cal.read_outcomes(args.outcomes)
+    names = cal.canonical_params(args.params)
+    bounds = name_ranges(args.bounds, "--bounds")
+    priors = name_ranges(args.prior, "--prior")
+    backend = "mjx" if args.estimator == "jvp" else args.backend
+    kw = dict(
+        temperature_mm=args.temperature_mm, pick_config=picks_cfg, bounds=bounds, priors=priors
+    )
+    problem = cal.Problem(obj, outcomes, names, base, backend=backend, **kw)
+    holdout = None
+    if args.holdout:
+        holdout = cal.Problem(
+            obj, cal.read_outcomes(args.holdout), names, base, backend=args.backend, **kw
+        )
+
+    def log(entry):
+        if entry["step"] % args.log_every == 0:
+            values = ", ".join(f"{k} {v:.4g}" for k, v in entry["values"].items())
+            blown = f"  ({entry['diverged']} rows diverged)" if entry.get("diverged") else ""
+            print(
+                f"step {entry['step']:4d}  loss {entry['loss']:.4f}  best {entry['best_loss']:.4f}"
+                f"  {values}{blown}",
+                flush=True,
+            )
+
+    if args.estimator == "lsq":
+        if args.resume:
+            raise ConfigError("--resume: estimator 'lsq' keeps no checkpoints; run it again")
+        res = cal.least_squares(
+            problem,
+            max_iters=args.steps,
+            budget=args.budget,
+            holdout=holdout,
+            identify=not args.no_identify,
+            log=log,
+            out=args.out,
+        )
+    else:
+        res = cal.calibrate(
+            problem,
+            steps=args.steps,
+            learning_rate=args.lr,
+            estimator=args.estimator,
+            samples=args.samples,
+            sigma=args.sigma,
+            seed=args.seed,
+            budget=args.budget,
+            checkpoint_every=args.checkpoint_every,
+            out=args.out,
+            resume=args.resume,
+            holdout=holdout,
+            identify=not args.no_identify,
+            log=log,
+        )
+    ident = res.identifiability or {}
+    for name in names:
+        info = ident.get(name)
+        where = ""
+        if info:
+            lo, hi = info["interval"]
+            where = f"  (95 % {lo:.4g}-{hi:.4g})" + (
+                "" if info["identified"] else "  NOT identified: kept at its start"
+            )
+        print(f"{name}: {res.initial[name]:.4g} -> {res.values[name]:.4g}{where}")
+    for label, acc in (("before", res.accuracy_before), ("after", res.accuracy_after)):
+        if acc:
+            print(f"held-out accuracy {label}: {acc['correct']}/{acc['total']}")
+    print(
+        f"results in {args.out}/ (contact.toml, calibration.json, loss.png, report.md); "
+        f"use: mjx-pick evaluate ... --contact {args.out}/contact.toml"
+    )
+    return 0
+
+
+def cmd_report(args) -> int:
+    from mjx_pick.reporting import report
+
+    frame = None
+    if args.frame:
+        try:
+            frame = [float(v) for v in args.frame.split(",")]
+        except ValueError as err:
+            raise ConfigError(f"--frame {args.frame!r}: {err}") from err
+    written = report(
+        args.run,
+        args.out,
+        n=args.n,
+        k=args.k,
+        frame=frame,
+        animations=not args.no_animations,
+        anim_every=args.anim_every,
+    )
+    print(f"report: {written['html']}")
+    for key in ("forces", "animations"):
+        print(f"  {key}: {len(written[key])} files")
+    print(f"  templates: {', '.join(written['templates'].values())}")
+    print(f"  robot export: {written['robot_picks']}")
+    return 0
+
+
+def print_summary(s: dict, out) -> None:
+    rows = [
+        ("object / gripper", f"{s['object']} / {s['gripper']}"),
+        ("backend / device", f"{s['backend']} / {s['device']}"),
+        ("pick-points", f"{s['n']} (candidates checked {s['candidates_checked']})"),
+        ("success rate", f"{s['success_rate']:.3f} ({s['successes']}/{s['n']})"),
+        ("diverged", f"{s['diverged']}"),
+        (
+            "score mean / median",
+            f"{s['score_mean']:.3f} / {s['score_quantiles'].get('p50', float('nan')):.3f}",
+        ),
+        (
+            "failures",
+            ", ".join(f"{k} {v}" for k, v in s["failures"].items() if v and k != "none") or "none",
+        ),
+        ("F_Gmin, eq. (1)", f"{s['f_gmin_n']:.3f} N (F_d = {s['grip_force_n']:g} N)"),
+        ("compile / run", f"{s['compile_s']:.1f} s / {s['run_s']:.1f} s"),
+        ("pick-points per s", f"{s['picks_per_s']}"),
+    ]
+    cluster = s.get("cluster")
+    if cluster:
+        nodes = ", ".join(f"{k} {v['picks_per_s']:g}/s" for k, v in cluster["nodes"].items())
+        rows.append(("cluster, per node", nodes or "-"))
+        rows.append(("cluster, in all", f"{cluster['picks_per_s']} pick-points/s"))
+        if cluster["chunks_rerun"]:
+            rows.append(("chunks re-run", f"{cluster['chunks_rerun']} (an actor died)"))
+    width = max(len(k) for k, _ in rows)
+    for k, v in rows:
+        print(f"{k:<{width}}  {v}")
+    if out:
+        print(f"results in {out}/ (results.parquet, summary.json, config.json, traces.parquet)")
+
+
+def cmd_picks(args) -> int:
+    from mjx_pick.pickfiles import write_picks
+
+    obj, gripper = objects(args)
+    picks = write_picks(
+        obj,
+        gripper,
+        args.n,
+        seed=args.seed,
+        config=pick_config(args),
+        out=args.out,
+        overwrite=args.overwrite,
+    )
+    print(
+        f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates; rejected "
+        f"{picks.rejected}; written to {args.out}/ (picks.csv, pick_0.png, candidates.png)"
+    )
+    return 0
+
+
+def cmd_presets(_args) -> int:
+    from mjx_pick.gripper import load_gripper, preset_names
+
+    for name in preset_names():
+        g = load_gripper(name)
+        print(
+            f"{name:<16} stroke {g.stroke_mm:g} mm, finger {g.finger_width_mm:g} x "
+            f"{g.finger_depth_mm:g} mm, force {g.force_min_n:g}-{g.force_max_n:g} N, "
+            f"speed {g.speed_min_mm_s:g}-{g.speed_max_mm_s:g} mm/s"
+        )
+    return 0
+
+
+def cmd_params(_args) -> int:
+    from mjx_pick.sweeps import sweepable
+
+    print("\n".join(sweepable()))
+    return 0
+
+
+def cmd_assets(_args) -> int:
+    from mjx_pick.objects import asset_manifest
+
+    for name, entry in sorted(asset_manifest().items()):
+        print(
+            f"{name:<12} {entry['description']} ({entry['thickness_mm']:g} mm, "
+            f"{entry['mass_g']:.1f} g)"
+        )
+    return 0
+
+
+def cmd_gui(args) -> int:
+    from mjx_pick import gui
+
+    problem = gui.missing_framework()
+    if problem:
+        raise ConfigError(problem)
+    if not 0 <= args.port <= 65535:
+        raise ConfigError(f"--port {args.port}: allowed 0-65535")
+    if not gui.is_loopback(args.host):
+        print(
+            f"mjx-pick gui: warning: listening on {args.host}: anyone who reaches this "
+            "machine can use the GUI and read and write its work folder",
+            file=sys.stderr,
+        )
+    busy = gui.port_problem(args.host, args.port)  # port 0: can the interface be used?
+    if busy:
+        raise ConfigError(f"--host {args.host} --port {args.port}: {busy}")
+    port = args.port or gui.free_port(args.host)
+    shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
+    print(f"mjx-pick gui: http://{shown}:{port}/ (work folder {args.workdir}; Ctrl-C stops)")
+    sys.stdout.flush()
+    gui.serve(args.host, port, args.workdir, show=not args.no_browser and gui.has_browser())
+    return 0

@@ -1,0 +1,136 @@
+"""Command-line options -> the library's objects (object, gripper, settings, ranges).
+
+Each converter names the option and the value it refuses (``ConfigError``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+
+from mjx_pick.config import ConfigError, load_toml
+
+
+def objects(args):
+    from mjx_pick.gripper import load_gripper
+    from mjx_pick.objects import load_object
+
+    obj = load_object(
+        args.object,
+        px_per_mm=args.px_per_mm,
+        thickness_mm=args.thickness_mm,
+        mass_g=args.mass_g,
+        density_kg_m3=args.density_kg_m3,
+        unit=args.unit,
+        pose=args.pose,
+        pick_height_mm=args.pick_height_mm,
+        simplify_mm=args.simplify_mm,
+        material=args.material,
+    )
+    gripper = load_gripper(args.gripper_file or args.gripper)
+    return obj, gripper
+
+
+def settings(args):
+    from mjx_pick.grasp import GraspConfig
+    from mjx_pick.physics import ContactParams, SolverParams, load_contact
+
+    contact = load_contact(args.contact)[0] if args.contact else ContactParams()
+    solver = load_toml(SolverParams, args.solver) if args.solver else SolverParams()
+    grasp = load_toml(GraspConfig, args.grasp) if args.grasp else GraspConfig()
+    contact = override(contact, pad_friction=args.pad_friction, table_friction=args.table_friction)
+    solver = override(solver, timestep_s=args.timestep_s)
+    grasp = override(
+        grasp,
+        grip_force_n=args.grip_force_n,
+        lift_height_mm=args.lift_height_mm,
+        hold_s=args.hold_s,
+        grasp_height=args.grasp_height,
+        fingertip_clearance_mm=args.fingertip_clearance_mm,
+    )
+    return contact, solver, grasp, pick_config(args)
+
+
+def check_contact_file(args, obj, gripper, grasp, solver) -> None:
+    """Before any simulation: say (stderr) where --contact was fitted for another set-up."""
+    if getattr(args, "contact", None):
+        from mjx_pick.calibration.outputs import contact_file_notes
+
+        for line in contact_file_notes(args.contact, obj, gripper, grasp, solver):
+            print(line, file=sys.stderr)
+
+
+def pick_config(args):
+    from mjx_pick.pickpoints import PickConfig
+
+    return override(
+        PickConfig(), safety_zone_mm=args.safety_zone_mm, min_coverage=args.min_coverage
+    )
+
+
+def override(obj, **values):
+    values = {k: v for k, v in values.items() if v is not None}
+    return dataclasses.replace(obj, **values) if values else obj
+
+
+def base_settings(args):
+    """Object, Settings (gripper + physics flags) and PickConfig from the shared options."""
+    from mjx_pick.simulate import Settings
+
+    obj, gripper = objects(args)
+    contact, solver, grasp, picks_cfg = settings(args)
+    check_contact_file(args, obj, gripper, grasp, solver)
+    return obj, Settings(gripper, contact, solver, grasp), picks_cfg
+
+
+def study_options(args, picks_cfg) -> dict:
+    """The keyword arguments every study (sweep, compare, design) takes from the CLI."""
+    return {
+        "n": args.n,
+        "seed": args.seed,
+        "pick_config": picks_cfg,
+        "backend": args.backend,
+        "batch_size": args.batch_size,
+        "out": args.out,
+        "overwrite": args.overwrite,
+        # sweep and compare take --ray (the other studies run on this machine)
+        **({"ray": args.ray} if getattr(args, "ray", None) is not None else {}),
+    }
+
+
+def grippers(text: str):
+    from mjx_pick.gripper import load_gripper
+
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    if not names:
+        raise ConfigError(f"--grippers {text!r}: give comma-separated presets or TOML files")
+    return [load_gripper(n) for n in names]
+
+
+def design_bounds(items: list[str]) -> dict:
+    out = {}
+    for item in items:
+        name, sep, rng = item.partition("=")
+        lo, sep2, hi = rng.partition(":")
+        try:
+            if not sep or not sep2:
+                raise ValueError("write FIELD=LO:HI")
+            out[name.strip()] = (float(lo), float(hi))
+        except ValueError as err:
+            raise ConfigError(f"--bound {item!r}: {err} (e.g. finger_width_mm=10:40)") from err
+    return out
+
+
+def name_ranges(items, flag: str) -> dict:
+    """['name=a:b', ...] -> {name: (a, b)}; a bad item is an error naming it."""
+    out = {}
+    for item in items or []:
+        name, _, rng = item.partition("=")
+        parts = rng.split(":")
+        try:
+            a, b = (float(x) for x in parts)
+        except ValueError:
+            raise ConfigError(
+                f"{flag} {item!r}: expected NAME=A:B with two numbers (e.g. pad_friction=0.3:1.2)"
+            ) from None
+        out[name.strip()] = (a, b)
+    return out
