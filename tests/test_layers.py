@@ -56,6 +56,8 @@ def modules():
         yield "kernels", path
     for path in sorted((ROOT / "mjx_pick" / "calibration").glob("*.py")):
         yield "calibration", path  # the calibration package: a study
+    for path in sorted((ROOT / "mjx_pick" / "reporting").glob("*.py")):
+        yield "reporting", path  # the report package: the outputs layer
     for path in sorted((ROOT / "mjx_pick" / "cli").glob("*.py")):
         yield "cli", path  # the command line: the interface layer
     for path in sorted((ROOT / "mjx_pick" / "gui").glob("*.py")):
