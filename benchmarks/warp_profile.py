@@ -88,12 +88,25 @@ def scripted_states(scene, grasp, n: int, seed: int) -> dict[str, tuple[np.ndarr
 
 def build(args, variant: dict):
     """The scene for one variant: MuJoCo options (``ccd_iterations``, ...) set on the
-    model as built."""
+    model as built; keys ``warp.NAME`` are left for :func:`warp_options`."""
     grasp = mp.GraspConfig()
     scene = mp.build_scene(mp.load_object(args.object), mp.load_gripper(args.gripper), grasp=grasp)
     for key, value in variant.items():
-        setattr(scene.model.opt, key, type(getattr(scene.model.opt, key))(value))
+        if not key.startswith("warp."):
+            setattr(scene.model.opt, key, type(getattr(scene.model.opt, key))(value))
     return scene, grasp
+
+
+def warp_options(mw, variant: dict) -> None:
+    """MuJoCo Warp's own options on the put model: as the rollout sets them, then the
+    variant's ``warp.NAME=VALUE`` (e.g. ``warp.run_rne_postconstraint=0``: what the
+    post-constraint RNE pass that gives cfrc_ext -- the pad forces -- costs)."""
+    mw.opt.run_rne_postconstraint = True  # as the rollout (pad forces from cfrc_ext)
+    mw.opt.warn_overflow = 0  # overflow is read back below, not printed per step
+    for key, value in variant.items():
+        if key.startswith("warp."):
+            name = key[len("warp.") :]
+            setattr(mw.opt, name, type(getattr(mw.opt, name))(int(float(value))))
 
 
 def parse_variant(text: str) -> dict:
@@ -116,7 +129,7 @@ def main() -> None:
         action="append",
         default=None,
         help="'default' or key=value[,key=value]: MuJoCo options (ccd_iterations, "
-        "ccd_tolerance, ...) (repeatable)",
+        "ccd_tolerance, ...) or MuJoCo Warp's (warp.run_rne_postconstraint=0) (repeatable)",
     )
     args = ap.parse_args()
 
@@ -151,11 +164,11 @@ def main() -> None:
         "fwd_position ms | solve ms | contacts/world | rows mean / max"
     )
     for text in args.variant or ["default"]:
-        scene, _ = build(args, parse_variant(text))
+        variant = parse_variant(text)
+        scene, _ = build(args, variant)
         m = scene.model
         mw = mjw.put_model(m)
-        mw.opt.run_rne_postconstraint = True  # as the rollout (pad forces from cfrc_ext)
-        mw.opt.warn_overflow = 0  # overflow is read back below, not printed per step
+        warp_options(mw, variant)
         for phase, (qpos, qvel, ctrl) in states.items():
             dw = mjw.make_data(
                 m, nworld=args.worlds, naconmax=buffers.naconmax(args.worlds), njmax=buffers.rows
