@@ -116,6 +116,54 @@ def parse_variant(text: str) -> dict:
     return dict(kv.split("=", 1) for kv in text.split(","))
 
 
+def mjx_scan_ms(scene, buffers, states, worlds: int, steps: int, repeats: int) -> float:
+    """ms per physics step of ``worlds`` simulations stepped through MJX (``impl='warp'``,
+    graph mode WARP), as the rollout steps them -- ``vmap`` of ``mjx.step`` with per-world
+    contact-pair parameters, ``steps`` steps under ``lax.scan`` in one jitted call -- but
+    without the project's controller, metrics or pool. Set against the bare Warp step
+    (CUDA graphs, above), it is what MJX's JAX wrapper adds; set against the rollout's
+    rate (benchmarks/throughput.py), what the project's own per-step work adds."""
+    import types
+
+    import jax
+    from mujoco import mjx
+    from mujoco.mjx.warp import types as mjxw_types
+
+    from mjx_pick.backend_mjx import _slot_axes
+
+    m = scene.model
+    mx = mjx.put_model(m, impl="warp", graph_mode=mjxw_types.GraphMode.WARP)
+    opt = mx.opt._impl.replace(run_rne_postconstraint=True, warn_overflow=0)
+    mx = mx.replace(opt=mx.opt.replace(_impl=opt))
+    d0 = mjx.make_data(m, impl="warp", naconmax=buffers.naconmax(worlds), njmax=buffers.rows)
+    axes = _slot_axes(types.SimpleNamespace(impl="warp", data0=d0)).d
+    tree = jax.tree.structure(d0)
+    qpos, qvel, ctrl = (np.tile(a, (-(-worlds // len(a)), 1))[:worlds] for a in states)
+    pairs = tuple(
+        np.tile(a, (worlds, 1, 1)) for a in (m.pair_friction, m.pair_solref, m.pair_solimp)
+    )
+
+    def start(q, v, c):
+        return tuple(tree.flatten_up_to(d0.replace(qpos=q, qvel=v, ctrl=c)))
+
+    def step_one(leaves, friction, solref, solimp):
+        mw = mx.replace(pair_friction=friction, pair_solref=solref, pair_solimp=solimp)
+        return tuple(tree.flatten_up_to(mjx.step(mw, tree.unflatten(leaves))))
+
+    step = jax.vmap(step_one, in_axes=(axes, 0, 0, 0), out_axes=axes)
+
+    @jax.jit
+    def run(leaves, *pair):
+        return jax.lax.scan(lambda c, _: (step(c, *pair), None), leaves, None, length=steps)[0]
+
+    leaves = jax.jit(jax.vmap(start, out_axes=axes))(qpos, qvel, ctrl)
+    jax.block_until_ready(run(leaves, *pairs))  # compile, and Warp's kernels
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        jax.block_until_ready(run(leaves, *pairs))
+    return (time.perf_counter() - t0) / (repeats * steps) * 1e3
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--object", default="door_opener")
@@ -130,6 +178,12 @@ def main() -> None:
         default=None,
         help="'default' or key=value[,key=value]: MuJoCo options (ccd_iterations, "
         "ccd_tolerance, ...) or MuJoCo Warp's (warp.run_rne_postconstraint=0) (repeatable)",
+    )
+    ap.add_argument(
+        "--mjx-steps",
+        type=int,
+        default=0,
+        help="also time this many steps through MJX's wrapper (vmap + scan of mjx.step)",
     )
     args = ap.parse_args()
 
@@ -193,6 +247,14 @@ def main() -> None:
                 f"{nefc.mean():.1f} / {nefc.max()}  (first step {build_s:.1f} s)",
                 flush=True,
             )
+            if args.mjx_steps:
+                del dw
+                ms = mjx_scan_ms(scene, buffers, (qpos, qvel, ctrl), args.worlds, args.mjx_steps, 3)
+                print(
+                    f"{text} | {phase} | through MJX (vmap + scan of mjx.step) | {ms:.3f} ms | "
+                    f"{args.worlds / ms / 1e3:.2f} M world-steps/s",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":
