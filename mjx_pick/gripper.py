@@ -45,6 +45,8 @@ class GripperSpec:
     # drive: the finger servo that tracks the integrated speed command
     drive_stiffness_n_per_mm: float = 10.0
     drive_damping_ns_per_mm: float = 0.02
+    # the pads' material, recorded with results (config.json) and shown in reports; the
+    # physics comes from ContactParams (pad friction, stiffness), never from this name
     pad_material: str = "nbr"
     source: str = "Bencak et al. 2023, Fig. 10; Robotiq 2F-85 datasheet"
     # a real gripper's MJCF model (None: the parametric parallel jaw above); its

@@ -52,11 +52,10 @@ class SceneIndex:
     """Ids and addresses the controller and the metrics need (ints: static under jit)."""
 
     object_body: int
-    gripper_body: int
+    gripper_body: int  # the mount (tests measure the pads' depth below it)
     finger_left_body: int
     finger_right_body: int
     object_qpos: int  # start of the object's free joint (x, y, z, qw, qx, qy, qz)
-    object_qvel: int  # start of its 6 dofs
     lift_qpos: int
     finger_left_qpos: int
     finger_right_qpos: int
@@ -398,7 +397,6 @@ def build_scene(
         finger_left_body=model.body(names["finger_left_body"]).id,
         finger_right_body=model.body(names["finger_right_body"]).id,
         object_qpos=qadr("object"),
-        object_qvel=int(model.jnt_dofadr[model.joint("object").id]),
         lift_qpos=qadr("lift"),
         finger_left_qpos=qadr(names["finger_left_qpos"]),
         finger_right_qpos=qadr(names["finger_right_qpos"]),
