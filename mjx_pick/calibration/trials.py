@@ -1298,7 +1298,8 @@ def fit_trials(
             f"not identified by these trials: {', '.join(res.not_identified)} (kept at "
             "the start, so the agreement after counts only what was identified; at the "
             f"fit's optimum {optimum[0]['correct']} of {optimum[0]['pick_points']} would "
-            "agree); the next round draws them from their prior"
+            "agree); the next round looks for pick-points that tell the values around "
+            "the optimum apart"
         )
     report = {
         "parameters": list(names),
@@ -1335,7 +1336,14 @@ def _named(table: dict | None, names) -> dict:
 
 
 def _propose(folder, obj, plan, problem, res, settings, pick_config, number, n, backend):
-    """The next round (or None and why not), drawn around the fit."""
+    """The next round (or None and why not).
+
+    Its predictions are the fitted parameters' (contact.toml's: a parameter the data did
+    not identify stays at its start). Its draws, which decide what is informative, come
+    from where the data left the doubt: a Gaussian in z around the fit's optimum with
+    the spread of its 95 % interval (identify.py) where that is narrower than the
+    prior's, else the prior's -- for a parameter not identified too, since its local
+    interval is still the best guide to where the next trials should look."""
     existing = [r for r in plan["rounds"] if r["round"] == number]
     _, rows = read_sheet(folder)
     tried_ids = {int(r["pick_id"]) for r in rows if r["successes"] != ""}
@@ -1343,13 +1351,13 @@ def _propose(folder, obj, plan, problem, res, settings, pick_config, number, n, 
         return None, f"round {number} is planned and partly tried already: no new proposal"
     space = problem.space
     names = list(space.names)
-    centre = space.z([res.values[k] for k in names])
+    centre = space.z([(res.optimum or res.values)[k] for k in names])
     sd = np.array(space.prior_sd, float)
     ident = res.identifiability or {}
     for i, k in enumerate(names):
-        info = ident.get(k) or {}
-        if info.get("identified") and info.get("half_width_z"):
-            sd[i] = min(sd[i], info["half_width_z"] / Z95)
+        half = (ident.get(k) or {}).get("half_width_z")
+        if half:
+            sd[i] = min(sd[i], half / Z95)
     draws = parameter_draws(space, plan["draws"], plan["seed"] + number, centre, sd)
     sims = Simulations(obj, settings, backend)
     table = pq.read_table(Path(folder) / CANDIDATES)
@@ -1374,6 +1382,10 @@ def _propose(folder, obj, plan, problem, res, settings, pick_config, number, n, 
         pick_config=pick_config,
         predictions_from_table=False,
     )
+    rnd["draws_from"] = {
+        "centre": dict(zip(names, map(float, space.natural(centre)), strict=True)),
+        "sd_z": dict(zip(names, map(float, sd), strict=True)),
+    }
     return rnd, None
 
 
@@ -1418,13 +1430,16 @@ def synthetic_trials(
     obj: ObjectModel,
     hidden: dict,
     *,
+    jitter_mm: float | None = None,
+    jitter_deg: float | None = None,
     seed: int = 1,
     backend: str = "auto",
 ) -> int:
     """SYNTHETIC outcomes for validation: fill every untried row of the sheet as a real
     cell whose contact parameters are `hidden` ({name: value}, ``parameters.PARAMS``)
-    would: each of a row's trials is the simulation at a placement jittered by the
-    plan's placing error. Returns the rows filled."""
+    would: each of a row's trials is the simulation at a placement jittered by
+    jitter_mm / jitter_deg (default: the plan's placing error; both 0: every trial at
+    the template pose). Returns the rows filled."""
     folder = Path(folder)
     plan = load_plan(folder)
     check_object(plan["object"], obj, f"trials folder {folder}")
@@ -1448,9 +1463,9 @@ def synthetic_trials(
     if len(picks) != len(todo):
         raise ConfigError("a planned pick-point is no longer feasible with the plan's settings")
     m = max(int(float(rows[i]["trials"])) for i in todo)
-    placed = place(
-        obj, picks, settings, m, plan["jitter_mm"], plan["jitter_deg"], seed, pick_config
-    )
+    sx = plan["jitter_mm"] if jitter_mm is None else jitter_mm
+    sy = plan["jitter_deg"] if jitter_deg is None else jitter_deg
+    placed = place(obj, picks, settings, m, sx, sy, seed, pick_config)
     success = np.zeros(len(todo) * m, bool)
     if len(placed.draws):
         success[placed.ok] = sims.run(placed.draws, [hidden])["success"][0]
