@@ -361,7 +361,8 @@ def choose(rows: list[dict], n: int, info_share: float) -> tuple[list[int], list
 
     About info_share x n by information (at least MIN_BITS); then, alternately, the
     best-scoring predicted success and the worst-scoring predicted failure (the paper's
-    check); then the rest by placement uncertainty. No two are the same template."""
+    check), one class continuing when the other runs out. No two are the same template
+    (fewer than n when the rows hold fewer distinct ones)."""
     picked: list[int] = []
     why: list[str] = []
 
@@ -382,9 +383,10 @@ def choose(rows: list[dict], n: int, info_share: float) -> tuple[list[int], list
             f"informative: {r['bits']:.2f} bits; the parameter draws give it "
             f"{r['p_lo']:.0%}-{r['p_hi']:.0%} success",
         )
-    order = sorted(range(len(rows)), key=lambda i: -rows[i]["score"])
-    good = [i for i in order if rows[i]["success"]]
-    bad = [i for i in reversed(order) if not rows[i]["success"]]
+    good = sorted((i for i, r in enumerate(rows) if r["success"]), key=lambda i: -rows[i]["score"])
+    bad = sorted(
+        (i for i, r in enumerate(rows) if not r["success"]), key=lambda i: rows[i]["score"]
+    )
     queues = [iter(good), iter(bad)]
     live = [True, True]
     turn = 0
@@ -405,10 +407,6 @@ def choose(rows: list[dict], n: int, info_share: float) -> tuple[list[int], list
                 if not take(i, reason):
                     continue
         turn = 1 - turn
-    for i in sorted(range(len(rows)), key=lambda i: abs(rows[i]["p_nominal"] - 0.5)):
-        if len(picked) >= n:
-            break
-        take(i, f"uncertain placement: {rows[i]['p_nominal']:.0%} of placements succeed")
     return picked, why
 
 
@@ -544,6 +542,10 @@ def _new_round(
         "simulations": int(sims.simulations - spent),
         "notes": notes,
         "picks": picks_out,
+        # every candidate simulated, chosen or not: what the choice was made from
+        "candidates_info": [
+            {k: r[k] for k in ("pick_id", "success", "p_nominal", "bits")} for r in rows
+        ],
     }
 
 
