@@ -1307,6 +1307,8 @@ def fit_trials(
         "parameters": list(names),
         "initial": res.initial,
         "fitted": res.values,
+        "optimum": res.optimum,
+        "intervals": {k: (res.identifiability or {}).get(k, {}).get("interval") for k in names},
         "not_identified": list(res.not_identified),
         "rows": len(o),
         "before": before,
@@ -1412,13 +1414,22 @@ def fit_md(report: dict, plan: dict) -> str:
         "",
     ]
     for k in report["parameters"]:
-        flag = " (not identified: kept at the start)" if k in report["not_identified"] else ""
-        lines.append(f"* {k}: {report['initial'][k]:.4g} -> {report['fitted'][k]:.4g}{flag}")
-    for label in ("before", "after"):
-        a = report[label]
-        title = "the run's parameters" if label == "before" else "the fitted parameters"
-        lines += ["", f"## {label.capitalize()}: {title}", "", *_confusion_md(a), ""]
-        lines += _summary_md(a)
+        iv = report["intervals"].get(k)
+        said = [f"95 % {iv[0]:.4g}-{iv[1]:.4g}"] if iv else []
+        if k in report["not_identified"]:
+            said = ["not identified: kept at the start", f"optimum {report['optimum'][k]:.4g}"]
+            said += [f"95 % {iv[0]:.4g}-{iv[1]:.4g}"] if iv else []
+        extra = f" ({'; '.join(said)})" if said else ""
+        lines.append(f"* {k}: {report['initial'][k]:.4g} -> {report['fitted'][k]:.4g}{extra}")
+    sections = [
+        ("before", "Before: the run's parameters"),
+        ("after", "After: the fitted parameters (contact.toml)"),
+        ("at_optimum", "At the fit's optimum (not used: a parameter was not identified)"),
+    ]
+    for key, title in sections:
+        a = report.get(key)
+        if a:
+            lines += ["", f"## {title}", "", *_confusion_md(a), "", *_summary_md(a)]
     lines += ["", "## Notes", "", *[f"* {n}" for n in report["notes"]]]
     lines += ["", "## Per pick-point, after the fit", "", *_rows_md(report["after"]["rows"])]
     return "\n".join(lines) + "\n"
