@@ -534,6 +534,10 @@ def cmd_trials_fit(args) -> int:
         print(f"{name}: {fit.initial[name]:.4g} -> {value:.4g}{flag}")
     _print_agreement("before (the run's parameters)", res.before)
     _print_agreement("after (the fitted parameters)", res.after)
+    if res.report["at_optimum"]:
+        _print_agreement(
+            "at the fit's optimum (not used: not identified)", res.report["at_optimum"]
+        )
     _print_notes(res.notes)
     print(f"fit in {res.out_dir}/ (contact.toml, agreement.md, report.md)")
     if res.next_round is not None:
