@@ -55,6 +55,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
+import jax
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -86,6 +87,7 @@ from mjx_pick.metrics import mcnemar_p, wilson_interval
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.rundir import claim, config_hash, finish, read_manifest
+from mjx_pick.scene import build_scene
 from mjx_pick.simulate import Settings, make_inputs
 
 COMMAND = "trials"
@@ -193,8 +195,6 @@ class Simulations:
     def __init__(
         self, obj: ObjectModel, settings: Settings, backend: str = "auto", batch_size=None
     ):
-        from mjx_pick.scene import build_scene
-
         s = settings
         self.object, self.settings = obj, s
         self.scene = build_scene(obj, s.gripper, s.contact, s.solver, s.grasp)
@@ -207,8 +207,6 @@ class Simulations:
 
         Returns (V, N) arrays: success (bool), score, failure (code, ``gk.FAILURES``),
         diverged (bool), lift_height_mm."""
-        import jax
-
         if self._runner is None:
             self._runner = self.engine.make(self.scene, self.settings.grasp)
         n = len(picks)
@@ -911,6 +909,8 @@ def record(folder, ask: Callable[[str], str], say: Callable[[str], None] = print
 def _parse_answer(answer: str, trials_text: str) -> tuple[int, int] | str:
     """(successes, trials) of an answer, or the message saying why it is not one."""
     k_text, slash, n_text = answer.partition("/")
+    if not slash and not trials_text:
+        return f"{answer!r}: this row has no trials count: answer K/N (K successes of N trials)"
     try:
         k = int(k_text)
         n = int(n_text) if slash else int(float(trials_text))
