@@ -311,6 +311,21 @@ def test_the_loop_on_synthetic_outcomes_of_a_hidden_friction(planned, heavy, tmp
     assert list(again["by_round"]) == ["1"] and len(again["untried_rows"]) == 3
     with pytest.raises(mp.ConfigError, match="holds an earlier fit of round 1.*--overwrite"):
         T.fit(folder, heavy, partial=True, backend="mujoco")
+    # round 2 tried: its agreement is the fit's prediction made before its trials (the
+    # honest test), reported apart; the next fit takes every tried row, round 1's too
+    assert (
+        T.synthetic_trials(
+            folder, heavy, {"pad_friction": HIDDEN}, jitter_mm=0, jitter_deg=0, backend="mujoco"
+        )
+        == 3
+    )
+    both = T.agree(folder)
+    assert list(both["by_round"]) == ["1", "2"]
+    assert both["by_round"]["2"]["planned_with"] == "the fit of fit-round1"
+    assert both["by_round"]["2"]["pick_points"] == 3 and both["overall"]["pick_points"] == N + 3
+    second = T.fit(folder, heavy, steps=1, popsize=4, identify=False, next_n=0, backend="mujoco")
+    assert second.out_dir.name == "fit-round2" and second.report["rows"] == N + 3
+    assert second.next_round is None and len(_rows(folder)) == N + 3
 
 
 def test_cli_trials(planned, run_dir, tmp_path, capsys, monkeypatch):

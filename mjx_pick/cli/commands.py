@@ -419,6 +419,21 @@ def _print_agreement(label: str, a: dict) -> None:
     )
 
 
+def _print_round(rnd: dict) -> None:
+    rows = [
+        {
+            "page": p["page"],
+            "pick_id": p["pick_id"],
+            "sim": "success" if p["sim_success"] else p["sim_failure"],
+            "bits": p["info_bits"],
+            "why": p["why"],
+        }
+        for p in rnd["picks"]
+    ]
+    _print_rows(rows, ["page", "pick_id", "sim", "bits", "why"])
+    _print_notes(rnd["notes"])
+
+
 def cmd_trials_plan(args) -> int:
     from mjx_pick import trials
     from mjx_pick.cli.inputs import object_of
@@ -446,18 +461,7 @@ def cmd_trials_plan(args) -> int:
         overwrite=args.overwrite,
     )
     rnd = plan["rounds"][0]
-    rows = [
-        {
-            "page": p["page"],
-            "pick_id": p["pick_id"],
-            "sim": "success" if p["sim_success"] else p["sim_failure"],
-            "bits": p["info_bits"],
-            "why": p["why"],
-        }
-        for p in rnd["picks"]
-    ]
-    _print_rows(rows, ["page", "pick_id", "sim", "bits", "why"])
-    _print_notes(rnd["notes"])
+    _print_round(rnd)
     print(
         f"{rnd['simulations']} simulations. Print {args.out}/templates_round1.pdf at actual "
         f"size; try each page {args.repeats} times; write the successes in "
@@ -543,8 +547,9 @@ def cmd_trials_fit(args) -> int:
     if res.next_round is not None:
         r = res.next_round["round"]
         print(
-            f"round {r}: {len(res.next_round['picks'])} pick-points added to "
-            f"{args.trials}/trials.csv; print {args.trials}/templates_round{r}.pdf"
+            f"round {r} (predicted with the fitted parameters): "
+            f"{len(res.next_round['picks'])} pick-points added to {args.trials}/trials.csv; "
+            f"print {args.trials}/templates_round{r}.pdf"
         )
-        _print_notes(res.next_round["notes"])
+        _print_round(res.next_round)
     return 0
