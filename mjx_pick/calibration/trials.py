@@ -595,8 +595,8 @@ def plan_trials(
         is marked complete (``mjx_pick.trials`` passes the 1:1 PDF writer).
 
     Returns:
-      the plan (``trials.json``). Simulates pool x (1 + (1 + draws) x placements)
-      pick-points (fewer: placements that cannot be grasped are not simulated).
+      the plan (``trials.json``). Simulates at most pool x (1 + draws) x placements
+      pick-points (placements that cannot be grasped are not simulated).
     """
     check_range("trials", "n", n, 1, 1000)
     check_range("trials", "repeats", repeats, 1, 1000)
