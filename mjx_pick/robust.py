@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -45,6 +46,58 @@ def perturb(picks: pp.PickBatch, m: int, sigma_xy_mm: float, sigma_yaw_deg: floa
     y = picks.y_mm[idx] + rng.normal(0.0, sigma_xy_mm, k * m)
     yaw = picks.yaw_deg[idx] + rng.normal(0.0, sigma_yaw_deg, k * m)
     return x, y, np.mod(yaw, 360.0), idx
+
+
+class Placements(NamedTuple):
+    """M real poses around each of K reported ones (K*M draws, pick-major).
+
+    draws: the draws that are simulated (a PickBatch of ok.sum() entries, the fingers
+    at each reported pose's planned opening); ok (K*M,): simulated (the rest fail as
+    they are: a finger lands on the object, or nothing lies between the fingers);
+    index (K*M,): the reported pick-point of each draw; reason (K*M,): the feasibility
+    check's reason code (``pickpoints.REASONS``).
+    """
+
+    draws: pp.PickBatch
+    ok: np.ndarray
+    index: np.ndarray
+    reason: np.ndarray
+
+
+def placements(
+    obj: ObjectModel,
+    picks: pp.PickBatch,
+    base: Settings,
+    m: int,
+    sigma_xy_mm: float,
+    sigma_yaw_deg: float,
+    seed: int,
+    pick_config: pp.PickConfig | None = None,
+) -> Placements:
+    """Real poses around each reported pick-point, checked with the fingers at the
+    opening planned for the reported pose (see the module docstring)."""
+    x, y, yaw, idx = perturb(picks, m, sigma_xy_mm, sigma_yaw_deg, seed)
+    checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
+    planned = picks.opening_mm[idx]
+    res = checker(x, y, yaw, opening_mm=planned)
+    # coverage is a planning rule, not physics: a real pose with little object between
+    # the fingers is simulated like any other; one with a finger on the object or
+    # nothing between the fingers fails as it is
+    ok = (res["reason"] == pp.fk.FEASIBLE) | (res["reason"] == pp.fk.COVERAGE)
+    draws = pp.PickBatch(
+        pick_id=np.arange(len(x))[ok],
+        x_mm=x[ok],
+        y_mm=y[ok],
+        yaw_deg=yaw[ok],
+        opening_mm=planned[ok],
+        coverage=res["coverage"][ok],
+        gap_left_mm=res["gap_left_mm"][ok],
+        gap_right_mm=res["gap_right_mm"][ok],
+        rejected={},
+        n_candidates=len(x),
+        mode="robustness",
+    )
+    return Placements(draws, ok, idx, np.asarray(res["reason"]))
 
 
 def robustness(
@@ -82,37 +135,18 @@ def robustness(
         claim(out, "robust", config_hash(request), overwrite=overwrite, joins=("evaluate",))
     t0 = time.perf_counter()
     k = len(picks)
-    x, y, yaw, idx = perturb(picks, m, sigma_xy_mm, sigma_yaw_deg, seed)
-    checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
-    planned = picks.opening_mm[idx]
-    res = checker(x, y, yaw, opening_mm=planned)
-    # coverage is a planning rule, not physics: a real pose with little object between
-    # the fingers is simulated like any other; one with a finger on the object or
-    # nothing between the fingers fails as it is
-    ok = (res["reason"] == pp.fk.FEASIBLE) | (res["reason"] == pp.fk.COVERAGE)
-    draws = pp.PickBatch(
-        pick_id=np.arange(len(x))[ok],
-        x_mm=x[ok],
-        y_mm=y[ok],
-        yaw_deg=yaw[ok],
-        opening_mm=planned[ok],
-        coverage=res["coverage"][ok],
-        gap_left_mm=res["gap_left_mm"][ok],
-        gap_right_mm=res["gap_right_mm"][ok],
-        rejected={},
-        n_candidates=len(x),
-        mode="robustness",
-    )
+    placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, seed, pick_config)
+    draws, ok, idx = placed.draws, placed.ok, placed.index
     sim = simulator or Simulator(obj, backend, batch_size)
     (out_d,) = sim.run([(base, draws)])
-    success = np.zeros(len(x), bool)
-    score = np.zeros(len(x))
+    success = np.zeros(len(idx), bool)
+    score = np.zeros(len(idx))
     if len(draws):
         success[ok] = out_d["success"]
         score[ok] = np.nan_to_num(out_d["score"], nan=0.0)
     successes = np.bincount(idx, weights=success, minlength=k).astype(int)
-    landed = np.bincount(idx, weights=res["reason"] == pp.fk.CLEARANCE, minlength=k).astype(int)
-    missed = np.bincount(idx, weights=res["reason"] == pp.fk.OFF_OBJECT, minlength=k).astype(int)
+    landed = np.bincount(idx, weights=placed.reason == pp.fk.CLEARANCE, minlength=k).astype(int)
+    missed = np.bincount(idx, weights=placed.reason == pp.fk.OFF_OBJECT, minlength=k).astype(int)
     mean_score = np.bincount(idx, weights=score, minlength=k) / m
     ci = np.array([wilson_interval(int(s), m) for s in successes]).reshape(k, 2)
     p = successes / m

@@ -36,7 +36,7 @@ LAYERS = {
     # engine: backends and the runner every study simulates through
     "engine": ("simulate", "engine", "backend_mjx", "backend_mujoco", "backend_warp", "cluster"),
     "studies": ("evaluation", "sweeps", "comparison", "robust", "calibration", "throughput"),
-    "outputs": ("reporting",),
+    "outputs": ("reporting", "trials"),
     "interfaces": ("cli", "__init__", "__main__", "gui"),
 }
 ORDER = list(LAYERS)

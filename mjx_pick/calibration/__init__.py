@@ -16,7 +16,10 @@ One module per responsibility, in the order of the flow:
 * ``identify`` -- intervals and identifiability from the loss's curvature;
 * ``outputs`` -- contact.toml (with what it was fitted for), calibration.json, plots,
   report; the contact-file check used by evaluate;
-* ``synthetic`` -- outcomes and traces simulated with hidden parameters.
+* ``synthetic`` -- outcomes and traces simulated with hidden parameters;
+* ``trials`` -- the paper's template-and-trial loop (``mjx-pick trials``): which
+  pick-points to try, the sheet, the agreement of simulation and reality, the fit and
+  the next round (imported on its own: ``from mjx_pick.calibration import trials``).
 """
 
 from mjx_pick.calibration.data import (

@@ -136,10 +136,22 @@ def read_outcomes(path: str | Path) -> Outcomes:
         rows = list(reader)
     if not rows:
         raise ConfigError(f"outcomes file {path.name} has no rows")
+    return outcomes_from_rows(rows, path)
+
+
+def outcomes_from_rows(
+    rows: list[dict], path: Path, lines: list[int] | None = None, label: str = "outcomes file"
+) -> Outcomes:
+    """Outcomes of CSV rows (dicts of cell text, as ``csv.DictReader`` gives them) of the
+    file `path` (trace files are found beside it), with every check of
+    :func:`read_outcomes`; lines: each row's line in the file, for the errors (default:
+    2, 3, ...); label: what the errors call the file. Columns other than REQUIRED and
+    OPTIONAL are not read."""
+    lines = list(range(2, len(rows) + 2)) if lines is None else list(lines)
     cols = {c: [] for c in REQUIRED}
     lift, traces = [], []
-    for line, row in enumerate(rows, start=2):
-        where = f"outcomes file {path.name}, row {line}"
+    for line, row in zip(lines, rows, strict=True):
+        where = f"{label} {path.name}, row {line}"
         for c in REQUIRED:
             try:
                 v = float(row[c])

@@ -390,3 +390,166 @@ def cmd_gui(args) -> int:
     sys.stdout.flush()
     gui.serve(args.host, port, args.workdir, show=not args.no_browser and gui.has_browser())
     return 0
+
+
+# ---------------------------------------------------------------------------- trials
+
+
+def _print_notes(notes) -> None:
+    for note in notes:
+        print(f"  note: {note}")
+
+
+def _print_agreement(label: str, a: dict) -> None:
+    c = a["confusion"]
+    lo, hi = a["accuracy_ci"]
+    print(
+        f"{label}: {a['correct']}/{a['pick_points']} pick-points agree "
+        f"({a['accuracy']:.0%}, 95 % {lo:.0%}-{hi:.0%}; always '{a['baseline']['predict']}' "
+        f"gets {a['baseline']['correct']})"
+    )
+    print("                      real success  real failure")
+    print(
+        f"  simulated success   {c['sim_success_real_success']:>12}  "
+        f"{c['sim_success_real_failure']:>12}"
+    )
+    print(
+        f"  simulated failure   {c['sim_failure_real_success']:>12}  "
+        f"{c['sim_failure_real_failure']:>12}"
+    )
+
+
+def _print_round(rnd: dict) -> None:
+    rows = [
+        {
+            "page": p["page"],
+            "pick_id": p["pick_id"],
+            "sim": "success" if p["sim_success"] else p["sim_failure"],
+            "bits": p["info_bits"],
+            "why": p["why"],
+        }
+        for p in rnd["picks"]
+    ]
+    _print_rows(rows, ["page", "pick_id", "sim", "bits", "why"])
+    _print_notes(rnd["notes"])
+
+
+def cmd_trials_plan(args) -> int:
+    from mjx_pick import trials
+    from mjx_pick.cli.inputs import object_of
+
+    plan = trials.plan(
+        args.run,
+        object_of(args),
+        args.out,
+        n=args.n,
+        repeats=args.repeats,
+        params=args.params,
+        bounds=name_ranges(args.bounds, "--bounds"),
+        priors=name_ranges(args.prior, "--prior"),
+        draws=args.draws,
+        placements=args.placements,
+        jitter_mm=args.jitter_mm,
+        jitter_deg=args.jitter_deg,
+        pool=args.pool,
+        info_share=args.info_share,
+        seed=args.seed,
+        blind=args.blind,
+        paper=args.paper,
+        backend=args.backend,
+        batch_size=args.batch_size,
+        overwrite=args.overwrite,
+    )
+    rnd = plan["rounds"][0]
+    _print_round(rnd)
+    print(
+        f"{rnd['simulations']} simulations. Print {args.out}/templates_round1.pdf at actual "
+        f"size; try each page {args.repeats} times; write the successes in "
+        f"{args.out}/trials.csv (or: mjx-pick trials record {args.out})"
+    )
+    return 0
+
+
+def cmd_trials_record(args) -> int:
+    from mjx_pick import trials
+
+    if not sys.stdin.isatty():
+        raise ConfigError(
+            f"trials record asks at a terminal and stdin is not one: fill the successes "
+            f"column of {args.trials}/trials.csv in an editor instead"
+        )
+    done = trials.record(args.trials, input)
+    print(
+        f"recorded {done['filled']} row(s), skipped {done['skipped']}; {done['left']} left "
+        f"untried in {args.trials}/trials.csv"
+    )
+    return 0
+
+
+def cmd_trials_agree(args) -> int:
+    from mjx_pick import trials
+
+    res = trials.agree(args.trials, partial=args.partial)
+    _print_agreement("simulation vs reality", res["overall"])
+    _print_notes(res["overall"]["notes"])
+    if len(res["by_round"]) > 1:
+        for r, a in res["by_round"].items():
+            print(
+                f"  round {r} (predicted by {a['planned_with']}): {a['correct']}/"
+                f"{a['pick_points']}, 95 % {a['accuracy_ci'][0]:.0%}-{a['accuracy_ci'][1]:.0%}"
+            )
+    print(f"details in {args.trials}/agreement.md (and .json); outcomes.csv feeds calibrate")
+    return 0
+
+
+def cmd_trials_fit(args) -> int:
+    from mjx_pick import trials
+    from mjx_pick.cli.inputs import object_of
+
+    obj = object_of(args)
+
+    def log(entry):
+        if entry["step"] % args.log_every == 0:
+            values = ", ".join(f"{k} {v:.4g}" for k, v in entry["values"].items())
+            print(f"step {entry['step']:4d}  best loss {entry['best_loss']:.4f}  {values}")
+
+    res = trials.fit(
+        args.trials,
+        obj,
+        args.params,
+        bounds=name_ranges(args.bounds, "--bounds") or None,
+        priors=name_ranges(args.prior, "--prior") or None,
+        partial=args.partial,
+        steps=args.steps,
+        estimator=args.estimator,
+        seed=args.seed,
+        identify=not args.no_identify,
+        temperature_mm=args.temperature_mm,
+        next_n=args.next,
+        paper=args.paper,
+        backend=args.backend,
+        overwrite=args.overwrite,
+        resume=args.resume,
+        log=log,
+    )
+    fit = res.result
+    for name, value in fit.values.items():
+        flag = "  NOT identified: kept at its start" if name in fit.not_identified else ""
+        print(f"{name}: {fit.initial[name]:.4g} -> {value:.4g}{flag}")
+    _print_agreement("before (the run's parameters)", res.before)
+    _print_agreement("after (the fitted parameters)", res.after)
+    if res.report["at_optimum"]:
+        _print_agreement(
+            "at the fit's optimum (not used: not identified)", res.report["at_optimum"]
+        )
+    _print_notes(res.notes)
+    print(f"fit in {res.out_dir}/ (contact.toml, agreement.md, report.md)")
+    if res.next_round is not None:
+        r = res.next_round["round"]
+        print(
+            f"round {r} (predicted with the fitted parameters): "
+            f"{len(res.next_round['picks'])} pick-points added to {args.trials}/trials.csv; "
+            f"print {args.trials}/templates_round{r}.pdf"
+        )
+        _print_round(res.next_round)
+    return 0

@@ -12,9 +12,16 @@ from mjx_pick.config import ConfigError, load_toml
 
 def objects(args):
     from mjx_pick.gripper import load_gripper
+
+    obj = object_of(args)
+    return obj, load_gripper(args.gripper_file or args.gripper)
+
+
+def object_of(args):
+    """The object the object options name (no gripper: a trials folder records its own)."""
     from mjx_pick.objects import load_object
 
-    obj = load_object(
+    return load_object(
         args.object,
         px_per_mm=args.px_per_mm,
         thickness_mm=args.thickness_mm,
@@ -26,8 +33,6 @@ def objects(args):
         simplify_mm=args.simplify_mm,
         material=args.material,
     )
-    gripper = load_gripper(args.gripper_file or args.gripper)
-    return obj, gripper
 
 
 def settings(args):

@@ -307,6 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("params", help="list the parameters sweep accepts").set_defaults(func=cmd_params)
     sub.add_parser("assets", help="list shipped objects").set_defaults(func=cmd_assets)
     _add_gui_parser(sub)
+    _add_trials_parser(sub)
     return ap
 
 
@@ -317,3 +318,151 @@ def _add_gui_parser(sub) -> None:
     gp.add_argument("--workdir", default="runs/gui", help="folder for uploads and runs")
     gp.add_argument("--no-browser", action="store_true", help="do not open a browser")
     gp.set_defaults(func=cmd_gui)
+
+
+# ---------------------------------------------------------------------------- trials
+
+
+def _add_trials_parser(sub) -> None:
+    """``mjx-pick trials plan | record | agree | fit``: the paper's template-and-trial
+    loop (docs/calibration.md, "Trials on the real cell")."""
+    from mjx_pick.cli.commands import (
+        cmd_trials_agree,
+        cmd_trials_fit,
+        cmd_trials_plan,
+        cmd_trials_record,
+    )
+
+    tp = sub.add_parser(
+        "trials",
+        help="the paper's loop on the real cell: plan pick-points and print their 1:1 "
+        "templates, record outcomes, report agreement, fit and plan the next round",
+    )
+    steps = tp.add_subparsers(dest="step", required=True)
+
+    def backend(p) -> None:
+        p.add_argument(
+            "--backend",
+            choices=("auto", "warp", "mjx", "mujoco"),
+            default="auto",
+            help="simulation backend (as evaluate)",
+        )
+
+    def ranges(p) -> None:
+        p.add_argument(
+            "--bounds", action="append", metavar="NAME=LO:HI", help="a parameter's bounds"
+        )
+        p.add_argument(
+            "--prior",
+            action="append",
+            metavar="NAME=MEAN:SD",
+            help="a parameter's Gaussian prior (SD in log units for stiffness, damping, "
+            "torsion); what is known already: trials are then spent where doubt remains",
+        )
+
+    pl = steps.add_parser(
+        "plan", help="choose pick-points of an evaluate run to try; print their 1:1 templates"
+    )
+    pl.add_argument("run", help="a finished evaluate output folder (its gripper and physics)")
+    _add_object_args(pl)
+    pl.add_argument("--n", type=int, default=12, help="pick-points to try; default %(default)s")
+    pl.add_argument(
+        "--repeats",
+        type=int,
+        default=5,
+        help="trials per pick-point (the paper: 5); default %(default)s",
+    )
+    pl.add_argument(
+        "--params",
+        default="pad_friction",
+        help="the uncertain parameters that decide what is informative (as calibrate "
+        "--params); default %(default)s",
+    )
+    ranges(pl)
+    pl.add_argument(
+        "--draws", type=int, default=6, help="parameter draws from the prior; default %(default)s"
+    )
+    pl.add_argument(
+        "--placements",
+        type=int,
+        default=3,
+        help="placements per pick-point and draw: the template pose and jittered ones; "
+        "default %(default)s",
+    )
+    pl.add_argument(
+        "--jitter-mm", type=float, default=1.0, help="placing error on x, y; default %(default)s"
+    )
+    pl.add_argument(
+        "--jitter-deg", type=float, default=2.0, help="placing error on yaw; default %(default)s"
+    )
+    pl.add_argument(
+        "--pool",
+        type=int,
+        default=32,
+        help="candidates simulated, from the run's successes and failures; default %(default)s",
+    )
+    pl.add_argument(
+        "--info-share",
+        type=float,
+        default=0.5,
+        help="share chosen by expected information (the rest: best and worst, as the "
+        "paper); default %(default)s",
+    )
+    pl.add_argument("--seed", type=int, default=0)
+    pl.add_argument("--paper", choices=("a4", "letter"), default="a4")
+    pl.add_argument(
+        "--blind",
+        action="store_true",
+        help="keep the predictions out of trials.csv (the person at the robot does not see them)",
+    )
+    backend(pl)
+    pl.add_argument("--batch-size", type=int, help="simulations per backend call")
+    pl.add_argument("--out", required=True, help="the trials folder")
+    _add_overwrite(pl)
+    pl.set_defaults(func=cmd_trials_plan)
+
+    rc = steps.add_parser(
+        "record", help="ask for each untried row's successes at the terminal (blind)"
+    )
+    rc.add_argument("trials", help="a trials folder")
+    rc.set_defaults(func=cmd_trials_record)
+
+    ag = steps.add_parser(
+        "agree", help="agreement of simulation and reality: confusion matrix, accuracy, per pick"
+    )
+    ag.add_argument("trials", help="a trials folder")
+    ag.add_argument("--partial", action="store_true", help="use the tried rows, others blank")
+    ag.set_defaults(func=cmd_trials_agree)
+
+    ft = steps.add_parser(
+        "fit",
+        help="fit the outcomes, re-simulate, agreement before and after, plan the next round",
+    )
+    ft.add_argument("trials", help="a trials folder")
+    _add_object_args(ft)
+    ft.add_argument("--params", help="parameters to fit (default: the plan's --params)")
+    ranges(ft)
+    ft.add_argument("--steps", type=int, default=40, help="estimator steps; default %(default)s")
+    ft.add_argument(
+        "--estimator",
+        choices=("cma", "smoothed", "random"),
+        default="cma",
+        help="as calibrate; default %(default)s",
+    )
+    ft.add_argument("--temperature-mm", type=float, help="outcome smoothing (as calibrate)")
+    ft.add_argument(
+        "--next",
+        type=int,
+        default=6,
+        help="pick-points of the next round, where the fitted model is least sure (0: "
+        "none); default %(default)s",
+    )
+    ft.add_argument("--partial", action="store_true", help="fit the tried rows, others blank")
+    ft.add_argument("--seed", type=int, default=0)
+    ft.add_argument("--no-identify", action="store_true", help="skip the intervals")
+    ft.add_argument("--paper", choices=("a4", "letter"), default="a4")
+    ft.add_argument("--log-every", type=int, default=10)
+    backend(ft)
+    ft.add_argument("--resume", action="store_true", help="continue this round's fit")
+    ft.add_argument("--overwrite", action="store_true", help="replace this round's earlier fit")
+    ft.set_defaults(func=cmd_trials_fit)
