@@ -45,6 +45,22 @@ def _finalize_fn():
     return jax.jit(jax.vmap(gk.finalize))
 
 
+def tick_rows(n: int) -> int:
+    """Rows the jitted tick runs for a chunk of n simulations: the next power of two (at
+    least 8). XLA compiles the tick once per shape (3-5 s on a 2-core CPU); studies and
+    calibration call with many chunk sizes, and a few shapes serve them all. The extra
+    rows repeat the last simulation's state and are dropped."""
+    return max(8, 1 << (int(n) - 1).bit_length())
+
+
+def _pad(x, rows: int):
+    """x (n, ...) padded to (rows, ...) by repeating its last row (finite values)."""
+    x = np.asarray(x)
+    if len(x) == rows:
+        return x
+    return np.concatenate([x, np.repeat(x[-1:], rows - len(x), axis=0)])
+
+
 class MujocoBackend:
     """Runs PickInputs on mujoco.batch.Batch in chunks of batch_size simulations."""
 
@@ -98,14 +114,22 @@ class MujocoBackend:
         cfrc, sim_time = b.bind("cfrc_ext"), b.bind("time")
         qpos[:] = inputs.qpos0
         qvel[:] = 0.0
+        # the controller runs on `rows` >= n rows (tick_rows); physics on the n alone
+        rows_n = tick_rows(n)
+        qpos0 = _pad(inputs.qpos0, rows_n)
+        params = jax.tree.map(lambda x: _pad(x, rows_n), inputs.params)
         o = ad.object_qpos
-        pos0 = inputs.qpos0[:, o : o + 3]
-        quat0 = inputs.qpos0[:, o + 3 : o + 7]
-        s, a = jax.vmap(lambda q: gk.initial(ad, q))(inputs.qpos0)
-        ctrl[:] = np.asarray(jax.vmap(lambda st, q: gk.command(ad, st, q))(s, inputs.qpos0))
+        pos0, quat0 = qpos0[:, o : o + 3], qpos0[:, o + 3 : o + 7]
+        s, a = jax.vmap(lambda q: gk.initial(ad, q))(qpos0)
+        u0 = jax.vmap(lambda st, q: gk.command(ad, st, q))(s, qpos0)
+        ctrl[:] = np.asarray(u0)[:n]
         b.forward()
         tick = _tick_fn(ad)
-        tick.lower(inputs.params, s, a, qpos, qvel, cfrc, pos0, quat0).compile()
+
+        def state():
+            return _pad(qpos, rows_n), _pad(qvel, rows_n), _pad(cfrc, rows_n)
+
+        tick.lower(params, s, a, *state(), pos0, quat0).compile()
         self.stats.compile_s += time.perf_counter() - t_compile
 
         t_run = time.perf_counter()
@@ -113,13 +137,13 @@ class MujocoBackend:
         rows = []
         dt = n_sub * self.scene.model.opt.timestep
         for k in range(n_ticks):
-            s, a, u, row = tick(inputs.params, s, a, qpos, qvel, cfrc, pos0, quat0)
+            s, a, u, row = tick(params, s, a, *state(), pos0, quat0)
             if record:
-                rows.append(np.asarray(row))
-            running = (np.asarray(s.phase) != gk.DONE) & ~np.asarray(a.diverged)
+                rows.append(np.asarray(row)[:n])
+            running = (np.asarray(s.phase)[:n] != gk.DONE) & ~np.asarray(a.diverged)[:n]
             if not running.any():
                 break
-            ctrl[:] = np.asarray(u)
+            ctrl[:] = np.asarray(u)[:n]
             ids = np.flatnonzero(running)
             failed = np.zeros(n, bool)
             try:
@@ -132,8 +156,8 @@ class MujocoBackend:
                 broken |= failed
                 qpos[failed] = np.nan  # the next tick flags them diverged
         if broken.any():
-            s, a, _, _ = tick(inputs.params, s, a, qpos, qvel, cfrc, pos0, quat0)
-        out = {k: np.asarray(v) for k, v in _finalize_fn()(inputs.params, a).items()}
+            s, a, _, _ = tick(params, s, a, *state(), pos0, quat0)
+        out = {k: np.asarray(v)[:n] for k, v in _finalize_fn()(params, a).items()}
         self.stats.run_s += time.perf_counter() - t_run
         traces = None
         if record:
