@@ -54,7 +54,7 @@ def modules():
         yield path.stem, path
     for path in sorted((ROOT / "mjx_pick" / "kernels").glob("*.py")):
         yield "kernels", path
-    for path in sorted((ROOT / "mjx_pick" / "calibration").glob("*.py")):
+    for path in sorted((ROOT / "mjx_pick" / "calibration").rglob("*.py")):
         yield "calibration", path  # the calibration package: a study
     for path in sorted((ROOT / "mjx_pick" / "reporting").glob("*.py")):
         yield "reporting", path  # the report package: the outputs layer
