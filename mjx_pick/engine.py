@@ -2,7 +2,7 @@
 
 Every caller runs its simulations through an :class:`Engine`: ``evaluate`` (chunked,
 resumable: :func:`run_chunks`), the studies through :class:`Simulator` (sweep, compare,
-design search, robustness, minimum grip force), calibration (``calibrate.Problem``) and
+design search, robustness, minimum grip force), calibration (``calibration.Problem``) and
 the throughput benchmarks (``throughput.measure``, ``side_by_side``). It owns
 
 * backend choice: ``simulate.make_backend`` ('auto', 'warp', 'mjx', 'mujoco'); a new
@@ -25,7 +25,8 @@ Every pick-point is simulated on its own (MJX pads batches with copies whose res
 are dropped; a refilled pool gives the results of full-length rollouts), but the float32
 rounding of a batched program may depend on the batch's SHAPE: on the C engine, the
 per-tick kernel (XLA on the CPU) gave 149 of 1,024 scores one float32 step apart in
-batches of 64 and of 1,024 (labels equal; benchmarks/RESULTS.md, issue 20). So results
+batches of 64 and of 1,024 (labels equal; benchmarks/RESULTS.md, issue 20); it runs on
+``backend_mujoco.tick_rows(n)`` rows, the next power of two. So results
 are bitwise the same for the same batch size and chunk size -- chunks that are whole
 numbers of batches give every call the full batch but the run's last -- which is why a
 resumed run keeps its chunk plan and a cluster run chunks as one machine would.
