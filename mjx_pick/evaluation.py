@@ -50,6 +50,7 @@ from mjx_pick.engine import (
     plan_chunks,
     read_chunk,
     run_chunks,
+    showing_progress,
 )
 from mjx_pick.grasp import GraspConfig, min_grasp_force_n
 from mjx_pick.gripper import GripperSpec, load_gripper
@@ -58,6 +59,7 @@ from mjx_pick.metrics import summarize
 from mjx_pick.objects import ObjectModel, load_object
 from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.pickfiles import read_picks_csv
+from mjx_pick.progress import ProgressBar
 from mjx_pick.robust import min_grip_force
 from mjx_pick.rundir import claim, config_hash, finish, versions
 from mjx_pick.scene import Scene, build_scene
@@ -388,7 +390,8 @@ def _evaluate(
             sim = Simulator(obj, engine=engine)  # its bisection runs through this engine
             sim.adopt(settings, runner)
             t1 = time.perf_counter()
-            forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
+            with showing_progress(engine, "minimum grip force (bisection)", "sim", progress):
+                forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
             table = table.append_column("min_force_n", pa.array(forces))
             # holding at the gripper's smallest force says only that the true minimum is at
             # or below it: flagged, never presented as the minimum itself
@@ -469,25 +472,25 @@ def experiment_key(scene: Scene, settings: dict) -> str:
 
 
 def _simulate(executor, picks, plan, out_dir, bar: bool, on_progress):
-    """The main run through the engine's chunked runner, with a tqdm bar if asked:
-    pick-points, chunks done and, on a cluster, pick-points/s per node and in all."""
+    """The main run through the engine's chunked runner, with a progress bar if asked
+    (``progress.ProgressBar``, on stderr): pick-points, chunks done and, on a cluster,
+    pick-points/s per node and in all."""
     if not bar:
         return run_chunks(executor, picks, plan, out_dir, on_progress)
-    from tqdm import tqdm
-
     chunks_done = [0]
     note = getattr(executor, "progress_note", None)
-    with tqdm(total=len(picks), unit="pick", desc=f"simulating ({executor.name})") as pbar:
+    desc = f"simulating ({executor.name})"
+    with ProgressBar(desc, "pick", total=len(picks)) as pbar:
 
         def chunk_done(result) -> None:
             chunks_done[0] += 1
             text = f"chunks {chunks_done[0]}/{plan.n_chunks} this run"
             if note is not None:
                 text += f"; {note()}"
-            pbar.set_postfix_str(text, refresh=False)
+            pbar.note(text)
 
         def report(done: int, total: int) -> None:
-            pbar.update(done - pbar.n)
+            pbar(done, total)
             if on_progress is not None:
                 on_progress(done, total)
 

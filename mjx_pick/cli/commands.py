@@ -349,10 +349,36 @@ def cmd_presets(_args) -> int:
     return 0
 
 
-def cmd_params(_args) -> int:
-    from mjx_pick.sweeps import sweepable
+_PARAM_SECTIONS = {
+    "contact": "contact parameters (ContactParams; --contact FILE, --pad-friction, ...)",
+    "grasp": "the pick procedure (GraspConfig; --grasp FILE, --grip-force-n, ...)",
+    "gripper": "gripper geometry and ranges (GripperSpec; --gripper-file FILE)",
+    "solver": "MuJoCo solver settings (SolverParams; --solver FILE, --timestep-s)",
+    "picks": "pick-point generation (PickConfig; --safety-zone-mm, --min-coverage): "
+    "set per run, not swept",
+}
 
-    print("\n".join(sweepable()))
+
+def cmd_params(args) -> int:
+    from mjx_pick.sweeps import describe_params
+
+    rows = describe_params(args.prefix or "")
+    for r in rows:
+        d = r["default"]
+        r["default"] = "none" if d is None else str(d) if isinstance(d, int) else f"{d:g}"
+        if r["aliases"]:
+            r["meaning"] += f" (alias: {', '.join(r['aliases'])})"
+    keys = ("name", "default", "unit", "range")
+    width = {k: max(len(k), *(len(str(r[k])) for r in rows)) for k in keys}
+    print("sweep: --param NAME=LO:HI:N (grid), NAME=A,B,C (list), NAME=LO:HI (random)")
+    section = None
+    for r in rows:
+        if r["name"].partition(".")[0] != section:
+            section = r["name"].partition(".")[0]
+            print(f"\n{section}: {_PARAM_SECTIONS[section]}")
+            print("  " + "  ".join(f"{k:<{width[k]}}" for k in keys) + "  meaning")
+        cells = "  ".join(f"{str(r[k]):<{width[k]}}" for k in keys)
+        print(f"  {cells}  {r['meaning']}")
     return 0
 
 
