@@ -16,7 +16,10 @@ Every simulation runs through the engine: large runs go in chunks
 ``ray="auto" | "HOST:PORT"`` the actors of a Ray cluster (``mjx_pick.cluster``); either
 way this process alone writes the folder. Each finished chunk is written atomically
 under ``chunks/`` beside the chunk plan (``chunks/plan.json``), so that ``resume=True``
-redoes nothing that finished, for the same experiment (:func:`experiment_key`).
+redoes nothing that finished, for the same experiment (:func:`experiment_key`). Once the
+run is complete (results, summary and traces written), ``chunks/`` is removed: its
+rows are all in results.parquet. A run that stops early keeps it for ``resume``, and
+``resume`` on a complete folder simulates nothing and returns what it holds.
 ``on_progress(done, total)`` reports pick-points done after each chunk; setting the
 ``cancel`` event stops the run before the next chunk (``engine.Cancelled``; the folder
 is marked "cancelled" and its finished chunks stay for ``resume``).
@@ -28,6 +31,7 @@ import dataclasses
 import hashlib
 import json
 import re
+import shutil
 import threading
 import time
 import warnings
@@ -61,7 +65,7 @@ from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.pickfiles import read_picks_csv
 from mjx_pick.progress import ProgressBar
 from mjx_pick.robust import min_grip_force
-from mjx_pick.rundir import claim, config_hash, finish, versions
+from mjx_pick.rundir import claim, config_hash, finish, read_manifest, versions
 from mjx_pick.scene import Scene, build_scene
 from mjx_pick.simulate import Settings
 
@@ -75,6 +79,8 @@ class Evaluation:
     config: dict
     traces: pa.Table | None
     out_dir: Path | None
+    # resume found the run already complete: read back, nothing simulated
+    already_complete: bool = False
 
 
 def user_picks(
@@ -139,6 +145,7 @@ def evaluate(
     min_force: bool = False,
     overwrite: bool = False,
     skip_infeasible: bool = False,
+    keep_chunks: bool = False,
     on_progress: ProgressFn | None = None,
     cancel: threading.Event | None = None,
     ray: str | None = None,
@@ -165,6 +172,8 @@ def evaluate(
       resume: continue an interrupted run of the same experiment (:func:`experiment_key`)
         in out: finished chunks are read, not simulated; the run keeps its chunk size.
       overwrite: replace what another command (or another configuration) wrote in out.
+      keep_chunks: keep out/chunks/ after a complete run (default: removed once every
+        row is in results.parquet; a run that stops early always keeps it).
       skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
         them) instead of refusing the file.
       until, min_score, max_n: Optimization mode -- simulate batches until `until`
@@ -229,6 +238,7 @@ def evaluate(
             min_force=min_force,
             overwrite=overwrite,
             skip_infeasible=skip_infeasible,
+            keep_chunks=keep_chunks,
             on_progress=on_progress,
         )
     finally:
@@ -262,6 +272,7 @@ def _evaluate(
     min_force,
     overwrite,
     skip_infeasible,
+    keep_chunks,
     on_progress,
 ) -> Evaluation:
     """evaluate() once its executor (this process, or a Ray cluster) is ready."""
@@ -287,6 +298,10 @@ def _evaluate(
             "batch_size": executor.batch_size,
         },
     )
+    if out_dir is not None and resume:
+        done = _complete_run(out_dir, key)
+        if done is not None:
+            return done
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
         claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite)
 
@@ -413,7 +428,35 @@ def _evaluate(
             write_parquet(out_dir / "traces.parquet", traces)
         meta = executor.describe(time.perf_counter() - t0)
         finish(out_dir, command="evaluate", config=config, seed=seed, **meta)
+        if not keep_chunks:  # every row is in results.parquet now
+            shutil.rmtree(out_dir / "chunks", ignore_errors=True)
     return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _complete_run(out_dir: Path, key: str) -> Evaluation | None:
+    """The run in out_dir read back when it is a complete evaluate run of this
+    experiment (resume then has nothing to do), else None."""
+    import pyarrow.parquet as pq
+
+    manifest = read_manifest(out_dir)
+    need = [out_dir / n for n in ("results.parquet", "summary.json", "config.json")]
+    if (
+        manifest is None
+        or manifest.get("command") != "evaluate"
+        or manifest.get("config_key") != key
+        or manifest.get("status") != "complete"
+        or not all(p.is_file() for p in need)
+    ):
+        return None
+    traces = out_dir / "traces.parquet"
+    return Evaluation(
+        pq.read_table(need[0]),
+        json.loads(need[1].read_text()),
+        json.loads(need[2].read_text()),
+        pq.read_table(traces) if traces.is_file() else None,
+        out_dir,
+        already_complete=True,
+    )
 
 
 def _stopped(out_dir, stop: BaseException, executor, seed, config, wall_s=None) -> None:

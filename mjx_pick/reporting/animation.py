@@ -40,8 +40,7 @@ class TracePose:
         self.links = []
         if self.linkage:
             self.links = [
-                int(model.jnt_qposadr[model.joint(PREFIX + j).id])
-                for j in self.linkage.joint_names
+                int(model.jnt_qposadr[model.joint(PREFIX + j).id]) for j in self.linkage.joint_names
             ]
 
     def __len__(self) -> int:

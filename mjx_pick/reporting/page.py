@@ -12,6 +12,7 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from mjx_pick.config import ConfigError, write_atomic, write_json
+from mjx_pick.metrics import rate_text
 from mjx_pick.progress import ProgressBar
 from mjx_pick.reporting.animation import animate
 from mjx_pick.reporting.figures import force_plot, maps
@@ -153,11 +154,11 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, picks) -> Path:
             ("object / gripper", f"{s.get('object')} / {s.get('gripper')}"),
             ("backend / device", f"{s.get('backend')} / {s.get('device')}"),
             ("pick-points", s.get("n")),
-            ("success rate", f"{s.get('success_rate', float('nan')):.3f}"),
+            ("success rate", rate_text(s.get("successes", 0), s.get("n", 0))),
             ("diverged", s.get("diverged")),
             ("score mean", f"{s.get('score_mean', float('nan')):.3f}"),
             ("F_Gmin, eq. (1)", f"{s.get('f_gmin_n', float('nan')):.3f} N"),
-            ("failures", ", ".join(f"{k_} {v}" for k_, v in s.get("failures", {}).items() if v)),
+            ("outcomes", ", ".join(f"{k_} {v}" for k_, v in s.get("failures", {}).items() if v)),
         )
     )
     img = lambda p, cap: (  # noqa: E731
@@ -176,7 +177,7 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, picks) -> Path:
         img(out_dir / "score_map.png", "pick-points by score"),
         img(out_dir / "success_by_yaw.png", "success rate over (x, y) per yaw bin"),
         img(out_dir / "score_hist.png", "score histogram"),
-        img(out_dir / "failures.png", "failure reasons"),
+        img(out_dir / "failures.png", "outcomes: success, or why it failed"),
         "<h2>Forces</h2>",
         *(img(p, cap) for p, cap in forces),
         "<h2>Animations</h2>",
