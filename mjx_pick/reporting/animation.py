@@ -145,33 +145,38 @@ def animate(
 def write_mp4(path: str | os.PathLike, frames: list[np.ndarray], fps: float) -> Path:
     """RGB frames (H, W, 3 uint8) as an H.264 MP4 (yuv420p: plays in browsers and
     players), fps frames per second, written atomically. Odd sizes are padded by one
-    black pixel (the codec needs even ones). Uses imageio's ffmpeg plugin, whose
-    ffmpeg binary ships in the imageio-ffmpeg wheel."""
+    black pixel (the codec needs even ones).
+
+    The encoder is the ffmpeg binary the imageio-ffmpeg wheel ships, run here directly:
+    imageio's own writer starts it with a ``preexec_fn``, i.e. a Python-level fork in a
+    process whose JAX threads are running (JAX warns of a deadlock), and leaves its pipes
+    open. In its own session, so that a Ctrl-C meant for mjx-pick reaches it only
+    through us (the partial file is removed).
+    """
+    import subprocess
     import tempfile
 
-    import imageio.v2 as imageio
+    from imageio_ffmpeg import get_ffmpeg_exe
 
     path = Path(path)
     h, w = frames[0].shape[:2]
     pad = ((0, h % 2), (0, w % 2), (0, 0))
+    raw = b"".join(
+        np.ascontiguousarray(np.pad(f[..., :3], pad), np.uint8).tobytes() for f in frames
+    )
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".mp4")
     os.close(fd)
+    cmd = [get_ffmpeg_exe(), "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24"]
+    cmd += ["-s", f"{w + w % 2}x{h + h % 2}", "-r", f"{fps:.6g}", "-i", "-", "-an"]
+    cmd += ["-c:v", "libx264", "-pix_fmt", "yuv420p", "-movflags", "+faststart", tmp]
     try:
-        writer = imageio.get_writer(
-            tmp,
-            format="FFMPEG",
-            mode="I",
-            fps=fps,
-            codec="libx264",
-            pixelformat="yuv420p",
-            macro_block_size=1,
-            ffmpeg_log_level="error",
-        )
-        try:
-            for frame in frames:
-                writer.append_data(np.pad(frame[..., :3], pad))
-        finally:
-            writer.close()
+        done = subprocess.run(cmd, input=raw, capture_output=True, start_new_session=True)
+        if done.returncode != 0:
+            why = done.stderr.decode(errors="replace").strip().splitlines()
+            raise RuntimeError(
+                f"ffmpeg could not write {path} (exit {done.returncode}): "
+                + (why[-1] if why else "no message")
+            )
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
