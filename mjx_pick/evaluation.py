@@ -18,8 +18,9 @@ way this process alone writes the folder. Each finished chunk is written atomica
 under ``chunks/`` beside the chunk plan (``chunks/plan.json``), so that ``resume=True``
 redoes nothing that finished, for the same experiment (:func:`experiment_key`). Once the
 run is complete (results, summary and traces written), ``chunks/`` is removed: its
-rows are all in results.parquet. A run that stops early keeps it for ``resume``, and
-``resume`` on a complete folder simulates nothing and returns what it holds.
+rows are all in results.parquet. A run that stops early keeps it for ``resume``;
+``resume`` on a complete folder simulates nothing and returns what it holds (without
+``resume`` or ``overwrite``, such a folder is refused).
 ``on_progress(done, total)`` reports pick-points done after each chunk; setting the
 ``cancel`` event stops the run before the next chunk (``engine.Cancelled``; the folder
 is marked "cancelled" and its finished chunks stay for ``resume``).
@@ -298,10 +299,14 @@ def _evaluate(
             "batch_size": executor.batch_size,
         },
     )
-    if out_dir is not None and resume:
-        done = _complete_run(out_dir, key)
-        if done is not None:
-            return done
+    done = _complete_run(out_dir, key) if out_dir is not None and not overwrite else None
+    if done is not None and resume:
+        return done
+    if done is not None:  # its chunks are gone: plan_chunks would no longer see it
+        raise ConfigError(
+            f"{out_dir} holds this run, complete: pass --resume to read it back, "
+            "--overwrite to run it again, or choose another --out"
+        )
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
         claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite)
 

@@ -178,3 +178,19 @@ def test_progress_over_several_runs_adds_up():
     assert lines[-1].startswith("simulating: 100% 10/10 pick"), lines
     assert sum("10/10" in line for line in lines) == 1
     assert _lines(lambda bar: bar(5, 5), enabled=False) == ""
+
+
+def test_progress_on_a_terminal_is_a_tqdm_bar_over_every_run():
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    sink = Terminal()
+    with ProgressBar("design", "sim", file=sink) as bar:
+        for total in (4, 6):
+            bar(0, total)
+            bar(total, total)
+        assert (bar.done, bar.total) == (10, 10)
+    assert "\r" in sink.getvalue() and sink.getvalue().rstrip().split("\r")[-1].startswith(
+        "design: 100%"
+    )
