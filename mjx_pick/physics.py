@@ -69,19 +69,19 @@ class ContactParams:
     )  # fmt: skip
     # ADAMS impact stiffness/damping (Table 1); mapped to negative solref, clamped
     pad_stiffness_n_per_mm: float = setting(
-        1e5, "N/mm", "pad-object contact stiffness (clamped to the stiffest stable)",
+        1e5, "N/mm", "pad-object contact stiffness (above the stable limit: clamped)",
         lo=0, lo_open=True,
     )  # fmt: skip
     pad_damping_ns_per_mm: float = setting(
-        5.5, "N s/mm", "pad-object contact damping (clamped to the stiffest stable)",
+        5.5, "N s/mm", "pad-object contact damping (above the stable limit: clamped)",
         lo=0, lo_open=True,
     )  # fmt: skip
     table_stiffness_n_per_mm: float = setting(
-        1e5, "N/mm", "object-table contact stiffness (clamped to the stiffest stable)",
+        1e5, "N/mm", "object-table contact stiffness (above the stable limit: clamped)",
         lo=0, lo_open=True,
     )  # fmt: skip
     table_damping_ns_per_mm: float = setting(
-        10.0, "N s/mm", "object-table contact damping (clamped to the stiffest stable)",
+        10.0, "N s/mm", "object-table contact damping (above the stable limit: clamped)",
         lo=0, lo_open=True,
     )  # fmt: skip
     # torsional friction of the pad contacts (length: torque limit per newton of
