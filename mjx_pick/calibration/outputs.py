@@ -177,7 +177,11 @@ def _loss_plot(result, path: Path) -> None:
         ax.set_yscale("log")
     elif len(finite):  # a zero loss (a perfect fit) has no place on a log axis
         ax.set_yscale("symlog", linthresh=max(1e-6, 1e-3 * float(finite.max())))
+    # 0.3, not 3 x 10^-1; between the decades only 2, 3 and 5 (the rest would overlap)
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(
+        FuncFormatter(lambda v, _: f"{v:g}" if f"{v:.0e}"[0] in "235" else "")
+    )
     if len(h):
         ax.annotate(
             f"best {best[-1]:.4g}",
