@@ -20,13 +20,13 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from mjx_pick.kernels import grasp as gk
 from scipy.stats import spearmanr
 
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
 from mjx_pick.engine import Engine
 from mjx_pick.grasp import GraspConfig
+from mjx_pick.kernels import grasp as gk
 from mjx_pick.simulate import make_inputs
 
 

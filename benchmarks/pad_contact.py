@@ -14,13 +14,13 @@ import argparse
 import collections
 
 import numpy as np
-from mjx_pick.kernels import grasp as gk
 from shapely.geometry import box
 
 import mjx_pick as mp
 from mjx_pick import pickpoints as pp
 from mjx_pick.engine import Engine
 from mjx_pick.grasp import G
+from mjx_pick.kernels import grasp as gk
 from mjx_pick.simulate import make_inputs
 
 FREE = mp.GripperSpec(name="test-gripper", force_min_n=0.01)

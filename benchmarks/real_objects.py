@@ -24,10 +24,10 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-from mjx_pick.kernels import grasp as gk
 
 import mjx_pick as mp
 from mjx_pick.config import load_toml, write_json
+from mjx_pick.kernels import grasp as gk
 from mjx_pick.metrics import wilson_interval
 
 

@@ -31,7 +31,7 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
-from mjx_pick.engine import Simulator, marking_stops
+from mjx_pick.engine import Simulator, marking_stops, showing_progress
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.objects import ObjectModel
@@ -133,15 +133,17 @@ def compare(
     out: str | Path | None = None,
     overwrite: bool = False,
     ray: str | None = None,
+    progress: bool = False,
 ) -> Comparison:
-    """Simulate one shared candidate set on every gripper and rank them (out, ray: as
-    sweep's)."""
+    """Simulate one shared candidate set on every gripper and rank them (out, ray,
+    progress: as sweep's)."""
     if simulator is None and ray is not None:
         sim = Simulator(obj, backend, batch_size, ray=ray)
         try:
             return compare(
                 obj, grippers, base, n=n, seed=seed, rank_by=rank_by,
                 pick_config=pick_config, simulator=sim, out=out, overwrite=overwrite,
+                progress=progress,
             )  # fmt: skip
         finally:
             sim.close()
@@ -162,7 +164,8 @@ def compare(
     n_cand = len(cand["pick_id"])
     sim = simulator or Simulator(obj, backend, batch_size)
     jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]
-    with marking_stops(out, "compare"):
+    desc = f"compare: {len(jobs)} grippers ({sim.engine.backend_name})"
+    with marking_stops(out, "compare"), showing_progress(sim.engine, desc, "sim", progress):
         outs = sim.run(jobs)
     success = np.zeros((len(grippers), n_cand), bool)
     score = np.zeros((len(grippers), n_cand))
@@ -334,12 +337,14 @@ def design_search(
     batch_size: int | None = None,
     out: str | Path | None = None,
     overwrite: bool = False,
+    progress: bool = False,
 ) -> DesignResult:
     """Search gripper geometry within bounds; see the module docstring.
 
     Round r simulates the surviving variants on n * 2**r shared pick-points and keeps
     the best third (at least one); the survivor is then compared with the base gripper
-    on final_n (default 4 n) fresh pick-points.
+    on final_n (default 4 n) fresh pick-points. progress: a progress bar on stderr
+    (its total grows as each round starts: a round's size depends on the last).
     """
     base = base or Settings()
     check_range("design", "rounds", rounds, 1, 20)
@@ -352,33 +357,39 @@ def design_search(
     pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
     sim = Simulator(obj, backend, batch_size)
     history = []
-    for r in range(rounds):
-        res = compare(
+    desc = f"design: {rounds} rounds + final ({sim.engine.backend_name})"
+    with showing_progress(sim.engine, desc, "sim", progress) as bar:
+        for r in range(rounds):
+            if bar is not None:
+                bar.note(f"round {r + 1}/{rounds}: {len(pool)} grippers")
+            res = compare(
+                obj,
+                pool,
+                base,
+                n=n * 2**r,
+                seed=seed,
+                rank_by=rank_by,
+                pick_config=pick_config,
+                simulator=sim,
+            )
+            history.append(res.ranking)
+            keep = max(1, math.ceil(len(pool) / 3)) if r < rounds - 1 else 1
+            by_name = {g.name: g for g in pool}
+            pool = [by_name[row["gripper"]] for row in res.ranking[:keep]]
+        best = pool[0]
+        contenders = [best] if best == base.gripper else [best, base.gripper]
+        if bar is not None:
+            bar.note("final: the best against the base gripper on fresh pick-points")
+        final = compare(
             obj,
-            pool,
+            contenders,
             base,
-            n=n * 2**r,
-            seed=seed,
+            n=final_n or 4 * n,
+            seed=seed + 1_000_003,
             rank_by=rank_by,
             pick_config=pick_config,
             simulator=sim,
         )
-        history.append(res.ranking)
-        keep = max(1, math.ceil(len(pool) / 3)) if r < rounds - 1 else 1
-        by_name = {g.name: g for g in pool}
-        pool = [by_name[row["gripper"]] for row in res.ranking[:keep]]
-    best = pool[0]
-    contenders = [best] if best == base.gripper else [best, base.gripper]
-    final = compare(
-        obj,
-        contenders,
-        base,
-        n=final_n or 4 * n,
-        seed=seed + 1_000_003,
-        rank_by=rank_by,
-        pick_config=pick_config,
-        simulator=sim,
-    )
     result = DesignResult(best, base.gripper, final, history, None)
     if out is not None:
         out_dir = Path(out)

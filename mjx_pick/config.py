@@ -11,6 +11,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import tempfile
 import tomllib
 from collections.abc import Mapping
@@ -47,6 +48,105 @@ def check_range(
         lo_s = "" if lo is None else f"{lo:g} {'<' if lo_open else '<='} "
         hi_s = "" if hi is None else f" {'<' if hi_open else '<='} {hi:g}"
         raise ConfigError(f"{name} = {value!r} is out of range: allowed {lo_s}{field}{hi_s}")
+
+
+Bound = float | str | None  # a number, no bound, or another field: "name" / "name + 360"
+
+
+def setting(
+    default: Any,
+    unit: str,
+    doc: str,
+    *,
+    lo: Bound = None,
+    hi: Bound = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> Any:
+    """A settings-dataclass field that says what it is: its unit, its meaning and the
+    range it must lie in. The one definition: :func:`check_fields` (called by the
+    dataclass's ``__post_init__``) enforces the range, and ``mjx-pick params``
+    (:func:`describe_fields`) shows the same facts.
+
+    Args:
+      unit: the field's unit ("mm", "N", "s", "mm/s", ...; "-" for a plain number).
+      doc: one line, what the field means.
+      lo, hi: the allowed range (inclusive; strict where lo_open / hi_open): a number,
+        None (unbounded), or another field of the same settings by name, with an
+        optional offset ("yaw_min_deg + 360"), read from the instance being checked.
+        A field whose value is None (where None is allowed) is not checked.
+    """
+    meta = {"unit": unit, "doc": doc, "range": (lo, hi, lo_open, hi_open)}
+    return dataclasses.field(default=default, metadata=meta)
+
+
+_BOUND = re.compile(r"^\s*([A-Za-z_]\w*)\s*(?:([+-])\s*([0-9.eE+-]+))?\s*$")
+
+
+def _bound(obj: Any, bound: Bound) -> float | None:
+    if bound is None or isinstance(bound, int | float):
+        return bound
+    m = _BOUND.match(bound)
+    if m is None:
+        raise ValueError(f"bad bound {bound!r}: write a number, 'field' or 'field + number'")
+    value = getattr(obj, m[1])
+    offset = float(m[3]) if m[3] else 0.0
+    return value + offset if m[2] != "-" else value - offset
+
+
+def check_fields(obj: Any, owner: str) -> None:
+    """Check every field of a settings dataclass declared with :func:`setting` against
+    its range (``check_range``: the first bad value is a ConfigError naming it): in the
+    order of the fields, those bounded by another field last."""
+    declared = [f for f in dataclasses.fields(obj) if f.metadata.get("range") is not None]
+    # fields bounded by numbers first: a bound read from another field is then valid
+    relative = [f for f in declared if any(isinstance(b, str) for b in f.metadata["range"][:2])]
+    for f in [f for f in declared if f not in relative] + relative:
+        value = getattr(obj, f.name)
+        if value is None:
+            continue
+        lo, hi, lo_open, hi_open = f.metadata["range"]
+        lo, hi = _bound(obj, lo), _bound(obj, hi)
+        check_range(owner, f.name, value, lo, hi, lo_open=lo_open, hi_open=hi_open)
+
+
+def range_text(rng: tuple | None) -> str:
+    """A field's allowed range in words: "0 < x <= 5", "x >= 1", "any"."""
+    if rng is None:
+        return "any"
+    lo, hi, lo_open, hi_open = rng
+    fmt = lambda b: f"{b:g}" if isinstance(b, int | float) else str(b)  # noqa: E731
+    if lo is None and hi is None:
+        return "any"
+    if hi is None:
+        return f"x {'>' if lo_open else '>='} {fmt(lo)}"
+    if lo is None:
+        return f"x {'<' if hi_open else '<='} {fmt(hi)}"
+    return f"{fmt(lo)} {'<' if lo_open else '<='} x {'<' if hi_open else '<='} {fmt(hi)}"
+
+
+def describe_fields(cls: type) -> list[dict]:
+    """Each field of a settings dataclass: name, unit, meaning, default and range text
+    (from its :func:`setting` declaration; a field declared without one gives unit and
+    meaning None)."""
+    out = []
+    for f in dataclasses.fields(cls):
+        if f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            default = None
+        out.append(
+            {
+                "name": f.name,
+                "unit": f.metadata.get("unit"),
+                "meaning": f.metadata.get("doc"),
+                "default": default,
+                "range": range_text(f.metadata.get("range")),
+            }
+        )
+    return out
 
 
 def check_choice(owner: str, field: str, value: Any, choices: tuple) -> None:

@@ -14,7 +14,7 @@ import os
 import sys
 import warnings
 
-__all__ = ["use_offscreen_rendering"]
+__all__ = ["display_problem", "has_display", "use_offscreen_rendering"]
 
 
 def use_offscreen_rendering() -> str | None:
@@ -28,7 +28,7 @@ def use_offscreen_rendering() -> str | None:
     """
     if "MUJOCO_GL" in os.environ:
         return os.environ["MUJOCO_GL"]
-    if not sys.platform.startswith("linux") or os.environ.get("DISPLAY"):
+    if has_display():
         return None
     if not ctypes.util.find_library("EGL"):
         return None
@@ -42,3 +42,21 @@ def use_offscreen_rendering() -> str | None:
         return None
     os.environ["MUJOCO_GL"] = "egl"
     return "egl"
+
+
+def has_display() -> bool:
+    """Whether windows can open here: always off Linux; on Linux, an X11 (DISPLAY) or
+    Wayland (WAYLAND_DISPLAY) session."""
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def display_problem() -> str | None:
+    """Why no window can open here, in one phrase naming what is needed (None: fine)."""
+    if has_display():
+        return None
+    return (
+        "no display: neither DISPLAY nor WAYLAND_DISPLAY is set; run it in a desktop "
+        "session (X11 or Wayland) or over ssh -X"
+    )

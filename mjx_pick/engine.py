@@ -56,6 +56,7 @@ from mjx_pick.grasp import GraspConfig
 from mjx_pick.metrics import results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.pickpoints import PickBatch
+from mjx_pick.progress import ProgressBar
 from mjx_pick.rundir import finish
 from mjx_pick.scene import Scene, build_scene
 from mjx_pick.simulate import (
@@ -515,6 +516,25 @@ def marking_stops(out_dir: str | Path | None, command: str) -> Iterator[None]:
         raise
 
 
+@contextlib.contextmanager
+def showing_progress(
+    engine: Engine, desc: str, unit: str = "sim", enabled: bool = True
+) -> Iterator[ProgressBar | None]:
+    """Inside it, the engine's progress goes to a :class:`~mjx_pick.progress.ProgressBar`
+    (on stderr): every run through the engine adds to the one bar. Nothing is shown when
+    not enabled or when the engine already reports to someone (an outer study's bar, a
+    caller's callback)."""
+    if not enabled or engine.on_progress is not None:
+        yield None
+        return
+    with ProgressBar(desc, unit) as bar:
+        engine.on_progress = bar
+        try:
+            yield bar
+        finally:
+            engine.on_progress = None
+
+
 class Simulator:
     """Runs (Settings, PickBatch) jobs for one object, batching what can share a program.
 
@@ -529,6 +549,8 @@ class Simulator:
       engine: run through this engine (its backend choice, progress and cancel event).
       ray: run on a Ray cluster ("auto" or "HOST:PORT": ``cluster.RayEngine``; ignored
         when engine is given); :meth:`close` ends its actors.
+      on_progress: the engine's progress callback, ``(done, total)`` in pick-point
+        simulations of each :meth:`run` (ignored when engine is given).
     """
 
     def __init__(
@@ -539,13 +561,14 @@ class Simulator:
         *,
         engine: Engine | None = None,
         ray: str | None = None,
+        on_progress: ProgressFn | None = None,
     ) -> None:
         self.object = obj
         if engine is None and ray is not None:
             from mjx_pick.cluster import RayEngine
 
-            engine = RayEngine(ray, backend, batch_size)
-        self.engine = engine or Engine(backend, batch_size)
+            engine = RayEngine(ray, backend, batch_size, on_progress=on_progress)
+        self.engine = engine or Engine(backend, batch_size, on_progress=on_progress)
         self.backend_name = self.engine.backend_name
         self.batch_size = self.engine.batch_size
         self._backends: dict[tuple, Backend] = {}

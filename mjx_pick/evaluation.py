@@ -16,7 +16,11 @@ Every simulation runs through the engine: large runs go in chunks
 ``ray="auto" | "HOST:PORT"`` the actors of a Ray cluster (``mjx_pick.cluster``); either
 way this process alone writes the folder. Each finished chunk is written atomically
 under ``chunks/`` beside the chunk plan (``chunks/plan.json``), so that ``resume=True``
-redoes nothing that finished, for the same experiment (:func:`experiment_key`).
+redoes nothing that finished, for the same experiment (:func:`experiment_key`). Once the
+run is complete (results, summary and traces written), ``chunks/`` is removed: its
+rows are all in results.parquet. A run that stops early keeps it for ``resume``;
+``resume`` on a complete folder simulates nothing and returns what it holds (without
+``resume`` or ``overwrite``, such a folder is refused).
 ``on_progress(done, total)`` reports pick-points done after each chunk; setting the
 ``cancel`` event stops the run before the next chunk (``engine.Cancelled``; the folder
 is marked "cancelled" and its finished chunks stay for ``resume``).
@@ -28,6 +32,7 @@ import dataclasses
 import hashlib
 import json
 import re
+import shutil
 import threading
 import time
 import warnings
@@ -50,6 +55,7 @@ from mjx_pick.engine import (
     plan_chunks,
     read_chunk,
     run_chunks,
+    showing_progress,
 )
 from mjx_pick.grasp import GraspConfig, min_grasp_force_n
 from mjx_pick.gripper import GripperSpec, load_gripper
@@ -58,8 +64,9 @@ from mjx_pick.metrics import summarize
 from mjx_pick.objects import ObjectModel, load_object
 from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.pickfiles import read_picks_csv
+from mjx_pick.progress import ProgressBar
 from mjx_pick.robust import min_grip_force
-from mjx_pick.rundir import claim, config_hash, finish, versions
+from mjx_pick.rundir import claim, config_hash, finish, read_manifest, versions
 from mjx_pick.scene import Scene, build_scene
 from mjx_pick.simulate import Settings
 
@@ -73,6 +80,8 @@ class Evaluation:
     config: dict
     traces: pa.Table | None
     out_dir: Path | None
+    # resume found the run already complete: read back, nothing simulated
+    already_complete: bool = False
 
 
 def user_picks(
@@ -137,6 +146,7 @@ def evaluate(
     min_force: bool = False,
     overwrite: bool = False,
     skip_infeasible: bool = False,
+    keep_chunks: bool = False,
     on_progress: ProgressFn | None = None,
     cancel: threading.Event | None = None,
     ray: str | None = None,
@@ -163,6 +173,8 @@ def evaluate(
       resume: continue an interrupted run of the same experiment (:func:`experiment_key`)
         in out: finished chunks are read, not simulated; the run keeps its chunk size.
       overwrite: replace what another command (or another configuration) wrote in out.
+      keep_chunks: keep out/chunks/ after a complete run (default: removed once every
+        row is in results.parquet; a run that stops early always keeps it).
       skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
         them) instead of refusing the file.
       until, min_score, max_n: Optimization mode -- simulate batches until `until`
@@ -227,6 +239,7 @@ def evaluate(
             min_force=min_force,
             overwrite=overwrite,
             skip_infeasible=skip_infeasible,
+            keep_chunks=keep_chunks,
             on_progress=on_progress,
         )
     finally:
@@ -260,6 +273,7 @@ def _evaluate(
     min_force,
     overwrite,
     skip_infeasible,
+    keep_chunks,
     on_progress,
 ) -> Evaluation:
     """evaluate() once its executor (this process, or a Ray cluster) is ready."""
@@ -285,6 +299,14 @@ def _evaluate(
             "batch_size": executor.batch_size,
         },
     )
+    done = _complete_run(out_dir, key) if out_dir is not None and not overwrite else None
+    if done is not None and resume:
+        return done
+    if done is not None:  # its chunks are gone: plan_chunks would no longer see it
+        raise ConfigError(
+            f"{out_dir} holds this run, complete: pass --resume to read it back, "
+            "--overwrite to run it again, or choose another --out"
+        )
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
         claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite)
 
@@ -388,7 +410,8 @@ def _evaluate(
             sim = Simulator(obj, engine=engine)  # its bisection runs through this engine
             sim.adopt(settings, runner)
             t1 = time.perf_counter()
-            forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
+            with showing_progress(engine, "minimum grip force (bisection)", "sim", progress):
+                forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
             table = table.append_column("min_force_n", pa.array(forces))
             # holding at the gripper's smallest force says only that the true minimum is at
             # or below it: flagged, never presented as the minimum itself
@@ -410,7 +433,35 @@ def _evaluate(
             write_parquet(out_dir / "traces.parquet", traces)
         meta = executor.describe(time.perf_counter() - t0)
         finish(out_dir, command="evaluate", config=config, seed=seed, **meta)
+        if not keep_chunks:  # every row is in results.parquet now
+            shutil.rmtree(out_dir / "chunks", ignore_errors=True)
     return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _complete_run(out_dir: Path, key: str) -> Evaluation | None:
+    """The run in out_dir read back when it is a complete evaluate run of this
+    experiment (resume then has nothing to do), else None."""
+    import pyarrow.parquet as pq
+
+    manifest = read_manifest(out_dir)
+    need = [out_dir / n for n in ("results.parquet", "summary.json", "config.json")]
+    if (
+        manifest is None
+        or manifest.get("command") != "evaluate"
+        or manifest.get("config_key") != key
+        or manifest.get("status") != "complete"
+        or not all(p.is_file() for p in need)
+    ):
+        return None
+    traces = out_dir / "traces.parquet"
+    return Evaluation(
+        pq.read_table(need[0]),
+        json.loads(need[1].read_text()),
+        json.loads(need[2].read_text()),
+        pq.read_table(traces) if traces.is_file() else None,
+        out_dir,
+        already_complete=True,
+    )
 
 
 def _stopped(out_dir, stop: BaseException, executor, seed, config, wall_s=None) -> None:
@@ -469,25 +520,25 @@ def experiment_key(scene: Scene, settings: dict) -> str:
 
 
 def _simulate(executor, picks, plan, out_dir, bar: bool, on_progress):
-    """The main run through the engine's chunked runner, with a tqdm bar if asked:
-    pick-points, chunks done and, on a cluster, pick-points/s per node and in all."""
+    """The main run through the engine's chunked runner, with a progress bar if asked
+    (``progress.ProgressBar``, on stderr): pick-points, chunks done and, on a cluster,
+    pick-points/s per node and in all."""
     if not bar:
         return run_chunks(executor, picks, plan, out_dir, on_progress)
-    from tqdm import tqdm
-
     chunks_done = [0]
     note = getattr(executor, "progress_note", None)
-    with tqdm(total=len(picks), unit="pick", desc=f"simulating ({executor.name})") as pbar:
+    desc = f"simulating ({executor.name})"
+    with ProgressBar(desc, "pick", total=len(picks)) as pbar:
 
         def chunk_done(result) -> None:
             chunks_done[0] += 1
             text = f"chunks {chunks_done[0]}/{plan.n_chunks} this run"
             if note is not None:
                 text += f"; {note()}"
-            pbar.set_postfix_str(text, refresh=False)
+            pbar.note(text)
 
         def report(done: int, total: int) -> None:
-            pbar.update(done - pbar.n)
+            pbar(done, total)
             if on_progress is not None:
                 on_progress(done, total)
 

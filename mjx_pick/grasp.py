@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from mjx_pick.config import ConfigError, check_choice, check_range
+from mjx_pick.config import ConfigError, check_choice, check_fields, setting
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.objects import ObjectModel
@@ -26,68 +26,136 @@ G = 9.81
 class GraspConfig:
     """Controller and phase settings of one simulated pick."""
 
-    grip_force_n: float = 50.0  # F_d, the desired pad force
-    kp_mm_s_per_n: float = 2.0  # P gain: each finger's speed (mm/s) per N of force error
+    grip_force_n: float = setting(
+        50.0,
+        "N",
+        "F_d, the desired pad force (within the gripper's force range)",
+        lo=0,
+        lo_open=True,
+    )
+    kp_mm_s_per_n: float = setting(
+        2.0,
+        "mm/s per N",
+        "P gain: each finger's speed per newton of force error",
+        lo=0,
+        hi=1e4,
+        lo_open=True,
+    )
     # largest rate of closing of the opening; Robotiq 2F-85 range 20-150 mm/s
-    closing_speed_mm_s: float = 100.0
-    opening_speed_mm_s: float = 10.0  # largest rate of opening (force overshoot)
-    control_period_s: float = 0.005  # the paper's Simulink sample time
-    reach_fraction: float = 0.95  # F >= 0.95 F_d counts as "force reached"...
+    closing_speed_mm_s: float = setting(
+        100.0,
+        "mm/s",
+        "largest closing speed of the opening (within the gripper's range)",
+        lo=0,
+        hi=2000,
+        lo_open=True,
+    )
+    opening_speed_mm_s: float = setting(
+        10.0, "mm/s", "largest opening speed (backing off a force overshoot)", lo=0, hi=2000
+    )
+    control_period_s: float = setting(
+        0.005,
+        "s",
+        "controller period (a whole multiple of solver.timestep_s)",
+        lo=1e-4,
+        hi=0.05,
+    )
+    reach_fraction: float = setting(
+        0.95, "-", "F >= this fraction of F_d counts as the force reached", lo=0.5, hi=1.0
+    )
     # ...once it has stayed between that and the drive's limit this long (the pads'
     # impact on a light part is a spike, not a grasp); 0 is the paper's literal rule
-    reach_settle_s: float = 0.02
-    dwell_s: float = 0.0  # wait between reaching F_d and lifting (paper: none)
-    settle_s: float = 0.02  # the object settles on the table before closing
-    close_timeout_s: float = 1.5  # a symmetric gripper may travel its half stroke
-    lift_height_mm: float = 100.0  # the paper's test lifted 10 cm
-    lift_speed_mm_s: float = 200.0
-    lift_accel_mm_s2: float = 2000.0  # the arm's acceleration (trapezoidal profile)
-    hold_s: float = 0.5
-    success_height_fraction: float = 0.9  # success: object lifted >= 90 % of the lift
-    max_rotation_deg: float = 45.0  # ...and turned at most this much in the grip
-    pad_contact_fraction: float = 0.02  # a pad touches above this fraction of F_d
-    table_contact_fraction: float = 0.1  # table contact above this fraction of m g
-    safety_factor: float = 1.1  # S_f of eq. (1), the paper's "gripper safety margin"
+    reach_settle_s: float = setting(
+        0.02, "s", "the force must stay reached this long before the lift", lo=0, hi=1
+    )
+    dwell_s: float = setting(0.0, "s", "wait between reaching F_d and lifting", lo=0, hi=10)
+    settle_s: float = setting(
+        0.02, "s", "the object settles on the table before closing", lo=0, hi=10
+    )
+    close_timeout_s: float = setting(
+        1.5, "s", "longest close before 'force_not_reached'", lo=0, hi=60, lo_open=True
+    )
+    lift_height_mm: float = setting(
+        100.0, "mm", "lift height (the paper's test: 10 cm)", lo=0, hi=2000, lo_open=True
+    )
+    lift_speed_mm_s: float = setting(
+        200.0, "mm/s", "the arm's lift cruise speed", lo=0, hi=5000, lo_open=True
+    )
+    lift_accel_mm_s2: float = setting(
+        2000.0,
+        "mm/s^2",
+        "the arm's lift acceleration (trapezoidal profile)",
+        lo=0,
+        hi=1e5,
+        lo_open=True,
+    )
+    hold_s: float = setting(0.5, "s", "hold at the top of the lift", lo=0, hi=60)
+    success_height_fraction: float = setting(
+        0.9,
+        "-",
+        "success: the object lifted at least this fraction of the lift",
+        lo=0,
+        hi=1,
+        lo_open=True,
+    )
+    max_rotation_deg: float = setting(
+        45.0,
+        "deg",
+        "success: the object turned at most this much in the grip",
+        lo=0,
+        hi=180,
+        lo_open=True,
+    )
+    pad_contact_fraction: float = setting(
+        0.02, "-", "a pad touches above this fraction of F_d", lo=0, hi=0.5, lo_open=True
+    )
+    table_contact_fraction: float = setting(
+        0.1,
+        "-",
+        "the object touches the table above this fraction of its weight",
+        lo=0,
+        hi=1,
+        lo_open=True,
+    )
+    safety_factor: float = setting(
+        1.1, "-", "S_f of eq. (1), the gripper safety margin in F_Gmin", lo=1.0
+    )
     # |qvel| above this (m/s, rad/s) is a blow-up; a light block squeezed out of a
     # corner pinch legitimately spins at ~60 rad/s, a blow-up reaches 1e3+ or NaN
-    divergence_speed: float = 200.0
+    divergence_speed: float = setting(
+        200.0,
+        "m/s or rad/s",
+        "a joint speed above this counts as a blow-up ('diverged')",
+        lo=0.1,
+    )
     # where the pads grip (the paper: "picked at half the object depth"): "mid_band"
     # centres the pads on the object's mid-height, the fingertips no lower than
     # fingertip_clearance_mm above the table; "fingertip_mid" puts the fingertips at
     # half height (the paper's literal rule: the pads then cover the upper half only).
     # An object's own pick_height_mm (the CLI's --pick-height-mm) overrides both.
     grasp_height: str = "mid_band"
-    fingertip_clearance_mm: float = 2.0
+    fingertip_clearance_mm: float = setting(
+        2.0,
+        "mm",
+        "lowest fingertip height above the table (grasp_height mid_band)",
+        lo=0,
+        hi=100,
+    )
     # the drive's force limit relative to F_d while the force loop runs: the real
     # gripper's current limit. The integrated speed command cannot wind the finger
     # servo up beyond it when the object slips or turns in the grasp.
-    force_limit_fraction: float = 1.15
+    force_limit_fraction: float = setting(
+        1.15,
+        "-",
+        "the drive's force limit while the force loop runs, as a fraction of F_d",
+        lo=1.0,
+        hi=3.0,
+    )
 
     def __post_init__(self):
         o = "grasp"
-        check_range(o, "grip_force_n", self.grip_force_n, 0, lo_open=True)
-        check_range(o, "kp_mm_s_per_n", self.kp_mm_s_per_n, 0, 1e4, lo_open=True)
-        check_range(o, "closing_speed_mm_s", self.closing_speed_mm_s, 0, 2000, lo_open=True)
-        check_range(o, "opening_speed_mm_s", self.opening_speed_mm_s, 0, 2000)
-        check_range(o, "control_period_s", self.control_period_s, 1e-4, 0.05)
-        check_range(o, "reach_fraction", self.reach_fraction, 0.5, 1.0)
-        check_range(o, "reach_settle_s", self.reach_settle_s, 0, 1)
-        check_range(o, "dwell_s", self.dwell_s, 0, 10)
-        check_range(o, "settle_s", self.settle_s, 0, 10)
-        check_range(o, "close_timeout_s", self.close_timeout_s, 0, 60, lo_open=True)
-        check_range(o, "lift_height_mm", self.lift_height_mm, 0, 2000, lo_open=True)
-        check_range(o, "lift_speed_mm_s", self.lift_speed_mm_s, 0, 5000, lo_open=True)
-        check_range(o, "lift_accel_mm_s2", self.lift_accel_mm_s2, 0, 1e5, lo_open=True)
-        check_range(o, "hold_s", self.hold_s, 0, 60)
-        check_range(o, "success_height_fraction", self.success_height_fraction, 0, 1, lo_open=True)
-        check_range(o, "max_rotation_deg", self.max_rotation_deg, 0, 180, lo_open=True)
-        check_range(o, "pad_contact_fraction", self.pad_contact_fraction, 0, 0.5, lo_open=True)
-        check_range(o, "table_contact_fraction", self.table_contact_fraction, 0, 1, lo_open=True)
-        check_range(o, "safety_factor", self.safety_factor, 1.0)
-        check_range(o, "divergence_speed", self.divergence_speed, 0.1, lo_open=False)
+        check_fields(self, o)
         check_choice(o, "grasp_height", self.grasp_height, ("mid_band", "fingertip_mid"))
-        check_range(o, "fingertip_clearance_mm", self.fingertip_clearance_mm, 0, 100)
-        check_range(o, "force_limit_fraction", self.force_limit_fraction, 1.0, 3.0)
 
     @property
     def duration_s(self) -> float:

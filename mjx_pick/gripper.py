@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick import mjcf_gripper
-from mjx_pick.config import ConfigError, check_range, from_mapping, load_toml
+from mjx_pick.config import ConfigError, check_fields, from_mapping, load_toml, setting
 
 
 @dataclasses.dataclass(frozen=True)
@@ -30,21 +30,60 @@ class GripperSpec:
     """A two-finger parallel gripper. Defaults: Robotiq 2F-85 as used in the paper."""
 
     name: str = "robotiq-2f85"
-    stroke_mm: float = 85.0
-    finger_width_mm: float = 22.0
-    finger_depth_mm: float = 8.0
-    pad_height_mm: float = 38.0
-    force_min_n: float = 20.0
-    force_max_n: float = 235.0
+    stroke_mm: float = setting(
+        85.0,
+        "mm",
+        "largest distance between the pads' inner faces (> 2 x finger_depth_mm)",
+        lo=0,
+        hi=1000,
+        lo_open=True,
+    )
+    finger_width_mm: float = setting(
+        22.0,
+        "mm",
+        "pad width, across the closing direction (<= 10 x stroke_mm)",
+        lo=0,
+        lo_open=True,
+    )
+    finger_depth_mm: float = setting(
+        8.0, "mm", "pad thickness along the closing direction", lo=0, lo_open=True
+    )
+    pad_height_mm: float = setting(38.0, "mm", "pad height (vertical)", lo=0, lo_open=True)
+    force_min_n: float = setting(
+        20.0, "N", "smallest grip force the gripper can be set to", lo=0, hi="force_max_n"
+    )
+    force_max_n: float = setting(
+        235.0, "N", "largest grip force the gripper can be set to", lo=0, lo_open=True
+    )
     # closing speed = rate of change of the opening (datasheet convention); each
     # finger moves at half of it
-    speed_min_mm_s: float = 20.0
-    speed_max_mm_s: float = 150.0
-    finger_mass_g: float = 40.0
-    body_mass_g: float = 925.0
+    speed_min_mm_s: float = setting(
+        20.0,
+        "mm/s",
+        "slowest closing speed (rate of change of the opening)",
+        lo=0,
+        hi="speed_max_mm_s",
+    )
+    speed_max_mm_s: float = setting(
+        150.0,
+        "mm/s",
+        "fastest closing speed (rate of change of the opening)",
+        lo=0,
+        lo_open=True,
+    )
+    finger_mass_g: float = setting(40.0, "g", "mass of one finger", lo=0, lo_open=True)
+    body_mass_g: float = setting(
+        925.0, "g", "mass of the gripper body (on the lift)", lo=0, lo_open=True
+    )
     # drive: the finger servo that tracks the integrated speed command
-    drive_stiffness_n_per_mm: float = 10.0
-    drive_damping_ns_per_mm: float = 0.02
+    drive_stiffness_n_per_mm: float = setting(
+        10.0,
+        "N/mm",
+        "finger servo stiffness (force per mm of lag behind its command)",
+        lo=0,
+        lo_open=True,
+    )
+    drive_damping_ns_per_mm: float = setting(0.02, "N s/mm", "finger servo damping", lo=0)
     # the pads' material, recorded with results (config.json) and shown in reports; the
     # physics comes from ContactParams (pad friction, stiffness), never from this name
     pad_material: str = "nbr"
@@ -78,22 +117,7 @@ class GripperSpec:
                         f"gripper's {field} is measured from its model ({value:g}); "
                         "change the MJCF file instead"
                     )
-        for field in (
-            "stroke_mm",
-            "finger_width_mm",
-            "finger_depth_mm",
-            "pad_height_mm",
-            "force_max_n",
-            "speed_max_mm_s",
-            "finger_mass_g",
-            "body_mass_g",
-            "drive_stiffness_n_per_mm",
-        ):
-            check_range(o, field, getattr(self, field), 0, lo_open=True)
-        check_range(o, "stroke_mm", self.stroke_mm, 0, 1000, lo_open=True)
-        check_range(o, "force_min_n", self.force_min_n, 0, self.force_max_n)
-        check_range(o, "speed_min_mm_s", self.speed_min_mm_s, 0, self.speed_max_mm_s)
-        check_range(o, "drive_damping_ns_per_mm", self.drive_damping_ns_per_mm, 0)
+        check_fields(self, o)
         # the two pads must fit side by side in the gripper body when fully open, and
         # a pad must be thinner than half the stroke so the fingers can close fully
         if 2 * self.finger_depth_mm >= self.stroke_mm:

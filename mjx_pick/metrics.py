@@ -29,7 +29,8 @@ COLUMNS = {
     "t_grasp_nc": ("float64", "fraction of the grasp window the object was off the table"),
     "failure": (
         "string",
-        "none, no_contact, force_not_reached, slipped_in_lift, dropped_in_hold, rotated, diverged",
+        "the outcome: success, or why it failed: no_contact, force_not_reached, "
+        "slipped_in_lift, dropped_in_hold, rotated, diverged",
     ),
     "diverged": ("bool", "the simulation blew up (NaN/Inf, MuJoCo reset, absurd speed)"),
     "max_force_left_n": ("float64", "largest left pad force"),
@@ -71,7 +72,8 @@ def _type(name: str) -> pa.DataType:
 
 
 def summarize(table: pa.Table) -> dict:
-    """Counts, success rate, score quantiles and failure reasons of a results table."""
+    """Counts, success rate with its Wilson 95 % interval, score quantiles and outcome
+    counts ("failures": per label of ``kernels.grasp.FAILURES``, "success" included)."""
     n = table.num_rows
     success = np.asarray(table["success"])
     diverged = np.asarray(table["diverged"])
@@ -90,6 +92,7 @@ def summarize(table: pa.Table) -> dict:
         "n": int(n),
         "successes": int(success.sum()),
         "success_rate": float(success.mean()) if n else float("nan"),
+        "success_ci": list(wilson_interval(int(success.sum()), int(n))),
         "diverged": int(diverged.sum()),
         "failures": {name: int(np.sum(failures == name)) for name in gk.FAILURES},
         "score_mean": float(valid.mean()) if len(valid) else float("nan"),
@@ -106,6 +109,15 @@ def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
     centre = (p + z * z / (2 * n)) / denom
     half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
     return (float(max(0.0, centre - half)), float(min(1.0, centre + half)))
+
+
+def rate_text(successes: int, n: int) -> str:
+    """A success rate as people read it: '0.812 (95 % CI 0.726-0.876; 81/100)', the
+    interval Wilson's."""
+    if not n:
+        return "- (no pick-points)"
+    lo, hi = wilson_interval(int(successes), int(n))
+    return f"{successes / n:.3f} (95 % CI {lo:.3f}-{hi:.3f}; {successes}/{n})"
 
 
 def mean_interval(values, z: float = 1.959964) -> tuple[float, float, float]:

@@ -51,7 +51,7 @@ import dataclasses
 
 import numpy as np
 
-from mjx_pick.config import ConfigError, check_choice, check_range
+from mjx_pick.config import ConfigError, check_choice, check_fields, check_range, setting
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,16 +59,38 @@ class ContactParams:
     """Contact parameters. Defaults: the paper's Table 1 (see the module docstring)."""
 
     # Coulomb coefficients (MuJoCo: one per contact; sliding, both tangent directions)
-    pad_friction: float = 0.86  # Table 1, finger-object, static = dynamic = 0.86
-    table_friction: float = 0.2  # Table 1, object-ground dynamic (static is 0.4)
+    pad_friction: float = setting(
+        0.86, "-", "pad-object Coulomb friction (Table 1: static = dynamic = 0.86)",
+        lo=0, hi=5, lo_open=True,
+    )  # fmt: skip
+    table_friction: float = setting(
+        0.2, "-", "object-table Coulomb friction (Table 1's dynamic value; static 0.4)",
+        lo=0, hi=5,
+    )  # fmt: skip
     # ADAMS impact stiffness/damping (Table 1); mapped to negative solref, clamped
-    pad_stiffness_n_per_mm: float = 1e5
-    pad_damping_ns_per_mm: float = 5.5
-    table_stiffness_n_per_mm: float = 1e5
-    table_damping_ns_per_mm: float = 10.0
+    pad_stiffness_n_per_mm: float = setting(
+        1e5, "N/mm", "pad-object contact stiffness (above the stable limit: clamped)",
+        lo=0, lo_open=True,
+    )  # fmt: skip
+    pad_damping_ns_per_mm: float = setting(
+        5.5, "N s/mm", "pad-object contact damping (above the stable limit: clamped)",
+        lo=0, lo_open=True,
+    )  # fmt: skip
+    table_stiffness_n_per_mm: float = setting(
+        1e5, "N/mm", "object-table contact stiffness (above the stable limit: clamped)",
+        lo=0, lo_open=True,
+    )  # fmt: skip
+    table_damping_ns_per_mm: float = setting(
+        10.0, "N s/mm", "object-table contact damping (above the stable limit: clamped)",
+        lo=0, lo_open=True,
+    )  # fmt: skip
     # torsional friction of the pad contacts (length: torque limit per newton of
     # normal force); None: derived from the pad's contact patch (module docstring)
-    pad_torsion_mm: float | None = None
+    pad_torsion_mm: float | None = setting(
+        None, "mm", "pads' torsional friction: torque limit per N of normal force "
+        "(none: pad_friction x the contact patch's mean radius)",
+        lo=0, hi=100,
+    )  # fmt: skip
     # MuJoCo impedance (dmin, dmax, width[m], midpoint, power). The pads: 0.99 instead
     # of MuJoCo's default 0.9-0.95: a soft constraint's regularisation lets a held part
     # creep down through friction at a rate that grows with (1 - d) / d; at 0.99 the
@@ -80,17 +102,7 @@ class ContactParams:
 
     def __post_init__(self):
         o = "contact"
-        check_range(o, "pad_friction", self.pad_friction, 0, 5, lo_open=True)
-        check_range(o, "table_friction", self.table_friction, 0, 5)
-        if self.pad_torsion_mm is not None:
-            check_range(o, "pad_torsion_mm", self.pad_torsion_mm, 0, 100)
-        for field in (
-            "pad_stiffness_n_per_mm",
-            "pad_damping_ns_per_mm",
-            "table_stiffness_n_per_mm",
-            "table_damping_ns_per_mm",
-        ):
-            check_range(o, field, getattr(self, field), 0, lo_open=True)
+        check_fields(self, o)
         for name in ("pad_solimp", "table_solimp"):
             value = getattr(self, name)
             if len(value) != 5:
@@ -127,34 +139,40 @@ class SolverParams:
     pads chatter on a line contact (a lying rod): off by default too.
     """
 
-    timestep_s: float = 0.001
+    timestep_s: float = setting(0.001, "s", "physics time step", lo=1e-5, hi=0.01)
     cone: str = "pyramidal"
-    impratio: float = 1.0
-    iterations: int = 10
-    ls_iterations: int = 8
+    impratio: float = setting(
+        1.0, "-", "frictional-to-normal constraint impedance ratio (MuJoCo's impratio)",
+        lo=1, hi=100,
+    )  # fmt: skip
+    iterations: int = setting(10, "iterations", "constraint solver iterations", lo=1, hi=1000)
+    ls_iterations: int = setting(
+        8, "iterations", "line-search iterations per solver iteration", lo=1, hi=1000
+    )
     # the solver stops once its improvement or gradient falls below this (MuJoCo's
     # default; MuJoCo Warp keeps iterating every simulation of a call until the last
     # one is there or the iteration cap is hit)
-    tolerance: float = 1e-8
+    tolerance: float = setting(
+        1e-8, "-", "solver stops below this relative improvement", lo=0, hi=1e-2
+    )
     # MuJoCo's no-slip post-solver (iterations; 0: off)
-    noslip_iterations: int = 0
+    noslip_iterations: int = setting(
+        0, "iterations", "MuJoCo's no-slip post-solver (0: off; C and Warp only)", lo=0, hi=1000
+    )
     integrator: str = "implicitfast"
     # softest-allowed contact time constant: stiffer requests (Table 1) are clamped to
     # it. Fixed in seconds, so halving the time step refines the integration of the
     # same contact; never below two time steps (MuJoCo's refsafe rule).
-    contact_timeconst_s: float = 0.002
+    contact_timeconst_s: float = setting(
+        0.002, "s", "stiffest contact allowed: its time constant (at least 2 time steps)",
+        lo=0, hi=1, lo_open=True,
+    )  # fmt: skip
 
     def __post_init__(self):
         o = "solver"
-        check_range(o, "timestep_s", self.timestep_s, 1e-5, 0.01)
+        check_fields(self, o)
         check_choice(o, "cone", self.cone, ("elliptic", "pyramidal"))
-        check_range(o, "impratio", self.impratio, 1, 100)
-        check_range(o, "iterations", self.iterations, 1, 1000)
-        check_range(o, "ls_iterations", self.ls_iterations, 1, 1000)
-        check_range(o, "tolerance", self.tolerance, 0, 1e-2)
-        check_range(o, "noslip_iterations", self.noslip_iterations, 0, 1000)
         check_choice(o, "integrator", self.integrator, ("implicitfast", "euler"))
-        check_range(o, "contact_timeconst_s", self.contact_timeconst_s, 0, 1, lo_open=True)
 
     @property
     def timeconst_s(self) -> float:

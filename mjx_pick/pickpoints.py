@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mjx_pick.config import ConfigError, check_range
+from mjx_pick.config import ConfigError, check_fields, check_range, setting
 from mjx_pick.grasp import GraspConfig, pad_band_mm
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.kernels import feasibility as fk
@@ -31,31 +31,47 @@ CANDIDATE_BLOCK = 4096  # candidates are drawn in fixed blocks: same seed, same 
 class PickConfig:
     """Pick-point generation settings. Defaults: the paper's (Fig. 10)."""
 
-    safety_zone_mm: float = 5.0
-    min_coverage: float = 0.35
+    safety_zone_mm: float = setting(
+        5.0, "mm", "clearance kept between a descending finger and the object", lo=0, hi=100
+    )
+    min_coverage: float = setting(
+        0.35,
+        "-",
+        "least fraction of the region between the fingertips the object fills",
+        lo=0,
+        hi=1,
+    )
     # offsets are uniform in +-range; None: half the object's length (the paper's rule)
-    x_range_mm: float | None = None
-    y_range_mm: float | None = None
-    yaw_min_deg: float = 0.0
-    yaw_max_deg: float = 360.0
-    resolution_mm: float = 0.5  # silhouette raster for the checks
-    max_candidates: int = 1_000_000  # Normal mode gives up after drawing this many
+    x_range_mm: float | None = setting(
+        None,
+        "mm",
+        "pick-point x offsets are drawn in +-this (none: half the object's length)",
+        lo=0,
+        hi=1000,
+    )
+    y_range_mm: float | None = setting(
+        None,
+        "mm",
+        "pick-point y offsets are drawn in +-this (none: half the object's length)",
+        lo=0,
+        hi=1000,
+    )
+    yaw_min_deg: float = setting(0.0, "deg", "smallest yaw drawn", lo=-360, hi=360)
+    yaw_max_deg: float = setting(
+        360.0, "deg", "largest yaw drawn", lo="yaw_min_deg", hi="yaw_min_deg + 360"
+    )
+    resolution_mm: float = setting(
+        0.5, "mm", "silhouette raster for the feasibility checks", lo=0.05, hi=2
+    )
+    max_candidates: int = setting(
+        1_000_000, "candidates", "Normal mode gives up after drawing this many", lo=1, hi=1e9
+    )
     # a linkage gripper (MJCF) only: reject poses whose near pad rides over the part
     # (FeasibilityChecker); off, such poses are simulated (and fail)
     pad_path_check: bool = True
 
     def __post_init__(self):
-        o = "picks"
-        check_range(o, "safety_zone_mm", self.safety_zone_mm, 0, 100)
-        check_range(o, "min_coverage", self.min_coverage, 0, 1, hi_open=False)
-        for name in ("x_range_mm", "y_range_mm"):
-            value = getattr(self, name)
-            if value is not None:
-                check_range(o, name, value, 0, 1000)
-        check_range(o, "yaw_min_deg", self.yaw_min_deg, -360, 360)
-        check_range(o, "yaw_max_deg", self.yaw_max_deg, self.yaw_min_deg, self.yaw_min_deg + 360)
-        check_range(o, "resolution_mm", self.resolution_mm, 0.05, 2)
-        check_range(o, "max_candidates", self.max_candidates, 1, 1e9)
+        check_fields(self, "picks")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,7 +30,7 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
-from mjx_pick.engine import Simulator
+from mjx_pick.engine import Simulator, showing_progress
 from mjx_pick.metrics import wilson_interval
 from mjx_pick.objects import ObjectModel
 from mjx_pick.rundir import claim, config_hash, finish
@@ -115,11 +115,13 @@ def robustness(
     simulator: Simulator | None = None,
     out: str | Path | None = None,
     overwrite: bool = False,
+    progress: bool = False,
 ) -> pa.Table:
     """Robust success probability of each pick-point; rows ranked best first.
 
     out: a new folder, or the evaluate folder the pick-points came from (its files
-    stay; robustness.parquet and robustness.json join them).
+    stay; robustness.parquet and robustness.json join them). progress: a progress bar
+    of the simulations on stderr.
 
     Returns a table with pick_id, x_mm, y_mm, yaw_deg, robust_p, robust_ci_low,
     robust_ci_high, trials, successes, landed (draws where a finger lands on the
@@ -138,7 +140,9 @@ def robustness(
     placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, seed, pick_config)
     draws, ok, idx = placed.draws, placed.ok, placed.index
     sim = simulator or Simulator(obj, backend, batch_size)
-    (out_d,) = sim.run([(base, draws)])
+    desc = f"robustness: {k} pick-points x {m} draws ({sim.engine.backend_name})"
+    with showing_progress(sim.engine, desc, "sim", progress):
+        (out_d,) = sim.run([(base, draws)])
     success = np.zeros(len(idx), bool)
     score = np.zeros(len(idx))
     if len(draws):
@@ -264,6 +268,7 @@ def robust_best(
     pick_config: pp.PickConfig | None = None,
     backend: str = "auto",
     batch_size: int | None = None,
+    progress: bool = False,
     **options,
 ) -> pa.Table:
     """The robustness of the ``top_k`` best successful pick-points (``mjx-pick robust``).
@@ -271,12 +276,19 @@ def robust_best(
     results: an evaluate folder (or its results.parquet) of this object to take them
     from; without it, ``n`` pick-points drawn with ``seed`` are simulated first.
     options: the rest of :func:`robustness`'s keywords (m, sigma_xy_mm, sigma_yaw_deg,
-    out, overwrite). Every input is checked before anything is simulated.
+    out, overwrite). Every input is checked before anything is simulated. progress: one
+    progress bar on stderr over every simulation (the n pick-points, then the draws).
     """
-    from mjx_pick.metrics import best_successes
-
     pick_config = pick_config or pp.PickConfig()
     sim = Simulator(obj, backend, batch_size)
+    with showing_progress(sim.engine, f"robust ({sim.engine.backend_name})", "sim", progress):
+        return _robust_best(obj, base, sim, results, n, top_k, seed, pick_config, options)
+
+
+def _robust_best(obj, base, sim, results, n, top_k, seed, pick_config, options) -> pa.Table:
+    """robust_best once its simulator (and progress bar) is set up."""
+    from mjx_pick.metrics import best_successes
+
     if results is not None:
         table = _read_results(Path(results), obj)
         x, y, yaw, ids = (np.asarray(table[c]) for c in ("x_mm", "y_mm", "yaw_deg", "pick_id"))

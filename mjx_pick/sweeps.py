@@ -31,8 +31,8 @@ import numpy as np
 import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
-from mjx_pick.config import ConfigError, to_dict, write_json, write_parquet
-from mjx_pick.engine import Simulator, marking_stops
+from mjx_pick.config import ConfigError, describe_fields, to_dict, write_json, write_parquet
+from mjx_pick.engine import Simulator, marking_stops, showing_progress
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import rate_summary, results_table
@@ -69,6 +69,47 @@ def sweepable() -> list[str]:
     """Every parameter name a sweep accepts (aliases included)."""
     names = [f"{s}.{f}" for s, cls in SECTIONS.items() for f in numeric_fields(cls)]
     return sorted(names) + sorted(ALIASES)
+
+
+def describe_params(prefix: str = "") -> list[dict]:
+    """What ``mjx-pick params`` shows: for each parameter a sweep accepts (and the
+    pick-point settings, which are set per run and not swept), its name, unit, default,
+    allowed range and meaning -- read from the settings dataclasses' field declarations
+    (``config.setting``), whose ranges are the ones their checks enforce. A sweep's
+    value must also pass the checks between fields and against the gripper (e.g.
+    grasp.grip_force_n within the gripper's force range).
+
+    prefix: only names that start with it ("contact", "grasp.lift"); aliases are listed
+    under the parameter they stand for. Each entry: name, unit, default, range,
+    meaning, aliases (list), sweepable (bool).
+    """
+    aliases: dict[str, list[str]] = {}
+    for alias, target in sorted(ALIASES.items()):
+        aliases.setdefault(target, []).append(alias)
+    rows = []
+    sections = {**SECTIONS, "picks": pp.PickConfig}
+    for section, cls in sections.items():
+        numeric = set(numeric_fields(cls))
+        for info in describe_fields(cls):
+            if info["name"] not in numeric:
+                continue
+            name = f"{section}.{info['name']}"
+            if not (
+                name.startswith(prefix) or any(a.startswith(prefix) for a in aliases.get(name, []))
+            ):
+                continue
+            rows.append(
+                {
+                    **info,
+                    "name": name,
+                    "aliases": aliases.get(name, []),
+                    "sweepable": section in SECTIONS,
+                }
+            )
+    if not rows:
+        known = ", ".join([*sections, *sorted({a.partition(".")[0] for a in ALIASES})])
+        raise ConfigError(f"no parameter starts with {prefix!r}: sections are {known}")
+    return rows
 
 
 def canonical(name: str) -> str:
@@ -196,19 +237,21 @@ def sweep(
     out: str | Path | None = None,
     overwrite: bool = False,
     ray: str | None = None,
+    progress: bool = False,
 ) -> SweepResult:
     """Simulate n pick-points under every parameter variant; see the module docstring.
 
     out: folder for the results (refused before any simulation when another command
     wrote it, unless overwrite). ray: run the variants on a Ray cluster ("auto" or
-    "HOST:PORT"; mjx_pick.cluster), this process writing out.
+    "HOST:PORT"; mjx_pick.cluster), this process writing out. progress: a progress bar
+    of the simulations on stderr (``progress.ProgressBar``).
     """
     if simulator is None and ray is not None:
         sim = Simulator(obj, backend, batch_size, ray=ray)
         try:
             return sweep(
                 obj, params, base, n=n, seed=seed, random=random, pick_config=pick_config,
-                simulator=sim, out=out, overwrite=overwrite,
+                simulator=sim, out=out, overwrite=overwrite, progress=progress,
             )  # fmt: skip
         finally:
             sim.close()
@@ -234,7 +277,8 @@ def sweep(
     jobs = [(s, picks_for[s.gripper]) for s in settings]
     before = sim.engine.timing
     t0 = time.perf_counter()
-    with marking_stops(out, "sweep"):
+    desc = f"sweep: {len(jobs)} variants ({sim.engine.backend_name})"
+    with marking_stops(out, "sweep"), showing_progress(sim.engine, desc, "sim", progress):
         outs = sim.run(jobs)
     wall = time.perf_counter() - t0
     spent = sim.engine.timing - before  # this sweep's compiles and runs alone

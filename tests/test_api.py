@@ -23,7 +23,7 @@ def test_kernels_install_under_the_package():
     import mjx_pick.kernels.feasibility as f
     import mjx_pick.kernels.grasp as g
 
-    assert f.REASONS[0] == "feasible" and g.FAILURES[0] == "none"
+    assert f.REASONS[0] == "feasible" and g.FAILURES[0] == "success"
 
 
 def test_cli_version_names_the_engines(capsys):

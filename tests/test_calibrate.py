@@ -5,6 +5,7 @@ hidden friction (checkpoints and resume), the CLI and the contact file's provena
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -357,7 +358,11 @@ def test_cli_calibrate_and_the_contact_files_provenance(tmp_path, synthetic, cap
         str(tmp_path / "fit"),
     ]
     assert main(args) == 0
-    assert "pad_friction: 0.86 ->" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "pad_friction: 0.86 ->" in captured.out
+    # the steps' progress on stderr, the loss lines on stdout
+    assert re.search(r"calibrating \(cma\): +\d+% \d/3 step", captured.err), captured.err
+    assert captured.out.count("step    0  loss") == 1
     contact = tmp_path / "fit" / "contact.toml"
     assert contact.is_file()
     run = json.loads((tmp_path / "fit" / "run.json").read_text())

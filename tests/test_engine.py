@@ -26,13 +26,14 @@ PINNED_SOLVER = mp.SolverParams(impratio=1.0)
 # exactly the calls below (MuJoCo C backend). Labels must match exactly; the floats to
 # 1e-6: on this machine they are bitwise equal, but the per-tick controller is XLA CPU
 # code, which XLA compiles per CPU model (float32 reductions may round differently on
-# CI's CPU), and 1e-6 is still far below any change a refactor bug would make. One
-# change since, on purpose: a successful pick's failure reason is "none" (the old code
-# gave these held picks "slipped_in_lift": the part lagged at the short lift's end).
+# CI's CPU), and 1e-6 is still far below any change a refactor bug would make. Changes
+# since, on purpose: a successful pick's failure reason is its own (the old code gave
+# these held picks "slipped_in_lift": the part lagged at the short lift's end), and it
+# reads "success" (issue 21; it read "none", code 0 both times).
 EVALUATE_DOOR_OPENER = {
     "pick_id": [12, 30, 41, 49, 50, 53],
     "success": [True, False, False, False, False, False],
-    "failure": ["none"] + ["force_not_reached"] * 5,
+    "failure": ["success"] + ["force_not_reached"] * 5,
     "score": [
         0.9564539790153503,
         0.26396703720092773,
@@ -48,7 +49,7 @@ SWEEP_BLOCK = {
     "variant": [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3],
     "pick_id": [0, 2, 4] * 4,
     "success": [True, False, True] * 4,
-    "failure": ["none", "force_not_reached", "none"] * 4,
+    "failure": ["success", "force_not_reached", "success"] * 4,
     "score": [
         0.9770233631134033,
         0.25076982378959656,
@@ -171,6 +172,7 @@ def test_progress_and_cancel_between_chunks_then_resume(door_opener, tmp_path):
         out=out,
         n_traces=0,
         resume=True,
+        keep_chunks=True,  # to show that the finished chunk was read, not redone
         on_progress=lambda d, t: calls.append((d, t)),
     )
     assert calls == [(0, 6), (2, 6), (4, 6), (6, 6)]

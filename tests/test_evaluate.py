@@ -247,7 +247,7 @@ def test_optimization_mode_resumes_where_it_stopped(tmp_path, block):
 
     run = dict(grasp=FAST, backend="mujoco", batch_size=8, until=20, min_score=0.9)
     run.update(max_n=64, n_traces=0)
-    whole = evaluate(block, **run, out=tmp_path / "whole")
+    whole = evaluate(block, **run, out=tmp_path / "whole", keep_chunks=True)
     parts = sorted((tmp_path / "whole" / "chunks").glob("part-*.parquet"))
     assert len(parts) >= 3, "the test needs a run of three batches or more"
     cut = tmp_path / "cut"
@@ -262,7 +262,7 @@ def test_optimization_mode_resumes_where_it_stopped(tmp_path, block):
     stamps = {p.name: (cut / "chunks" / p.name).stat().st_mtime_ns for p in parts[:2]}
     with pytest.raises(mp.ConfigError, match="--resume"):
         evaluate(block, **run, out=cut)
-    resumed = evaluate(block, **run, out=cut, resume=True)
+    resumed = evaluate(block, **run, out=cut, resume=True, keep_chunks=True)
     assert resumed.table.equals(whole.table)
     for name, stamp in stamps.items():
         assert (cut / "chunks" / name).stat().st_mtime_ns == stamp, f"{name} was redone"

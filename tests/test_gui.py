@@ -206,7 +206,7 @@ def test_paper_workflow(page, server):
     assert manifest["command"] == "evaluate" and manifest["status"] == "complete"
     table = pq.read_table(run / "results.parquet")
     assert table.num_rows == 6
-    assert len(list((run / "chunks").glob("part-*.parquet"))) == 3
+    assert not (run / "chunks").exists(), "a complete run's chunks are removed"
     config = json.loads((run / "config.json").read_text())
     assert config["grasp"]["grip_force_n"] == 40 and config["grasp"]["hold_s"] == 0.1
     assert config["backend"] == "mujoco"

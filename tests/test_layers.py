@@ -30,6 +30,7 @@ LAYERS = {
         "plots",
         "rundir",
         "display",
+        "progress",
         "kernels",
         "assets",
     ),

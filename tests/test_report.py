@@ -65,7 +65,11 @@ def test_template_pages_and_true_scale(written):
         assert max(bars) == pytest.approx(100 * MM, abs=0.05)
 
 
-def test_animations_have_the_frames_asked_for(written, run_dir):
+# imageio's reader leaves its ffmpeg pipe to the garbage collector, and starts ffmpeg
+# with a preexec_fn (a Python fork, which JAX warns of) unless told not to
+@pytest.mark.filterwarnings("ignore::ResourceWarning")
+def test_animations_have_the_frames_asked_for(written, run_dir, monkeypatch):
+    monkeypatch.setenv("IMAGEIO_FFMPEG_NO_PREVENT_SIGINT", "1")
     run = Run.load(run_dir)
     assert len(written["animations"]) == len(run.traced()) == 2
     for path in written["animations"]:
@@ -77,6 +81,21 @@ def test_animations_have_the_frames_asked_for(written, run_dir):
             gif.seek(gif.n_frames // 2)
             pixels = np.asarray(gif.convert("RGB"), float)
         assert pixels.std() > 10, "a blank frame"
+        # the same frames as an MP4 beside the GIF, played in real time
+        import imageio.v2 as imageio
+
+        video = Path(path).with_suffix(".mp4")
+        assert str(video) in written["videos"]
+        reader = imageio.get_reader(video, format="FFMPEG")
+        try:
+            meta = reader.get_meta_data()
+            decoded = [frame for frame in reader]
+        finally:
+            reader.close()
+        assert len(decoded) == math.ceil(ticks / 25)
+        assert decoded[0].shape == (120, 320, 3) and meta["codec"] == "h264"
+        assert meta["fps"] == pytest.approx(1 / (25 * 0.005), rel=1e-3)
+        assert np.asarray(decoded[len(decoded) // 2], float).std() > 10, "a blank frame"
 
 
 def test_force_plots_and_maps(written):
@@ -125,6 +144,77 @@ def test_cli_report_and_bad_input(run_dir, tmp_path, capsys):
         == 0
     )
     assert (tmp_path / "r" / "report.html").is_file()
+    # progress of the report's parts on stderr: not a terminal here, so whole lines,
+    # the last one once
+    err = capsys.readouterr().err
+    assert "\r" not in err and err.count("report: 100% 7/7 part") == 1, err
     assert main(["report", str(tmp_path)]) == 2
     assert "not an evaluate output folder" in capsys.readouterr().err
     assert main(["report", str(run_dir), "--frame", "1,2,x"]) == 2
+
+
+def test_view_checks_its_inputs_then_the_display(run_dir, monkeypatch, capsys):
+    import sys
+
+    traced = [pid for pid, _ in Run.load(run_dir).traced()]
+    assert main(["view", str(run_dir), "--pick", "99999"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, "one line"
+    assert f"--pick 99999: not traced in {run_dir}; traced pick-points: " in err
+    assert all(str(p) in err for p in traced)
+    assert main(["view", str(run_dir), "--pick", str(traced[0]), "--speed", "0"]) == 2
+    assert "view.speed = 0.0 is out of range" in capsys.readouterr().err
+    monkeypatch.setattr(sys, "platform", "linux")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", str(run_dir), "--pick", str(traced[0])]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no display: neither DISPLAY nor WAYLAND_DISPLAY" in err
+
+
+def test_view_replays_the_trace_row_by_row(run_dir, monkeypatch):
+    # the window itself cannot open in CI; a stand-in for MuJoCo's passive viewer
+    # records what each frame shows: every trace row, in order, then the window closes
+    import contextlib
+
+    import mujoco.viewer
+
+    from mjx_pick.reporting import viewer
+
+    run = Run.load(run_dir)
+    pid = run.traced()[0][0]
+    trace = run.trace(pid)
+    shown = []
+
+    class Handle:
+        def __init__(self, model, data):
+            self.model, self.data = model, data
+
+        def is_running(self):
+            return len(shown) < len(trace["t_s"])
+
+        def lock(self):
+            return contextlib.nullcontext()
+
+        def set_texts(self, texts):
+            self.text = texts[2]
+
+        def sync(self):
+            o = self.model.jnt_qposadr[self.model.joint("object").id]
+            shown.append((self.text, self.data.qpos[o : o + 3].copy()))
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+    monkeypatch.setenv("DISPLAY", ":99")
+    monkeypatch.setattr(mujoco.viewer, "launch_passive", Handle)
+    viewer.view(run_dir, pid, speed=100.0)
+    assert len(shown) == len(trace["t_s"])
+    k = len(shown) // 2
+    assert shown[k][0].startswith(f"t = {trace['t_s'][k]:.2f} s  {trace['phase'][k]}")
+    for k in (0, len(shown) // 2, len(shown) - 1):
+        want = [trace[f"object_{c}_m"][k] for c in "xyz"]
+        assert shown[k][1] == pytest.approx(want, abs=1e-9)

@@ -117,6 +117,7 @@ def test_kill_mid_run_then_resume_equals_uninterrupted(tmp_path, block):
         out=out,
         resume=True,
         n_traces=0,
+        keep_chunks=True,  # to show that no finished chunk was redone
     )
     # nothing finished was redone, nothing was lost
     for name, stamp in stamps.items():

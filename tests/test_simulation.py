@@ -182,7 +182,7 @@ def test_metrics_on_a_hand_made_success():
     assert out["t_grasp_nc"] == pytest.approx(t_nc, abs=1e-4)
     assert out["phi_max_deg"] == pytest.approx(10.0, abs=1e-3)
     assert out["score"] == pytest.approx((t_grasp + 170 / 180 + t_nc) / 3, abs=1e-4)
-    assert bool(out["success"]) and gk.FAILURES[int(out["failure"])] == "none"
+    assert bool(out["success"]) and gk.FAILURES[int(out["failure"])] == "success"
 
 
 def test_metrics_on_hand_made_failures():

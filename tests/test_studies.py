@@ -3,6 +3,7 @@ each against a case whose answer is known."""
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -185,6 +186,9 @@ def test_cli_studies(tmp_path, capsys):
         == 0
     )
     assert (tmp_path / "sw" / "results.parquet").is_file()
+    # progress on stderr (not a terminal here: whole lines, the last one once)
+    err = capsys.readouterr().err
+    assert "\r" not in err and err.count("sweep: 2 variants (mujoco): 100% 8/8 sim") == 1, err
     assert (
         main(
             [
@@ -200,6 +204,8 @@ def test_cli_studies(tmp_path, capsys):
         )
         == 0
     )
+    err = capsys.readouterr().err
+    assert re.search(r"compare: 2 grippers \(mujoco\): 100% (\d+)/\1 sim", err), err
     assert (
         main(
             [
@@ -218,6 +224,12 @@ def test_cli_studies(tmp_path, capsys):
         == 0
     )
     assert pq.read_table(tmp_path / "rb" / "robustness.parquet").num_rows == 2
+    # one bar over both stages, its total growing: the 6 pick-points, then the draws
+    lines = capsys.readouterr().err.splitlines()
+    first, last = re.fullmatch(r"robust \(mujoco\): 100% 6/6 sim .*", lines[0]), lines[-1]
+    total = re.fullmatch(r"robust \(mujoco\): 100% (\d+)/\1 sim .*", last)
+    assert first and total and int(total[1]) > 6, lines
+    assert sum(f"{total[1]}/{total[1]}" in line for line in lines) == 1, lines
     assert (
         main(
             [
@@ -235,6 +247,7 @@ def test_cli_studies(tmp_path, capsys):
         )
         == 0
     )
+    assert "%" not in capsys.readouterr().err, "--no-progress shows none"
     table = pq.read_table(tmp_path / "ev" / "results.parquet")
     forces = table["min_force_n"].to_numpy()
     found = np.isfinite(forces)

@@ -16,6 +16,7 @@ from mjx_pick.calibration.identify import identifiability, theta_of_z
 from mjx_pick.calibration.parameters import fitted_contact
 from mjx_pick.config import ConfigError, check_range, to_dict
 from mjx_pick.physics import ContactParams
+from mjx_pick.progress import ProgressBar
 from mjx_pick.rundir import claim, config_hash, finish
 
 
@@ -80,6 +81,7 @@ def calibrate(
     holdout=None,
     identify: bool = True,
     log=None,
+    progress: bool = False,
 ) -> CalibrationResult:
     """Fit problem's parameters; see ``estimators`` for the estimators.
 
@@ -97,6 +99,8 @@ def calibrate(
       identify: after the fit, intervals and identifiability (``identify.py``); the
         parameters not identified keep their starting values in the answer.
       log: called with each step's history entry (progress output).
+      progress: a progress bar of the steps on stderr (``progress.ProgressBar``; print
+        log lines with ``progress.echo`` so that they do not break it).
     """
     est = E.make(
         estimator,
@@ -140,6 +144,8 @@ def calibrate(
         acc_before = holdout.accuracy(problem.start_theta())
     t0 = time.perf_counter() - wall0
     spent0 = problem.rollouts - (history[-1]["rollouts"] if history else 0)
+    bar = ProgressBar(f"calibrating ({estimator})", "step", enabled=progress, total=steps)
+    bar(step, steps)
     try:
         while step < steps:
             if budget is not None and problem.rollouts - spent0 >= budget:
@@ -182,6 +188,8 @@ def calibrate(
             if log is not None:
                 log(entry)
             step += 1
+            bar.note(f"best loss {best:.4g}")
+            bar(step, steps)
             if ckpt is not None and (step % checkpoint_every == 0 or step == steps):
                 ckpt.save(
                     step,
@@ -193,6 +201,7 @@ def calibrate(
                     },
                 )
     finally:
+        bar.close()
         if ckpt is not None:
             ckpt.close()
     theta = est.best(state)
@@ -260,6 +269,7 @@ def least_squares(
     holdout=None,
     log=None,
     out: str | Path | None = None,
+    progress: bool = False,
 ) -> CalibrationResult:
     """Levenberg-Marquardt on the residuals with ``mujoco.sysid.optimize`` (MuJoCo's
     ``minimize.least_squares``; its finite-difference Jacobian runs all P shifted
@@ -270,7 +280,8 @@ def least_squares(
     Where it fits: smooth residuals (traces, lift times). Outcome residuals are steps
     smoothed over ``temperature_mm``: a local method stalls on their plateaus.
     With ``out``, writes the results folder as ``calibrate`` does (no checkpoints: a
-    killed fit starts again).
+    killed fit starts again). progress: a progress bar of the residual evaluations
+    (steps; their number is not known ahead) on stderr.
     """
     from mujoco import sysid
 
@@ -321,11 +332,14 @@ def least_squares(
         history.append(entry)
         if log is not None:
             log(entry)
+        bar.note(f"best loss {best['loss']:.4g}")
+        bar.advance()
         r = ev.residuals.T  # (M, S)
         return [r[:, 0] if x.ndim == 1 else r], None, None
 
     import io
 
+    bar = ProgressBar("calibrating (lsq)", "step", enabled=progress)
     try:
         # output: MuJoCo's optimiser prints every iteration unless given a stream
         sysid.optimize(
@@ -339,6 +353,8 @@ def least_squares(
         )
     except _Budget:
         pass
+    finally:
+        bar.close()
     result = _finish(
         problem,
         best["theta"],

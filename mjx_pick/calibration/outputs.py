@@ -7,6 +7,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import numpy as np
+
 from mjx_pick.config import to_dict, to_toml, write_atomic, write_json
 
 # procedure settings that do not change what the contact parameters mean
@@ -155,17 +157,49 @@ def write_result(result, problem, out_dir: Path) -> None:
 
 
 def _loss_plot(result, path: Path) -> None:
+    """loss.png: the loss against the simulations spent, each step's and the best so
+    far. The loss is 0.5 |r|^2 per measured trial (``calibration.loss``): a pure
+    number, 0 a perfect fit; a log axis where every value is above 0."""
+    from matplotlib.ticker import FuncFormatter
+
     from mjx_pick.plots import new_figure, save_png
 
-    fig, ax = new_figure(figsize=(6, 3.5))
+    fig, ax = new_figure(figsize=(7, 4))
     h = result.history
-    ax.plot([e["rollouts"] for e in h], [e["loss"] for e in h], label="loss at the step")
-    ax.plot([e["rollouts"] for e in h], [e["best_loss"] for e in h], label="best so far")
-    ax.set_xlabel("pick-point simulations")
-    ax.set_ylabel("loss (negative log likelihood per trial)")
-    ax.set_yscale("symlog", linthresh=1e-3)
-    ax.legend()
-    ax.grid(alpha=0.3)
+    x = np.array([e["rollouts"] for e in h], float)
+    loss = np.array([e["loss"] for e in h], float)
+    best = np.array([e["best_loss"] for e in h], float)
+    ax.plot(x, loss, "o-", ms=3, lw=1, color="#9ab8d8", label="loss at each step")
+    ax.plot(x, best, "-", lw=2, color="#1f4e8c", label="best so far")
+    finite = np.concatenate([loss, best])
+    finite = finite[np.isfinite(finite)]
+    if len(finite) and finite.min() > 0:
+        ax.set_yscale("log")
+    elif len(finite):  # a zero loss (a perfect fit) has no place on a log axis
+        ax.set_yscale("symlog", linthresh=max(1e-6, 1e-3 * float(finite.max())))
+    # 0.3, not 3 x 10^-1; between the decades only 2, 3 and 5 (the rest would overlap)
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(
+        FuncFormatter(lambda v, _: f"{v:g}" if f"{v:.0e}"[0] in "235" else "")
+    )
+    if len(h):
+        ax.annotate(
+            f"best {best[-1]:.4g}",
+            (x[-1], best[-1]),
+            textcoords="offset points",
+            xytext=(-6, 8),
+            ha="right",
+            fontsize=9,
+            color="#1f4e8c",
+        )
+    ax.set_xlabel("pick-point simulations spent (count)")
+    ax.set_ylabel("loss per measured trial\n(0.5 |r|^2 / trials, dimensionless)")
+    ax.set_title(
+        f"calibration ({result.estimator}): {len(h)} steps, fitting " + ", ".join(result.initial),
+        fontsize=10,
+    )
+    ax.legend(fontsize=9)
+    ax.grid(alpha=0.3, which="both")
     fig.tight_layout()
     save_png(fig, path)
 

@@ -17,6 +17,7 @@ from mjx_pick.cli.inputs import (
     study_options,
 )
 from mjx_pick.config import ConfigError
+from mjx_pick.progress import echo
 
 
 def cmd_evaluate(args) -> int:
@@ -50,6 +51,8 @@ def cmd_evaluate(args) -> int:
         skip_infeasible=args.skip_infeasible,
         ray=args.ray,
     )
+    if ev.already_complete:
+        print(f"{args.out} holds this run complete: nothing to resume, nothing simulated")
     print_summary(ev.summary, args.out)
     return 0
 
@@ -169,6 +172,7 @@ def cmd_robust(args) -> int:
         sigma_yaw_deg=args.sigma_yaw_deg,
         out=args.out,
         overwrite=args.overwrite,
+        progress=not args.no_progress,
     )
     _print_rows(
         table.slice(0, 20).to_pylist(),
@@ -202,10 +206,9 @@ def cmd_calibrate(args) -> int:
         if entry["step"] % args.log_every == 0:
             values = ", ".join(f"{k} {v:.4g}" for k, v in entry["values"].items())
             blown = f"  ({entry['diverged']} rows diverged)" if entry.get("diverged") else ""
-            print(
+            echo(
                 f"step {entry['step']:4d}  loss {entry['loss']:.4f}  best {entry['best_loss']:.4f}"
-                f"  {values}{blown}",
-                flush=True,
+                f"  {values}{blown}"
             )
 
     if args.estimator == "lsq":
@@ -219,6 +222,7 @@ def cmd_calibrate(args) -> int:
             identify=not args.no_identify,
             log=log,
             out=args.out,
+            progress=not args.no_progress,
         )
     else:
         res = cal.calibrate(
@@ -236,6 +240,7 @@ def cmd_calibrate(args) -> int:
             holdout=holdout,
             identify=not args.no_identify,
             log=log,
+            progress=not args.no_progress,
         )
     ident = res.identifiability or {}
     for name in names:
@@ -274,21 +279,25 @@ def cmd_report(args) -> int:
         frame=frame,
         animations=not args.no_animations,
         anim_every=args.anim_every,
+        progress=not args.no_progress,
     )
     print(f"report: {written['html']}")
-    for key in ("forces", "animations"):
-        print(f"  {key}: {len(written[key])} files")
+    for key, what in (("forces", "force plots"), ("animations", "GIFs"), ("videos", "MP4s")):
+        print(f"  {key}: {len(written[key])} {what}")
     print(f"  templates: {', '.join(written['templates'].values())}")
     print(f"  robot export: {written['robot_picks']}")
     return 0
 
 
 def print_summary(s: dict, out) -> None:
+    from mjx_pick.kernels.grasp import SUCCESS
+    from mjx_pick.metrics import rate_text
+
     rows = [
         ("object / gripper", f"{s['object']} / {s['gripper']}"),
         ("backend / device", f"{s['backend']} / {s['device']}"),
         ("pick-points", f"{s['n']} (candidates checked {s['candidates_checked']})"),
-        ("success rate", f"{s['success_rate']:.3f} ({s['successes']}/{s['n']})"),
+        ("success rate", rate_text(s["successes"], s["n"])),
         ("diverged", f"{s['diverged']}"),
         (
             "score mean / median",
@@ -296,7 +305,7 @@ def print_summary(s: dict, out) -> None:
         ),
         (
             "failures",
-            ", ".join(f"{k} {v}" for k, v in s["failures"].items() if v and k != "none") or "none",
+            ", ".join(f"{k} {v}" for k, v in s["failures"].items() if v and k != SUCCESS) or "none",
         ),
         ("F_Gmin, eq. (1)", f"{s['f_gmin_n']:.3f} N (F_d = {s['grip_force_n']:g} N)"),
         ("compile / run", f"{s['compile_s']:.1f} s / {s['run_s']:.1f} s"),
@@ -349,10 +358,36 @@ def cmd_presets(_args) -> int:
     return 0
 
 
-def cmd_params(_args) -> int:
-    from mjx_pick.sweeps import sweepable
+_PARAM_SECTIONS = {
+    "contact": "contact parameters (ContactParams; --contact FILE, --pad-friction, ...)",
+    "grasp": "the pick procedure (GraspConfig; --grasp FILE, --grip-force-n, ...)",
+    "gripper": "gripper geometry and ranges (GripperSpec; --gripper-file FILE)",
+    "solver": "MuJoCo solver settings (SolverParams; --solver FILE, --timestep-s)",
+    "picks": "pick-point generation (PickConfig; --safety-zone-mm, --min-coverage): "
+    "set per run, not swept",
+}
 
-    print("\n".join(sweepable()))
+
+def cmd_params(args) -> int:
+    from mjx_pick.sweeps import describe_params
+
+    rows = describe_params(args.prefix or "")
+    for r in rows:
+        d = r["default"]
+        r["default"] = "none" if d is None else str(d) if isinstance(d, int) else f"{d:g}"
+        if r["aliases"]:
+            r["meaning"] += f" (alias: {', '.join(r['aliases'])})"
+    keys = ("name", "default", "unit", "range")
+    width = {k: max(len(k), *(len(str(r[k])) for r in rows)) for k in keys}
+    print("sweep: --param NAME=LO:HI:N (grid), NAME=A,B,C (list), NAME=LO:HI (random)")
+    section = None
+    for r in rows:
+        if r["name"].partition(".")[0] != section:
+            section = r["name"].partition(".")[0]
+            print(f"\n{section}: {_PARAM_SECTIONS[section]}")
+            print("  " + "  ".join(f"{k:<{width[k]}}" for k in keys) + "  meaning")
+        cells = "  ".join(f"{str(r[k]):<{width[k]}}" for k in keys)
+        print(f"  {cells}  {r['meaning']}")
     return 0
 
 
@@ -364,6 +399,13 @@ def cmd_assets(_args) -> int:
             f"{name:<12} {entry['description']} ({entry['thickness_mm']:g} mm, "
             f"{entry['mass_g']:.1f} g)"
         )
+    return 0
+
+
+def cmd_view(args) -> int:
+    from mjx_pick.reporting.viewer import view
+
+    view(args.run, args.pick, speed=args.speed, loop=args.loop)
     return 0
 
 

@@ -97,6 +97,7 @@ def study_options(args, picks_cfg) -> dict:
         "batch_size": args.batch_size,
         "out": args.out,
         "overwrite": args.overwrite,
+        "progress": not args.no_progress,
         # sweep and compare take --ray (the other studies run on this machine)
         **({"ray": args.ray} if getattr(args, "ray", None) is not None else {}),
     }

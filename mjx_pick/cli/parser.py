@@ -17,52 +17,144 @@ from mjx_pick.cli.commands import (
     cmd_report,
     cmd_robust,
     cmd_sweep,
+    cmd_view,
 )
+
+
+class DefaultsHelp(argparse.HelpFormatter):
+    """Help that shows each option's default: "(default: X)" is appended where the
+    option has one (not for None, a bare switch, or help that already names it)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "%(default)" in text or "(default" in text:
+            return text
+        default = action.default
+        if default is None or default is argparse.SUPPRESS or isinstance(default, bool):
+            return text
+        if action.option_strings or action.nargs in (argparse.OPTIONAL, argparse.ZERO_OR_MORE):
+            return text + " (default: %(default)s)"
+        return text
+
+
+class Parser(argparse.ArgumentParser):
+    """The root parser and every subcommand's: defaults shown in --help."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", DefaultsHelp)
+        super().__init__(*args, **kwargs)
 
 
 def _add_object_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("object")
-    g.add_argument("object", help="asset name, image (PNG/JPG) or mesh (STL/OBJ/PLY/GLB)")
-    g.add_argument("--px-per-mm", type=float, help="image scale (images)")
-    g.add_argument("--thickness-mm", type=float, help="object thickness (images)")
-    g.add_argument("--mass-g", type=float, help="object mass")
-    g.add_argument("--density-kg-m3", type=float, help="density, instead of --mass-g")
-    g.add_argument("--unit", choices=("m", "mm"), help="unit of a mesh file's coordinates")
     g.add_argument(
-        "--pose", choices=("as_given", "stable"), default="as_given", help="mesh resting pose"
+        "object",
+        help="a shipped asset name (mjx-pick assets), a top-down image (PNG/JPG) or a mesh "
+        "(STL/OBJ/PLY/GLB)",
     )
     g.add_argument(
-        "--pick-height-mm", type=float, help="fingertip height (default: --grasp-height's rule)"
+        "--px-per-mm",
+        type=float,
+        help="image scale, pixels per mm (an image: required; a shipped asset: its own)",
     )
-    g.add_argument("--simplify-mm", type=float, help="outline tolerance (images)")
-    g.add_argument("--material", help="object material name (recorded)")
+    g.add_argument(
+        "--thickness-mm",
+        type=float,
+        help="object thickness (prism height), mm (an image: required; an asset: its own)",
+    )
+    g.add_argument(
+        "--mass-g",
+        type=float,
+        help="object mass, g (an image or mesh: this or --density-kg-m3; an asset: its own)",
+    )
+    g.add_argument(
+        "--density-kg-m3", type=float, help="object density, kg/m^3, instead of --mass-g"
+    )
+    g.add_argument(
+        "--unit", choices=("m", "mm"), help="unit of a mesh file's coordinates (a mesh: required)"
+    )
+    g.add_argument(
+        "--pose",
+        choices=("as_given", "stable"),
+        default="as_given",
+        help="a mesh's resting pose: as in the file, or its most stable resting pose",
+    )
+    g.add_argument(
+        "--pick-height-mm",
+        type=float,
+        help="fingertip height above the table at the grasp, mm (default: --grasp-height's rule)",
+    )
+    g.add_argument(
+        "--simplify-mm",
+        type=float,
+        help="outline simplification tolerance of an image, mm (default: 0.3)",
+    )
+    g.add_argument(
+        "--material",
+        help="object material name, recorded with the results (default: pla; an asset: its own)",
+    )
 
 
 def _add_gripper_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("gripper")
     g.add_argument("--gripper", default="robotiq-2f85", help="preset name (mjx-pick presets)")
-    g.add_argument("--gripper-file", help="a gripper TOML file (overrides --gripper)")
+    g.add_argument(
+        "--gripper-file", help="a gripper TOML file (GripperSpec fields; overrides --gripper)"
+    )
 
 
+# Flags that override one settings field: their help states the field's default (a test
+# checks each against the dataclass: tests/test_cli.py)
 def _add_physics_args(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("physics")
-    g.add_argument("--contact", help="contact parameters TOML (ContactParams fields)")
-    g.add_argument("--solver", help="solver settings TOML (SolverParams fields)")
-    g.add_argument("--grasp", help="grasp procedure TOML (GraspConfig fields)")
-    g.add_argument("--grip-force-n", type=float, help="desired pad force F_d")
-    g.add_argument("--pad-friction", type=float, help="pad-object friction coefficient")
-    g.add_argument("--table-friction", type=float, help="object-table friction coefficient")
-    g.add_argument("--timestep-s", type=float, help="physics time step")
-    g.add_argument("--lift-height-mm", type=float)
-    g.add_argument("--hold-s", type=float)
+    g = p.add_argument_group("physics (mjx-pick params: every setting, its unit and range)")
+    g.add_argument(
+        "--contact",
+        help="contact parameters TOML (ContactParams fields, or calibrate's contact.toml; "
+        "default: the paper's Table 1)",
+    )
+    g.add_argument(
+        "--solver", help="solver settings TOML (SolverParams fields; default: mjx-pick params)"
+    )
+    g.add_argument(
+        "--grasp", help="grasp procedure TOML (GraspConfig fields; default: mjx-pick params)"
+    )
+    g.add_argument(
+        "--grip-force-n",
+        type=float,
+        help="desired pad force F_d, N (default: 50, or --grasp's)",
+    )
+    g.add_argument(
+        "--pad-friction",
+        type=float,
+        help="pad-object friction coefficient (default: 0.86, or --contact's)",
+    )
+    g.add_argument(
+        "--table-friction",
+        type=float,
+        help="object-table friction coefficient (default: 0.2, or --contact's)",
+    )
+    g.add_argument(
+        "--timestep-s", type=float, help="physics time step, s (default: 0.001, or --solver's)"
+    )
+    g.add_argument(
+        "--lift-height-mm", type=float, help="lift height, mm (default: 100, or --grasp's)"
+    )
+    g.add_argument(
+        "--hold-s",
+        type=float,
+        help="hold at the top of the lift, s (default: 0.5, or --grasp's)",
+    )
     g.add_argument(
         "--grasp-height",
         choices=("mid_band", "fingertip_mid"),
-        help="mid_band (default): pads centred on the object's mid-height; fingertip_mid: "
-        "fingertips at half height (the paper's literal rule)",
+        help="mid_band: pads centred on the object's mid-height; fingertip_mid: "
+        "fingertips at half height (the paper's literal rule) (default: mid_band, or "
+        "--grasp's)",
     )
     g.add_argument(
-        "--fingertip-clearance-mm", type=float, help="lowest fingertip height (mid_band), mm"
+        "--fingertip-clearance-mm",
+        type=float,
+        help="lowest fingertip height above the table (mid_band), mm (default: 2, or --grasp's)",
     )
     g.add_argument(
         "--backend",
@@ -71,15 +163,37 @@ def _add_physics_args(p: argparse.ArgumentParser) -> None:
         help="warp: MuJoCo Warp on an NVIDIA GPU (pip install '.[gpu]'); mjx: MJX's JAX "
         "physics; mujoco: the C engine on CPU threads; auto: warp where it can run, else mujoco",
     )
-    g.add_argument("--batch-size", type=int, help="simulations per backend call")
+    g.add_argument(
+        "--batch-size",
+        type=int,
+        help="simulations per backend call (default: per backend: mujoco 1024, warp 32768 "
+        "per GPU, mjx 8192 on an accelerator, else 64)",
+    )
 
 
 def _add_pick_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("pick-points")
-    g.add_argument("--n", type=int, default=1000, help="pick-points (Normal mode)")
-    g.add_argument("--seed", type=int, default=0)
-    g.add_argument("--safety-zone-mm", type=float)
-    g.add_argument("--min-coverage", type=float)
+    g.add_argument("--n", type=int, default=1000, help="pick-points to generate (Normal mode)")
+    g.add_argument("--seed", type=int, default=0, help="seed: same seed, same pick-points")
+    g.add_argument(
+        "--safety-zone-mm",
+        type=float,
+        help="clearance between a descending finger and the object, mm (default: 5)",
+    )
+    g.add_argument(
+        "--min-coverage",
+        type=float,
+        help="least fraction of the region between the fingertips the object must fill "
+        "(default: 0.35)",
+    )
+
+
+def _add_progress(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress bar (on stderr; without a terminal: a line every 10 percent)",
+    )
 
 
 def _add_ray(p: argparse.ArgumentParser) -> None:
@@ -87,7 +201,8 @@ def _add_ray(p: argparse.ArgumentParser) -> None:
         "--ray",
         metavar="auto|ADDRESS",
         help="simulate on a Ray cluster: auto, or its head's HOST:PORT (pip install "
-        "'mjx-pick[cluster]'; docs/cluster.md); this process still writes --out",
+        "'mjx-pick[cluster]'; docs/cluster.md); this process still writes --out "
+        "(default: this machine)",
     )
 
 
@@ -109,42 +224,73 @@ def _version_line() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = Parser(
         prog="mjx-pick",
         description="mjx-pick: evaluate robot pick-points by physics simulation (MuJoCo).",
     )
-    ap.add_argument("--version", action="version", version=_version_line())
-    sub = ap.add_subparsers(dest="command", required=True)
+    ap.add_argument(
+        "--version",
+        action="version",
+        version=_version_line(),
+        help="show mjx-pick's version and its physics engines' and exit",
+    )
+    sub = ap.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     ev = sub.add_parser("evaluate", help="simulate pick-points and write results")
     _add_object_args(ev)
     _add_gripper_args(ev)
     _add_physics_args(ev)
     _add_pick_args(ev)
-    ev.add_argument("--picks", help="CSV of your own pick-points (x_mm, y_mm, yaw_deg)")
+    ev.add_argument(
+        "--picks",
+        help="CSV of your own pick-points (columns x_mm, y_mm, yaw_deg), instead of --n",
+    )
     ev.add_argument(
         "--skip-infeasible",
         action="store_true",
         help="leave infeasible rows of --picks out (listed) instead of refusing the file",
     )
-    ev.add_argument("--out", help="output folder")
-    ev.add_argument("--resume", action="store_true", help="continue an interrupted run")
+    ev.add_argument(
+        "--out", help="output folder (default: none: the summary is printed, nothing written)"
+    )
+    ev.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
     _add_overwrite(ev)
     ev.add_argument(
         "--chunk-size",
         type=int,
-        help="pick-points per chunk written to disk (default: from device memory)",
+        help="pick-points per chunk saved while the run goes on, the unit of --resume "
+        "(default: from device memory; one batch on the CPU)",
     )
-    ev.add_argument("--traces", type=int, default=3, help="traces of the n best and n worst")
-    ev.add_argument("--until", type=int, help="Optimization mode: stop after K good pick-points")
-    ev.add_argument("--min-score", type=float, default=0.9, help="Optimization threshold")
-    ev.add_argument("--max", type=int, help="Optimization mode: most pick-points to simulate")
-    ev.add_argument("--no-progress", action="store_true")
+    ev.add_argument(
+        "--traces",
+        type=int,
+        default=3,
+        help="trace the n best and n worst pick-points (traces.parquet: force plots, "
+        "animations, view)",
+    )
+    ev.add_argument(
+        "--until",
+        type=int,
+        metavar="K",
+        help="Optimization mode: stop once K pick-points reach --min-score (default: off)",
+    )
+    ev.add_argument(
+        "--min-score",
+        type=float,
+        default=0.9,
+        help="Optimization mode: the score, eq. (2) in [0, 1], a good pick-point reaches",
+    )
+    ev.add_argument(
+        "--max",
+        type=int,
+        help="Optimization mode: most pick-points to simulate (default: 10 x --until)",
+    )
+    _add_progress(ev)
     _add_ray(ev)
     ev.add_argument(
         "--min-force",
         action="store_true",
-        help="add min_force_n: each pick-point's smallest successful F_d (bisection)",
+        help="add min_force_n, N: each pick-point's smallest successful F_d (bisection)",
     )
     ev.set_defaults(func=cmd_evaluate)
 
@@ -154,8 +300,9 @@ def build_parser() -> argparse.ArgumentParser:
         _add_gripper_args(p)
         _add_physics_args(p)
         _add_pick_args(p)
-        p.add_argument("--out", help="output folder")
+        p.add_argument("--out", help="output folder (default: none: nothing written)")
         _add_overwrite(p)
+        _add_progress(p)
         return p
 
     sw = study("sweep", "sweep contact, controller, gripper or solver parameters")
@@ -163,20 +310,26 @@ def build_parser() -> argparse.ArgumentParser:
         "--param",
         action="append",
         metavar="NAME=LO:HI:N",
-        help="a swept parameter: LO:HI:N grid, A,B,C list, LO:HI (random); repeat",
+        help="a swept parameter in its own unit (mjx-pick params): LO:HI:N grid, "
+        "LO:HI:N:log geometric grid, A,B,C list, LO:HI range (--random); repeat",
     )
     sw.add_argument(
         "--random",
         type=int,
         metavar="K",
-        help="K random variants within the LO:HI ranges instead of a grid",
+        help="K random variants within the LO:HI ranges (default: the grid)",
     )
     _add_ray(sw)
     sw.set_defaults(func=cmd_sweep, n=200)
 
     cp = study("compare", "rank grippers on one shared pick-point set")
     cp.add_argument("--grippers", required=True, help="comma-separated presets or TOML files")
-    cp.add_argument("--rank-by", choices=("success", "score"), default="success")
+    cp.add_argument(
+        "--rank-by",
+        choices=("success", "score"),
+        default="success",
+        help="rank by success rate or by mean score, eq. (2)",
+    )
     _add_ray(cp)
     cp.set_defaults(func=cmd_compare, n=200)
 
@@ -185,26 +338,51 @@ def build_parser() -> argparse.ArgumentParser:
         "--bound",
         action="append",
         metavar="FIELD=LO:HI",
-        help="a searched gripper field and its bounds; repeat",
+        help="a searched gripper field and its bounds in the field's unit (e.g. "
+        "finger_width_mm=10:40; mjx-pick params gripper); repeat",
     )
-    ds.add_argument("--variants", type=int, default=12, help="variants sampled")
-    ds.add_argument("--rounds", type=int, default=3, help="successive-halving rounds")
-    ds.add_argument("--rank-by", choices=("success", "score"), default="success")
+    ds.add_argument("--variants", type=int, default=12, help="gripper variants sampled")
+    ds.add_argument(
+        "--rounds",
+        type=int,
+        default=3,
+        help="successive-halving rounds (round r: n x 2^r pick-points, the best third kept)",
+    )
+    ds.add_argument(
+        "--rank-by",
+        choices=("success", "score"),
+        default="success",
+        help="rank by success rate or by mean score, eq. (2)",
+    )
     ds.set_defaults(func=cmd_design, n=64)
 
     rb = study("robust", "robust success probability of the top pick-points under vision error")
-    rb.add_argument("--results", help="an evaluate output folder or results.parquet to rank")
-    rb.add_argument("--top-k", type=int, default=10)
+    rb.add_argument(
+        "--results",
+        help="an evaluate output folder or results.parquet to rank (default: simulate --n "
+        "pick-points first)",
+    )
+    rb.add_argument("--top-k", type=int, default=10, help="best successful pick-points tested")
     rb.add_argument("--m", type=int, default=32, help="perturbed draws per pick-point")
-    rb.add_argument("--sigma-xy-mm", type=float, default=2.0)
-    rb.add_argument("--sigma-yaw-deg", type=float, default=3.0)
+    rb.add_argument(
+        "--sigma-xy-mm",
+        type=float,
+        default=2.0,
+        help="vision error: standard deviation of x and y, mm",
+    )
+    rb.add_argument(
+        "--sigma-yaw-deg",
+        type=float,
+        default=3.0,
+        help="vision error: standard deviation of yaw, deg",
+    )
     rb.set_defaults(func=cmd_robust, n=200)
 
     pk = sub.add_parser("picks", help="generate feasible pick-points and draw them")
     _add_object_args(pk)
     _add_gripper_args(pk)
     _add_pick_args(pk)
-    pk.add_argument("--out", required=True)
+    pk.add_argument("--out", required=True, help="output folder (picks.csv and pictures)")
     _add_overwrite(pk)
     pk.set_defaults(func=cmd_picks)
 
@@ -222,60 +400,60 @@ def build_parser() -> argparse.ArgumentParser:
         help="comma-separated, fitted jointly: pad_friction, pad_torsion_mm, table_friction, "
         "pad_stiffness_n_per_mm, pad_damping_ns_per_mm, table_stiffness_n_per_mm, "
         "table_damping_ns_per_mm, force_offset_n (aliases: friction, torsion, stiffness, "
-        "damping, force_offset); default %(default)s",
+        "damping, force_offset)",
     )
     cb.add_argument(
         "--bounds",
         action="append",
         metavar="NAME=LO:HI",
-        help="a parameter's bounds, natural units (repeatable)",
+        help="a parameter's bounds in its own unit (N/mm, N s/mm, mm, N; repeatable)",
     )
     cb.add_argument(
         "--prior",
         action="append",
         metavar="NAME=MEAN:SD",
-        help="a parameter's Gaussian prior (SD in log units for stiffness, damping "
-        "and torsion; default: mean the start, SD half the bounds; repeatable)",
+        help="a parameter's Gaussian prior, its own unit (SD in natural-log units for "
+        "stiffness, damping and torsion; default: mean the start, SD half the bounds; "
+        "repeatable)",
     )
+    cb.add_argument("--steps", type=int, default=100, help="estimator steps (lsq: iterations)")
     cb.add_argument(
-        "--steps",
+        "--budget",
         type=int,
-        default=100,
-        help="estimator steps (lsq: iterations); default %(default)s",
+        help="stop after this many pick-point simulations (default: no limit)",
     )
-    cb.add_argument("--budget", type=int, help="stop after this many pick-point simulations")
     cb.add_argument(
         "--lr",
         type=float,
         default=0.1,
-        help="Adam step in the bounded space (smoothed, jvp); default %(default)s",
+        help="Adam step, dimensionless: in the bounded space, whose range is 1 (smoothed, jvp)",
     )
     cb.add_argument(
         "--estimator",
         choices=("smoothed", "random", "cma", "lsq", "jvp"),
         default="cma",
-        help="cma: CMA-ES (default: it reached the common target on 1, 3 and 5 hidden "
-        "parameters, benchmarks/RESULTS.md); smoothed: Gauss-Hermite smoothed gradient + "
-        "Adam; random: uniform search; lsq: Levenberg-Marquardt on the residuals "
+        help="cma: CMA-ES (it reached the common target on 1, 3 and 5 hidden parameters, "
+        "benchmarks/RESULTS.md); smoothed: Gauss-Hermite smoothed gradient + Adam; "
+        "random: uniform search; lsq: Levenberg-Marquardt on the residuals "
         "(mujoco.sysid); jvp: forward mode through MJX",
     )
     cb.add_argument(
         "--samples",
         type=int,
         default=2,
-        help="quadrature node pairs per parameter and step (smoothed); default %(default)s",
+        help="quadrature node pairs per parameter and step (smoothed)",
     )
     cb.add_argument(
         "--sigma",
         type=float,
         default=0.2,
-        help="smoothing spread (bounded space); default %(default)s",
+        help="smoothing spread, dimensionless: in the bounded space, whose range is 1",
     )
     cb.add_argument(
         "--temperature-mm",
         type=float,
         default=2.0,
-        help="outcome smoothing, mm of final lift; default %(default)s",
+        help="outcome smoothing, mm of final lift",
     )
     cb.add_argument("--holdout", help="held-out outcomes CSV for accuracy before/after")
     cb.add_argument(
@@ -283,31 +461,58 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip the intervals / identifiability after the fit",
     )
-    cb.add_argument("--checkpoint-every", type=int, default=10)
-    cb.add_argument("--log-every", type=int, default=10)
-    cb.add_argument("--resume", action="store_true")
-    cb.add_argument("--out", required=True)
+    cb.add_argument(
+        "--checkpoint-every", type=int, default=10, help="steps between saved checkpoints"
+    )
+    cb.add_argument("--log-every", type=int, default=10, help="steps between printed loss lines")
+    cb.add_argument(
+        "--resume", action="store_true", help="continue an interrupted fit from its checkpoint"
+    )
+    cb.add_argument(
+        "--out", required=True, help="output folder (contact.toml, loss.png, report.md, ...)"
+    )
+    _add_progress(cb)
     cb.set_defaults(func=cmd_calibrate)
 
     rp = sub.add_parser("report", help="plots, maps, animations, 1:1 template, robot export, HTML")
     rp.add_argument("run", help="an evaluate output folder")
-    rp.add_argument("--out", help="write here instead of into the run folder")
+    rp.add_argument("--out", help="write here (default: into the run folder)")
     rp.add_argument("--n", type=int, default=3, help="best and worst pick-points on the template")
     rp.add_argument("--k", type=int, default=10, help="pick-points in the robot export")
     rp.add_argument(
         "--frame",
         metavar="X,Y,Z,ROLL,PITCH,YAW",
-        help="object frame's pose in your robot frame (mm, deg) for the export",
+        help="object frame's pose in your robot frame, mm and deg, for the export "
+        "(default: the object frame)",
     )
-    rp.add_argument("--anim-every", type=int, default=8, help="control ticks per frame")
-    rp.add_argument("--no-animations", action="store_true")
+    rp.add_argument(
+        "--anim-every",
+        type=int,
+        default=8,
+        help="control ticks per animation frame (a tick: grasp.control_period_s)",
+    )
+    rp.add_argument(
+        "--no-animations",
+        action="store_true",
+        help="skip the animations (GIF and MP4: the slowest part)",
+    )
+    _add_progress(rp)
     rp.set_defaults(func=cmd_report)
 
     sub.add_parser("presets", help="list gripper presets").set_defaults(func=cmd_presets)
-    sub.add_parser("params", help="list the parameters sweep accepts").set_defaults(func=cmd_params)
+    pa = sub.add_parser(
+        "params", help="each sweepable parameter: meaning, unit, default and allowed range"
+    )
+    pa.add_argument(
+        "prefix",
+        nargs="?",
+        help="only parameters whose name starts with this (e.g. contact, grasp.lift)",
+    )
+    pa.set_defaults(func=cmd_params)
     sub.add_parser("assets", help="list shipped objects").set_defaults(func=cmd_assets)
     _add_gui_parser(sub)
     _add_trials_parser(sub)
+    _add_view_parser(sub)
     return ap
 
 
@@ -338,7 +543,7 @@ def _add_trials_parser(sub) -> None:
         help="the paper's loop on the real cell: plan pick-points and print their 1:1 "
         "templates, record outcomes, report agreement, fit and plan the next round",
     )
-    steps = tp.add_subparsers(dest="step", required=True)
+    steps = tp.add_subparsers(dest="step", required=True, parser_class=Parser)
 
     def backend(p) -> None:
         p.add_argument(
@@ -365,51 +570,46 @@ def _add_trials_parser(sub) -> None:
     )
     pl.add_argument("run", help="a finished evaluate output folder (its gripper and physics)")
     _add_object_args(pl)
-    pl.add_argument("--n", type=int, default=12, help="pick-points to try; default %(default)s")
+    pl.add_argument("--n", type=int, default=12, help="pick-points to try")
     pl.add_argument(
         "--repeats",
         type=int,
         default=5,
-        help="trials per pick-point (the paper: 5); default %(default)s",
+        help="trials per pick-point (the paper: 5)",
     )
     pl.add_argument(
         "--params",
         default="pad_friction",
-        help="the uncertain parameters that decide what is informative (as calibrate "
-        "--params); default %(default)s",
+        help="the uncertain parameters that decide what is informative (as calibrate --params)",
     )
     ranges(pl)
-    pl.add_argument(
-        "--draws", type=int, default=6, help="parameter draws from the prior; default %(default)s"
-    )
+    pl.add_argument("--draws", type=int, default=6, help="parameter draws from the prior")
     pl.add_argument(
         "--placements",
         type=int,
         default=3,
-        help="placements per pick-point and draw: the template pose and jittered ones; "
-        "default %(default)s",
+        help="placements per pick-point and draw: the template pose and jittered ones",
     )
-    pl.add_argument(
-        "--jitter-mm", type=float, default=1.0, help="placing error on x, y; default %(default)s"
-    )
-    pl.add_argument(
-        "--jitter-deg", type=float, default=2.0, help="placing error on yaw; default %(default)s"
-    )
+    pl.add_argument("--jitter-mm", type=float, default=1.0, help="placing error on x and y, mm")
+    pl.add_argument("--jitter-deg", type=float, default=2.0, help="placing error on yaw, deg")
     pl.add_argument(
         "--pool",
         type=int,
         default=32,
-        help="candidates simulated, from the run's successes and failures; default %(default)s",
+        help="candidates simulated, from the run's successes and failures",
     )
     pl.add_argument(
         "--info-share",
         type=float,
         default=0.5,
-        help="share chosen by expected information (the rest: best and worst, as the "
-        "paper); default %(default)s",
+        help="fraction chosen by expected information (the rest: best and worst, as the paper)",
     )
-    pl.add_argument("--seed", type=int, default=0)
-    pl.add_argument("--paper", choices=("a4", "letter"), default="a4")
+    pl.add_argument(
+        "--seed", type=int, default=0, help="seed of the parameter draws and placements"
+    )
+    pl.add_argument(
+        "--paper", choices=("a4", "letter"), default="a4", help="paper size of the templates"
+    )
     pl.add_argument(
         "--blind",
         action="store_true",
@@ -442,27 +642,56 @@ def _add_trials_parser(sub) -> None:
     _add_object_args(ft)
     ft.add_argument("--params", help="parameters to fit (default: the plan's --params)")
     ranges(ft)
-    ft.add_argument("--steps", type=int, default=40, help="estimator steps; default %(default)s")
+    ft.add_argument("--steps", type=int, default=40, help="estimator steps")
     ft.add_argument(
         "--estimator",
         choices=("cma", "smoothed", "random"),
         default="cma",
-        help="as calibrate; default %(default)s",
+        help="as calibrate",
     )
-    ft.add_argument("--temperature-mm", type=float, help="outcome smoothing (as calibrate)")
+    ft.add_argument(
+        "--temperature-mm",
+        type=float,
+        help="outcome smoothing, mm of final lift (default: as calibrate)",
+    )
     ft.add_argument(
         "--next",
         type=int,
         default=6,
-        help="pick-points of the next round, where the fitted model is least sure (0: "
-        "none); default %(default)s",
+        help="pick-points of the next round, where the fitted model is least sure (0: none)",
     )
     ft.add_argument("--partial", action="store_true", help="fit the tried rows, others blank")
-    ft.add_argument("--seed", type=int, default=0)
+    ft.add_argument(
+        "--seed", type=int, default=0, help="seed of the fit and of the next round's draws"
+    )
     ft.add_argument("--no-identify", action="store_true", help="skip the intervals")
-    ft.add_argument("--paper", choices=("a4", "letter"), default="a4")
-    ft.add_argument("--log-every", type=int, default=10)
+    ft.add_argument(
+        "--paper", choices=("a4", "letter"), default="a4", help="paper size of the templates"
+    )
+    ft.add_argument("--log-every", type=int, default=10, help="steps between printed loss lines")
     backend(ft)
     ft.add_argument("--resume", action="store_true", help="continue this round's fit")
     ft.add_argument("--overwrite", action="store_true", help="replace this round's earlier fit")
     ft.set_defaults(func=cmd_trials_fit)
+
+
+def _add_view_parser(sub) -> None:
+    vp = sub.add_parser(
+        "view", help="replay one traced pick-point in MuJoCo's interactive viewer (a display)"
+    )
+    vp.add_argument("run", help="an evaluate output folder with traces.parquet")
+    vp.add_argument(
+        "--pick",
+        type=int,
+        required=True,
+        metavar="ID",
+        help="pick_id of a traced pick-point (the report's forces_<ID>.png)",
+    )
+    vp.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help="playback speed, a multiple of real time",
+    )
+    vp.add_argument("--loop", action="store_true", help="replay until the viewer window is closed")
+    vp.set_defaults(func=cmd_view)

@@ -606,11 +606,13 @@ class Page:
                 return
             if progress.state != "complete":
                 return
+            from mjx_pick.metrics import rate_text
+
             self.resume.value = False
             s = json.loads((out / "summary.json").read_text())
             self.run_summary.set_content(
-                f"**{out.name}**: success rate {s['success_rate']:.3f} "
-                f"({s['successes']}/{s['n']}), mean score {_fmt(s['score_mean'])}, "
+                f"**{out.name}**: success rate {rate_text(s['successes'], s['n'])}, "
+                f"mean score {_fmt(s['score_mean'])}, "
                 f"{s['picks_per_s']} pick-points/s on {s['backend']}. Open tab 4."
             )
             self.run_dir.value = str(out)
@@ -703,6 +705,7 @@ class Page:
             self.open_run()
 
     def open_run(self) -> None:
+        from mjx_pick.metrics import rate_text
         from mjx_pick.reporting import Run
 
         self.analyze_error.set_text("")
@@ -719,7 +722,8 @@ class Page:
         s = run.summary
         self.run_info.set_text(
             f"{s.get('object')} / {s.get('gripper')}: {s.get('n')} pick-points, success rate "
-            f"{_fmt(s.get('success_rate'))}, mean score {_fmt(s.get('score_mean'))}, "
+            f"{rate_text(s.get('successes', 0), s.get('n', 0))}, "
+            f"mean score {_fmt(s.get('score_mean'))}, "
             f"F_Gmin {_fmt(s.get('f_gmin_n'))} N"
         )
         traced = {pid for pid, _ in run.traced()}

@@ -40,9 +40,11 @@ import jax.numpy as jnp
 SETTLE, CLOSE, DWELL, LIFT, HOLD, DONE = range(6)
 PHASES = ("settle", "close", "dwell", "lift", "hold", "done")
 
+# outcome codes (stable: results and benchmarks store them) and their labels, the
+# results table's `failure` column; a successful pick's label is "success"
 OK, NO_CONTACT, FORCE_NOT_REACHED, SLIPPED_IN_LIFT, DROPPED_IN_HOLD, ROTATED, DIVERGED = range(7)
 FAILURES = (
-    "none",
+    "success",
     "no_contact",
     "force_not_reached",
     "slipped_in_lift",
@@ -50,6 +52,9 @@ FAILURES = (
     "rotated",
     "diverged",
 )
+SUCCESS = FAILURES[OK]
+# the label of OK before it read "success" (results written by mjx-pick <= 0.1.0)
+OLD_SUCCESS_LABEL = "none"
 
 
 class GraspParams(NamedTuple):

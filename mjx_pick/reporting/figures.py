@@ -30,16 +30,26 @@ def phase_events(t: np.ndarray, phase: np.ndarray) -> list[tuple[float, str]]:
 
 
 def force_plot(trace: dict, grip_force_n: float, path, title: str = "") -> None:
-    """Pad forces and object-table force against time, F_d dashed, phases marked."""
+    """The forces of one traced pick-point and, below them on the same time axis, the
+    lift: the gripper's and the object's height above their start, mm -- where the
+    object's curve falls behind the gripper's, the part slips (the gap is shaded).
+
+    Top panel: left and right pad force and the object-table force, N, F_d dashed.
+    Both panels mark the phase changes.
+    """
     t = trace["t_s"]
-    fig, ax = new_figure(figsize=(8, 4))
+    fig, (ax, lift_ax) = new_figure(
+        2, 1, figsize=(8, 5.6), sharex=True, gridspec_kw={"height_ratios": [2, 1]}
+    )
     ax.plot(t, trace["force_left_n"], label="left finger", color="#1f77b4")
     ax.plot(t, trace["force_right_n"], label="right finger", color="#d62728", ls="-.")
     ax.plot(t, trace["force_table_n"], label="object-table", color="#7f7f7f")
     ax.axhline(grip_force_n, color="k", ls="--", lw=1, label=f"F_d = {grip_force_n:g} N")
     top = max(grip_force_n, float(np.nanmax(trace["force_left_n"]))) * 1.15
-    for when, name in phase_events(t, trace["phase"]):
-        ax.axvline(when, color=PHASE_COLOURS.get(name, "k"), lw=0.8, ls=":")
+    events = phase_events(t, trace["phase"])
+    for when, name in events:
+        for a in (ax, lift_ax):
+            a.axvline(when, color=PHASE_COLOURS.get(name, "k"), lw=0.8, ls=":")
         ax.text(
             when,
             top,
@@ -50,11 +60,22 @@ def force_plot(trace: dict, grip_force_n: float, path, title: str = "") -> None:
             color=PHASE_COLOURS.get(name, "k"),
         )
     ax.set_ylim(min(0.0, float(np.nanmin(trace["force_table_n"]))) - 1, top * 1.05)
-    ax.set_xlabel("time, s")
     ax.set_ylabel("force, N")
     ax.set_title(title, fontsize=10)
     ax.legend(loc="center right", fontsize=8)
     ax.grid(alpha=0.3)
+
+    gripper = (np.asarray(trace["lift_m"]) - trace["lift_m"][0]) * 1e3
+    obj = (np.asarray(trace["object_z_m"]) - trace["object_z_m"][0]) * 1e3
+    lift_ax.plot(t, obj, color="#2ca02c", lw=2, label="object")
+    lift_ax.plot(t, gripper, color="k", lw=1, ls="--", label="gripper")
+    lift_ax.fill_between(
+        t, obj, gripper, where=gripper > obj, color="#d62728", alpha=0.25, label="slip"
+    )
+    lift_ax.set_xlabel("time, s")
+    lift_ax.set_ylabel("lift, mm")
+    lift_ax.legend(loc="upper left", fontsize=8)
+    lift_ax.grid(alpha=0.3)
     fig.tight_layout()
     save_png(fig, path)
 
@@ -123,12 +144,12 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
     ax.barh(
         names[::-1],
         counts[::-1],
-        color=["#2ca02c" if n == "none" else "#d62728" for n in names[::-1]],
+        color=["#2ca02c" if n == gk.SUCCESS else "#d62728" for n in names[::-1]],
     )
     for i, c in enumerate(counts[::-1]):
         ax.text(c, i, f" {c}", va="center", fontsize=8)
     ax.set_xlabel("pick-points")
-    ax.set_title("outcome ('none': success)")
+    ax.set_title("outcome: success, or why it failed")
     fig.tight_layout()
     save_png(fig, out_dir / "failures.png")
     out["failures"] = out_dir / "failures.png"

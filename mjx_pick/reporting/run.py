@@ -15,6 +15,7 @@ import shapely.affinity
 
 from mjx_pick.config import ConfigError, from_mapping
 from mjx_pick.gripper import GripperSpec
+from mjx_pick.kernels import grasp as gk
 
 __all__ = ["Run"]
 
@@ -49,10 +50,10 @@ class Run:
         )
         return cls(
             path=path,
-            table=pq.read_table(path / "results.parquet"),
+            table=_success_labelled(pq.read_table(path / "results.parquet")),
             traces=traces,
             config=config,
-            summary=json.loads((path / "summary.json").read_text()),
+            summary=_success_counted(json.loads((path / "summary.json").read_text())),
             outline=shapely.from_wkt(wkt),
             gripper=from_mapping(GripperSpec, config["gripper"]),
         )
@@ -82,3 +83,26 @@ class Run:
         ids = np.asarray(self.table["pick_id"])
         k = int(np.flatnonzero(ids == pick_id)[0])
         return {name: self.table[name][k].as_py() for name in self.table.column_names}
+
+
+def _success_labelled(table: pa.Table) -> pa.Table:
+    """A results table whose successes read "success" (older runs wrote "none")."""
+    if "failure" not in table.column_names:
+        return table
+    labels = np.asarray(table["failure"].to_pylist(), dtype=object)
+    old = labels == gk.OLD_SUCCESS_LABEL
+    if not old.any():
+        return table
+    labels[old] = gk.SUCCESS
+    k = table.column_names.index("failure")
+    return table.set_column(k, "failure", pa.array(labels.tolist(), pa.string()))
+
+
+def _success_counted(summary: dict) -> dict:
+    """A summary whose outcome counts name success "success" (older runs: "none")."""
+    failures = summary.get("failures")
+    if isinstance(failures, dict) and gk.OLD_SUCCESS_LABEL in failures:
+        summary["failures"] = {
+            (gk.SUCCESS if k == gk.OLD_SUCCESS_LABEL else k): v for k, v in failures.items()
+        }
+    return summary
