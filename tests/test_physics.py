@@ -86,6 +86,7 @@ def test_coulomb_grid_on_the_c_engine(thickness_mm):
 @pytest.mark.mjx
 @pytest.mark.xfail(
     strict=True,
+    raises=AssertionError,
     reason="MJX's JAX implementation lets the pads chatter on a part at low pad friction "
     "(0.1: forces alternate 0 / 10-57 N between pads, the block tips over) where MuJoCo C "
     "holds it; seen before the soft-finger change too (commit 8c0fc84: 0 of 4 Coulomb "
@@ -93,9 +94,13 @@ def test_coulomb_grid_on_the_c_engine(thickness_mm):
 )
 def test_coulomb_on_mjx():
     # MJX (the JAX implementation, the differentiable backend) on one block: friction
-    # and force are per-pick data, so the whole set is one compile
+    # and force are per-pick data, so the set is one compile. Only the friction that
+    # shows the failure above (0.1: the case that must hold and the one that must
+    # slip), the smallest run that fails for that reason. Once MJX holds it, strict
+    # xfail reports the pass as a failure: then drop the mark and test frictions 0.1,
+    # 0.5 and 1.0 again (the set this test ran before it was cut to CI size)
     block = mp.object_from_polygon(box(-25, -15, 25, 15), thickness_mm=20, mass_g=300, name="b")
-    rows = coulomb_cases((0.3,), (0.1, 0.5, 1.0))
+    rows = coulomb_cases((0.3,), (0.1,))
     out, _, _ = simulate(
         block,
         centred(block, len(rows)),
