@@ -318,7 +318,9 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
     with pytest.raises(Killed):
         cal.calibrate(p2, **kw, out=tmp_path, log=kill_at_7, identify=False)
     assert not (tmp_path / "contact.toml").exists()
+    assert (tmp_path / "checkpoint").is_dir()  # what the resume reads
     resumed = cal.calibrate(p2, **kw, out=tmp_path, resume=True, identify=False)
+    assert not (tmp_path / "checkpoint").exists()  # removed once the fit is complete
     assert resumed.values["pad_friction"] == pytest.approx(mu, abs=1e-5)
     assert len(resumed.history) == 12
     fitted, meta = load_contact(tmp_path / "contact.toml")
@@ -329,7 +331,8 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
     report = json.loads((tmp_path / "calibration.json").read_text())
     assert report["fitted"]["pad_friction"] == pytest.approx(mu, abs=1e-6)
     assert (tmp_path / "loss.png").is_file() and (tmp_path / "report.md").is_file()
-    with pytest.raises(mp.ConfigError, match="holds an earlier fit"):
+    # a complete fit's folder (its checkpoints gone) is still refused to another fit
+    with pytest.raises(mp.ConfigError, match="holds `mjx-pick calibrate` results"):
         cal.calibrate(p2, steps=1, out=tmp_path)
 
 

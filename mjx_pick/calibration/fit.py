@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import shutil
 import time
 from pathlib import Path
 
@@ -222,6 +223,8 @@ def calibrate(
             d = jax.devices()[0]
             meta.update(backend="mjx", device=f"{d.platform}:{d.device_kind}")
         finish(out_dir, command="calibrate", config=request, **meta)
+        # the fit is complete and written: its checkpoints served only a resume
+        shutil.rmtree(out_dir / "checkpoint", ignore_errors=True)
     return result
 
 
