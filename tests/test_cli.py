@@ -196,3 +196,21 @@ def test_progress_on_a_terminal_is_a_tqdm_bar_over_every_run():
     assert "\r" in sink.getvalue() and sink.getvalue().rstrip().split("\r")[-1].startswith(
         "design: 100%"
     )
+
+
+def test_every_bad_input_is_reported_at_once(tmp_path, capsys):
+    # three wrong inputs in three places (gripper, contact, solver): one run names them
+    # all, before anything is simulated or written
+    out = tmp_path / "never"
+    argv = ["evaluate", "block", "--gripper", "nosuch", "--pad-friction", "-1"]
+    argv += ["--timestep-s", "5", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("mjx-pick: error: 3 problems:")
+    for part in (
+        "unknown gripper preset 'nosuch'",
+        "contact.pad_friction = -1.0",
+        "solver.timestep_s = 5.0",
+    ):
+        assert part in err
+    assert not out.exists()

@@ -10,10 +10,10 @@ from mjx_pick.cli.inputs import (
     check_contact_file,
     design_bounds,
     grippers,
+    inputs_of,
     name_ranges,
     objects,
     pick_config,
-    settings,
     study_options,
 )
 from mjx_pick.config import ConfigError
@@ -23,8 +23,7 @@ from mjx_pick.progress import echo
 def cmd_evaluate(args) -> int:
     from mjx_pick.evaluation import evaluate
 
-    obj, gripper = objects(args)
-    contact, solver, grasp, picks_cfg = settings(args)
+    obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
     check_contact_file(args, obj, gripper, grasp, solver)
     ev = evaluate(
         obj,

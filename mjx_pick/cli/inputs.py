@@ -10,11 +10,40 @@ import sys
 from mjx_pick.config import ConfigError, load_toml
 
 
+def each_checked(*makers):
+    """Call every maker; the results, or ONE ConfigError listing every problem found (a
+    user fixes all of them at once instead of one per run)."""
+    values, problems = [], []
+    for make in makers:
+        try:
+            values.append(make())
+        except ConfigError as err:
+            problems += getattr(err, "problems", [str(err)])  # a nested list: flattened
+            values.append(None)
+    if len(problems) == 1:
+        raise ConfigError(problems[0])
+    if problems:
+        err = ConfigError(f"{len(problems)} problems:\n" + "\n".join(f"  - {p}" for p in problems))
+        err.problems = problems
+        raise err
+    return values
+
+
 def objects(args):
+    """(object, gripper), both checked before either error is reported."""
     from mjx_pick.gripper import load_gripper
 
-    obj = object_of(args)
-    return obj, load_gripper(args.gripper_file or args.gripper)
+    obj, gripper = each_checked(
+        lambda: object_of(args), lambda: load_gripper(args.gripper_file or args.gripper)
+    )
+    return obj, gripper
+
+
+def inputs_of(args):
+    """(object, gripper, contact, solver, grasp, pick config): every one checked, every
+    problem reported together."""
+    both, four = each_checked(lambda: objects(args), lambda: settings(args))
+    return (*both, *four)
 
 
 def object_of(args):
@@ -39,20 +68,26 @@ def settings(args):
     from mjx_pick.grasp import GraspConfig
     from mjx_pick.physics import ContactParams, SolverParams, load_contact
 
-    contact = load_contact(args.contact)[0] if args.contact else ContactParams()
-    solver = load_toml(SolverParams, args.solver) if args.solver else SolverParams()
-    grasp = load_toml(GraspConfig, args.grasp) if args.grasp else GraspConfig()
-    contact = override(contact, pad_friction=args.pad_friction, table_friction=args.table_friction)
-    solver = override(solver, timestep_s=args.timestep_s)
-    grasp = override(
-        grasp,
-        grip_force_n=args.grip_force_n,
-        lift_height_mm=args.lift_height_mm,
-        hold_s=args.hold_s,
-        grasp_height=args.grasp_height,
-        fingertip_clearance_mm=args.fingertip_clearance_mm,
-    )
-    return contact, solver, grasp, pick_config(args)
+    def contact():
+        c = load_contact(args.contact)[0] if args.contact else ContactParams()
+        return override(c, pad_friction=args.pad_friction, table_friction=args.table_friction)
+
+    def solver():
+        s = load_toml(SolverParams, args.solver) if args.solver else SolverParams()
+        return override(s, timestep_s=args.timestep_s)
+
+    def grasp():
+        g = load_toml(GraspConfig, args.grasp) if args.grasp else GraspConfig()
+        return override(
+            g,
+            grip_force_n=args.grip_force_n,
+            lift_height_mm=args.lift_height_mm,
+            hold_s=args.hold_s,
+            grasp_height=args.grasp_height,
+            fingertip_clearance_mm=args.fingertip_clearance_mm,
+        )
+
+    return tuple(each_checked(contact, solver, grasp, lambda: pick_config(args)))
 
 
 def check_contact_file(args, obj, gripper, grasp, solver) -> None:
@@ -81,8 +116,7 @@ def base_settings(args):
     """Object, Settings (gripper + physics flags) and PickConfig from the shared options."""
     from mjx_pick.simulate import Settings
 
-    obj, gripper = objects(args)
-    contact, solver, grasp, picks_cfg = settings(args)
+    obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
     check_contact_file(args, obj, gripper, grasp, solver)
     return obj, Settings(gripper, contact, solver, grasp), picks_cfg
 
