@@ -764,3 +764,26 @@ def load_object(
         f"object {text!r} is neither a shipped asset ({', '.join(asset_names())}), an image "
         f"({', '.join(IMAGE_SUFFIXES)}) nor a mesh ({', '.join(MESH_SUFFIXES)})"
     )
+
+
+def check_same_object(theirs: dict, obj: ObjectModel, where: str) -> None:
+    """Refuse an object that is not the one ``theirs`` (an ``ObjectModel.summary``
+    recorded with a run or a plan) was made for: name, mass, height and silhouette must
+    match (numbers to a relative 1e-6); fields ``theirs`` lacks are not compared.
+
+    where: what holds ``theirs``, for the message (e.g. "--results runs/do")."""
+    mine = obj.summary()
+    differ = []
+    for k in ("name", "mass_g", "height_mm", "outline_wkt"):
+        a, b = theirs.get(k), mine.get(k)
+        if a is None:
+            continue
+        same = math.isclose(a, b, rel_tol=1e-6) if isinstance(a, int | float) else a == b
+        if not same:
+            differ.append(k)
+    if differ:
+        raise ConfigError(
+            f"{where} is of object {theirs.get('name')!r}, not this run's {mine['name']!r} "
+            f"({theirs.get('mass_g', 0):g} g against {mine['mass_g']:g} g): they differ in "
+            f"{', '.join(differ)}; give the object (and --mass-g ...) it was made with"
+        )

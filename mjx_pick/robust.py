@@ -32,7 +32,7 @@ from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
 from mjx_pick.engine import Simulator, showing_progress
 from mjx_pick.metrics import wilson_interval
-from mjx_pick.objects import ObjectModel
+from mjx_pick.objects import ObjectModel, check_same_object
 from mjx_pick.rundir import claim, config_hash, finish
 from mjx_pick.simulate import Settings
 
@@ -320,17 +320,7 @@ def _read_results(path: Path, obj: ObjectModel) -> pa.Table:
     config = table_path.parent / "config.json"
     if config.is_file():
         theirs = json.loads(config.read_text()).get("object") or {}
-        mine = obj.summary()
-        differ = [
-            k
-            for k in ("name", "mass_g", "height_mm", "outline_wkt")
-            if k in theirs and theirs[k] != mine[k]
-        ]
-        if differ:
-            raise ConfigError(
-                f"--results {path}: its pick-points are of object {theirs.get('name')!r}, "
-                f"not this run's {mine['name']!r} (differs in {', '.join(differ)})"
-            )
+        check_same_object(theirs, obj, f"--results {path}")
     table = pq.read_table(table_path)
     for col in ("pick_id", "x_mm", "y_mm", "yaw_deg", "score", "success"):
         if col not in table.column_names:

@@ -23,7 +23,6 @@ from mjx_pick.calibration.trials.agreement import (
 from mjx_pick.calibration.trials.choosing import new_round
 from mjx_pick.calibration.trials.runs import (
     Simulations,
-    check_object,
     parameter_draws,
     plan_settings,
 )
@@ -46,7 +45,7 @@ from mjx_pick.config import (
 )
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.metrics import mcnemar_p
-from mjx_pick.objects import ObjectModel
+from mjx_pick.objects import ObjectModel, check_same_object
 from mjx_pick.rundir import read_manifest
 
 
@@ -119,7 +118,7 @@ def fit_trials(
 
     folder = Path(folder)
     plan = load_plan(folder)
-    check_object(plan["object"], obj, f"trials folder {folder}")
+    check_same_object(plan["object"], obj, f"trials folder {folder}")
     names = canonical_params(params or plan["params"])
     check_range("trials", "next", next_n, 0, 1000)
     tried = tried_rows(folder, plan, partial)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import NamedTuple
 
@@ -26,31 +25,11 @@ from mjx_pick.engine import Engine
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.objects import ObjectModel
+from mjx_pick.objects import ObjectModel, check_same_object
 from mjx_pick.physics import ContactParams, SolverParams
 from mjx_pick.rundir import read_manifest
 from mjx_pick.scene import build_scene
 from mjx_pick.simulate import Settings, make_inputs
-
-
-def check_object(theirs: dict, obj: ObjectModel, where: str) -> None:
-    """Refuse an object that is not the one `theirs` (an ``ObjectModel.summary``) was
-    made for: name, mass, height and silhouette must match."""
-    mine = obj.summary()
-    differ = []
-    for k in ("name", "mass_g", "height_mm", "outline_wkt"):
-        a, b = theirs.get(k), mine.get(k)
-        if a is None:
-            continue
-        same = math.isclose(a, b, rel_tol=1e-6) if isinstance(a, int | float) else a == b
-        if not same:
-            differ.append(k)
-    if differ:
-        raise ConfigError(
-            f"{where} is of object {theirs.get('name')!r} ({theirs.get('mass_g', 0):g} g), "
-            f"not this {mine['name']!r} ({mine['mass_g']:g} g): they differ in "
-            f"{', '.join(differ)}; give the object (and --mass-g ...) it was made with"
-        )
 
 
 def settings_of(config: dict, where: str) -> tuple[Settings, pp.PickConfig]:
@@ -98,7 +77,7 @@ def read_run(run_dir, obj: ObjectModel) -> RunSource:
     if missing:
         raise ConfigError(f"run {path} is not an evaluate output folder: no {', '.join(missing)}")
     config = json.loads((path / "config.json").read_text())
-    check_object(config.get("object") or {}, obj, f"run {path}")
+    check_same_object(config.get("object") or {}, obj, f"run {path}")
     table = pq.read_table(path / "results.parquet")
     need = ("pick_id", "x_mm", "y_mm", "yaw_deg", "opening_mm", "success", "score", "failure")
     absent = [c for c in need if c not in table.column_names]

@@ -10,7 +10,7 @@ from mjx_pick import pickpoints as pp
 from mjx_pick.calibration.parameters import (
     canonical_params,
 )
-from mjx_pick.calibration.trials.runs import Simulations, check_object, plan_settings
+from mjx_pick.calibration.trials.runs import Simulations, plan_settings
 from mjx_pick.calibration.trials.sheet import (
     SHEET,
     check_rows,
@@ -21,7 +21,7 @@ from mjx_pick.calibration.trials.sheet import (
 from mjx_pick.config import (
     ConfigError,
 )
-from mjx_pick.objects import ObjectModel
+from mjx_pick.objects import ObjectModel, check_same_object
 
 
 def synthetic_trials(
@@ -41,7 +41,7 @@ def synthetic_trials(
     the template pose). Returns the rows filled."""
     folder = Path(folder)
     plan = load_plan(folder)
-    check_object(plan["object"], obj, f"trials folder {folder}")
+    check_same_object(plan["object"], obj, f"trials folder {folder}")
     hidden = {canonical_params([k])[0]: float(v) for k, v in hidden.items()}
     settings, pick_config = plan_settings(plan, folder)
     header, rows = read_sheet(folder)
