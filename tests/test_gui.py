@@ -114,8 +114,10 @@ def page(server, browser, request):
     pg.get_by_text("1 Import object model").wait_for()
     failed = request.session.testsfailed
     yield pg
-    if request.session.testsfailed > failed:  # keep what the page showed
+    if request.session.testsfailed > failed:  # keep what the page and the server showed
         shot(pg, f"FAILED-{request.node.name}")
+        log = (server[1].parent / "gui_server.log").read_text(errors="replace")
+        print(f"--- the GUI server's log, last 4000 characters:\n{log[-4000:]}")
     assert "Traceback" not in pg.content()
     context.close()
 
@@ -134,7 +136,14 @@ def number(page, label: str, value) -> None:
 
 def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
     """Wait until the job panel shows the run `title` ended; returns its status line."""
-    page.get_by_test_id("job-title").filter(has_text=title).wait_for()
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    try:
+        page.get_by_test_id("job-title").filter(has_text=title).wait_for()
+    except PlaywrightTimeout:  # the run never started: say what the page showed instead
+        errors = [e for e in page.locator('[data-testid$="-error"]').all_inner_texts() if e]
+        shown = page.get_by_test_id("job-title").all_inner_texts()
+        pytest.fail(f"run {title!r} never started; job title {shown}, errors {errors}")
     status = page.get_by_test_id("job-status")
     status.filter(has_text=re.compile(r"^(complete|failed|cancelled)")).wait_for(timeout=timeout_ms)
     return status.inner_text()
