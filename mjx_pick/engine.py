@@ -17,7 +17,8 @@ the throughput benchmarks (``throughput.measure``, ``side_by_side``). It owns
   chunk and after every chunk;
 * cancellation: a ``threading.Event`` checked before every chunk; once set, the run
   stops with :class:`Cancelled` (finished chunks of an evaluate folder are kept for
-  ``resume``). A chunk that has started runs to its end: a device program cannot be
+  ``resume``); a recorded Ctrl-C (``mjx_pick.interrupts``) stops it the same way with
+  ``KeyboardInterrupt``. A chunk that has started runs to its end: a device program cannot be
   interrupted, and a chunk is the unit that is saved;
 * compile time apart from run time (:class:`Timing`, read from the backends' stats).
 
@@ -51,6 +52,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from mjx_pick import interrupts
 from mjx_pick.config import ConfigError, write_json, write_parquet
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.metrics import results_table
@@ -219,9 +221,12 @@ class Engine:
         return self.run(self.make(scene, grasp), inputs, record=record)
 
     def check_cancel(self) -> None:
-        """Raise :class:`Cancelled` when the cancel event is set."""
+        """Raise :class:`Cancelled` when the cancel event is set, ``KeyboardInterrupt``
+        when a Ctrl-C was recorded (``mjx_pick.interrupts``: it may have been swallowed
+        where it was first raised)."""
         if self.cancel is not None and self.cancel.is_set():
             raise Cancelled("cancelled")
+        interrupts.raise_if_requested()
 
     def chunk_for(self, backend: Backend) -> int:
         return int(self.chunk_size or auto_chunk(backend))

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from mjx_pick import interrupts
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, to_dict, write_atomic, write_json, write_parquet
 from mjx_pick.engine import (
@@ -423,6 +424,7 @@ def _evaluate(
                 float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
             )
         traces = _traces(executor, picks_batch, table, n_traces) if n_traces else None
+        interrupts.raise_if_requested()  # a Ctrl-C swallowed in the last chunk: not complete
     except (KeyboardInterrupt, Cancelled) as stop:
         _stopped(out_dir, stop, executor, seed, config, time.perf_counter() - t0)
         raise

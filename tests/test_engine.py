@@ -183,6 +183,58 @@ def test_progress_and_cancel_between_chunks_then_resume(door_opener, tmp_path):
     _check(ev.table, EVALUATE_DOOR_OPENER)
 
 
+def test_a_swallowed_ctrl_c_still_stops_the_run_at_the_next_chunk(door_opener, tmp_path):
+    """A SIGINT whose KeyboardInterrupt was swallowed (Python ignores exceptions raised
+    in a garbage-collector callback, where JAX has one) is still recorded by the CLI's
+    handler: the run stops before the next chunk, 'interrupted', its chunk kept."""
+    from mjx_pick import interrupts
+
+    out = tmp_path / "run"
+
+    def ctrl_c_swallowed_after_first_chunk(done, total):
+        if done >= 2:
+            interrupts.request()  # what the handler records besides raising
+
+    common = dict(n=6, seed=3, grasp=SHORT, solver=PINNED_SOLVER, backend="mujoco")
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            evaluate(
+                door_opener,
+                **common,
+                batch_size=2,
+                chunk_size=2,
+                out=out,
+                n_traces=0,
+                on_progress=ctrl_c_swallowed_after_first_chunk,
+            )
+    finally:
+        interrupts.clear()
+    chunks = sorted(p.name for p in (out / "chunks").glob("part-*.parquet"))
+    assert chunks == ["part-000000.parquet"], "the run stops before the next chunk"
+    assert json.loads((out / "mjx_pick_run.json").read_text())["status"] == "interrupted"
+
+
+def test_the_cli_handler_records_ctrl_c_and_forgets_it_after_the_command():
+    import signal
+
+    from mjx_pick import interrupts
+
+    before = signal.getsignal(signal.SIGINT)
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts.catching_sigint():
+            signal.raise_signal(signal.SIGINT)
+    assert not interrupts.requested(), "cleared when the command ends"
+    assert signal.getsignal(signal.SIGINT) is before
+    with interrupts.catching_sigint():
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except KeyboardInterrupt:  # raised as Python's own handler does ...
+            pass
+        assert interrupts.requested()  # ... and recorded for the engine's next check
+        with pytest.raises(KeyboardInterrupt):
+            interrupts.raise_if_requested()
+
+
 def test_simulator_reports_progress_over_all_jobs_and_honours_cancel(block):
     calls = []
     engine = Engine("mujoco", 2, chunk_size=2, on_progress=lambda d, t: calls.append((d, t)))

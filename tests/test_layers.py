@@ -31,6 +31,7 @@ LAYERS = {
         "rundir",
         "display",
         "progress",
+        "interrupts",
         "kernels",
         "assets",
     ),

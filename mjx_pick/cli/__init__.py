@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import sys
 
+from mjx_pick import interrupts
 from mjx_pick.cli.parser import build_parser
 from mjx_pick.config import ConfigError
 from mjx_pick.display import use_offscreen_rendering
@@ -31,7 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     use_offscreen_rendering()  # before anything imports MuJoCo: animations on a headless host
     try:
-        return int(args.func(args) or 0)
+        with interrupts.catching_sigint():  # a Ctrl-C is never swallowed (see interrupts)
+            return int(args.func(args) or 0)
     except ConfigError as err:
         print(f"mjx-pick: error: {err}", file=sys.stderr)
         return 2
