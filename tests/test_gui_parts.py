@@ -13,7 +13,7 @@ import pytest
 from mjx_pick.config import ConfigError
 from mjx_pick.gripper import load_gripper
 from mjx_pick.gui import forms, is_loopback, jobs
-from mjx_pick.gui.app import check_upload, save_upload
+from mjx_pick.gui.uploads import check_upload, save_upload
 
 
 def test_importing_the_package_does_not_import_the_web_framework():
@@ -172,3 +172,23 @@ def test_run_inputs_never_replace_the_files_of_another_run(tmp_path):
     assert "grip_force_n = 30.0" in other["grasp"].read_text()
     flags = forms.cli_flags(b, other)
     assert flags[flags.index("--grasp") + 1] == str(other["grasp"])
+
+
+def test_gripper_toml_and_outcomes_uploads_are_checked_before_they_are_read():
+    from mjx_pick.gui.uploads import check_outcomes_upload, check_toml_upload
+
+    assert check_toml_upload("g.toml", b'name = "g"') == ""
+    assert "not a .toml file" in check_toml_upload("g.txt", b"")
+    assert "larger than 64 KB" in check_toml_upload("g.toml", b"#" * (64 * 2**10 + 1))
+    assert check_outcomes_upload("o.csv", b"x_mm,y_mm\n") == ""
+    assert "not a .csv file of at most 5 MB" in check_outcomes_upload("o.xlsx", b"")
+    assert "not a UTF-8 text file" in check_outcomes_upload("o.csv", b"\xff\xfe\x00")
+
+
+def test_run_names_stay_inside_the_work_folder(tmp_path):
+    from mjx_pick.gui.state import PageState
+
+    state = PageState(tmp_path)
+    assert state.run_folder(" gui-run ") == tmp_path / "gui-run"
+    for bad in ("../outside", "", ".hidden", "a/b", "x" * 81):
+        assert state.run_folder(bad) is None, bad
