@@ -192,3 +192,57 @@ def test_run_names_stay_inside_the_work_folder(tmp_path):
     assert state.run_folder(" gui-run ") == tmp_path / "gui-run"
     for bad in ("../outside", "", ".hidden", "a/b", "x" * 81):
         assert state.run_folder(bad) is None, bad
+
+
+def test_progress_survives_chunks_removed_while_it_reads_them(tmp_path):
+    # a complete evaluate removes its chunk files; the page may have just listed them
+    gone = tmp_path / "part-0.parquet"
+    kept = tmp_path / "part-1.parquet"
+    kept.write_bytes(b"")
+    assert jobs._newest_mtime([gone, kept]) == kept.stat().st_mtime
+    assert jobs._newest_mtime([gone]) is None
+
+
+class _Shown:
+    """Stands in for a NiceGUI element: records what the panel shows."""
+
+    text = ""
+
+    def set_text(self, text):
+        self.text = text
+
+    def set_value(self, value):
+        pass
+
+    def set_content(self, content):
+        pass
+
+    def set_visibility(self, visible):
+        pass
+
+    def props(self, *args, **kwargs):
+        return self
+
+
+def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
+    # the child process exits up to one poll before the panel sees it: a run started in
+    # that gap replaced the job whose end was never shown (its results never drawn)
+    from mjx_pick.gui.page.job_panel import JobPanel
+
+    panel = JobPanel.__new__(JobPanel)  # its logic without a browser
+    panel.started, panel.job, panel.on_end = set(), None, None
+    panel.title, panel.status, panel.bar = _Shown(), _Shown(), _Shown()
+    panel.command, panel.cancel_button, panel.card = _Shown(), _Shown(), _Shown()
+    ended = []
+    job = jobs.Job(["--version"], tmp_path / "version.log")
+    panel.start("version", job, ended.append)
+    job.wait(120)
+    assert not job.running
+    where = _Shown()
+    assert panel.busy(where) and "in progress" in where.text
+    with pytest.raises(RuntimeError, match="a run is current"):
+        panel.start("second", jobs.Job(["--version"], tmp_path / "second.log"), ended.append)
+    panel.poll()
+    assert [p.state for p in ended] == ["complete"]
+    assert panel.status.text.startswith("complete")
+    assert not panel.busy(_Shown())

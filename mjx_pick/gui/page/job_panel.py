@@ -1,7 +1,12 @@
 """The job panel: the run this browser tab started, its progress, Cancel, its CLI command.
 
 The panel owns the current job (a :class:`mjx_pick.gui.jobs.Job`): tabs start runs
-through :meth:`JobPanel.start` and ask :meth:`JobPanel.busy` before they do.
+through :meth:`JobPanel.start` and ask :meth:`JobPanel.busy` before they do. A job is
+current from its start until the panel has shown how it ended and called its ``on_end``
+(which draws its results). ``busy`` goes by that, not by whether the child process still
+runs: the process exits up to one poll (0.5 s) before the panel sees it, and a run
+started in that gap used to replace the job whose end was never shown -- its results
+never drawn, its status line left at "running".
 """
 
 from __future__ import annotations
@@ -37,14 +42,16 @@ class JobPanel:
         ui.timer(POLL_S, self.poll)
 
     def busy(self, where: ui.label) -> bool:
-        """True (and says so in where) while a run is going: no second run starts."""
-        if self.job is not None and self.job.running:
+        """True (and says so in where) while a run is current: no second run starts."""
+        if self.job is not None:
             where.set_text("a run is in progress: wait for it or cancel it")
             return True
         return False
 
     def start(self, title: str, job: jobs.Job, on_end: Callable[[jobs.Progress], None]) -> None:
         """Start job and show it; on_end(progress) runs once, when the panel sees it end."""
+        if self.job is not None:  # callers check busy() first
+            raise RuntimeError(f"a run is current ({self.title.text}): cannot start {title}")
         self.job, self.on_end = job.start(), on_end
         self.started.difference_update([j for j in self.started if not j.running])
         self.started.add(job)
