@@ -33,7 +33,7 @@ class GripperTab:
                 ui.button("Test simulation", on_click=self.test_pick).props(
                     'data-testid="test-pick"'
                 )
-                self.error = error_label()
+                self.error = error_label().props('data-testid="test-pick-error"')
                 self.info = ui.markdown("").props('data-testid="test-info"')
                 self.plot = picture()
 

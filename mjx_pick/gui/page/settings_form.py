@@ -54,7 +54,7 @@ class SettingsForm:
                 .classes("w-72")
             )
             self.toml_error = error_label().props('data-testid="toml-error"')
-        self.settings_error = error_label()
+        self.settings_error = error_label().props('data-testid="settings-error"')
         for title, group in (
             ("Gripper", forms.GRIPPER_FIELDS),
             ("Pick-points", forms.PICK_FIELDS),
