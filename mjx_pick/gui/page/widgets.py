@@ -8,6 +8,7 @@ from nicegui import ui
 
 from mjx_pick.gui.formatting import fmt_cell
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
+from mjx_pick.gui.views import data_uri
 
 
 def error_label() -> ui.label:
@@ -23,8 +24,7 @@ def picture(classes: str = "w-full max-w-2xl") -> ui.image:
 
 
 def show_picture(image: ui.image, data: bytes, mime: str = "image/png") -> None:
-    from mjx_pick.gui.views import data_uri
-
+    """Show PNG (or GIF) bytes in a picture."""
     image.set_source(data_uri(data, mime))
     image.set_visibility(True)
 
