@@ -110,6 +110,7 @@ def page(server, browser, request):
     context = browser.new_context(viewport={"width": 1500, "height": 1000}, accept_downloads=True)
     pg = context.new_page()
     pg.set_default_timeout(60_000)  # a page update on a busy 2-core machine
+    seen = browser_events(pg)
     pg.goto(url)
     pg.get_by_text("1 Import object model").wait_for()
     failed = request.session.testsfailed
@@ -118,8 +119,28 @@ def page(server, browser, request):
         shot(pg, f"FAILED-{request.node.name}")
         log = (server[1].parent / "gui_server.log").read_text(errors="replace")
         print(f"--- the GUI server's log, last 4000 characters:\n{log[-4000:]}")
+        print("--- what the browser saw (loads, websocket, console):\n" + "\n".join(seen[-60:]))
     assert "Traceback" not in pg.content()
     context.close()
+
+
+def browser_events(pg) -> list[str]:
+    """A timed list of the page's loads, websocket opens and closes and console lines: a
+    click the server never handled shows whether the connection dropped around it."""
+    seen: list[str] = []
+    t0 = time.monotonic()
+
+    def note(what: str) -> None:
+        seen.append(f"{time.monotonic() - t0:7.1f} s  {what}")
+
+    def websocket(ws) -> None:
+        note(f"websocket open {ws.url}")
+        ws.on("close", lambda _: note("websocket closed"))
+
+    pg.on("console", lambda m: note(f"console {m.type}: {m.text}"))
+    pg.on("websocket", websocket)
+    pg.on("load", lambda _: note("page loaded"))
+    return seen
 
 
 def shot(page, name: str) -> None:
@@ -142,8 +163,13 @@ def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
         page.get_by_test_id("job-title").filter(has_text=title).wait_for()
     except PlaywrightTimeout:  # the run never started: say what the page showed instead
         errors = [e for e in page.locator('[data-testid$="-error"]').all_inner_texts() if e]
+        fields = [e for e in page.locator(".q-field__messages").all_inner_texts() if e.strip()]
+        notes = page.locator(".q-notification").all_inner_texts()
         shown = page.get_by_test_id("job-title").all_inner_texts()
-        pytest.fail(f"run {title!r} never started; job title {shown}, errors {errors}")
+        pytest.fail(
+            f"run {title!r} never started; job title {shown}, errors {errors}, field "
+            f"messages {fields}, notifications {notes}"
+        )
     status = page.get_by_test_id("job-status")
     status.filter(has_text=re.compile(r"^(complete|failed|cancelled)")).wait_for(timeout=timeout_ms)
     return status.inner_text()

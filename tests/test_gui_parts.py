@@ -13,7 +13,7 @@ import pytest
 from mjx_pick.config import ConfigError
 from mjx_pick.gripper import load_gripper
 from mjx_pick.gui import forms, is_loopback, jobs
-from mjx_pick.gui.app import check_upload, save_upload
+from mjx_pick.gui.uploads import check_upload, save_upload
 
 
 def test_importing_the_package_does_not_import_the_web_framework():
@@ -172,3 +172,77 @@ def test_run_inputs_never_replace_the_files_of_another_run(tmp_path):
     assert "grip_force_n = 30.0" in other["grasp"].read_text()
     flags = forms.cli_flags(b, other)
     assert flags[flags.index("--grasp") + 1] == str(other["grasp"])
+
+
+def test_gripper_toml_and_outcomes_uploads_are_checked_before_they_are_read():
+    from mjx_pick.gui.uploads import check_outcomes_upload, check_toml_upload
+
+    assert check_toml_upload("g.toml", b'name = "g"') == ""
+    assert "not a .toml file" in check_toml_upload("g.txt", b"")
+    assert "larger than 64 KB" in check_toml_upload("g.toml", b"#" * (64 * 2**10 + 1))
+    assert check_outcomes_upload("o.csv", b"x_mm,y_mm\n") == ""
+    assert "not a .csv file of at most 5 MB" in check_outcomes_upload("o.xlsx", b"")
+    assert "not a UTF-8 text file" in check_outcomes_upload("o.csv", b"\xff\xfe\x00")
+
+
+def test_run_names_stay_inside_the_work_folder(tmp_path):
+    from mjx_pick.gui.state import PageState
+
+    state = PageState(tmp_path)
+    assert state.run_folder(" gui-run ") == tmp_path / "gui-run"
+    for bad in ("../outside", "", ".hidden", "a/b", "x" * 81):
+        assert state.run_folder(bad) is None, bad
+
+
+def test_progress_survives_chunks_removed_while_it_reads_them(tmp_path):
+    # a complete evaluate removes its chunk files; the page may have just listed them
+    gone = tmp_path / "part-0.parquet"
+    kept = tmp_path / "part-1.parquet"
+    kept.write_bytes(b"")
+    assert jobs._newest_mtime([gone, kept]) == kept.stat().st_mtime
+    assert jobs._newest_mtime([gone]) is None
+
+
+class _Shown:
+    """Stands in for a NiceGUI element: records what the panel shows."""
+
+    text = ""
+
+    def set_text(self, text):
+        self.text = text
+
+    def set_value(self, value):
+        pass
+
+    def set_content(self, content):
+        pass
+
+    def set_visibility(self, visible):
+        pass
+
+    def props(self, *args, **kwargs):
+        return self
+
+
+def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
+    # the child process exits up to one poll before the panel sees it: a run started in
+    # that gap replaced the job whose end was never shown (its results never drawn)
+    from mjx_pick.gui.page.job_panel import JobPanel
+
+    panel = JobPanel.__new__(JobPanel)  # its logic without a browser
+    panel.started, panel.job, panel.on_end = set(), None, None
+    panel.title, panel.status, panel.bar = _Shown(), _Shown(), _Shown()
+    panel.command, panel.cancel_button, panel.card = _Shown(), _Shown(), _Shown()
+    ended = []
+    job = jobs.Job(["--version"], tmp_path / "version.log")
+    panel.start("version", job, ended.append)
+    job.wait(120)
+    assert not job.running
+    where = _Shown()
+    assert panel.busy(where) and "in progress" in where.text
+    with pytest.raises(RuntimeError, match="a run is current"):
+        panel.start("second", jobs.Job(["--version"], tmp_path / "second.log"), ended.append)
+    panel.poll()
+    assert [p.state for p in ended] == ["complete"]
+    assert panel.status.text.startswith("complete")
+    assert not panel.busy(_Shown())

@@ -62,8 +62,8 @@ def modules():
         yield "reporting", path  # the report package: the outputs layer
     for path in sorted((ROOT / "mjx_pick" / "cli").glob("*.py")):
         yield "cli", path  # the command line: the interface layer
-    for path in sorted((ROOT / "mjx_pick" / "gui").glob("*.py")):
-        yield "gui", path  # the GUI package: the interface layer, like the CLI
+    for path in sorted((ROOT / "mjx_pick" / "gui").rglob("*.py")):
+        yield "gui", path  # the GUI package (and its page/): the interface layer, like the CLI
 
 
 def imported(path: Path) -> set[str]:
@@ -104,3 +104,111 @@ def test_the_check_sees_function_level_imports(tmp_path):
     assert imported(src) == {"reporting"}
     src.write_text("def f():\n    from mjx_pick import sweep\n")  # a public function
     assert imported(src) == {"sweeps"}
+
+
+# Inside the GUI, the same rule: the framework-free modules, then the page's shared parts,
+# then the tabs (which never import each other), then the server that wires them.
+GUI = ROOT / "mjx_pick" / "gui"
+GUI_LEVELS = {
+    "no web framework": (
+        "__init__",
+        "forms",
+        "jobs",
+        "views",
+        "uploads",
+        "formatting",
+        "state",
+        "one_pick",
+    ),
+    "page parts": ("page", "page.widgets", "page.settings_form", "page.job_panel"),
+    "tabs": (
+        "page.import_tab",
+        "page.gripper_tab",
+        "page.generate_tab",
+        "page.analyze_tab",
+        "page.sweep_tab",
+        "page.studies_tab",
+    ),
+    "server": ("app",),
+}
+GUI_ORDER = list(GUI_LEVELS)
+# the package's serve() starts the server on demand: its one look upward, inside serve()
+GUI_ALLOWED_UP = {("__init__", "app")}
+
+
+def gui_name(path: Path) -> str:
+    """``page/job_panel.py`` -> ``page.job_panel``; a package's ``__init__`` -> its name."""
+    parts = list(path.relative_to(GUI).with_suffix("").parts)
+    if parts[-1] == "__init__" and len(parts) > 1:
+        parts.pop()
+    return ".".join(parts)
+
+
+def gui_level(name: str) -> str:
+    for level, names in GUI_LEVELS.items():
+        if name in names:
+            return level
+    raise KeyError(name)
+
+
+def gui_imports(path: Path) -> set[str]:
+    """Every mjx_pick.gui module a file imports (``page.job_panel``, ``forms``, ...)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = []
+        if isinstance(node, ast.ImportFrom) and node.module:
+            if node.module.startswith("mjx_pick.gui."):
+                names = [node.module.removeprefix("mjx_pick.gui.")]
+            elif node.module == "mjx_pick.gui":  # from mjx_pick.gui import forms, jobs
+                names = [a.name for a in node.names]
+            elif node.module == "mjx_pick.gui.page":
+                names = [f"page.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            names = [
+                a.name.removeprefix("mjx_pick.gui.")
+                for a in node.names
+                if a.name.startswith("mjx_pick.gui.")
+            ]
+        out.update(names)
+    return {n for n in out if n in {gui_name(p) for p in GUI.rglob("*.py")}}
+
+
+def imports_nicegui(path: Path) -> bool:
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "nicegui":
+            return True
+        if isinstance(node, ast.Import) and any(
+            a.name.split(".")[0] == "nicegui" for a in node.names
+        ):
+            return True
+    return False
+
+
+def test_every_gui_module_has_a_level():
+    unknown = [
+        gui_name(p)
+        for p in GUI.rglob("*.py")
+        if not any(gui_name(p) in v for v in GUI_LEVELS.values())
+    ]
+    assert not unknown, f"add these GUI modules to GUI_LEVELS in tests/test_layers.py: {unknown}"
+
+
+@pytest.mark.parametrize("path", sorted(GUI.rglob("*.py")), ids=gui_name)
+def test_gui_modules_import_only_down(path):
+    name = gui_name(path)
+    mine = GUI_ORDER.index(gui_level(name))
+    bad = sorted(
+        m
+        for m in gui_imports(path)
+        if (name, m) not in GUI_ALLOWED_UP
+        and (
+            GUI_ORDER.index(gui_level(m)) > mine
+            or (gui_level(m) == "tabs" == gui_level(name) and m != name)  # tab to tab
+        )
+    )
+    assert not bad, f"{path.relative_to(ROOT)} ({gui_level(name)}) imports {bad}"
+
+
+def test_only_the_page_and_the_server_import_the_web_framework():
+    free = [gui_name(p) for p in GUI.rglob("*.py") if gui_level(gui_name(p)) == "no web framework"]
+    assert free and not [n for n in free if imports_nicegui(GUI / f"{n.replace('.', '/')}.py")]

@@ -136,9 +136,9 @@ class Job:
             done = min(self.total, len(files) * self.chunk)
             new = (len(files) - self._chunks_before) * self.chunk
             started = self._run_started()
-            if new > 0 and started is not None:
+            last = _newest_mtime(files)
+            if new > 0 and started is not None and last is not None:
                 # from the simulation's start to its newest finished chunk
-                last = max(f.stat().st_mtime for f in files)
                 rate = new / max(last - started, 1e-3)
                 eta = max(0.0, (self.total - done) / rate)
         if self.steps_logged is not None and self.total:
@@ -182,3 +182,15 @@ class Job:
         last = next((ln.strip() for ln in reversed(lines) if ln.strip()), "")
         # the exception's last line, never the traceback; the log keeps the rest
         return f"the run stopped (exit code {code}): {last[-300:]}; full log: {self.log}"
+
+
+def _newest_mtime(files: list[Path]) -> float | None:
+    """The newest modification time of files that still exist: a run that completes
+    removes its chunk files while the page may be reading them."""
+    times = []
+    for f in files:
+        try:
+            times.append(f.stat().st_mtime)
+        except FileNotFoundError:
+            continue
+    return max(times, default=None)

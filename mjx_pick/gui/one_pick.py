@@ -1,0 +1,64 @@
+"""The gripper tab's test of one pick-point (no web framework; runs in a worker thread).
+
+Clearance and coverage first, then -- if the pick-point is feasible -- one recorded
+simulation through :func:`mjx_pick.evaluate` and its force plot.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mjx_pick.gui import views
+from mjx_pick.gui.formatting import fmt
+from mjx_pick.gui.forms import Settings
+
+
+def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, backend) -> dict:
+    """The check and simulation of the pick-point (x, y in mm, yaw in degrees).
+
+    Returns:
+      {"text": markdown lines for the page, "plot": force plot PNG bytes, or None when
+      the pick-point is infeasible and was not simulated}.
+    """
+    from mjx_pick import pickpoints as pp
+    from mjx_pick.evaluation import evaluate
+    from mjx_pick.grasp import fingertip_height_mm
+
+    checker = pp.FeasibilityChecker(obj, settings.gripper, settings.picks, settings.grasp)
+    res = checker(np.array([x]), np.array([y]), np.array([yaw]))
+    reason = pp.REASONS[int(res["reason"][0])]
+    tip = fingertip_height_mm(obj, settings.gripper, settings.grasp)
+    head = [
+        f"- clearance and coverage check: **{reason}** (opening "
+        f"{float(res['opening_mm'][0]):.1f} mm, coverage {float(res['coverage'][0]):.2f})",
+        f"- initial (closing) speed: {settings.grasp.closing_speed_mm_s:g} mm/s",
+        f"- height compensation (fingertips above the table): {tip:.1f} mm",
+    ]
+    if reason != "feasible":
+        return {
+            "text": "\n".join(head) + "\n- not simulated: the pick-point is infeasible",
+            "plot": None,
+        }
+    batch = checker.batch(np.array([0]), np.array([x]), np.array([y]), np.array([yaw]), "user")
+    ev = evaluate(
+        obj,
+        settings.gripper,
+        picks=batch,
+        contact=settings.contact,
+        grasp=settings.grasp,
+        pick_config=settings.picks,
+        backend=backend,
+        n_traces=1,
+    )
+    r = {k: ev.table[k][0].as_py() for k in ev.table.column_names}
+    trace = {name: np.asarray(ev.traces[name]) for name in ev.traces.column_names}
+    head += [
+        f"- score (eq. 2): **{fmt(r['score'])}**, success: **{r['success']}**, outcome: "
+        f"{r['failure']}",
+        f"- `t_grasp` {fmt(r['t_grasp'])}, `phi_max` {fmt(r['phi_max_deg'], 1)} deg, "
+        f"`t_grasp_nc` {fmt(r['t_grasp_nc'])}",
+        f"- `F_Gmin`, eq. (1): {fmt(ev.summary['f_gmin_n'])} N at `F_d` = "
+        f"{settings.grasp.grip_force_n:g} N",
+    ]
+    plot = views.force_png(trace, settings.grasp.grip_force_n, f"test pick ({x:g}, {y:g}, {yaw:g})")
+    return {"text": "\n".join(head), "plot": plot}

@@ -1,0 +1,257 @@
+"""Tab 4, *Analyze results*: open an evaluate folder, rank its pick-points, inspect one.
+
+Sets the page's open run (:attr:`PageState.obj` is tab 1's; :attr:`PageState.run` is
+this tab's), which the robustness study reads. A selected traced pick-point shows its
+force plot and a 3-D replay; Export runs ``mjx-pick report`` (templates, report).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from nicegui import run, ui
+
+from mjx_pick.config import ConfigError
+from mjx_pick.gui import jobs, views
+from mjx_pick.gui.formatting import fmt
+from mjx_pick.gui.page.job_panel import JobPanel
+from mjx_pick.gui.page.widgets import error_label, show_picture, whole
+from mjx_pick.gui.state import PageState
+
+TABLE_COLUMNS = (
+    ("rank", "rank"),
+    ("pick_id", "pick"),
+    ("x_mm", "x, mm"),
+    ("y_mm", "y, mm"),
+    ("yaw_deg", "yaw, deg"),
+    ("score", "score"),
+    ("success", "success"),
+    ("failure", "outcome"),
+    ("t_grasp", "t_grasp"),
+    ("phi_max_deg", "phi_max, deg"),
+    ("t_grasp_nc", "t_grasp_nc"),
+    ("traced", "traced"),
+)
+DOWNLOADS = (
+    ("template_a4.pdf", "template (A4, PDF)"),
+    ("template_letter.pdf", "template (Letter, PDF)"),
+    ("report.html", "report (HTML)"),
+    ("robot_picks.json", "robot pick-points (JSON)"),
+)
+
+
+class AnalyzeTab:
+    def __init__(self, state: PageState, panel: JobPanel):
+        self.state, self.panel = state, panel
+        with ui.row().classes("w-full items-end"):
+            self.run_dir = (
+                ui.input("evaluate output folder")
+                .classes("w-[32rem]")
+                .props('data-testid="run-dir"')
+            )
+            ui.button("Open", on_click=self.open_run).props('data-testid="open-run"')
+            self.known_runs = ui.select(
+                [], label="runs in the work folder", on_change=self.on_known_run
+            ).classes("w-72")
+            ui.button(icon="refresh", on_click=self.refresh_runs).props("flat")
+        self.error = error_label().props('data-testid="analyze-error"')
+        self.run_info = ui.label("").props('data-testid="run-info"')
+        with ui.row().classes("w-full no-wrap items-start"):
+            with ui.column().classes("w-[46rem]"):
+                self.table = (
+                    ui.table(
+                        columns=[
+                            {
+                                "name": k,
+                                "label": label,
+                                "field": k,
+                                "sortable": True,
+                                "align": "left",
+                            }
+                            for k, label in TABLE_COLUMNS
+                        ],
+                        rows=[],
+                        row_key="pick_id",
+                        selection="single",
+                        pagination=10,
+                        on_select=self.on_select,
+                    )
+                    .classes("w-full")
+                    .props('dense data-testid="picks-table"')
+                )
+                with ui.row().classes("items-end"):
+                    self.export_n = ui.number("n best and n worst", value=3, step=1).classes("w-40")
+                    self.export_anim = ui.checkbox("animations (slow)")
+                    ui.button("Export template and report", on_click=self.export).props(
+                        'data-testid="export"'
+                    )
+                self.downloads = ui.row()
+            with ui.column().classes("grow"):
+                self.detail = ui.markdown("Select a pick-point.").props('data-testid="pick-detail"')
+                with ui.column().classes("w-full"):
+                    self.force_image = (
+                        ui.image()
+                        .props("no-transition no-spinner")
+                        .classes("w-full max-w-2xl")
+                        .props('data-testid="force-plot"')
+                    )
+                    self.replay_image = (
+                        ui.image()
+                        .props("no-transition no-spinner")
+                        .classes("w-full max-w-2xl")
+                        .props('data-testid="replay"')
+                    )
+                self.force_image.set_visibility(False)
+                self.replay_image.set_visibility(False)
+        self.refresh_runs()
+
+    def refresh_runs(self) -> None:
+        """The evaluate folders in the work folder, for the chooser."""
+        from mjx_pick.rundir import read_manifest
+
+        names = []
+        workdir = self.state.workdir
+        if workdir.is_dir():
+            for p in sorted(workdir.iterdir()):
+                m = read_manifest(p) if p.is_dir() else None
+                if m and m.get("command") == "evaluate":
+                    names.append(str(p))
+        self.known_runs.set_options(names)
+
+    def on_known_run(self, _=None) -> None:
+        if self.known_runs.value:
+            self.open(Path(self.known_runs.value))
+
+    def open(self, folder: Path) -> None:
+        """Open an evaluate folder (a complete run of tab 3, or one chosen here)."""
+        self.run_dir.value = str(folder)
+        self.open_run()
+
+    def open_run(self) -> None:
+        """Open the folder of the run-dir field: the page's open run, ranked by score."""
+        from mjx_pick.metrics import rate_text
+        from mjx_pick.reporting import Run
+
+        self.error.set_text("")
+        path = Path((self.run_dir.value or "").strip()).expanduser()
+        try:
+            opened = Run.load(path)
+        except ConfigError as err:
+            self.error.set_text(str(err))
+            return
+        except (OSError, ValueError) as err:
+            self.error.set_text(f"{path}: cannot be read ({err})")
+            return
+        self.state.run = opened
+        s = opened.summary
+        self.run_info.set_text(
+            f"{s.get('object')} / {s.get('gripper')}: {s.get('n')} pick-points, success rate "
+            f"{rate_text(s.get('successes', 0), s.get('n', 0))}, "
+            f"mean score {fmt(s.get('score_mean'))}, "
+            f"F_Gmin {fmt(s.get('f_gmin_n'))} N"
+        )
+        self.table.rows = ranked_rows(opened)
+        self.table.selected = []
+        self.table.update()
+        self.detail.set_content("Select a pick-point (the table is ranked by score).")
+        self.force_image.set_visibility(False)
+        self.replay_image.set_visibility(False)
+        self.show_downloads()
+        self.refresh_runs()
+
+    async def on_select(self, e) -> None:
+        """A selected pick-point: its metrics, and if traced its force plot and replay."""
+        opened = self.state.run
+        if not e.selection or opened is None:
+            return
+        row = e.selection[0]
+        pid = int(row["pick_id"])
+        full = opened.row(pid)
+        lines = [
+            f"**pick {pid}** (rank {row['rank']}): x {full['x_mm']:.2f} mm, y "
+            f"{full['y_mm']:.2f} mm, yaw {full['yaw_deg']:.1f} deg, opening "
+            f"{full['opening_mm']:.1f} mm",
+            "",
+            f"- score (eq. 2): **{fmt(full['score'])}**, success: **{full['success']}**, "
+            f"outcome: {full['failure']}",
+            f"- `t_grasp`: {fmt(full['t_grasp'])} (grip force held, fraction of the window)",
+            f"- `phi_max`: {fmt(full['phi_max_deg'], 1)} deg (largest rotation)",
+            f"- `t_grasp_nc`: {fmt(full['t_grasp_nc'])} (off the table, fraction)",
+            f"- pad forces max {fmt(full['max_force_left_n'], 1)} / "
+            f"{fmt(full['max_force_right_n'], 1)} N, lift {fmt(full['lift_height_mm'], 1)} "
+            f"mm, slip {fmt(full['slip_mm'], 2)} mm",
+        ]
+        self.detail.set_content("\n".join(lines))
+        if row.get("traced") != "yes":
+            self.detail.set_content(
+                "\n".join(lines)
+                + "\n\nNot traced: the run recorded the forces of its best and worst "
+                "pick-points only (tab 3, 'traced best and worst')."
+            )
+            self.force_image.set_visibility(False)
+            self.replay_image.set_visibility(False)
+            return
+        trace = opened.trace(pid)
+        f_d = float(opened.config["grasp"]["grip_force_n"])
+        title = f"pick {pid}: score {fmt(full['score'])}, {full['failure']}"
+        png = await run.io_bound(views.force_png, trace, f_d, title)
+        show_picture(self.force_image, png)
+        self.replay_image.set_visibility(False)
+        try:
+            gif = await run.io_bound(views.replay_gif, opened.path / "scene.xml", trace)
+        except RuntimeError as err:  # no offscreen GL here: say so, keep the plot
+            self.error.set_text(str(err))
+            return
+        show_picture(self.replay_image, gif, "image/gif")
+
+    def export(self) -> None:
+        """``mjx-pick report`` of the open run: templates, report, robot pick-points."""
+        self.error.set_text("")
+        opened = self.state.run
+        if opened is None:
+            self.error.set_text("open an evaluate output folder first")
+            return
+        if self.panel.busy(self.error):
+            return
+        n = whole(self.export_n, 1, 50)
+        if n is None:
+            return
+        argv = ["report", str(opened.path), "--n", str(int(n))]
+        if not self.export_anim.value:
+            argv.append("--no-animations")
+        job = jobs.Job(argv, self.state.log(f"{opened.path.name}-report"))
+        self.panel.start(f"report {opened.path.name}", job, lambda p: self.show_downloads())
+
+    def show_downloads(self) -> None:
+        """A download button for each file the report wrote into the open run."""
+        self.downloads.clear()
+        opened = self.state.run
+        if opened is None:
+            return
+        with self.downloads:
+            for name, label in DOWNLOADS:
+                path = opened.path / name
+                if path.is_file():
+                    ui.button(
+                        label, icon="download", on_click=lambda p=path: ui.download.file(p)
+                    ).props(f'outline data-testid="download-{name}"')
+
+
+def ranked_rows(opened) -> list[dict]:
+    """The table's rows: every pick-point of a run, best score first (NaN last)."""
+    traced = {pid for pid, _ in opened.traced()}
+    t = opened.table
+    score = np.asarray(t["score"], float)
+    order = np.argsort(np.where(np.isnan(score), -np.inf, -score), kind="stable")
+    rows = []
+    for rank, i in enumerate(order, start=1):
+        row = {k: t[k][int(i)].as_py() for k, _ in TABLE_COLUMNS if k in t.column_names}
+        for k, v in row.items():
+            if isinstance(v, float):
+                row[k] = None if math.isnan(v) else round(v, 3)
+        row["rank"] = rank
+        row["traced"] = "yes" if row["pick_id"] in traced else ""
+        rows.append(row)
+    return rows

@@ -1,0 +1,150 @@
+"""Tab 3, *Generate input data*: sample feasible pick-points, then run them (``evaluate``).
+
+The batch simulation is ``mjx-pick evaluate`` in a child process, shown by the job panel;
+a cancelled run is set up to be resumed, a complete one is opened in tab 4.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from nicegui import run, ui
+
+from mjx_pick.config import ConfigError
+from mjx_pick.gui import jobs, views
+from mjx_pick.gui.formatting import fmt, stamp
+from mjx_pick.gui.page.job_panel import JobPanel
+from mjx_pick.gui.page.settings_form import SettingsForm
+from mjx_pick.gui.page.widgets import (
+    error_label,
+    need_object,
+    picture,
+    run_folder,
+    show_picture,
+    whole,
+)
+from mjx_pick.gui.state import PageState
+
+
+def default_chunk(n: int) -> int:
+    """Pick-points per saved part: n/20, at least 64 (chunk overheads stay small)."""
+    return max(64, math.ceil(n / 20))
+
+
+class GenerateTab:
+    def __init__(
+        self,
+        state: PageState,
+        form: SettingsForm,
+        panel: JobPanel,
+        on_complete: Callable[[Path], None],
+    ):
+        """on_complete(folder): a complete evaluate run's folder (opened in tab 4)."""
+        self.state, self.form, self.panel = state, form, panel
+        self.on_complete = on_complete
+        with ui.row().classes("w-full no-wrap items-start"):
+            with ui.column().classes("w-96"):
+                self.n = ui.number("pick-points", value=200, step=1, min=1).props('data-testid="n"')
+                self.seed = ui.number("seed", value=0, step=1)
+                self.traces = ui.number("traced best and worst (force plots)", value=3, step=1)
+                self.chunk = ui.number(
+                    "chunk (pick-points per saved part; empty: automatic)", value=None, step=1
+                )
+                self.run_name = ui.input("run folder name", value=f"evaluate-{stamp()}")
+                self.resume = ui.checkbox("resume an interrupted run of this folder")
+                ui.button("Generate pick-points", on_click=self.generate).props(
+                    'data-testid="generate"'
+                )
+                ui.button("Start batch simulation", on_click=self.start_evaluate).props(
+                    'data-testid="start-batch"'
+                )
+                self.error = error_label().props('data-testid="generate-error"')
+            with ui.column().classes("grow"):
+                self.picks_info = ui.label("").props('data-testid="picks-info"')
+                self.picks_image = picture()
+                self.run_summary = ui.markdown("").props('data-testid="run-summary"')
+
+    def pick_numbers(self) -> tuple[int, int] | None:
+        n = whole(self.n, 1, 10_000_000)
+        seed = whole(self.seed, 0, 2**31 - 1)
+        return None if n is None or seed is None else (n, seed)
+
+    async def generate(self) -> None:
+        """Sample the pick-points (in a worker thread) and draw them on the outline."""
+        from mjx_pick.pickpoints import generate_normal
+
+        self.error.set_text("")
+        if not need_object(self.state, self.error):
+            return
+        settings = self.form.read()
+        numbers = self.pick_numbers()
+        if settings is None or numbers is None:
+            return
+        n, seed = numbers
+        obj = self.state.obj
+        self.picks_info.set_text("generating ...")
+        try:
+            picks = await run.io_bound(
+                generate_normal, obj, settings.gripper, n, seed, settings.picks, settings.grasp
+            )
+            png = await run.io_bound(views.picks_png, obj, picks)
+        except ConfigError as err:
+            self.picks_info.set_text("")
+            self.error.set_text(str(err))
+            return
+        rejected = ", ".join(f"{k} {v}" for k, v in picks.rejected.items() if v)
+        self.picks_info.set_text(
+            f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates checked "
+            f"(rejected: {rejected or 'none'})"
+        )
+        show_picture(self.picks_image, png)
+
+    def start_evaluate(self) -> None:
+        """``mjx-pick evaluate`` with the page's object, settings and numbers."""
+        self.error.set_text("")
+        if self.panel.busy(self.error) or not need_object(self.state, self.error):
+            return
+        settings = self.form.read()
+        numbers = self.pick_numbers()
+        out = run_folder(self.state, self.run_name)
+        if settings is None or numbers is None or out is None:
+            return
+        n, seed = numbers
+        traces = int(self.traces.value or 0)
+        chunk = int(self.chunk.value) if self.chunk.value else default_chunk(n)
+        flags = self.form.cli_flags(settings, self.state.workdir, out)
+        argv = ["evaluate", *self.state.obj_args, *flags]
+        argv += ["--n", str(n), "--seed", str(seed), "--traces", str(max(traces, 0))]
+        argv += ["--chunk-size", str(max(1, chunk)), "--no-progress", "--out", str(out)]
+        if self.resume.value:
+            argv.append("--resume")
+        self.run_summary.set_content("")
+
+        def done(progress: jobs.Progress) -> None:
+            if progress.state == "cancelled":  # ready to continue: same folder, resume
+                self.run_name.value = out.name
+                self.resume.value = True
+                self.run_summary.set_content(
+                    f"**{out.name}**: cancelled; its finished chunks are kept. Start the "
+                    "batch again (resume is ticked) to continue it."
+                )
+                return
+            if progress.state != "complete":
+                return
+            from mjx_pick.metrics import rate_text
+
+            self.resume.value = False
+            s = json.loads((out / "summary.json").read_text())
+            self.run_summary.set_content(
+                f"**{out.name}**: success rate {rate_text(s['successes'], s['n'])}, "
+                f"mean score {fmt(s['score_mean'])}, "
+                f"{s['picks_per_s']} pick-points/s on {s['backend']}. Open tab 4."
+            )
+            self.on_complete(out)
+
+        job = jobs.Job(argv, self.state.log(out.name), out, n, chunk)
+        self.panel.start(f"evaluate {out.name}", job, done)
+        self.run_name.value = f"evaluate-{stamp()}"

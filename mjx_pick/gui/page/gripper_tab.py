@@ -1,0 +1,69 @@
+"""Tab 2, *Set gripper parameters*: the settings form and a test of one pick-point.
+
+The form (:class:`~mjx_pick.gui.page.settings_form.SettingsForm`) is built here, where
+the user sees it, and handed to every tab that starts a run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from nicegui import run, ui
+
+from mjx_pick.config import ConfigError
+from mjx_pick.gui.one_pick import simulate_one_pick
+from mjx_pick.gui.page.settings_form import SettingsForm
+from mjx_pick.gui.page.widgets import error_label, need_object, picture, show_picture
+from mjx_pick.gui.state import PageState
+
+
+class GripperTab:
+    def __init__(self, state: PageState, show: Callable[[], None]):
+        """show: switches the page to this tab (when a settings field is wrong)."""
+        self.state = state
+        with ui.row().classes("w-full no-wrap items-start"):
+            with ui.column().classes("w-[44rem]"):
+                self.form = SettingsForm(show)
+            with ui.column().classes("grow"):
+                ui.label("Test simulation of one pick-point").classes("font-bold")
+                with ui.row():
+                    self.x = ui.number("x (mm)", value=0.0, step=1).classes("w-24")
+                    self.y = ui.number("y (mm)", value=0.0, step=1).classes("w-24")
+                    self.yaw = ui.number("yaw (deg)", value=0.0, step=5).classes("w-24")
+                ui.button("Test simulation", on_click=self.test_pick).props(
+                    'data-testid="test-pick"'
+                )
+                self.error = error_label().props('data-testid="test-pick-error"')
+                self.info = ui.markdown("").props('data-testid="test-info"')
+                self.plot = picture()
+
+    async def test_pick(self) -> None:
+        """Check and simulate the pick-point of the x, y and yaw fields, in a worker thread."""
+        self.error.set_text("")
+        if not need_object(self.state, self.error):
+            return
+        settings = self.form.read()
+        if settings is None:
+            return
+        pose = [self.x.value, self.y.value, self.yaw.value]
+        if any(v is None for v in pose):
+            self.error.set_text("give x, y and yaw of the test pick-point")
+            return
+        self.info.set_content("simulating one pick-point ...")
+        try:
+            result = await run.io_bound(
+                simulate_one_pick,
+                self.state.obj,
+                settings,
+                *map(float, pose),
+                self.form.backend.value,
+            )
+        except ConfigError as err:
+            self.info.set_content("")
+            self.error.set_text(str(err))
+            return
+        self.info.set_content(result["text"])
+        if result["plot"] is not None:
+            show_picture(self.plot, result["plot"])
+        else:
+            self.plot.set_visibility(False)

@@ -1,0 +1,172 @@
+"""Tab 1, *Import object model*: upload an image or a mesh, or choose a shipped object.
+
+Sets the page's object (:attr:`PageState.obj`, and the same object as CLI arguments for
+every run) and shows its segmentation and outline.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+from nicegui import run, ui
+
+from mjx_pick.config import ConfigError
+from mjx_pick.gui import views
+from mjx_pick.gui.page.widgets import error_label, picture, show_picture
+from mjx_pick.gui.state import PageState
+from mjx_pick.gui.uploads import (
+    MESH_MAX_BYTES,
+    UPLOAD_TYPES,
+    check_upload,
+    object_refused,
+    save_upload,
+)
+from mjx_pick.objects import MESH_SUFFIXES
+
+UPLOADED = "(uploaded file)"
+
+
+class ImportTab:
+    def __init__(self, state: PageState):
+        from mjx_pick.objects import asset_manifest
+
+        self.state = state
+        self.upload_path: Path | None = None
+        self.manifest = asset_manifest()
+        with ui.row().classes("w-full no-wrap items-start"):
+            with ui.column().classes("w-96"):
+                ui.label(
+                    "A top-down image (PNG/JPG, up to 20 MB), a mesh (STL/OBJ/PLY, up "
+                    "to 50 MB), or a shipped object."
+                ).classes("text-sm")
+                self.upload = (
+                    ui.upload(
+                        label="upload image or mesh",
+                        auto_upload=True,
+                        max_file_size=MESH_MAX_BYTES,
+                        on_upload=self.on_upload,
+                        on_rejected=lambda: self.upload_error.set_text(object_refused()),
+                    )
+                    .props('accept="' + ",".join(UPLOAD_TYPES) + '" data-testid="object-upload"')
+                    .classes("w-full")
+                )
+                self.upload_error = error_label().props('data-testid="upload-error"')
+                self.asset = ui.select(
+                    [UPLOADED, *sorted(self.manifest)],
+                    value="block",
+                    label="object",
+                    on_change=self.on_asset,
+                )
+                self.px_per_mm = ui.number("image scale (px per mm)", value=10.0, step=0.5)
+                self.thickness = ui.number("thickness (mm)", value=20.0, step=1)
+                self.mass = ui.number("mass (g)", value=43.2, step=1)
+                self.unit = ui.select(["mm", "m"], value="mm", label="mesh unit").classes("w-40")
+                self.on_asset()
+                ui.button("Import object", on_click=self.import_object).props(
+                    'data-testid="import"'
+                )
+                self.import_error = error_label().props('data-testid="import-error"')
+            with ui.column().classes("grow"):
+                self.object_info = ui.label("No object imported yet.").props(
+                    'data-testid="object-info"'
+                )
+                self.object_image = picture("w-full max-w-3xl").props('data-testid="object-image"')
+
+    def fields(self) -> dict:
+        return {"px_per_mm": self.px_per_mm, "thickness_mm": self.thickness, "mass_g": self.mass}
+
+    def on_asset(self, _=None) -> None:
+        """A shipped object fills in its scale, thickness and mass."""
+        if self.asset.value in self.manifest:
+            entry = self.manifest[self.asset.value]
+            self.px_per_mm.value = entry["px_per_mm"]
+            self.thickness.value = entry["thickness_mm"]
+            self.mass.value = round(entry["mass_g"], 3)
+
+    async def on_upload(self, e) -> None:
+        self.upload_error.set_text("")
+        name = e.file.name
+        data = await e.file.read()
+        self.upload.reset()  # a corrected file of the same name may follow
+        problem = check_upload(name, len(data), data)
+        if problem:
+            self.upload_error.set_text(problem)
+            return
+        try:
+            self.upload_path = await run.io_bound(save_upload, data, name, self.state.uploads)
+        except (OSError, ConfigError) as err:
+            self.upload_error.set_text(f"{name}: cannot be stored ({err})")
+            return
+        self.asset.value = UPLOADED
+        self.upload_error.set_text("")
+        self.object_info.set_text(
+            f"uploaded {name}: set its scale, thickness and mass, then Import object"
+        )
+
+    def source(self) -> tuple[str, Path | None]:
+        """The object's CLI argument (a file or a shipped name) and its image, if any."""
+        if self.asset.value == UPLOADED:
+            if self.upload_path is None:
+                raise ConfigError("upload an image or a mesh first, or choose a shipped object")
+            return str(self.upload_path), self.upload_path
+        entry = self.manifest[self.asset.value]
+        image = Path(str(resources.files("mjx_pick.assets") / "objects" / entry["image"]))
+        return self.asset.value, image
+
+    async def import_object(self) -> None:
+        from mjx_pick.objects import load_object
+
+        self.import_error.set_text("")
+        for w in self.fields().values():
+            w.error = None
+        try:
+            source, image = self.source()
+        except ConfigError as err:
+            self.import_error.set_text(str(err))
+            return
+        is_mesh = Path(source).suffix.lower() in MESH_SUFFIXES
+        values = {k: w.value for k, w in self.fields().items()}
+        needed = ("mass_g",) if is_mesh else ("px_per_mm", "thickness_mm", "mass_g")
+        missing = [k for k in needed if values[k] is None]
+        for k in missing:
+            self.fields()[k].error = f"{k} is required"
+        if missing:
+            return
+        kwargs = {"mass_g": float(values["mass_g"])}
+        args = [source, "--mass-g", repr(float(values["mass_g"]))]
+        if is_mesh:
+            kwargs["unit"] = self.unit.value
+            args += ["--unit", self.unit.value]
+            image = None
+        else:
+            kwargs["px_per_mm"] = float(values["px_per_mm"])
+            kwargs["thickness_mm"] = float(values["thickness_mm"])
+            args += ["--px-per-mm", repr(kwargs["px_per_mm"])]
+            args += ["--thickness-mm", repr(kwargs["thickness_mm"])]
+        self.object_info.set_text("importing ...")
+        try:
+            obj = await run.io_bound(load_object, source, **kwargs)
+            png = await run.io_bound(views.object_png, obj, image)
+        except ConfigError as err:
+            self.object_info.set_text("No object imported.")
+            self.show_error(str(err))
+            return
+        except Exception as err:  # noqa: BLE001 - a bad file must not show a traceback
+            self.object_info.set_text("No object imported.")
+            self.import_error.set_text(f"{Path(source).name}: cannot be imported ({err})")
+            return
+        self.state.obj, self.state.obj_args = obj, args
+        self.object_info.set_text(
+            f"{obj.name}: outline {obj.area_mm2:.0f} mm^2, length {obj.length_mm:.1f} mm, "
+            f"height {obj.height_mm:g} mm, mass {obj.mass_kg * 1e3:.1f} g"
+        )
+        show_picture(self.object_image, png)
+
+    def show_error(self, message: str) -> None:
+        """An object's ConfigError under the field it names, else above the button."""
+        for key, widget in self.fields().items():
+            if f"object.{key}" in message or message.startswith(key):
+                widget.error = message
+                return
+        self.import_error.set_text(message)

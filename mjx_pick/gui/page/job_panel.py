@@ -1,0 +1,107 @@
+"""The job panel: the run this browser tab started, its progress, Cancel, its CLI command.
+
+The panel owns the current job (a :class:`mjx_pick.gui.jobs.Job`): tabs start runs
+through :meth:`JobPanel.start` and ask :meth:`JobPanel.busy` before they do. A job is
+current from its start until the panel has shown how it ended and called its ``on_end``
+(which draws its results). ``busy`` goes by that, not by whether the child process still
+runs: the process exits up to one poll (0.5 s) before the panel sees it, and a run
+started in that gap used to replace the job whose end was never shown -- its results
+never drawn, its status line left at "running".
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from nicegui import ui
+
+from mjx_pick.gui import jobs
+
+POLL_S = 0.5  # how often the panel reads the run's progress
+
+
+class JobPanel:
+    """One browser tab's current run, shown above the tabs."""
+
+    def __init__(self, started: set[jobs.Job]):
+        """started: the server's set of the jobs it started that may still run (stopped
+        at shutdown, also those of a closed browser tab)."""
+        self.started = started
+        self.job: jobs.Job | None = None
+        self.on_end: Callable[[jobs.Progress], None] | None = None
+        with ui.card().classes("w-full") as card:
+            with ui.row().classes("items-center w-full"):
+                self.title = ui.label("").classes("font-bold").props('data-testid="job-title"')
+                self.status = ui.label("").props('data-testid="job-status"')
+                ui.space()
+                self.cancel_button = ui.button("Cancel", on_click=self.cancel, color="red")
+            self.bar = ui.linear_progress(value=0, show_value=False).props("size=12px")
+            self.command = ui.code("", language="bash").classes("w-full text-xs")
+        card.set_visibility(False)
+        self.card = card
+        ui.timer(POLL_S, self.poll)
+
+    def busy(self, where: ui.label) -> bool:
+        """True (and says so in where) while a run is current: no second run starts."""
+        if self.job is not None:
+            where.set_text("a run is in progress: wait for it or cancel it")
+            return True
+        return False
+
+    def start(self, title: str, job: jobs.Job, on_end: Callable[[jobs.Progress], None]) -> None:
+        """Start job and show it; on_end(progress) runs once, when the panel sees it end."""
+        if self.job is not None:  # callers check busy() first
+            raise RuntimeError(f"a run is current ({self.title.text}): cannot start {title}")
+        self.job, self.on_end = job.start(), on_end
+        self.started.difference_update([j for j in self.started if not j.running])
+        self.started.add(job)
+        self.title.set_text(title)
+        self.status.set_text("starting ...")
+        self.command.set_content(job.command_line)
+        self.bar.set_value(0)
+        self.bar.props(remove="indeterminate")
+        if job.total is None:
+            self.bar.props("indeterminate")
+        self.cancel_button.set_visibility(True)
+        self.card.set_visibility(True)
+
+    def cancel(self) -> None:
+        if self.job is not None:
+            self.job.cancel()
+
+    def poll(self) -> None:
+        """Show the run's progress; when it has ended, free the panel and call on_end."""
+        if self.job is None:
+            return
+        p = self.job.poll()
+        if p.fraction is not None:
+            self.bar.set_value(p.fraction)
+        self.status.set_text(status_line(p))
+        if p.state == "running":
+            return
+        self.bar.props(remove="indeterminate")
+        if p.state == "complete":
+            self.bar.set_value(1.0)
+        self.cancel_button.set_visibility(False)
+        on_end = self.on_end
+        self.job, self.on_end = None, None
+        try:
+            if on_end is not None:
+                on_end(p)
+        except (OSError, ValueError, KeyError) as err:
+            self.status.set_text(f"{p.state}; its results cannot be read: {err}")
+
+
+def status_line(p: jobs.Progress) -> str:
+    """The panel's one line: state, count, rate, time left, time so far, message."""
+    parts = [p.state]
+    if p.done is not None:
+        parts.append(f"{p.done}/{p.total} {p.unit}")
+    if p.rate:
+        parts.append(f"{p.rate:.1f} per s")
+    if p.eta_s is not None and p.state == "running":
+        parts.append(f"about {p.eta_s:.0f} s left")
+    parts.append(f"{p.elapsed_s:.0f} s")
+    if p.message:
+        parts.append(p.message)
+    return ", ".join(parts)

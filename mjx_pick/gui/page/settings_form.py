@@ -1,0 +1,135 @@
+"""The settings form of tab 2: gripper preset or TOML, backend, and every settings field.
+
+It lives on the gripper tab, but every run reads it: :meth:`SettingsForm.read` checks the
+fields (each error under its field; the page switches to tab 2 to show them) and
+:meth:`SettingsForm.cli_flags` writes them as the CLI's TOML files for a run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from nicegui import ui
+
+from mjx_pick.config import ConfigError
+from mjx_pick.gui import forms
+from mjx_pick.gui.page.widgets import error_label
+from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload
+
+PRESET = "robotiq-2f85"  # the gripper the page starts with
+BACKENDS = ["auto", "mujoco", "warp", "mjx"]
+
+
+class SettingsForm:
+    """The gripper, pick-point, procedure and contact settings every run uses."""
+
+    def __init__(self, show: Callable[[], None]):
+        """show: brings the form into view (switches to tab 2) when a field is wrong."""
+        from mjx_pick.gripper import load_gripper, preset_names
+
+        self.show = show
+        self.base_contact = None  # calibrated contact parameters, once adopted
+        self.inputs: dict[str, ui.number] = {}
+        with ui.row().classes("items-end"):
+            self.preset = ui.select(
+                preset_names(),
+                value=PRESET,
+                label="gripper preset",
+                on_change=self.on_preset,
+            ).classes("w-56")
+            self.backend = ui.select(BACKENDS, value="mujoco", label="backend").classes("w-40")
+        with ui.row().classes("items-center"):
+            self.toml_upload = (
+                ui.upload(
+                    label="or load a gripper TOML",
+                    auto_upload=True,
+                    max_file_size=TOML_MAX_BYTES,
+                    on_upload=self.on_gripper_toml,
+                    on_rejected=lambda: self.toml_error.set_text(
+                        f"file refused: a .toml file of at most {TOML_MAX_BYTES // 2**10} KB"
+                    ),
+                )
+                .props('accept=".toml" data-testid="gripper-upload"')
+                .classes("w-72")
+            )
+            self.toml_error = error_label().props('data-testid="toml-error"')
+        self.settings_error = error_label().props('data-testid="settings-error"')
+        for title, group in (
+            ("Gripper", forms.GRIPPER_FIELDS),
+            ("Pick-points", forms.PICK_FIELDS),
+            ("Procedure (force controller, lift)", forms.PROCEDURE_FIELDS),
+            ("Contact", forms.CONTACT_FIELDS),
+        ):
+            ui.label(title).classes("font-bold mt-2")
+            with ui.grid(columns=3).classes("w-full gap-x-4 gap-y-0"):
+                for f in group:
+                    label = f"{f.label} ({f.unit})" if f.unit else f.label
+                    self.inputs[f.key] = ui.number(label, step=f.step).props(
+                        f'data-testid="{f.key}"'
+                    )
+        self.base_gripper = load_gripper(PRESET)
+        self.fill(self.base_gripper)
+
+    def fill(self, gripper) -> None:
+        """A gripper's fields; the other fields keep their values (defaults if empty)."""
+        for key, value in forms.defaults(gripper).items():
+            if key.startswith("gripper.") or not self.inputs[key].value:
+                self.inputs[key].value = value
+            self.inputs[key].error = None
+
+    def on_preset(self, _=None) -> None:
+        from mjx_pick.gripper import load_gripper
+
+        self.base_gripper = load_gripper(self.preset.value)
+        self.fill(self.base_gripper)
+        # the preset's force and speed ranges bound F_d and the closing speed
+        g = self.base_gripper
+        f_d = self.inputs["grasp.grip_force_n"]
+        f_d.value = min(max(f_d.value or 0, g.force_min_n), g.force_max_n)
+        v = self.inputs["grasp.closing_speed_mm_s"]
+        v.value = min(max(v.value or 0, g.speed_min_mm_s), g.speed_max_mm_s)
+
+    async def on_gripper_toml(self, e) -> None:
+        self.toml_error.set_text("")
+        name = e.file.name
+        data = await e.file.read()
+        self.toml_upload.reset()  # a corrected file of the same name may follow
+        problem = check_toml_upload(name, data)
+        if problem:
+            self.toml_error.set_text(problem)
+            return
+        try:
+            gripper = forms.gripper_from_toml(data.decode("utf-8"), where=name)
+        except UnicodeDecodeError:
+            self.toml_error.set_text(f"{name}: not a UTF-8 text file")
+            return
+        except ConfigError as err:
+            self.toml_error.set_text(str(err))
+            return
+        self.base_gripper = gripper
+        self.fill(gripper)
+        self.toml_error.set_text("")
+
+    def adopt_contact(self, contact) -> None:
+        """Fitted contact parameters (the calibration study) for every later run."""
+        self.base_contact = contact
+        for key in ("contact.pad_friction", "contact.table_friction"):
+            self.inputs[key].value = float(getattr(contact, key.split(".")[1]))
+
+    def read(self) -> forms.Settings | None:
+        """The settings, or None with each error next to its field (and the form shown)."""
+        values = {k: w.value for k, w in self.inputs.items()}
+        settings, errors = forms.build(values, self.base_gripper, self.base_contact)
+        for key, widget in self.inputs.items():
+            widget.error = errors.get(key)
+        self.settings_error.set_text(errors.get("", ""))
+        if settings is None:
+            self.show()
+        return settings
+
+    def cli_flags(self, settings: forms.Settings, workdir: Path, out: Path) -> list[str]:
+        """The CLI flags of a run into out: its settings written under workdir/inputs/."""
+        folder = workdir / "inputs" / out.name
+        paths = forms.write_inputs(settings, folder)
+        return forms.cli_flags(settings, paths) + ["--backend", self.backend.value]

@@ -1,0 +1,307 @@
+"""The *Studies* tab: compare grippers, robustness of a run's best pick-points, calibrate.
+
+Each study is a section (an expansion) and a class here; each runs its CLI command
+(``compare``, ``robust``, ``calibrate``) on the object of tab 1 with the settings of
+tab 2. The robustness study reads the run open in tab 4; a calibration's fitted contact
+parameters can be put into tab 2's form.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from nicegui import run, ui
+
+from mjx_pick.config import ConfigError
+from mjx_pick.gui import jobs
+from mjx_pick.gui.formatting import fmt, stamp
+from mjx_pick.gui.page.job_panel import JobPanel
+from mjx_pick.gui.page.settings_form import SettingsForm
+from mjx_pick.gui.page.widgets import (
+    error_label,
+    need_object,
+    picture,
+    run_folder,
+    show_picture,
+    show_rows,
+    whole,
+)
+from mjx_pick.gui.state import PageState
+from mjx_pick.gui.uploads import OUTCOMES_MAX_BYTES, check_outcomes_upload, save_upload
+
+
+class StudiesTab:
+    def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
+        ui.label(
+            "Each study runs on the object of tab 1 with the settings of tab 2, and writes "
+            "the folder of its CLI command."
+        ).classes("text-sm")
+        with ui.expansion("Compare grippers", value=True).classes("w-full"):
+            self.compare = CompareStudy(state, form, panel)
+        with ui.expansion("Robustness of the best pick-points (run of tab 4)").classes("w-full"):
+            self.robust = RobustStudy(state, form, panel)
+        with ui.expansion("Calibrate contact parameters from measured outcomes").classes("w-full"):
+            self.calibrate = CalibrationStudy(state, form, panel)
+
+
+class CompareStudy:
+    """``mjx-pick compare``: presets (and tab 2's gripper) ranked on the same pick-points."""
+
+    def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
+        from mjx_pick.gripper import preset_names
+
+        self.state, self.form, self.panel = state, form, panel
+        with ui.row().classes("w-full no-wrap items-start"):
+            with ui.column().classes("w-96"):
+                self.grippers = ui.select(
+                    preset_names(),
+                    value=["robotiq-2f85", "onrobot-rg2"],
+                    multiple=True,
+                    label="presets",
+                ).classes("w-full")
+                self.current = ui.checkbox("and the gripper of tab 2")
+                self.n = ui.number("pick-points", value=200, step=1)
+                self.rank = ui.select(["success", "score"], value="success", label="rank by")
+                self.name = ui.input("run folder name", value=f"compare-{stamp()}")
+                ui.button("Start comparison", on_click=self.start).props(
+                    'data-testid="start-compare"'
+                )
+                self.error = error_label().props('data-testid="compare-error"')
+            with ui.column().classes("grow"):
+                self.table = ui.table(columns=[], rows=[], row_key="rank").props(
+                    'dense data-testid="compare-table"'
+                )
+                self.image = picture("w-full max-w-3xl")
+
+    def start(self) -> None:
+        self.error.set_text("")
+        if self.panel.busy(self.error) or not need_object(self.state, self.error):
+            return
+        n = whole(self.n, 1, 1_000_000)
+        settings = self.form.read()
+        out = run_folder(self.state, self.name)
+        if n is None or settings is None or out is None:
+            return
+        flags = self.form.cli_flags(settings, self.state.workdir, out)
+        names = list(self.grippers.value or [])
+        if self.current.value:
+            names.append(flags[flags.index("--gripper-file") + 1])
+        if len(names) < 2:
+            self.error.set_text("choose at least two grippers")
+            return
+        argv = ["compare", *self.state.obj_args, *flags, "--grippers", ",".join(names)]
+        argv += ["--n", str(n), "--rank-by", self.rank.value, "--out", str(out)]
+
+        def done(progress: jobs.Progress) -> None:
+            if progress.state == "complete":
+                rows = json.loads((out / "ranking.json").read_text())
+                keys = ["rank", "gripper", "success_rate", "success_ci", "score_mean"]
+                show_rows(self.table, rows, keys + ["feasible", "p_vs_best"])
+                show_picture(self.image, (out / "maps.png").read_bytes())
+
+        job = jobs.Job(argv, self.state.log(out.name), out)
+        self.panel.start(f"compare {out.name} ({len(names)} grippers x {n})", job, done)
+        self.name.value = f"compare-{stamp()}"
+
+
+class RobustStudy:
+    """``mjx-pick robust``: the open run's best pick-points under position and yaw error."""
+
+    def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
+        self.state, self.form, self.panel = state, form, panel
+        with ui.row().classes("w-full no-wrap items-start"):
+            with ui.column().classes("w-96"):
+                self.k = ui.number("top pick-points", value=10, step=1)
+                self.m = ui.number("perturbed draws each", value=32, step=1)
+                self.sigma_xy = ui.number("position error sigma (mm)", value=2.0, step=0.5)
+                self.sigma_yaw = ui.number("yaw error sigma (deg)", value=3.0, step=0.5)
+                ui.button("Start robustness study", on_click=self.start).props(
+                    'data-testid="start-robust"'
+                )
+                self.error = error_label().props('data-testid="robust-error"')
+            with ui.column().classes("grow"):
+                self.table = ui.table(columns=[], rows=[], row_key="rank").props(
+                    'dense data-testid="robust-table"'
+                )
+
+    def start(self) -> None:
+        self.error.set_text("")
+        if self.panel.busy(self.error) or not need_object(self.state, self.error):
+            return
+        opened = self.state.run
+        if opened is None:
+            self.error.set_text("open an evaluate output folder in tab 4 first")
+            return
+        k = whole(self.k, 1, 1000)
+        m = whole(self.m, 2, 10_000)
+        sig = []
+        for w in (self.sigma_xy, self.sigma_yaw):
+            w.error = None
+            if w.value is None or not 0 <= w.value <= 100:
+                w.error = "from 0 to 100"
+            sig.append(w.value)
+        settings = self.form.read()
+        if (
+            k is None
+            or m is None
+            or settings is None
+            or self.sigma_xy.error
+            or self.sigma_yaw.error
+        ):
+            return
+        obj = self.state.obj
+        s = opened.summary
+        if (s.get("object"), s.get("gripper")) != (obj.name, settings.gripper.name):
+            self.error.set_text(
+                f"the run of tab 4 is of {s.get('object')} / {s.get('gripper')}: import that "
+                f"object and set that gripper (now {obj.name} / {settings.gripper.name})"
+            )
+            return
+        out = opened.path
+        argv = ["robust", *self.state.obj_args]
+        argv += self.form.cli_flags(settings, self.state.workdir, out)
+        argv += ["--results", str(out), "--top-k", str(k), "--m", str(m)]
+        argv += ["--sigma-xy-mm", repr(float(sig[0])), "--sigma-yaw-deg", repr(float(sig[1]))]
+        argv += ["--out", str(out)]
+
+        def done(progress: jobs.Progress) -> None:
+            if progress.state == "complete":
+                rows = json.loads((out / "robustness.json").read_text())["ranking"]
+                keys = ["rank", "pick_id", "x_mm", "y_mm", "yaw_deg", "robust_p"]
+                show_rows(self.table, rows, keys + ["robust_ci_low", "landed"])
+
+        job = jobs.Job(argv, self.state.log(f"{out.name}-robust"), out)
+        self.panel.start(f"robust {out.name} (top {k} x {m} draws)", job, done)
+
+
+class CalibrationStudy:
+    """``mjx-pick calibrate``: contact parameters fitted to an uploaded outcomes CSV."""
+
+    def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
+        from mjx_pick.calibration import FITTABLE
+
+        self.state, self.form, self.panel = state, form, panel
+        self.outcomes_path: Path | None = None
+        self.fitted_contact: Path | None = None
+        with ui.row().classes("w-full no-wrap items-start"):
+            with ui.column().classes("w-96"):
+                ui.label(
+                    "A CSV of tested pick-points and their outcomes (format: "
+                    "mjx_pick/assets/outcomes/README.md), up to 5 MB."
+                ).classes("text-sm")
+                self.upload = (
+                    ui.upload(
+                        label="upload outcomes CSV",
+                        auto_upload=True,
+                        max_file_size=OUTCOMES_MAX_BYTES,
+                        on_upload=self.on_upload,
+                        on_rejected=lambda: self.error.set_text(
+                            f"file refused: a .csv file of at most {OUTCOMES_MAX_BYTES // 2**20} MB"
+                        ),
+                    )
+                    .props('accept=".csv" data-testid="outcomes-upload"')
+                    .classes("w-full")
+                )
+                self.params = ui.select(
+                    list(FITTABLE),
+                    value=["pad_friction"],
+                    multiple=True,
+                    label="parameters to fit",
+                ).classes("w-full")
+                self.steps = ui.number("optimiser steps", value=60, step=1)
+                self.name = ui.input("run folder name", value=f"calibrate-{stamp()}")
+                ui.button("Start calibration", on_click=self.start).props(
+                    'data-testid="start-calibrate"'
+                )
+                self.error = error_label().props('data-testid="calibrate-error"')
+            with ui.column().classes("grow"):
+                self.info = ui.markdown("").props('data-testid="calibrate-info"')
+                self.use = ui.button(
+                    "Use the fitted contact parameters in tab 2", on_click=self.use_fitted
+                ).props('data-testid="use-calibration"')
+                self.use.set_visibility(False)
+                self.image = picture()
+
+    async def on_upload(self, e) -> None:
+        from mjx_pick.calibration import read_outcomes
+
+        self.error.set_text("")
+        name = e.file.name
+        data = await e.file.read()
+        self.upload.reset()
+        problem = check_outcomes_upload(name, data)
+        if problem:
+            self.error.set_text(problem)
+            return
+        path = await run.io_bound(save_upload, data, name, self.state.uploads)
+        try:
+            outcomes = await run.io_bound(read_outcomes, str(path))
+        except ConfigError as err:
+            self.error.set_text(str(err))
+            return
+        self.outcomes_path = path
+        self.info.set_content(
+            f"outcomes: {name}, {len(outcomes)} tested pick-points "
+            f"({int(np.sum(outcomes.trials))} trials)"
+        )
+
+    def start(self) -> None:
+        self.error.set_text("")
+        if self.panel.busy(self.error) or not need_object(self.state, self.error):
+            return
+        if self.outcomes_path is None:
+            self.error.set_text("upload an outcomes CSV first")
+            return
+        steps = whole(self.steps, 1, 100_000)
+        settings = self.form.read()
+        out = run_folder(self.state, self.name)
+        params = list(self.params.value or [])
+        self.params.error = None if params else "choose at least one parameter"
+        if steps is None or settings is None or out is None or not params:
+            return
+        argv = ["calibrate", str(self.outcomes_path), *self.state.obj_args]
+        argv += self.form.cli_flags(settings, self.state.workdir, out)
+        argv += ["--params", ",".join(params), "--steps", str(steps), "--log-every", "1"]
+        argv += ["--out", str(out)]
+
+        def done(progress: jobs.Progress) -> None:
+            if progress.state == "complete":
+                self.show(out)
+
+        job = jobs.Job(
+            argv,
+            self.state.log(out.name),
+            out,
+            steps,
+            steps_logged=r"(?m)^step\s+(\d+)\s",
+            unit="steps",
+        )
+        self.panel.start(f"calibrate {out.name} ({steps} steps)", job, done)
+        self.name.value = f"calibrate-{stamp()}"
+
+    def show(self, out: Path) -> None:
+        """A complete calibration: initial -> fitted values, the loss plot, Use button."""
+        c = json.loads((out / "calibration.json").read_text())
+        lines = [f"**{out.name}**: fitted contact parameters (`{out / 'contact.toml'}`)", ""]
+        lines += [
+            f"- `{k}`: {fmt(c['initial'][k], 4)} -> **{fmt(c['fitted'][k], 4)}**"
+            for k in c["parameters"]
+        ]
+        self.info.set_content("\n".join(lines))
+        show_picture(self.image, (out / "loss.png").read_bytes())
+        self.fitted_contact = out / "contact.toml"
+        self.use.set_visibility(True)
+
+    def use_fitted(self) -> None:
+        """The fitted contact parameters into tab 2's form, for every later run."""
+        from mjx_pick.physics import load_contact
+
+        try:
+            contact, _ = load_contact(self.fitted_contact)
+        except ConfigError as err:
+            self.error.set_text(str(err))
+            return
+        self.form.adopt_contact(contact)
+        self.info.set_content(self.info.content + "\n\nIn use in tab 2 (all fitted parameters).")

@@ -1,0 +1,95 @@
+"""The *Parameter sweep* tab: one parameter over start..end by step (``mjx-pick sweep``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from nicegui import ui
+
+from mjx_pick.gui import forms, jobs
+from mjx_pick.gui.formatting import fmt, stamp
+from mjx_pick.gui.page.job_panel import JobPanel
+from mjx_pick.gui.page.settings_form import SettingsForm
+from mjx_pick.gui.page.widgets import (
+    error_label,
+    need_object,
+    picture,
+    run_folder,
+    show_picture,
+    whole,
+)
+from mjx_pick.gui.state import PageState
+
+
+class SweepTab:
+    def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
+        from mjx_pick.sweeps import sweepable
+
+        self.state, self.form, self.panel = state, form, panel
+        with ui.row().classes("w-full no-wrap items-start"):
+            with ui.column().classes("w-96"):
+                self.param = ui.select(
+                    sweepable(),
+                    value="contact.pad_friction",
+                    label="parameter",
+                    with_input=True,
+                ).classes("w-full")
+                self.start = ui.number("start", value=0.4, step=0.05)
+                self.end = ui.number("end", value=1.0, step=0.05)
+                self.step = ui.number("step", value=0.2, step=0.05)
+                self.n = ui.number("simulations per value", value=100, step=1)
+                self.name = ui.input("run folder name", value=f"sweep-{stamp()}")
+                ui.button("Start sweep", on_click=self.start_sweep).props(
+                    'data-testid="start-sweep"'
+                )
+                self.error = error_label().props('data-testid="sweep-error"')
+            with ui.column().classes("grow"):
+                self.table = ui.table(columns=[], rows=[], row_key="variant").props(
+                    'dense data-testid="sweep-table"'
+                )
+                self.image = picture("w-full max-w-3xl")
+
+    def start_sweep(self) -> None:
+        """``mjx-pick sweep`` of the chosen parameter with the page's object and settings."""
+        self.error.set_text("")
+        if self.panel.busy(self.error) or not need_object(self.state, self.error):
+            return
+        fields = {"start": self.start, "end": self.end, "step": self.step}
+        values, errors = forms.sweep_values(*(w.value for w in fields.values()))
+        for key, widget in fields.items():
+            widget.error = errors.get(key)
+        n = whole(self.n, 1, 1_000_000)
+        if n is None:
+            return
+        settings = self.form.read()
+        out = run_folder(self.state, self.name)
+        if values is None or settings is None or out is None:
+            return
+        if not self.param.value:
+            self.error.set_text("choose a parameter")
+            return
+        param = f"{self.param.value}=" + ",".join(repr(v) for v in values)
+        argv = [
+            "sweep",
+            *self.state.obj_args,
+            *self.form.cli_flags(settings, self.state.workdir, out),
+        ]
+        argv += ["--param", param, "--n", str(int(n)), "--out", str(out)]
+
+        def done(progress: jobs.Progress) -> None:
+            if progress.state == "complete":
+                self.show(out)
+
+        job = jobs.Job(argv, self.state.log(out.name), out, None, None)
+        self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job, done)
+        self.name.value = f"sweep-{stamp()}"
+
+    def show(self, out: Path) -> None:
+        """A complete sweep: one row per value, and its plot."""
+        variants = json.loads((out / "variants.json").read_text())
+        keys = [k for k in variants[0] if k not in ("success_ci", "score_ci")]
+        self.table.columns = [{"name": k, "label": k, "field": k} for k in keys]
+        self.table.rows = [{k: fmt(v[k]) for k in keys} for v in variants]
+        self.table.update()
+        show_picture(self.image, (out / "sweep.png").read_bytes())
