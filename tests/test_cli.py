@@ -214,3 +214,14 @@ def test_every_bad_input_is_reported_at_once(tmp_path, capsys):
     ):
         assert part in err
     assert not out.exists()
+
+
+def test_choosing_mjx_by_name_says_it_is_not_a_label_backend(tmp_path, capsys):
+    # a bad input ends the run before anything is simulated: the note comes first
+    argv = ["evaluate", "block", "--backend", "mjx", "--pad-friction", "-1"]
+    assert main([*argv, "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("mjx-pick: note: --backend mjx is MJX's JAX physics")
+    assert "use --backend mujoco or warp" in err
+    assert main(["evaluate", "block", "--pad-friction", "-1", "--out", str(tmp_path / "x")]) == 2
+    assert "note:" not in capsys.readouterr().err  # auto: never said

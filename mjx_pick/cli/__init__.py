@@ -27,10 +27,19 @@ from mjx_pick.display import use_offscreen_rendering
 
 __all__ = ["build_parser", "main"]
 
+# said whenever a user picks MJX's JAX physics by name (issue 16; README "Known limits")
+MJX_NOTE = (
+    "mjx-pick: note: --backend mjx is MJX's JAX physics, kept for derivatives: at low pad "
+    "friction (0.1-0.2) its pads chatter where MuJoCo C and Warp hold the part; for labels "
+    "use --backend mujoco or warp (auto)"
+)
+
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     use_offscreen_rendering()  # before anything imports MuJoCo: animations on a headless host
+    if getattr(args, "backend", None) == "mjx":
+        print(MJX_NOTE, file=sys.stderr)
     try:
         with interrupts.catching_sigint():  # a Ctrl-C is never swallowed (see interrupts)
             return int(args.func(args) or 0)
