@@ -150,6 +150,7 @@ def evaluate(
     on_progress: ProgressFn | None = None,
     cancel: threading.Event | None = None,
     ray: str | None = None,
+    on_cluster_event=None,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
@@ -188,6 +189,8 @@ def evaluate(
         simulations per pick-point; see mjx_pick.robust.min_grip_force).
       ray: run the chunks on a Ray cluster: "auto" or the head's "HOST:PORT" (needs
         the cluster extra; see mjx_pick.cluster). This process still writes out.
+      on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` (an actor
+        started or answered, a chunk sent, done or lost), in the driver's loop.
     """
     obj, gripper = _resolve(obj, gripper)
     contact = contact or ContactParams()
@@ -211,7 +214,13 @@ def evaluate(
         from mjx_pick.cluster import RayExecutor
 
         executor = RayExecutor(
-            ray, scene, grasp, backend=backend, batch_size=batch_size, cancel=cancel
+            ray,
+            scene,
+            grasp,
+            backend=backend,
+            batch_size=batch_size,
+            cancel=cancel,
+            on_event=on_cluster_event,
         )
     try:
         return _evaluate(

@@ -135,6 +135,65 @@ def test_worker_killed_mid_chunk_is_rerun_elsewhere(cluster, block, tmp_path):
     assert ev.table.equals(reference)
 
 
+def test_node_joining_is_used_and_node_leaving_is_survived(cluster, block, tmp_path):
+    """A third node joins while the run goes on and takes chunks; then it leaves (its
+    `ray start` session stopped) with a chunk in flight, which runs on another node. The
+    table is still the one of one uninterrupted process.
+
+    Nothing here sleeps and hopes: the test acts on the driver's events
+    (``cluster.ClusterEvent``), which the driver reports from its loop and waits for.
+    Holding the loop at the first chunk done (the join) and at the third node's actor
+    start (until it answers) leaves most chunks in the queue for the new actor, which
+    the driver serves first (the least busy)."""
+    import ray
+
+    address, _, reference = cluster
+    port = int(address.rsplit(":", 1)[1])
+    temp = Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp"))
+    third: dict = {"proc": None, "id": None, "inflight": 0, "left": False}
+    kinds: list[str] = []
+
+    def act(ev) -> None:
+        kinds.append(ev.kind)
+        if ev.kind == "call_done" and third["proc"] is None:
+            before = {n["NodeID"] for n in ray.nodes() if n["Alive"]}
+            log = tmp_path / "third.log"
+            third["proc"] = start_local_node(temp, log, port, head=False, env=CPU)
+            deadline = time.monotonic() + 60
+            while not {n["NodeID"] for n in ray.nodes() if n["Alive"]} - before:
+                assert third["proc"].poll() is None, log.read_text()
+                assert time.monotonic() < deadline, "the third node did not join in 60 s"
+                time.sleep(0.1)
+            (third["id"],) = {n["NodeID"] for n in ray.nodes() if n["Alive"]} - before
+        elif ev.kind == "actor_started" and ev.node_id == third["id"] and not third["left"]:
+            ray.get(ev.ready, timeout=120)  # the joined node's actor answers
+        elif ev.kind == "call_done" and ev.node_id == third["id"] and not third["left"]:
+            # it has done a chunk and runs the next (sent with it): it leaves with that
+            # one in flight. Its actor is killed first, so that the chunk cannot finish
+            # while the node shuts down; the node then leaves as `ray stop` would
+            third["inflight"] = ev.inflight
+            for pid in _chunk_workers([third["proc"]]):
+                os.kill(pid, signal.SIGKILL)
+            stop_local_node(third["proc"])
+            third["left"] = True
+
+    try:
+        ev = evaluate(block, **RUN, chunk_size=CHUNK, ray=address, on_cluster_event=act)
+    finally:
+        if third["proc"] is not None and not third["left"]:
+            stop_local_node(third["proc"])
+        subprocess.run(["rm", "-rf", str(temp)], check=False)
+    assert third["left"], f"the joined node never finished a chunk: {kinds}"
+    assert third["inflight"] >= 1, "it left holding a chunk (sent with its first)"
+    assert ev.table.equals(reference)
+    nodes = ev.summary["cluster"]["nodes"]
+    joined = [label for label in nodes if label.endswith("/" + third["id"][:6])]
+    assert len(nodes) == 3 and joined, nodes
+    assert nodes[joined[0]]["picks"] >= CHUNK, "the joined node simulated a chunk"
+    assert ev.summary["cluster"]["chunks_rerun"] >= 1, "its chunk in flight ran elsewhere"
+    assert "call_lost" in kinds
+
+
 def test_driver_killed_then_resumed_equals_one_process(cluster, block, tmp_path):
     address, _, reference = cluster
     grasp_file = tmp_path / "grasp.toml"
