@@ -99,10 +99,19 @@ def connect(address: str) -> bool:
     (and the caller should disconnect), False when it already was connected."""
     address = check_address(address)
     ray = import_ray()
-    if ray.is_initialized():
-        return False  # the caller's own connection (a script that ran ray.init) is used
     if address != "auto":
         _probe(address)
+    if ray.is_initialized():
+        # the caller's own connection (a script that ran ray.init, another run's pool)
+        # is used; a HOST:PORT must name that cluster (its GCS port)
+        gcs = ray.get_runtime_context().gcs_address or ""
+        head = address != "auto" and not address.startswith("ray://")
+        if head and gcs.rpartition(":")[2] != address.rpartition(":")[2]:
+            raise ConfigError(
+                f"--ray {address}: this process is already connected to the Ray cluster "
+                f"at {gcs}; use that one, or run from another process"
+            )
+        return False
     try:
         ray.init(
             address=address,
@@ -689,6 +698,7 @@ class RayBackend:
         self.pool, self.scene, self.grasp = pool, scene, grasp
         self.name = pool.name
         self.batch_size = pool.batch_size * max(pool.planned, 1)
+        self.call_batch_size = pool.batch_size  # the shape each actor runs
         self.stats = RunStats()
 
     @property

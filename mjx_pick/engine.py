@@ -39,7 +39,10 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
+import io
 import json
+import shutil
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -51,7 +54,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from mjx_pick.config import ConfigError, write_json, write_parquet
+from mjx_pick.config import ConfigError, to_dict, write_atomic, write_json, write_parquet
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.metrics import results_table
 from mjx_pick.objects import ObjectModel
@@ -234,6 +237,7 @@ class Engine:
         record: bool = False,
         chunk_size: int | None = None,
         on_progress: ProgressFn | None = None,
+        store: ChunkStore | None = None,
     ) -> Outcome:
         """Simulate inputs (N pick-points) on backend, chunk by chunk.
 
@@ -241,6 +245,9 @@ class Engine:
           record: also return traces (N, T, F) at the control rate.
           chunk_size: pick-points per chunk for this call (default: the engine's).
           on_progress: ``(done, total)`` after each chunk (default: the engine's).
+          store: a study's finished chunks (:class:`ChunkStore`): a chunk found there
+            is read instead of simulated, each simulated one is saved; the chunk size
+            is the store's for this scene once it has one (not with record).
 
         Returns:
           :class:`Outcome`: results ((N,) arrays), traces, this call's timing.
@@ -248,6 +255,10 @@ class Engine:
         report = on_progress if on_progress is not None else self.on_progress
         n = len(inputs)
         chunk = int(chunk_size or self.chunk_for(backend))
+        if record:
+            store = None  # traces are not kept
+        if store is not None:
+            chunk = store.chunk_size(backend, chunk)
         stats = backend.stats
         compile0, run0 = stats.compile_s, stats.run_s
         t0 = time.perf_counter()
@@ -257,7 +268,14 @@ class Engine:
         # an empty run still calls the backend once: it says what an empty batch gives
         for start in range(0, max(n, 1), chunk):
             self.check_cancel()
-            out, rows = backend.run(inputs.take(slice(start, start + chunk)), record=record)
+            part = inputs.take(slice(start, start + chunk))
+            out = store.read(backend, part) if store is not None else None
+            if out is None:
+                out, rows = backend.run(part, record=record)
+                if store is not None:
+                    store.write(backend, part, out)
+            else:
+                rows = None
             results.append(out)
             traces.append(rows)
             self.rollouts += min(chunk, n - start)
@@ -439,6 +457,108 @@ def read_chunk(out_dir: Path, k: int, picks: PickBatch) -> pa.Table | None:
     return table
 
 
+class ChunkStore:
+    """A study's finished chunks in its output folder (sweep, compare): what lets a
+    killed or stopped run continue with ``resume`` instead of starting again.
+
+    :meth:`Engine.run` asks the store for each chunk before simulating it and saves
+    each chunk it simulates, atomically, as ``chunks/<digest>.npz``: the chunk's result
+    arrays, named by a digest of what decides them -- the scene's model by content
+    (``Scene.portable_xml``), the procedure, the backend, its batch size (the float32
+    rounding of a batched program depends on its shape: module docstring) and the
+    chunk's per-pick inputs. A chunk is read back exactly when the same backend
+    simulated the same inputs in the same scene; whether that ran in this process or on
+    a Ray cluster makes no difference. The chunk size of each scene is saved
+    (``chunks/store.json``) on first use and kept by a resumed run, so that the chunks
+    cut the same way, whatever the new start (another cluster size, another device's
+    memory) would choose.
+
+    Args:
+      out_dir: the study's output folder (already claimed: ``rundir.claim``).
+      key: the study's configuration key (the folder's manifest's).
+      resume: continue from the chunks there; without it, a folder that holds chunks
+        is refused (ConfigError) before anything is simulated.
+    """
+
+    def __init__(self, out_dir: str | Path, key: str, resume: bool = False):
+        self.dir = Path(out_dir) / "chunks"
+        self.key = key
+        self._bases: dict[int, tuple[object, str]] = {}  # id(backend) -> (backend, digest)
+        meta = self.dir / "store.json"
+        has_chunks = any(self.dir.glob("*.npz"))
+        saved = None
+        if meta.is_file():
+            try:
+                saved = json.loads(meta.read_text())
+            except ValueError as err:
+                raise ConfigError(f"{meta}: unreadable ({err}); choose another --out") from err
+        if has_chunks and not resume:
+            raise ConfigError(
+                f"{out_dir} holds results of an earlier run: pass --resume to continue it, "
+                "or choose another --out"
+            )
+        if has_chunks and (saved is None or saved.get("key") != key):
+            raise ConfigError(
+                f"{out_dir} holds a run with a different configuration; it cannot be resumed "
+                "with these settings (choose another --out)"
+            )
+        self.sizes: dict[str, int] = dict(saved["chunk_sizes"]) if has_chunks else {}
+        self.read_chunks = self.written_chunks = 0
+
+    def _base(self, backend: Backend) -> str:
+        """Digest of what the backend fixes: scene content, procedure, backend, batch."""
+        entry = self._bases.get(id(backend))
+        if entry is None or entry[0] is not backend:
+            h = hashlib.sha256()
+            h.update(backend.scene.portable_xml().encode())
+            h.update(json.dumps(to_dict(backend.grasp), sort_keys=True).encode())
+            # a Ray backend's calls are actor batches (its batch_size is one per actor)
+            batch = getattr(backend, "call_batch_size", backend.batch_size)
+            h.update(f"{backend.name}/{batch}".encode())
+            entry = (backend, h.hexdigest()[:16])
+            self._bases[id(backend)] = entry
+        return entry[1]
+
+    def chunk_size(self, backend: Backend, proposed: int) -> int:
+        """The chunk size of backend's scene: the saved one, else proposed (saved)."""
+        base = self._base(backend)
+        if base not in self.sizes:
+            self.sizes[base] = int(proposed)
+            write_json(self.dir / "store.json", {"key": self.key, "chunk_sizes": self.sizes})
+        return self.sizes[base]
+
+    def _path(self, backend: Backend, inputs: PickInputs) -> Path:
+        h = hashlib.sha256(self._base(backend).encode())
+        for leaf in jax.tree.leaves(inputs):
+            a = np.ascontiguousarray(leaf)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+        return self.dir / f"{h.hexdigest()[:32]}.npz"
+
+    def read(self, backend: Backend, inputs: PickInputs) -> dict | None:
+        """The saved results of this chunk ((N,) arrays), or None."""
+        path = self._path(backend, inputs)
+        if not path.is_file():
+            return None
+        with np.load(path) as data:
+            out = {k: data[k] for k in data.files}
+        if any(len(v) != len(inputs) for v in out.values()):
+            raise ConfigError(f"{path} does not hold this chunk's results: choose another --out")
+        self.read_chunks += 1
+        return out
+
+    def write(self, backend: Backend, inputs: PickInputs, results: dict) -> None:
+        """Save a simulated chunk's results (atomically)."""
+        buf = io.BytesIO()
+        np.savez(buf, **results)
+        write_atomic(self._path(backend, inputs), buf.getvalue())
+        self.written_chunks += 1
+
+    def remove(self) -> None:
+        """Drop the chunks once the study's outputs are written (they hold every row)."""
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
 def run_chunks(
     executor: ChunkExecutor,
     picks: PickBatch,
@@ -597,10 +717,14 @@ class Simulator:
             self._backends[key] = self.engine.make(scene, settings.grasp)
         return self._backends[key]
 
-    def run(self, jobs: list[tuple[Settings, PickBatch]]) -> list[dict]:
+    def run(
+        self, jobs: list[tuple[Settings, PickBatch]], store: ChunkStore | None = None
+    ) -> list[dict]:
         """Per-job results (the dict of ``kernels.grasp.finalize``, (len(picks),) arrays).
 
-        The engine's on_progress gets (done, total) over all jobs of this call.
+        The engine's on_progress gets (done, total) over all jobs of this call. store:
+        chunks finished by an earlier run are read from it, new ones saved to it
+        (:class:`ChunkStore`).
         """
         for settings, _ in jobs:
             settings.grasp.check_gripper(settings.gripper)
@@ -640,7 +764,7 @@ class Simulator:
                 if report is not None and k > 0:
                     report(offset + k, total)
 
-            out = self.engine.run(backend, inputs, on_progress=progress).results
+            out = self.engine.run(backend, inputs, on_progress=progress, store=store).results
             done += len(inputs)
             self.rollouts += len(inputs)
             start = 0

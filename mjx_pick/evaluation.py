@@ -31,7 +31,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import re
 import shutil
 import threading
 import time
@@ -513,11 +512,7 @@ def experiment_key(scene: Scene, settings: dict) -> str:
     site-packages gives the same key) nor the chunk size (derived from free device
     memory; a resumed run keeps the one on disk, ``engine.ChunkPlan``).
     """
-    xml = re.sub(
-        r'file="([^"]+)"',
-        lambda m: f'file="sha256:{_file_digest(m[1])}"' if Path(m[1]).is_file() else m[0],
-        scene.xml,
-    )
+    xml = scene.portable_xml()
     obj = {k: v for k, v in scene.object.summary().items() if k != "source"}
     values = {k: to_dict(v) for k, v in settings.items()}
     mjcf = (values.get("gripper") or {}).get("mjcf")

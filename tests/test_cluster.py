@@ -10,6 +10,7 @@ The physics is kept short (a 0.6 s close, a 20 mm lift, a 0.2 s hold: test_scale
 kill test) so that 192 pick-points take seconds on one CPU.
 """
 
+import json
 import os
 import signal
 import socket
@@ -19,6 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
@@ -26,8 +29,10 @@ import mjx_pick as mp
 from mjx_pick import cli
 from mjx_pick.cluster import free_ports, session_pids, start_local_node, stop_local_node
 from mjx_pick.config import to_toml
+from mjx_pick.engine import Simulator
 from mjx_pick.evaluation import evaluate
 from mjx_pick.grasp import GraspConfig
+from mjx_pick.robust import robust_best
 
 GRASP = GraspConfig(close_timeout_s=0.6, lift_height_mm=20.0, hold_s=0.2)
 N = 192  # pick-points per run
@@ -261,14 +266,145 @@ def test_sweep_on_the_cluster_equals_one_process(cluster, block):
     assert remote.table.equals(local.table)
 
 
-def test_bad_cluster_addresses_are_one_line_errors(capsys, tmp_path):
+@pytest.fixture(scope="module")
+def cluster_sim(cluster, block):
+    """One Simulator on the cluster for the studies below (their actors start once):
+    the C engine, 16 pick-points per actor batch."""
+    address, _, _ = cluster
+    sim = Simulator(block, "mujoco", 16, ray=address)
+    yield sim
+    sim.close()
+
+
+def test_robust_on_the_cluster_equals_one_process(cluster_sim, block):
+    # the n pick-points, then the top-k's perturbed draws, all through the RayEngine
+    run = {"n": 32, "top_k": 4, "m": 8, "seed": 2}
+    local = robust_best(block, mp.Settings(grasp=GRASP), **run, backend="mujoco", batch_size=16)
+    remote = robust_best(block, mp.Settings(grasp=GRASP), **run, simulator=cluster_sim)
+    assert remote.num_rows == 4 and int(pc.sum(remote["trials"]).as_py()) == 32
+    assert remote.equals(local)
+
+
+def test_design_on_the_cluster_equals_one_process(cluster_sim, block):
+    # every round's comparison (a scene per gripper variant) and the final one
+    bounds = {"finger_width_mm": (10.0, 30.0)}
+    run = {"variants": 2, "n": 16, "rounds": 2, "final_n": 16, "seed": 0}
+    settings = mp.Settings(grasp=GRASP)
+    local = mp.design_search(block, bounds, settings, **run, backend="mujoco", batch_size=16)
+    remote = mp.design_search(block, bounds, settings, **run, simulator=cluster_sim)
+    assert remote.best == local.best
+    assert json.dumps(remote.rounds) == json.dumps(local.rounds)  # NaN-safe equality
+    assert remote.final.table.num_rows > 0
+    assert remote.final.table.equals(local.final.table)
+
+
+def _same_outputs(a: Path, b: Path, names: tuple[str, ...]) -> None:
+    """The study's outputs in a and b are equal: tables row for row, JSON files as text."""
+    for name in names:
+        if name.endswith(".parquet"):
+            assert pq.read_table(a / name).equals(pq.read_table(b / name)), name
+        else:
+            assert (a / name).read_text() == (b / name).read_text(), name
+
+
+def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(cluster_sim, block, tmp_path):
+    # started on the cluster (chunks of one actor batch per actor: 2 x 16), stopped as
+    # Ctrl-C stops it after its first chunk, resumed without Ray: the chunk on disk is
+    # read back (the chunk size with it), the rest simulated here; the outputs are
+    # those of one uninterrupted run without Ray
+    params = [mp.ParamSpec.parse("contact.pad_friction=0.5,0.9")]
+    run = {"n": 32, "seed": 1, "backend": "mujoco", "batch_size": 16}
+    settings = mp.Settings(grasp=GRASP)
+    mp.sweep(block, params, settings, **run, out=tmp_path / "ref")
+    out = tmp_path / "sw"
+
+    def ctrl_c(done: int, _total: int) -> None:
+        if done > 0:
+            raise KeyboardInterrupt
+
+    cluster_sim.engine.on_progress = ctrl_c
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            mp.sweep(block, params, settings, **run, simulator=cluster_sim, out=out)
+    finally:
+        cluster_sim.engine.on_progress = None
+    assert len(list((out / "chunks").glob("*.npz"))) == 1
+    assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
+    with pytest.raises(mp.ConfigError, match="pass --resume"):
+        mp.sweep(block, params, settings, **run, out=out)  # refused before simulating
+    resumed = mp.sweep(block, params, settings, **run, out=out, resume=True)
+    assert resumed.timing["chunks_resumed"] == 1 and resumed.table.num_rows == 64
+    _same_outputs(out, tmp_path / "ref", ("results.parquet", "variants.json"))
+    assert not (out / "chunks").exists(), "a complete sweep's chunks are removed"
+    again = mp.sweep(block, params, settings, **run, out=out, resume=True)
+    assert again.already_complete and again.table.equals(resumed.table)
+
+
+def test_compare_killed_then_resumed_on_the_cluster(cluster_sim, block, tmp_path):
+    # `mjx-pick compare` without Ray, killed (SIGKILL) once a chunk is on disk, then
+    # resumed on the cluster: only the missing chunks are simulated there, and the
+    # outputs are those of one uninterrupted run without Ray
+    grasp_file = tmp_path / "grasp.toml"
+    grasp_file.write_text(to_toml(GRASP))
+    names = ["robotiq-2f85", "franka-hand"]
+    run = {"n": 32, "seed": 0, "backend": "mujoco", "batch_size": 16}
+    settings = mp.Settings(mp.load_gripper("robotiq-2f85"), grasp=GRASP)  # the CLI's base
+    grippers = [mp.load_gripper(g) for g in names]
+    reference = mp.compare(block, grippers, settings, **run, out=tmp_path / "ref")
+    out = tmp_path / "cmp"
+    cmd = [sys.executable, "-m", "mjx_pick.cli", "compare", "block", "--grippers", ",".join(names)]
+    cmd += ["--n", "32", "--seed", "0", "--backend", "mujoco", "--batch-size", "16"]
+    cmd += ["--grasp", str(grasp_file), "--out", str(out), "--no-progress"]
+    log = tmp_path / "compare.log"
+    with log.open("wb") as sink:
+        env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": ""}
+        proc = subprocess.Popen(cmd, env=env, stdout=sink, stderr=subprocess.STDOUT, cwd=tmp_path)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if list((out / "chunks").glob("*.npz")):
+                break
+            time.sleep(0.05)
+        alive = proc.poll() is None
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert alive, f"compare ended before it could be killed: {log.read_text()}"
+    kept = list((out / "chunks").glob("*.npz"))
+    on_disk = sum(len(np.load(f)["success"]) for f in kept)
+    simulated = int(np.sum(reference.feasible))
+    assert kept and on_disk < simulated and not (out / "ranking.json").exists()
+    before = cluster_sim.engine.pool.simulated
+    resumed = mp.compare(
+        block, grippers, settings, **run, simulator=cluster_sim, out=out, resume=True
+    )
+    assert cluster_sim.engine.pool.simulated - before == simulated - on_disk
+    assert resumed.table.equals(reference.table)
+    _same_outputs(out, tmp_path / "ref", ("results.parquet", "ranking.json"))
+    again = mp.compare(block, grippers, settings, **run, out=out, resume=True)
+    assert again.already_complete and again.ranking == json.loads(
+        (out / "ranking.json").read_text()
+    )
+    assert np.array_equal(again.success, reference.success)
+    assert np.array_equal(again.score, reference.score)
+
+
+COMMANDS = {  # each study's own arguments, for the address checks below
+    "evaluate": ["--n", "8"],
+    "sweep": ["--n", "8", "--param", "contact.pad_friction=0.5,0.9"],
+    "compare": ["--n", "8", "--grippers", "robotiq-2f85,franka-hand"],
+    "design": ["--n", "8", "--bound", "finger_width_mm=10:30"],
+    "robust": ["--n", "8"],
+}
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_bad_cluster_addresses_are_one_line_errors(command, capsys, tmp_path):
     port = free_ports(1)[0]  # nothing listens there
     for address, message in (
         ("no address", "is not a cluster address"),
         ("host:99999", "is not a cluster address"),
         (f"127.0.0.1:{port}", "no Ray cluster answers there"),
     ):
-        argv = ["evaluate", "block", "--n", "8", "--backend", "mujoco", "--ray", address]
+        argv = [command, "block", *COMMANDS[command], "--backend", "mujoco", "--ray", address]
         assert cli.main([*argv, "--out", str(tmp_path / "never")]) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1, err
