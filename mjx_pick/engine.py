@@ -237,7 +237,7 @@ class Engine:
         record: bool = False,
         chunk_size: int | None = None,
         on_progress: ProgressFn | None = None,
-        store: ChunkStore | None = None,
+        store: StoredScene | None = None,
     ) -> Outcome:
         """Simulate inputs (N pick-points) on backend, chunk by chunk.
 
@@ -245,9 +245,10 @@ class Engine:
           record: also return traces (N, T, F) at the control rate.
           chunk_size: pick-points per chunk for this call (default: the engine's).
           on_progress: ``(done, total)`` after each chunk (default: the engine's).
-          store: a study's finished chunks (:class:`ChunkStore`): a chunk found there
-            is read instead of simulated, each simulated one is saved; the chunk size
-            is the store's for this scene once it has one (not with record).
+          store: a study's finished chunks as seen from this backend
+            (:meth:`ChunkStore.scene`): a chunk found there is read instead of
+            simulated, each simulated one is saved; the chunk size is the store's for
+            this scene once it has one (not with record).
 
         Returns:
           :class:`Outcome`: results ((N,) arrays), traces, this call's timing.
@@ -258,7 +259,7 @@ class Engine:
         if record:
             store = None  # traces are not kept
         if store is not None:
-            chunk = store.chunk_size(backend, chunk)
+            chunk = store.chunk_size(chunk)
         stats = backend.stats
         compile0, run0 = stats.compile_s, stats.run_s
         t0 = time.perf_counter()
@@ -269,11 +270,11 @@ class Engine:
         for start in range(0, max(n, 1), chunk):
             self.check_cancel()
             part = inputs.take(slice(start, start + chunk))
-            out = store.read(backend, part) if store is not None else None
+            out = store.read(part) if store is not None else None
             if out is None:
                 out, rows = backend.run(part, record=record)
                 if store is not None:
-                    store.write(backend, part, out)
+                    store.write(part, out)
             else:
                 rows = None
             results.append(out)
@@ -461,14 +462,16 @@ class ChunkStore:
     """A study's finished chunks in its output folder (sweep, compare): what lets a
     killed or stopped run continue with ``resume`` instead of starting again.
 
-    :meth:`Engine.run` asks the store for each chunk before simulating it and saves
-    each chunk it simulates, atomically, as ``chunks/<digest>.npz``: the chunk's result
-    arrays, named by a digest of what decides them -- the scene's model by content
-    (``Scene.portable_xml``), the procedure, the backend, its batch size (the float32
-    rounding of a batched program depends on its shape: module docstring) and the
-    chunk's per-pick inputs. A chunk is read back exactly when the same backend
-    simulated the same inputs in the same scene; whether that ran in this process or on
-    a Ray cluster makes no difference. The chunk size of each scene is saved
+    :meth:`Engine.run` asks the store (through :meth:`scene`'s view) for each chunk
+    before simulating it and saves each chunk it simulates, atomically, as
+    ``chunks/<digest>.npz``: the chunk's result arrays, named by a digest of what decides
+    them -- the compiled simulation's structure (``Settings.structure``: gripper,
+    solver, scan length, grasp height; the object is the folder's, fixed by its
+    configuration key), the backend, its batch size (the float32 rounding of a batched
+    program depends on its shape: module docstring) and the chunk's per-pick inputs
+    (pose, contact, controller). A chunk is read back exactly when the same backend
+    simulated the same inputs in the same structure; whether that ran in this process
+    or on a Ray cluster makes no difference. The chunk size of each structure is saved
     (``chunks/store.json``) on first use and kept by a resumed run, so that the chunks
     cut the same way, whatever the new start (another cluster size, another device's
     memory) would choose.
@@ -483,7 +486,6 @@ class ChunkStore:
     def __init__(self, out_dir: str | Path, key: str, resume: bool = False):
         self.dir = Path(out_dir) / "chunks"
         self.key = key
-        self._bases: dict[int, tuple[object, str]] = {}  # id(backend) -> (backend, digest)
         meta = self.dir / "store.json"
         has_chunks = any(self.dir.glob("*.npz"))
         saved = None
@@ -505,58 +507,62 @@ class ChunkStore:
         self.sizes: dict[str, int] = dict(saved["chunk_sizes"]) if has_chunks else {}
         self.read_chunks = self.written_chunks = 0
 
-    def _base(self, backend: Backend) -> str:
-        """Digest of what the backend fixes: scene content, procedure, backend, batch."""
-        entry = self._bases.get(id(backend))
-        if entry is None or entry[0] is not backend:
-            h = hashlib.sha256()
-            h.update(backend.scene.portable_xml().encode())
-            h.update(json.dumps(to_dict(backend.grasp), sort_keys=True).encode())
-            # a Ray backend's calls are actor batches (its batch_size is one per actor)
-            batch = getattr(backend, "call_batch_size", backend.batch_size)
-            h.update(f"{backend.name}/{batch}".encode())
-            entry = (backend, h.hexdigest()[:16])
-            self._bases[id(backend)] = entry
-        return entry[1]
+    def scene(self, backend: Backend, structure: tuple) -> StoredScene:
+        """The store as :meth:`Engine.run` uses it for backend, whose compiled
+        simulation is settings' ``structure()``."""
+        h = hashlib.sha256(json.dumps(to_dict(structure), sort_keys=True, default=str).encode())
+        # a Ray backend's calls are actor batches (its batch_size is one per actor)
+        batch = getattr(backend, "call_batch_size", backend.batch_size)
+        h.update(f"{backend.name}/{batch}".encode())
+        return StoredScene(self, h.hexdigest()[:16])
 
-    def chunk_size(self, backend: Backend, proposed: int) -> int:
-        """The chunk size of backend's scene: the saved one, else proposed (saved)."""
-        base = self._base(backend)
-        if base not in self.sizes:
-            self.sizes[base] = int(proposed)
-            write_json(self.dir / "store.json", {"key": self.key, "chunk_sizes": self.sizes})
-        return self.sizes[base]
+    def remove(self) -> None:
+        """Drop the chunks once the study's outputs are written (they hold every row)."""
+        shutil.rmtree(self.dir, ignore_errors=True)
 
-    def _path(self, backend: Backend, inputs: PickInputs) -> Path:
-        h = hashlib.sha256(self._base(backend).encode())
+
+@dataclasses.dataclass(frozen=True)
+class StoredScene:
+    """A :class:`ChunkStore` seen from one compiled simulation (:meth:`ChunkStore.scene`)."""
+
+    store: ChunkStore
+    base: str  # digest of the structure, backend and batch size
+
+    def chunk_size(self, proposed: int) -> int:
+        """This scene's chunk size: the saved one, else proposed (then saved)."""
+        sizes = self.store.sizes
+        if self.base not in sizes:
+            sizes[self.base] = int(proposed)
+            meta = {"key": self.store.key, "chunk_sizes": sizes}
+            write_json(self.store.dir / "store.json", meta)
+        return sizes[self.base]
+
+    def _path(self, inputs: PickInputs) -> Path:
+        h = hashlib.sha256(self.base.encode())
         for leaf in jax.tree.leaves(inputs):
             a = np.ascontiguousarray(leaf)
             h.update(f"{a.dtype.str}{a.shape}".encode())
             h.update(a.tobytes())
-        return self.dir / f"{h.hexdigest()[:32]}.npz"
+        return self.store.dir / f"{h.hexdigest()[:32]}.npz"
 
-    def read(self, backend: Backend, inputs: PickInputs) -> dict | None:
+    def read(self, inputs: PickInputs) -> dict | None:
         """The saved results of this chunk ((N,) arrays), or None."""
-        path = self._path(backend, inputs)
+        path = self._path(inputs)
         if not path.is_file():
             return None
         with np.load(path) as data:
             out = {k: data[k] for k in data.files}
         if any(len(v) != len(inputs) for v in out.values()):
             raise ConfigError(f"{path} does not hold this chunk's results: choose another --out")
-        self.read_chunks += 1
+        self.store.read_chunks += 1
         return out
 
-    def write(self, backend: Backend, inputs: PickInputs, results: dict) -> None:
+    def write(self, inputs: PickInputs, results: dict) -> None:
         """Save a simulated chunk's results (atomically)."""
         buf = io.BytesIO()
         np.savez(buf, **results)
-        write_atomic(self._path(backend, inputs), buf.getvalue())
-        self.written_chunks += 1
-
-    def remove(self) -> None:
-        """Drop the chunks once the study's outputs are written (they hold every row)."""
-        shutil.rmtree(self.dir, ignore_errors=True)
+        write_atomic(self._path(inputs), buf.getvalue())
+        self.store.written_chunks += 1
 
 
 def run_chunks(
@@ -737,7 +743,7 @@ class Simulator:
         report = self.engine.on_progress
         if report is not None:
             report(0, total)
-        for members in groups.values():
+        for structure, members in groups.items():
             live = [j for j in members if len(jobs[j][1])]
             for j in members:
                 if not len(jobs[j][1]):
@@ -764,7 +770,8 @@ class Simulator:
                 if report is not None and k > 0:
                     report(offset + k, total)
 
-            out = self.engine.run(backend, inputs, on_progress=progress, store=store).results
+            view = store.scene(backend, structure) if store is not None else None
+            out = self.engine.run(backend, inputs, on_progress=progress, store=view).results
             done += len(inputs)
             self.rollouts += len(inputs)
             start = 0
