@@ -160,6 +160,8 @@ def compare(
     base = base or Settings()
     pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
     store = None
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
     if out is not None:
         request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
         request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)

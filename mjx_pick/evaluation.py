@@ -203,6 +203,8 @@ def evaluate(
         )
     if chunk_size is not None and int(chunk_size) < 1:
         raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
     scene = build_scene(obj, gripper, contact, solver, grasp)
     engine = runner = None
     if ray is None:

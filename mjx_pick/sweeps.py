@@ -265,6 +265,8 @@ def sweep(
     base = base or Settings()
     pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
     store = None
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
     if out is not None:
         request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
         request.update(params=to_dict(params), n=n, seed=seed, random=random)

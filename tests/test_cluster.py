@@ -332,6 +332,8 @@ def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(cluster_sim, block,
     assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
     with pytest.raises(mp.ConfigError, match="pass --resume"):
         mp.sweep(block, params, settings, **run, out=out)  # refused before simulating
+    with pytest.raises(mp.ConfigError, match="--resume needs --out"):
+        mp.sweep(block, params, settings, **run, resume=True)
     resumed = mp.sweep(block, params, settings, **run, out=out, resume=True)
     assert resumed.timing["chunks_resumed"] == 1 and resumed.table.num_rows == 64
     _same_outputs(out, tmp_path / "ref", ("results.parquet", "variants.json"))
