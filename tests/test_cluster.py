@@ -50,31 +50,39 @@ def cluster(tmp_path_factory, block):
     import ray
 
     logs = tmp_path_factory.mktemp("ray-logs")
-    # Ray's socket paths must stay short (107 bytes): its temp folders go under /tmp
-    temps = [Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp")) for _ in range(2)]
-    port = free_ports(1)[0]
+    temps: list[Path] = []
     nodes = []
     try:
-        nodes.append(start_local_node(temps[0], logs / "head.log", port, head=True, env=CPU))
-        deadline = time.monotonic() + 60
-        while True:  # the head's GCS port answers
+        ports = iter(free_ports(3))  # a new head port for each try
+
+        def answers(port: int) -> bool:  # the head's GCS port
             try:
                 socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
+                return True
             except OSError:
-                assert nodes[0].poll() is None, (logs / "head.log").read_text()
-                assert time.monotonic() < deadline, "the Ray head did not start in 60 s"
-                time.sleep(0.2)
-        nodes.append(start_local_node(temps[1], logs / "worker.log", port, head=False, env=CPU))
+                return False
+
+        head, port = _start_node(logs / "head.log", lambda: next(ports), True, answers, temps)
+        nodes.append(head)
         address = f"127.0.0.1:{port}"
-        reference = evaluate(block, **RUN, chunk_size=CHUNK).table
+        temps.append(Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp")))
+        log = logs / "worker.log"
+        nodes.append(start_local_node(temps[-1], log, port, head=False, env=CPU))
+        reference = evaluate(block, **RUN, chunk_size=CHUNK).table  # while it starts
         ray.init(address=address, logging_level="WARNING", log_to_driver=False)
         try:
+
+            def joined(_port: int) -> bool:
+                return sum(n["Alive"] for n in ray.nodes()) >= 2
+
             deadline = time.monotonic() + 60
-            while sum(n["Alive"] for n in ray.nodes()) < 2:
-                assert nodes[1].poll() is None, (logs / "worker.log").read_text()
-                assert time.monotonic() < deadline, "the second node did not join in 60 s"
-                time.sleep(0.2)
+            while not joined(port):
+                if nodes[1].poll() is not None:  # it exited (a port taken): start it again
+                    stop_local_node(nodes.pop())
+                    nodes.append(_start_node(log, lambda: port, False, joined, temps)[0])
+                    break
+                assert time.monotonic() < deadline, f"no second node in 60 s: {log.read_text()}"
+                time.sleep(0.1)
         finally:
             ray.shutdown()
         yield address, nodes, reference
@@ -83,6 +91,30 @@ def cluster(tmp_path_factory, block):
             stop_local_node(proc)
         for temp in temps:
             subprocess.run(["rm", "-rf", str(temp)], check=False)
+
+
+def _start_node(log: Path, head_port, head: bool, up, temps: list[Path]):
+    """Start a node of the local cluster (``cluster.start_local_node``) and wait until
+    up(port) says it is there: (its process, the head's port). A node that exits before
+    is started again (up to 3 tries, new ports and temp folder): the free ports it was
+    given can be taken by another process of a shared machine before it binds them.
+
+    head_port: () -> the head's port for this try; temps: where each try's temp folder
+    is listed, for the caller to remove. Ray's socket paths must stay short (107 bytes):
+    the temp folders go under /tmp."""
+    for _ in range(3):
+        port = head_port()
+        temp = Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp"))
+        temps.append(temp)
+        proc = start_local_node(temp, log, port, head=head, env=CPU)
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and not up(port):
+            assert time.monotonic() < deadline, f"{log.name}: not up in 60 s: {log.read_text()}"
+            time.sleep(0.1)
+        if proc.poll() is None:
+            return proc, port
+        stop_local_node(proc)  # what it started before it exited
+    raise AssertionError(f"{log.name}: the node exited 3 times: {log.read_text()}")
 
 
 def _chunk_workers(nodes: list[subprocess.Popen]) -> list[int]:
@@ -154,7 +186,7 @@ def test_node_joining_is_used_and_node_leaving_is_survived(cluster, block, tmp_p
 
     address, _, reference = cluster
     port = int(address.rsplit(":", 1)[1])
-    temp = Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp"))
+    temps: list[Path] = []
     third: dict = {"proc": None, "id": None, "inflight": 0, "left": False}
     kinds: list[str] = []
 
@@ -162,13 +194,12 @@ def test_node_joining_is_used_and_node_leaving_is_survived(cluster, block, tmp_p
         kinds.append(ev.kind)
         if ev.kind == "call_done" and third["proc"] is None:
             before = {n["NodeID"] for n in ray.nodes() if n["Alive"]}
+
+            def joined(_port: int) -> bool:
+                return bool({n["NodeID"] for n in ray.nodes() if n["Alive"]} - before)
+
             log = tmp_path / "third.log"
-            third["proc"] = start_local_node(temp, log, port, head=False, env=CPU)
-            deadline = time.monotonic() + 60
-            while not {n["NodeID"] for n in ray.nodes() if n["Alive"]} - before:
-                assert third["proc"].poll() is None, log.read_text()
-                assert time.monotonic() < deadline, "the third node did not join in 60 s"
-                time.sleep(0.1)
+            third["proc"], _ = _start_node(log, lambda: port, False, joined, temps)
             (third["id"],) = {n["NodeID"] for n in ray.nodes() if n["Alive"]} - before
         elif ev.kind == "actor_started" and ev.node_id == third["id"] and not third["left"]:
             ray.get(ev.ready, timeout=120)  # the joined node's actor answers
@@ -187,7 +218,8 @@ def test_node_joining_is_used_and_node_leaving_is_survived(cluster, block, tmp_p
     finally:
         if third["proc"] is not None and not third["left"]:
             stop_local_node(third["proc"])
-        subprocess.run(["rm", "-rf", str(temp)], check=False)
+        for temp in temps:
+            subprocess.run(["rm", "-rf", str(temp)], check=False)
     assert third["left"], f"the joined node never finished a chunk: {kinds}"
     assert third["inflight"] >= 1, "it left holding a chunk (sent with its first)"
     assert ev.table.equals(reference)
