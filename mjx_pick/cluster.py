@@ -37,11 +37,12 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 
+from mjx_pick import interrupts
 from mjx_pick.config import ConfigError
 from mjx_pick.engine import Cancelled, ChunkDone, Engine, LocalExecutor
 from mjx_pick.grasp import GraspConfig
@@ -99,10 +100,19 @@ def connect(address: str) -> bool:
     (and the caller should disconnect), False when it already was connected."""
     address = check_address(address)
     ray = import_ray()
-    if ray.is_initialized():
-        return False  # the caller's own connection (a script that ran ray.init) is used
     if address != "auto":
         _probe(address)
+    if ray.is_initialized():
+        # the caller's own connection (a script that ran ray.init, another run's pool)
+        # is used; a HOST:PORT must name that cluster (its GCS port)
+        gcs = ray.get_runtime_context().gcs_address or ""
+        head = address != "auto" and not address.startswith("ray://")
+        if head and gcs.rpartition(":")[2] != address.rpartition(":")[2]:
+            raise ConfigError(
+                f"--ray {address}: this process is already connected to the Ray cluster "
+                f"at {gcs}; use that one, or run from another process"
+            )
+        return False
     try:
         ray.init(
             address=address,
@@ -198,6 +208,35 @@ class ChunkWorker:
         return Simulated(out.results, out.traces, t.compile_s, t.run_s, wall, self.label)
 
 
+@dataclasses.dataclass(frozen=True)
+class ClusterEvent:
+    """One step of the driver's work on the cluster, as :class:`ActorPool` reports it to
+    its ``on_event`` callback (for a display of the nodes, for tests that act at a given
+    point of a run). The callback runs in the driver's loop: while it runs, nothing is
+    handed out or collected (the actors go on with the calls they hold).
+
+    kind is one of
+
+    * ``'actor_started'``: an actor was placed on node_id (at the start, on a node that
+      joined, or in place of one that died); ``ready`` is an ObjectRef that resolves
+      once the actor answers (``ray.get(event.ready)`` waits for it);
+    * ``'actor_ready'``: that actor answered; it takes calls from now on;
+    * ``'actor_lost'``: an actor died before it answered (its node left, or it failed
+      to start);
+    * ``'call_sent'``, ``'call_done'``: call ``key`` (evaluate: the chunk's index) was
+      handed to the actor on node_id, or came back from it;
+    * ``'call_lost'``: call ``key`` was lost with its actor; it goes back to the front of
+      the queue and runs on another actor.
+    """
+
+    kind: str
+    node_id: str  # Ray's node id (hex)
+    label: str = ""  # 'host/3f2a1b', once the node's actor answered
+    key: object = None  # the call, for the call_* kinds
+    inflight: int = 0  # calls the actor holds after this event
+    ready: object = None  # actor_started: the ObjectRef of its first answer
+
+
 @dataclasses.dataclass
 class _Slot:
     """Where one actor goes, and the actor once started."""
@@ -271,6 +310,8 @@ class ActorPool:
         (a call that kills every actor it meets is a bug, not bad luck); also the
         actors a node may lose before it is left alone.
       start_timeout_s: how long to wait for the first actor to start.
+      on_event: called with a :class:`ClusterEvent` at each actor start and answer,
+        and each call sent, done or lost.
     """
 
     def __init__(
@@ -283,8 +324,10 @@ class ActorPool:
         depth: int = 2,
         max_attempts: int = 3,
         start_timeout_s: float = 600.0,
+        on_event: Callable[[ClusterEvent], None] | None = None,
     ):
         self.address = check_address(address)
+        self.on_event = on_event
         self.slots: list[_Slot] = []
         self._connected = connect(self.address)
         self._ray = import_ray()
@@ -354,6 +397,12 @@ class ActorPool:
         ).remote(self.name, self.batch_size, slot.nthread)
         slot.ready_ref = slot.actor.info.remote()
         self.slots.append(slot)
+        self._emit("actor_started", slot, ready=slot.ready_ref)
+
+    def _emit(self, kind: str, slot: _Slot, **fields) -> None:
+        if self.on_event is not None:
+            label = slot.info["label"] if slot.info else ""
+            self.on_event(ClusterEvent(kind, slot.node_id, label, inflight=slot.inflight, **fields))
 
     def _scan(self, force: bool = False) -> None:
         """Start actors on alive nodes that have none (at the start, nodes that joined,
@@ -384,6 +433,7 @@ class ActorPool:
                 # constructor's exception): kept for the error if no actor is left
                 self.last_error = str(err).strip().splitlines()[-1] if str(err).strip() else ""
                 self._drop(slot)
+                self._emit("actor_lost", slot)
                 continue
             mine = {k: v for k, v in versions().items() if k in SAME_VERSIONS}
             if slot.info["versions"] != mine:
@@ -397,6 +447,7 @@ class ActorPool:
                     f"node {slot.info['label']} runs {diff}: install the same versions on "
                     "every node"
                 )
+            self._emit("actor_ready", slot)
 
     def _drop(self, slot: _Slot) -> None:
         """Forget a dead actor; its node gets a new one unless it failed too often."""
@@ -417,7 +468,14 @@ class ActorPool:
     def _lost_errors(self) -> tuple[type, ...]:
         """Exceptions that mean an actor (or its node, or its results) is gone."""
         ex = self._ray.exceptions
-        names = ("RayActorError", "WorkerCrashedError", "NodeDiedError", "ObjectLostError")
+        # ActorUnschedulableError: an actor placed on a node that left before it started
+        names = (
+            "RayActorError",
+            "ActorUnschedulableError",
+            "WorkerCrashedError",
+            "NodeDiedError",
+            "ObjectLostError",
+        )
         return tuple(getattr(ex, n) for n in names if hasattr(ex, n))
 
     # ------------------------------------------------------------------ calls
@@ -445,6 +503,7 @@ class ActorPool:
         while queue or inflight:
             if self.cancel is not None and self.cancel.is_set():
                 raise Cancelled("cancelled")
+            interrupts.raise_if_requested()  # a Ctrl-C swallowed while waiting on Ray
             self._scan()
             self._check_ready()
             ready = [s for s in self.slots if s.info is not None]
@@ -461,13 +520,19 @@ class ActorPool:
                     f"no Ray actor started within {self.start_timeout_s:.0f} s: does any node "
                     f"have the resources for one ({self.name}; `ray status`)?"
                 )
-            for slot in ready:
-                while queue and slot.inflight < self.depth:
-                    key = queue.popleft()
-                    method, args = calls[key]
-                    ref = getattr(slot.actor, method).remote(*args)
-                    inflight[ref] = (key, slot)
-                    slot.inflight += 1
+            while queue:
+                # the least busy actor first: one that just started (a node that joined,
+                # a replacement) gets work at once instead of what busy ones leave
+                free = [s for s in ready if s.inflight < self.depth]
+                if not free:
+                    break
+                slot = min(free, key=lambda s: s.inflight)
+                key = queue.popleft()
+                method, args = calls[key]
+                ref = getattr(slot.actor, method).remote(*args)
+                inflight[ref] = (key, slot)
+                slot.inflight += 1
+                self._emit("call_sent", slot, key=key)
             if not inflight:
                 time.sleep(0.1)  # actors still starting
                 continue
@@ -489,6 +554,7 @@ class ActorPool:
                     queue.appendleft(key)
                     if slot in self.slots:
                         self._drop(slot)
+                    self._emit("call_lost", slot, key=key)
                     continue
                 wall = getattr(result, "wall_s", 0.0)
                 label = slot.info["label"]
@@ -497,6 +563,7 @@ class ActorPool:
                 self.compile_s += getattr(result, "compile_s", 0.0)
                 self.run_s += getattr(result, "run_s", 0.0)
                 self.simulated += sizes[key]
+                self._emit("call_done", slot, key=key)
                 yield key, result
 
     def call(self, method: str, args: tuple):
@@ -633,6 +700,7 @@ class RayBackend:
         self.pool, self.scene, self.grasp = pool, scene, grasp
         self.name = pool.name
         self.batch_size = pool.batch_size * max(pool.planned, 1)
+        self.call_batch_size = pool.batch_size  # the shape each actor runs
         self.stats = RunStats()
 
     @property
@@ -677,8 +745,11 @@ class RayEngine(Engine):
         chunk_size: int | None = None,
         on_progress=None,
         cancel: threading.Event | None = None,
+        on_event: Callable[[ClusterEvent], None] | None = None,
     ):
-        self.pool = ActorPool(address, backend=backend, batch_size=batch_size, cancel=cancel)
+        self.pool = ActorPool(
+            address, backend=backend, batch_size=batch_size, cancel=cancel, on_event=on_event
+        )
         super().__init__(
             self.pool.name,
             self.pool.batch_size,

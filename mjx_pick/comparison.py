@@ -31,11 +31,11 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
-from mjx_pick.engine import Simulator, marking_stops, showing_progress
+from mjx_pick.engine import ChunkStore, Simulator, marking_stops, showing_progress
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.objects import ObjectModel
-from mjx_pick.rundir import claim, config_hash, finish
+from mjx_pick.rundir import claim, config_hash, finish, is_complete, portable_object
 from mjx_pick.simulate import Settings
 
 
@@ -51,6 +51,8 @@ class Comparison:
     feasible: np.ndarray  # (G, n) bool
     candidates: dict  # x_mm, y_mm, yaw_deg, pick_id (n,)
     out_dir: Path | None
+    # resume found the comparison already complete: read back, nothing simulated
+    already_complete: bool = False
 
 
 def shared_candidates(
@@ -132,18 +134,19 @@ def compare(
     simulator: Simulator | None = None,
     out: str | Path | None = None,
     overwrite: bool = False,
+    resume: bool = False,
     ray: str | None = None,
     progress: bool = False,
 ) -> Comparison:
-    """Simulate one shared candidate set on every gripper and rank them (out, ray,
-    progress: as sweep's)."""
+    """Simulate one shared candidate set on every gripper and rank them (out, resume,
+    ray, progress: as sweep's)."""
     if simulator is None and ray is not None:
         sim = Simulator(obj, backend, batch_size, ray=ray)
         try:
             return compare(
                 obj, grippers, base, n=n, seed=seed, rank_by=rank_by,
                 pick_config=pick_config, simulator=sim, out=out, overwrite=overwrite,
-                progress=progress,
+                resume=resume, progress=progress,
             )  # fmt: skip
         finally:
             sim.close()
@@ -155,10 +158,19 @@ def compare(
     if len(set(names)) != len(names):
         raise ConfigError(f"gripper names must differ: {names}")
     base = base or Settings()
+    pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+    store = None
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
     if out is not None:
-        request = {"object": obj.summary(), "grippers": to_dict(grippers), "base": to_dict(base)}
-        request.update(n=n, seed=seed, rank_by=rank_by, picks=to_dict(pick_config))
-        claim(out, "compare", config_hash(request), overwrite=overwrite)
+        request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
+        request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
+        request.update(picks=to_dict(pick_config))
+        key = config_hash(request)
+        if resume and not overwrite and is_complete(out, "compare", key):
+            return _read_comparison(Path(out), obj, grippers, base, n, seed, pick_config)
+        claim(out, "compare", key, resume=resume, overwrite=overwrite)
+        store = ChunkStore(out, key, resume)
     t0 = time.perf_counter()
     cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
     n_cand = len(cand["pick_id"])
@@ -166,7 +178,7 @@ def compare(
     jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]
     desc = f"compare: {len(jobs)} grippers ({sim.engine.backend_name})"
     with marking_stops(out, "compare"), showing_progress(sim.engine, desc, "sim", progress):
-        outs = sim.run(jobs)
+        outs = sim.run(jobs, store)
     success = np.zeros((len(grippers), n_cand), bool)
     score = np.zeros((len(grippers), n_cand))
     tables = []
@@ -214,7 +226,34 @@ def compare(
         meta = sim.engine.describe(time.perf_counter() - t0)
         config["picks"] = to_dict(pick_config)
         finish(out_dir, command="compare", config=config, seed=seed, **meta)
+        store.remove()  # every row is in results.parquet now
     return result
+
+
+def _read_comparison(out_dir: Path, obj, grippers, base, n, seed, pick_config) -> Comparison:
+    """A complete comparison's folder read back (resume has nothing to do): its ranking
+    and table, and the per-gripper arrays rebuilt from the table on the shared
+    candidates (drawn again: geometry only, nothing simulated)."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    cand, _, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
+    table = pq.read_table(out_dir / "results.parquet")
+    ranking = json.loads((out_dir / "ranking.json").read_text())
+    names = [g.name for g in grippers]
+    success = np.zeros((len(grippers), len(cand["pick_id"])), bool)
+    score = np.zeros(success.shape)
+    where = {int(pid): i for i, pid in enumerate(cand["pick_id"])}
+    if table.num_rows:
+        rows = table.select(["gripper", "pick_id", "success", "score"]).to_pydict()
+        for g, pid, ok, s in zip(*rows.values(), strict=True):
+            i = names.index(g), where[int(pid)]
+            success[i], score[i] = bool(ok), 0.0 if s is None or np.isnan(s) else s
+    feasible = reasons == 0
+    return Comparison(
+        ranking, table, names, success, score, feasible, cand, out_dir, already_complete=True
+    )
 
 
 def plot_comparison(obj: ObjectModel, result: Comparison, out_dir: Path) -> None:
@@ -337,25 +376,49 @@ def design_search(
     batch_size: int | None = None,
     out: str | Path | None = None,
     overwrite: bool = False,
+    ray: str | None = None,
+    simulator: Simulator | None = None,
     progress: bool = False,
 ) -> DesignResult:
     """Search gripper geometry within bounds; see the module docstring.
 
     Round r simulates the surviving variants on n * 2**r shared pick-points and keeps
     the best third (at least one); the survivor is then compared with the base gripper
-    on final_n (default 4 n) fresh pick-points. progress: a progress bar on stderr
-    (its total grows as each round starts: a round's size depends on the last).
+    on final_n (default 4 n) fresh pick-points. ray: every round on a Ray cluster
+    ("auto" or "HOST:PORT"; mjx_pick.cluster), this process writing out. simulator:
+    run through this one (kept open; backend, batch_size and ray are then its own).
+    progress: a progress bar on stderr (its total grows as each round starts: a
+    round's size depends on the last).
     """
     base = base or Settings()
     check_range("design", "rounds", rounds, 1, 20)
+    check_range("design", "n", n, 1, 1e8)
+    if final_n is not None:
+        check_range("design", "final_n", final_n, 1, 1e8)
+    if rank_by not in ("success", "score"):
+        raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
     t0 = time.perf_counter()
     request = {"object": obj.summary(), "bounds": {k: list(v) for k, v in bounds.items()}}
     request.update(base=to_dict(base), variants=variants, n=n, rounds=rounds, seed=seed)
     request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
-    if out is not None:
-        claim(out, "design", config_hash(request), overwrite=overwrite)
     pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
-    sim = Simulator(obj, backend, batch_size)
+    sim = simulator or Simulator(obj, backend, batch_size, ray=ray)
+    try:
+        if out is not None:
+            claim(out, "design", config_hash(request), overwrite=overwrite)
+        search = {"rounds": rounds, "n": n, "final_n": final_n, "seed": seed}
+        search.update(rank_by=rank_by, pick_config=pick_config)
+        return _design(obj, base, pool, sim, bounds, request, t0, out, progress, **search)
+    finally:
+        if sim is not simulator:
+            sim.close()
+
+
+def _design(
+    obj, base, pool, sim, bounds, request, t0, out, progress, *,
+    rounds, n, final_n, seed, rank_by, pick_config,
+) -> DesignResult:  # fmt: skip
+    """design_search once its inputs are checked, its simulator made and out claimed."""
     history = []
     desc = f"design: {rounds} rounds + final ({sim.engine.backend_name})"
     with showing_progress(sim.engine, desc, "sim", progress) as bar:

@@ -40,7 +40,10 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
+import io
 import json
+import shutil
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -53,7 +56,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from mjx_pick import interrupts
-from mjx_pick.config import ConfigError, write_json, write_parquet
+from mjx_pick.config import ConfigError, to_dict, write_atomic, write_json, write_parquet
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.metrics import results_table
 from mjx_pick.objects import ObjectModel
@@ -239,6 +242,7 @@ class Engine:
         record: bool = False,
         chunk_size: int | None = None,
         on_progress: ProgressFn | None = None,
+        store: StoredScene | None = None,
     ) -> Outcome:
         """Simulate inputs (N pick-points) on backend, chunk by chunk.
 
@@ -246,6 +250,10 @@ class Engine:
           record: also return traces (N, T, F) at the control rate.
           chunk_size: pick-points per chunk for this call (default: the engine's).
           on_progress: ``(done, total)`` after each chunk (default: the engine's).
+          store: a study's finished chunks as seen from this backend
+            (:meth:`ChunkStore.scene`): a chunk found there is read instead of
+            simulated, each simulated one is saved; the chunk size is the store's for
+            this scene once it has one (not with record).
 
         Returns:
           :class:`Outcome`: results ((N,) arrays), traces, this call's timing.
@@ -253,6 +261,10 @@ class Engine:
         report = on_progress if on_progress is not None else self.on_progress
         n = len(inputs)
         chunk = int(chunk_size or self.chunk_for(backend))
+        if record:
+            store = None  # traces are not kept
+        if store is not None:
+            chunk = store.chunk_size(chunk)
         stats = backend.stats
         compile0, run0 = stats.compile_s, stats.run_s
         t0 = time.perf_counter()
@@ -262,7 +274,14 @@ class Engine:
         # an empty run still calls the backend once: it says what an empty batch gives
         for start in range(0, max(n, 1), chunk):
             self.check_cancel()
-            out, rows = backend.run(inputs.take(slice(start, start + chunk)), record=record)
+            part = inputs.take(slice(start, start + chunk))
+            out = store.read(part) if store is not None else None
+            if out is None:
+                out, rows = backend.run(part, record=record)
+                if store is not None:
+                    store.write(part, out)
+            else:
+                rows = None
             results.append(out)
             traces.append(rows)
             self.rollouts += min(chunk, n - start)
@@ -444,6 +463,113 @@ def read_chunk(out_dir: Path, k: int, picks: PickBatch) -> pa.Table | None:
     return table
 
 
+class ChunkStore:
+    """A study's finished chunks in its output folder (sweep, compare): what lets a
+    killed or stopped run continue with ``resume`` instead of starting again.
+
+    :meth:`Engine.run` asks the store (through :meth:`scene`'s view) for each chunk
+    before simulating it and saves each chunk it simulates, atomically, as
+    ``chunks/<digest>.npz``: the chunk's result arrays, named by a digest of what decides
+    them -- the compiled simulation's structure (``Settings.structure``: gripper,
+    solver, scan length, grasp height; the object is the folder's, fixed by its
+    configuration key), the backend, its batch size (the float32 rounding of a batched
+    program depends on its shape: module docstring) and the chunk's per-pick inputs
+    (pose, contact, controller). A chunk is read back exactly when the same backend
+    simulated the same inputs in the same structure; whether that ran in this process
+    or on a Ray cluster makes no difference. The chunk size of each structure is saved
+    (``chunks/store.json``) on first use and kept by a resumed run, so that the chunks
+    cut the same way, whatever the new start (another cluster size, another device's
+    memory) would choose.
+
+    Args:
+      out_dir: the study's output folder (already claimed: ``rundir.claim``).
+      key: the study's configuration key (the folder's manifest's).
+      resume: continue from the chunks there; without it, a folder that holds chunks
+        is refused (ConfigError) before anything is simulated.
+    """
+
+    def __init__(self, out_dir: str | Path, key: str, resume: bool = False):
+        self.dir = Path(out_dir) / "chunks"
+        self.key = key
+        meta = self.dir / "store.json"
+        has_chunks = any(self.dir.glob("*.npz"))
+        saved = None
+        if meta.is_file():
+            try:
+                saved = json.loads(meta.read_text())
+            except ValueError as err:
+                raise ConfigError(f"{meta}: unreadable ({err}); choose another --out") from err
+        if has_chunks and not resume:
+            raise ConfigError(
+                f"{out_dir} holds results of an earlier run: pass --resume to continue it, "
+                "or choose another --out"
+            )
+        if has_chunks and (saved is None or saved.get("key") != key):
+            raise ConfigError(
+                f"{out_dir} holds a run with a different configuration; it cannot be resumed "
+                "with these settings (choose another --out)"
+            )
+        self.sizes: dict[str, int] = dict(saved["chunk_sizes"]) if has_chunks else {}
+        self.read_chunks = self.written_chunks = 0
+
+    def scene(self, backend: Backend, structure: tuple) -> StoredScene:
+        """The store as :meth:`Engine.run` uses it for backend, whose compiled
+        simulation is settings' ``structure()``."""
+        h = hashlib.sha256(json.dumps(to_dict(structure), sort_keys=True, default=str).encode())
+        # a Ray backend's calls are actor batches (its batch_size is one per actor)
+        batch = getattr(backend, "call_batch_size", backend.batch_size)
+        h.update(f"{backend.name}/{batch}".encode())
+        return StoredScene(self, h.hexdigest()[:16])
+
+    def remove(self) -> None:
+        """Drop the chunks once the study's outputs are written (they hold every row)."""
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class StoredScene:
+    """A :class:`ChunkStore` seen from one compiled simulation (:meth:`ChunkStore.scene`)."""
+
+    store: ChunkStore
+    base: str  # digest of the structure, backend and batch size
+
+    def chunk_size(self, proposed: int) -> int:
+        """This scene's chunk size: the saved one, else proposed (then saved)."""
+        sizes = self.store.sizes
+        if self.base not in sizes:
+            sizes[self.base] = int(proposed)
+            meta = {"key": self.store.key, "chunk_sizes": sizes}
+            write_json(self.store.dir / "store.json", meta)
+        return sizes[self.base]
+
+    def _path(self, inputs: PickInputs) -> Path:
+        h = hashlib.sha256(self.base.encode())
+        for leaf in jax.tree.leaves(inputs):
+            a = np.ascontiguousarray(leaf)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+        return self.store.dir / f"{h.hexdigest()[:32]}.npz"
+
+    def read(self, inputs: PickInputs) -> dict | None:
+        """The saved results of this chunk ((N,) arrays), or None."""
+        path = self._path(inputs)
+        if not path.is_file():
+            return None
+        with np.load(path) as data:
+            out = {k: data[k] for k in data.files}
+        if any(len(v) != len(inputs) for v in out.values()):
+            raise ConfigError(f"{path} does not hold this chunk's results: choose another --out")
+        self.store.read_chunks += 1
+        return out
+
+    def write(self, inputs: PickInputs, results: dict) -> None:
+        """Save a simulated chunk's results (atomically)."""
+        buf = io.BytesIO()
+        np.savez(buf, **results)
+        write_atomic(self._path(inputs), buf.getvalue())
+        self.store.written_chunks += 1
+
+
 def run_chunks(
     executor: ChunkExecutor,
     picks: PickBatch,
@@ -602,10 +728,14 @@ class Simulator:
             self._backends[key] = self.engine.make(scene, settings.grasp)
         return self._backends[key]
 
-    def run(self, jobs: list[tuple[Settings, PickBatch]]) -> list[dict]:
+    def run(
+        self, jobs: list[tuple[Settings, PickBatch]], store: ChunkStore | None = None
+    ) -> list[dict]:
         """Per-job results (the dict of ``kernels.grasp.finalize``, (len(picks),) arrays).
 
-        The engine's on_progress gets (done, total) over all jobs of this call.
+        The engine's on_progress gets (done, total) over all jobs of this call. store:
+        chunks finished by an earlier run are read from it, new ones saved to it
+        (:class:`ChunkStore`).
         """
         for settings, _ in jobs:
             settings.grasp.check_gripper(settings.gripper)
@@ -618,7 +748,7 @@ class Simulator:
         report = self.engine.on_progress
         if report is not None:
             report(0, total)
-        for members in groups.values():
+        for structure, members in groups.items():
             live = [j for j in members if len(jobs[j][1])]
             for j in members:
                 if not len(jobs[j][1]):
@@ -645,7 +775,8 @@ class Simulator:
                 if report is not None and k > 0:
                     report(offset + k, total)
 
-            out = self.engine.run(backend, inputs, on_progress=progress).results
+            view = store.scene(backend, structure) if store is not None else None
+            out = self.engine.run(backend, inputs, on_progress=progress, store=view).results
             done += len(inputs)
             self.rollouts += len(inputs)
             start = 0

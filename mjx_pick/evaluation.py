@@ -31,7 +31,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import re
 import shutil
 import threading
 import time
@@ -151,6 +150,7 @@ def evaluate(
     on_progress: ProgressFn | None = None,
     cancel: threading.Event | None = None,
     ray: str | None = None,
+    on_cluster_event=None,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
@@ -189,6 +189,8 @@ def evaluate(
         simulations per pick-point; see mjx_pick.robust.min_grip_force).
       ray: run the chunks on a Ray cluster: "auto" or the head's "HOST:PORT" (needs
         the cluster extra; see mjx_pick.cluster). This process still writes out.
+      on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` (an actor
+        started or answered, a chunk sent, done or lost), in the driver's loop.
     """
     obj, gripper = _resolve(obj, gripper)
     contact = contact or ContactParams()
@@ -202,6 +204,8 @@ def evaluate(
         )
     if chunk_size is not None and int(chunk_size) < 1:
         raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
     scene = build_scene(obj, gripper, contact, solver, grasp)
     engine = runner = None
     if ray is None:
@@ -212,7 +216,13 @@ def evaluate(
         from mjx_pick.cluster import RayExecutor
 
         executor = RayExecutor(
-            ray, scene, grasp, backend=backend, batch_size=batch_size, cancel=cancel
+            ray,
+            scene,
+            grasp,
+            backend=backend,
+            batch_size=batch_size,
+            cancel=cancel,
+            on_event=on_cluster_event,
         )
     try:
         return _evaluate(
@@ -506,11 +516,7 @@ def experiment_key(scene: Scene, settings: dict) -> str:
     site-packages gives the same key) nor the chunk size (derived from free device
     memory; a resumed run keeps the one on disk, ``engine.ChunkPlan``).
     """
-    xml = re.sub(
-        r'file="([^"]+)"',
-        lambda m: f'file="sha256:{_file_digest(m[1])}"' if Path(m[1]).is_file() else m[0],
-        scene.xml,
-    )
+    xml = scene.portable_xml()
     obj = {k: v for k, v in scene.object.summary().items() if k != "source"}
     values = {k: to_dict(v) for k, v in settings.items()}
     mjcf = (values.get("gripper") or {}).get("mjcf")

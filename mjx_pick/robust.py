@@ -100,6 +100,14 @@ def placements(
     return Placements(draws, ok, idx, np.asarray(res["reason"]))
 
 
+def check_draws(m: int, sigma_xy_mm: float, sigma_yaw_deg: float) -> None:
+    """A ConfigError unless 1 <= m <= 100000 draws, sigma_xy_mm in [0, 100] mm and
+    sigma_yaw_deg in [0, 180] deg."""
+    check_range("robustness", "m", m, 1, 100_000)
+    check_range("robustness", "sigma_xy_mm", sigma_xy_mm, 0, 100)
+    check_range("robustness", "sigma_yaw_deg", sigma_yaw_deg, 0, 180)
+
+
 def robustness(
     obj: ObjectModel,
     picks: pp.PickBatch,
@@ -115,23 +123,34 @@ def robustness(
     simulator: Simulator | None = None,
     out: str | Path | None = None,
     overwrite: bool = False,
+    ray: str | None = None,
     progress: bool = False,
+    _claimed: bool = False,
 ) -> pa.Table:
     """Robust success probability of each pick-point; rows ranked best first.
 
     out: a new folder, or the evaluate folder the pick-points came from (its files
-    stay; robustness.parquet and robustness.json join them). progress: a progress bar
-    of the simulations on stderr.
+    stay; robustness.parquet and robustness.json join them). ray: simulate the draws on
+    a Ray cluster ("auto" or "HOST:PORT"; mjx_pick.cluster), this process writing out.
+    progress: a progress bar of the simulations on stderr.
 
     Returns a table with pick_id, x_mm, y_mm, yaw_deg, robust_p, robust_ci_low,
     robust_ci_high, trials, successes, landed (draws where a finger lands on the
     object), missed (nothing between the fingers), robust_score_mean and rank.
     """
-    check_range("robustness", "m", m, 1, 100_000)
-    check_range("robustness", "sigma_xy_mm", sigma_xy_mm, 0, 100)
-    check_range("robustness", "sigma_yaw_deg", sigma_yaw_deg, 0, 180)
+    check_draws(m, sigma_xy_mm, sigma_yaw_deg)
+    if simulator is None and ray is not None:
+        sim = Simulator(obj, backend, batch_size, ray=ray)
+        try:
+            return robustness(
+                obj, picks, base, m=m, sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg,
+                seed=seed, pick_config=pick_config, simulator=sim, out=out,
+                overwrite=overwrite, progress=progress,
+            )  # fmt: skip
+        finally:
+            sim.close()
     base = base or Settings()
-    if out is not None:
+    if out is not None and not _claimed:
         request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
         request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, k=len(picks))
         claim(out, "robust", config_hash(request), overwrite=overwrite, joins=("evaluate",))
@@ -268,29 +287,57 @@ def robust_best(
     pick_config: pp.PickConfig | None = None,
     backend: str = "auto",
     batch_size: int | None = None,
+    ray: str | None = None,
+    simulator: Simulator | None = None,
     progress: bool = False,
-    **options,
+    m: int = 32,
+    sigma_xy_mm: float = 2.0,
+    sigma_yaw_deg: float = 3.0,
+    out: str | Path | None = None,
+    overwrite: bool = False,
 ) -> pa.Table:
     """The robustness of the ``top_k`` best successful pick-points (``mjx-pick robust``).
 
     results: an evaluate folder (or its results.parquet) of this object to take them
     from; without it, ``n`` pick-points drawn with ``seed`` are simulated first.
-    options: the rest of :func:`robustness`'s keywords (m, sigma_xy_mm, sigma_yaw_deg,
-    out, overwrite). Every input is checked before anything is simulated. progress: one
-    progress bar on stderr over every simulation (the n pick-points, then the draws).
+    m, sigma_xy_mm (mm), sigma_yaw_deg (deg), out, overwrite: as :func:`robustness`.
+    ray: every simulation on a Ray cluster ("auto" or "HOST:PORT"; mjx_pick.cluster).
+    simulator: run through this one (e.g. a caller's on a cluster, kept open; backend,
+    batch_size and ray are then its own). Every input is checked, and out claimed,
+    before anything is simulated. progress: one progress bar on stderr over every
+    simulation (the n pick-points, then the draws).
     """
     pick_config = pick_config or pp.PickConfig()
-    sim = Simulator(obj, backend, batch_size)
-    with showing_progress(sim.engine, f"robust ({sim.engine.backend_name})", "sim", progress):
-        return _robust_best(obj, base, sim, results, n, top_k, seed, pick_config, options)
+    check_draws(m, sigma_xy_mm, sigma_yaw_deg)
+    check_range("robust", "top_k", top_k, 1, 100_000)
+    if results is None:
+        check_range("robust", "n", n, 1, 1e8)
+    table = _read_results(Path(results), obj) if results is not None else None
+    sim = simulator or Simulator(obj, backend, batch_size, ray=ray)
+    try:
+        if out is not None:
+            request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
+            request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, top_k=top_k)
+            request.update(results=str(results) if results is not None else None, n=n)
+            key = config_hash(request)
+            claim(out, "robust", key, overwrite=overwrite, joins=("evaluate",))
+        options = {"m": m, "sigma_xy_mm": sigma_xy_mm, "sigma_yaw_deg": sigma_yaw_deg}
+        options.update(out=out, _claimed=True)
+        desc = f"robust ({sim.engine.backend_name})"
+        with showing_progress(sim.engine, desc, "sim", progress):
+            return _robust_best(obj, base, sim, table, n, top_k, seed, pick_config, options)
+    finally:
+        if sim is not simulator:
+            sim.close()
 
 
 def _robust_best(obj, base, sim, results, n, top_k, seed, pick_config, options) -> pa.Table:
-    """robust_best once its simulator (and progress bar) is set up."""
+    """robust_best once its simulator (and progress bar) is set up; results: the
+    evaluate table to take the best pick-points from, or None."""
     from mjx_pick.metrics import best_successes
 
     if results is not None:
-        table = _read_results(Path(results), obj)
+        table = results
         x, y, yaw, ids = (np.asarray(table[c]) for c in ("x_mm", "y_mm", "yaw_deg", "pick_id"))
         success, score = np.asarray(table["success"]), np.asarray(table["score"], float)
     else:

@@ -51,6 +51,19 @@ def read_manifest(path: str | os.PathLike) -> dict | None:
         return None
 
 
+def is_complete(path: str | os.PathLike, command: str, key: str) -> bool:
+    """True when path holds a complete run of command with this configuration key."""
+    m = read_manifest(path) or {}
+    return (m.get("command"), m.get("config_key"), m.get("status")) == (command, key, "complete")
+
+
+def portable_object(summary: dict) -> dict:
+    """An object's summary (``ObjectModel.summary``) less where it was read from: what a
+    configuration key holds of it, so that the same object from a checkout and from an
+    installed package is the same experiment."""
+    return {k: v for k, v in summary.items() if k != "source"}
+
+
 def _usable(path: Path) -> None:
     if path.exists() and not path.is_dir():
         raise ConfigError(f"--out {path}: is a file, not a folder")

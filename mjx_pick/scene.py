@@ -27,6 +27,9 @@ so the pads meet the object at the grasp height despite their descent while clos
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import re
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -101,6 +104,19 @@ class Scene:
     pad_patch_mm: tuple[float, float]  # (width, height) of the pads' contact patch
     # the MJCF gripper's measured close (None: parallel jaw)
     kinematics: mjcf_gripper.Kinematics | None = None
+
+    def portable_xml(self) -> str:
+        """The simulated model's MJCF text with every file it names (the object's
+        meshes, an MJCF gripper's assets) replaced by ``sha256:<digest>`` of the file's
+        bytes: what the model is, never where its files are installed (resume keys)."""
+
+        def digest(m: re.Match) -> str:
+            path = Path(m[1])
+            if not path.is_file():
+                return m[0]
+            return f'file="sha256:{hashlib.sha256(path.read_bytes()).hexdigest()}"'
+
+        return re.sub(r'file="([^"]+)"', digest, self.xml)
 
     def initial_qpos(self, x_m, y_m, yaw_rad, opening_m, grasp_gap_m=None) -> np.ndarray:
         """Initial joint positions for picks (N,) arrays -> (N, nq).

@@ -32,13 +32,13 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, describe_fields, to_dict, write_json, write_parquet
-from mjx_pick.engine import Simulator, marking_stops, showing_progress
+from mjx_pick.engine import ChunkStore, Simulator, marking_stops, showing_progress
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import rate_summary, results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams
-from mjx_pick.rundir import claim, config_hash, finish
+from mjx_pick.rundir import claim, config_hash, finish, is_complete, portable_object
 from mjx_pick.simulate import Settings
 
 SECTIONS = {
@@ -220,6 +220,8 @@ class SweepResult:
     variants: list[dict]  # per variant: parameter values and rate_summary()
     timing: dict  # simulations, scenes built, compile_s apart from run_s, per second
     out_dir: Path | None
+    # resume found the sweep already complete: read back, nothing simulated
+    already_complete: bool = False
 
 
 def sweep(
@@ -236,30 +238,44 @@ def sweep(
     simulator: Simulator | None = None,
     out: str | Path | None = None,
     overwrite: bool = False,
+    resume: bool = False,
     ray: str | None = None,
     progress: bool = False,
 ) -> SweepResult:
     """Simulate n pick-points under every parameter variant; see the module docstring.
 
     out: folder for the results (refused before any simulation when another command
-    wrote it, unless overwrite). ray: run the variants on a Ray cluster ("auto" or
-    "HOST:PORT"; mjx_pick.cluster), this process writing out. progress: a progress bar
-    of the simulations on stderr (``progress.ProgressBar``).
+    wrote it, unless overwrite); finished chunks are saved there as the sweep goes
+    (``engine.ChunkStore``) and removed once its outputs are written. resume: continue
+    an interrupted sweep of this configuration in out from its chunks (on a complete
+    one: read it back, simulate nothing). ray: run the variants on a Ray cluster
+    ("auto" or "HOST:PORT"; mjx_pick.cluster), this process writing out. progress: a
+    progress bar of the simulations on stderr (``progress.ProgressBar``).
     """
     if simulator is None and ray is not None:
         sim = Simulator(obj, backend, batch_size, ray=ray)
         try:
             return sweep(
                 obj, params, base, n=n, seed=seed, random=random, pick_config=pick_config,
-                simulator=sim, out=out, overwrite=overwrite, progress=progress,
+                simulator=sim, out=out, overwrite=overwrite, resume=resume,
+                progress=progress,
             )  # fmt: skip
         finally:
             sim.close()
     base = base or Settings()
+    pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+    store = None
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
     if out is not None:
-        request = {"object": obj.summary(), "base": to_dict(base), "params": to_dict(params)}
-        request.update(n=n, seed=seed, random=random, picks=to_dict(pick_config))
-        claim(out, "sweep", config_hash(request), overwrite=overwrite)
+        request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
+        request.update(params=to_dict(params), n=n, seed=seed, random=random)
+        request.update(picks=to_dict(pick_config))
+        key = config_hash(request)
+        if resume and not overwrite and is_complete(out, "sweep", key):
+            return _read_sweep(Path(out))
+        claim(out, "sweep", key, resume=resume, overwrite=overwrite)
+        store = ChunkStore(out, key, resume)
     combos = variants(params, random, seed)
     settings = []
     for combo in combos:
@@ -279,7 +295,7 @@ def sweep(
     t0 = time.perf_counter()
     desc = f"sweep: {len(jobs)} variants ({sim.engine.backend_name})"
     with marking_stops(out, "sweep"), showing_progress(sim.engine, desc, "sim", progress):
-        outs = sim.run(jobs)
+        outs = sim.run(jobs, store)
     wall = time.perf_counter() - t0
     spent = sim.engine.timing - before  # this sweep's compiles and runs alone
     compile_s, run_s = spent.compile_s, spent.run_s
@@ -292,6 +308,8 @@ def sweep(
         "wall_s": round(wall, 3),
         "simulations_per_s": round(n_sims / run_s, 2) if run_s > 0 else None,
     }
+    if store is not None:
+        timing["chunks_resumed"] = store.read_chunks  # read back, not simulated
     tables, summaries = [], []
     for v, ((_, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
         extra = {"variant": np.full(len(picks), v)}
@@ -327,7 +345,20 @@ def sweep(
         write_json(out_dir / "variants.json", summaries)
         plot_sweep(summaries, table, [p.name for p in params], out_dir / "sweep.png")
         finish(out_dir, command="sweep", config=config, seed=seed, **meta)
+        store.remove()  # every row is in results.parquet now
     return SweepResult(table, summaries, timing, out_dir)
+
+
+def _read_sweep(out_dir: Path) -> SweepResult:
+    """A complete sweep's folder read back (resume has nothing to do)."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(out_dir / "results.parquet")
+    summaries = json.loads((out_dir / "variants.json").read_text())
+    timing = json.loads((out_dir / "config.json").read_text()).get("timing", {})
+    return SweepResult(table, summaries, timing, out_dir, already_complete=True)
 
 
 def marginal(table: pa.Table, name: str) -> list[dict]:

@@ -10,6 +10,7 @@ The physics is kept short (a 0.6 s close, a 20 mm lift, a 0.2 s hold: test_scale
 kill test) so that 192 pick-points take seconds on one CPU.
 """
 
+import json
 import os
 import signal
 import socket
@@ -19,6 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
@@ -26,8 +29,10 @@ import mjx_pick as mp
 from mjx_pick import cli
 from mjx_pick.cluster import free_ports, session_pids, start_local_node, stop_local_node
 from mjx_pick.config import to_toml
+from mjx_pick.engine import Simulator
 from mjx_pick.evaluation import evaluate
 from mjx_pick.grasp import GraspConfig
+from mjx_pick.robust import robust_best
 
 GRASP = GraspConfig(close_timeout_s=0.6, lift_height_mm=20.0, hold_s=0.2)
 N = 192  # pick-points per run
@@ -45,31 +50,39 @@ def cluster(tmp_path_factory, block):
     import ray
 
     logs = tmp_path_factory.mktemp("ray-logs")
-    # Ray's socket paths must stay short (107 bytes): its temp folders go under /tmp
-    temps = [Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp")) for _ in range(2)]
-    port = free_ports(1)[0]
+    temps: list[Path] = []
     nodes = []
     try:
-        nodes.append(start_local_node(temps[0], logs / "head.log", port, head=True, env=CPU))
-        deadline = time.monotonic() + 60
-        while True:  # the head's GCS port answers
+        ports = iter(free_ports(3))  # a new head port for each try
+
+        def answers(port: int) -> bool:  # the head's GCS port
             try:
                 socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
+                return True
             except OSError:
-                assert nodes[0].poll() is None, (logs / "head.log").read_text()
-                assert time.monotonic() < deadline, "the Ray head did not start in 60 s"
-                time.sleep(0.2)
-        nodes.append(start_local_node(temps[1], logs / "worker.log", port, head=False, env=CPU))
+                return False
+
+        head, port = _start_node(logs / "head.log", lambda: next(ports), True, answers, temps)
+        nodes.append(head)
         address = f"127.0.0.1:{port}"
-        reference = evaluate(block, **RUN, chunk_size=CHUNK).table
+        temps.append(Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp")))
+        log = logs / "worker.log"
+        nodes.append(start_local_node(temps[-1], log, port, head=False, env=CPU))
+        reference = evaluate(block, **RUN, chunk_size=CHUNK).table  # while it starts
         ray.init(address=address, logging_level="WARNING", log_to_driver=False)
         try:
+
+            def joined(_port: int) -> bool:
+                return sum(n["Alive"] for n in ray.nodes()) >= 2
+
             deadline = time.monotonic() + 60
-            while sum(n["Alive"] for n in ray.nodes()) < 2:
-                assert nodes[1].poll() is None, (logs / "worker.log").read_text()
-                assert time.monotonic() < deadline, "the second node did not join in 60 s"
-                time.sleep(0.2)
+            while not joined(port):
+                if nodes[1].poll() is not None:  # it exited (a port taken): start it again
+                    stop_local_node(nodes.pop())
+                    nodes.append(_start_node(log, lambda: port, False, joined, temps)[0])
+                    break
+                assert time.monotonic() < deadline, f"no second node in 60 s: {log.read_text()}"
+                time.sleep(0.1)
         finally:
             ray.shutdown()
         yield address, nodes, reference
@@ -78,6 +91,30 @@ def cluster(tmp_path_factory, block):
             stop_local_node(proc)
         for temp in temps:
             subprocess.run(["rm", "-rf", str(temp)], check=False)
+
+
+def _start_node(log: Path, head_port, head: bool, up, temps: list[Path]):
+    """Start a node of the local cluster (``cluster.start_local_node``) and wait until
+    up(port) says it is there: (its process, the head's port). A node that exits before
+    is started again (up to 3 tries, new ports and temp folder): the free ports it was
+    given can be taken by another process of a shared machine before it binds them.
+
+    head_port: () -> the head's port for this try; temps: where each try's temp folder
+    is listed, for the caller to remove. Ray's socket paths must stay short (107 bytes):
+    the temp folders go under /tmp."""
+    for _ in range(3):
+        port = head_port()
+        temp = Path(tempfile.mkdtemp(prefix="mjxray", dir="/tmp"))
+        temps.append(temp)
+        proc = start_local_node(temp, log, port, head=head, env=CPU)
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and not up(port):
+            assert time.monotonic() < deadline, f"{log.name}: not up in 60 s: {log.read_text()}"
+            time.sleep(0.1)
+        if proc.poll() is None:
+            return proc, port
+        stop_local_node(proc)  # what it started before it exited
+    raise AssertionError(f"{log.name}: the node exited 3 times: {log.read_text()}")
 
 
 def _chunk_workers(nodes: list[subprocess.Popen]) -> list[int]:
@@ -133,6 +170,65 @@ def test_worker_killed_mid_chunk_is_rerun_elsewhere(cluster, block, tmp_path):
     assert killed
     assert ev.summary["cluster"]["chunks_rerun"] >= 1, ev.summary["cluster"]
     assert ev.table.equals(reference)
+
+
+def test_node_joining_is_used_and_node_leaving_is_survived(cluster, block, tmp_path):
+    """A third node joins while the run goes on and takes chunks; then it leaves (its
+    `ray start` session stopped) with a chunk in flight, which runs on another node. The
+    table is still the one of one uninterrupted process.
+
+    Nothing here sleeps and hopes: the test acts on the driver's events
+    (``cluster.ClusterEvent``), which the driver reports from its loop and waits for.
+    Holding the loop at the first chunk done (the join) and at the third node's actor
+    start (until it answers) leaves most chunks in the queue for the new actor, which
+    the driver serves first (the least busy)."""
+    import ray
+
+    address, _, reference = cluster
+    port = int(address.rsplit(":", 1)[1])
+    temps: list[Path] = []
+    third: dict = {"proc": None, "id": None, "inflight": 0, "left": False}
+    kinds: list[str] = []
+
+    def act(ev) -> None:
+        kinds.append(ev.kind)
+        if ev.kind == "call_done" and third["proc"] is None:
+            before = {n["NodeID"] for n in ray.nodes() if n["Alive"]}
+
+            def joined(_port: int) -> bool:
+                return bool({n["NodeID"] for n in ray.nodes() if n["Alive"]} - before)
+
+            log = tmp_path / "third.log"
+            third["proc"], _ = _start_node(log, lambda: port, False, joined, temps)
+            (third["id"],) = {n["NodeID"] for n in ray.nodes() if n["Alive"]} - before
+        elif ev.kind == "actor_started" and ev.node_id == third["id"] and not third["left"]:
+            ray.get(ev.ready, timeout=120)  # the joined node's actor answers
+        elif ev.kind == "call_done" and ev.node_id == third["id"] and not third["left"]:
+            # it has done a chunk and runs the next (sent with it): it leaves with that
+            # one in flight. Its actor is killed first, so that the chunk cannot finish
+            # while the node shuts down; the node then leaves as `ray stop` would
+            third["inflight"] = ev.inflight
+            for pid in _chunk_workers([third["proc"]]):
+                os.kill(pid, signal.SIGKILL)
+            stop_local_node(third["proc"])
+            third["left"] = True
+
+    try:
+        ev = evaluate(block, **RUN, chunk_size=CHUNK, ray=address, on_cluster_event=act)
+    finally:
+        if third["proc"] is not None and not third["left"]:
+            stop_local_node(third["proc"])
+        for temp in temps:
+            subprocess.run(["rm", "-rf", str(temp)], check=False)
+    assert third["left"], f"the joined node never finished a chunk: {kinds}"
+    assert third["inflight"] >= 1, "it left holding a chunk (sent with its first)"
+    assert ev.table.equals(reference)
+    nodes = ev.summary["cluster"]["nodes"]
+    joined = [label for label in nodes if label.endswith("/" + third["id"][:6])]
+    assert len(nodes) == 3 and joined, nodes
+    assert nodes[joined[0]]["picks"] >= CHUNK, "the joined node simulated a chunk"
+    assert ev.summary["cluster"]["chunks_rerun"] >= 1, "its chunk in flight ran elsewhere"
+    assert "call_lost" in kinds
 
 
 def test_driver_killed_then_resumed_equals_one_process(cluster, block, tmp_path):
@@ -202,14 +298,147 @@ def test_sweep_on_the_cluster_equals_one_process(cluster, block):
     assert remote.table.equals(local.table)
 
 
-def test_bad_cluster_addresses_are_one_line_errors(capsys, tmp_path):
+@pytest.fixture(scope="module")
+def cluster_sim(cluster, block):
+    """One Simulator on the cluster for the studies below (their actors start once):
+    the C engine, 16 pick-points per actor batch."""
+    address, _, _ = cluster
+    sim = Simulator(block, "mujoco", 16, ray=address)
+    yield sim
+    sim.close()
+
+
+def test_robust_on_the_cluster_equals_one_process(cluster_sim, block):
+    # the n pick-points, then the top-k's perturbed draws, all through the RayEngine
+    run = {"n": 32, "top_k": 4, "m": 8, "seed": 2}
+    local = robust_best(block, mp.Settings(grasp=GRASP), **run, backend="mujoco", batch_size=16)
+    remote = robust_best(block, mp.Settings(grasp=GRASP), **run, simulator=cluster_sim)
+    assert remote.num_rows == 4 and int(pc.sum(remote["trials"]).as_py()) == 32
+    assert remote.equals(local)
+
+
+def test_design_on_the_cluster_equals_one_process(cluster_sim, block):
+    # every round's comparison (a scene per gripper variant) and the final one
+    bounds = {"finger_width_mm": (10.0, 30.0)}
+    run = {"variants": 2, "n": 16, "rounds": 2, "final_n": 16, "seed": 0}
+    settings = mp.Settings(grasp=GRASP)
+    local = mp.design_search(block, bounds, settings, **run, backend="mujoco", batch_size=16)
+    remote = mp.design_search(block, bounds, settings, **run, simulator=cluster_sim)
+    assert remote.best == local.best
+    assert json.dumps(remote.rounds) == json.dumps(local.rounds)  # NaN-safe equality
+    assert remote.final.table.num_rows > 0
+    assert remote.final.table.equals(local.final.table)
+
+
+def _same_outputs(a: Path, b: Path, names: tuple[str, ...]) -> None:
+    """The study's outputs in a and b are equal: tables row for row, JSON files as text."""
+    for name in names:
+        if name.endswith(".parquet"):
+            assert pq.read_table(a / name).equals(pq.read_table(b / name)), name
+        else:
+            assert (a / name).read_text() == (b / name).read_text(), name
+
+
+def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(cluster_sim, block, tmp_path):
+    # started on the cluster (chunks of one actor batch per actor: 2 x 16), stopped as
+    # Ctrl-C stops it after its first chunk, resumed without Ray: the chunk on disk is
+    # read back (the chunk size with it), the rest simulated here; the outputs are
+    # those of one uninterrupted run without Ray
+    params = [mp.ParamSpec.parse("contact.pad_friction=0.5,0.9")]
+    run = {"n": 32, "seed": 1, "backend": "mujoco", "batch_size": 16}
+    settings = mp.Settings(grasp=GRASP)
+    mp.sweep(block, params, settings, **run, out=tmp_path / "ref")
+    out = tmp_path / "sw"
+
+    def ctrl_c(done: int, _total: int) -> None:
+        if done > 0:
+            raise KeyboardInterrupt
+
+    cluster_sim.engine.on_progress = ctrl_c
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            mp.sweep(block, params, settings, **run, simulator=cluster_sim, out=out)
+    finally:
+        cluster_sim.engine.on_progress = None
+    assert len(list((out / "chunks").glob("*.npz"))) == 1
+    assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
+    with pytest.raises(mp.ConfigError, match="pass --resume"):
+        mp.sweep(block, params, settings, **run, out=out)  # refused before simulating
+    with pytest.raises(mp.ConfigError, match="--resume needs --out"):
+        mp.sweep(block, params, settings, **run, resume=True)
+    resumed = mp.sweep(block, params, settings, **run, out=out, resume=True)
+    assert resumed.timing["chunks_resumed"] == 1 and resumed.table.num_rows == 64
+    _same_outputs(out, tmp_path / "ref", ("results.parquet", "variants.json"))
+    assert not (out / "chunks").exists(), "a complete sweep's chunks are removed"
+    again = mp.sweep(block, params, settings, **run, out=out, resume=True)
+    assert again.already_complete and again.table.equals(resumed.table)
+
+
+def test_compare_killed_then_resumed_on_the_cluster(cluster_sim, block, tmp_path):
+    # `mjx-pick compare` without Ray, killed (SIGKILL) once a chunk is on disk, then
+    # resumed on the cluster: only the missing chunks are simulated there, and the
+    # outputs are those of one uninterrupted run without Ray
+    grasp_file = tmp_path / "grasp.toml"
+    grasp_file.write_text(to_toml(GRASP))
+    names = ["robotiq-2f85", "franka-hand"]
+    run = {"n": 32, "seed": 0, "backend": "mujoco", "batch_size": 16}
+    settings = mp.Settings(mp.load_gripper("robotiq-2f85"), grasp=GRASP)  # the CLI's base
+    grippers = [mp.load_gripper(g) for g in names]
+    reference = mp.compare(block, grippers, settings, **run, out=tmp_path / "ref")
+    out = tmp_path / "cmp"
+    cmd = [sys.executable, "-m", "mjx_pick.cli", "compare", "block", "--grippers", ",".join(names)]
+    cmd += ["--n", "32", "--seed", "0", "--backend", "mujoco", "--batch-size", "16"]
+    cmd += ["--grasp", str(grasp_file), "--out", str(out), "--no-progress"]
+    log = tmp_path / "compare.log"
+    with log.open("wb") as sink:
+        env = {**os.environ, "JAX_PLATFORMS": "cpu", "XLA_FLAGS": ""}
+        proc = subprocess.Popen(cmd, env=env, stdout=sink, stderr=subprocess.STDOUT, cwd=tmp_path)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if list((out / "chunks").glob("*.npz")):
+                break
+            time.sleep(0.05)
+        alive = proc.poll() is None
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert alive, f"compare ended before it could be killed: {log.read_text()}"
+    kept = list((out / "chunks").glob("*.npz"))
+    on_disk = sum(len(np.load(f)["success"]) for f in kept)
+    simulated = int(np.sum(reference.feasible))
+    assert kept and on_disk < simulated and not (out / "ranking.json").exists()
+    before = cluster_sim.engine.pool.simulated
+    resumed = mp.compare(
+        block, grippers, settings, **run, simulator=cluster_sim, out=out, resume=True
+    )
+    assert cluster_sim.engine.pool.simulated - before == simulated - on_disk
+    assert resumed.table.equals(reference.table)
+    _same_outputs(out, tmp_path / "ref", ("results.parquet", "ranking.json"))
+    again = mp.compare(block, grippers, settings, **run, out=out, resume=True)
+    assert again.already_complete and again.ranking == json.loads(
+        (out / "ranking.json").read_text()
+    )
+    assert np.array_equal(again.success, reference.success)
+    assert np.array_equal(again.score, reference.score)
+
+
+COMMANDS = {  # each study's own arguments, for the address checks below
+    "evaluate": ["--n", "8"],
+    "sweep": ["--n", "8", "--param", "contact.pad_friction=0.5,0.9"],
+    "compare": ["--n", "8", "--grippers", "robotiq-2f85,franka-hand"],
+    "design": ["--n", "8", "--bound", "finger_width_mm=10:30"],
+    "robust": ["--n", "8"],
+}
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_bad_cluster_addresses_are_one_line_errors(command, capsys, tmp_path):
     port = free_ports(1)[0]  # nothing listens there
     for address, message in (
         ("no address", "is not a cluster address"),
         ("host:99999", "is not a cluster address"),
         (f"127.0.0.1:{port}", "no Ray cluster answers there"),
     ):
-        argv = ["evaluate", "block", "--n", "8", "--backend", "mujoco", "--ray", address]
+        argv = [command, "block", *COMMANDS[command], "--backend", "mujoco", "--ray", address]
         assert cli.main([*argv, "--out", str(tmp_path / "never")]) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1, err

@@ -1,7 +1,7 @@
 """``mjx-pick``: the command line.
 
   mjx-pick evaluate OBJECT [--gripper robotiq-2f85] [--n 1000] [--seed 0] --out DIR
-                    [--ray auto|HOST:PORT]           (on a Ray cluster; sweep, compare too)
+                    [--ray auto|HOST:PORT]           (on a Ray cluster; the studies too)
   mjx-pick picks OBJECT --n 500 --out DIR          (pick-points and their pictures only)
   mjx-pick sweep OBJECT --param contact.pad_friction=0.4:1.0:7 [--param ...] --out DIR
   mjx-pick compare OBJECT --grippers robotiq-2f85,onrobot-rg2 --out DIR

@@ -78,7 +78,16 @@ def cmd_sweep(args) -> int:
         raise ConfigError("sweep needs at least one --param NAME=LO:HI:N (`mjx-pick params`)")
     obj, base, picks_cfg = base_settings(args)
     params = [ParamSpec.parse(p) for p in args.param]
-    res = sweep(obj, params, base, random=args.random, **study_options(args, picks_cfg))
+    res = sweep(
+        obj,
+        params,
+        base,
+        random=args.random,
+        resume=args.resume,
+        **study_options(args, picks_cfg),
+    )
+    if res.already_complete:
+        print(f"{args.out} holds this sweep complete: nothing to resume, nothing simulated")
     _print_rows(
         res.variants,
         [
@@ -106,8 +115,15 @@ def cmd_compare(args) -> int:
 
     obj, base, picks_cfg = base_settings(args)
     res = compare(
-        obj, grippers(args.grippers), base, rank_by=args.rank_by, **study_options(args, picks_cfg)
+        obj,
+        grippers(args.grippers),
+        base,
+        rank_by=args.rank_by,
+        resume=args.resume,
+        **study_options(args, picks_cfg),
     )
+    if res.already_complete:
+        print(f"{args.out} holds this comparison complete: nothing to resume, nothing simulated")
     _print_rows(
         res.ranking,
         [
@@ -171,6 +187,7 @@ def cmd_robust(args) -> int:
         sigma_yaw_deg=args.sigma_yaw_deg,
         out=args.out,
         overwrite=args.overwrite,
+        ray=args.ray,
         progress=not args.no_progress,
     )
     _print_rows(

@@ -132,7 +132,7 @@ def study_options(args, picks_cfg) -> dict:
         "out": args.out,
         "overwrite": args.overwrite,
         "progress": not args.no_progress,
-        # sweep and compare take --ray (the other studies run on this machine)
+        # --ray: sweep, compare and design (robust passes it itself)
         **({"ray": args.ray} if getattr(args, "ray", None) is not None else {}),
     }
 

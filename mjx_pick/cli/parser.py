@@ -206,6 +206,15 @@ def _add_ray(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_resume(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted run of the same command and settings in --out "
+        "from its finished chunks",
+    )
+
+
 def _add_overwrite(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--overwrite",
@@ -319,6 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="K",
         help="K random variants within the LO:HI ranges (default: the grid)",
     )
+    _add_resume(sw)
     _add_ray(sw)
     sw.set_defaults(func=cmd_sweep, n=200)
 
@@ -330,6 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="success",
         help="rank by success rate or by mean score, eq. (2)",
     )
+    _add_resume(cp)
     _add_ray(cp)
     cp.set_defaults(func=cmd_compare, n=200)
 
@@ -354,6 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="success",
         help="rank by success rate or by mean score, eq. (2)",
     )
+    _add_ray(ds)
     ds.set_defaults(func=cmd_design, n=64)
 
     rb = study("robust", "robust success probability of the top pick-points under vision error")
@@ -376,6 +388,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=3.0,
         help="vision error: standard deviation of yaw, deg",
     )
+    _add_ray(rb)
     rb.set_defaults(func=cmd_robust, n=200)
 
     pk = sub.add_parser("picks", help="generate feasible pick-points and draw them")
