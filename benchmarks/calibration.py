@@ -12,8 +12,13 @@ by every estimator with the same budget of pick-point simulations:
 With ``--gradients``, also forward-mode derivatives through MJX against finite
 differences (MJX compiles for minutes on a CPU).
 
-Estimators: ``smoothed`` (the default: Gauss-Hermite smoothed gradient + Adam),
-``random`` (uniform search), ``cma`` (CMA-ES, the ``cma`` package), ``lsq``
+The trace residual: ``--replicates`` K simulations per traced row and a
+``--trace-window-s`` moving average (docs/calibration.md; ``--replicates 1
+--trace-window-s 0`` is the former per-sample RMS). The budget counts simulations, so
+K = 3 leaves a third as many parameter vectors.
+
+Estimators: ``smoothed`` (Gauss-Hermite smoothed gradient + Adam),
+``random`` (uniform search), ``cma`` (CMA-ES, the ``cma`` package; the default), ``lsq``
 (Levenberg-Marquardt on the residuals, ``mujoco.sysid``). Per fit: the best loss
 against simulations and wall time; simulations and wall time to reach the target loss
 (90 % of the way from the start's loss to the hidden parameters' loss); each
@@ -75,8 +80,11 @@ def setup(rows: int, seed: int, names: list[str]):
     return obj, base, train, held
 
 
-def fit(obj, base, train, held, names, estimator, budget, seed):
-    problem = cal.Problem(obj, train, names, base, backend="mujoco")
+def fit(obj, base, train, held, names, estimator, budget, seed, replicates=3, window_s=0.05):
+    noise = cal.Noise(trace_window_s=window_s)
+    problem = cal.Problem(
+        obj, train, names, base, backend="mujoco", replicates=replicates, noise=noise
+    )
     holdout = cal.Problem(obj, held, names, base, backend="mujoco")
     truth = problem.space.theta([HIDDEN[n] for n in names])
     # a bounded parameter can be clipped by theta(): the truth's own loss, on its theta
@@ -85,7 +93,7 @@ def fit(obj, base, train, held, names, estimator, budget, seed):
     target = l_true + 0.1 * (l_start - l_true)
     spent0 = problem.rollouts
     t0 = time.perf_counter()
-    rows = len(train)
+    rows = len(problem.row_of)  # simulations per parameter vector (replicas included)
     before = holdout.accuracy(problem.start_theta())["correct"]
     if estimator == "lsq":
         res = cal.least_squares(problem, max_iters=10_000, budget=budget, holdout=holdout)
@@ -107,7 +115,8 @@ def fit(obj, base, train, held, names, estimator, budget, seed):
         "hidden_parameters": len(names),
         "names": names,
         "budget": budget,
-        "rows": rows,
+        "rows": len(train),
+        "simulations_per_vector": rows,
         "loss_start": l_start,
         "loss_hidden": l_true,
         "target": target,
@@ -222,6 +231,19 @@ def main() -> None:
     ap.add_argument("--params", default="1,3,5")
     ap.add_argument("--estimators", default=",".join(ESTIMATORS))
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--replicates",
+        type=int,
+        default=3,
+        help="simulations per traced row (the trace residual's replicas; 1: the former "
+        "per-sample RMS)",
+    )
+    ap.add_argument(
+        "--trace-window-s",
+        type=float,
+        default=0.05,
+        help="moving average of the traces before they are compared (0: tick by tick)",
+    )
     ap.add_argument("--out", default="benchmarks/out/calibration_estimators.json")
     ap.add_argument("--table", help="print the RESULTS.md table of this JSON and stop")
     ap.add_argument(
@@ -242,6 +264,8 @@ def main() -> None:
         "hidden": HIDDEN,
         "trace_noise": NOISE,
         "rows": args.rows,
+        "replicates": args.replicates,
+        "trace_window_s": args.trace_window_s,
         "fits": [],
     }
     out = Path(args.out)
@@ -255,7 +279,18 @@ def main() -> None:
         budget = (args.budget + 60 * (p - 1)) * len(train)
         report[f"train_successes_{p}"] = int(train.successes.sum())
         for est in args.estimators.split(","):
-            row = fit(obj, base, train, held, SETS[p], est, budget, args.seed)
+            row = fit(
+                obj,
+                base,
+                train,
+                held,
+                SETS[p],
+                est,
+                budget,
+                args.seed,
+                args.replicates,
+                args.trace_window_s,
+            )
             report["fits"].append(row)
             print(
                 json.dumps({k: v for k, v in row.items() if k != "curve"}, default=float),
