@@ -18,7 +18,8 @@ likelihood is 0.5 * |r|^2 (least squares, identifiability and the loss all read 
   moved by a few hundredths of a millimetre), every trace -- measured and simulated --
   is smoothed by a ``noise.trace_window_s`` moving average (a gauge's bandwidth), and
   the residual is the Gaussian negative log likelihood of the measured trace under the
-  replicas' mean m_t and spread v_t (sample variance over K), per sample
+  replicas' mean m_t and spread v_t (sample variance over K, at least its mean over
+  the 4 windows around: three replicas may agree by chance), per sample
 
       z_t^2 + log(1 + v_t / s_t^2),   z_t = (m_t - measured_t) / sqrt(s_t^2 + v_t)
 
@@ -191,6 +192,9 @@ def residuals(sim: dict, data, noise: Noise, prior=None):
             ens = moving_average(ens, width)
             mean = ens.mean(axis=-2)
             var = ens.var(axis=-2, ddof=1) if ens.shape[-2] > 1 else jnp.zeros_like(mean)
+            # a few replicas' variance is itself noisy (by chance they agree at a tick
+            # where the grasp is chaotic): at least its mean over 4 windows around
+            var = jnp.maximum(var, moving_average(var, 4 * width))
             shape = mean.shape
 
             def full(a, shape=shape):
@@ -221,7 +225,8 @@ def moving_average(x, width: int):
     csum = xp.concatenate([zero, csum], axis=-1)  # csum[..., i] = sum of x[..., :i]
     i = np.arange(n)
     a, b = np.clip(i - lo, 0, n), np.clip(i + hi + 1, 0, n)
-    return (csum[..., b] - csum[..., a]) / (b - a).astype(np.float32)
+    count = (b - a).astype(np.float32).reshape((1,) * (x.ndim - 1) + (n,))
+    return (csum[..., b] - csum[..., a]) / count
 
 
 def loss_of(blocks: dict, total_trials: float):
