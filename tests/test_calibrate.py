@@ -321,6 +321,45 @@ def test_trace_loss_is_smooth_around_the_hidden_friction(heavy_block):
             assert 0 < climb < 0.15, (label, v)
 
 
+class _TwoBasins:
+    """A stand-in Problem with known residuals (no simulation): parameter a has one
+    quadratic basin at 0.3; parameter b has two equally deep ones, at 0.3 and 0.8 --
+    smooth and curved around each, so that the local tests see nothing wrong."""
+
+    def __init__(self):
+        one = np.ones(2)
+        self.space = cal.ParamSpace(("a", "b"), 0 * one, one, one < 0, 0.5 * one, 10 * one)
+        self.outcomes = [None]
+        self.data = dataclasses.make_dataclass("D", [("total_trials", float)])(1.0)
+        self.rollouts = 0
+
+    def evaluate(self, thetas):
+        v = np.asarray(self.space.values(thetas), float)  # (S, 2)
+        a, b = v[:, 0], v[:, 1]
+        near = np.where(np.abs(b - 0.3) < np.abs(b - 0.8), 0.3, 0.8)
+        w = np.linspace(1, 2, 20)  # 20 residuals per parameter, noise units
+        res = np.concatenate([w * 20 * (a[:, None] - 0.3), w * 20 * (b - near)[:, None]], 1)
+        self.rollouts += len(v)
+        loss = 0.5 * np.sum(res**2, axis=1)
+        return cal.Evaluation(loss, {}, np.zeros(len(v)), res, res.shape[1])
+
+
+def test_identifiability_global_check_rejects_a_second_basin():
+    problem = _TwoBasins()
+    theta = problem.space.theta([0.3, 0.3])
+    ident = cal.identifiability(problem, theta)
+    a, b = ident["a"], ident["b"]
+    assert a["identified"] and a["global"]["passed"]
+    assert a["interval"][0] < 0.3 < a["interval"][1] and a["interval"][1] - a["interval"][0] < 0.1
+    # the local tests are fooled by b's curved basin; the slice finds the other one
+    assert b["local"] and b["locally_quadratic"]
+    assert not b["global"]["passed"] and not b["identified"]
+    lo, hi = b["global"]["interval"]
+    assert lo < 0.3 and hi > 0.8
+    # without the slice, b would pass: the check is what rejects it
+    assert cal.identifiability(problem, theta, profile_points=0)["b"]["identified"]
+
+
 def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_block, synthetic):
     assert 0 < synthetic.successes.sum() < len(synthetic), "the data must hold both outcomes"
     # the fit starts below the hidden value: this loss is not monotone between 0.62 and
