@@ -209,6 +209,49 @@ def table(path: str) -> None:
         )
 
 
+def reidentify(path: str, out: str) -> None:
+    """Identifiability (local tests and the global slice, ``identify.py``) at every fit's
+    optimum in a results JSON, on the same problems: which parameters each test passes
+    and whether the hidden value lies in the reported intervals."""
+    report = json.loads(Path(path).read_text())
+    k, window = report.get("replicates", 1), report.get("trace_window_s", 0.0)
+    rows, cache = [], {}
+    for f in report["fits"]:
+        names, p = f["names"], f["hidden_parameters"]
+        if p not in cache:
+            obj, base, train, _ = setup(report["rows"], report.get("seed", 0), names)
+            noise = cal.Noise(trace_window_s=window)
+            cache[p] = cal.Problem(
+                obj, train, names, base, backend="mujoco", replicates=k, noise=noise
+            )
+        problem = cache[p]
+        theta = problem.space.theta([f["optimum"][n] for n in names])
+        t0 = time.perf_counter()
+        ident = cal.identifiability(problem, theta)
+        row = {"estimator": f["estimator"], "hidden_parameters": p, "params": {}}
+        for n in names:
+            i = ident[n]
+            lo, hi = i["interval"]
+            glo, ghi = i["global"]["interval"]
+            row["params"][n] = {
+                "local": i["local"],
+                "global": i["global"]["passed"],
+                "identified": i["identified"],
+                "interval": [lo, hi],
+                "global_interval": [glo, ghi],
+                "hidden_in_interval": lo <= HIDDEN[n] <= hi,
+                "hidden_in_global": glo <= HIDDEN[n] <= ghi,
+            }
+        row["wall_s"] = time.perf_counter() - t0
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+        Path(out).write_text(json.dumps({"source": path, "fits": rows}, indent=1))
+    for test in ("local", "identified"):
+        flagged = [q for r in rows for q in r["params"].values() if q[test]]
+        inside = sum(q["hidden_in_interval"] for q in flagged)
+        print(f"{test}: {len(flagged)} parameters pass; hidden value inside the interval: {inside}")
+
+
 SHORT = {
     "pad_friction": "mu_pad",
     "force_offset_n": "offset",
@@ -247,6 +290,10 @@ def main() -> None:
     ap.add_argument("--out", default="benchmarks/out/calibration_estimators.json")
     ap.add_argument("--table", help="print the RESULTS.md table of this JSON and stop")
     ap.add_argument(
+        "--reidentify",
+        help="identifiability (local and global) at every optimum of this JSON, into --out",
+    )
+    ap.add_argument(
         "--gradients",
         action="store_true",
         help="also: forward-mode (MJX) gradients against finite differences",
@@ -254,6 +301,9 @@ def main() -> None:
     args = ap.parse_args()
     if args.table:
         table(args.table)
+        return
+    if args.reidentify:
+        reidentify(args.reidentify, args.out)
         return
     commit = subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
@@ -264,6 +314,7 @@ def main() -> None:
         "hidden": HIDDEN,
         "trace_noise": NOISE,
         "rows": args.rows,
+        "seed": args.seed,
         "replicates": args.replicates,
         "trace_window_s": args.trace_window_s,
         "fits": [],
