@@ -263,8 +263,11 @@ def test_estimators_on_known_losses():
 
 def test_identifiability_outcomes_against_traces(heavy_block):
     # outcomes alone pin pad friction and the gripper's force offset only loosely (the
-    # outcome mostly sees mu x (F_d + offset)); a force gauge's traces narrow both; the
-    # table's damping, which outcomes do not see, is reported as not identified
+    # outcome mostly sees mu x (F_d + offset)); a force gauge's traces narrow the offset
+    # (the squeeze itself) -- less than tick-by-tick residuals claimed: their jumps made
+    # a steep local curvature (RESULTS.md); pad friction barely (the force does not
+    # see it until the part slips, and a slipping grasp's trace is chaotic). The table's
+    # damping, which neither sees, is reported as not identified
     hidden = mp.Settings(LIGHT, mp.ContactParams(pad_friction=HIDDEN), grasp=SHORT)
     rng = np.random.default_rng(0)
     n = 8
@@ -276,17 +279,15 @@ def test_identifiability_outcomes_against_traces(heavy_block):
     )
     names = ["pad_friction", "force_offset_n", "table_damping_ns_per_mm"]
     half = {}
-    for label, data in (("outcomes", out), ("traces", traced)):
+    for label, data, profile in (("outcomes", out, 0), ("traces", traced, 6)):
         problem = cal.Problem(heavy_block, data, names, hidden, backend="mujoco")
         theta = problem.space.theta([HIDDEN, 1.5, problem.start["table_damping_ns_per_mm"]])
-        ident = cal.identifiability(problem, theta)
+        ident = cal.identifiability(problem, theta, profile_points=profile)
         half[label] = {n: ident[n]["data_half_width_z"] or np.inf for n in names}
-        if label == "outcomes":
-            assert not ident["table_damping_ns_per_mm"]["identified"]
+        assert not ident["table_damping_ns_per_mm"]["identified"], label
         lo, hi = ident["force_offset_n"]["interval"]
         assert lo < 1.5 < hi, label
-    for n in ("pad_friction", "force_offset_n"):
-        assert half["traces"][n] < 0.5 * half["outcomes"][n], n
+    assert half["traces"]["force_offset_n"] < 0.75 * half["outcomes"]["force_offset_n"], half
 
 
 def test_trace_loss_is_smooth_around_the_hidden_friction(heavy_block):
