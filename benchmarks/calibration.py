@@ -168,6 +168,87 @@ def gradient_quality(obj, base, train) -> dict:
     return out
 
 
+def gradient_check_tiny() -> dict:
+    """Forward-mode derivatives through MJX against central finite differences on a
+    tiny problem: the 1 kg block, two rows (F_d 14 N holds, 6 N slips), the short test
+    procedure, theta = (pad friction, force offset) at (0.86, 0). Quantities per row:
+    the mean pad force over the last 10 control ticks (N) and the final lift (mm); and
+    the calibration loss of the two rows with a force trace (one simulation per row)."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_pick.calibration.parameters import contact_arrays_jnp
+    from mjx_pick.engine import differentiable_rollout
+    from mjx_pick.kernels.grasp import TRACE_FIELDS
+
+    obj = mp.object_from_polygon(box(-20, -10, 20, 10), thickness_mm=20, mass_g=1000, name="heavy")
+    gripper = mp.GripperSpec(name="light-gripper", force_min_n=1.0)
+    grasp = GraspConfig(close_timeout_s=0.4, lift_height_mm=20.0, hold_s=0.05)
+    base = mp.Settings(gripper=gripper, grasp=grasp)
+    names = ["pad_friction", "force_offset_n"]
+    data = cal.synthetic_outcomes(
+        obj, base, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [14.0, 6.0], traces=("force_n",)
+    )
+    problem = cal.Problem(obj, data, names, base, backend="mjx", replicates=1)
+    theta = problem.space.theta([0.86, 0.0])
+    roll = differentiable_rollout(problem.scene, grasp, True)
+    inp = problem.inputs
+    fl, fr_ = TRACE_FIELDS.index("force_left_n"), TRACE_FIELDS.index("force_right_n")
+
+    def quantities(th):
+        values = problem.space.values(th)
+        fr, ref, force = contact_arrays_jnp(names, values, inp, problem.scene, base, obj.mass_kg)
+        out, rows = roll(inp.qpos0, inp.params._replace(force_n=force), fr, ref, inp.pair_solimp)
+        hold = 0.5 * (rows[:, -10:, fl] + rows[:, -10:, fr_]).mean(axis=-1)
+        return jnp.concatenate([hold, out["lift_height_mm"]])  # (4,)
+
+    f = jax.jit(quantities)
+    jac_f = jax.jit(jax.jacfwd(quantities))
+    t0 = time.perf_counter()
+    value = np.asarray(f(jnp.asarray(theta)))
+    t_value = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    jac = np.asarray(jac_f(jnp.asarray(theta)))  # (4, 2)
+    t_jac = time.perf_counter() - t0
+    labels = ["hold force 14 N row", "hold force 6 N row", "lift 14 N row", "lift 6 N row"]
+    res = {
+        "names": names,
+        "quantities": labels,
+        "value": value.tolist(),
+        "jvp": jac.tolist(),
+        "first_call_s": {"value": t_value, "jacfwd": t_jac},
+        "fd": {},
+    }
+    for h in (0.1, 0.03, 0.01):
+        cols = []
+        for i in range(len(names)):
+            e = np.zeros(len(names), np.float32)
+            e[i] = h
+            hi = np.asarray(f(jnp.asarray(theta + e)))
+            lo = np.asarray(f(jnp.asarray(theta - e)))
+            cols.append((hi - lo) / (2 * h))
+        res["fd"][str(h)] = np.stack(cols, axis=1).tolist()  # (4, 2)
+    t0 = time.perf_counter()
+    loss, grad = problem.mjx_loss_and_grad(theta)
+    res["loss"] = {"value": loss, "jvp": grad.tolist(), "first_call_s": time.perf_counter() - t0}
+    res["loss"]["fd"] = {}
+    for h in (0.1, 0.03, 0.01):
+        g = []
+        for i in range(len(names)):
+            e = np.zeros(len(names), np.float32)
+            e[i] = h
+            g.append(
+                (problem.mjx_loss_and_grad(theta + e)[0] - problem.mjx_loss_and_grad(theta - e)[0])
+                / (2 * h)
+            )
+        res["loss"]["fd"][str(h)] = g
+    # d theta / d value, to read the derivatives per unit of each parameter
+    res["dvalue_dtheta"] = (
+        np.asarray(jax.jacfwd(problem.space.values)(jnp.asarray(theta))).diagonal().tolist()
+    )
+    return res
+
+
 def to_target(fits: list[dict]) -> None:
     """Per fit, simulations and wall time until its best loss came within 10 % of the
     way from the start's loss to the best loss ANY estimator found on that problem
@@ -290,6 +371,12 @@ def main() -> None:
     ap.add_argument("--out", default="benchmarks/out/calibration_estimators.json")
     ap.add_argument("--table", help="print the RESULTS.md table of this JSON and stop")
     ap.add_argument(
+        "--gradients-tiny",
+        action="store_true",
+        help="only: forward-mode (MJX) derivatives against finite differences on a tiny "
+        "problem (two rows, short procedure), into --out",
+    )
+    ap.add_argument(
         "--reidentify",
         help="identifiability (local and global) at every optimum of this JSON, into --out",
     )
@@ -301,6 +388,12 @@ def main() -> None:
     args = ap.parse_args()
     if args.table:
         table(args.table)
+        return
+    if args.gradients_tiny:
+        res = gradient_check_tiny()
+        print(json.dumps(res, indent=1))
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(res, indent=1))
         return
     if args.reidentify:
         reidentify(args.reidentify, args.out)
