@@ -14,6 +14,7 @@ from shapely.geometry import box
 import mjx_pick as mp
 from mjx_pick import calibration as cal
 from mjx_pick.calibration import estimators as E
+from mjx_pick.calibration import loss as L
 from mjx_pick.calibration.parameters import contact_arrays_jnp, row_inputs
 from mjx_pick.cli import main
 from mjx_pick.config import to_toml
@@ -305,14 +306,19 @@ def test_trace_loss_is_smooth_around_the_hidden_friction(heavy_block):
         heavy_block, hidden, *poses, np.linspace(5, 14, n), traces=True, trace_noise=noise
     )
     steps = np.array([-0.1, -0.001, 0.0, 0.001, 0.1])  # relative to the hidden value
+    problem = cal.Problem(heavy_block, data, ["pad_friction"], hidden, backend="mujoco")
+    assert problem.replicates == 3 and problem.noise.trace_window_s == 0.05  # the defaults
+    thetas = np.stack([problem.space.theta([HIDDEN * (1 + d)]) for d in steps])
+    sim = problem.simulate(thetas)  # each row at its pick-point, then its replicas
+    # the former residual: the pick-point's own simulation, tick by tick
+    own = {k: v for k, v in sim.items() if not k.endswith("_replicas")}
     loss = {}
-    for label, kw in (
-        ("tick by tick", {"replicates": 1, "noise": cal.Noise(trace_window_s=0.0)}),
-        ("replicas", {}),
+    for label, out, noise in (
+        ("tick by tick", own, cal.Noise(trace_window_s=0.0)),
+        ("replicas", sim, problem.noise),
     ):
-        problem = cal.Problem(heavy_block, data, ["pad_friction"], hidden, backend="mujoco", **kw)
-        thetas = np.stack([problem.space.theta([HIDDEN * (1 + d)]) for d in steps])
-        loss[label] = problem.loss(thetas)
+        blocks = L.residuals(out, problem.data, noise)
+        loss[label] = np.asarray(L.loss_of(blocks, problem.data.total_trials)[0])
     for label, v in loss.items():
         # how far a 0.1 % step climbs towards a 10 % step's loss
         climb = (max(v[1], v[3]) - v[2]) / (min(v[0], v[4]) - v[2])
