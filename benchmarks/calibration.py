@@ -314,12 +314,15 @@ def reidentify(path: str, out: str) -> None:
             i = ident[n]
             lo, hi = i["interval"]
             glo, ghi = i["global"]["interval"]
+            llo, lhi = i["local_interval"]
             row["params"][n] = {
                 "local": i["local"],
                 "global": i["global"]["passed"],
                 "identified": i["identified"],
+                "local_interval": [llo, lhi],
                 "interval": [lo, hi],
                 "global_interval": [glo, ghi],
+                "hidden_in_local_interval": llo <= HIDDEN[n] <= lhi,
                 "hidden_in_interval": lo <= HIDDEN[n] <= hi,
                 "hidden_in_global": glo <= HIDDEN[n] <= ghi,
             }
@@ -327,9 +330,9 @@ def reidentify(path: str, out: str) -> None:
         rows.append(row)
         print(json.dumps(row), flush=True)
         Path(out).write_text(json.dumps({"source": path, "fits": rows}, indent=1))
-    for test in ("local", "identified"):
+    for test, iv in (("local", "hidden_in_local_interval"), ("identified", "hidden_in_interval")):
         flagged = [q for r in rows for q in r["params"].values() if q[test]]
-        inside = sum(q["hidden_in_interval"] for q in flagged)
+        inside = sum(q[iv] for q in flagged)
         print(f"{test}: {len(flagged)} parameters pass; hidden value inside the interval: {inside}")
 
 

@@ -26,11 +26,13 @@ So a parameter must also pass a global check: the data's negative log likelihood
 each parameter over its whole bounds (``profile_points`` values evenly spaced in z, the
 others at theta: a slice, in the same engine batch as the local steps). Every slice
 point that the likelihood ratio does not exclude at 95 % (a rise of less than
-chi2_95(1) / 2 = 1.92 above theta's) must lie within the local interval widened by one
-slice spacing -- no second basin, no plateau as deep as the answer, no better point
-elsewhere. The slice's own 95 % set (its extent, plus one spacing) is reported as the
-global interval. The rest are reported as not identified, and a fit keeps them at their
-starting values instead of pretending to have fitted them.
+chi2_95(1) / 2 = 1.92 above theta's, plus the loss's own wiggle: the largest rise at the
+fine steps) must lie within the local interval widened by one slice spacing -- no
+second basin, no plateau as deep as the answer, no better point elsewhere. The reported
+interval is the local one widened to the farthest value kept (a flat-bottomed basin is
+wider than its curvature says); the slice's own 95 % set (its extent, plus one spacing)
+is reported as the global interval. The rest are reported as not identified, and a fit
+keeps them at their starting values instead of pretending to have fitted them.
 """
 
 from __future__ import annotations
@@ -126,15 +128,28 @@ def identifiability(
     for i, name in enumerate(space.names):
         narrow = bool(np.isfinite(half_data[i]) and half_data[i] < ratio * prior_half[i])
         local = (narrow and bool(agree[i])) or bool(basin[i])
-        glob = None
+        glob, interval = None, [float(lo[i]), float(hi[i])]
         if profile_points:
-            glob = _global(grid[i], slice_rise[i], z0[i], half_all[i], spacing[i])
+            # the four local steps of parameter i and their rises join the slice
+            steps_z = (
+                zs[1 + 2 * i : 3 + 2 * i, i].tolist()
+                + zs[1 + 2 * (p + i) : 3 + 2 * (p + i), i].tolist()
+            )
+            steps_rise = np.concatenate([rise[0, i], rise[1, i]])
+            glob = _global(
+                grid[i], slice_rise[i], z0[i], half_all[i], spacing[i], steps_z, steps_rise
+            )
             glob["values"] = space.natural(_at(z0, i, grid[i]))[:, i].tolist()
             ends = [max(glob.pop("lo_z"), space.z_lo[i]), min(glob.pop("hi_z"), space.z_hi[i])]
             glob["interval"] = space.natural(_at(z0, i, np.array(ends)))[:, i].tolist()
+            wide = glob["half_width_z"]
+            if wide is not None:  # the local interval, widened to what the slice keeps
+                ends = [max(z0[i] - wide, space.z_lo[i]), min(z0[i] + wide, space.z_hi[i])]
+                interval = space.natural(_at(z0, i, np.array(ends)))[:, i].tolist()
         out[name] = {
             "value": float(value[i]),
-            "interval": [float(lo[i]), float(hi[i])],
+            "interval": interval,
+            "local_interval": [float(lo[i]), float(hi[i])],
             "half_width_z": _num(half_all[i]),
             "data_half_width_z": _num(half_data[i]),
             "data_half_width_z_fine_step": _num(half_fine[i]),
@@ -159,21 +174,35 @@ def identifiability(
     return out
 
 
-def _global(grid, rise, z0, half, spacing) -> dict:
+def _global(grid, rise, z0, half, spacing, steps_z, steps_rise) -> dict:
     """The slice's verdict for one parameter: grid (G,) z values, rise (G,) the data's
-    -log likelihood above theta's; half: the local 95 % half-width (z)."""
-    kept = rise < CHI2_95 / 2  # not excluded by the likelihood ratio at 95 %
+    -log likelihood above theta's; half: the local 95 % half-width (z); steps_z,
+    steps_rise (4,): the local steps (coarse +-, fine +-) and their rises.
+
+    A value is kept (not excluded at 95 %) when its rise is under chi2_95(1) / 2 plus
+    the loss's own wiggle: the largest |rise| at the fine steps (on a quadratic loss a
+    sixteenth of the coarse rise; on a jagged one as large as any: a rise smaller than
+    what 1.25 % of the bounds already gives is no evidence)."""
+    wiggle = float(np.max(np.abs(steps_rise)))
+    thr = CHI2_95 / 2 + wiggle
+    kept = rise < thr
+    steps_z, steps_rise = np.asarray(steps_z, float), np.asarray(steps_rise, float)
+    kept_z = np.concatenate([grid[kept], steps_z[steps_rise < thr]])
+    reach = float(np.max(np.abs(kept_z - z0), initial=0.0))
     zk = np.append(grid[kept], z0)
     outside = np.abs(grid[kept] - z0) > half + spacing  # False where half is infinite
     return {
         "z": grid.tolist(),
         "nll_rise": rise.tolist(),
+        "threshold": thr,
         "lo_z": float(zk.min() - spacing),
         "hi_z": float(zk.max() + spacing),
-        # a point as likely as theta outside its local interval: another basin, a
+        # the local half-width, widened to the farthest value kept (z)
+        "half_width_z": _num(max(half, reach)),
+        # a value as likely as theta outside its local interval: another basin, a
         # plateau, or a better answer the fit missed
         "passed": bool(np.isfinite(half) and not outside.any()),
-        "better_elsewhere": bool((rise < -CHI2_95 / 2).any()),
+        "better_elsewhere": bool((rise < -thr).any()),
     }
 
 
