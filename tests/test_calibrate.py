@@ -328,6 +328,44 @@ def test_trace_loss_is_smooth_around_the_hidden_friction(heavy_block):
             assert 0 < climb < 0.15, (label, v)
 
 
+def test_replicas_only_for_traced_rows_and_alike_in_numpy_and_jax(heavy_block):
+    # rows 0 and 2 have a force trace: each gets K - 1 = 2 replicas, moved +-0.05 mm;
+    # split() hands every measured row its own simulation and its replicas, the same in
+    # numpy (the engine's path) and jax (the forward-mode path)
+    import jax.numpy as jnp
+
+    from mjx_pick.calibration.problem import trace_outputs
+    from mjx_pick.kernels.grasp import TRACE_FIELDS
+
+    rows = cal.make_outcomes([0, 1, -1], [0, 0.5, 0], [0, 0, 5], [8, 9, 10])
+    trace = {"force_n": np.array([[0.0, 0.0], [0.3, 5.0]])}
+    rows = dataclasses.replace(rows, traces=(trace, None, trace))
+    problem = cal.Problem(heavy_block, rows, ["pad_friction"], mp.Settings(LIGHT, grasp=SHORT))
+    assert problem.row_of.tolist() == [0, 1, 2, 0, 2, 0, 2]
+    assert np.allclose(problem.picks.x_mm, [0, 1, -1, 0.05, -0.95, -0.05, -1.05])
+    n, t = len(problem.row_of), 4
+    rng = np.random.default_rng(0)
+    out = {
+        "diverged": np.array([[0, 0, 0, 1, 0, 0, 0]], bool),
+        "lift_height_mm": rng.normal(size=(1, n)),
+    }
+    traces = rng.normal(size=(1, n, t, len(TRACE_FIELDS))).astype(np.float32)
+    a = problem.split(out, traces)
+    b = problem.split({k: jnp.asarray(v) for k, v in out.items()}, jnp.asarray(traces), xp=jnp)
+    assert a["force_n"].shape == (1, 3, t) and a["force_n_replicas"].shape == (1, 3, 2, t)
+    for k in a:
+        np.testing.assert_allclose(np.asarray(b[k]), a[k], rtol=1e-6, err_msg=k)
+    own = a["force_n"][0]
+    # row 2's second replica is simulated row 6 (replica-major: 0 1 2 | 0 2 | 0 2)
+    sixth = trace_outputs(traces[:, 6])["force_n"][0]
+    np.testing.assert_allclose(a["force_n_replicas"][0, 2, 1], sixth, rtol=1e-6)
+    # row 1 has no trace: its "replicas" are its own simulation; row 0's first replica
+    # (simulated row 3) diverged
+    np.testing.assert_array_equal(a["force_n_replicas"][0, 1, 0], own[1])
+    assert a["diverged_replicas"][0].tolist() == [[True, False], [False, False], [False, False]]
+    assert not np.allclose(a["force_n_replicas"][0, 2, 0], own[2])
+
+
 class _TwoBasins:
     """A stand-in Problem with known residuals (no simulation): parameter a has one
     quadratic basin at 0.3; parameter b has two equally deep ones, at 0.3 and 0.8 --
