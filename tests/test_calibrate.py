@@ -280,10 +280,11 @@ def test_identifiability_outcomes_against_traces(heavy_block):
     )
     names = ["pad_friction", "force_offset_n", "table_damping_ns_per_mm"]
     half = {}
-    for label, data, profile in (("outcomes", out, 0), ("traces", traced, 6)):
+    for label, data in (("outcomes", out), ("traces", traced)):
         problem = cal.Problem(heavy_block, data, names, hidden, backend="mujoco")
         theta = problem.space.theta([HIDDEN, 1.5, problem.start["table_damping_ns_per_mm"]])
-        ident = cal.identifiability(problem, theta, profile_points=profile)
+        # the local tests (the slice: test_identifiability_global_check_rejects_...)
+        ident = cal.identifiability(problem, theta, profile_points=0)
         half[label] = {n: ident[n]["data_half_width_z"] or np.inf for n in names}
         assert not ident["table_damping_ns_per_mm"]["identified"], label
         lo, hi = ident["force_offset_n"]["interval"]
