@@ -212,7 +212,7 @@ def report_md(result, problem) -> str:
         f"{len(problem.outcomes)} measured pick-points, {result.rollouts} simulations, "
         f"estimator `{result.estimator}`.",
         "",
-        "| parameter | initial | optimum | 95 % interval (local) | not excluded along its "
+        "| parameter | initial | optimum | 95 % interval | not excluded along its "
         "bounds (global) | identified | used |",
         "|---|---|---|---|---|---|---|",
     ]
