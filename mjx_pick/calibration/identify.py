@@ -25,14 +25,15 @@ Both tests are local: on a jagged loss a point can sit in one narrow basin of se
 So a parameter must also pass a global check: the data's negative log likelihood along
 each parameter over its whole bounds (``profile_points`` values evenly spaced in z, the
 others at theta: a slice, in the same engine batch as the local steps). Every slice
-point that the likelihood ratio does not exclude at 95 % (a rise of less than
-chi2_95(1) / 2 = 1.92 above theta's, plus the loss's own wiggle: the largest rise at the
-fine steps) must lie within the local interval widened by one slice spacing -- no
-second basin, no plateau as deep as the answer, no better point elsewhere. The reported
-interval is the local one widened to the farthest value kept (a flat-bottomed basin is
-wider than its curvature says); the slice's own 95 % set (its extent, plus one spacing)
-is reported as the global interval. The rest are reported as not identified, and a fit
-keeps them at their starting values instead of pretending to have fitted them.
+point that the likelihood ratio does not exclude at 95 % (a rise of less than chi2_95(1)
+/ 2 = 1.92 above the best of theta and its local steps, plus the loss's own wiggle: the
+largest |rise| at the fine steps) must lie within the local interval widened by one
+slice spacing -- no second basin, no plateau as deep as the answer, no better point
+elsewhere. The reported interval is the local one widened to the farthest value kept (a
+flat-bottomed basin is wider than its curvature says); the slice's own 95 % set (its
+extent, plus one spacing) is reported as the global interval. The rest are reported as
+not identified, and a fit keeps them at their starting values instead of pretending to
+have fitted them.
 """
 
 from __future__ import annotations
@@ -179,14 +180,18 @@ def _global(grid, rise, z0, half, spacing, steps_z, steps_rise) -> dict:
     -log likelihood above theta's; half: the local 95 % half-width (z); steps_z,
     steps_rise (4,): the local steps (coarse +-, fine +-) and their rises.
 
-    A value is kept (not excluded at 95 %) when its rise is under chi2_95(1) / 2 plus
-    the loss's own wiggle: the largest |rise| at the fine steps (on a quadratic loss a
-    sixteenth of the coarse rise; on a jagged one as large as any: a rise smaller than
-    what 1.25 % of the bounds already gives is no evidence)."""
-    wiggle = float(np.max(np.abs(steps_rise)))
-    thr = CHI2_95 / 2 + wiggle
-    kept = rise < thr
+    A value is kept (not excluded at 95 %) when its rise above the best of theta and
+    its four steps (theta may sit on a slope) is under chi2_95(1) / 2 plus the loss's
+    own wiggle: the largest |rise| at the fine steps (on a quadratic loss a sixteenth
+    of the coarse rise; on a jagged one as large as any: a rise smaller than what 1.25 %
+    of the bounds already gives is no evidence). The threshold returned is relative to
+    theta."""
     steps_z, steps_rise = np.asarray(steps_z, float), np.asarray(steps_rise, float)
+    wiggle = float(np.max(np.abs(steps_rise[2:])))  # the fine steps
+    # rises counted from the best of theta and its steps: theta may sit on a slope
+    ref = min(0.0, float(steps_rise.min()))
+    thr = CHI2_95 / 2 + wiggle + ref
+    kept = rise < thr
     kept_z = np.concatenate([grid[kept], steps_z[steps_rise < thr]])
     reach = float(np.max(np.abs(kept_z - z0), initial=0.0))
     zk = np.append(grid[kept], z0)
