@@ -12,8 +12,13 @@ by every estimator with the same budget of pick-point simulations:
 With ``--gradients``, also forward-mode derivatives through MJX against finite
 differences (MJX compiles for minutes on a CPU).
 
-Estimators: ``smoothed`` (the default: Gauss-Hermite smoothed gradient + Adam),
-``random`` (uniform search), ``cma`` (CMA-ES, the ``cma`` package), ``lsq``
+The trace residual: ``--replicates`` K simulations per traced row and a
+``--trace-window-s`` moving average (docs/calibration.md; ``--replicates 1
+--trace-window-s 0`` is the former per-sample RMS). The budget counts simulations, so
+K = 3 leaves a third as many parameter vectors.
+
+Estimators: ``smoothed`` (Gauss-Hermite smoothed gradient + Adam),
+``random`` (uniform search), ``cma`` (CMA-ES, the ``cma`` package; the default), ``lsq``
 (Levenberg-Marquardt on the residuals, ``mujoco.sysid``). Per fit: the best loss
 against simulations and wall time; simulations and wall time to reach the target loss
 (90 % of the way from the start's loss to the hidden parameters' loss); each
@@ -75,8 +80,11 @@ def setup(rows: int, seed: int, names: list[str]):
     return obj, base, train, held
 
 
-def fit(obj, base, train, held, names, estimator, budget, seed):
-    problem = cal.Problem(obj, train, names, base, backend="mujoco")
+def fit(obj, base, train, held, names, estimator, budget, seed, replicates=3, window_s=0.05):
+    noise = cal.Noise(trace_window_s=window_s)
+    problem = cal.Problem(
+        obj, train, names, base, backend="mujoco", replicates=replicates, noise=noise
+    )
     holdout = cal.Problem(obj, held, names, base, backend="mujoco")
     truth = problem.space.theta([HIDDEN[n] for n in names])
     # a bounded parameter can be clipped by theta(): the truth's own loss, on its theta
@@ -85,7 +93,7 @@ def fit(obj, base, train, held, names, estimator, budget, seed):
     target = l_true + 0.1 * (l_start - l_true)
     spent0 = problem.rollouts
     t0 = time.perf_counter()
-    rows = len(train)
+    rows = len(problem.row_of)  # simulations per parameter vector (replicas included)
     before = holdout.accuracy(problem.start_theta())["correct"]
     if estimator == "lsq":
         res = cal.least_squares(problem, max_iters=10_000, budget=budget, holdout=holdout)
@@ -107,7 +115,8 @@ def fit(obj, base, train, held, names, estimator, budget, seed):
         "hidden_parameters": len(names),
         "names": names,
         "budget": budget,
-        "rows": rows,
+        "rows": len(train),
+        "simulations_per_vector": rows,
         "loss_start": l_start,
         "loss_hidden": l_true,
         "target": target,
@@ -159,6 +168,87 @@ def gradient_quality(obj, base, train) -> dict:
     return out
 
 
+def gradient_check_tiny() -> dict:
+    """Forward-mode derivatives through MJX against central finite differences on a
+    tiny problem: the 1 kg block, two rows (F_d 14 N holds, 6 N slips), the short test
+    procedure, theta = (pad friction, force offset) at (0.86, 0). Quantities per row:
+    the mean pad force over the last 10 control ticks (N) and the final lift (mm); and
+    the calibration loss of the two rows with a force trace (one simulation per row)."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_pick.calibration.parameters import contact_arrays_jnp
+    from mjx_pick.engine import differentiable_rollout
+    from mjx_pick.kernels.grasp import TRACE_FIELDS
+
+    obj = mp.object_from_polygon(box(-20, -10, 20, 10), thickness_mm=20, mass_g=1000, name="heavy")
+    gripper = mp.GripperSpec(name="light-gripper", force_min_n=1.0)
+    grasp = GraspConfig(close_timeout_s=0.4, lift_height_mm=20.0, hold_s=0.05)
+    base = mp.Settings(gripper=gripper, grasp=grasp)
+    names = ["pad_friction", "force_offset_n"]
+    data = cal.synthetic_outcomes(
+        obj, base, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [14.0, 6.0], traces=("force_n",)
+    )
+    problem = cal.Problem(obj, data, names, base, backend="mjx", replicates=1)
+    theta = problem.space.theta([0.86, 0.0])
+    roll = differentiable_rollout(problem.scene, grasp, True)
+    inp = problem.inputs
+    fl, fr_ = TRACE_FIELDS.index("force_left_n"), TRACE_FIELDS.index("force_right_n")
+
+    def quantities(th):
+        values = problem.space.values(th)
+        fr, ref, force = contact_arrays_jnp(names, values, inp, problem.scene, base, obj.mass_kg)
+        out, rows = roll(inp.qpos0, inp.params._replace(force_n=force), fr, ref, inp.pair_solimp)
+        hold = 0.5 * (rows[:, -10:, fl] + rows[:, -10:, fr_]).mean(axis=-1)
+        return jnp.concatenate([hold, out["lift_height_mm"]])  # (4,)
+
+    f = jax.jit(quantities)
+    jac_f = jax.jit(jax.jacfwd(quantities))
+    t0 = time.perf_counter()
+    value = np.asarray(f(jnp.asarray(theta)))
+    t_value = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    jac = np.asarray(jac_f(jnp.asarray(theta)))  # (4, 2)
+    t_jac = time.perf_counter() - t0
+    labels = ["hold force 14 N row", "hold force 6 N row", "lift 14 N row", "lift 6 N row"]
+    res = {
+        "names": names,
+        "quantities": labels,
+        "value": value.tolist(),
+        "jvp": jac.tolist(),
+        "first_call_s": {"value": t_value, "jacfwd": t_jac},
+        "fd": {},
+    }
+    for h in (0.1, 0.03, 0.01):
+        cols = []
+        for i in range(len(names)):
+            e = np.zeros(len(names), np.float32)
+            e[i] = h
+            hi = np.asarray(f(jnp.asarray(theta + e)))
+            lo = np.asarray(f(jnp.asarray(theta - e)))
+            cols.append((hi - lo) / (2 * h))
+        res["fd"][str(h)] = np.stack(cols, axis=1).tolist()  # (4, 2)
+    t0 = time.perf_counter()
+    loss, grad = problem.mjx_loss_and_grad(theta)
+    res["loss"] = {"value": loss, "jvp": grad.tolist(), "first_call_s": time.perf_counter() - t0}
+    res["loss"]["fd"] = {}
+    for h in (0.1, 0.03, 0.01):
+        g = []
+        for i in range(len(names)):
+            e = np.zeros(len(names), np.float32)
+            e[i] = h
+            g.append(
+                (problem.mjx_loss_and_grad(theta + e)[0] - problem.mjx_loss_and_grad(theta - e)[0])
+                / (2 * h)
+            )
+        res["loss"]["fd"][str(h)] = g
+    # d theta / d value, to read the derivatives per unit of each parameter
+    res["dvalue_dtheta"] = (
+        np.asarray(jax.jacfwd(problem.space.values)(jnp.asarray(theta))).diagonal().tolist()
+    )
+    return res
+
+
 def to_target(fits: list[dict]) -> None:
     """Per fit, simulations and wall time until its best loss came within 10 % of the
     way from the start's loss to the best loss ANY estimator found on that problem
@@ -200,6 +290,52 @@ def table(path: str) -> None:
         )
 
 
+def reidentify(path: str, out: str) -> None:
+    """Identifiability (local tests and the global slice, ``identify.py``) at every fit's
+    optimum in a results JSON, on the same problems: which parameters each test passes
+    and whether the hidden value lies in the reported intervals."""
+    report = json.loads(Path(path).read_text())
+    k, window = report.get("replicates", 1), report.get("trace_window_s", 0.0)
+    rows, cache = [], {}
+    for f in report["fits"]:
+        names, p = f["names"], f["hidden_parameters"]
+        if p not in cache:
+            obj, base, train, _ = setup(report["rows"], report.get("seed", 0), names)
+            noise = cal.Noise(trace_window_s=window)
+            cache[p] = cal.Problem(
+                obj, train, names, base, backend="mujoco", replicates=k, noise=noise
+            )
+        problem = cache[p]
+        theta = problem.space.theta([f["optimum"][n] for n in names])
+        t0 = time.perf_counter()
+        ident = cal.identifiability(problem, theta)
+        row = {"estimator": f["estimator"], "hidden_parameters": p, "params": {}}
+        for n in names:
+            i = ident[n]
+            lo, hi = i["interval"]
+            glo, ghi = i["global"]["interval"]
+            llo, lhi = i["local_interval"]
+            row["params"][n] = {
+                "local": i["local"],
+                "global": i["global"]["passed"],
+                "identified": i["identified"],
+                "local_interval": [llo, lhi],
+                "interval": [lo, hi],
+                "global_interval": [glo, ghi],
+                "hidden_in_local_interval": llo <= HIDDEN[n] <= lhi,
+                "hidden_in_interval": lo <= HIDDEN[n] <= hi,
+                "hidden_in_global": glo <= HIDDEN[n] <= ghi,
+            }
+        row["wall_s"] = time.perf_counter() - t0
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+        Path(out).write_text(json.dumps({"source": path, "fits": rows}, indent=1))
+    for test, iv in (("local", "hidden_in_local_interval"), ("identified", "hidden_in_interval")):
+        flagged = [q for r in rows for q in r["params"].values() if q[test]]
+        inside = sum(q[iv] for q in flagged)
+        print(f"{test}: {len(flagged)} parameters pass; hidden value inside the interval: {inside}")
+
+
 SHORT = {
     "pad_friction": "mu_pad",
     "force_offset_n": "offset",
@@ -222,8 +358,31 @@ def main() -> None:
     ap.add_argument("--params", default="1,3,5")
     ap.add_argument("--estimators", default=",".join(ESTIMATORS))
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--replicates",
+        type=int,
+        default=3,
+        help="simulations per traced row (the trace residual's replicas; 1: the former "
+        "per-sample RMS)",
+    )
+    ap.add_argument(
+        "--trace-window-s",
+        type=float,
+        default=0.05,
+        help="moving average of the traces before they are compared (0: tick by tick)",
+    )
     ap.add_argument("--out", default="benchmarks/out/calibration_estimators.json")
     ap.add_argument("--table", help="print the RESULTS.md table of this JSON and stop")
+    ap.add_argument(
+        "--gradients-tiny",
+        action="store_true",
+        help="only: forward-mode (MJX) derivatives against finite differences on a tiny "
+        "problem (two rows, short procedure), into --out",
+    )
+    ap.add_argument(
+        "--reidentify",
+        help="identifiability (local and global) at every optimum of this JSON, into --out",
+    )
     ap.add_argument(
         "--gradients",
         action="store_true",
@@ -232,6 +391,15 @@ def main() -> None:
     args = ap.parse_args()
     if args.table:
         table(args.table)
+        return
+    if args.gradients_tiny:
+        res = gradient_check_tiny()
+        print(json.dumps(res, indent=1))
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(res, indent=1))
+        return
+    if args.reidentify:
+        reidentify(args.reidentify, args.out)
         return
     commit = subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
@@ -242,6 +410,9 @@ def main() -> None:
         "hidden": HIDDEN,
         "trace_noise": NOISE,
         "rows": args.rows,
+        "seed": args.seed,
+        "replicates": args.replicates,
+        "trace_window_s": args.trace_window_s,
         "fits": [],
     }
     out = Path(args.out)
@@ -255,7 +426,18 @@ def main() -> None:
         budget = (args.budget + 60 * (p - 1)) * len(train)
         report[f"train_successes_{p}"] = int(train.successes.sum())
         for est in args.estimators.split(","):
-            row = fit(obj, base, train, held, SETS[p], est, budget, args.seed)
+            row = fit(
+                obj,
+                base,
+                train,
+                held,
+                SETS[p],
+                est,
+                budget,
+                args.seed,
+                args.replicates,
+                args.trace_window_s,
+            )
             report["fits"].append(row)
             print(
                 json.dumps({k: v for k, v in row.items() if k != "curve"}, default=float),

@@ -11,8 +11,9 @@ ask / tell because a step's simulations run in one engine batch between them:
 
 Estimators (benchmarks/calibration.py compares them at equal budgets; RESULTS.md):
 
-* ``cma`` (the default) -- see below; it is the one that reached the common target on
-  1, 3 and 5 hidden parameters in benchmarks/calibration.py (RESULTS.md).
+* ``cma`` (the default) -- see below; in benchmarks/calibration.py it is the only one
+  to reach the common target with 3 hidden parameters and the first with 5 (with one,
+  the smoothed gradient and least squares are faster; RESULTS.md).
 * ``smoothed`` -- optax Adam on the gradient of the loss smoothed with a Gaussian along
   each parameter, E[L(theta + sigma Z e_i)], by Gauss-Hermite quadrature (symmetric
   node pairs; 1 + 2 x pairs x P vectors per step): deterministic, no derivatives, sees
@@ -22,8 +23,9 @@ Estimators (benchmarks/calibration.py compares them at equal budgets; RESULTS.md
 * ``cma`` -- CMA-ES (the ``cma`` package, N. Hansen's reference implementation) in
   theta space: a population per step, step size and covariance adapted.
 * ``jvp`` -- Adam on forward-mode derivatives through MJX (``Problem.mjx_loss_and_grad``;
-  the fit loop supplies the gradient). Kept for smooth losses: over a whole pick its
-  derivative disagrees with finite differences (RESULTS.md), so it is no default.
+  the fit loop supplies the gradient). Kept for smooth losses: over a pick its
+  derivative disagrees with finite differences, which do not even converge on a
+  chaotic grasp (RESULTS.md), so it is no default.
 
 A least-squares fit of the residuals with MuJoCo's own optimiser (``mujoco.sysid``)
 is ``fit.least_squares``: it runs its own loop (Levenberg-Marquardt with batched

@@ -10,13 +10,30 @@ likelihood is 0.5 * |r|^2 (least squares, identifiability and the loss all read 
   its row costs the most wrong prediction the clipped logit allows.
 * lift time, per row where measured: (simulated - measured) / ``noise.lift_time_s``
   (a simulation that never reached F_d waited its whole close timeout).
-* traces, one residual per trace kind and row: the RMS over the trace's samples of
-  (simulated - measured) / noise of the kind (force: ``noise.force_fraction`` of F_d;
-  lift: ``noise.lift_mm``; rotation: ``noise.rotation_deg``). One number per trace,
-  not one per sample: a trace's samples are strongly correlated, so hundreds of them
-  must not outweigh the trials' outcomes (nor claim hundreds of independent
-  observations in the intervals). A diverged row counts as predicting nothing (zero),
-  at least one noise unit off.
+* traces, one residual per trace kind and row. A grasp that chatters, slips or drops
+  is chaotic: a 0.1 % change of a parameter moves every tick's pad force and the tick
+  the part drops at (docs/calibration.md, "Traces of a chaotic grasp"), so one
+  simulated trace is one draw of what the model predicts. Each traced row is therefore
+  simulated at K placements (``Problem(replicates=K)``: the pick-point and K - 1 copies
+  moved by a few hundredths of a millimetre), every trace -- measured and simulated --
+  is smoothed by a ``noise.trace_window_s`` moving average (a gauge's bandwidth), and
+  the residual is the Gaussian negative log likelihood of the measured trace under the
+  replicas' mean m_t and spread v_t (sample variance over K, at least its mean over
+  the 4 windows around: three replicas may agree by chance), per sample
+
+      z_t^2 + log(1 + v_t / s_t^2),   z_t = (m_t - measured_t) / sqrt(s_t^2 + v_t)
+
+  (s_t the noise of the kind: force ``noise.force_fraction`` of F_d, lift
+  ``noise.lift_mm``, rotation ``noise.rotation_deg``), averaged over the measured
+  samples, square-rooted: an RMS in noise units. Where the replicas agree (v = 0) it is
+  the plain RMS of (simulated - measured) / s; where the model itself cannot say when
+  the force chatters or the part drops, that spread widens the tolerance, and the log
+  term charges for it (the likelihood's normaliser) so that a chaotic simulation does
+  not fit by being vague. K = 1 and window 0 give the former per-sample RMS. One number
+  per trace, not one per sample: a trace's samples are strongly correlated, so hundreds
+  of them must not outweigh the trials' outcomes (nor claim hundreds of independent
+  observations in the intervals). A diverged row (or replica) counts as predicting
+  nothing (zero); a diverged row is at least one noise unit off.
 * prior, per parameter: the standardised distance from its prior mean.
 
 loss = 0.5 |r|^2 / (total trials): per trial, as the old outcome cross-entropy was.
@@ -48,6 +65,8 @@ class Noise:
     force_fraction: float = 0.05  # of F_d
     lift_mm: float = 2.0
     rotation_deg: float = 3.0
+    # moving average over which traces are compared (s; 0: tick by tick)
+    trace_window_s: float = 0.05
     # weights of the terms (0 drops one)
     outcome_weight: float = 1.0
     time_weight: float = 1.0
@@ -57,7 +76,7 @@ class Noise:
     def __post_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            if f.name.endswith("weight"):
+            if f.name.endswith("weight") or f.name == "trace_window_s":
                 check_range("calibrate", f.name, v, 0, 1e6)
             else:
                 check_range("calibrate", f.name, v, 0, 1e6, lo_open=True)
@@ -122,7 +141,9 @@ def residuals(sim: dict, data, noise: Noise, prior=None):
     """Named residual blocks {term: (..., n_term)} of simulated outputs against data.
 
     sim: (..., R) 'lift_height_mm', 't_reached_s', 'diverged' and, where traces are
-    measured, (..., R, T) arrays named as the trace kinds. data: a ``LossData``.
+    measured, (..., R, T) arrays named as the trace kinds, and optionally their
+    replicas '<kind>_replicas' (..., R, K - 1, T) with 'diverged_replicas'
+    (..., R, K - 1) (module docstring). data: a ``LossData``.
     prior: (..., P) prior residuals of the parameters (or None).
     """
     out = {}
@@ -153,23 +174,59 @@ def residuals(sim: dict, data, noise: Noise, prior=None):
             "lift_mm": np.full((r_n, t_n), noise.lift_mm),
             "rotation_deg": np.full((r_n, t_n), noise.rotation_deg),
         }
+        width = int(round(noise.trace_window_s / data.dt_s)) if data.dt_s else 0
         for k, kind in enumerate(tt.kinds):
             rows = tt.mask[k].any(axis=-1)
             pred = jnp.where(diverged[..., None], 0.0, jnp.nan_to_num(sim[kind]))
-            shape = pred.shape
+            # (..., R, K, T): the row's own simulation first, then its replicas
+            reps = sim.get(f"{kind}_replicas")
+            ens = pred[..., None, :]
+            if reps is not None:
+                rd = sim.get("diverged_replicas", jnp.zeros(reps.shape[:-1], bool))
+                reps = jnp.where(rd[..., None], 0.0, jnp.nan_to_num(reps))
+                ens = jnp.concatenate([ens, reps], axis=-2)
+            mask = np.asarray(tt.mask[k], np.float32)
+            target = moving_average(np.asarray(tt.target[k]) * mask, width)
+            weight = moving_average(mask, width)
+            target = np.where(weight > 0, target / np.maximum(weight, 1e-9), 0.0)
+            ens = moving_average(ens, width)
+            mean = ens.mean(axis=-2)
+            var = ens.var(axis=-2, ddof=1) if ens.shape[-2] > 1 else jnp.zeros_like(mean)
+            # a few replicas' variance is itself noisy (by chance they agree at a tick
+            # where the grasp is chaotic): at least its mean over 4 windows around
+            var = jnp.maximum(var, moving_average(var, 4 * width))
+            shape = mean.shape
 
             def full(a, shape=shape):
                 return jnp.broadcast_to(jnp.asarray(a, jnp.float32), shape)
 
-            mask = full(tt.mask[k])
-            e = (pred - full(tt.target[k])) / full(scale[kind]) * mask
-            rms = jnp.sqrt(jnp.sum(e**2, axis=-1) / jnp.maximum(mask.sum(-1), 1.0))
+            m = full(mask)
+            s2 = full(scale[kind]) ** 2
+            nll = (mean - full(target)) ** 2 / (s2 + var) + jnp.log1p(var / s2)
+            rms = jnp.sqrt(jnp.sum(nll * m, axis=-1) / jnp.maximum(m.sum(-1), 1.0))
             floor = jnp.maximum(rms, 1.0)
             rms = jnp.where(diverged, floor, rms)
             out[kind] = np.sqrt(noise.trace_weight) * rms[..., rows]
     if prior is not None and noise.prior_weight:
         out["prior"] = np.sqrt(noise.prior_weight) * jnp.asarray(prior, jnp.float32)
     return out
+
+
+def moving_average(x, width: int):
+    """Centred moving average of width samples along the last axis (edges: the mean of
+    the samples inside); width <= 1 returns x. numpy or jax arrays (..., T)."""
+    if width <= 1:
+        return x
+    xp = np if isinstance(x, np.ndarray) else jnp
+    lo, hi = width // 2, width - 1 - width // 2
+    n = x.shape[-1]
+    csum = xp.cumsum(x, axis=-1)
+    zero = xp.zeros(x.shape[:-1] + (1,), csum.dtype)
+    csum = xp.concatenate([zero, csum], axis=-1)  # csum[..., i] = sum of x[..., :i]
+    i = np.arange(n)
+    a, b = np.clip(i - lo, 0, n), np.clip(i + hi + 1, 0, n)
+    count = (b - a).astype(np.float32).reshape((1,) * (x.ndim - 1) + (n,))
+    return (csum[..., b] - csum[..., a]) / count
 
 
 def loss_of(blocks: dict, total_trials: float):
@@ -191,6 +248,7 @@ class LossData:
     high_mm: float  # final lift counted as success
     settle_s: float
     close_timeout_s: float
+    dt_s: float = 0.0  # the traces' sample period (the control tick); 0: no smoothing
 
     @property
     def total_trials(self) -> float:

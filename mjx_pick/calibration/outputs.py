@@ -212,17 +212,20 @@ def report_md(result, problem) -> str:
         f"{len(problem.outcomes)} measured pick-points, {result.rollouts} simulations, "
         f"estimator `{result.estimator}`.",
         "",
-        "| parameter | initial | optimum | 95 % interval | identified | used |",
-        "|---|---|---|---|---|---|",
+        "| parameter | initial | optimum | 95 % interval | not excluded along its "
+        "bounds (global) | identified | used |",
+        "|---|---|---|---|---|---|---|",
     ]
     for n in problem.names:
         info = ident.get(n, {})
         iv = info.get("interval")
         iv_text = f"{iv[0]:.4g} - {iv[1]:.4g}" if iv else "-"
+        gv = (info.get("global") or {}).get("interval")
+        gv_text = f"{gv[0]:.4g} - {gv[1]:.4g}" if gv else "-"
         ok = {True: "yes", False: "**no**"}.get(info.get("identified"), "-")
         opt = (result.optimum or result.values)[n]
         lines.append(
-            f"| {n} | {result.initial[n]:.4g} | {opt:.4g} | {iv_text} | {ok} | "
+            f"| {n} | {result.initial[n]:.4g} | {opt:.4g} | {iv_text} | {gv_text} | {ok} | "
             f"{result.values[n]:.4g} |"
         )
     if result.not_identified:
@@ -230,7 +233,9 @@ def report_md(result, problem) -> str:
             "",
             f"Not identified by these data: {', '.join(result.not_identified)} -- kept at "
             "their starting values (the data alone do not narrow them to half their "
-            "prior's range). Measure what moves them (traces, other grip forces) to fit them.",
+            "prior's range, or, along the parameter's bounds, other values fit the data "
+            "as well as the optimum). Measure what moves them (traces, other grip forces) "
+            "to fit them.",
         ]
     if result.history:
         lines += [

@@ -53,6 +53,12 @@ class Problem:
       bounds, priors: per parameter (see ``parameters.param_space``).
       start: starting values (default: the settings' own).
       backend: the engine's backend ('auto', 'mujoco', 'mjx', 'warp').
+      replicates: K, simulations of each row with a measured trace -- the pick-point
+        and K - 1 copies moved by +-``replica_jitter_mm`` in x and y -- whose spread is
+        the model's own uncertainty about the trace (``loss.py``). Outcomes and lift
+        times are those of the pick-point itself. 1: one simulation per row.
+      replica_jitter_mm: the copies' offset (mm); small: the chaos of a slipping
+        grasp decorrelates them, not the offset.
     """
 
     def __init__(
@@ -71,6 +77,8 @@ class Problem:
         start: dict | None = None,
         pick_config: pp.PickConfig | None = None,
         backend: str = "auto",
+        replicates: int = 3,
+        replica_jitter_mm: float = 0.05,
     ) -> None:
         from mjx_pick.grasp import broadcast_params
         from mjx_pick.scene import build_scene
@@ -107,9 +115,26 @@ class Problem:
                 f"{len(bad)} of {len(outcomes)} measured pick-points are infeasible for "
                 f"{g.name}: {shown}"
             )
-        self.picks = checker.batch(
-            np.arange(len(outcomes)), outcomes.x_mm, outcomes.y_mm, outcomes.yaw_deg, "calibration"
-        )
+        check_range("calibrate", "replicates", replicates, 1, 64)
+        check_range("calibrate", "replica_jitter_mm", replica_jitter_mm, 0, 5)
+        # rows with a measured trace get K - 1 replicas: row_of maps every simulated row
+        # (R pick-points, then the replicas, replica-major) to its measured row
+        r_n = len(outcomes)
+        traced = np.flatnonzero([bool(tr) for tr in outcomes.traces])
+        self.replicates = int(replicates) if len(traced) else 1
+        self.traced_rows = traced if self.replicates > 1 else np.zeros(0, int)
+        offsets = replica_offsets(self.replicates - 1, replica_jitter_mm)  # (K - 1, 2)
+        self.row_of = np.concatenate([np.arange(r_n)] + [self.traced_rows] * len(offsets))
+        xs = np.concatenate([outcomes.x_mm] + [outcomes.x_mm[traced] + o[0] for o in offsets])
+        ys = np.concatenate([outcomes.y_mm] + [outcomes.y_mm[traced] + o[1] for o in offsets])
+        yaws = outcomes.yaw_deg[self.row_of]
+        # a replica whose offset makes it infeasible (a pick-point at a clearance edge)
+        # stays at the pick-point: it adds no spread
+        moved = checker(xs, ys, yaws)["reason"] != pp.fk.FEASIBLE
+        xs = np.where(moved, outcomes.x_mm[self.row_of], xs)
+        ys = np.where(moved, outcomes.y_mm[self.row_of], ys)
+        self.picks = checker.batch(np.arange(len(xs)), xs, ys, yaws, "calibration")
+        self.grip_force_n = outcomes.grip_force_n[self.row_of]  # (R + replicas,)
         self.scene = build_scene(obj, g, s.contact, s.solver, s.grasp)
         self.start = start_values(self.names, s, self.scene)
         self.start.update({canonical_params([k])[0]: float(v) for k, v in (start or {}).items()})
@@ -125,12 +150,12 @@ class Problem:
         check_start(self.space, self.start)
         per_row = [
             dataclasses.replace(s.grasp, grip_force_n=float(f)).params(obj, g)
-            for f in outcomes.grip_force_n
+            for f in self.grip_force_n
         ]
         stacked = {k: np.array([getattr(p, k) for p in per_row]) for k in per_row[0]._fields}
-        params = broadcast_params(per_row[0], len(outcomes), **stacked)
+        params = broadcast_params(per_row[0], len(self.row_of), **stacked)
         self.inputs = make_inputs(
-            self.scene, s.grasp, self.picks, s.overrides(self.scene, len(outcomes))
+            self.scene, s.grasp, self.picks, s.overrides(self.scene, len(self.row_of))
         ).replace(params=params)
         gr = s.grasp
         self.high_mm = gr.success_height_fraction * gr.lift_height_mm
@@ -145,11 +170,12 @@ class Problem:
             high_mm=self.high_mm,
             settle_s=gr.settle_s,
             close_timeout_s=gr.close_timeout_s,
+            dt_s=gr.control_period_s,
         )
         self.record = traces is not None
         self.backend_name = backend
         # a batch holds every row of at least one parameter vector
-        self.engine = Engine(backend, batch_size=max(256, len(outcomes)))
+        self.engine = Engine(backend, batch_size=max(256, len(self.row_of)))
         self._backend = None
         self._jvp = None
 
@@ -168,25 +194,58 @@ class Problem:
         return self._backend
 
     def simulate(self, thetas: np.ndarray) -> dict:
-        """Simulate every row for each theta (S, P) in ONE engine run; outputs (S, R)
-        (and (S, R, T) per measured trace kind)."""
+        """Simulate every row (and its replicas) for each theta (S, P) in ONE engine run;
+        outputs (S, R) (and (S, R, T) per measured trace kind, with their replicas:
+        :meth:`split`)."""
         thetas = np.atleast_2d(np.asarray(thetas, np.float32))
-        s_n, r = len(thetas), len(self.outcomes)
+        s_n, n = len(thetas), len(self.row_of)
         parts = [
             row_inputs(
                 self.inputs,
                 self.scene,
                 self.settings,
-                self.outcomes.grip_force_n,
+                self.grip_force_n,
                 self.space.as_dict(th),
             )
             for th in thetas
         ]
         inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
         out, rows, _ = self.engine.run(self._forward_backend(), inputs, record=self.record)
-        res = {k: np.asarray(v).reshape(s_n, r) for k, v in out.items()}
+        out = {k: np.asarray(v).reshape(s_n, n) for k, v in out.items()}
         if rows is not None:
-            res.update(trace_outputs(rows.reshape(s_n, r, *rows.shape[1:])))
+            rows = rows.reshape(s_n, n, *rows.shape[1:])
+        return self.split(out, rows)
+
+    def split(self, out: dict, rows=None, xp=np) -> dict:
+        """Per simulated row outputs (..., R + replicas) and traces (..., R + replicas,
+        T, F) -> the measured rows' own (..., R) and (..., R, T) per trace kind, plus
+        '<kind>_replicas' (..., R, K - 1, T) and 'diverged_replicas' (..., R, K - 1)
+        where K > 1 (rows without a trace repeat their own simulation there)."""
+        r = len(self.outcomes)
+        res = {k: v[..., :r] for k, v in out.items()}
+        if rows is None:
+            return res
+        kinds = trace_outputs(rows, xp=xp)
+        res.update({k: v[..., :r, :] for k, v in kinds.items()})
+        if self.replicates > 1:
+            k1, tr = self.replicates - 1, self.traced_rows
+            div = out["diverged"]
+            rd = xp.repeat(div[..., :r, None], k1, axis=-1)
+            extra = div[..., r:].reshape(*div.shape[:-1], k1, len(tr))
+            if xp is np:
+                rd[..., tr, :] = np.swapaxes(extra, -1, -2)
+            else:
+                rd = rd.at[..., tr, :].set(jnp.swapaxes(extra, -1, -2))
+            res["diverged_replicas"] = rd
+            for k, v in kinds.items():
+                rep = xp.repeat(v[..., :r, None, :], k1, axis=-2)  # (..., R, K - 1, T)
+                extra = v[..., r:, :].reshape(*v.shape[:-2], k1, len(tr), v.shape[-1])
+                extra = xp.swapaxes(extra, -2, -3)  # (..., traced, K - 1, T)
+                if xp is np:
+                    rep[..., tr, :, :] = extra
+                else:
+                    rep = rep.at[..., tr, :, :].set(extra)
+                res[f"{k}_replicas"] = rep
         return res
 
     # --- loss
@@ -254,9 +313,7 @@ class Problem:
                 )
                 params = inp.params._replace(force_n=force)
                 out, rows = roll(inp.qpos0, params, fr, ref, inp.pair_solimp)
-                sim = dict(out)
-                if rows is not None:
-                    sim.update(trace_outputs(rows, xp=jnp))
+                sim = self.split(dict(out), rows, xp=jnp)
                 sp = self.space
                 z = jnp.where(sp.log, jnp.log(jnp.where(sp.log, values, 1.0)), values)
                 prior = (z - sp.prior_mean) / sp.prior_sd
@@ -265,7 +322,7 @@ class Problem:
 
             self._jvp = jax.jit(lambda th: (loss_fn(th), jax.jacfwd(loss_fn)(th)))
         loss, grad = self._jvp(jnp.asarray(theta, jnp.float32))
-        self._jvp_rollouts = getattr(self, "_jvp_rollouts", 0) + len(self.outcomes) * (
+        self._jvp_rollouts = getattr(self, "_jvp_rollouts", 0) + len(self.row_of) * (
             1 + len(self.names)
         )
         return float(loss), np.asarray(grad, float)
@@ -282,6 +339,14 @@ class Problem:
             # a blown-up simulation predicts no success; counted so it is never silent
             "diverged": int(out["diverged"][0].sum()),
         }
+
+
+def replica_offsets(n: int, jitter_mm: float) -> np.ndarray:
+    """(n, 2) x, y offsets (mm) of a row's replicas: the corners of a square of half
+    side jitter_mm, in turn, then again at 2x, 3x, ... (deterministic: the loss is a
+    function of the parameters alone)."""
+    corners = np.array([[1, 1], [-1, -1], [1, -1], [-1, 1]], float)
+    return np.array([corners[i % 4] * jitter_mm * (1 + i // 4) for i in range(n)]).reshape(n, 2)
 
 
 def trace_outputs(rows, xp=np) -> dict:

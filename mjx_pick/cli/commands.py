@@ -209,7 +209,12 @@ def cmd_calibrate(args) -> int:
     priors = name_ranges(args.prior, "--prior")
     backend = "mjx" if args.estimator == "jvp" else args.backend
     kw = dict(
-        temperature_mm=args.temperature_mm, pick_config=picks_cfg, bounds=bounds, priors=priors
+        temperature_mm=args.temperature_mm,
+        pick_config=picks_cfg,
+        bounds=bounds,
+        priors=priors,
+        replicates=args.replicates,
+        noise=cal.Noise(trace_window_s=args.trace_window_s),
     )
     problem = cal.Problem(obj, outcomes, names, base, backend=backend, **kw)
     holdout = None

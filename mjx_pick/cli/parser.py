@@ -468,6 +468,20 @@ def build_parser() -> argparse.ArgumentParser:
         default=2.0,
         help="outcome smoothing, mm of final lift",
     )
+    cb.add_argument(
+        "--replicates",
+        type=int,
+        default=3,
+        help="simulations of each row with a measured trace (the pick-point and copies "
+        "0.05 mm off): their spread is the model's own uncertainty about a chaotic "
+        "grasp's trace (docs/calibration.md); 1: one per row",
+    )
+    cb.add_argument(
+        "--trace-window-s",
+        type=float,
+        default=0.05,
+        help="moving average over which measured and simulated traces are compared (s)",
+    )
     cb.add_argument("--holdout", help="held-out outcomes CSV for accuracy before/after")
     cb.add_argument(
         "--no-identify",
