@@ -31,7 +31,13 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
-from mjx_pick.engine import ChunkStore, Simulator, marking_stops, showing_progress
+from mjx_pick.engine import (
+    ChunkStore,
+    Simulator,
+    marking_stops,
+    showing_progress,
+    study_simulator,
+)
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.objects import ObjectModel
@@ -140,94 +146,84 @@ def compare(
 ) -> Comparison:
     """Simulate one shared candidate set on every gripper and rank them (out, resume,
     ray, progress: as sweep's)."""
-    if simulator is None and ray is not None:
-        sim = Simulator(obj, backend, batch_size, ray=ray)
-        try:
-            return compare(
-                obj, grippers, base, n=n, seed=seed, rank_by=rank_by,
-                pick_config=pick_config, simulator=sim, out=out, overwrite=overwrite,
-                resume=resume, progress=progress,
-            )  # fmt: skip
-        finally:
-            sim.close()
-    if rank_by not in ("success", "score"):
-        raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
-    if len(grippers) < 1:
-        raise ConfigError("compare needs at least one gripper")
-    names = [g.name for g in grippers]
-    if len(set(names)) != len(names):
-        raise ConfigError(f"gripper names must differ: {names}")
-    base = base or Settings()
-    pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
-    store = None
-    if resume and out is None:
-        raise ConfigError("--resume needs --out: the folder of the run to continue")
-    if out is not None:
-        request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
-        request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
-        request.update(picks=to_dict(pick_config))
-        key = config_hash(request)
-        if resume and not overwrite and is_complete(out, "compare", key):
-            return _read_comparison(Path(out), obj, grippers, base, n, seed, pick_config)
-        claim(out, "compare", key, resume=resume, overwrite=overwrite)
-        store = ChunkStore(out, key, resume)
-    t0 = time.perf_counter()
-    cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
-    n_cand = len(cand["pick_id"])
-    sim = simulator or Simulator(obj, backend, batch_size)
-    jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]
-    desc = f"compare: {len(jobs)} grippers ({sim.engine.backend_name})"
-    with marking_stops(out, "compare"), showing_progress(sim.engine, desc, "sim", progress):
-        outs = sim.run(jobs, store)
-    success = np.zeros((len(grippers), n_cand), bool)
-    score = np.zeros((len(grippers), n_cand))
-    tables = []
-    for g, (b, out_g) in enumerate(zip(batches, outs, strict=True)):
-        ok = reasons[g] == 0
-        if len(b):
-            success[g, ok] = out_g["success"]
-            score[g, ok] = np.nan_to_num(out_g["score"], nan=0.0)  # diverged: no quality
-            tables.append(results_table(b, out_g, {"gripper": np.full(len(b), names[g])}))
-    rows = []
-    for g, gripper in enumerate(grippers):
-        ok = reasons[g] == 0
-        row = {"gripper": gripper.name, **rate_summary(success[g], score[g])}
-        row["grip_force_n"] = jobs[g][0].grasp.grip_force_n
-        feasible = rate_summary(success[g, ok], score[g, ok]) if ok.any() else None
-        row["feasible"] = int(ok.sum())
-        row["feasible_success_rate"] = feasible["success_rate"] if feasible else math.nan
-        row["diverged"] = int(np.sum(outs[g]["diverged"])) if len(batches[g]) else 0
-        rows.append(row)
-    key = "success_rate" if rank_by == "success" else "score_mean"
-    other = "score_mean" if rank_by == "success" else "success_rate"
-    order = sorted(range(len(rows)), key=lambda g: (-rows[g][key], -rows[g][other]))
-    lead = order[0]
-    for rank, g in enumerate(order, start=1):
-        rows[g]["rank"] = rank
-        rows[g]["p_vs_best"] = 1.0 if g == lead else mcnemar_p(success[lead], success[g])
-    ranking = [rows[g] for g in order]
-    table = pa.concat_tables(tables) if tables else pa.table({})
-    result = Comparison(ranking, table, names, success, score, reasons == 0, cand, None)
-    if out is not None:
-        out_dir = Path(out)
-        config = {
-            "object": obj.summary(),
-            "grippers": [to_dict(g) for g in grippers],
-            "base": to_dict(base),
-            "n": n,
-            "seed": seed,
-            "rank_by": rank_by,
-        }
-        write_json(out_dir / "config.json", config)
-        write_json(out_dir / "ranking.json", ranking)
-        write_parquet(out_dir / "results.parquet", table)
-        plot_comparison(obj, result, out_dir)
-        result.out_dir = out_dir
-        meta = sim.engine.describe(time.perf_counter() - t0)
-        config["picks"] = to_dict(pick_config)
-        finish(out_dir, command="compare", config=config, seed=seed, **meta)
-        store.remove()  # every row is in results.parquet now
-    return result
+    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+        if rank_by not in ("success", "score"):
+            raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
+        if len(grippers) < 1:
+            raise ConfigError("compare needs at least one gripper")
+        names = [g.name for g in grippers]
+        if len(set(names)) != len(names):
+            raise ConfigError(f"gripper names must differ: {names}")
+        base = base or Settings()
+        pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+        store = None
+        if resume and out is None:
+            raise ConfigError("--resume needs --out: the folder of the run to continue")
+        if out is not None:
+            request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
+            request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
+            request.update(picks=to_dict(pick_config))
+            key = config_hash(request)
+            if resume and not overwrite and is_complete(out, "compare", key):
+                return _read_comparison(Path(out), obj, grippers, base, n, seed, pick_config)
+            claim(out, "compare", key, resume=resume, overwrite=overwrite)
+            store = ChunkStore(out, key, resume)
+        t0 = time.perf_counter()
+        cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
+        n_cand = len(cand["pick_id"])
+        jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]
+        desc = f"compare: {len(jobs)} grippers ({sim.engine.backend_name})"
+        with marking_stops(out, "compare"), showing_progress(sim.engine, desc, "sim", progress):
+            outs = sim.run(jobs, store)
+        success = np.zeros((len(grippers), n_cand), bool)
+        score = np.zeros((len(grippers), n_cand))
+        tables = []
+        for g, (b, out_g) in enumerate(zip(batches, outs, strict=True)):
+            ok = reasons[g] == 0
+            if len(b):
+                success[g, ok] = out_g["success"]
+                score[g, ok] = np.nan_to_num(out_g["score"], nan=0.0)  # diverged: no quality
+                tables.append(results_table(b, out_g, {"gripper": np.full(len(b), names[g])}))
+        rows = []
+        for g, gripper in enumerate(grippers):
+            ok = reasons[g] == 0
+            row = {"gripper": gripper.name, **rate_summary(success[g], score[g])}
+            row["grip_force_n"] = jobs[g][0].grasp.grip_force_n
+            feasible = rate_summary(success[g, ok], score[g, ok]) if ok.any() else None
+            row["feasible"] = int(ok.sum())
+            row["feasible_success_rate"] = feasible["success_rate"] if feasible else math.nan
+            row["diverged"] = int(np.sum(outs[g]["diverged"])) if len(batches[g]) else 0
+            rows.append(row)
+        key = "success_rate" if rank_by == "success" else "score_mean"
+        other = "score_mean" if rank_by == "success" else "success_rate"
+        order = sorted(range(len(rows)), key=lambda g: (-rows[g][key], -rows[g][other]))
+        lead = order[0]
+        for rank, g in enumerate(order, start=1):
+            rows[g]["rank"] = rank
+            rows[g]["p_vs_best"] = 1.0 if g == lead else mcnemar_p(success[lead], success[g])
+        ranking = [rows[g] for g in order]
+        table = pa.concat_tables(tables) if tables else pa.table({})
+        result = Comparison(ranking, table, names, success, score, reasons == 0, cand, None)
+        if out is not None:
+            out_dir = Path(out)
+            config = {
+                "object": obj.summary(),
+                "grippers": [to_dict(g) for g in grippers],
+                "base": to_dict(base),
+                "n": n,
+                "seed": seed,
+                "rank_by": rank_by,
+            }
+            write_json(out_dir / "config.json", config)
+            write_json(out_dir / "ranking.json", ranking)
+            write_parquet(out_dir / "results.parquet", table)
+            plot_comparison(obj, result, out_dir)
+            result.out_dir = out_dir
+            meta = sim.engine.describe(time.perf_counter() - t0)
+            config["picks"] = to_dict(pick_config)
+            finish(out_dir, command="compare", config=config, seed=seed, **meta)
+            store.remove()  # every row is in results.parquet now
+        return result
 
 
 def _read_comparison(out_dir: Path, obj, grippers, base, n, seed, pick_config) -> Comparison:
@@ -402,16 +398,12 @@ def design_search(
     request.update(base=to_dict(base), variants=variants, n=n, rounds=rounds, seed=seed)
     request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
     pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
-    sim = simulator or Simulator(obj, backend, batch_size, ray=ray)
-    try:
+    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
         if out is not None:
             claim(out, "design", config_hash(request), overwrite=overwrite)
         search = {"rounds": rounds, "n": n, "final_n": final_n, "seed": seed}
         search.update(rank_by=rank_by, pick_config=pick_config)
         return _design(obj, base, pool, sim, bounds, request, t0, out, progress, **search)
-    finally:
-        if sim is not simulator:
-            sim.close()
 
 
 def _design(

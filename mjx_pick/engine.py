@@ -790,6 +790,27 @@ class Simulator:
 # ------------------------------------------------------------------------ gradients
 
 
+@contextlib.contextmanager
+def study_simulator(
+    obj: ObjectModel,
+    simulator: Simulator | None = None,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    ray: str | None = None,
+) -> Iterator[Simulator]:
+    """The simulator a study runs on: the caller's (left open: it may serve further
+    studies), else a new one for obj -- on a Ray cluster with ray -- closed when the
+    study ends (a cluster's actors released)."""
+    if simulator is not None:
+        yield simulator
+        return
+    sim = Simulator(obj, backend, batch_size, ray=ray)
+    try:
+        yield sim
+    finally:
+        sim.close()
+
+
 def differentiable_rollout(scene: Scene, grasp: GraspConfig, record: bool):
     """The batched MJX rollout (JAX physics) as a JAX function, for forward-mode derivatives.
 

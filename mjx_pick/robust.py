@@ -30,7 +30,7 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
-from mjx_pick.engine import Simulator, showing_progress
+from mjx_pick.engine import Simulator, showing_progress, study_simulator
 from mjx_pick.metrics import wilson_interval
 from mjx_pick.objects import ObjectModel, check_same_object
 from mjx_pick.rundir import claim, config_hash, finish
@@ -139,83 +139,74 @@ def robustness(
     object), missed (nothing between the fingers), robust_score_mean and rank.
     """
     check_draws(m, sigma_xy_mm, sigma_yaw_deg)
-    if simulator is None and ray is not None:
-        sim = Simulator(obj, backend, batch_size, ray=ray)
-        try:
-            return robustness(
-                obj, picks, base, m=m, sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg,
-                seed=seed, pick_config=pick_config, simulator=sim, out=out,
-                overwrite=overwrite, progress=progress,
-            )  # fmt: skip
-        finally:
-            sim.close()
-    base = base or Settings()
-    if out is not None and not _claimed:
-        request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
-        request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, k=len(picks))
-        claim(out, "robust", config_hash(request), overwrite=overwrite, joins=("evaluate",))
-    t0 = time.perf_counter()
-    k = len(picks)
-    placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, seed, pick_config)
-    draws, ok, idx = placed.draws, placed.ok, placed.index
-    sim = simulator or Simulator(obj, backend, batch_size)
-    desc = f"robustness: {k} pick-points x {m} draws ({sim.engine.backend_name})"
-    with showing_progress(sim.engine, desc, "sim", progress):
-        (out_d,) = sim.run([(base, draws)])
-    success = np.zeros(len(idx), bool)
-    score = np.zeros(len(idx))
-    if len(draws):
-        success[ok] = out_d["success"]
-        score[ok] = np.nan_to_num(out_d["score"], nan=0.0)
-    successes = np.bincount(idx, weights=success, minlength=k).astype(int)
-    landed = np.bincount(idx, weights=placed.reason == pp.fk.CLEARANCE, minlength=k).astype(int)
-    missed = np.bincount(idx, weights=placed.reason == pp.fk.OFF_OBJECT, minlength=k).astype(int)
-    mean_score = np.bincount(idx, weights=score, minlength=k) / m
-    ci = np.array([wilson_interval(int(s), m) for s in successes]).reshape(k, 2)
-    p = successes / m
-    order = np.lexsort((-mean_score, -ci[:, 0], -p))
-    rank = np.empty(k, int)
-    rank[order] = np.arange(1, k + 1)
-    table = pa.table(
-        {
-            "pick_id": picks.pick_id,
-            "x_mm": picks.x_mm,
-            "y_mm": picks.y_mm,
-            "yaw_deg": picks.yaw_deg,
-            "opening_mm": picks.opening_mm,
-            "robust_p": p,
-            "robust_ci_low": ci[:, 0],
-            "robust_ci_high": ci[:, 1],
-            "trials": np.full(k, m),
-            "successes": successes,
-            "landed": landed,
-            "missed": missed,
-            "robust_score_mean": mean_score,
-            "rank": rank,
-        }
-    ).take(pa.array(order))
-    if out is not None:
-        out_dir = Path(out)
-        write_parquet(out_dir / "robustness.parquet", table)
-        write_json(
-            out_dir / "robustness.json",
+    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+        base = base or Settings()
+        if out is not None and not _claimed:
+            request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
+            request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, k=len(picks))
+            claim(out, "robust", config_hash(request), overwrite=overwrite, joins=("evaluate",))
+        t0 = time.perf_counter()
+        k = len(picks)
+        placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, seed, pick_config)
+        draws, ok, idx = placed.draws, placed.ok, placed.index
+        desc = f"robustness: {k} pick-points x {m} draws ({sim.engine.backend_name})"
+        with showing_progress(sim.engine, desc, "sim", progress):
+            (out_d,) = sim.run([(base, draws)])
+        success = np.zeros(len(idx), bool)
+        score = np.zeros(len(idx))
+        if len(draws):
+            success[ok] = out_d["success"]
+            score[ok] = np.nan_to_num(out_d["score"], nan=0.0)
+        successes = np.bincount(idx, weights=success, minlength=k).astype(int)
+        landed = np.bincount(idx, weights=placed.reason == pp.fk.CLEARANCE, minlength=k).astype(int)
+        off_object = placed.reason == pp.fk.OFF_OBJECT
+        missed = np.bincount(idx, weights=off_object, minlength=k).astype(int)
+        mean_score = np.bincount(idx, weights=score, minlength=k) / m
+        ci = np.array([wilson_interval(int(s), m) for s in successes]).reshape(k, 2)
+        p = successes / m
+        order = np.lexsort((-mean_score, -ci[:, 0], -p))
+        rank = np.empty(k, int)
+        rank[order] = np.arange(1, k + 1)
+        table = pa.table(
             {
-                "object": obj.summary(),
-                "settings": to_dict(base),
-                "m": m,
-                "sigma_xy_mm": sigma_xy_mm,
-                "sigma_yaw_deg": sigma_yaw_deg,
-                "seed": seed,
-                "ranking": table.slice(0, 50).to_pylist(),
-            },
-        )
-        config = {"object": obj.summary(), "settings": to_dict(base), "m": m, "k": k}
-        config.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, seed=seed)
-        config["picks"] = to_dict(pick_config)
-        # in an evaluate folder: run-robust.json beside evaluate's own run.json
-        meta = sim.engine.describe(time.perf_counter() - t0)
-        finish(out_dir, command="robust", config=config, seed=seed, **meta)
-    return table
+                "pick_id": picks.pick_id,
+                "x_mm": picks.x_mm,
+                "y_mm": picks.y_mm,
+                "yaw_deg": picks.yaw_deg,
+                "opening_mm": picks.opening_mm,
+                "robust_p": p,
+                "robust_ci_low": ci[:, 0],
+                "robust_ci_high": ci[:, 1],
+                "trials": np.full(k, m),
+                "successes": successes,
+                "landed": landed,
+                "missed": missed,
+                "robust_score_mean": mean_score,
+                "rank": rank,
+            }
+        ).take(pa.array(order))
+        if out is not None:
+            out_dir = Path(out)
+            write_parquet(out_dir / "robustness.parquet", table)
+            write_json(
+                out_dir / "robustness.json",
+                {
+                    "object": obj.summary(),
+                    "settings": to_dict(base),
+                    "m": m,
+                    "sigma_xy_mm": sigma_xy_mm,
+                    "sigma_yaw_deg": sigma_yaw_deg,
+                    "seed": seed,
+                    "ranking": table.slice(0, 50).to_pylist(),
+                },
+            )
+            config = {"object": obj.summary(), "settings": to_dict(base), "m": m, "k": k}
+            config.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, seed=seed)
+            config["picks"] = to_dict(pick_config)
+            # in an evaluate folder: run-robust.json beside evaluate's own run.json
+            meta = sim.engine.describe(time.perf_counter() - t0)
+            finish(out_dir, command="robust", config=config, seed=seed, **meta)
+        return table
 
 
 def min_grip_force(
@@ -313,8 +304,7 @@ def robust_best(
     if results is None:
         check_range("robust", "n", n, 1, 1e8)
     table = _read_results(Path(results), obj) if results is not None else None
-    sim = simulator or Simulator(obj, backend, batch_size, ray=ray)
-    try:
+    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
         if out is not None:
             request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
             request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, top_k=top_k)
@@ -326,9 +316,6 @@ def robust_best(
         desc = f"robust ({sim.engine.backend_name})"
         with showing_progress(sim.engine, desc, "sim", progress):
             return _robust_best(obj, base, sim, table, n, top_k, seed, pick_config, options)
-    finally:
-        if sim is not simulator:
-            sim.close()
 
 
 def _robust_best(obj, base, sim, results, n, top_k, seed, pick_config, options) -> pa.Table:

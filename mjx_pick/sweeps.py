@@ -32,7 +32,13 @@ import pyarrow as pa
 
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, describe_fields, to_dict, write_json, write_parquet
-from mjx_pick.engine import ChunkStore, Simulator, marking_stops, showing_progress
+from mjx_pick.engine import (
+    ChunkStore,
+    Simulator,
+    marking_stops,
+    showing_progress,
+    study_simulator,
+)
 from mjx_pick.grasp import GraspConfig
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import rate_summary, results_table
@@ -252,101 +258,91 @@ def sweep(
     ("auto" or "HOST:PORT"; mjx_pick.cluster), this process writing out. progress: a
     progress bar of the simulations on stderr (``progress.ProgressBar``).
     """
-    if simulator is None and ray is not None:
-        sim = Simulator(obj, backend, batch_size, ray=ray)
-        try:
-            return sweep(
-                obj, params, base, n=n, seed=seed, random=random, pick_config=pick_config,
-                simulator=sim, out=out, overwrite=overwrite, resume=resume,
-                progress=progress,
-            )  # fmt: skip
-        finally:
-            sim.close()
-    base = base or Settings()
-    pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
-    store = None
-    if resume and out is None:
-        raise ConfigError("--resume needs --out: the folder of the run to continue")
-    if out is not None:
-        request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
-        request.update(params=to_dict(params), n=n, seed=seed, random=random)
-        request.update(picks=to_dict(pick_config))
-        key = config_hash(request)
-        if resume and not overwrite and is_complete(out, "sweep", key):
-            return _read_sweep(Path(out))
-        claim(out, "sweep", key, resume=resume, overwrite=overwrite)
-        store = ChunkStore(out, key, resume)
-    combos = variants(params, random, seed)
-    settings = []
-    for combo in combos:
-        s = base
-        for name, value in combo.items():
-            s = apply(s, name, value)
-        settings.append(s)
-    sim = simulator or Simulator(obj, backend, batch_size)
-    picks_for: dict[GripperSpec, pp.PickBatch] = {}
-    for s in settings:
-        if s.gripper not in picks_for:
-            picks_for[s.gripper] = pp.generate_normal(
-                obj, s.gripper, n, seed, pick_config, grasp=s.grasp
+    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+        base = base or Settings()
+        pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+        store = None
+        if resume and out is None:
+            raise ConfigError("--resume needs --out: the folder of the run to continue")
+        if out is not None:
+            request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
+            request.update(params=to_dict(params), n=n, seed=seed, random=random)
+            request.update(picks=to_dict(pick_config))
+            key = config_hash(request)
+            if resume and not overwrite and is_complete(out, "sweep", key):
+                return _read_sweep(Path(out))
+            claim(out, "sweep", key, resume=resume, overwrite=overwrite)
+            store = ChunkStore(out, key, resume)
+        combos = variants(params, random, seed)
+        settings = []
+        for combo in combos:
+            s = base
+            for name, value in combo.items():
+                s = apply(s, name, value)
+            settings.append(s)
+        picks_for: dict[GripperSpec, pp.PickBatch] = {}
+        for s in settings:
+            if s.gripper not in picks_for:
+                picks_for[s.gripper] = pp.generate_normal(
+                    obj, s.gripper, n, seed, pick_config, grasp=s.grasp
+                )
+        jobs = [(s, picks_for[s.gripper]) for s in settings]
+        before = sim.engine.timing
+        t0 = time.perf_counter()
+        desc = f"sweep: {len(jobs)} variants ({sim.engine.backend_name})"
+        with marking_stops(out, "sweep"), showing_progress(sim.engine, desc, "sim", progress):
+            outs = sim.run(jobs, store)
+        wall = time.perf_counter() - t0
+        spent = sim.engine.timing - before  # this sweep's compiles and runs alone
+        compile_s, run_s = spent.compile_s, spent.run_s
+        n_sims = sum(len(p) for _, p in jobs)
+        timing = {
+            "simulations": n_sims,
+            "scenes": len(sim.backends),
+            "compile_s": round(compile_s, 3),
+            "run_s": round(run_s, 3),
+            "wall_s": round(wall, 3),
+            "simulations_per_s": round(n_sims / run_s, 2) if run_s > 0 else None,
+        }
+        if store is not None:
+            timing["chunks_resumed"] = store.read_chunks  # read back, not simulated
+        tables, summaries = [], []
+        for v, ((_, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
+            extra = {"variant": np.full(len(picks), v)}
+            extra.update({name: np.full(len(picks), value) for name, value in combo.items()})
+            tables.append(results_table(picks, out_v, extra))
+            summaries.append(
+                {
+                    "variant": v,
+                    **combo,
+                    **rate_summary(out_v["success"], out_v["score"]),
+                    "diverged": int(np.sum(out_v["diverged"])),
+                }
             )
-    jobs = [(s, picks_for[s.gripper]) for s in settings]
-    before = sim.engine.timing
-    t0 = time.perf_counter()
-    desc = f"sweep: {len(jobs)} variants ({sim.engine.backend_name})"
-    with marking_stops(out, "sweep"), showing_progress(sim.engine, desc, "sim", progress):
-        outs = sim.run(jobs, store)
-    wall = time.perf_counter() - t0
-    spent = sim.engine.timing - before  # this sweep's compiles and runs alone
-    compile_s, run_s = spent.compile_s, spent.run_s
-    n_sims = sum(len(p) for _, p in jobs)
-    timing = {
-        "simulations": n_sims,
-        "scenes": len(sim.backends),
-        "compile_s": round(compile_s, 3),
-        "run_s": round(run_s, 3),
-        "wall_s": round(wall, 3),
-        "simulations_per_s": round(n_sims / run_s, 2) if run_s > 0 else None,
-    }
-    if store is not None:
-        timing["chunks_resumed"] = store.read_chunks  # read back, not simulated
-    tables, summaries = [], []
-    for v, ((_, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
-        extra = {"variant": np.full(len(picks), v)}
-        extra.update({name: np.full(len(picks), value) for name, value in combo.items()})
-        tables.append(results_table(picks, out_v, extra))
-        summaries.append(
-            {
-                "variant": v,
-                **combo,
-                **rate_summary(out_v["success"], out_v["score"]),
-                "diverged": int(np.sum(out_v["diverged"])),
+        table = pa.concat_tables(tables)
+        out_dir = Path(out) if out is not None else None
+        if out_dir is not None:
+            config = {
+                "object": obj.summary(),
+                "base": to_dict(base),
+                "params": [to_dict(p) for p in params],
+                "random": random,
+                "n": n,
+                "seed": seed,
+                "picks": to_dict(pick_config),
             }
-        )
-    table = pa.concat_tables(tables)
-    out_dir = Path(out) if out is not None else None
-    if out_dir is not None:
-        config = {
-            "object": obj.summary(),
-            "base": to_dict(base),
-            "params": [to_dict(p) for p in params],
-            "random": random,
-            "n": n,
-            "seed": seed,
-            "picks": to_dict(pick_config),
-        }
-        meta = {
-            "backend": sim.backends[0].name if sim.backends else backend,
-            "device": sim.backends[0].device if sim.backends else None,
-            "timing": timing,
-        }
-        write_json(out_dir / "config.json", {**config, **meta})
-        write_parquet(out_dir / "results.parquet", table)
-        write_json(out_dir / "variants.json", summaries)
-        plot_sweep(summaries, table, [p.name for p in params], out_dir / "sweep.png")
-        finish(out_dir, command="sweep", config=config, seed=seed, **meta)
-        store.remove()  # every row is in results.parquet now
-    return SweepResult(table, summaries, timing, out_dir)
+            meta = {
+                "backend": sim.backends[0].name if sim.backends else backend,
+                "device": sim.backends[0].device if sim.backends else None,
+                "timing": timing,
+            }
+            write_json(out_dir / "config.json", {**config, **meta})
+            write_parquet(out_dir / "results.parquet", table)
+            write_json(out_dir / "variants.json", summaries)
+            plot_sweep(summaries, table, [p.name for p in params], out_dir / "sweep.png")
+            finish(out_dir, command="sweep", config=config, seed=seed, **meta)
+            store.remove()  # every row is in results.parquet now
+        return SweepResult(table, summaries, timing, out_dir)
 
 
 def _read_sweep(out_dir: Path) -> SweepResult:
