@@ -13,7 +13,7 @@ from nicegui import run, ui
 
 from mjx_pick.config import ConfigError
 from mjx_pick.gui import views
-from mjx_pick.gui.page.widgets import error_label, picture, show_picture
+from mjx_pick.gui.page.widgets import error_label, picture, show_picture, upload
 from mjx_pick.gui.state import PageState
 from mjx_pick.gui.uploads import (
     MESH_MAX_BYTES,
@@ -40,17 +40,14 @@ class ImportTab:
                     "A top-down image (PNG/JPG, up to 20 MB), a mesh (STL/OBJ/PLY, up "
                     "to 50 MB), or a shipped object."
                 ).classes("text-sm")
-                self.upload = (
-                    ui.upload(
-                        label="upload image or mesh",
-                        auto_upload=True,
-                        max_file_size=MESH_MAX_BYTES,
-                        on_upload=self.on_upload,
-                        on_rejected=lambda: self.upload_error.set_text(object_refused()),
-                    )
-                    .props('accept="' + ",".join(UPLOAD_TYPES) + '" data-testid="object-upload"')
-                    .classes("w-full")
-                )
+                self.upload = upload(
+                    "upload image or mesh",
+                    ",".join(UPLOAD_TYPES),
+                    MESH_MAX_BYTES,
+                    self.on_upload,
+                    lambda: self.upload_error.set_text(object_refused()),
+                    "object-upload",
+                ).classes("w-full")
                 self.upload_error = error_label().props('data-testid="upload-error"')
                 self.asset = ui.select(
                     [UPLOADED, *sorted(self.manifest)],

@@ -14,7 +14,7 @@ from nicegui import ui
 
 from mjx_pick.config import ConfigError
 from mjx_pick.gui import forms
-from mjx_pick.gui.page.widgets import error_label
+from mjx_pick.gui.page.widgets import error_label, upload
 from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload
 
 PRESET = "robotiq-2f85"  # the gripper the page starts with
@@ -40,19 +40,16 @@ class SettingsForm:
             ).classes("w-56")
             self.backend = ui.select(BACKENDS, value="mujoco", label="backend").classes("w-40")
         with ui.row().classes("items-center"):
-            self.toml_upload = (
-                ui.upload(
-                    label="or load a gripper TOML",
-                    auto_upload=True,
-                    max_file_size=TOML_MAX_BYTES,
-                    on_upload=self.on_gripper_toml,
-                    on_rejected=lambda: self.toml_error.set_text(
-                        f"file refused: a .toml file of at most {TOML_MAX_BYTES // 2**10} KB"
-                    ),
-                )
-                .props('accept=".toml" data-testid="gripper-upload"')
-                .classes("w-72")
-            )
+            self.toml_upload = upload(
+                "or load a gripper TOML",
+                ".toml",
+                TOML_MAX_BYTES,
+                self.on_gripper_toml,
+                lambda: self.toml_error.set_text(
+                    f"file refused: a .toml file of at most {TOML_MAX_BYTES // 2**10} KB"
+                ),
+                "gripper-upload",
+            ).classes("w-72")
             self.toml_error = error_label().props('data-testid="toml-error"')
         self.settings_error = error_label().props('data-testid="settings-error"')
         for title, group in (

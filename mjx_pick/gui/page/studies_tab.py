@@ -26,6 +26,7 @@ from mjx_pick.gui.page.widgets import (
     run_folder,
     show_picture,
     show_rows,
+    upload,
     whole,
 )
 from mjx_pick.gui.state import PageState
@@ -191,19 +192,16 @@ class CalibrationStudy:
                     "A CSV of tested pick-points and their outcomes (format: "
                     "mjx_pick/assets/outcomes/README.md), up to 5 MB."
                 ).classes("text-sm")
-                self.upload = (
-                    ui.upload(
-                        label="upload outcomes CSV",
-                        auto_upload=True,
-                        max_file_size=OUTCOMES_MAX_BYTES,
-                        on_upload=self.on_upload,
-                        on_rejected=lambda: self.error.set_text(
-                            f"file refused: a .csv file of at most {OUTCOMES_MAX_BYTES // 2**20} MB"
-                        ),
-                    )
-                    .props('accept=".csv" data-testid="outcomes-upload"')
-                    .classes("w-full")
-                )
+                self.upload = upload(
+                    "upload outcomes CSV",
+                    ".csv",
+                    OUTCOMES_MAX_BYTES,
+                    self.on_upload,
+                    lambda: self.error.set_text(
+                        f"file refused: a .csv file of at most {OUTCOMES_MAX_BYTES // 2**20} MB"
+                    ),
+                    "outcomes-upload",
+                ).classes("w-full")
                 self.params = ui.select(
                     list(FITTABLE),
                     value=["pad_friction"],

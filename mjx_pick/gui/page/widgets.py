@@ -16,6 +16,19 @@ def error_label() -> ui.label:
     return ui.label("").classes("text-negative text-sm").props('role="alert"')
 
 
+def upload(label: str, accept: str, max_bytes: int, on_upload, on_rejected, testid: str):
+    """A file upload sent as soon as it is chosen: accept lists the file types
+    (".csv", ".png,.stl"), max_bytes the largest file; on_rejected runs for a file
+    refused by either (the caller says why, under the widget)."""
+    return ui.upload(
+        label=label,
+        auto_upload=True,
+        max_file_size=max_bytes,
+        on_upload=on_upload,
+        on_rejected=on_rejected,
+    ).props(f'accept="{accept}" data-testid="{testid}"')
+
+
 def picture(classes: str = "w-full max-w-2xl") -> ui.image:
     """An image shown only once it has a picture (``set_source`` + ``set_visibility``)."""
     image = ui.image().props("no-transition no-spinner").classes(classes)
