@@ -55,6 +55,8 @@ HIDDEN = {
 SETS = {1: list(HIDDEN)[:1], 3: list(HIDDEN)[:3], 5: list(HIDDEN)}
 NOISE = {"force_n": 0.3, "lift_mm": 0.5, "rotation_deg": 1.0}
 ESTIMATORS = ("smoothed", "random", "cma", "lsq")
+# the engine that simulates the ground truth and every fit's rollouts (--backend)
+BACKEND = {"name": "mujoco"}
 
 
 def setup(rows: int, seed: int, names: list[str]):
@@ -74,18 +76,26 @@ def setup(rows: int, seed: int, names: list[str]):
         f = np.linspace(lo, hi, n)
         return rng.uniform(-3, 3, n), rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), f
 
-    kw = dict(traces=True, lift_times=True, force_offset_n=offset, trace_noise=NOISE)
+    kw = dict(
+        traces=True,
+        lift_times=True,
+        force_offset_n=offset,
+        trace_noise=NOISE,
+        backend=BACKEND["name"],
+    )
     train = cal.synthetic_outcomes(obj, hidden, *draw(rows, 5.0, 14.0), seed=seed, **kw)
-    held = cal.synthetic_outcomes(obj, hidden, *draw(rows, 5.5, 13.5), force_offset_n=offset)
+    held = cal.synthetic_outcomes(
+        obj, hidden, *draw(rows, 5.5, 13.5), force_offset_n=offset, backend=BACKEND["name"]
+    )
     return obj, base, train, held
 
 
 def fit(obj, base, train, held, names, estimator, budget, seed, replicates=3, window_s=0.05):
     noise = cal.Noise(trace_window_s=window_s)
     problem = cal.Problem(
-        obj, train, names, base, backend="mujoco", replicates=replicates, noise=noise
+        obj, train, names, base, backend=BACKEND["name"], replicates=replicates, noise=noise
     )
-    holdout = cal.Problem(obj, held, names, base, backend="mujoco")
+    holdout = cal.Problem(obj, held, names, base, backend=BACKEND["name"])
     truth = problem.space.theta([HIDDEN[n] for n in names])
     # a bounded parameter can be clipped by theta(): the truth's own loss, on its theta
     l_true = float(problem.loss(truth[None])[0])
@@ -303,7 +313,7 @@ def reidentify(path: str, out: str) -> None:
             obj, base, train, _ = setup(report["rows"], report.get("seed", 0), names)
             noise = cal.Noise(trace_window_s=window)
             cache[p] = cal.Problem(
-                obj, train, names, base, backend="mujoco", replicates=k, noise=noise
+                obj, train, names, base, backend=BACKEND["name"], replicates=k, noise=noise
             )
         problem = cache[p]
         theta = problem.space.theta([f["optimum"][n] for n in names])
@@ -371,6 +381,12 @@ def main() -> None:
         default=0.05,
         help="moving average of the traces before they are compared (0: tick by tick)",
     )
+    ap.add_argument(
+        "--backend",
+        default="mujoco",
+        choices=("mujoco", "warp", "mjx"),
+        help="the engine of the ground truth and of every fit (warp: a GPU)",
+    )
     ap.add_argument("--out", default="benchmarks/out/calibration_estimators.json")
     ap.add_argument("--table", help="print the RESULTS.md table of this JSON and stop")
     ap.add_argument(
@@ -389,6 +405,7 @@ def main() -> None:
         help="also: forward-mode (MJX) gradients against finite differences",
     )
     args = ap.parse_args()
+    BACKEND["name"] = args.backend
     if args.table:
         table(args.table)
         return
@@ -407,6 +424,7 @@ def main() -> None:
     report = {
         "date": time.strftime("%Y-%m-%d"),
         "commit": commit,
+        "backend": args.backend,
         "hidden": HIDDEN,
         "trace_noise": NOISE,
         "rows": args.rows,
