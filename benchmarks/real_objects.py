@@ -36,6 +36,14 @@ def ycb_manifest() -> dict:
     return tomllib.loads((folder / "manifest.toml").read_text())
 
 
+def load_ycb(name: str) -> mp.ObjectModel:
+    """A shipped YCB part by its manifest name, with its published mass."""
+    entry = ycb_manifest()[name]
+    folder = resources.files("mjx_pick.assets") / "objects" / "ycb"
+    with resources.as_file(folder / entry["file"]) as path:
+        return mp.load_object(path, unit=entry["unit"], mass_g=entry["mass_g"])
+
+
 def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
     """Re-simulate the first pick of a failure class with its trace and draw why."""
     from mjx_pick import pickpoints as pp
@@ -89,11 +97,9 @@ def run_object(
     solver=None,
 ) -> dict:
     """One object on each backend (the first is the reference for label agreement)."""
-    folder = resources.files("mjx_pick.assets") / "objects" / "ycb"
-    with resources.as_file(folder / entry["file"]) as path:
-        t0 = time.perf_counter()
-        obj = mp.load_object(path, unit=entry["unit"], mass_g=entry["mass_g"])
-        t_load = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    obj = load_ycb(name)
+    t_load = time.perf_counter() - t0
     grasp = mp.GraspConfig(grip_force_n=force_n)
     row = {"object": name, "mass_g": entry["mass_g"], "height_mm": round(obj.height_mm, 2)}
     labels = {}
