@@ -89,8 +89,10 @@ def test_coulomb_grid_on_the_c_engine(thickness_mm):
     raises=AssertionError,
     reason="MJX's JAX implementation lets the pads chatter on a part at low pad friction "
     "(0.1: forces alternate 0 / 10-57 N between pads, the block tips over) where MuJoCo C "
-    "holds it; seen before the soft-finger change too (commit 8c0fc84: 0 of 4 Coulomb "
-    "cases held on MJX, 3 of 4 on C). Open: issue 16's closing note.",
+    "holds it. Upstream cause (benchmarks/RESULTS.md, 'Why MJX chatters at low friction'; "
+    "benchmarks/mjx_contact_repro.py): MJX-JAX's convex collider makes one edge contact "
+    "instead of four on a flat pad, and drops points shallower than 1e-6 m, which is "
+    "where a low-friction pyramidal contact settles.",
 )
 def test_coulomb_on_mjx():
     # MJX (the JAX implementation, the differentiable backend) on one block: friction
