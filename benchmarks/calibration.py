@@ -341,9 +341,10 @@ def table(path: str) -> None:
 
 
 def reidentify(path: str, out: str) -> None:
-    """Identifiability (local tests and the global slice, ``identify.py``) at every fit's
-    optimum in a results JSON, on the same problems: which parameters each test passes
-    and whether the hidden value lies in the reported intervals."""
+    """Identifiability (local tests, the global slice and the refit profile,
+    ``identify.py``) at every fit's optimum in a results JSON, on the same problems:
+    which parameters each test passes and whether the hidden value lies in the reported
+    intervals (no fit here: no empirical profile)."""
     report = json.loads(Path(path).read_text())
     k, window = report.get("replicates", 1), report.get("trace_window_s", 0.0)
     rows, cache = [], {}
@@ -376,6 +377,9 @@ def reidentify(path: str, out: str) -> None:
                 "hidden_in_interval": lo <= HIDDEN[n] <= hi,
                 "hidden_in_global": glo <= HIDDEN[n] <= ghi,
             }
+        # no fit here, so no empirical profile: the slice against slice + refit
+        row["identification"] = {n: _verdicts(ident[n]) for n in names}
+        row["profile_rollouts"] = ident["profile_rollouts"]
         row["wall_s"] = time.perf_counter() - t0
         rows.append(row)
         print(json.dumps(row), flush=True)
@@ -384,6 +388,7 @@ def reidentify(path: str, out: str) -> None:
         flagged = [q for r in rows for q in r["params"].values() if q[test]]
         inside = sum(q[iv] for q in flagged)
         print(f"{test}: {len(flagged)} parameters pass; hidden value inside the interval: {inside}")
+    print(json.dumps(identify_counts(rows)))
 
 
 SHORT = {
