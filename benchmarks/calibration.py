@@ -142,11 +142,61 @@ def fit(obj, base, train, held, names, estimator, budget, seed, replicates=3, wi
         "relative_error": {n: abs(res.optimum[n] - HIDDEN[n]) / abs(HIDDEN[n]) for n in names},
         "interval": {n: ident.get(n, {}).get("interval") for n in names},
         "identified": {n: ident.get(n, {}).get("identified") for n in names},
+        "identification": {n: _verdicts(ident.get(n)) for n in names},
+        "identify_rollouts": ident.get("rollouts"),
+        "profile_rollouts": ident.get("profile_rollouts"),
+        "identify_wall_s": ident.get("wall_s"),
         "held_out_before": before,
         "held_out_after": res.accuracy_after["correct"] if res.accuracy_after else None,
         "held_out_rows": len(held),
         "curve": [(h["rollouts"], h["best_loss"], h["wall_s"]) for h in res.history],
     }
+
+
+def _verdicts(info: dict | None) -> dict | None:
+    """One parameter's verdict and interval by each stage of identify.py: the slice
+    (local tests + slice), + the empirical profile (the fit's own vectors), + the refit
+    profile (the final one); the profile points kept."""
+    if not info:
+        return None
+    prof = info.get("profile") or {}
+    emp, refit = prof.get("empirical"), prof.get("refit")
+    res = {
+        "slice": {"identified": info["slice_identified"], "interval": info["slice_interval"]},
+        "empirical": {
+            "identified": info["slice_identified"] and (emp is None or emp["passed"]),
+            "interval": emp["interval"] if emp else info["slice_interval"],
+        },
+        "refit": {"identified": info["identified"], "interval": info["interval"]},
+    }
+    if refit:
+        res["refit"].update(
+            open=refit["open"],
+            narrow_after_widening=bool(refit["passed"] or refit["open"]),
+            points=[
+                {k: q[k] for k in ("scale", "value", "nll_rise", "others", "kept")}
+                for q in refit["points"]
+            ],
+        )
+    if emp:
+        res["empirical"].update(vectors=emp["vectors"], kept=emp["kept"])
+    return res
+
+
+def identify_counts(fits: list[dict]) -> dict:
+    """Per stage: parameters called identified, and how many of their intervals hold
+    the hidden value (fits run with the profile check)."""
+    counts = {}
+    for stage in ("slice", "empirical", "refit"):
+        called = inside = 0
+        for f in fits:
+            for n, v in (f.get("identification") or {}).items():
+                if v and v[stage]["identified"]:
+                    called += 1
+                    lo, hi = v[stage]["interval"]
+                    inside += lo <= HIDDEN[n] <= hi
+        counts[stage] = {"identified": called, "hidden_inside": inside}
+    return counts
 
 
 def gradient_quality(obj, base, train) -> dict:
@@ -301,9 +351,10 @@ def table(path: str) -> None:
 
 
 def reidentify(path: str, out: str) -> None:
-    """Identifiability (local tests and the global slice, ``identify.py``) at every fit's
-    optimum in a results JSON, on the same problems: which parameters each test passes
-    and whether the hidden value lies in the reported intervals."""
+    """Identifiability (local tests, the global slice and the refit profile,
+    ``identify.py``) at every fit's optimum in a results JSON, on the same problems:
+    which parameters each test passes and whether the hidden value lies in the reported
+    intervals (no fit here: no empirical profile)."""
     report = json.loads(Path(path).read_text())
     k, window = report.get("replicates", 1), report.get("trace_window_s", 0.0)
     rows, cache = [], {}
@@ -336,6 +387,9 @@ def reidentify(path: str, out: str) -> None:
                 "hidden_in_interval": lo <= HIDDEN[n] <= hi,
                 "hidden_in_global": glo <= HIDDEN[n] <= ghi,
             }
+        # no fit here, so no empirical profile: the slice against slice + refit
+        row["identification"] = {n: _verdicts(ident[n]) for n in names}
+        row["profile_rollouts"] = ident["profile_rollouts"]
         row["wall_s"] = time.perf_counter() - t0
         rows.append(row)
         print(json.dumps(row), flush=True)
@@ -344,6 +398,7 @@ def reidentify(path: str, out: str) -> None:
         flagged = [q for r in rows for q in r["params"].values() if q[test]]
         inside = sum(q[iv] for q in flagged)
         print(f"{test}: {len(flagged)} parameters pass; hidden value inside the interval: {inside}")
+    print(json.dumps(identify_counts(rows)))
 
 
 SHORT = {
@@ -461,7 +516,9 @@ def main() -> None:
                 json.dumps({k: v for k, v in row.items() if k != "curve"}, default=float),
                 flush=True,
             )
+            report["identify_counts"] = identify_counts(report["fits"])
             out.write_text(json.dumps(report, indent=1, default=float))
+    print(json.dumps(report["identify_counts"]), flush=True)
 
 
 if __name__ == "__main__":

@@ -406,6 +406,79 @@ def test_identifiability_global_check_rejects_a_second_basin():
     assert cal.identifiability(problem, theta, profile_points=0)["b"]["identified"]
 
 
+class _Valley:
+    """A stand-in Problem (no simulation) with a valley across two parameters, as pad
+    friction against the gripper's force offset: the data see b - 0.5 a sharply (20
+    residuals) and a itself only through a pin that saturates (tanh: at most ~0.9 of
+    -log likelihood, under the 95 % threshold of 1.92). c: a plain basin at 0.5."""
+
+    def __init__(self):
+        one = np.ones(3)
+        # priors: 95 % half-width = the bounds, so "narrow" is under a quarter of them
+        self.space = cal.ParamSpace(("a", "b", "c"), 0 * one, one, one < 0, 0.5 * one, one / 1.96)
+        self.outcomes = [None]
+        self.data = dataclasses.make_dataclass("D", [("total_trials", float)])(1.0)
+        self.rollouts = self.evaluations = 0
+
+    def evaluate(self, thetas):
+        self.evaluations += 1
+        a, b, c = np.asarray(self.space.values(thetas), float).T
+        w = np.linspace(1, 2, 20)
+        res = np.concatenate(
+            [
+                w * 20 * (b - 0.3 - 0.5 * (a - 0.3))[:, None],
+                w * 0.2 * np.tanh((a - 0.3) / 0.02)[:, None],
+                w * 20 * (c - 0.5)[:, None],
+            ],
+            1,
+        )
+        self.rollouts += len(a)
+        loss = 0.5 * np.sum(res**2, axis=1)
+        return cal.Evaluation(loss, {}, np.zeros(len(a)), res, res.shape[1])
+
+
+def test_identifiability_profile_sees_a_valley_across_parameters():
+    problem = _Valley()
+    theta = problem.space.theta([0.3, 0.3, 0.5])
+    # the local tests and the slice (the others held at theta) call all three identified
+    held = cal.identifiability(problem, theta, profile_scales=())
+    assert all(held[n]["identified"] for n in "abc")
+    assert held["a"]["interval"][1] - held["a"]["interval"][0] < 0.15
+    spent, calls = problem.rollouts, problem.evaluations
+    ident = cal.identifiability(problem, theta)
+    # the profile refits the others: b follows a along the valley, every point fits
+    for n in "ab":
+        info = ident[n]
+        assert info["slice_identified"] and not info["identified"], n
+        refit = info["profile"]["refit"]
+        assert refit["open"] and all(q["kept"] for q in refit["points"]), n
+        assert info["interval"][1] - info["interval"][0] > 2.5 * (
+            info["slice_interval"][1] - info["slice_interval"][0]
+        )
+    far = [q for q in ident["a"]["profile"]["refit"]["points"] if q["scale"] == 3.0][0]
+    assert far["others"]["b"] == pytest.approx(0.3 + 0.5 * (far["value"] - 0.3), abs=0.01)
+    # c's profile rises beyond its interval: still identified, its interval kept
+    c = ident["c"]
+    assert c["identified"] and not c["profile"]["refit"]["open"]
+    assert c["interval"] == pytest.approx(c["slice_interval"])
+    assert [q["kept"] for q in c["profile"]["refit"]["points"]] == [True, False, False] * 2
+    # batched: the slice's batch, then the refit's two starts and 4 generations
+    assert problem.evaluations - calls == 1 + 1 + 4
+    assert ident["profile_rollouts"] == 3 * 6 * (2 + 6 * 4)
+    assert problem.rollouts - spent == ident["rollouts"]
+    # the fit's own vectors alone (no refit): vectors along the valley widen a
+    v = np.linspace(0.02, 0.62, 11)
+    seen = problem.space.theta(np.stack([v, 0.3 + 0.5 * (v - 0.3), np.full(11, 0.5)], 1))
+    nll = problem.evaluate(seen).loss
+    emp = cal.identifiability(problem, theta, visited=(seen, nll), profile_steps=0)["a"]
+    assert not emp["profile"]["empirical"]["passed"] and emp["profile"]["refit"] is None
+    assert emp["interval"][0] < 0.1 and emp["interval"][1] > 0.5
+    with pytest.raises(mp.ConfigError, match="visited must be"):
+        cal.identifiability(problem, theta, visited=(seen[:, :2], nll))
+    with pytest.raises(mp.ConfigError, match="profile_scales"):
+        cal.identifiability(problem, theta, profile_scales=(0.5,))
+
+
 def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_block, synthetic):
     assert 0 < synthetic.successes.sum() < len(synthetic), "the data must hold both outcomes"
     # the fit starts below the hidden value: this loss is not monotone between 0.62 and
@@ -422,6 +495,12 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
     assert problem.loss(problem.space.theta([mu])[None])[0] < before
     info = whole.identifiability["pad_friction"]
     assert info["identified"] and info["interval"][0] < mu < info["interval"][1]
+    # a well-pinned parameter passes the profile too: the fit's own vectors (the
+    # empirical profile) and the likelihood beyond its interval's ends (fitted alone,
+    # there are no others to refit) exclude what lies outside
+    prof = info["profile"]
+    assert prof["passed"] and prof["empirical"]["vectors"] == 12 * 5
+    assert not prof["refit"]["open"] and prof["refit"]["points"][-1]["nll_rise"] > 1.92
 
     # killed after the checkpoint of step 6, resumed: the same fit as without the kill
     class Killed(Exception):

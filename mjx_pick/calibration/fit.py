@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.calibration import estimators as E
-from mjx_pick.calibration.identify import identifiability, theta_of_z
+from mjx_pick.calibration.identify import data_nll, identifiability, theta_of_z
 from mjx_pick.calibration.parameters import fitted_contact
 from mjx_pick.config import ConfigError, check_range, to_dict
 from mjx_pick.physics import ContactParams
@@ -122,6 +122,9 @@ def calibrate(
     initial = dict(problem.start)
     state = est.init(problem.start_theta())
     step, history, wall0 = 0, [], 0.0
+    # every vector simulated and its data -log likelihood: the empirical profile of
+    # the identifiability check (identify.py), at no simulation cost
+    visited: list[tuple[np.ndarray, np.ndarray]] = []
     best = math.inf
     out_dir = Path(out) if out is not None else None
     ckpt = request = None
@@ -139,6 +142,8 @@ def calibrate(
             state = E.loads(saved["state"])
             history = E.loads(saved["history"])
             step, wall0 = int(saved["step"]), float(saved["wall_s"])
+            if "visited" in saved:  # (checkpoints of earlier versions lack it)
+                visited = E.loads(saved["visited"])
             best = min([h["best_loss"] for h in history], default=math.inf)
     acc_before = None
     if holdout is not None and step == 0:
@@ -161,6 +166,7 @@ def calibrate(
             else:
                 ev = problem.evaluate(thetas)
                 losses, diverged = ev.loss, ev.diverged
+                visited.append((np.asarray(thetas, np.float32), data_nll(problem, ev)))
             try:
                 state = est.tell(state, thetas, losses, grad)
             except FloatingPointError:
@@ -197,6 +203,7 @@ def calibrate(
                     {
                         "state": E.dumps(state),
                         "history": E.dumps(history),
+                        "visited": E.dumps(visited),
                         "step": np.int64(step),
                         "wall_s": np.float64(time.perf_counter() - t0),
                     },
@@ -207,7 +214,17 @@ def calibrate(
             ckpt.close()
     theta = est.best(state)
     result = _finish(
-        problem, theta, initial, history, acc_before, holdout, identify, estimator, out_dir, base
+        problem,
+        theta,
+        initial,
+        history,
+        acc_before,
+        holdout,
+        identify,
+        estimator,
+        out_dir,
+        base,
+        visited,
     )
     result.rollouts = problem.rollouts - spent0
     result.wall_s = time.perf_counter() - t0
@@ -229,14 +246,30 @@ def calibrate(
 
 
 def _finish(
-    problem, theta, initial, history, acc_before, holdout, identify, estimator, out_dir, base
+    problem,
+    theta,
+    initial,
+    history,
+    acc_before,
+    holdout,
+    identify,
+    estimator,
+    out_dir,
+    base,
+    visited=(),
 ) -> CalibrationResult:
     space = problem.space
     optimum = space.as_dict(theta)
     ident, lost = None, ()
     values = dict(optimum)
     if identify:
-        ident = identifiability(problem, theta)
+        seen = None
+        if visited:
+            seen = (
+                np.concatenate([t for t, _ in visited]),
+                np.concatenate([v for _, v in visited]),
+            )
+        ident = identifiability(problem, theta, visited=seen)
         lost = tuple(n for n in problem.names if not ident[n]["identified"])
         for n in lost:  # not pinned by the data: keep the start, do not pretend
             values[n] = initial[n]
@@ -309,6 +342,7 @@ def least_squares(
         params.add(sysid.Parameter(n, float(np.clip(u0[i], 0.01, 0.99)), 0.0, 1.0))
     history: list[dict] = []
     best = {"loss": math.inf, "theta": problem.start_theta()}
+    visited: list[tuple[np.ndarray, np.ndarray]] = []  # as in calibrate
     t0 = time.perf_counter()
     spent0 = problem.rollouts
 
@@ -320,6 +354,7 @@ def least_squares(
         z = space.z_lo[:, None] + cols * (space.z_hi - space.z_lo)[:, None]
         thetas = theta_of_z(space, z.T)
         ev = problem.evaluate(thetas)
+        visited.append((np.asarray(thetas, np.float32), data_nll(problem, ev)))
         i = int(np.argmin(ev.loss))
         if ev.loss[i] < best["loss"]:
             best.update(loss=float(ev.loss[i]), theta=thetas[i])
@@ -369,6 +404,7 @@ def least_squares(
         "least_squares",
         out_dir,
         problem.settings.contact,
+        visited,
     )
     result.rollouts = problem.rollouts - spent0
     result.wall_s = time.perf_counter() - t0

@@ -233,9 +233,11 @@ def report_md(result, problem) -> str:
             "",
             f"Not identified by these data: {', '.join(result.not_identified)} -- kept at "
             "their starting values (the data alone do not narrow them to half their "
-            "prior's range, or, along the parameter's bounds, other values fit the data "
-            "as well as the optimum). Measure what moves them (traces, other grip forces) "
-            "to fit them.",
+            "prior's range; or, along the parameter's bounds, other values fit the data "
+            "as well as the optimum; or, with the other parameters re-fitted -- the "
+            "profile likelihood -- values beyond its interval do: a valley across "
+            "parameters, as pad friction against grip force). Measure what moves them "
+            "(traces, other grip forces) to fit them.",
         ]
     if result.history:
         lines += [
