@@ -9,6 +9,10 @@ This measures how often, so that a user knows how far a GPU label is reproducibl
 
 * ``repeat``: the same pick-points, the same batch size, R times in one process;
 * ``batch``: the same pick-points with another batch size (the pool's shape);
+* ``shift``: the same pick-points moved by a micrometre (``--shift-um``): on MuJoCo C,
+  which is deterministic, this asks how many labels rest on a threshold that a change far
+  below any real pose error crosses -- the physics' own sensitivity, which bounds how
+  reproducible any engine's label there can be;
 * per backend: the share of pick-points whose label (success) or failure reason differs
   from the first run in any repeat, and the spread (max - min over the runs) of the
   graded score, the final lift, the left pad's peak force and the slip.
@@ -50,6 +54,23 @@ def run_backend(obj: str, n: int, seed: int, backend: str, repeats: int, batch: 
         )
         tables.append(ev.table.to_pandas())
     return tables, walls
+
+
+def run_shifted(obj, table, backend: str, shift_um: float):
+    """The pick-points of table moved by shift_um micrometres along x (the object's
+    offset under the gripper), one run: how far a label rests on a threshold that a
+    micrometre crosses. Returns the table in table's pick order."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        csv = Path(tmp) / "picks.csv"
+        lines = ["x_mm,y_mm,yaw_deg"] + [
+            f"{float(x) + shift_um * 1e-3!r},{float(y)!r},{float(yaw)!r}"
+            for x, y, yaw in zip(table["x_mm"], table["y_mm"], table["yaw_deg"], strict=True)
+        ]
+        csv.write_text("\n".join(lines) + "\n")
+        ev = mp.evaluate(obj, picks=csv, backend=backend)
+    return ev.table.to_pandas()
 
 
 def compare(tables, first: int = 0) -> dict:
@@ -136,6 +157,13 @@ def main() -> None:
         help="also: the calibration benchmark's loss at its hidden parameters this many "
         "times per backend (0: not)",
     )
+    ap.add_argument(
+        "--shift-um",
+        type=float,
+        default=0.0,
+        help="also: one run with every pick-point moved this many micrometres along x, "
+        "compared with the first run (0: not)",
+    )
     ap.add_argument("--out", default="benchmarks/out/determinism.json")
     args = ap.parse_args()
     if args.repeats < 2:
@@ -162,6 +190,9 @@ def main() -> None:
             }
             if args.batch:
                 row["batch"] = {"batch_size": args.batch, **compare([tables[0], tables[-1]])}
+            if args.shift_um:
+                shifted = run_shifted(obj, tables[0], backend, args.shift_um)
+                row["shifted"] = {"shift_um": args.shift_um, **compare([tables[0], shifted])}
             report["rows"].append(row)
             print(json.dumps(row), flush=True)
             write_json(Path(args.out), report)
