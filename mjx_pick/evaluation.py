@@ -42,7 +42,14 @@ import pyarrow as pa
 
 from mjx_pick import interrupts
 from mjx_pick import pickpoints as pp
-from mjx_pick.config import ConfigError, to_dict, write_atomic, write_json, write_parquet
+from mjx_pick.config import (
+    ConfigError,
+    check_range,
+    to_dict,
+    write_atomic,
+    write_json,
+    write_parquet,
+)
 from mjx_pick.engine import (
     Cancelled,
     ChunkExecutor,
@@ -144,6 +151,7 @@ def evaluate(
     max_n: int | None = None,
     chunk_size: int | None = None,
     min_force: bool = False,
+    stability_um: float = 0.0,
     overwrite: bool = False,
     skip_infeasible: bool = False,
     keep_chunks: bool = False,
@@ -187,6 +195,13 @@ def evaluate(
       min_force: add a min_force_n column: each pick-point's smallest successful F_d
         within the gripper's force range (a batched bisection, about 10 more
         simulations per pick-point; see mjx_pick.robust.min_grip_force).
+      stability_um: > 0: simulate every pick-point again with the object moved this far
+        along x (micrometres, at most 100) and add success_shifted, score_shifted and
+        label_stable (the two labels agree). A label that a micrometre flips rests on a
+        threshold (a part that just holds or just slips; an edge contact that creeps
+        off the pad or not): no engine reproduces it reliably -- MuJoCo Warp's own
+        run-to-run differences flip such labels too (benchmarks/RESULTS.md, "Run-to-run
+        determinism"). One more simulation per pick-point.
       ray: run the chunks on a Ray cluster: "auto" or the head's "HOST:PORT" (needs
         the cluster extra; see mjx_pick.cluster). This process still writes out.
       on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` (an actor
@@ -201,6 +216,11 @@ def evaluate(
     if ray is not None and min_force:
         raise ConfigError(
             "--min-force does not run on a Ray cluster yet: leave out --ray or --min-force"
+        )
+    check_range("evaluate", "stability_um", stability_um, 0, 100)
+    if ray is not None and stability_um:
+        raise ConfigError(
+            "--stability-um does not run on a Ray cluster yet: leave out --ray or --stability-um"
         )
     if chunk_size is not None and int(chunk_size) < 1:
         raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
@@ -248,6 +268,7 @@ def evaluate(
             max_n=max_n,
             chunk_size=chunk_size,
             min_force=min_force,
+            stability_um=stability_um,
             overwrite=overwrite,
             skip_infeasible=skip_infeasible,
             keep_chunks=keep_chunks,
@@ -282,6 +303,7 @@ def _evaluate(
     max_n,
     chunk_size,
     min_force,
+    stability_um,
     overwrite,
     skip_infeasible,
     keep_chunks,
@@ -304,6 +326,7 @@ def _evaluate(
             "min_score": min_score if until is not None else None,
             "max_n": max_n,
             "min_force": min_force,
+            "stability_um": stability_um,
             "backend": executor.name,
             # a batched program's float32 rounding depends on its batch shape, on the C
             # engine too (its per-tick kernel: engine module docstring)
@@ -433,6 +456,22 @@ def _evaluate(
             summary["min_force_n_median"] = (
                 float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
             )
+        if stability_um:
+            t1 = time.perf_counter()
+            table = _stability(
+                table,
+                picks_batch,
+                obj,
+                engine,
+                runner,
+                Settings(gripper, contact, solver, grasp),
+                stability_um,
+                progress,
+            )
+            stable = table["label_stable"].to_numpy(zero_copy_only=False)
+            summary["stability_um"] = stability_um
+            summary["labels_unstable"] = int((~stable).sum())
+            summary["stability_s"] = round(time.perf_counter() - t1, 3)
         traces = _traces(executor, picks_batch, table, n_traces) if n_traces else None
         interrupts.raise_if_requested()  # a Ctrl-C swallowed in the last chunk: not complete
     except (KeyboardInterrupt, Cancelled) as stop:
@@ -448,6 +487,27 @@ def _evaluate(
         if not keep_chunks:  # every row is in results.parquet now
             shutil.rmtree(out_dir / "chunks", ignore_errors=True)
     return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _stability(table, picks_batch, obj, engine, runner, settings, shift_um, progress):
+    """table with success_shifted, score_shifted and label_stable: every simulated
+    pick-point again with the object moved shift_um micrometres along x (one batch
+    through the run's own backend)."""
+    sim = Simulator(obj, engine=engine)
+    sim.adopt(settings, runner)
+    # the table's rows are the batch's pick-points in order (infeasible ones, if kept,
+    # included: they are not simulated twice -- no simulation decides their label)
+    ids = table["pick_id"].to_numpy()
+    if len(ids) != len(picks_batch) or not np.array_equal(ids, picks_batch.pick_id):
+        raise RuntimeError("evaluate: the results table does not follow its pick-points")
+    shifted = dataclasses.replace(picks_batch, x_mm=picks_batch.x_mm + shift_um * 1e-3)
+    with showing_progress(engine, "stability (pick-points moved)", "sim", progress):
+        (res,) = sim.run([(settings, shifted)])
+    success = np.asarray(res["success"], bool)
+    table = table.append_column("success_shifted", pa.array(success))
+    table = table.append_column("score_shifted", pa.array(np.asarray(res["score"], float)))
+    same = success == table["success"].to_numpy(zero_copy_only=False).astype(bool)
+    return table.append_column("label_stable", pa.array(same))
 
 
 def _complete_run(out_dir: Path, key: str) -> Evaluation | None:

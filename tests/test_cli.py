@@ -17,7 +17,7 @@ from mjx_pick.sweeps import SECTIONS, describe_params, numeric_fields
 
 # what a number's help must name: a unit, or that it is a pure number of some kind
 UNITS = re.compile(
-    r"\b(mm|N|s|deg|g|kg/m\^3|pixels per mm|coefficient|fraction|dimensionless|score|"
+    r"\b(mm|um|N|s|deg|g|kg/m\^3|pixels per mm|coefficient|fraction|dimensionless|score|"
     r"multiple of real time)\b"
 )
 # flags that override one settings field, and the field: their help states its default

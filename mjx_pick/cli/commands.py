@@ -46,6 +46,7 @@ def cmd_evaluate(args) -> int:
         max_n=args.max,
         chunk_size=args.chunk_size,
         min_force=args.min_force,
+        stability_um=args.stability_um,
         overwrite=args.overwrite,
         skip_infeasible=args.skip_infeasible,
         ray=args.ray,
@@ -332,6 +333,14 @@ def print_summary(s: dict, out) -> None:
         ("compile / run", f"{s['compile_s']:.1f} s / {s['run_s']:.1f} s"),
         ("pick-points per s", f"{s['picks_per_s']}"),
     ]
+    if s.get("stability_um"):
+        rows.append(
+            (
+                "labels a shift flips",
+                f"{s['labels_unstable']} of {s['n']} (object moved {s['stability_um']:g} um; "
+                "label_stable in the results)",
+            )
+        )
     cluster = s.get("cluster")
     if cluster:
         nodes = ", ".join(f"{k} {v['picks_per_s']:g}/s" for k, v in cluster["nodes"].items())

@@ -301,6 +301,14 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="add min_force_n, N: each pick-point's smallest successful F_d (bisection)",
     )
+    ev.add_argument(
+        "--stability-um",
+        type=float,
+        default=0.0,
+        help="simulate every pick-point again with the object moved this far along x, um "
+        "(0-100; 0: off), and add label_stable: a label a micrometre flips rests on a "
+        "threshold no engine reproduces reliably (default: 0.0)",
+    )
     ev.set_defaults(func=cmd_evaluate)
 
     def study(name, help_text):
