@@ -73,6 +73,21 @@ def run_shifted(obj, table, backend: str, shift_um: float):
     return ev.table.to_pandas()
 
 
+def overlap(repeats, shifted) -> dict:
+    """Does a label that the shift flips (what ``evaluate --stability-um`` flags) predict
+    the labels that change between repeats? Counts over the pick-points."""
+    ref = repeats[0]["success"].to_numpy()
+    flagged = shifted["success"].to_numpy() != ref
+    flipped = np.zeros(len(ref), bool)
+    for t in repeats[1:]:
+        flipped |= t["success"].to_numpy() != ref
+    return {
+        "flagged": int(flagged.sum()),
+        "flipped_between_repeats": int(flipped.sum()),
+        "flipped_and_flagged": int((flipped & flagged).sum()),
+    }
+
+
 def compare(tables, first: int = 0) -> dict:
     """Label, failure-reason and value differences of tables[1:] against tables[first]."""
     ref = tables[first]
@@ -193,6 +208,7 @@ def main() -> None:
             if args.shift_um:
                 shifted = run_shifted(obj, tables[0], backend, args.shift_um)
                 row["shifted"] = {"shift_um": args.shift_um, **compare([tables[0], shifted])}
+                row["shift_flags_repeat_flips"] = overlap(tables[: args.repeats], shifted)
             report["rows"].append(row)
             print(json.dumps(row), flush=True)
             write_json(Path(args.out), report)
