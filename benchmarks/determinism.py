@@ -174,10 +174,10 @@ def main() -> None:
     )
     ap.add_argument(
         "--shift-um",
-        type=float,
-        default=0.0,
-        help="also: one run with every pick-point moved this many micrometres along x, "
-        "compared with the first run (0: not)",
+        default="",
+        help="also: runs with every pick-point moved these micrometres along x (comma-"
+        "separated), compared with the first run; the first shift's flips (what "
+        "evaluate --stability-um flags) against the repeats' and the other shifts' flips",
     )
     ap.add_argument("--out", default="benchmarks/out/determinism.json")
     args = ap.parse_args()
@@ -205,10 +205,16 @@ def main() -> None:
             }
             if args.batch:
                 row["batch"] = {"batch_size": args.batch, **compare([tables[0], tables[-1]])}
-            if args.shift_um:
-                shifted = run_shifted(obj, tables[0], backend, args.shift_um)
-                row["shifted"] = {"shift_um": args.shift_um, **compare([tables[0], shifted])}
-                row["shift_flags_repeat_flips"] = overlap(tables[: args.repeats], shifted)
+            shifts = [float(v) for v in args.shift_um.split(",")] if args.shift_um else []
+            if shifts:
+                moved = [run_shifted(obj, tables[0], backend, um) for um in shifts]
+                row["shifted"] = {"shift_um": shifts[0], **compare([tables[0], moved[0]])}
+                row["shift_flags_repeat_flips"] = overlap(tables[: args.repeats], moved[0])
+                if len(shifts) > 1:  # the first shift's flags against the other shifts' flips
+                    row["shift_flags_other_shifts"] = {
+                        "shift_um": shifts[1:],
+                        **overlap([tables[0], *moved[1:]], moved[0]),
+                    }
             report["rows"].append(row)
             print(json.dumps(row), flush=True)
             write_json(Path(args.out), report)

@@ -201,7 +201,9 @@ def evaluate(
         threshold (a part that just holds or just slips; an edge contact that creeps
         off the pad or not): no engine reproduces it reliably -- MuJoCo Warp's own
         run-to-run differences flip such labels too (benchmarks/RESULTS.md, "Run-to-run
-        determinism"). One more simulation per pick-point.
+        determinism"). One more simulation per pick-point. One probe finds about half
+        of the labels that some micrometre move flips (RESULTS.md): a flag marks a coin
+        toss; no flag promises less (robust() samples more moves).
       ray: run the chunks on a Ray cluster: "auto" or the head's "HOST:PORT" (needs
         the cluster extra; see mjx_pick.cluster). This process still writes out.
       on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` (an actor
