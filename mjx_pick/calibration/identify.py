@@ -255,10 +255,36 @@ def identifiability(
             "profile": None,
             "identified": ok,
         }
+    limit = ratio * prior_half  # the local test's narrowness rule, per parameter
+    seen = (v_theta, v_nll) if visited is not None else None
+    options = (profile_points, profile_steps, profile_popsize, profile_sigma, seed)
+    _profile(out, problem, z0, nll[0], thr, wide_z, limit, seen, scales, j_data, options)
+    cov = _covariance(jac)
+    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = cov / np.outer(sd, sd)
+    out["correlation"] = np.where(np.isfinite(corr), corr, 0.0).round(4).tolist()
+    out["rollouts"] = problem.rollouts - spent0
+    out.setdefault("profile_rollouts", 0)
+    out["wall_s"] = time.perf_counter() - t_start
+    return out
+
+
+def _profile(out, problem, z0, nll0, thr, wide_z, limit, seen, scales, j_data, options):
+    """The profile likelihood check (module docstring), in place on out: for each
+    parameter the local tests and the slice identify, the empirical profile from seen
+    (thetas (N, P), nll (N,)) or None, then the refit at ``scales`` x its half-width;
+    out[name]'s interval, half_width_z, profile and identified are updated.
+
+    nll0: theta's data -log likelihood; thr (P,): the likelihood-ratio thresholds
+    relative to theta; wide_z (P,): the half-widths after the slice (z); limit (P,):
+    the largest half-width still narrow; j_data: the data's Jacobian at theta (M, P);
+    options: (profile_points, profile_steps, profile_popsize, profile_sigma, seed)."""
+    profile_points, profile_steps, profile_popsize, profile_sigma, seed = options
+    space = problem.space
+    p = len(z0)
     # the profile: only parameters the tests above identify, and only with an interval
     todo = [i for i, nm in enumerate(space.names) if out[nm]["identified"]]
     todo = [i for i in todo if np.isfinite(wide_z[i])] if scales else []
-    limit = ratio * prior_half
 
     def verdict(i, reach, open_end=False) -> tuple[float, bool]:
         # the half-width widened to the farthest value kept; still narrow (the local
@@ -266,9 +292,10 @@ def identifiability(
         half = max(wide_z[i], reach)
         return half, bool((half <= wide_z[i] or half < limit[i]) and not open_end)
 
-    if visited is not None:
+    if seen is not None:
+        v_theta, v_nll = seen
         v_z = space.z(np.asarray(space.values(v_theta.astype(np.float32)), float))
-        v_rise = np.where(np.isfinite(v_nll), v_nll - nll[0], np.inf)
+        v_rise = np.where(np.isfinite(v_nll), v_nll - nll0, np.inf)
         for i in todo:
             emp = _empirical(space, z0, i, v_z, v_rise, thr[i], max(profile_points, 12))
             half, emp["passed"] = verdict(i, emp["reach_z"])
@@ -312,7 +339,7 @@ def identifiability(
                 on_side = [k for k in ks if specs[k][2] == side]
                 for k in on_side:
                     _, c, _, zi = specs[k]
-                    r = float(best_nll[k] - nll[0])
+                    r = float(best_nll[k] - nll0)
                     kept = bool(r < thr[i])
                     if kept:
                         reach = max(reach, abs(zi - z0[i]))
@@ -359,14 +386,6 @@ def identifiability(
         out[name]["interval"] = prof["interval"]
         out[name]["half_width_z"] = _num(half)
         out[name]["identified"] = out[name]["slice_identified"] and prof["passed"]
-    cov = _covariance(jac)
-    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = cov / np.outer(sd, sd)
-    out["correlation"] = np.where(np.isfinite(corr), corr, 0.0).round(4).tolist()
-    out["rollouts"] = problem.rollouts - spent0
-    out.setdefault("profile_rollouts", 0)
-    out["wall_s"] = time.perf_counter() - t_start
-    return out
 
 
 def data_nll(problem, ev) -> np.ndarray:
