@@ -55,11 +55,9 @@ HIDDEN = {
 SETS = {1: list(HIDDEN)[:1], 3: list(HIDDEN)[:3], 5: list(HIDDEN)}
 NOISE = {"force_n": 0.3, "lift_mm": 0.5, "rotation_deg": 1.0}
 ESTIMATORS = ("smoothed", "random", "cma", "lsq")
-# the engine that simulates the ground truth and every fit's rollouts (--backend)
-BACKEND = {"name": "mujoco"}
 
 
-def setup(rows: int, seed: int, names: list[str]):
+def setup(rows: int, seed: int, names: list[str], backend: str = "mujoco"):
     """Training and held-out outcomes simulated with names hidden at HIDDEN and every
     other parameter at its default (what the fit starts from): exactly P unknowns."""
     obj = mp.object_from_polygon(box(-20, -10, 20, 10), thickness_mm=20, mass_g=1000, name="heavy")
@@ -81,21 +79,33 @@ def setup(rows: int, seed: int, names: list[str]):
         lift_times=True,
         force_offset_n=offset,
         trace_noise=NOISE,
-        backend=BACKEND["name"],
+        backend=backend,
     )
     train = cal.synthetic_outcomes(obj, hidden, *draw(rows, 5.0, 14.0), seed=seed, **kw)
     held = cal.synthetic_outcomes(
-        obj, hidden, *draw(rows, 5.5, 13.5), force_offset_n=offset, backend=BACKEND["name"]
+        obj, hidden, *draw(rows, 5.5, 13.5), force_offset_n=offset, backend=backend
     )
     return obj, base, train, held
 
 
-def fit(obj, base, train, held, names, estimator, budget, seed, replicates=3, window_s=0.05):
+def fit(
+    obj,
+    base,
+    train,
+    held,
+    names,
+    estimator,
+    budget,
+    seed,
+    replicates=3,
+    window_s=0.05,
+    backend="mujoco",
+):
     noise = cal.Noise(trace_window_s=window_s)
     problem = cal.Problem(
-        obj, train, names, base, backend=BACKEND["name"], replicates=replicates, noise=noise
+        obj, train, names, base, backend=backend, replicates=replicates, noise=noise
     )
-    holdout = cal.Problem(obj, held, names, base, backend=BACKEND["name"])
+    holdout = cal.Problem(obj, held, names, base, backend=backend)
     truth = problem.space.theta([HIDDEN[n] for n in names])
     # a bounded parameter can be clipped by theta(): the truth's own loss, on its theta
     l_true = float(problem.loss(truth[None])[0])
@@ -350,7 +360,7 @@ def table(path: str) -> None:
         )
 
 
-def reidentify(path: str, out: str) -> None:
+def reidentify(path: str, out: str, backend: str = "mujoco") -> None:
     """Identifiability (local tests, the global slice and the refit profile,
     ``identify.py``) at every fit's optimum in a results JSON, on the same problems:
     which parameters each test passes and whether the hidden value lies in the reported
@@ -361,10 +371,10 @@ def reidentify(path: str, out: str) -> None:
     for f in report["fits"]:
         names, p = f["names"], f["hidden_parameters"]
         if p not in cache:
-            obj, base, train, _ = setup(report["rows"], report.get("seed", 0), names)
+            obj, base, train, _ = setup(report["rows"], report.get("seed", 0), names, backend)
             noise = cal.Noise(trace_window_s=window)
             cache[p] = cal.Problem(
-                obj, train, names, base, backend=BACKEND["name"], replicates=k, noise=noise
+                obj, train, names, base, backend=backend, replicates=k, noise=noise
             )
         problem = cache[p]
         theta = problem.space.theta([f["optimum"][n] for n in names])
@@ -460,7 +470,6 @@ def main() -> None:
         help="also: forward-mode (MJX) gradients against finite differences",
     )
     args = ap.parse_args()
-    BACKEND["name"] = args.backend
     if args.table:
         table(args.table)
         return
@@ -471,7 +480,7 @@ def main() -> None:
         Path(args.out).write_text(json.dumps(res, indent=1))
         return
     if args.reidentify:
-        reidentify(args.reidentify, args.out)
+        reidentify(args.reidentify, args.out, args.backend)
         return
     commit = subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
@@ -491,11 +500,11 @@ def main() -> None:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     if args.gradients:
-        obj, base, train, _ = setup(args.rows, args.seed, SETS[1])
+        obj, base, train, _ = setup(args.rows, args.seed, SETS[1], args.backend)
         report["gradient_quality"] = gradient_quality(obj, base, train)
         print(json.dumps(report["gradient_quality"]), flush=True)
     for p in (int(x) for x in args.params.split(",")):
-        obj, base, train, held = setup(args.rows, args.seed, SETS[p])
+        obj, base, train, held = setup(args.rows, args.seed, SETS[p], args.backend)
         budget = (args.budget + 60 * (p - 1)) * len(train)
         report[f"train_successes_{p}"] = int(train.successes.sum())
         for est in args.estimators.split(","):
@@ -510,6 +519,7 @@ def main() -> None:
                 args.seed,
                 args.replicates,
                 args.trace_window_s,
+                args.backend,
             )
             report["fits"].append(row)
             print(

@@ -129,20 +129,14 @@ def sibling(name: str):
     return module
 
 
-def real_objects():
-    """benchmarks/real_objects.py (the YCB manifest and loader)."""
-    return sibling("real_objects")
-
-
 def calibration_loss(backend: str, repeats: int, params: int = 3) -> dict:
     """The calibration benchmark's loss (benchmarks/calibration.py: 16 rows, three
     replicas per traced row) at the hidden parameters, evaluated ``repeats`` times one
     vector per call, then as ``repeats`` copies in one call: how much of an estimator's
     step is the engine's own run-to-run noise."""
     cb = sibling("calibration")
-    cb.BACKEND["name"] = backend
     names = cb.SETS[params]
-    obj, base, train, _ = cb.setup(16, 0, names)
+    obj, base, train, _ = cb.setup(16, 0, names, backend)
     problem = mp.calibration.Problem(obj, train, names, base, backend=backend, replicates=3)
     truth = problem.space.theta([cb.HIDDEN[n] for n in names])
     one_by_one = [float(problem.loss(truth[None])[0]) for _ in range(repeats)]
@@ -187,10 +181,11 @@ def main() -> None:
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
     ).stdout.strip()
     report = {"date": time.strftime("%Y-%m-%d"), "commit": commit, "args": vars(args), "rows": []}
-    ycb = real_objects().ycb_manifest()
+    real_objects = sibling("real_objects")  # the YCB manifest and loader
+    ycb = real_objects.ycb_manifest()
     for name in args.objects.split(","):
         # a shipped YCB part by its manifest name, else a shipped asset name
-        obj = real_objects().load_ycb(name) if name in ycb else name
+        obj = real_objects.load_ycb(name) if name in ycb else name
         for backend in args.backends.split(","):
             tables, walls = run_backend(
                 obj, args.n, args.seed, backend, args.repeats, args.batch or None

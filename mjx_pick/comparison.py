@@ -32,16 +32,16 @@ import pyarrow as pa
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, check_range, to_dict, write_json, write_parquet
 from mjx_pick.engine import (
-    ChunkStore,
     Simulator,
     marking_stops,
+    open_study_store,
     showing_progress,
     study_simulator,
 )
 from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.objects import ObjectModel
-from mjx_pick.rundir import claim, config_hash, finish, is_complete, portable_object
+from mjx_pick.rundir import claim, config_hash, finish, portable_object
 from mjx_pick.simulate import Settings
 
 
@@ -146,28 +146,26 @@ def compare(
 ) -> Comparison:
     """Simulate one shared candidate set on every gripper and rank them (out, resume,
     ray, progress: as sweep's)."""
+    if rank_by not in ("success", "score"):
+        raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
+    if len(grippers) < 1:
+        raise ConfigError("compare needs at least one gripper")
+    names = [g.name for g in grippers]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"gripper names must differ: {names}")
+    base = base or Settings()
+    pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
     with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
-        if rank_by not in ("success", "score"):
-            raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
-        if len(grippers) < 1:
-            raise ConfigError("compare needs at least one gripper")
-        names = [g.name for g in grippers]
-        if len(set(names)) != len(names):
-            raise ConfigError(f"gripper names must differ: {names}")
-        base = base or Settings()
-        pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
-        store = None
-        if resume and out is None:
-            raise ConfigError("--resume needs --out: the folder of the run to continue")
-        if out is not None:
-            request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
-            request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
-            request.update(picks=to_dict(pick_config))
-            key = config_hash(request)
-            if resume and not overwrite and is_complete(out, "compare", key):
-                return _read_comparison(Path(out), obj, grippers, base, n, seed, pick_config)
-            claim(out, "compare", key, resume=resume, overwrite=overwrite)
-            store = ChunkStore(out, key, resume)
+        request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
+        request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
+        request.update(picks=to_dict(pick_config))
+        store, complete = open_study_store(
+            out, "compare", request, resume=resume, overwrite=overwrite
+        )
+        if complete:
+            return _read_comparison(Path(out), obj, grippers, base, n, seed, pick_config)
         t0 = time.perf_counter()
         cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
         n_cand = len(cand["pick_id"])

@@ -62,7 +62,7 @@ from mjx_pick.metrics import results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.pickpoints import PickBatch
 from mjx_pick.progress import ProgressBar
-from mjx_pick.rundir import finish
+from mjx_pick.rundir import claim, config_hash, finish, is_complete
 from mjx_pick.scene import Scene, build_scene
 from mjx_pick.simulate import (
     Backend,
@@ -461,6 +461,23 @@ def read_chunk(out_dir: Path, k: int, picks: PickBatch) -> pa.Table | None:
             f"{path} does not hold the pick-points of chunk {k}: choose another --out"
         )
     return table
+
+
+def open_study_store(
+    out: str | Path | None, command: str, request: dict, *, resume: bool, overwrite: bool
+) -> tuple[ChunkStore | None, bool]:
+    """A resumable study's output folder (sweep, compare), before it simulates: the
+    folder claimed for command under request's configuration key and its
+    :class:`ChunkStore` -- or, on resume, whether the folder already holds this study
+    complete (the caller reads it back and simulates nothing). Returns (store,
+    complete); (None, False) without out."""
+    if out is None:
+        return None, False
+    key = config_hash(request)
+    if resume and not overwrite and is_complete(out, command, key):
+        return None, True
+    claim(out, command, key, resume=resume, overwrite=overwrite)
+    return ChunkStore(out, key, resume), False
 
 
 class ChunkStore:

@@ -441,10 +441,12 @@ def _evaluate(
         )
         if hasattr(executor, "cluster_summary"):
             summary["cluster"] = executor.cluster_summary()
-        if min_force:
-            settings = Settings(gripper, contact, solver, grasp)
-            sim = Simulator(obj, engine=engine)  # its bisection runs through this engine
+        settings = Settings(gripper, contact, solver, grasp)
+        if min_force or stability_um:
+            # the extra simulations below run through this run's engine and backend
+            sim = Simulator(obj, engine=engine)
             sim.adopt(settings, runner)
+        if min_force:
             t1 = time.perf_counter()
             with showing_progress(engine, "minimum grip force (bisection)", "sim", progress):
                 forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
@@ -460,16 +462,7 @@ def _evaluate(
             )
         if stability_um:
             t1 = time.perf_counter()
-            table = _stability(
-                table,
-                picks_batch,
-                obj,
-                engine,
-                runner,
-                Settings(gripper, contact, solver, grasp),
-                stability_um,
-                progress,
-            )
+            table = _stability(table, picks_batch, sim, settings, stability_um, progress)
             stable = table["label_stable"].to_numpy(zero_copy_only=False)
             summary["stability_um"] = stability_um
             summary["labels_unstable"] = int((~stable).sum())
@@ -491,19 +484,17 @@ def _evaluate(
     return Evaluation(table, summary, config, traces, out_dir)
 
 
-def _stability(table, picks_batch, obj, engine, runner, settings, shift_um, progress):
+def _stability(table, picks_batch, sim: Simulator, settings, shift_um, progress):
     """table with success_shifted, score_shifted and label_stable: every simulated
     pick-point again with the object moved shift_um micrometres along x (one batch
-    through the run's own backend)."""
-    sim = Simulator(obj, engine=engine)
-    sim.adopt(settings, runner)
+    through sim, which runs on the run's own engine and backend)."""
     # the table's rows are the batch's pick-points in order (infeasible ones, if kept,
     # included: they are not simulated twice -- no simulation decides their label)
     ids = table["pick_id"].to_numpy()
     if len(ids) != len(picks_batch) or not np.array_equal(ids, picks_batch.pick_id):
         raise RuntimeError("evaluate: the results table does not follow its pick-points")
     shifted = dataclasses.replace(picks_batch, x_mm=picks_batch.x_mm + shift_um * 1e-3)
-    with showing_progress(engine, "stability (pick-points moved)", "sim", progress):
+    with showing_progress(sim.engine, "stability (pick-points moved)", "sim", progress):
         (res,) = sim.run([(settings, shifted)])
     success = np.asarray(res["success"], bool)
     table = table.append_column("success_shifted", pa.array(success))

@@ -33,9 +33,9 @@ import pyarrow as pa
 from mjx_pick import pickpoints as pp
 from mjx_pick.config import ConfigError, describe_fields, to_dict, write_json, write_parquet
 from mjx_pick.engine import (
-    ChunkStore,
     Simulator,
     marking_stops,
+    open_study_store,
     showing_progress,
     study_simulator,
 )
@@ -44,7 +44,7 @@ from mjx_pick.gripper import GripperSpec
 from mjx_pick.metrics import rate_summary, results_table
 from mjx_pick.objects import ObjectModel
 from mjx_pick.physics import ContactParams, SolverParams
-from mjx_pick.rundir import claim, config_hash, finish, is_complete, portable_object
+from mjx_pick.rundir import finish, portable_object
 from mjx_pick.simulate import Settings
 
 SECTIONS = {
@@ -258,21 +258,19 @@ def sweep(
     ("auto" or "HOST:PORT"; mjx_pick.cluster), this process writing out. progress: a
     progress bar of the simulations on stderr (``progress.ProgressBar``).
     """
+    base = base or Settings()
+    pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
     with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
-        base = base or Settings()
-        pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
-        store = None
-        if resume and out is None:
-            raise ConfigError("--resume needs --out: the folder of the run to continue")
-        if out is not None:
-            request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
-            request.update(params=to_dict(params), n=n, seed=seed, random=random)
-            request.update(picks=to_dict(pick_config))
-            key = config_hash(request)
-            if resume and not overwrite and is_complete(out, "sweep", key):
-                return _read_sweep(Path(out))
-            claim(out, "sweep", key, resume=resume, overwrite=overwrite)
-            store = ChunkStore(out, key, resume)
+        request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
+        request.update(params=to_dict(params), n=n, seed=seed, random=random)
+        request.update(picks=to_dict(pick_config))
+        store, complete = open_study_store(
+            out, "sweep", request, resume=resume, overwrite=overwrite
+        )
+        if complete:
+            return _read_sweep(Path(out))
         combos = variants(params, random, seed)
         settings = []
         for combo in combos:
