@@ -23,11 +23,11 @@ import numpy as np
 from scipy.stats import spearmanr
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
-from mjx_pick.engine import Engine
-from mjx_pick.grasp import GraspConfig
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.runner import Engine
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.simulate import make_inputs
 
 
 def perturbed_success(scene, grasp, picks: pp.PickBatch, copies: int, seed: int) -> np.ndarray:
@@ -57,7 +57,7 @@ def main() -> None:
     ap.add_argument("--grasp", help="GraspConfig TOML")
     ap.add_argument("--out", default="benchmarks/out")
     args = ap.parse_args()
-    from mjx_pick.config import load_toml
+    from mjx_pick.core.config import load_toml
 
     grasp = load_toml(GraspConfig, args.grasp) if args.grasp else GraspConfig()
     obj = mp.load_object(args.object)

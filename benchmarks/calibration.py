@@ -42,8 +42,8 @@ import numpy as np
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick import calibration as cal
-from mjx_pick.grasp import GraspConfig
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.studies import calibration as cal
 
 HIDDEN = {
     "pad_friction": 0.62,
@@ -247,9 +247,9 @@ def gradient_check_tiny() -> dict:
     import jax
     import jax.numpy as jnp
 
-    from mjx_pick.calibration.parameters import contact_arrays_jnp
-    from mjx_pick.engine import differentiable_rollout
+    from mjx_pick.engine.simulator import differentiable_rollout
     from mjx_pick.kernels.grasp import TRACE_FIELDS
+    from mjx_pick.studies.calibration.parameters import contact_arrays_jnp
 
     obj = mp.object_from_polygon(box(-20, -10, 20, 10), thickness_mm=20, mass_g=1000, name="heavy")
     gripper = mp.GripperSpec(name="light-gripper", force_min_n=1.0)

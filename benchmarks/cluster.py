@@ -32,8 +32,8 @@ import time
 from pathlib import Path
 
 import mjx_pick as mp
-from mjx_pick.cluster import free_ports, start_local_node, stop_local_node
-from mjx_pick.evaluation import evaluate
+from mjx_pick.engine.cluster import free_ports, start_local_node, stop_local_node
+from mjx_pick.studies.evaluation import evaluate
 
 
 def local_cluster(n_nodes: int, cpus: int, logs: Path):

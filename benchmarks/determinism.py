@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 
 import mjx_pick as mp
-from mjx_pick.config import write_json
+from mjx_pick.core.config import write_json
+from mjx_pick.studies.calibration import Problem
 
 COLUMNS = ("score", "lift_height_mm", "max_force_left_n", "slip_mm")
 
@@ -137,7 +138,7 @@ def calibration_loss(backend: str, repeats: int, params: int = 3) -> dict:
     cb = sibling("calibration")
     names = cb.SETS[params]
     obj, base, train, _ = cb.setup(16, 0, names, backend)
-    problem = mp.calibration.Problem(obj, train, names, base, backend=backend, replicates=3)
+    problem = Problem(obj, train, names, base, backend=backend, replicates=3)
     truth = problem.space.theta([cb.HIDDEN[n] for n in names])
     one_by_one = [float(problem.loss(truth[None])[0]) for _ in range(repeats)]
     together = problem.loss(np.repeat(truth[None], repeats, axis=0)).astype(float).tolist()

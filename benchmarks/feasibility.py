@@ -21,7 +21,7 @@ import jax
 import numpy as np
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
+from mjx_pick.core import pickpoints as pp
 
 
 def main() -> None:

@@ -33,13 +33,13 @@ from pathlib import Path
 import numpy as np
 
 import mjx_pick as mp
-from mjx_pick import mjcf_gripper
-from mjx_pick import pickpoints as pp
-from mjx_pick.comparison import compare
-from mjx_pick.config import write_json
-from mjx_pick.engine import Engine
+from mjx_pick.core import mjcf_gripper
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import write_json
+from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.runner import Engine
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.simulate import make_inputs
+from mjx_pick.studies.comparison import compare
 
 PARALLEL, LINKAGE = "robotiq-2f85", "robotiq-2f85-linkage"
 
@@ -164,7 +164,7 @@ def changes(obj, grippers, result, seed: int) -> dict:
 def picture(obj, grippers, cand_row, grasp, config, path: Path) -> None:
     """One pick re-simulated on both grippers with traces: the pick, pad forces, the
     object's lift and tilt."""
-    from mjx_pick.plots import new_figure, pick_on_axes, save_png
+    from mjx_pick.outputs.plots import new_figure, pick_on_axes, save_png
 
     fig, axes = new_figure(2, 3, figsize=(15, 8))
     for row, gripper in zip(axes, grippers, strict=True):
@@ -253,8 +253,8 @@ def run_links(args) -> None:
     """What colliding link meshes cost: the same scene with the linkage's 10 link
     meshes paired with every object piece or not. MuJoCo C: microseconds per physics
     step of one simulation; MJX / Warp: a full batched rollout through the backend
-    (compile time apart from run time, pick-points per second; mjx_pick.throughput)."""
-    from mjx_pick.throughput import measure
+    (compile time apart from run time, pick-points per second; mjx_pick.studies.throughput)."""
+    from mjx_pick.studies.throughput import measure
 
     base = mp.load_gripper(LINKAGE)
     grasp = mp.GraspConfig()

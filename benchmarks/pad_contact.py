@@ -17,11 +17,11 @@ import numpy as np
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
-from mjx_pick.engine import Engine
-from mjx_pick.grasp import G
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import G
+from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.runner import Engine
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.simulate import make_inputs
 
 FREE = mp.GripperSpec(name="test-gripper", force_min_n=0.01)
 
@@ -105,8 +105,8 @@ def _lying_rod(mass_kg: float) -> mp.ObjectModel:
 
 def torque() -> None:
     """Off-centre parts: the lever at which they first turn out of the grasp, against
-    the capacity the model states (mjx_pick.holding) and a uniform-pressure rubber pad."""
-    from mjx_pick import holding
+    the capacity the model states (mjx_pick.core.holding) and a uniform-pressure rubber pad."""
+    from mjx_pick.core import holding
 
     cases = {
         "bar 20x20x200 mm, 0.6 kg, 30 N": (

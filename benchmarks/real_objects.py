@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 
 import mjx_pick as mp
-from mjx_pick.config import load_toml, write_json
+from mjx_pick.core.config import load_toml, write_json
+from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.metrics import wilson_interval
 
 
 def ycb_manifest() -> dict:
@@ -46,10 +46,10 @@ def load_ycb(name: str) -> mp.ObjectModel:
 
 def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
     """Re-simulate the first pick of a failure class with its trace and draw why."""
-    from mjx_pick import pickpoints as pp
-    from mjx_pick.engine import Engine
-    from mjx_pick.plots import new_figure, pick_on_axes, save_png
-    from mjx_pick.simulate import make_inputs
+    from mjx_pick.core import pickpoints as pp
+    from mjx_pick.engine.backend import make_inputs
+    from mjx_pick.engine.runner import Engine
+    from mjx_pick.outputs.plots import new_figure, pick_on_axes, save_png
 
     gripper = mp.load_gripper("robotiq-2f85")
     r = table[table["failure"] == failure].iloc[0]

@@ -14,10 +14,10 @@ import time
 import numpy as np
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
-from mjx_pick.engine import Engine
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.simulate import make_inputs
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.runner import Engine
 
 VARIANTS = {
     "default (10/8)": {},

@@ -12,7 +12,7 @@ One CSV row per configuration.
 Side by side (--run, repeated): each run takes the first n of ONE shared set of
 pick-points; MuJoCo C runs first and the others' labels are compared with its labels
 on the pick-points both ran; rows go to side_by_side.jsonl (see
-mjx_pick.throughput.side_by_side for the fields):
+mjx_pick.studies.throughput.side_by_side for the fields):
 
   python benchmarks/throughput.py --objects door_opener \\
       --run mujoco:n=4096:batch=1024 \\
@@ -37,8 +37,8 @@ from pathlib import Path
 import jax
 
 import mjx_pick as mp
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.throughput import RunSpec, measure, side_by_side
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.studies.throughput import RunSpec, measure, side_by_side
 
 
 def main() -> None:
@@ -66,7 +66,7 @@ def main() -> None:
     )
     ap.add_argument("--seed", type=int, default=0, help="pick-point seed (side by side)")
     args = ap.parse_args()
-    from mjx_pick.config import load_toml
+    from mjx_pick.core.config import load_toml
 
     grasp = load_toml(GraspConfig, args.grasp) if args.grasp else GraspConfig()
     solver = load_toml(mp.SolverParams, args.solver) if args.solver else mp.SolverParams()

@@ -30,8 +30,8 @@ import mujoco
 import numpy as np
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
-from mjx_pick.backend_warp import size_buffers
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.engine.warp_backend import size_buffers
 
 
 def scripted_states(scene, grasp, n: int, seed: int) -> dict[str, tuple[np.ndarray, ...]]:
@@ -129,7 +129,7 @@ def mjx_scan_ms(scene, buffers, states, worlds: int, steps: int, repeats: int) -
     from mujoco import mjx
     from mujoco.mjx.warp import types as mjxw_types
 
-    from mjx_pick.backend_mjx import _slot_axes
+    from mjx_pick.engine.mjx_backend import _slot_axes
 
     m = scene.model
     mx = mjx.put_model(m, impl="warp", graph_mode=mjxw_types.GraphMode.WARP)

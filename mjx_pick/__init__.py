@@ -18,47 +18,47 @@ __version__ = "0.1.0"
 # public name -> the module that defines it
 _PUBLIC = {
     # core: objects, grippers, physics, scenes, pick-points
-    "ObjectModel": "objects",
-    "asset_names": "objects",
-    "load_asset": "objects",
-    "load_object": "objects",
-    "object_from_image": "objects",
-    "object_from_mesh": "objects",
-    "object_from_polygon": "objects",
-    "GripperSpec": "gripper",
-    "load_gripper": "gripper",
-    "preset_names": "gripper",
-    "ContactParams": "physics",
-    "SolverParams": "physics",
-    "GraspConfig": "grasp",
-    "min_grasp_force_n": "grasp",
-    "Scene": "scene",
-    "build_scene": "scene",
-    "FeasibilityChecker": "pickpoints",
-    "PickBatch": "pickpoints",
-    "PickConfig": "pickpoints",
-    "generate_grid": "pickpoints",
-    "generate_normal": "pickpoints",
-    "optimize": "pickpoints",
-    "ConfigError": "config",
+    "ObjectModel": "core.objects",
+    "asset_names": "core.objects",
+    "load_asset": "core.objects",
+    "load_object": "core.objects",
+    "object_from_image": "core.objects",
+    "object_from_mesh": "core.objects",
+    "object_from_polygon": "core.objects",
+    "GripperSpec": "core.gripper",
+    "load_gripper": "core.gripper",
+    "preset_names": "core.gripper",
+    "ContactParams": "core.physics",
+    "SolverParams": "core.physics",
+    "GraspConfig": "core.procedure",
+    "min_grasp_force_n": "core.procedure",
+    "Scene": "core.scene",
+    "build_scene": "core.scene",
+    "FeasibilityChecker": "core.pickpoints",
+    "PickBatch": "core.pickpoints",
+    "PickConfig": "core.pickpoints",
+    "generate_grid": "core.pickpoints",
+    "generate_normal": "core.pickpoints",
+    "optimize": "core.pickpoints",
+    "ConfigError": "core.config",
     # engine: the one simulation path
-    "Cancelled": "engine",
-    "Engine": "engine",
-    "Simulator": "engine",
-    "Settings": "simulate",
+    "Cancelled": "engine.runner",
+    "Engine": "engine.runner",
+    "Simulator": "engine.simulator",
+    "Settings": "engine.backend",
     # studies
-    "Evaluation": "evaluation",
-    "evaluate": "evaluation",
-    "ParamSpec": "sweeps",
-    "sweep": "sweeps",
-    "compare": "comparison",
-    "design_search": "comparison",
-    "robustness": "robust",
-    "min_grip_force": "robust",
-    "calibrate": "calibration",
+    "Evaluation": "studies.evaluation",
+    "evaluate": "studies.evaluation",
+    "ParamSpec": "studies.sweeps",
+    "sweep": "studies.sweeps",
+    "compare": "studies.comparison",
+    "design_search": "studies.comparison",
+    "robustness": "studies.robust",
+    "min_grip_force": "studies.robust",
+    "calibrate": "studies.calibration",
     # outputs
-    "report": "reporting",
-    "use_offscreen_rendering": "display",
+    "report": "outputs.reporting",
+    "use_offscreen_rendering": "outputs.display",
 }
 
 __all__ = [
@@ -103,15 +103,9 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load lazily
-    from mjx_pick.calibration import calibrate
-    from mjx_pick.comparison import compare, design_search
-    from mjx_pick.config import ConfigError
-    from mjx_pick.display import use_offscreen_rendering
-    from mjx_pick.engine import Cancelled, Engine, Simulator
-    from mjx_pick.evaluation import Evaluation, evaluate
-    from mjx_pick.grasp import GraspConfig, min_grasp_force_n
-    from mjx_pick.gripper import GripperSpec, load_gripper, preset_names
-    from mjx_pick.objects import (
+    from mjx_pick.core.config import ConfigError
+    from mjx_pick.core.gripper import GripperSpec, load_gripper, preset_names
+    from mjx_pick.core.objects import (
         ObjectModel,
         asset_names,
         load_asset,
@@ -120,8 +114,8 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load lazily
         object_from_mesh,
         object_from_polygon,
     )
-    from mjx_pick.physics import ContactParams, SolverParams
-    from mjx_pick.pickpoints import (
+    from mjx_pick.core.physics import ContactParams, SolverParams
+    from mjx_pick.core.pickpoints import (
         FeasibilityChecker,
         PickBatch,
         PickConfig,
@@ -129,11 +123,18 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load lazily
         generate_normal,
         optimize,
     )
-    from mjx_pick.reporting import report
-    from mjx_pick.robust import min_grip_force, robustness
-    from mjx_pick.scene import Scene, build_scene
-    from mjx_pick.simulate import Settings
-    from mjx_pick.sweeps import ParamSpec, sweep
+    from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
+    from mjx_pick.core.scene import Scene, build_scene
+    from mjx_pick.engine.backend import Settings
+    from mjx_pick.engine.runner import Cancelled, Engine
+    from mjx_pick.engine.simulator import Simulator
+    from mjx_pick.outputs.display import use_offscreen_rendering
+    from mjx_pick.outputs.reporting import report
+    from mjx_pick.studies.calibration import calibrate
+    from mjx_pick.studies.comparison import compare, design_search
+    from mjx_pick.studies.evaluation import Evaluation, evaluate
+    from mjx_pick.studies.robust import min_grip_force, robustness
+    from mjx_pick.studies.sweeps import ParamSpec, sweep
 
 
 def __getattr__(name: str):

@@ -10,7 +10,7 @@ import os
 os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=4")
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 
-from mjx_pick.display import use_offscreen_rendering  # noqa: E402
+from mjx_pick.outputs.display import use_offscreen_rendering  # noqa: E402
 
 use_offscreen_rendering()  # the report tests render animations on a headless CI machine
 

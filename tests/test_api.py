@@ -71,4 +71,4 @@ def test_import_has_no_side_effects():
     )
     assert got == {"changed": [], "loaded": []}
     # and a public name still loads on first use
-    assert mjx_pick.evaluate.__module__ == "mjx_pick.evaluation"
+    assert mjx_pick.evaluate.__module__ == "mjx_pick.studies.evaluation"

@@ -17,11 +17,12 @@ import numpy as np
 import pytest
 
 import mjx_pick as mp
-from mjx_pick import backend_warp as bw
-from mjx_pick import pickpoints as pp
-from mjx_pick.grasp import GraspConfig
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine import devices
+from mjx_pick.engine import warp_backend as bw
+from mjx_pick.engine.backend import make_backend, make_inputs
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.simulate import make_backend, make_inputs
 
 SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=10.0, hold_s=0.1)
 
@@ -35,9 +36,9 @@ def block_scene(block):
 def fresh_probe():
     """warp_problem() is cached per process: clear it around a test that fakes the
     machine."""
-    bw.warp_problem.cache_clear()
+    devices.warp_problem.cache_clear()
     yield
-    bw.warp_problem.cache_clear()
+    devices.warp_problem.cache_clear()
 
 
 # --------------------------------------------------------------------------- choice
@@ -49,8 +50,8 @@ def test_backend_names_and_options(block_scene):
 
 
 def test_warp_without_gpu_is_a_clear_error(block_scene, fresh_probe, monkeypatch):
-    monkeypatch.delenv(bw.ALLOW_CPU_ENV, raising=False)
-    if bw.nvidia_gpus():
+    monkeypatch.delenv(devices.ALLOW_CPU_ENV, raising=False)
+    if devices.nvidia_gpus():
         pytest.skip("this machine has a CUDA GPU")
     with pytest.raises(mp.ConfigError, match=r'no NVIDIA \(CUDA\) GPU.*pip install "\.\[gpu\]"'):
         make_backend("warp", block_scene, SHORT, batch_size=4)
@@ -59,8 +60,8 @@ def test_warp_without_gpu_is_a_clear_error(block_scene, fresh_probe, monkeypatch
 
 
 def _fake_gpu(monkeypatch, warp_spec, version="1.18.0"):
-    monkeypatch.delenv(bw.ALLOW_CPU_ENV, raising=False)
-    monkeypatch.setattr(bw, "nvidia_gpus", lambda: ["cuda:0"])
+    monkeypatch.delenv(devices.ALLOW_CPU_ENV, raising=False)
+    monkeypatch.setattr(devices, "nvidia_gpus", lambda: ["cuda:0"])
     find_spec = importlib.util.find_spec
     monkeypatch.setattr(
         bw.importlib.util,
@@ -82,12 +83,12 @@ def test_gpu_without_warp_lang_names_the_extra(block_scene, fresh_probe, monkeyp
     ):
         make_backend("warp", block_scene, SHORT, batch_size=4)
     # auto on a GPU without warp-lang: the C engine (faster there than MJX's JAX physics)
-    bw.warp_problem.cache_clear()
+    devices.warp_problem.cache_clear()
     assert make_backend("auto", block_scene, SHORT, batch_size=4).name == "mujoco"
 
 
 def test_wrong_warp_version_is_named(block_scene, fresh_probe, monkeypatch):
-    pin = bw._warp_pin()
+    pin = devices.warp_pin()
     if pin is None:
         pytest.skip("mujoco-mjx declares no warp-lang pin")
     _fake_gpu(monkeypatch, warp_spec=object(), version="0.1.0")
@@ -96,7 +97,7 @@ def test_wrong_warp_version_is_named(block_scene, fresh_probe, monkeypatch):
 
 
 def test_gpu_extra_pins_warp_like_mujoco_mjx():
-    pin = bw._warp_pin()  # e.g. "==1.18.0"
+    pin = devices.warp_pin()  # e.g. "==1.18.0"
     if pin is None:
         pytest.skip("mujoco-mjx declares no warp-lang pin")
     import tomllib
@@ -232,7 +233,7 @@ def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
     # held pick with an empty one.
     import jax
 
-    from mjx_pick.backend_mjx import shrink_sizes
+    from mjx_pick.engine.mjx_backend import shrink_sizes
 
     assert shrink_sizes(8, 2) == (8, 4, 2) and shrink_sizes(8, 5) == (8, 4, 2, 1)
     assert shrink_sizes(6, 3) == (6, 3) and shrink_sizes(8, 0) == (8,)
@@ -285,8 +286,8 @@ def test_device_threads_run_shares_side_by_side_in_pick_order(block_scene):
     # other would time out -- and results, diagnostics and stats merged in pick order
     import threading
 
-    from mjx_pick.backend_mjx import DeviceThreads, Diagnostics, PoolStats
-    from mjx_pick.simulate import RunStats
+    from mjx_pick.engine.backend import RunStats
+    from mjx_pick.engine.mjx_backend import DeviceThreads, Diagnostics, PoolStats
 
     barrier = threading.Barrier(2, timeout=20)
 
@@ -330,7 +331,7 @@ def test_device_threads_run_shares_side_by_side_in_pick_order(block_scene):
 # --------------------------------------------------------------------------- warp
 @pytest.mark.mjx
 @pytest.mark.skipif(
-    os.environ.get(bw.ALLOW_CPU_ENV) != "1" or importlib.util.find_spec("warp") is None,
+    os.environ.get(devices.ALLOW_CPU_ENV) != "1" or importlib.util.find_spec("warp") is None,
     reason="Warp on the CPU: needs warp-lang and MJX_PICK_WARP_CPU=1 (minutes)",
 )
 def test_warp_on_cpu_agrees_with_c_and_grows_overflowing_buffers(

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.simulate import make_backend, make_inputs
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine.backend import make_backend, make_inputs
 
 SHORT = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.3)
 
@@ -46,7 +46,7 @@ def test_auto_backend_choice(block):
     scene = mp.build_scene(block, mp.GripperSpec())
     backend = make_backend("auto", scene, SHORT, batch_size=4)
     # warp where it can run (an NVIDIA GPU with warp-lang), else the C engine
-    from mjx_pick.backend_warp import warp_problem
+    from mjx_pick.engine.devices import warp_problem
 
     assert backend.name == ("warp" if warp_problem() is None else "mujoco")
     with pytest.raises(mp.ConfigError, match="backend = 'gpu'"):

@@ -12,15 +12,15 @@ import pytest
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick import calibration as cal
-from mjx_pick.calibration import estimators as E
-from mjx_pick.calibration import loss as L
-from mjx_pick.calibration.parameters import contact_arrays_jnp, row_inputs
 from mjx_pick.cli import main
-from mjx_pick.config import to_toml
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.physics import load_contact
-from mjx_pick.simulate import make_inputs
+from mjx_pick.core.config import to_toml
+from mjx_pick.core.physics import load_contact
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine.backend import make_inputs
+from mjx_pick.studies import calibration as cal
+from mjx_pick.studies.calibration import estimators as E
+from mjx_pick.studies.calibration import loss as L
+from mjx_pick.studies.calibration.parameters import contact_arrays_jnp, row_inputs
 
 LIGHT = mp.GripperSpec(name="light-gripper", force_min_n=1.0)
 GRASP = GraspConfig(close_timeout_s=0.6, lift_height_mm=30.0, hold_s=0.1)
@@ -335,8 +335,8 @@ def test_replicas_only_for_traced_rows_and_alike_in_numpy_and_jax(heavy_block):
     # numpy (the engine's path) and jax (the forward-mode path)
     import jax.numpy as jnp
 
-    from mjx_pick.calibration.problem import trace_outputs
     from mjx_pick.kernels.grasp import TRACE_FIELDS
+    from mjx_pick.studies.calibration.problem import trace_outputs
 
     rows = cal.make_outcomes([0, 1, -1], [0, 0.5, 0], [0, 0, 5], [8, 9, 10])
     trace = {"force_n": np.array([[0.0, 0.0], [0.3, 5.0]])}
@@ -601,7 +601,7 @@ def test_forward_mode_gradient_through_mjx(heavy_block, synthetic):
     import jax
     import jax.numpy as jnp
 
-    from mjx_pick.backend_mjx import make_rollout
+    from mjx_pick.engine.mjx_backend import make_rollout
 
     base = mp.Settings(LIGHT, mp.ContactParams(), grasp=SHORT)
     rows = synthetic.take([0, len(synthetic) - 1])

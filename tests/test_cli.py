@@ -10,10 +10,10 @@ import pytest
 
 import mjx_pick as mp
 from mjx_pick.cli import build_parser, main
-from mjx_pick.config import ConfigError
-from mjx_pick.pickpoints import PickConfig
-from mjx_pick.progress import ProgressBar
-from mjx_pick.sweeps import SECTIONS, describe_params, numeric_fields
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.pickpoints import PickConfig
+from mjx_pick.outputs.progress import ProgressBar
+from mjx_pick.studies.sweeps import SECTIONS, describe_params, numeric_fields
 
 # what a number's help must name: a unit, or that it is a pure number of some kind
 UNITS = re.compile(
@@ -112,7 +112,7 @@ def test_params_come_from_the_settings_declarations(capsys):
 def test_the_printed_ranges_are_the_ones_enforced():
     # the range `params` prints and the one the dataclass checks are one declaration
     # (config.setting): a value just past either end is a ConfigError naming the field
-    from mjx_pick.config import _bound, range_text
+    from mjx_pick.core.config import _bound, range_text
 
     checked = 0
     printed = {r["name"]: r["range"] for r in describe_params()}

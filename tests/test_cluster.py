@@ -27,12 +27,12 @@ import pytest
 
 import mjx_pick as mp
 from mjx_pick import cli
-from mjx_pick.cluster import free_ports, session_pids, start_local_node, stop_local_node
-from mjx_pick.config import to_toml
-from mjx_pick.engine import Simulator
-from mjx_pick.evaluation import evaluate
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.robust import robust_best
+from mjx_pick.core.config import to_toml
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine.cluster import free_ports, session_pids, start_local_node, stop_local_node
+from mjx_pick.engine.simulator import Simulator
+from mjx_pick.studies.evaluation import evaluate
+from mjx_pick.studies.robust import robust_best
 
 GRASP = GraspConfig(close_timeout_s=0.6, lift_height_mm=20.0, hold_s=0.2)
 N = 192  # pick-points per run
@@ -446,7 +446,7 @@ def test_bad_cluster_addresses_are_one_line_errors(command, capsys, tmp_path):
 
 
 def test_missing_ray_names_the_extra(monkeypatch, block):
-    from mjx_pick import cluster
+    from mjx_pick.engine import cluster
 
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
     with pytest.raises(mp.ConfigError, match=r"mjx-pick\[cluster\]"):
@@ -461,12 +461,12 @@ def test_min_force_on_a_cluster_is_refused_before_connecting(block):
 
 
 def test_importing_the_package_does_not_import_ray():
-    code = "import sys, mjx_pick, mjx_pick.cluster; assert 'ray' not in sys.modules"
+    code = "import sys, mjx_pick, mjx_pick.engine.cluster; assert 'ray' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True, cwd=tempfile.gettempdir())
 
 
 def test_cluster_backend_choice():
-    from mjx_pick.cluster import cluster_backend, plan_slots
+    from mjx_pick.engine.cluster import cluster_backend, plan_slots
 
     cpu = {"NodeID": "a", "Resources": {"CPU": 8.0}}
     gpu = {"NodeID": "b", "Resources": {"CPU": 16.0, "GPU": 4.0}}

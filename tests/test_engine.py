@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
-from mjx_pick.engine import Cancelled, Engine, Simulator
-from mjx_pick.evaluation import evaluate
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.sweeps import ParamSpec, sweep
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine.runner import Cancelled, Engine
+from mjx_pick.engine.simulator import Simulator
+from mjx_pick.studies.evaluation import evaluate
+from mjx_pick.studies.sweeps import ParamSpec, sweep
 
 SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
 # the solver the pinned results were taken with (impratio 1): these tests pin the
@@ -187,7 +188,7 @@ def test_a_swallowed_ctrl_c_still_stops_the_run_at_the_next_chunk(door_opener, t
     """A SIGINT whose KeyboardInterrupt was swallowed (Python ignores exceptions raised
     in a garbage-collector callback, where JAX has one) is still recorded by the CLI's
     handler: the run stops before the next chunk, 'interrupted', its chunk kept."""
-    from mjx_pick import interrupts
+    from mjx_pick.engine import interrupts
 
     out = tmp_path / "run"
 
@@ -217,7 +218,7 @@ def test_a_swallowed_ctrl_c_still_stops_the_run_at_the_next_chunk(door_opener, t
 def test_the_cli_handler_records_ctrl_c_and_forgets_it_after_the_command():
     import signal
 
-    from mjx_pick import interrupts
+    from mjx_pick.engine import interrupts
 
     before = signal.getsignal(signal.SIGINT)
     with pytest.raises(KeyboardInterrupt):
@@ -263,7 +264,7 @@ def test_simulator_reports_progress_over_all_jobs_and_honours_cancel(block):
 ROOT = Path(__file__).resolve().parents[1]
 # only the engine layer builds and runs backends; everyone else goes through the engine
 BACKEND_NAMES = {"make_backend", "make_rollout", "MjxBackend", "MujocoBackend", "make_warp_backend"}
-ENGINE_LAYER = {"engine", "simulate", "backend_mjx", "backend_mujoco", "backend_warp"}
+ENGINE_LAYER = {"engine", "simulate", "mjx_backend", "c_backend", "warp_backend"}
 
 
 def _names_used(path: Path) -> set[str]:
@@ -284,13 +285,13 @@ def test_only_the_engine_builds_backends():
     assert len(files) > 10
     offenders = {str(p.relative_to(ROOT)): sorted(_names_used(p) & BACKEND_NAMES) for p in files}
     offenders = {k: v for k, v in offenders.items() if v}
-    assert not offenders, f"simulate through mjx_pick.engine, not a backend: {offenders}"
+    assert not offenders, f"simulate through mjx_pick.engine.runner, not a backend: {offenders}"
 
 
 def test_the_backend_check_sees_a_direct_call(tmp_path):
     src = tmp_path / "m.py"
     src.write_text(
-        "import mjx_pick.simulate as s\n\n"
+        "import mjx_pick.engine.backend as s\n\n"
         "def f(scene):\n    return s.make_backend('mujoco', scene)\n"
     )
     assert _names_used(src) & BACKEND_NAMES == {"make_backend"}
@@ -299,7 +300,7 @@ def test_the_backend_check_sees_a_direct_call(tmp_path):
 def test_a_cancelled_sweep_or_compare_marks_its_folder(block, tmp_path):
     # issue 21: a study stopped by its cancel event leaves its folder "cancelled", not
     # "running" (evaluate does the same and keeps its chunks for --resume)
-    from mjx_pick.comparison import compare
+    from mjx_pick.studies.comparison import compare
 
     cancel = threading.Event()
     cancel.set()

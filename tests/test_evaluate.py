@@ -9,10 +9,10 @@ import pytest
 
 import mjx_pick as mp
 from mjx_pick import cli
-from mjx_pick.config import to_toml
-from mjx_pick.evaluation import evaluate, experiment_key
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.metrics import COLUMNS
+from mjx_pick.core.config import to_toml
+from mjx_pick.core.metrics import COLUMNS
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.studies.evaluation import evaluate, experiment_key
 
 FAST = GraspConfig(close_timeout_s=0.8, lift_height_mm=30.0, hold_s=0.2)
 
@@ -215,8 +215,8 @@ def test_resume_key_is_the_experiment_not_the_install(tmp_path, block):
     helper = tmp_path / "tests_key.py"
     helper.write_text(
         "import mjx_pick as mp\n"
-        "from mjx_pick.evaluation import experiment_key\n"
-        f"from mjx_pick.grasp import GraspConfig\nFAST = {FAST!r}\n"
+        "from mjx_pick.studies.evaluation import experiment_key\n"
+        f"from mjx_pick.core.procedure import GraspConfig\nFAST = {FAST!r}\n"
         "def key(obj):\n"
         "    g = mp.GripperSpec()\n"
         "    scene = mp.build_scene(obj, g, grasp=FAST)\n"

@@ -18,10 +18,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import mjx_pick as mp
-from mjx_pick.calibration import read_outcomes
-from mjx_pick.config import ConfigError, load_toml
-from mjx_pick.objects import ObjectModel
-from mjx_pick.pickfiles import read_picks_csv
+from mjx_pick.core.config import ConfigError, load_toml
+from mjx_pick.core.objects import ObjectModel
+from mjx_pick.studies.calibration import read_outcomes
+from mjx_pick.studies.pickfiles import read_picks_csv
 
 FUZZ = settings(
     max_examples=30,

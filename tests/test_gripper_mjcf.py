@@ -21,12 +21,12 @@ import pytest
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick import mjcf_gripper
-from mjx_pick import pickpoints as pp
-from mjx_pick.config import ConfigError
-from mjx_pick.grasp import GraspConfig
+from mjx_pick.core import mjcf_gripper
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine.backend import addresses, make_backend, make_inputs
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.simulate import addresses, make_backend, make_inputs
 
 LINKAGE = "robotiq-2f85-linkage"
 GRIPPERS = resources.files("mjx_pick.assets") / "grippers"
@@ -376,7 +376,7 @@ def test_every_ycb_mesh_compiles_with_the_linkage(name, linkage, monkeypatch):
     """The image assets x every preset: tests/test_objects.py. Here the meshes, with
     their convex hull as the one collision piece (CoACD takes 5-40 s per mesh here and
     does not change what this checks: the gripper attached over a mesh object)."""
-    from mjx_pick import objects
+    from mjx_pick.core import objects
 
     monkeypatch.setattr(
         objects, "_coacd_pieces", lambda mesh, threshold: (np.asarray(mesh.convex_hull.vertices),)
@@ -406,7 +406,7 @@ def test_link_contacts_add_one_pair_per_link_and_piece(linkage, block):
 
 
 def test_mjcf_gripper_round_trips_through_a_saved_config(linkage):
-    from mjx_pick.config import from_mapping, to_dict
+    from mjx_pick.core.config import from_mapping, to_dict
 
     again = from_mapping(mp.GripperSpec, json.loads(json.dumps(to_dict(linkage))))
     assert again == linkage

@@ -10,8 +10,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from mjx_pick.config import ConfigError
-from mjx_pick.gripper import load_gripper
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.gripper import load_gripper
 from mjx_pick.gui import forms, is_loopback, jobs
 from mjx_pick.gui.uploads import check_upload, save_upload
 

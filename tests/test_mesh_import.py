@@ -33,7 +33,7 @@ def hull_pieces(monkeypatch):
     only sets the collision pieces; the tests using this check the outline and the
     pose, which do not depend on it.
     """
-    from mjx_pick import objects
+    from mjx_pick.core import objects
 
     def hull(mesh, threshold):
         return (np.asarray(mesh.convex_hull.vertices, dtype=float),)

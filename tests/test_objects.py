@@ -12,7 +12,7 @@ from mujoco import mjx
 from shapely.geometry import Point, box
 
 import mjx_pick as mp
-from mjx_pick.objects import convex_partition, rasterize
+from mjx_pick.core.objects import convex_partition, rasterize
 
 PX = 10.0  # px per mm of the drawn test images
 
@@ -220,7 +220,7 @@ def test_bad_gripper():
 
 
 def test_gripper_file_roundtrip(tmp_path):
-    from mjx_pick.config import to_toml
+    from mjx_pick.core.config import to_toml
 
     spec = mp.GripperSpec(name="custom", stroke_mm=60, finger_width_mm=15)
     path = tmp_path / "g.toml"
@@ -243,7 +243,7 @@ def test_mesh_bad_inputs(tmp_path):
 
 
 def test_contact_mapping_clamps_table1_stiffness():
-    from mjx_pick.physics import mujoco_contact
+    from mjx_pick.core.physics import mujoco_contact
 
     solver = mp.SolverParams(timestep_s=0.001)
     mjc = mujoco_contact(mp.ContactParams(), solver, mass_kg=0.013, patch_mm=(22.0, 5.0))

@@ -14,11 +14,11 @@ import trimesh
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick import holding
-from mjx_pick import pickpoints as pp
-from mjx_pick.grasp import G, GraspConfig, fingertip_height_mm
+from mjx_pick.core import holding, physics
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import G, GraspConfig, fingertip_height_mm
+from mjx_pick.engine.backend import make_backend, make_inputs
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.simulate import make_backend, make_inputs
 
 # lift 30 mm at the default 2 m/s^2, hold 0.3 s
 PROC = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.3)
@@ -128,7 +128,7 @@ def lying_rod(tmp_path, mass_kg):
 def test_torque_threshold_is_the_capacity_the_model_states(shape, tmp_path):
     # a 200 mm part gripped at distance d from its centre of mass along its length:
     # gravity turns it about the grip axis with m (g + a) d. The model states its
-    # capacity before simulating (mjx_pick.holding: Coulomb's law at the contact points
+    # capacity before simulating (mjx_pick.core.holding: Coulomb's law at the contact points
     # the collider makes -- four corners on the bar's flat side, two line ends on the
     # rod -- with soft-finger torsion). It must hold at 0.85x that lever and turn out
     # of the grasp at 1.15x: the threshold within 15 % of the stated capacity.
@@ -153,7 +153,7 @@ def test_torque_threshold_is_the_capacity_the_model_states(shape, tmp_path):
     # the torsional coefficient is mu times the contact patch's mean radius
     w, h = scene.pad_patch_mm
     assert scene.contact.pad_torsion_m == pytest.approx(
-        mu * mp.physics.patch_mean_radius_mm(w, h) * 1e-3, rel=1e-6
+        mu * physics.patch_mean_radius_mm(w, h) * 1e-3, rel=1e-6
     )
 
 
@@ -183,7 +183,7 @@ def test_hold_limit_against_closed_forms():
 
 
 def test_patch_mean_radius_matches_closed_forms():
-    r = mp.physics.patch_mean_radius_mm
+    r = physics.patch_mean_radius_mm
     assert r(10.0, 0.0) == pytest.approx(2.5, rel=1e-3)  # a line of length L: L / 4
     # a square of side s: s (sqrt(2) + asinh(1)) / 6 = 0.3826 s
     assert r(10.0, 10.0) == pytest.approx(10 * (np.sqrt(2) + np.arcsinh(1)) / 6, rel=1e-3)

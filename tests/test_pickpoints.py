@@ -7,7 +7,7 @@ import pytest
 from shapely.geometry import Point, box
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
+from mjx_pick.core import pickpoints as pp
 from mjx_pick.kernels import feasibility as fk
 
 GRIPPER = mp.GripperSpec()  # Robotiq 2F-85: stroke 85, width 22, depth 8
@@ -211,7 +211,7 @@ def test_bad_settings():
 
 
 def test_pictures(tmp_path, door_opener):
-    from mjx_pick import plots
+    from mjx_pick.outputs import plots
 
     picks = pp.generate_normal(door_opener, GRIPPER, 20, seed=0)
     plots.draw_pick(

@@ -13,8 +13,8 @@ from PIL import Image
 
 import mjx_pick as mp
 from mjx_pick.cli import main
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.reporting import PAPERS_MM, Run, report
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.outputs.reporting import PAPERS_MM, Run, report
 
 FAST = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.2)
 MM = 72.0 / 25.4  # PDF points per millimetre
@@ -179,7 +179,7 @@ def test_view_replays_the_trace_row_by_row(run_dir, monkeypatch):
 
     import mujoco.viewer
 
-    from mjx_pick.reporting import viewer
+    from mjx_pick.outputs.reporting import viewer
 
     run = Run.load(run_dir)
     pid = run.traced()[0][0]

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
 from mjx_pick.cli import main
-from mjx_pick.rundir import MANIFEST, claim, finish, read_manifest
-from mjx_pick.sweeps import ParamSpec, sweep
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.outputs.rundir import MANIFEST, claim, finish, read_manifest
+from mjx_pick.studies.sweeps import ParamSpec, sweep
 
 
 def test_claim_refuses_other_commands_and_configurations(tmp_path):

@@ -14,11 +14,11 @@ import pyarrow.parquet as pq
 import pytest
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
-from mjx_pick.config import to_toml
-from mjx_pick.evaluation import evaluate
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.simulate import make_backend, make_inputs
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import to_toml
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine.backend import make_backend, make_inputs
+from mjx_pick.studies.evaluation import evaluate
 
 FAST = GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
 

@@ -9,10 +9,10 @@ import pytest
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
-from mjx_pick.grasp import GraspConfig
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine.backend import make_backend, make_inputs
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.simulate import make_backend, make_inputs
 
 # a short procedure for tests: lift 30 mm, hold 0.3 s
 FAST = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.3)

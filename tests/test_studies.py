@@ -11,11 +11,11 @@ import pytest
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
 from mjx_pick.cli import main
-from mjx_pick.config import to_toml
-from mjx_pick.grasp import GraspConfig, min_grasp_force_n
-from mjx_pick.sweeps import ParamSpec, apply, variants
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import to_toml
+from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
+from mjx_pick.studies.sweeps import ParamSpec, apply, variants
 
 # short procedure: 30 mm lift, 0.2 s hold
 FAST = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.2)

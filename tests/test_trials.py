@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 import mjx_pick as mp
-from mjx_pick import calibration as cal
-from mjx_pick import trials as T
-from mjx_pick.calibration import trials as CT
 from mjx_pick.cli import main
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.metrics import wilson_interval
+from mjx_pick.core.metrics import wilson_interval
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.studies import calibration as cal
+from mjx_pick.studies.calibration import trials as CT
+from mjx_pick.studies.calibration.trials import loop as T
 
 LIGHT = mp.GripperSpec(name="light-gripper", force_min_n=1.0)
 PROC = GraspConfig(close_timeout_s=1.0, lift_height_mm=20.0, hold_s=0.05, grip_force_n=10.0)

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 import mjx_pick as mp
-from mjx_pick.calibration import synthetic_outcomes, write_outcomes
+from mjx_pick.studies.calibration import synthetic_outcomes, write_outcomes
 
 HERE = Path(__file__).resolve().parents[1] / "mjx_pick" / "assets" / "outcomes"
 

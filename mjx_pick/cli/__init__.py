@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import sys
 
-from mjx_pick import interrupts
 from mjx_pick.cli.parser import build_parser
-from mjx_pick.config import ConfigError
-from mjx_pick.display import use_offscreen_rendering
+from mjx_pick.core.config import ConfigError
+from mjx_pick.engine import interrupts
+from mjx_pick.outputs.display import use_offscreen_rendering
 
 __all__ = ["build_parser", "main"]
 

@@ -16,12 +16,12 @@ from mjx_pick.cli.inputs import (
     pick_config,
     study_options,
 )
-from mjx_pick.config import ConfigError
-from mjx_pick.progress import echo
+from mjx_pick.core.config import ConfigError
+from mjx_pick.outputs.progress import echo
 
 
 def cmd_evaluate(args) -> int:
-    from mjx_pick.evaluation import evaluate
+    from mjx_pick.studies.evaluation import evaluate
 
     obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
     check_contact_file(args, obj, gripper, grasp, solver)
@@ -73,7 +73,7 @@ def _fmt(v) -> str:
 
 
 def cmd_sweep(args) -> int:
-    from mjx_pick.sweeps import ParamSpec, sweep
+    from mjx_pick.studies.sweeps import ParamSpec, sweep
 
     if not args.param:
         raise ConfigError("sweep needs at least one --param NAME=LO:HI:N (`mjx-pick params`)")
@@ -112,7 +112,7 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from mjx_pick.comparison import compare
+    from mjx_pick.studies.comparison import compare
 
     obj, base, picks_cfg = base_settings(args)
     res = compare(
@@ -144,7 +144,7 @@ def cmd_compare(args) -> int:
 
 
 def cmd_design(args) -> int:
-    from mjx_pick.comparison import design_search
+    from mjx_pick.studies.comparison import design_search
 
     obj, base, picks_cfg = base_settings(args)
     bounds = design_bounds(args.bound or [])
@@ -170,7 +170,7 @@ def cmd_design(args) -> int:
 
 
 def cmd_robust(args) -> int:
-    from mjx_pick.robust import robust_best
+    from mjx_pick.studies.robust import robust_best
 
     obj, base, picks_cfg = base_settings(args)
     table = robust_best(
@@ -201,7 +201,7 @@ def cmd_robust(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    from mjx_pick import calibration as cal
+    from mjx_pick.studies import calibration as cal
 
     obj, base, picks_cfg = base_settings(args)
     outcomes = cal.read_outcomes(args.outcomes)
@@ -285,7 +285,7 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from mjx_pick.reporting import report
+    from mjx_pick.outputs.reporting import report
 
     frame = None
     if args.frame:
@@ -312,8 +312,8 @@ def cmd_report(args) -> int:
 
 
 def print_summary(s: dict, out) -> None:
+    from mjx_pick.core.metrics import rate_text
     from mjx_pick.kernels.grasp import SUCCESS
-    from mjx_pick.metrics import rate_text
 
     rows = [
         ("object / gripper", f"{s['object']} / {s['gripper']}"),
@@ -356,7 +356,7 @@ def print_summary(s: dict, out) -> None:
 
 
 def cmd_picks(args) -> int:
-    from mjx_pick.pickfiles import write_picks
+    from mjx_pick.studies.pickfiles import write_picks
 
     obj, gripper = objects(args)
     picks = write_picks(
@@ -376,7 +376,7 @@ def cmd_picks(args) -> int:
 
 
 def cmd_presets(_args) -> int:
-    from mjx_pick.gripper import load_gripper, preset_names
+    from mjx_pick.core.gripper import load_gripper, preset_names
 
     for name in preset_names():
         g = load_gripper(name)
@@ -399,7 +399,7 @@ _PARAM_SECTIONS = {
 
 
 def cmd_params(args) -> int:
-    from mjx_pick.sweeps import describe_params
+    from mjx_pick.studies.sweeps import describe_params
 
     rows = describe_params(args.prefix or "")
     for r in rows:
@@ -422,7 +422,7 @@ def cmd_params(args) -> int:
 
 
 def cmd_assets(_args) -> int:
-    from mjx_pick.objects import asset_manifest
+    from mjx_pick.core.objects import asset_manifest
 
     for name, entry in sorted(asset_manifest().items()):
         print(
@@ -433,7 +433,7 @@ def cmd_assets(_args) -> int:
 
 
 def cmd_view(args) -> int:
-    from mjx_pick.reporting.viewer import view
+    from mjx_pick.outputs.reporting.viewer import view
 
     view(args.run, args.pick, speed=args.speed, loop=args.loop)
     return 0
@@ -507,8 +507,8 @@ def _print_round(rnd: dict) -> None:
 
 
 def cmd_trials_plan(args) -> int:
-    from mjx_pick import trials
     from mjx_pick.cli.inputs import object_of
+    from mjx_pick.studies.calibration.trials import loop as trials
 
     plan = trials.plan(
         args.run,
@@ -543,7 +543,7 @@ def cmd_trials_plan(args) -> int:
 
 
 def cmd_trials_record(args) -> int:
-    from mjx_pick import trials
+    from mjx_pick.studies.calibration.trials import loop as trials
 
     if not sys.stdin.isatty():
         raise ConfigError(
@@ -559,7 +559,7 @@ def cmd_trials_record(args) -> int:
 
 
 def cmd_trials_agree(args) -> int:
-    from mjx_pick import trials
+    from mjx_pick.studies.calibration.trials import loop as trials
 
     res = trials.agree(args.trials, partial=args.partial)
     _print_agreement("simulation vs reality", res["overall"])
@@ -575,8 +575,8 @@ def cmd_trials_agree(args) -> int:
 
 
 def cmd_trials_fit(args) -> int:
-    from mjx_pick import trials
     from mjx_pick.cli.inputs import object_of
+    from mjx_pick.studies.calibration.trials import loop as trials
 
     obj = object_of(args)
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 
-from mjx_pick.config import ConfigError, load_toml
+from mjx_pick.core.config import ConfigError, load_toml
 
 
 def each_checked(*makers):
@@ -31,7 +31,7 @@ def each_checked(*makers):
 
 def objects(args):
     """(object, gripper), both checked before either error is reported."""
-    from mjx_pick.gripper import load_gripper
+    from mjx_pick.core.gripper import load_gripper
 
     obj, gripper = each_checked(
         lambda: object_of(args), lambda: load_gripper(args.gripper_file or args.gripper)
@@ -48,7 +48,7 @@ def inputs_of(args):
 
 def object_of(args):
     """The object the object options name (no gripper: a trials folder records its own)."""
-    from mjx_pick.objects import load_object
+    from mjx_pick.core.objects import load_object
 
     return load_object(
         args.object,
@@ -65,8 +65,8 @@ def object_of(args):
 
 
 def settings(args):
-    from mjx_pick.grasp import GraspConfig
-    from mjx_pick.physics import ContactParams, SolverParams, load_contact
+    from mjx_pick.core.physics import ContactParams, SolverParams, load_contact
+    from mjx_pick.core.procedure import GraspConfig
 
     def contact():
         c = load_contact(args.contact)[0] if args.contact else ContactParams()
@@ -93,14 +93,14 @@ def settings(args):
 def check_contact_file(args, obj, gripper, grasp, solver) -> None:
     """Before any simulation: say (stderr) where --contact was fitted for another set-up."""
     if getattr(args, "contact", None):
-        from mjx_pick.calibration.outputs import contact_file_notes
+        from mjx_pick.studies.calibration.outputs import contact_file_notes
 
         for line in contact_file_notes(args.contact, obj, gripper, grasp, solver):
             print(line, file=sys.stderr)
 
 
 def pick_config(args):
-    from mjx_pick.pickpoints import PickConfig
+    from mjx_pick.core.pickpoints import PickConfig
 
     return override(
         PickConfig(), safety_zone_mm=args.safety_zone_mm, min_coverage=args.min_coverage
@@ -114,7 +114,7 @@ def override(obj, **values):
 
 def base_settings(args):
     """Object, Settings (gripper + physics flags) and PickConfig from the shared options."""
-    from mjx_pick.simulate import Settings
+    from mjx_pick.engine.backend import Settings
 
     obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
     check_contact_file(args, obj, gripper, grasp, solver)
@@ -138,7 +138,7 @@ def study_options(args, picks_cfg) -> dict:
 
 
 def grippers(text: str):
-    from mjx_pick.gripper import load_gripper
+    from mjx_pick.core.gripper import load_gripper
 
     names = [t.strip() for t in text.split(",") if t.strip()]
     if not names:

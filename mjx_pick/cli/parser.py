@@ -225,7 +225,7 @@ def _add_overwrite(p: argparse.ArgumentParser) -> None:
 
 def _version_line() -> str:
     """mjx-pick's version and the physics engines it runs on (rundir.versions)."""
-    from mjx_pick.rundir import versions
+    from mjx_pick.outputs.rundir import versions
 
     v = {k: x or "not installed" for k, x in versions().items()}
     parts = ", ".join(f"{d} {v[d]}" for d in ("mujoco", "mujoco-mjx", "jax", "warp-lang"))

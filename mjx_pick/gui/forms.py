@@ -14,11 +14,11 @@ import re
 import tomllib
 from pathlib import Path
 
-from mjx_pick.config import ConfigError, from_mapping, to_toml, write_atomic
-from mjx_pick.grasp import GraspConfig
-from mjx_pick.gripper import GripperSpec
-from mjx_pick.physics import ContactParams
-from mjx_pick.pickpoints import PickConfig
+from mjx_pick.core.config import ConfigError, from_mapping, to_toml, write_atomic
+from mjx_pick.core.gripper import GripperSpec
+from mjx_pick.core.physics import ContactParams
+from mjx_pick.core.pickpoints import PickConfig
+from mjx_pick.core.procedure import GraspConfig
 
 SECTIONS = {
     "gripper": GripperSpec,

@@ -20,9 +20,9 @@ def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, b
       {"text": markdown lines for the page, "plot": force plot PNG bytes, or None when
       the pick-point is infeasible and was not simulated}.
     """
-    from mjx_pick import pickpoints as pp
-    from mjx_pick.evaluation import evaluate
-    from mjx_pick.grasp import fingertip_height_mm
+    from mjx_pick.core import pickpoints as pp
+    from mjx_pick.core.procedure import fingertip_height_mm
+    from mjx_pick.studies.evaluation import evaluate
 
     checker = pp.FeasibilityChecker(obj, settings.gripper, settings.picks, settings.grasp)
     res = checker(np.array([x]), np.array([y]), np.array([yaw]))

@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from mjx_pick.objects import ObjectModel
-    from mjx_pick.reporting import Run
+    from mjx_pick.core.objects import ObjectModel
+    from mjx_pick.outputs.reporting import Run
 
 RUN_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$")
 RUN_NAME_RULE = "letters, digits, '.', '_' and '-' only (at most 80)"

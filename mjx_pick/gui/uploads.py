@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pick.config import ConfigError, write_atomic
-from mjx_pick.objects import IMAGE_SUFFIXES, MESH_SUFFIXES
+from mjx_pick.core.config import ConfigError, write_atomic
+from mjx_pick.core.objects import IMAGE_SUFFIXES, MESH_SUFFIXES
 
 IMAGE_MAX_BYTES = 20 * 2**20
 MESH_MAX_BYTES = 50 * 2**20  # also the browser's limit for an object upload

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pick import plots
-from mjx_pick.objects import ObjectModel, segment_image
-from mjx_pick.pickpoints import PickBatch
+from mjx_pick.core.objects import ObjectModel, segment_image
+from mjx_pick.core.pickpoints import PickBatch
+from mjx_pick.outputs import plots
 
 
 def data_uri(data: bytes, mime: str) -> str:
@@ -72,13 +72,13 @@ def picks_png(obj: ObjectModel, picks: PickBatch) -> bytes:
 
 
 def force_png(trace: dict, grip_force_n: float, title: str) -> bytes:
-    from mjx_pick.reporting import force_plot
+    from mjx_pick.outputs.reporting import force_plot
 
     return _render(lambda path: force_plot(trace, grip_force_n, path, title=title))
 
 
 def replay_gif(scene_xml: Path, trace: dict, every: int = 12) -> bytes:
     """The recorded pick replayed in 3-D (top and side cameras), an animated GIF."""
-    from mjx_pick.reporting import animate
+    from mjx_pick.outputs.reporting import animate
 
     return _render(lambda path: animate(scene_xml, trace, path, every=every), ".gif")

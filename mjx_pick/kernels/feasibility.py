@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 FEASIBLE, OFF_OBJECT, TOO_WIDE, CLEARANCE, COVERAGE, PAD_PATH = range(6)
-# pad_path: a linkage's near pad rides over the part (mjx_pick.pickpoints; not checked
+# pad_path: a linkage's near pad rides over the part (mjx_pick.core.pickpoints; not checked
 # in these kernels, which see the gripper's footprint only)
 REASONS = ("feasible", "off_object", "too_wide", "clearance", "coverage", "pad_path")
 

@@ -22,7 +22,7 @@ Grippers: a parametric parallel jaw has one slide joint and one position servo p
 finger, whose coordinate IS the finger's closing travel. A gripper from an MJCF file (a
 linkage such as the Robotiq 2F-85) has neither: its fingers are driven through joints
 and tendons, and its pads travel along a curve. :class:`DriveMap` (static tables
-measured on the MuJoCo C model, ``mjx_pick.mjcf_gripper``) maps its finger joints to
+measured on the MuJoCo C model, ``mjx_pick.core.mjcf_gripper``) maps its finger joints to
 each pad's closing travel, the commanded travel to the actuator's control, and the
 travel to the drive's stiffness at the pads; the controller itself still works in
 travel, so the same code regulates both. The gripper's starting lift may be non-zero
@@ -395,7 +395,7 @@ class DriveMap(NamedTuple):
     """How an MJCF gripper's joints and actuator relate to its pads' closing travel.
 
     Static under jit (tuples of floats, hashable): tables sampled along the stroke by a
-    quasi-static close of the MuJoCo C model (``mjx_pick.mjcf_gripper``), each ascending
+    quasi-static close of the MuJoCo C model (``mjx_pick.core.mjcf_gripper``), each ascending
     in its first column, interpolated linearly. Travel is each pad's closing distance
     from fully open, m, in the free (parallel) mode of the linkage.
     """

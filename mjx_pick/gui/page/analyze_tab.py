@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from nicegui import run, ui
 
-from mjx_pick.config import ConfigError
+from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs, views
 from mjx_pick.gui.formatting import fmt
 from mjx_pick.gui.page.job_panel import JobPanel
@@ -109,7 +109,7 @@ class AnalyzeTab:
 
     def refresh_runs(self) -> None:
         """The evaluate folders in the work folder, for the chooser."""
-        from mjx_pick.rundir import read_manifest
+        from mjx_pick.outputs.rundir import read_manifest
 
         names = []
         workdir = self.state.workdir
@@ -131,8 +131,8 @@ class AnalyzeTab:
 
     def open_run(self) -> None:
         """Open the folder of the run-dir field: the page's open run, ranked by score."""
-        from mjx_pick.metrics import rate_text
-        from mjx_pick.reporting import Run
+        from mjx_pick.core.metrics import rate_text
+        from mjx_pick.outputs.reporting import Run
 
         self.error.set_text("")
         path = Path((self.run_dir.value or "").strip()).expanduser()

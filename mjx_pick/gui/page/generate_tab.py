@@ -13,7 +13,7 @@ from pathlib import Path
 
 from nicegui import run, ui
 
-from mjx_pick.config import ConfigError
+from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs, views
 from mjx_pick.gui.formatting import fmt, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
@@ -74,7 +74,7 @@ class GenerateTab:
 
     async def generate(self) -> None:
         """Sample the pick-points (in a worker thread) and draw them on the outline."""
-        from mjx_pick.pickpoints import generate_normal
+        from mjx_pick.core.pickpoints import generate_normal
 
         self.error.set_text("")
         if not need_object(self.state, self.error):
@@ -134,7 +134,7 @@ class GenerateTab:
                 return
             if progress.state != "complete":
                 return
-            from mjx_pick.metrics import rate_text
+            from mjx_pick.core.metrics import rate_text
 
             self.resume.value = False
             s = json.loads((out / "summary.json").read_text())

@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 from nicegui import run, ui
 
-from mjx_pick.config import ConfigError
+from mjx_pick.core.config import ConfigError
 from mjx_pick.gui.one_pick import simulate_one_pick
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import error_label, need_object, picture, show_picture

@@ -11,7 +11,8 @@ from pathlib import Path
 
 from nicegui import run, ui
 
-from mjx_pick.config import ConfigError
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.objects import MESH_SUFFIXES
 from mjx_pick.gui import views
 from mjx_pick.gui.page.widgets import error_label, picture, show_picture, upload
 from mjx_pick.gui.state import PageState
@@ -22,14 +23,13 @@ from mjx_pick.gui.uploads import (
     object_refused,
     save_upload,
 )
-from mjx_pick.objects import MESH_SUFFIXES
 
 UPLOADED = "(uploaded file)"
 
 
 class ImportTab:
     def __init__(self, state: PageState):
-        from mjx_pick.objects import asset_manifest
+        from mjx_pick.core.objects import asset_manifest
 
         self.state = state
         self.upload_path: Path | None = None
@@ -112,7 +112,7 @@ class ImportTab:
         return self.asset.value, image
 
     async def import_object(self) -> None:
-        from mjx_pick.objects import load_object
+        from mjx_pick.core.objects import load_object
 
         self.import_error.set_text("")
         for w in self.fields().values():

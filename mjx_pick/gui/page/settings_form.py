@@ -12,7 +12,7 @@ from pathlib import Path
 
 from nicegui import ui
 
-from mjx_pick.config import ConfigError
+from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import forms
 from mjx_pick.gui.page.widgets import error_label, upload
 from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload
@@ -26,7 +26,7 @@ class SettingsForm:
 
     def __init__(self, show: Callable[[], None]):
         """show: brings the form into view (switches to tab 2) when a field is wrong."""
-        from mjx_pick.gripper import load_gripper, preset_names
+        from mjx_pick.core.gripper import load_gripper, preset_names
 
         self.show = show
         self.base_contact = None  # calibrated contact parameters, once adopted
@@ -76,7 +76,7 @@ class SettingsForm:
             self.inputs[key].error = None
 
     def on_preset(self, _=None) -> None:
-        from mjx_pick.gripper import load_gripper
+        from mjx_pick.core.gripper import load_gripper
 
         self.base_gripper = load_gripper(self.preset.value)
         self.fill(self.base_gripper)

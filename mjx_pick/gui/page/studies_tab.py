@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from nicegui import run, ui
 
-from mjx_pick.config import ConfigError
+from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs
 from mjx_pick.gui.formatting import fmt, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
@@ -51,7 +51,7 @@ class CompareStudy:
     """``mjx-pick compare``: presets (and tab 2's gripper) ranked on the same pick-points."""
 
     def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
-        from mjx_pick.gripper import preset_names
+        from mjx_pick.core.gripper import preset_names
 
         self.state, self.form, self.panel = state, form, panel
         with ui.row().classes("w-full no-wrap items-start"):
@@ -181,7 +181,7 @@ class CalibrationStudy:
     """``mjx-pick calibrate``: contact parameters fitted to an uploaded outcomes CSV."""
 
     def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
-        from mjx_pick.calibration import FITTABLE
+        from mjx_pick.studies.calibration import FITTABLE
 
         self.state, self.form, self.panel = state, form, panel
         self.outcomes_path: Path | None = None
@@ -223,7 +223,7 @@ class CalibrationStudy:
                 self.image = picture()
 
     async def on_upload(self, e) -> None:
-        from mjx_pick.calibration import read_outcomes
+        from mjx_pick.studies.calibration import read_outcomes
 
         self.error.set_text("")
         name = e.file.name
@@ -294,7 +294,7 @@ class CalibrationStudy:
 
     def use_fitted(self) -> None:
         """The fitted contact parameters into tab 2's form, for every later run."""
-        from mjx_pick.physics import load_contact
+        from mjx_pick.core.physics import load_contact
 
         try:
             contact, _ = load_contact(self.fitted_contact)

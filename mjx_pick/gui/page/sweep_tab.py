@@ -24,7 +24,7 @@ from mjx_pick.gui.state import PageState
 
 class SweepTab:
     def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
-        from mjx_pick.sweeps import sweepable
+        from mjx_pick.studies.sweeps import sweepable
 
         self.state, self.form, self.panel = state, form, panel
         with ui.row().classes("w-full no-wrap items-start"):

@@ -1,0 +1,202 @@
+"""Parametric parallel-jaw (two-finger) gripper specs and the shipped presets.
+
+Gripper frame: the gripper centre is the origin, fingers close along x, the gripper
+approaches along -z. Each finger is a pad box: ``finger_depth_mm`` along x (the closing
+direction), ``finger_width_mm`` along y, ``pad_height_mm`` along z. ``stroke_mm`` is the
+largest distance between the pads' inner faces.
+
+A gripper TOML with an ``[mjcf]`` table is a real gripper's MJCF model instead
+(``mjx_pick.core.mjcf_gripper``): its stroke and pad geometry are measured from the model,
+and the TOML gives its name, force and speed ranges and which geoms and actuator are
+its pads and drive.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pick.core import mjcf_gripper
+from mjx_pick.core.config import ConfigError, check_fields, from_mapping, load_toml, setting
+
+
+@dataclasses.dataclass(frozen=True)
+class GripperSpec:
+    """A two-finger parallel gripper. Defaults: Robotiq 2F-85 as used in the paper."""
+
+    name: str = "robotiq-2f85"
+    stroke_mm: float = setting(
+        85.0,
+        "mm",
+        "largest distance between the pads' inner faces (> 2 x finger_depth_mm)",
+        lo=0,
+        hi=1000,
+        lo_open=True,
+    )
+    finger_width_mm: float = setting(
+        22.0,
+        "mm",
+        "pad width, across the closing direction (<= 10 x stroke_mm)",
+        lo=0,
+        lo_open=True,
+    )
+    finger_depth_mm: float = setting(
+        8.0, "mm", "pad thickness along the closing direction", lo=0, lo_open=True
+    )
+    pad_height_mm: float = setting(38.0, "mm", "pad height (vertical)", lo=0, lo_open=True)
+    force_min_n: float = setting(
+        20.0, "N", "smallest grip force the gripper can be set to", lo=0, hi="force_max_n"
+    )
+    force_max_n: float = setting(
+        235.0, "N", "largest grip force the gripper can be set to", lo=0, lo_open=True
+    )
+    # closing speed = rate of change of the opening (datasheet convention); each
+    # finger moves at half of it
+    speed_min_mm_s: float = setting(
+        20.0,
+        "mm/s",
+        "slowest closing speed (rate of change of the opening)",
+        lo=0,
+        hi="speed_max_mm_s",
+    )
+    speed_max_mm_s: float = setting(
+        150.0,
+        "mm/s",
+        "fastest closing speed (rate of change of the opening)",
+        lo=0,
+        lo_open=True,
+    )
+    finger_mass_g: float = setting(40.0, "g", "mass of one finger", lo=0, lo_open=True)
+    body_mass_g: float = setting(
+        925.0, "g", "mass of the gripper body (on the lift)", lo=0, lo_open=True
+    )
+    # drive: the finger servo that tracks the integrated speed command
+    drive_stiffness_n_per_mm: float = setting(
+        10.0,
+        "N/mm",
+        "finger servo stiffness (force per mm of lag behind its command)",
+        lo=0,
+        lo_open=True,
+    )
+    drive_damping_ns_per_mm: float = setting(0.02, "N s/mm", "finger servo damping", lo=0)
+    # the pads' material, recorded with results (config.json) and shown in reports; the
+    # physics comes from ContactParams (pad friction, stiffness), never from this name
+    pad_material: str = "nbr"
+    source: str = "Bencak et al. 2023, Fig. 10; Robotiq 2F-85 datasheet"
+    # a real gripper's MJCF model (None: the parametric parallel jaw above); its
+    # geometry fields are then measured from it
+    mjcf: mjcf_gripper.MjcfGripper | None = None
+
+    def __post_init__(self):
+        o = f"gripper[{self.name}]"
+        if isinstance(self.mjcf, dict):  # from a saved config (JSON) or a TOML table
+            mjcf = from_mapping(mjcf_gripper.MjcfGripper, self.mjcf, where=f"{o}.mjcf")
+            object.__setattr__(self, "mjcf", mjcf)
+        if self.mjcf is not None:
+            kin = mjcf_gripper.characterise(self.mjcf)
+            weakest = float(kin.force_limit_n.min())
+            if self.force_max_n > weakest * (1 + 1e-6):
+                at = float(kin.opening[np.argmin(kin.force_limit_n)]) * 1e3
+                raise ConfigError(
+                    f"{o}.force_max_n = {self.force_max_n:g} is more than the actuator "
+                    f"{self.mjcf.actuator!r} can push: its force limit gives {weakest:.1f} N "
+                    f"per pad at a {at:.1f} mm opening; raise mjcf.actuator_forcerange or "
+                    "lower force_max_n"
+                )
+            # an MJCF gripper's geometry is its model's: a sweep or design variant that
+            # changes it would simulate a gripper other than the one it names
+            for field, value in measured_fields(kin).items():
+                if abs(getattr(self, field) - value) > 1e-9 * max(1.0, abs(value)):
+                    raise ConfigError(
+                        f"{o}.{field} = {getattr(self, field)!r} cannot be set: an MJCF "
+                        f"gripper's {field} is measured from its model ({value:g}); "
+                        "change the MJCF file instead"
+                    )
+        check_fields(self, o)
+        # the two pads must fit side by side in the gripper body when fully open, and
+        # a pad must be thinner than half the stroke so the fingers can close fully
+        if 2 * self.finger_depth_mm >= self.stroke_mm:
+            raise ConfigError(
+                f"{o}: fingers cannot fit the stroke: 2 x finger_depth_mm = "
+                f"{2 * self.finger_depth_mm:g} mm must be < stroke_mm = {self.stroke_mm:g} mm"
+            )
+        if self.finger_width_mm > 10 * self.stroke_mm:
+            raise ConfigError(
+                f"{o}.finger_width_mm = {self.finger_width_mm:g} is out of range: allowed "
+                f"<= 10 x stroke_mm ({10 * self.stroke_mm:g})"
+            )
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped gripper presets (assets/grippers/*.toml)."""
+    folder = resources.files("mjx_pick.assets") / "grippers"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_gripper(name_or_path: str | os.PathLike) -> GripperSpec:
+    """A preset by name (e.g. "robotiq-2f85") or a gripper TOML file by path."""
+    text = str(name_or_path)
+    if text.endswith(".toml") or os.sep in text:
+        return _load_file(Path(text))
+    names = preset_names()
+    if text not in names:
+        raise ConfigError(
+            f"unknown gripper preset {text!r}: choose one of {', '.join(names)} "
+            "or pass a gripper TOML file"
+        )
+    with resources.as_file(resources.files("mjx_pick.assets") / "grippers" / f"{text}.toml") as p:
+        return _load_file(p)
+
+
+def _load_file(path: Path) -> GripperSpec:
+    if path.is_file():
+        try:
+            data = tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as err:
+            raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
+        if "mjcf" in data:
+            return mjcf_gripper_spec(data, path)
+    return load_toml(GripperSpec, path)
+
+
+def mjcf_gripper_spec(data: dict, path: Path) -> GripperSpec:
+    """A GripperSpec for an MJCF gripper TOML (already parsed): the [mjcf] table checked
+    against the model, geometry and masses measured from it (a quasi-static close)."""
+    data = dict(data)
+    table = data.pop("mjcf")
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path.name}: mjcf must be a table ([mjcf])")
+    given = sorted(set(data) & set(mjcf_gripper.GEOMETRY_FIELDS + MJCF_MEASURED))
+    if given:
+        raise ConfigError(
+            f"{path.name}: {', '.join(given)} are measured from the MJCF model; remove them"
+        )
+    mjcf = mjcf_gripper.resolve(
+        from_mapping(mjcf_gripper.MjcfGripper, table, where=f"{path.name} [mjcf]"), path.parent
+    )
+    kin = mjcf_gripper.characterise(mjcf)
+    spec = from_mapping(GripperSpec, data, where=path.name)
+    return dataclasses.replace(spec, mjcf=mjcf, **measured_fields(kin))
+
+
+def measured_fields(kin: mjcf_gripper.Kinematics) -> dict[str, float]:
+    """The GripperSpec fields an MJCF gripper's model sets (geometry, masses, drive)."""
+    return {
+        "stroke_mm": round(kin.stroke_m * 1e3, 3),
+        "finger_width_mm": round(kin.pad_width_m * 1e3, 3),
+        "finger_depth_mm": round(kin.pad_depth_m * 1e3, 3),
+        "pad_height_mm": round(kin.pad_height_m * 1e3, 3),
+        "finger_mass_g": round(kin.finger_mass_kg * 1e3, 3),
+        "body_mass_g": round(kin.mass_kg * 1e3, 3),
+        # where the stroke is stiffest (the kernels use the table along the stroke)
+        "drive_stiffness_n_per_mm": round(float(kin.stiffness_n_per_m.max()) * 1e-3, 6),
+    }
+
+
+# besides the geometry: measured from an MJCF model, never set by its TOML
+MJCF_MEASURED = ("finger_mass_g", "body_mass_g", "drive_stiffness_n_per_mm")

@@ -1,0 +1,168 @@
+"""Results table (one row per pick-point) and run summary.
+
+Columns are stable and named with units. Per-pick metrics come from the shared kernel
+(``mjx_pick.kernels.grasp.finalize``); this module only labels and aggregates them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyarrow as pa
+
+from mjx_pick.core.pickpoints import PickBatch
+from mjx_pick.kernels import grasp as gk
+
+# the results table's columns, in order (dtype, description)
+COLUMNS = {
+    "pick_id": ("int64", "index of the pick-point in its generator's stream"),
+    "x_mm": ("float64", "object x offset under the gripper centre"),
+    "y_mm": ("float64", "object y offset"),
+    "yaw_deg": ("float64", "object yaw relative to the gripper"),
+    "opening_mm": ("float64", "starting distance between the pads"),
+    "coverage": ("float64", "object fraction of the region between the fingertips"),
+    "success": ("bool", "lifted >= 90% of the lift, off the table, upright, at the hold's end"),
+    "score": ("float64", "eq. (2) grasp quality in [0, 1]; NaN when diverged"),
+    "t_grasp": ("float64", "fraction of the grasp window the grip force was held"),
+    "phi_max_deg": ("float64", "largest rotation of the object from its start pose"),
+    "t_grasp_nc": ("float64", "fraction of the grasp window the object was off the table"),
+    "failure": (
+        "string",
+        "the outcome: success, or why it failed: no_contact, force_not_reached, "
+        "slipped_in_lift, dropped_in_hold, rotated, diverged",
+    ),
+    "diverged": ("bool", "the simulation blew up (NaN/Inf, MuJoCo reset, absurd speed)"),
+    "max_force_left_n": ("float64", "largest left pad force"),
+    "max_force_right_n": ("float64", "largest right pad force"),
+    "lift_height_mm": ("float64", "object lift at the end of the hold"),
+    "yaw_max_deg": ("float64", "largest yaw change (about the vertical)"),
+    "tilt_max_deg": ("float64", "largest tilt of the object's vertical axis"),
+    "slip_mm": ("float64", "largest lag of the object behind the gripper while grasped"),
+    "t_reached_s": ("float64", "time F_d was reached (-1: never)"),
+}
+
+
+def results_table(picks: PickBatch, out: dict, extra: dict | None = None) -> pa.Table:
+    """One row per pick-point: the pick's pose and every metric, named with units.
+
+    extra: further (N,) columns (e.g. swept parameters), appended after COLUMNS.
+    """
+    cols = dict(picks.columns())
+    for name in COLUMNS:
+        if name in cols:
+            continue
+        if name == "failure":
+            cols[name] = np.asarray(gk.FAILURES, dtype=object)[np.asarray(out["failure"])]
+        else:
+            cols[name] = np.asarray(out[name])
+    arrays = {name: pa.array(cols[name], type=_type(COLUMNS[name][0])) for name in COLUMNS}
+    for name, values in (extra or {}).items():
+        arrays[name] = pa.array(np.asarray(values))
+    return pa.table(arrays)
+
+
+def _type(name: str) -> pa.DataType:
+    return {
+        "int64": pa.int64(),
+        "float64": pa.float64(),
+        "bool": pa.bool_(),
+        "string": pa.string(),
+    }[name]
+
+
+def summarize(table: pa.Table) -> dict:
+    """Counts, success rate with its Wilson 95 % interval, score quantiles and outcome
+    counts ("failures": per label of ``kernels.grasp.FAILURES``, "success" included)."""
+    n = table.num_rows
+    success = np.asarray(table["success"])
+    diverged = np.asarray(table["diverged"])
+    score = np.asarray(table["score"], float)
+    failures = np.asarray(table["failure"].to_pylist(), dtype=object)
+    valid = score[~np.isnan(score)]
+    q = (
+        {
+            f"p{int(p * 100):02d}": float(np.quantile(valid, p))
+            for p in (0.05, 0.25, 0.5, 0.75, 0.95)
+        }
+        if len(valid)
+        else {}
+    )
+    return {
+        "n": int(n),
+        "successes": int(success.sum()),
+        "success_rate": float(success.mean()) if n else float("nan"),
+        "success_ci": list(wilson_interval(int(success.sum()), int(n))),
+        "diverged": int(diverged.sum()),
+        "failures": {name: int(np.sum(failures == name)) for name in gk.FAILURES},
+        "score_mean": float(valid.mean()) if len(valid) else float("nan"),
+        "score_quantiles": q,
+    }
+
+
+def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """95% Wilson score interval of a binomial proportion k/n."""
+    if n == 0:
+        return (0.0, 1.0)
+    p = k / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return (float(max(0.0, centre - half)), float(min(1.0, centre + half)))
+
+
+def rate_text(successes: int, n: int) -> str:
+    """A success rate as people read it: '0.812 (95 % CI 0.726-0.876; 81/100)', the
+    interval Wilson's."""
+    if not n:
+        return "- (no pick-points)"
+    lo, hi = wilson_interval(int(successes), int(n))
+    return f"{successes / n:.3f} (95 % CI {lo:.3f}-{hi:.3f}; {successes}/{n})"
+
+
+def mean_interval(values, z: float = 1.959964) -> tuple[float, float, float]:
+    """Mean of the finite values and its 95% normal-approximation interval."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if len(v) == 0:
+        return (float("nan"), float("nan"), float("nan"))
+    m = float(v.mean())
+    half = z * float(v.std(ddof=1)) / math.sqrt(len(v)) if len(v) > 1 else math.inf
+    return (m, m - half, m + half)
+
+
+def mcnemar_p(a, b) -> float:
+    """Exact McNemar test of paired binary outcomes a, b (N,): two-sided p-value that
+    both have the same success probability (binomial test on the discordant pairs)."""
+    from scipy.stats import binomtest
+
+    a, b = np.asarray(a, bool), np.asarray(b, bool)
+    only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
+    if only_a + only_b == 0:
+        return 1.0
+    return float(binomtest(only_a, only_a + only_b, 0.5).pvalue)
+
+
+def rate_summary(success, score) -> dict:
+    """Success rate with its Wilson interval and mean score with its interval."""
+    success = np.asarray(success, bool)
+    k, n = int(success.sum()), len(success)
+    lo, hi = wilson_interval(k, n)
+    m, mlo, mhi = mean_interval(score)
+    return {
+        "n": n,
+        "successes": k,
+        "success_rate": k / n if n else float("nan"),
+        "success_ci": [lo, hi],
+        "score_mean": m,
+        "score_ci": [mlo, mhi],
+    }
+
+
+def best_successes(success, score, k: int) -> np.ndarray:
+    """Indices of the k best-scoring successful pick-points, best first (ties: earlier
+    first); diverged ones (score NaN) are never successes."""
+    success, score = np.asarray(success, bool), np.asarray(score, float)
+    key = np.where(success & np.isfinite(score), score, -np.inf)
+    order = np.argsort(-key, kind="stable")[:k]
+    return order[np.isfinite(key[order])]

@@ -1,0 +1,789 @@
+"""Object import: a top-down image plus thickness, or a mesh, to an :class:`ObjectModel`.
+
+Object frame (used everywhere downstream): z up, the table is z = 0, the object rests on
+it, and the origin's x, y is the object's centre of mass. A pick-point (x, y, yaw) is the
+pose of this frame relative to the gripper centre.
+
+Image objects are prisms of constant thickness (the paper's assumption). Their collision
+geometry is an *exact* convex partition of the silhouette polygon (triangulation merged
+by Hertel-Mehlhorn), extruded: a hook keeps its gap, and every piece stays under MJX's
+vertex budget for convex-convex collisions. Mesh objects (variable depth, the paper's
+future work) are split by CoACD, whose collision-aware cuts keep concave features.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+import shapely
+import shapely.affinity
+import trimesh
+from shapely.geometry import MultiPolygon, Polygon
+from shapely.geometry.polygon import orient
+
+from mjx_pick.core.config import ConfigError, check_range
+
+# MJX wants convex meshes of fewer than ~32 vertices for its branchless convex-convex
+# test ("sharp bits" of the MJX docs); a prism of 12 polygon corners has 24.
+MAX_PIECE_CORNERS = 12
+MAX_HULL_VERTICES = 32
+# a disconnected blob is dropped with a warning only when it is this small beside the
+# largest; otherwise the image holds several objects and we refuse to guess
+DOMINANCE_RATIO = 0.05
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ObjectModel:
+    """A rigid object ready for scene building and for the geometric checks.
+
+    Attributes:
+      name: identifier used in file names and reports.
+      polygon: top-down silhouette, mm, object frame (may have holes).
+      height_mm: thickness of a prism; the largest height of a mesh.
+      mass_kg: mass.
+      com_m: (3,) centre of mass in the object frame, m (x = y = 0 by construction).
+      inertia_kg_m2: (3, 3) inertia about the centre of mass, object-frame axes.
+      mesh: watertight visual/mass mesh in the object frame, m.
+      pieces: convex collision pieces, each (V, 3) vertices in the object frame, m.
+      pick_height_mm: fingertip height above the table set by the user, or None for
+        the grasp-height rule of the procedure (``mjx_pick.core.procedure.fingertip_height_mm``).
+      material: the object's material name (recorded with results).
+      source: where it came from (file path and import settings).
+    """
+
+    name: str
+    polygon: Polygon
+    height_mm: float
+    mass_kg: float
+    com_m: np.ndarray
+    inertia_kg_m2: np.ndarray
+    mesh: trimesh.Trimesh
+    pieces: tuple[np.ndarray, ...]
+    pick_height_mm: float | None
+    material: str = "pla"
+    source: str = ""
+    # prisms only: the outline the pieces were cut from (mm), and the thickness (m)
+    outline: Polygon | None = None
+
+    def pad_pieces(self, finger_depth_mm: float, finger_width_mm: float) -> tuple[np.ndarray, ...]:
+        """Collision pieces for the pads of a finger of this footprint (depth x width).
+
+        A hole no finger can enter never touches a pad, so for a prism it is filled
+        before partitioning: every hole vertex is reflex and costs a piece, and every
+        piece costs MJX a contact pair per pad. Mass properties and the table contact
+        (the convex hull) are unaffected. A hole is kept when its area could hold the
+        footprint and it is wider than the finger is deep (conservative: a hole kept
+        in doubt only costs speed).
+        """
+        if self.outline is None or not self.outline.interiors:
+            return self.pieces
+        kept = [
+            h
+            for h in self.outline.interiors
+            if _finger_may_enter(Polygon(h), finger_depth_mm, finger_width_mm)
+        ]
+        if len(kept) == len(self.outline.interiors):
+            return self.pieces
+        filled = Polygon(self.outline.exterior, kept)
+        height = float(self.pieces[0][:, 2].max())
+        return tuple(_prism(p, height) for p in convex_partition(filled, MAX_PIECE_CORNERS))
+
+    def band_outline(self, z_lo_mm: float, z_hi_mm: float) -> Polygon:
+        """Top-down outline of the part of the object between two heights, mm.
+
+        What fingers whose pads span z_lo..z_hi can touch or hit: a prism's silhouette
+        wherever the band meets it; for a mesh, the projection of its slice (an L-part
+        standing on its edge has a narrower outline in a band than its whole shadow).
+        Empty when the band misses the object.
+        """
+        key = (round(float(z_lo_mm), 6), round(float(z_hi_mm), 6))
+        cache = self.__dict__.setdefault("_band_cache", {})
+        if key not in cache:
+            z_lo, z_hi = max(key[0], 0.0), min(key[1], self.height_mm)
+            if z_hi <= z_lo:
+                cache[key] = Polygon()
+            elif self.outline is not None or (z_lo <= 0.0 and z_hi >= self.height_mm):
+                cache[key] = self.polygon  # a prism, or the whole height
+            else:
+                cache[key] = _mesh_outline(self.mesh, z_lo * 1e-3, z_hi * 1e-3)
+        return cache[key]
+
+    def wall_height_mm(self, z_lo_mm: float, z_hi_mm: float, slices: int = 24) -> float:
+        """Height of the object's side wall within a band, mm: how tall a rigid pad's
+        contact patch on it can be.
+
+        A prism's wall is vertical over its whole thickness: the band's overlap with it.
+        A curved side (a lying cylinder) touches a flat pad only near its widest
+        cross-section: the band is sliced, and the slices whose cross-section is within
+        5 % of the widest one (by area; for a cylinder of radius R a strip of 0.62 R,
+        close to the contact of a ~1 mm deep rubber pad) count as wall.
+        """
+        z_lo, z_hi = max(z_lo_mm, 0.0), min(z_hi_mm, self.height_mm)
+        if z_hi <= z_lo:
+            return 0.0
+        if self.outline is not None:
+            return z_hi - z_lo
+        zs = np.linspace(z_lo, z_hi, slices + 2)[1:-1]
+        areas = np.array([_section_area_mm2(self.mesh, z * 1e-3) for z in zs])
+        if areas.max() <= 0:
+            return 0.0
+        return float((z_hi - z_lo) * np.mean(areas >= 0.95 * areas.max()))
+
+    @property
+    def area_mm2(self) -> float:
+        return float(self.polygon.area)
+
+    @property
+    def length_mm(self) -> float:
+        """Longest side of the silhouette's axis-aligned bounding box."""
+        x0, y0, x1, y1 = self.polygon.bounds
+        return float(max(x1 - x0, y1 - y0))
+
+    def summary(self) -> dict:
+        """Plain-values description for config.json and reports."""
+        return {
+            "name": self.name,
+            "area_mm2": round(self.area_mm2, 3),
+            "height_mm": self.height_mm,
+            "mass_g": self.mass_kg * 1e3,
+            "pick_height_mm": self.pick_height_mm,
+            "bounds_mm": [round(b, 3) for b in self.polygon.bounds],
+            "n_holes": len(self.polygon.interiors),
+            "n_collision_pieces": len(self.pieces),
+            "material": self.material,
+            "source": self.source,
+            # the silhouette, so that reports can draw it from config.json alone
+            "outline_wkt": shapely.to_wkt(self.polygon, rounding_precision=4),
+        }
+
+
+# --------------------------------------------------------------------------- images
+
+
+def segment_image(path: str | os.PathLike) -> np.ndarray:
+    """Foreground mask of the one object in a top-down image.
+
+    Handles dark-on-light, light-on-dark (the background is the class that owns the
+    image border) and images with an alpha channel.
+
+    Returns:
+      (H, W) bool mask of the object (holes are False).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"image {str(path)!r} does not exist")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None or img.size == 0:
+        raise ConfigError(
+            f"image {str(path)!r} cannot be read: use a PNG or JPG "
+            "(8- or 16-bit; gray, RGB or RGBA)"
+        )
+    if img.dtype != np.uint8:
+        img = cv2.convertScaleAbs(img, alpha=255.0 / max(float(img.max()), 1.0))
+    fg = None
+    if img.ndim == 3 and img.shape[2] == 4 and img[..., 3].min() < 128 <= img[..., 3].max():
+        fg = img[..., 3] >= 128  # alpha carries the silhouette
+    if fg is None:
+        gray = img if img.ndim == 2 else cv2.cvtColor(img[..., :3], cv2.COLOR_BGR2GRAY)
+        if float(gray.max()) - float(gray.min()) < 16:
+            raise ConfigError(f"image {str(path)!r}: no object found (the image has no contrast)")
+        _, binary = cv2.threshold(gray, 0, 1, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+        border = np.concatenate([binary[0], binary[-1], binary[:, 0], binary[:, -1]])
+        background = 1 if border.mean() >= 0.5 else 0
+        fg = binary != background
+    # 3x3 open removes isolated noise pixels; close fills pinholes in the object
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
+    fg8 = cv2.morphologyEx(fg.astype(np.uint8), cv2.MORPH_OPEN, kernel)
+    fg8 = cv2.morphologyEx(fg8, cv2.MORPH_CLOSE, kernel)
+    return _single_component(fg8, path)
+
+
+def _single_component(fg8: np.ndarray, path: Path) -> np.ndarray:
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(fg8, connectivity=8)
+    if count <= 1:
+        raise ConfigError(f"image {str(path)!r}: no object found after segmentation")
+    areas = stats[1:, cv2.CC_STAT_AREA]
+    order = np.argsort(areas)[::-1]
+    largest = int(order[0]) + 1
+    if len(order) > 1:
+        second = float(areas[order[1]])
+        if second > DOMINANCE_RATIO * float(areas[order[0]]):
+            raise ConfigError(
+                f"image {str(path)!r}: {len(order)} disconnected objects found (largest areas "
+                f"{int(areas[order[0]])} and {int(second)} px); crop the image to one object"
+            )
+        warnings.warn(
+            f"image {path.name}: kept the largest object, dropped {len(order) - 1} small "
+            f"blob(s) of at most {int(second)} px",
+            stacklevel=3,
+        )
+    x, y, w, h = stats[largest, :4]
+    hgt, wid = fg8.shape
+    if x == 0 or y == 0 or x + w >= wid or y + h >= hgt:
+        raise ConfigError(
+            f"image {str(path)!r}: the object touches the image border (bbox x={x}..{x + w}, "
+            f"y={y}..{y + h} in a {wid}x{hgt} image); photograph it with a margin"
+        )
+    return labels == largest
+
+
+def mask_to_polygon(mask: np.ndarray, px_per_mm: float, simplify_mm: float) -> Polygon:
+    """Outer contour and holes of a mask as a polygon in mm (y up), simplified.
+
+    Contours run through boundary pixel *centres*; growing the polygon by half a pixel
+    puts its edges on the pixel edges, so areas come out unbiased.
+    """
+    contours, hierarchy = cv2.findContours(
+        mask.astype(np.uint8), cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE
+    )
+    hierarchy = hierarchy[0]
+    outer = max(
+        (i for i in range(len(contours)) if hierarchy[i][3] == -1),
+        key=lambda i: cv2.contourArea(contours[i]),
+    )
+    holes = [contours[i][:, 0, :] for i in range(len(contours)) if hierarchy[i][3] == outer]
+    shell = contours[outer][:, 0, :].astype(float)
+
+    def ring(pts: np.ndarray) -> Polygon:
+        return Polygon(pts) if len(pts) >= 3 else Polygon()
+
+    poly_px = shapely.make_valid(ring(shell))
+    for hole in holes:
+        # a hole contour traces the object pixels around it; shrink by half a pixel
+        hole_poly = shapely.make_valid(ring(hole.astype(float)))
+        if hole_poly.area > 0:
+            poly_px = poly_px.difference(hole_poly)
+    poly_px = poly_px.buffer(0.5, join_style="mitre", mitre_limit=2.0)
+    poly = shapely.affinity.scale(poly_px, 1.0 / px_per_mm, -1.0 / px_per_mm, origin=(0, 0))
+    poly = poly.simplify(simplify_mm, preserve_topology=True)
+    return _largest_polygon(shapely.make_valid(poly))
+
+
+def _largest_polygon(geom) -> Polygon:
+    if isinstance(geom, Polygon):
+        return orient(geom)
+    polys = [g for g in getattr(geom, "geoms", []) if isinstance(g, Polygon | MultiPolygon)]
+    flat = []
+    for g in polys:
+        flat.extend(g.geoms if isinstance(g, MultiPolygon) else [g])
+    if not flat:
+        raise ConfigError("the silhouette has no area after simplification")
+    return orient(max(flat, key=lambda p: p.area))
+
+
+def object_from_image(
+    path: str | os.PathLike,
+    *,
+    px_per_mm: float | None,
+    thickness_mm: float | None,
+    mass_g: float | None = None,
+    density_kg_m3: float | None = None,
+    simplify_mm: float = 0.3,
+    pick_height_mm: float | None = None,
+    material: str = "pla",
+    name: str | None = None,
+) -> ObjectModel:
+    """A prism of the silhouette in a top-down image.
+
+    Args:
+      path: PNG/JPG, dark-on-light, light-on-dark or with alpha.
+      px_per_mm: image scale (required).
+      thickness_mm: prism thickness (required).
+      mass_g: mass; give this or density_kg_m3.
+      density_kg_m3: density, used when mass_g is not given.
+      simplify_mm: polygon simplification tolerance.
+      pick_height_mm: fingertip height above the table; default: the grasp-height
+        rule of the procedure (``GraspConfig.grasp_height``).
+      material: material name recorded with the results.
+      name: defaults to the file stem.
+    """
+    if not Path(path).is_file():
+        raise ConfigError(f"image {str(path)!r} does not exist")
+    if px_per_mm is None:
+        raise ConfigError("px_per_mm is required for an image object (pixels per millimetre)")
+    if thickness_mm is None:
+        raise ConfigError("thickness_mm is required for an image object")
+    check_range("object", "px_per_mm", px_per_mm, 0, lo_open=True)
+    check_range("object", "thickness_mm", thickness_mm, 0, lo_open=True)
+    check_range("object", "simplify_mm", simplify_mm, 0, 5)
+    mask = segment_image(path)
+    polygon = mask_to_polygon(mask, px_per_mm, simplify_mm)
+    label = name or Path(path).stem
+    source = f"{path} (px_per_mm={px_per_mm:g}, simplify_mm={simplify_mm:g})"
+    return object_from_polygon(
+        polygon,
+        thickness_mm=thickness_mm,
+        mass_g=mass_g,
+        density_kg_m3=density_kg_m3,
+        pick_height_mm=pick_height_mm,
+        material=material,
+        name=label,
+        source=source,
+    )
+
+
+def object_from_polygon(
+    polygon: Polygon,
+    *,
+    thickness_mm: float,
+    mass_g: float | None = None,
+    density_kg_m3: float | None = None,
+    pick_height_mm: float | None = None,
+    material: str = "pla",
+    name: str = "object",
+    source: str = "polygon",
+    collision_simplify_mm: float = 0.5,
+) -> ObjectModel:
+    """A prism from a silhouette polygon in mm (any origin; recentred on its centroid).
+
+    collision_simplify_mm is the outline tolerance of the collision pieces (the
+    silhouette for the geometric checks keeps the polygon as given).
+    """
+    check_range("object", "thickness_mm", thickness_mm, 0, lo_open=True)
+    polygon = orient(shapely.make_valid(polygon)) if not polygon.is_valid else orient(polygon)
+    if polygon.is_empty or polygon.area <= 0:
+        raise ConfigError(f"object {name!r}: the silhouette has no area")
+    c = polygon.centroid
+    polygon = shapely.affinity.translate(polygon, -c.x, -c.y)
+    mesh = trimesh.creation.extrude_polygon(
+        shapely.affinity.scale(polygon, 1e-3, 1e-3, origin=(0, 0)), thickness_mm * 1e-3
+    )
+    if not mesh.is_watertight:
+        raise ConfigError(f"object {name!r}: extrusion is not watertight (self-touching outline?)")
+    mass_kg = _mass_kg(name, mesh.volume, mass_g, density_kg_m3)
+    # collision pieces come from a coarser outline: every hole vertex is reflex and
+    # costs a piece, and every piece costs MJX three contact pairs
+    coarse = polygon.simplify(max(collision_simplify_mm, 0.0), preserve_topology=True)
+    pieces = tuple(
+        _prism(piece, thickness_mm * 1e-3) for piece in convex_partition(coarse, MAX_PIECE_CORNERS)
+    )
+    obj = _finish(
+        name, polygon, thickness_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
+    )
+    return dataclasses.replace(obj, outline=coarse)
+
+
+def _finger_may_enter(hole: Polygon, depth_mm: float, width_mm: float) -> bool:
+    if hole.area < depth_mm * width_mm:
+        return False
+    radius = shapely.maximum_inscribed_circle(hole, tolerance=0.05).length
+    return 2.0 * radius >= depth_mm
+
+
+def _mass_kg(name: str, volume_m3: float, mass_g: float | None, density: float | None) -> float:
+    if mass_g is None and density is None:
+        raise ConfigError(f"object {name!r}: give mass_g or density_kg_m3")
+    if mass_g is not None:
+        check_range("object", "mass_g", mass_g, 0, lo_open=True)
+        return mass_g * 1e-3
+    check_range("object", "density_kg_m3", density, 0, lo_open=True)
+    return density * volume_m3
+
+
+def _finish(name, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source):
+    mesh = mesh.copy()
+    mesh.density = mass_kg / mesh.volume
+    com = np.asarray(mesh.center_mass, dtype=float)
+    inertia = np.asarray(mesh.moment_inertia, dtype=float)  # about the centre of mass
+    if pick_height_mm is not None:
+        check_range("object", "pick_height_mm", pick_height_mm, 0, height_mm, lo_open=True)
+        pick_height_mm = float(pick_height_mm)
+    return ObjectModel(
+        name=name,
+        polygon=polygon,
+        height_mm=float(height_mm),
+        mass_kg=float(mass_kg),
+        com_m=com,
+        inertia_kg_m2=inertia,
+        mesh=mesh,
+        pieces=pieces,
+        pick_height_mm=pick_height_mm,
+        material=material,
+        source=source,
+    )
+
+
+def _prism(corners_mm: np.ndarray, height_m: float) -> np.ndarray:
+    xy = np.asarray(corners_mm, dtype=float) * 1e-3
+    bottom = np.column_stack([xy, np.zeros(len(xy))])
+    top = np.column_stack([xy, np.full(len(xy), height_m)])
+    return np.vstack([bottom, top])
+
+
+# ----------------------------------------------------------- exact convex partition
+
+
+def convex_partition(polygon: Polygon, max_corners: int = MAX_PIECE_CORNERS) -> list[np.ndarray]:
+    """Split a polygon (holes allowed) into convex pieces of at most max_corners corners.
+
+    Triangulates (earcut) and greedily removes diagonals while the merged piece stays
+    convex and small enough (Hertel-Mehlhorn): at most 4x the optimal piece count, and
+    exact -- the union of the pieces is the polygon.
+
+    Returns:
+      list of (k, 2) counter-clockwise corner arrays, mm.
+    """
+    verts, faces = trimesh.creation.triangulate_polygon(polygon, engine="earcut")
+    verts = np.asarray(verts, dtype=float)
+    pieces: list[list[int]] = []
+    for f in faces:
+        a, b, c = (int(i) for i in f)
+        if _cross(verts[a], verts[b], verts[c]) < 0:
+            b, c = c, b
+        if abs(_cross(verts[a], verts[b], verts[c])) > 1e-12:
+            pieces.append([a, b, c])
+    # merge across the diagonal that yields the largest convex piece first: fewer,
+    # fatter pieces than a first-come order (fewer contact pairs for MJX)
+    while True:
+        edge_owner: dict[tuple[int, int], int] = {}
+        for pi, cyc in enumerate(pieces):
+            for k in range(len(cyc)):
+                edge_owner[(cyc[k], cyc[(k + 1) % len(cyc)])] = pi
+        best = None
+        for (u, v), pi in edge_owner.items():
+            pj = edge_owner.get((v, u))
+            if pj is None or pj <= pi:
+                continue
+            cand = _drop_collinear(_merge(pieces[pi], pieces[pj], u, v), verts)
+            if len(cand) <= max_corners and _is_convex(cand, verts):
+                area = _area(cand, verts)
+                if best is None or area > best[0]:
+                    best = (area, pi, pj, cand)
+        if best is None:
+            break
+        _, pi, pj, cand = best
+        pieces = [p for k, p in enumerate(pieces) if k not in (pi, pj)] + [cand]
+    return [verts[p] for p in pieces]
+
+
+def _area(cyc: list[int], verts: np.ndarray) -> float:
+    pts = verts[cyc]
+    return 0.5 * float(
+        np.dot(pts[:, 0], np.roll(pts[:, 1], -1)) - np.dot(pts[:, 1], np.roll(pts[:, 0], -1))
+    )
+
+
+def _cross(o, a, b) -> float:
+    return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
+
+
+def _merge(p: list[int], q: list[int], u: int, v: int) -> list[int]:
+    """Join cycles p (has edge u->v) and q (has edge v->u) along that edge."""
+    i = p.index(u)
+    p_rot = p[i + 1 :] + p[: i + 1]  # ends with u, starts with v
+    j = q.index(v)
+    q_rot = q[j + 1 :] + q[: j + 1]  # ends with v, starts with u
+    return p_rot[:-1] + [u] + q_rot[1:-1]
+
+
+def _drop_collinear(cyc: list[int], verts: np.ndarray) -> list[int]:
+    out = []
+    n = len(cyc)
+    for k in range(n):
+        a, b, c = verts[cyc[k - 1]], verts[cyc[k]], verts[cyc[(k + 1) % n]]
+        scale = max(np.linalg.norm(b - a) * np.linalg.norm(c - b), 1e-18)
+        if abs(_cross(a, b, c)) / scale > 1e-9:
+            out.append(cyc[k])
+    return out
+
+
+def _is_convex(cyc: list[int], verts: np.ndarray) -> bool:
+    n = len(cyc)
+    if n < 3:
+        return False
+    for k in range(n):
+        if _cross(verts[cyc[k - 1]], verts[cyc[k]], verts[cyc[(k + 1) % n]]) < -1e-12:
+            return False
+    return True
+
+
+# --------------------------------------------------------------------------- meshes
+
+
+def object_from_mesh(
+    path: str | os.PathLike,
+    *,
+    unit: str,
+    mass_g: float | None = None,
+    density_kg_m3: float | None = None,
+    pose: str = "as_given",
+    pick_height_mm: float | None = None,
+    material: str = "pla",
+    name: str | None = None,
+    coacd_threshold: float = 0.04,
+) -> ObjectModel:
+    """An object from a mesh file (STL/OBJ/PLY/GLB), resting on the table.
+
+    Args:
+      path: mesh file readable by trimesh.
+      unit: "m" or "mm", the unit the file's coordinates are in (required).
+      mass_g / density_kg_m3: one of them.
+      pose: "as_given" (keep the file's orientation, z up) or "stable" (the most
+        probable resting pose, trimesh.poses.compute_stable_poses).
+      pick_height_mm: fingertip height; default: the procedure's grasp-height rule.
+      coacd_threshold: CoACD concavity threshold (smaller keeps finer concave detail).
+    """
+    path = Path(path)
+    label = name or path.stem
+    scales = {"m": 1.0, "mm": 1e-3}
+    if unit not in scales:
+        raise ConfigError(f"object.unit = {unit!r} is not allowed: choose 'm' or 'mm'")
+    if pose not in ("as_given", "stable"):
+        raise ConfigError(f"object.pose = {pose!r} is not allowed: choose 'as_given' or 'stable'")
+    if not path.is_file():
+        raise ConfigError(f"mesh {str(path)!r} does not exist")
+    try:
+        mesh = trimesh.load(str(path), force="mesh", process=True)
+    except Exception as err:  # noqa: BLE001 - trimesh raises many types for bad files
+        raise ConfigError(f"mesh {str(path)!r} cannot be read: {err}") from err
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ConfigError(f"mesh {str(path)!r} holds no triangles")
+    mesh.apply_scale(scales[unit])
+    if not mesh.is_watertight:
+        mesh.fill_holes()
+    if not mesh.is_watertight:
+        raise ConfigError(
+            f"mesh {str(path)!r} is not watertight; mass properties need a closed surface "
+            "(repair it, e.g. with MeshLab's 'close holes')"
+        )
+    if mesh.volume < 0:
+        mesh.invert()
+    if pose == "stable":
+        transforms, _ = trimesh.poses.compute_stable_poses(mesh, n_samples=1, sigma=0.0)
+        mesh.apply_transform(transforms[0])
+    com = mesh.center_mass
+    mesh.apply_translation([-com[0], -com[1], -mesh.bounds[0, 2]])
+    height_mm = float(mesh.bounds[1, 2] * 1e3)
+    extent_mm = float(np.max(mesh.extents) * 1e3)
+    if not 1.0 <= extent_mm <= 1000.0:
+        raise ConfigError(
+            f"mesh {str(path)!r} is {extent_mm:.3g} mm across with unit={unit!r}; "
+            "check the unit (allowed size 1 mm to 1 m)"
+        )
+    mass_kg = _mass_kg(label, mesh.volume, mass_g, density_kg_m3)
+    polygon = _mesh_outline(mesh, 0.0, float(mesh.bounds[1, 2]))
+    pieces = _coacd_pieces(mesh, coacd_threshold)
+    source = f"{path} (unit={unit}, pose={pose})"
+    return _finish(
+        label, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
+    )
+
+
+def _mesh_outline(mesh: trimesh.Trimesh, z_lo_m: float, z_hi_m: float) -> Polygon:
+    """Top-down outline (mm) of the part of a watertight mesh between two heights (m).
+
+    The shadow of a solid is the union of its triangles' shadows. That union is taken
+    directly, because trimesh's projected outline came apart into dozens of slivers on
+    real scanned meshes (a YCB marker kept a third of its length). The band's part is
+    the mesh cut by two capped planes.
+    """
+    part = mesh
+    lo, hi = mesh.bounds[:, 2]
+    if z_lo_m > lo + 1e-9:
+        part = part.slice_plane([0, 0, z_lo_m], [0, 0, 1], cap=True)
+    if z_hi_m < hi - 1e-9 and part is not None and len(part.faces):
+        part = part.slice_plane([0, 0, z_hi_m], [0, 0, -1], cap=True)
+    if part is None or not len(part.faces):
+        return Polygon()
+    tri = np.asarray(part.triangles)[:, :, :2] * 1e3
+    # drop triangles seen edge-on (vertical walls): their shadow has no area
+    u, v = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    area = 0.5 * np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    shadows = shapely.polygons(tri[area > 1e-9])
+    # a hair of growth closes the cracks between neighbouring triangles' shadows
+    union = shapely.union_all(shapely.buffer(shadows, 1e-4)).buffer(-1e-4)
+    return _largest_polygon(shapely.make_valid(union))
+
+
+def _section_area_mm2(mesh: trimesh.Trimesh, z_m: float) -> float:
+    """Area of a mesh's horizontal cross-section at height z_m, mm^2 (0 if none)."""
+    section = mesh.section(plane_origin=[0, 0, z_m], plane_normal=[0, 0, 1])
+    if section is None:
+        return 0.0
+    planar, _ = section.to_2D()
+    return float(sum(p.area for p in planar.polygons_full)) * 1e6
+
+
+def _coacd_pieces(mesh: trimesh.Trimesh, threshold: float) -> tuple[np.ndarray, ...]:
+    import coacd
+
+    coacd.set_log_level("error")
+    parts = coacd.run_coacd(
+        coacd.Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)),
+        threshold=threshold,
+        max_convex_hull=32,
+        preprocess_mode="auto",
+        seed=0,
+    )
+    pieces = []
+    for verts, faces in parts:
+        hull = trimesh.Trimesh(verts, faces).convex_hull
+        v = np.asarray(hull.vertices, dtype=float)
+        if len(v) > MAX_HULL_VERTICES:
+            v = _reduce_hull(v, MAX_HULL_VERTICES)
+        pieces.append(v)
+    return tuple(pieces)
+
+
+def _reduce_hull(v: np.ndarray, k: int) -> np.ndarray:
+    """Keep k hull vertices spread by farthest-point sampling (a slightly smaller hull)."""
+    chosen = [int(np.argmax(np.linalg.norm(v - v.mean(0), axis=1)))]
+    dist = np.linalg.norm(v - v[chosen[0]], axis=1)
+    while len(chosen) < k:
+        nxt = int(np.argmax(dist))
+        chosen.append(nxt)
+        dist = np.minimum(dist, np.linalg.norm(v - v[nxt], axis=1))
+    return v[chosen]
+
+
+def rasterize(
+    polygon: Polygon,
+    mm_per_px: float,
+    yaw_rad: float = 0.0,
+    pad_px: int = 2,
+    radius_mm: float | None = None,
+):
+    """Rasterize a (rotated) polygon on a grid centred on the object origin.
+
+    radius_mm: the grid's half size before padding (default: the polygon's largest
+    distance from the origin). Give it to get one grid size for every yaw: the rotated
+    corners' distances differ in the last bits, and ceil() can turn that into a pixel.
+
+    Pixel (i, j) covers x in [x0 + j*s, x0 + (j+1)*s), y in [y0 + i*s, ...) (row = +y);
+    a pixel is object when its centre is inside.
+
+    Returns:
+      mask (H, W) uint8 and (x0, y0) of the grid's lower-left corner, mm.
+    """
+    rot = shapely.affinity.rotate(polygon, yaw_rad, origin=(0, 0), use_radians=True)
+    if radius_mm is None:
+        radius_mm = max(math.hypot(x, y) for x, y in rot.exterior.coords)
+    half = int(math.ceil(radius_mm / mm_per_px)) + pad_px
+    x0 = y0 = -half * mm_per_px
+    centres = x0 + (np.arange(2 * half) + 0.5) * mm_per_px
+    xs, ys = np.meshgrid(centres, centres)
+    shapely.prepare(rot)
+    mask = shapely.contains_xy(rot, xs.ravel(), ys.ravel()).reshape(xs.shape).astype(np.uint8)
+    return mask, (x0, y0)
+
+
+# --------------------------------------------------------------------------- assets
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".glb", ".gltf", ".off")
+
+
+def asset_manifest() -> dict:
+    """The shipped objects' manifest (assets/objects/manifest.toml)."""
+    import tomllib
+    from importlib import resources
+
+    text = (resources.files("mjx_pick.assets") / "objects" / "manifest.toml").read_text()
+    return tomllib.loads(text)
+
+
+def asset_names() -> list[str]:
+    """Names of the shipped test objects."""
+    return sorted(asset_manifest())
+
+
+def load_asset(name: str, **overrides) -> ObjectModel:
+    """A shipped object by name, with its manifest's scale, thickness, mass and material."""
+    from importlib import resources
+
+    manifest = asset_manifest()
+    if name not in manifest:
+        raise ConfigError(
+            f"unknown object asset {name!r}: choose one of {', '.join(sorted(manifest))}"
+        )
+    entry = manifest[name]
+    kwargs = {
+        "px_per_mm": entry["px_per_mm"],
+        "thickness_mm": entry["thickness_mm"],
+        "mass_g": entry["mass_g"],
+        "material": entry["material"],
+        "name": name,
+    }
+    kwargs.update({k: v for k, v in overrides.items() if v is not None})
+    with resources.as_file(resources.files("mjx_pick.assets") / "objects" / entry["image"]) as p:
+        return object_from_image(p, **kwargs)
+
+
+def load_object(
+    source: str | os.PathLike,
+    *,
+    px_per_mm: float | None = None,
+    thickness_mm: float | None = None,
+    mass_g: float | None = None,
+    density_kg_m3: float | None = None,
+    unit: str | None = None,
+    pose: str = "as_given",
+    pick_height_mm: float | None = None,
+    simplify_mm: float | None = None,
+    material: str | None = None,
+) -> ObjectModel:
+    """An object from a shipped asset name, an image file or a mesh file (CLI entry)."""
+    text = str(source)
+    suffix = Path(text).suffix.lower()
+    common = {"pick_height_mm": pick_height_mm}
+    if material is not None:
+        common["material"] = material
+    if suffix in IMAGE_SUFFIXES:
+        extra = {} if simplify_mm is None else {"simplify_mm": simplify_mm}
+        return object_from_image(
+            text,
+            px_per_mm=px_per_mm,
+            thickness_mm=thickness_mm,
+            mass_g=mass_g,
+            density_kg_m3=density_kg_m3,
+            **extra,
+            **common,
+        )
+    if suffix in MESH_SUFFIXES:
+        if unit is None:
+            raise ConfigError(f"mesh {text!r}: give its unit ('m' or 'mm', --unit)")
+        return object_from_mesh(
+            text, unit=unit, mass_g=mass_g, density_kg_m3=density_kg_m3, pose=pose, **common
+        )
+    if suffix == "" and text in asset_names():
+        return load_asset(
+            text,
+            px_per_mm=px_per_mm,
+            thickness_mm=thickness_mm,
+            mass_g=mass_g,
+            simplify_mm=simplify_mm,
+            **common,
+        )
+    raise ConfigError(
+        f"object {text!r} is neither a shipped asset ({', '.join(asset_names())}), an image "
+        f"({', '.join(IMAGE_SUFFIXES)}) nor a mesh ({', '.join(MESH_SUFFIXES)})"
+    )
+
+
+def check_same_object(theirs: dict, obj: ObjectModel, where: str) -> None:
+    """Refuse an object that is not the one ``theirs`` (an ``ObjectModel.summary``
+    recorded with a run or a plan) was made for: name, mass, height and silhouette must
+    match (numbers to a relative 1e-6); fields ``theirs`` lacks are not compared.
+
+    where: what holds ``theirs``, for the message (e.g. "--results runs/do")."""
+    mine = obj.summary()
+    differ = []
+    for k in ("name", "mass_g", "height_mm", "outline_wkt"):
+        a, b = theirs.get(k), mine.get(k)
+        if a is None:
+            continue
+        same = math.isclose(a, b, rel_tol=1e-6) if isinstance(a, int | float) else a == b
+        if not same:
+            differ.append(k)
+    if differ:
+        raise ConfigError(
+            f"{where} is of object {theirs.get('name')!r}, not this run's {mine['name']!r} "
+            f"({theirs.get('mass_g', 0):g} g against {mine['mass_g']:g} g): they differ in "
+            f"{', '.join(differ)}; give the object (and --mass-g ...) it was made with"
+        )

@@ -1,0 +1,313 @@
+"""Contact parameters (the paper's Table 1) and solver settings, and their MuJoCo mapping.
+
+The paper's ADAMS model uses an impact contact: force = K * depth**e + B * depth_rate,
+with K = 1e5 N/mm, B = 5.5 N s/mm (finger-object) or 10 N s/mm (object-ground),
+exponents 1.2 / 2.2, full damping at 1 um / 10 um penetration, and static/dynamic
+Coulomb friction with stiction and friction transition velocities (Table 1).
+
+MuJoCo has a different, soft-constraint contact model, so the mapping is partial:
+
+* Friction: MuJoCo has one Coulomb coefficient per contact (pyramidal or elliptic
+  cone). The pads use the paper's static coefficient (0.86, equal to its dynamic one):
+  holding is sticking. The object-table contact uses the *dynamic* coefficient (0.2):
+  the object slides on the table when the first finger pushes it, and MuJoCo's soft
+  contacts creep under any tangential load, so stiction is not representable anyway.
+* Stiffness and damping: a negative ``solref = (-k, -b)`` gives MuJoCo a mass-normalised
+  spring k [1/s^2] and damper b [1/s]. We take k = K / m and b = B / m with m the
+  object's mass (the contact's effective mass: the fingers are held by stiff servos and
+  the table is fixed). MuJoCo integrates this reference spring once per time step, so
+  it is stable only for a contact time constant of at least about two time steps (its
+  own ``refsafe`` rule for positive solref). Table 1's values are 4-5 orders of
+  magnitude stiffer than that at any practical time step (ADAMS used a variable-step
+  stiff integrator and ~1 um penetration), so they are clamped to the stiffest stable
+  contact: critically damped with time constant ``SolverParams.timeconst_s``.
+  Softer values (e.g. from calibration) pass through unclamped. ``mujoco_contact``
+  reports what was clamped.
+* Pad contacts are soft-finger contacts (``condim`` 4): besides Coulomb friction in
+  the pad plane they resist spinning about the contact normal -- the grip axis -- up
+  to a torque of mu_t * N. A single point contact with condim 3 cannot: a part held
+  off its centre of mass turned in the grasp and slid out at any force. A real pad
+  carries that torque with its contact patch: under uniform pressure p = N / A, the
+  friction of each patch element acts at its distance r from the patch centre, so the
+  largest torque is mu * N * mean(r). Hence mu_t = mu_pad * r_mean(patch), with the
+  patch a rectangle: the pad's width (or the object's, if narrower) by the height of
+  the object's side wall within the pads' band (``ObjectModel.wall_height_mm``; a rigid
+  curved side touches a flat rubber pad only near its widest section).
+  ``pad_torsion_mm`` sets mu_t directly. Where the collider spreads a contact over
+  several points (the four corners of a pad on a flat face, the two ends of a line
+  contact), their Coulomb friction also resists spin, at the patch's edges rather than
+  its mean radius: the grasp then holds 1.5-1.9x the torque of a uniform-pressure pad.
+  ``mjx_pick.core.holding`` states the model's capacity from those points (the tests check
+  the simulated threshold against it); benchmarks/RESULTS.md ("Torque") gives the gap.
+* Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
+  the impedance instead), the penetration depth for full damping (solimp's width plays a
+  similar role), the static/dynamic split and the stiction/friction transition
+  velocities (no velocity-dependent friction in MuJoCo).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from mjx_pick.core.config import ConfigError, check_choice, check_fields, check_range, setting
+
+
+@dataclasses.dataclass(frozen=True)
+class ContactParams:
+    """Contact parameters. Defaults: the paper's Table 1 (see the module docstring)."""
+
+    # Coulomb coefficients (MuJoCo: one per contact; sliding, both tangent directions)
+    pad_friction: float = setting(
+        0.86, "-", "pad-object Coulomb friction (Table 1: static = dynamic = 0.86)",
+        lo=0, hi=5, lo_open=True,
+    )  # fmt: skip
+    table_friction: float = setting(
+        0.2, "-", "object-table Coulomb friction (Table 1's dynamic value; static 0.4)",
+        lo=0, hi=5,
+    )  # fmt: skip
+    # ADAMS impact stiffness/damping (Table 1); mapped to negative solref, clamped
+    pad_stiffness_n_per_mm: float = setting(
+        1e5, "N/mm", "pad-object contact stiffness (above the stable limit: clamped)",
+        lo=0, lo_open=True,
+    )  # fmt: skip
+    pad_damping_ns_per_mm: float = setting(
+        5.5, "N s/mm", "pad-object contact damping (above the stable limit: clamped)",
+        lo=0, lo_open=True,
+    )  # fmt: skip
+    table_stiffness_n_per_mm: float = setting(
+        1e5, "N/mm", "object-table contact stiffness (above the stable limit: clamped)",
+        lo=0, lo_open=True,
+    )  # fmt: skip
+    table_damping_ns_per_mm: float = setting(
+        10.0, "N s/mm", "object-table contact damping (above the stable limit: clamped)",
+        lo=0, lo_open=True,
+    )  # fmt: skip
+    # torsional friction of the pad contacts (length: torque limit per newton of
+    # normal force); None: derived from the pad's contact patch (module docstring)
+    pad_torsion_mm: float | None = setting(
+        None, "mm", "pads' torsional friction: torque limit per N of normal force "
+        "(none: pad_friction x the contact patch's mean radius)",
+        lo=0, hi=100,
+    )  # fmt: skip
+    # MuJoCo impedance (dmin, dmax, width[m], midpoint, power). The pads: 0.99 instead
+    # of MuJoCo's default 0.9-0.95: a soft constraint's regularisation lets a held part
+    # creep down through friction at a rate that grows with (1 - d) / d; at 0.99 the
+    # creep over lift and hold dropped 5-10x. The table keeps MuJoCo's default: made
+    # as stiff, a part pushed and spun over it by the first pad changed its label with
+    # the time step in 3.5 % of door-opener picks (0 % so). benchmarks/RESULTS.md, "creep".
+    pad_solimp: tuple[float, float, float, float, float] = (0.99, 0.99, 0.001, 0.5, 2.0)
+    table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
+
+    def __post_init__(self):
+        o = "contact"
+        check_fields(self, o)
+        for name in ("pad_solimp", "table_solimp"):
+            value = getattr(self, name)
+            if len(value) != 5:
+                raise ConfigError(f"contact.{name} = {value!r} must have 5 numbers")
+            dmin, dmax, width, mid, power = value
+            check_range(o, f"{name}[0] (dmin)", dmin, 0, 1, lo_open=True, hi_open=True)
+            check_range(o, f"{name}[1] (dmax)", dmax, dmin, 1, hi_open=True)
+            check_range(o, f"{name}[2] (width)", width, 0, lo_open=True)
+            check_range(o, f"{name}[3] (midpoint)", mid, 0, 1, lo_open=True, hi_open=True)
+            check_range(o, f"{name}[4] (power)", power, 1)
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverParams:
+    """MuJoCo solver settings shared by both backends.
+
+    Defaults were chosen by measurement on this scene (benchmarks/RESULTS.md, "solver
+    choice" and "Pad contact"): elliptic cones with impratio 10 -- the usual cure for
+    creep (MuJoCo issue #3328) -- blew up (NaN accelerations) in most random grasps of
+    the block, where an object pushed and spun by the first pad chatters between pads
+    and table; pyramidal cones were stable. Pyramidal cones are also the ones whose
+    forward-mode derivatives are finite in MJX (calibration) and the faster ones.
+
+    Creep: MuJoCo's soft friction lets a held part slip at a steady speed of about
+    (1 - d) / d * a / (b * impratio) under a tangential load a (per unit mass) -- d the
+    pad impedance (solimp), b the contact's damping. A light part pushed sideways by a
+    tilted contact (a pad's edge on a rounded wall) creeps out of the grasp at 2-4 mm/s
+    though Coulomb's law holds it. impratio 2 halves that creep (YCB banana 71 -> 96 %
+    success on MuJoCo C) but is not the default: the engines then agree less (door
+    opener labels MuJoCo Warp = C 99.6 -> 98.9 %, YCB scissors 98.4 -> 90.6 %, MJX's
+    scores 0.09 apart from C's), C diverged on 4 of 4,096 door-opener picks, and
+    impratio 3 and 5 made a 10 g part at pad friction 0.05 blow up. ``noslip_iterations``
+    (MuJoCo's no-slip post-solver; C and Warp) stops creep on flat faces but made the
+    pads chatter on a line contact (a lying rod): off by default too.
+    """
+
+    timestep_s: float = setting(0.001, "s", "physics time step", lo=1e-5, hi=0.01)
+    cone: str = "pyramidal"
+    impratio: float = setting(
+        1.0, "-", "frictional-to-normal constraint impedance ratio (MuJoCo's impratio)",
+        lo=1, hi=100,
+    )  # fmt: skip
+    iterations: int = setting(10, "iterations", "constraint solver iterations", lo=1, hi=1000)
+    ls_iterations: int = setting(
+        8, "iterations", "line-search iterations per solver iteration", lo=1, hi=1000
+    )
+    # the solver stops once its improvement or gradient falls below this (MuJoCo's
+    # default; MuJoCo Warp keeps iterating every simulation of a call until the last
+    # one is there or the iteration cap is hit)
+    tolerance: float = setting(
+        1e-8, "-", "solver stops below this relative improvement", lo=0, hi=1e-2
+    )
+    # MuJoCo's no-slip post-solver (iterations; 0: off)
+    noslip_iterations: int = setting(
+        0, "iterations", "MuJoCo's no-slip post-solver (0: off; C and Warp only)", lo=0, hi=1000
+    )
+    integrator: str = "implicitfast"
+    # softest-allowed contact time constant: stiffer requests (Table 1) are clamped to
+    # it. Fixed in seconds, so halving the time step refines the integration of the
+    # same contact; never below two time steps (MuJoCo's refsafe rule).
+    contact_timeconst_s: float = setting(
+        0.002, "s", "stiffest contact allowed: its time constant (at least 2 time steps)",
+        lo=0, hi=1, lo_open=True,
+    )  # fmt: skip
+
+    def __post_init__(self):
+        o = "solver"
+        check_fields(self, o)
+        check_choice(o, "cone", self.cone, ("elliptic", "pyramidal"))
+        check_choice(o, "integrator", self.integrator, ("implicitfast", "euler"))
+
+    @property
+    def timeconst_s(self) -> float:
+        """The contact time constant in effect: at least two time steps."""
+        return max(self.contact_timeconst_s, 2 * self.timestep_s)
+
+
+@dataclasses.dataclass(frozen=True)
+class MujocoContact:
+    """What ContactParams become in MuJoCo for one object (see the module docstring)."""
+
+    pad_friction: float
+    pad_torsion_m: float  # torsional friction coefficient of the pad contacts, m
+    table_friction: float
+    pad_solref: tuple[float, float]  # negative form (-k [1/s^2], -b [1/s])
+    table_solref: tuple[float, float]
+    pad_solimp: tuple[float, float, float, float, float]
+    table_solimp: tuple[float, float, float, float, float]
+    clamped: tuple[str, ...]  # which Table-1 values were limited by the time step
+
+    @property
+    def torsion_per_friction_m(self) -> float:
+        """Torsional friction per unit of pad friction, m (the patch's mean radius, or
+        the ratio a user's pad_torsion_mm set): another pad friction scales mu_t by it."""
+        return self.pad_torsion_m / self.pad_friction
+
+
+def per_unit_mass(n_per_mm, mass_kg):
+    """A spring's stiffness (N/mm) or damping (N s/mm) per kg of the body it holds: the
+    magnitude of MuJoCo's negative solref terms (1/s^2, 1/s). Works on arrays (jnp too:
+    calibration differentiates through it)."""
+    return n_per_mm * 1e3 / mass_kg
+
+
+def stiffest_spring(mass_kg: float, timeconst_s: float) -> tuple[float, float]:
+    """(stiffness N/mm, damping N s/mm) of the critically damped contact with that time
+    constant on a body of mass_kg: the stiffest one MuJoCo integrates stably."""
+    return mass_kg / timeconst_s**2 * 1e-3, 2.0 * mass_kg / timeconst_s * 1e-3
+
+
+def spring_solref(
+    stiffness_n_per_mm: float, damping_ns_per_mm: float, mass_kg: float, timeconst_s: float
+) -> tuple[tuple[float, float], tuple[str, ...]]:
+    """Negative solref for a physical spring-damper on a body of mass_kg, clamped.
+
+    Returns:
+      (-k, -b) with k in 1/s^2 and b in 1/s, and the names of the clamped terms.
+    """
+    k, b = solref_terms(stiffness_n_per_mm, damping_ns_per_mm, mass_kg, timeconst_s)
+    k_max, b_max = (per_unit_mass(v, mass_kg) for v in stiffest_spring(mass_kg, timeconst_s))
+    clamped = []
+    if per_unit_mass(stiffness_n_per_mm, mass_kg) > k_max:
+        clamped.append("stiffness")
+    if per_unit_mass(damping_ns_per_mm, mass_kg) > b_max:
+        clamped.append("damping")
+    return (-float(k), -float(b)), tuple(clamped)
+
+
+def solref_terms(stiffness_n_per_mm, damping_ns_per_mm, mass_kg, timeconst_s, xp=np):
+    """(k [1/s^2], b [1/s]), the magnitudes of the negative solref of a spring-damper on
+    a body of mass_kg, each clamped to the stiffest stable contact. The one stiffness
+    and damping -> solref mapping: :func:`spring_solref` and calibration (arrays; xp=jnp
+    where it is differentiated) both use it."""
+    k_max, b_max = (per_unit_mass(v, mass_kg) for v in stiffest_spring(mass_kg, timeconst_s))
+    k = xp.minimum(per_unit_mass(stiffness_n_per_mm, mass_kg), k_max)
+    b = xp.minimum(per_unit_mass(damping_ns_per_mm, mass_kg), b_max)
+    return k, b
+
+
+def pad_torsion_m(pad_friction, pad_torsion_mm, patch_mm: tuple[float, float]):
+    """Torsional friction coefficient of the pad contacts, m: pad_torsion_mm when set,
+    else mu_pad * the patch's mean radius (module docstring). Works on arrays."""
+    if pad_torsion_mm is not None:
+        return pad_torsion_mm * 1e-3
+    return pad_friction * patch_mean_radius_mm(*patch_mm) * 1e-3
+
+
+def patch_mean_radius_mm(width_mm: float, height_mm: float, n: int = 200) -> float:
+    """Mean distance from the centre of a uniformly loaded width x height rectangle, mm.
+
+    (For a square of side s it is 0.383 s; for a line of length L, L / 4.)
+    """
+    u = (np.arange(n) + 0.5) / n - 0.5
+    x, y = np.meshgrid(u * width_mm, u * height_mm)
+    return float(np.mean(np.hypot(x, y)))
+
+
+def mujoco_contact(
+    contact: ContactParams,
+    solver: SolverParams,
+    mass_kg: float,
+    patch_mm: tuple[float, float],
+) -> MujocoContact:
+    """Map ContactParams to MuJoCo pair parameters for an object of mass_kg.
+
+    patch_mm: (width, height) of the pads' contact patch on this object, mm.
+    """
+    tc = solver.timeconst_s
+    pad_ref, pad_c = spring_solref(
+        contact.pad_stiffness_n_per_mm, contact.pad_damping_ns_per_mm, mass_kg, tc
+    )
+    tab_ref, tab_c = spring_solref(
+        contact.table_stiffness_n_per_mm, contact.table_damping_ns_per_mm, mass_kg, tc
+    )
+    mu = contact.pad_friction
+    return MujocoContact(
+        pad_friction=mu,
+        pad_torsion_m=float(pad_torsion_m(mu, contact.pad_torsion_mm, patch_mm)),
+        table_friction=contact.table_friction,
+        pad_solref=pad_ref,
+        table_solref=tab_ref,
+        pad_solimp=tuple(contact.pad_solimp),
+        table_solimp=tuple(contact.table_solimp),
+        clamped=tuple(f"pad_{c}" for c in pad_c) + tuple(f"table_{c}" for c in tab_c),
+    )
+
+
+# tables a calibration writes into contact.toml besides ContactParams' own keys
+CONTACT_META_TABLES = ("fitted_for", "calibrated")
+
+
+def load_contact(path) -> tuple[ContactParams, dict]:
+    """ContactParams from a TOML file, and its metadata tables (CONTACT_META_TABLES: what
+    a calibration fitted them for and its other results; empty for a plain file)."""
+    import tomllib
+    from pathlib import Path
+
+    from mjx_pick.core.config import from_mapping
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"ContactParams file {str(path)!r} does not exist")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
+    meta = {k: data.pop(k) for k in CONTACT_META_TABLES if isinstance(data.get(k), dict)}
+    return from_mapping(ContactParams, data, where=path.name), meta

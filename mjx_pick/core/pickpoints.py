@@ -1,0 +1,453 @@
+"""Pick-point generation (Normal, Grid, Optimization modes) with the paper's checks.
+
+A pick-point is the object's planar pose under the gripper: x, y offset (mm) and yaw
+(deg) of the object frame relative to the gripper centre. Candidates are drawn, checked
+in one vectorised call (``mjx_pick.kernels.feasibility``), and the feasible ones get the
+starting finger opening, so that each simulation starts with the fingers just clear of
+the object (the paper's trick to cut closing time).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import warnings
+from collections.abc import Callable
+
+import numpy as np
+
+from mjx_pick.core.config import ConfigError, check_fields, check_range, setting
+from mjx_pick.core.gripper import GripperSpec
+from mjx_pick.core.objects import ObjectModel, rasterize
+from mjx_pick.core.procedure import GraspConfig, pad_band_mm
+from mjx_pick.kernels import feasibility as fk
+
+REASONS = fk.REASONS
+CANDIDATE_BLOCK = 4096  # candidates are drawn in fixed blocks: same seed, same stream
+
+
+@dataclasses.dataclass(frozen=True)
+class PickConfig:
+    """Pick-point generation settings. Defaults: the paper's (Fig. 10)."""
+
+    safety_zone_mm: float = setting(
+        5.0, "mm", "clearance kept between a descending finger and the object", lo=0, hi=100
+    )
+    min_coverage: float = setting(
+        0.35,
+        "-",
+        "least fraction of the region between the fingertips the object fills",
+        lo=0,
+        hi=1,
+    )
+    # offsets are uniform in +-range; None: half the object's length (the paper's rule)
+    x_range_mm: float | None = setting(
+        None,
+        "mm",
+        "pick-point x offsets are drawn in +-this (none: half the object's length)",
+        lo=0,
+        hi=1000,
+    )
+    y_range_mm: float | None = setting(
+        None,
+        "mm",
+        "pick-point y offsets are drawn in +-this (none: half the object's length)",
+        lo=0,
+        hi=1000,
+    )
+    yaw_min_deg: float = setting(0.0, "deg", "smallest yaw drawn", lo=-360, hi=360)
+    yaw_max_deg: float = setting(
+        360.0, "deg", "largest yaw drawn", lo="yaw_min_deg", hi="yaw_min_deg + 360"
+    )
+    resolution_mm: float = setting(
+        0.5, "mm", "silhouette raster for the feasibility checks", lo=0.05, hi=2
+    )
+    max_candidates: int = setting(
+        1_000_000, "candidates", "Normal mode gives up after drawing this many", lo=1, hi=1e9
+    )
+    # a linkage gripper (MJCF) only: reject poses whose near pad rides over the part
+    # (FeasibilityChecker); off, such poses are simulated (and fail)
+    pad_path_check: bool = True
+
+    def __post_init__(self):
+        check_fields(self, "picks")
+
+
+@dataclasses.dataclass(frozen=True)
+class PickBatch:
+    """Feasible pick-points, one entry per pick (all arrays (N,)).
+
+    pick_id: index of the candidate in its generator's stream (stable across runs).
+    opening_mm: starting distance between the pads.
+    gap_left_mm / gap_right_mm: each pad's start distance from the object.
+    rejected: candidates dropped per reason; n_candidates: how many were checked.
+    """
+
+    pick_id: np.ndarray
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    yaw_deg: np.ndarray
+    opening_mm: np.ndarray
+    coverage: np.ndarray
+    gap_left_mm: np.ndarray
+    gap_right_mm: np.ndarray
+    rejected: dict
+    n_candidates: int
+    mode: str = "normal"
+
+    def __len__(self) -> int:
+        return len(self.pick_id)
+
+    def take(self, index) -> PickBatch:
+        """A sub-batch (index: slice, int array or bool mask)."""
+        arrays = {
+            f.name: getattr(self, f.name)[index]
+            for f in dataclasses.fields(self)
+            if isinstance(getattr(self, f.name), np.ndarray)
+        }
+        return dataclasses.replace(self, **arrays)
+
+    def columns(self) -> dict:
+        """Per-pick columns for a results table."""
+        return {
+            "pick_id": self.pick_id,
+            "x_mm": self.x_mm,
+            "y_mm": self.y_mm,
+            "yaw_deg": self.yaw_deg,
+            "opening_mm": self.opening_mm,
+            "coverage": self.coverage,
+        }
+
+
+def concat(batches: list[PickBatch]) -> PickBatch:
+    """Join batches (rejection counts add up)."""
+    first = batches[0]
+    arrays = {
+        f.name: np.concatenate([getattr(b, f.name) for b in batches])
+        for f in dataclasses.fields(first)
+        if isinstance(getattr(first, f.name), np.ndarray)
+    }
+    rejected = {r: sum(b.rejected.get(r, 0) for b in batches) for r in REASONS[1:]}
+    return dataclasses.replace(
+        first, **arrays, rejected=rejected, n_candidates=sum(b.n_candidates for b in batches)
+    )
+
+
+class FeasibilityChecker:
+    """The paper's three checks for one (object, gripper, settings), batched.
+
+    The checks see the object's outline above the fingertips at the grasp
+    (``ObjectModel.band_outline``; the procedure's grasp-height rule places them): for
+    a prism its silhouette, for a mesh the shadow of its part above that height --
+    what a descending finger can hit and what the pads can meet. A foot below the
+    fingertips (an L-part standing on its edge) is no longer taken for a grip.
+
+    An MJCF linkage's pads descend while they close (``mjx_pick.core.mjcf_gripper``); the
+    scene starts each pick raised by the height compensation for the final grasp gap,
+    so the pads grip at the grasp height. But with the part off-centre the near pad
+    reaches it first, at a wider opening, where it rides higher by the drop between
+    that opening and the grasp gap; if that lifts its tip above the part's top, it
+    passes over the part and lands on it (the door opener: 29 of the 30 such poses
+    failed in simulation, benchmarks/RESULTS.md). A fourth check rejects those poses
+    as "pad_path" (the part's full height is taken as its top: optimistic for a mesh
+    lower under the near pad).
+    """
+
+    def __init__(
+        self,
+        obj: ObjectModel,
+        gripper: GripperSpec,
+        config: PickConfig | None = None,
+        grasp: GraspConfig | None = None,
+    ):
+        config = config or PickConfig()
+        if config.safety_zone_mm >= 0.5 * gripper.stroke_mm:
+            raise ConfigError(
+                f"picks.safety_zone_mm = {config.safety_zone_mm:g} is out of range: allowed "
+                f"< half the stroke of {gripper.name} ({0.5 * gripper.stroke_mm:g} mm)"
+            )
+        self.object, self.gripper, self.config = obj, gripper, config
+        self.band = fk.GripperBand(
+            stroke_mm=float(gripper.stroke_mm),
+            finger_width_mm=float(gripper.finger_width_mm),
+            finger_depth_mm=float(gripper.finger_depth_mm),
+            safety_zone_mm=float(config.safety_zone_mm),
+            min_coverage=float(config.min_coverage),
+        )
+        lo, hi = pad_band_mm(obj, gripper, grasp or GraspConfig())
+        self.silhouette = obj.band_outline(lo, max(hi, obj.height_mm))
+        if self.silhouette.is_empty:
+            raise ConfigError(
+                f"the pads of {gripper.name} span {lo:g}-{hi:g} mm above the table and miss "
+                f"{obj.name!r} ({obj.height_mm:g} mm high): lower pick_height_mm"
+            )
+        self.stack = _stack(obj.name, self.silhouette, config.resolution_mm)
+        self.kinematics = None
+        if gripper.mjcf is not None and config.pad_path_check:
+            from mjx_pick.core import mjcf_gripper
+
+            self.kinematics = mjcf_gripper.characterise(gripper.mjcf)
+            self.room_mm = obj.height_mm - lo  # the part's top above the fingertips
+
+    def __call__(self, x_mm, y_mm, yaw_deg, opening_mm=None) -> dict[str, np.ndarray]:
+        """Check (N,) candidates; returns reason, opening_mm, coverage, gap_*_mm arrays.
+
+        opening_mm: (N,) fixed starting openings (the fingers of a plan made for another
+        pose; an object reaching a finger fails clearance), or None to choose them.
+        """
+        reason, opening, coverage, gap_l, gap_r = fk.check_candidates(
+            self.stack, self.band, x_mm, y_mm, np.deg2rad(np.asarray(yaw_deg, float)), opening_mm
+        )
+        reason = np.asarray(reason)
+        if self.kinematics is not None:
+            rides = self.near_pad_rise_mm(opening, gap_l, gap_r) >= self.room_mm
+            reason = np.where((reason == fk.FEASIBLE) & rides, fk.PAD_PATH, reason)
+        return {
+            "reason": reason,
+            "opening_mm": np.asarray(opening, float),
+            "coverage": np.asarray(coverage, float),
+            "gap_left_mm": np.asarray(gap_l, float),
+            "gap_right_mm": np.asarray(gap_r, float),
+        }
+
+    def near_pad_rise_mm(self, opening_mm, gap_left_mm, gap_right_mm) -> np.ndarray:
+        """(N,) how much higher than at the grasp the near pad is when it reaches the
+        part (an MJCF linkage; mm): the pads' drop between the first-contact opening
+        and the grasp gap."""
+        o, gl, gr = (np.asarray(a, float) * 1e-3 for a in (opening_mm, gap_left_mm, gap_right_mm))
+        first, final = o - 2.0 * np.minimum(gl, gr), o - gl - gr
+        kin = self.kinematics
+        return 1e3 * (kin.pad_centre_drop_m(final) - kin.pad_centre_drop_m(first))
+
+    def ranges(self) -> tuple[float, float]:
+        """The x and y offset ranges in mm (defaults: half the object's length)."""
+        half = 0.5 * self.object.length_mm
+        xr = self.config.x_range_mm if self.config.x_range_mm is not None else half
+        yr = self.config.y_range_mm if self.config.y_range_mm is not None else half
+        return xr, yr
+
+    def batch(self, pick_id, x_mm, y_mm, yaw_deg, mode: str) -> PickBatch:
+        """Check candidates and keep the feasible ones as a PickBatch."""
+        return feasible_batch(pick_id, x_mm, y_mm, yaw_deg, self(x_mm, y_mm, yaw_deg), mode)
+
+
+def feasible_batch(pick_id, x_mm, y_mm, yaw_deg, res: dict, mode: str) -> PickBatch:
+    """The feasible candidates of a FeasibilityChecker result `res`, with the counts of
+    the rejected ones."""
+    ok = res["reason"] == fk.FEASIBLE
+    counts = np.bincount(res["reason"], minlength=len(REASONS))
+    return PickBatch(
+        pick_id=np.asarray(pick_id, np.int64)[ok],
+        x_mm=np.asarray(x_mm, float)[ok],
+        y_mm=np.asarray(y_mm, float)[ok],
+        yaw_deg=np.asarray(yaw_deg, float)[ok],
+        opening_mm=res["opening_mm"][ok],
+        coverage=res["coverage"][ok],
+        gap_left_mm=res["gap_left_mm"][ok],
+        gap_right_mm=res["gap_right_mm"][ok],
+        rejected={REASONS[i]: int(counts[i]) for i in range(1, len(REASONS))},
+        n_candidates=len(ok),
+        mode=mode,
+    )
+
+
+@functools.lru_cache(maxsize=8)
+def _stack_cached(key, polygon, res_mm: float):
+    radius = max(math.hypot(x, y) for x, y in polygon.exterior.coords)
+    return fk.build_stack(rasterize, polygon, res_mm, radius)
+
+
+def _stack(name: str, silhouette, res_mm: float) -> fk.SilhouetteStack:
+    return _stack_cached((name, silhouette.wkb), silhouette, float(res_mm))
+
+
+def draw_block(rng: np.random.Generator, xr: float, yr: float, config: PickConfig, n: int):
+    """n uniform candidate poses: x in +-xr, y in +-yr (mm), yaw in the config's range."""
+    x = rng.uniform(-xr, xr, n)
+    y = rng.uniform(-yr, yr, n)
+    yaw = rng.uniform(config.yaw_min_deg, config.yaw_max_deg, n)
+    if config.yaw_max_deg - config.yaw_min_deg >= 360.0:
+        yaw = np.mod(yaw, 360.0)
+    return x, y, yaw
+
+
+def candidate_blocks(checker: FeasibilityChecker, seed: int):
+    """An endless, seeded stream of candidate blocks: (pick_id, x_mm, y_mm, yaw_deg),
+    CANDIDATE_BLOCK each. The poses depend on the object and settings only, so every
+    gripper sees the same stream for the same seed."""
+    rng = np.random.default_rng(seed)
+    xr, yr = checker.ranges()
+    start = 0
+    while True:
+        x, y, yaw = draw_block(rng, xr, yr, checker.config, CANDIDATE_BLOCK)
+        yield np.arange(start, start + CANDIDATE_BLOCK), x, y, yaw
+        start += CANDIDATE_BLOCK
+
+
+def candidate_stream(checker: FeasibilityChecker, seed: int):
+    """Feasible PickBatches from the seeded stream of candidate blocks."""
+    for ids, x, y, yaw in candidate_blocks(checker, seed):
+        yield checker.batch(ids, x, y, yaw, mode="normal")
+
+
+def generate_normal(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    n: int,
+    seed: int = 0,
+    config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
+) -> PickBatch:
+    """Normal mode: the first n feasible pick-points of the seeded candidate stream."""
+    check_range("picks", "n", n, 1, 1e9)
+    checker = FeasibilityChecker(obj, gripper, config, grasp)
+    batches, found, drawn = [], 0, 0
+    for block in candidate_stream(checker, seed):
+        batches.append(block)
+        found += len(block)
+        drawn += block.n_candidates
+        if found >= n or drawn >= checker.config.max_candidates:
+            break
+    picks = concat(batches)
+    if len(picks) == 0:
+        raise ConfigError(_empty_message(obj, gripper, checker.config, picks))
+    if len(picks) < n:
+        warnings.warn(
+            f"only {len(picks)} of {n} pick-points are feasible after {picks.n_candidates} "
+            f"candidates (rejected: {picks.rejected})",
+            stacklevel=2,
+        )
+        return picks
+    # keep exactly n; n_candidates and the rejection counts cover every candidate that
+    # was checked (whole blocks)
+    return picks.take(slice(0, n))
+
+
+def generate_grid(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    x_step_mm: float,
+    y_step_mm: float,
+    yaw_step_deg: float,
+    config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
+) -> PickBatch:
+    """Grid mode: every feasible pick of a systematic x, y, yaw grid (ranges as Normal)."""
+    check_range("grid", "x_step_mm", x_step_mm, 0, lo_open=True)
+    check_range("grid", "y_step_mm", y_step_mm, 0, lo_open=True)
+    check_range("grid", "yaw_step_deg", yaw_step_deg, 0, 360, lo_open=True)
+    checker = FeasibilityChecker(obj, gripper, config, grasp)
+    xr, yr = checker.ranges()
+    xs = np.arange(-xr, xr + 1e-9, x_step_mm)
+    ys = np.arange(-yr, yr + 1e-9, y_step_mm)
+    cfg = checker.config
+    yaws = np.arange(cfg.yaw_min_deg, cfg.yaw_max_deg - 1e-9, yaw_step_deg)
+    if len(xs) * len(ys) * len(yaws) > 50_000_000:
+        raise ConfigError(
+            f"grid has {len(xs) * len(ys) * len(yaws)} points (> 50 million): use larger steps"
+        )
+    gx, gy, gyaw = (a.ravel() for a in np.meshgrid(xs, ys, yaws, indexing="ij"))
+    parts = []
+    for start in range(0, len(gx), 262_144):
+        sl = slice(start, start + 262_144)
+        parts.append(checker.batch(np.arange(len(gx))[sl], gx[sl], gy[sl], gyaw[sl], "grid"))
+    picks = concat(parts)
+    if len(picks) == 0:
+        raise ConfigError(_empty_message(obj, gripper, cfg, picks))
+    return picks
+
+
+@dataclasses.dataclass(frozen=True)
+class OptimizationResult:
+    """Optimization mode: every evaluated pick-point, its score, and whether K were found."""
+
+    picks: PickBatch
+    scores: np.ndarray
+    reached: bool
+    k: int
+    min_score: float
+
+    @property
+    def best(self) -> PickBatch:
+        """The evaluated pick-points at or above the score threshold, best first."""
+        order = np.argsort(-self.scores, kind="stable")
+        order = order[self.scores[order] >= self.min_score]
+        return self.picks.take(order)
+
+
+def optimize(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    score_fn: Callable[[PickBatch], np.ndarray],
+    k: int,
+    min_score: float,
+    max_n: int,
+    batch_size: int = 256,
+    seed: int = 0,
+    config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
+) -> OptimizationResult:
+    """Optimization mode: evaluate feasible batches until k reach min_score or max_n are spent.
+
+    Args:
+      score_fn: scores (N,) for a PickBatch -- the simulator in practice.
+      k: pick-points wanted at or above min_score.
+      max_n: most pick-points to evaluate.
+      batch_size: pick-points per call of score_fn (a fixed shape: no recompiles).
+    """
+    check_range("optimize", "k", k, 1)
+    check_range("optimize", "max_n", max_n, 1)
+    check_range("optimize", "batch_size", batch_size, 1)
+    checker = FeasibilityChecker(obj, gripper, config, grasp)
+    pending: list[PickBatch] = []
+    evaluated, scores, good = [], [], 0
+    stream = candidate_stream(checker, seed)
+    drawn = 0
+    while good < k and sum(len(b) for b in evaluated) < max_n:
+        while sum(len(b) for b in pending) < batch_size and drawn < checker.config.max_candidates:
+            block = next(stream)
+            drawn += block.n_candidates
+            pending.append(block)
+        queue = concat(pending)
+        if len(queue) == 0:
+            raise ConfigError(_empty_message(obj, gripper, checker.config, queue))
+        room = max_n - sum(len(b) for b in evaluated)
+        take = min(batch_size, len(queue), room)
+        batch = queue.take(slice(0, take))
+        rest = queue.take(slice(take, None))
+        pending = [dataclasses.replace(rest, rejected={}, n_candidates=0)] if len(rest) else []
+        s = np.asarray(score_fn(batch), float)
+        if s.shape != (len(batch),):
+            raise ValueError(f"score_fn returned shape {s.shape}, expected ({len(batch)},)")
+        evaluated.append(batch)
+        scores.append(s)
+        good += int(np.sum(s >= min_score))
+        if take == 0:
+            break
+    picks = concat(evaluated)
+    picks = dataclasses.replace(picks, mode="optimization", n_candidates=drawn)
+    return OptimizationResult(picks, np.concatenate(scores), good >= k, k, min_score)
+
+
+def _empty_message(obj, gripper, config, picks: PickBatch) -> str:
+    counts = picks.rejected
+    top = max(counts, key=counts.get) if counts and any(counts.values()) else "off_object"
+    advice = {
+        "off_object": "the offset ranges miss the object; reduce x_range_mm/y_range_mm",
+        "too_wide": (
+            f"the object is wider than the stroke of {gripper.name} ({gripper.stroke_mm:g} mm) "
+            f"with a {config.safety_zone_mm:g} mm safety zone at every tried pose; use a gripper "
+            "with a larger stroke or a smaller safety_zone_mm"
+        ),
+        "clearance": "the fingers land on the object everywhere; use a larger stroke",
+        "coverage": f"lower min_coverage (now {config.min_coverage:g})",
+        "pad_path": (
+            "the linkage's near pad rides over the part at every tried pose (its pads "
+            "descend while closing); a parallel-jaw gripper or centred poses may take it"
+        ),
+    }[top]
+    return (
+        f"no feasible pick-point for {obj.name} with {gripper.name} after "
+        f"{picks.n_candidates} candidates (rejected: {counts}): {advice}"
+    )

@@ -1,0 +1,438 @@
+"""Scene: object on a table under a two-finger gripper, as one MuJoCo model.
+
+The model compiles for the MuJoCo C engine and for MJX (``mujoco.mjx.put_model``).
+Only the contacts that matter exist: every geom has contype = conaffinity = 0 and the
+contacts are explicit ``<pair>``s -- each pad against each convex collision piece of the
+object (soft-finger contacts with torsional friction, see ``mjx_pick.core.physics``), and
+the table against the object's convex hull (a rigid body on a plane touches
+it only on its hull, so one pair replaces one per piece). Fingers never collide with the
+table or each
+other, which keeps MJX's fixed-size contact buffers small.
+
+Bodies: ``object`` (free joint), ``gripper`` (vertical ``lift`` slide joint, position
+servo), ``finger_left`` / ``finger_right`` (slide joints along +x / -x measuring each
+finger's closing travel from fully open, position servos with a force limit of the
+gripper's maximum force). The object's pad contact forces are read from ``cfrc_ext`` of
+the finger bodies; an accelerometer on the object makes both engines compute it.
+
+A gripper from an MJCF file (``GripperSpec.mjcf``, ``mjx_pick.core.mjcf_gripper``) replaces
+the two finger bodies: its model is attached under ``gripper`` (names prefixed
+``gripper/``), its own actuator drives it, its pad geoms get the pad pairs and none of
+its other geoms collide. ``gripper`` then sits so that the pads' centre is at the grasp
+height when the fingers are fully open; each pick-point starts with the lift raised by
+the height compensation for the gap the pads will close to (the paper's section 3.5),
+so the pads meet the object at the grasp height despite their descent while closing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import re
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from mjx_pick.core import mjcf_gripper
+from mjx_pick.core.gripper import GripperSpec
+from mjx_pick.core.objects import MAX_HULL_VERTICES, ObjectModel
+from mjx_pick.core.physics import ContactParams, MujocoContact, SolverParams, mujoco_contact
+from mjx_pick.core.procedure import GraspConfig, pad_band_mm
+from mjx_pick.kernels.grasp import DriveMap
+
+# the robot arm carrying the gripper: a stiff, well-damped vertical servo
+LIFT_STIFFNESS_N_PER_M = 2e4
+LIFT_DAMPING_NS_PER_M = 400.0
+LIFT_FORCE_LIMIT_N = 500.0
+TABLE_HALF_SIZE_M = 0.5
+# an MJCF gripper's own bodies carry its mass; this is the arm's flange that lifts it
+MJCF_CARRIAGE_MASS_KG = 0.1
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneIndex:
+    """Ids and addresses the controller and the metrics need (ints: static under jit)."""
+
+    object_body: int
+    gripper_body: int  # the mount (tests measure the pads' depth below it)
+    finger_left_body: int
+    finger_right_body: int
+    object_qpos: int  # start of the object's free joint (x, y, z, qw, qx, qy, qz)
+    lift_qpos: int
+    finger_left_qpos: int
+    finger_right_qpos: int
+    lift_actuator: int
+    finger_left_actuator: int
+    finger_right_actuator: int
+    pad_pairs: tuple[int, ...]  # pair ids of pad-object contacts
+    table_pairs: tuple[int, ...]  # pair ids of table-object contacts
+    pad_bottom_z0_m: float  # fingertip height above the table at the grasp
+    stroke_m: float
+    # MJCF gripper: finger joints -> pad travel -> control tables; None: parallel jaw
+    drive: DriveMap | None = None
+    gripper_qpos: tuple[int, ...] = ()  # qpos addresses of the MJCF gripper's joints
+
+
+def pad_patch_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
+    """(width, height) of a pad's contact patch on the object, mm (``mjx_pick.core.physics``).
+
+    Width: the pad's, or the object's smallest width in the pads' band if narrower.
+    Height: the object's side wall within the band.
+    """
+    lo, hi = pad_band_mm(obj, gripper, grasp)
+    band = obj.band_outline(lo, hi)
+    width = gripper.finger_width_mm
+    if not band.is_empty:
+        rect = np.asarray(band.minimum_rotated_rectangle.exterior.coords)
+        sides = np.linalg.norm(np.diff(rect[:3], axis=0), axis=1)
+        width = min(width, float(sides.min()))
+    return width, obj.wall_height_mm(lo, hi)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Scene:
+    """A compiled scene: the model, its MJCF text, the index, and what built it."""
+
+    model: mujoco.MjModel
+    xml: str
+    index: SceneIndex
+    contact: MujocoContact
+    object: ObjectModel
+    gripper: GripperSpec
+    solver: SolverParams
+    pad_patch_mm: tuple[float, float]  # (width, height) of the pads' contact patch
+    # the MJCF gripper's measured close (None: parallel jaw)
+    kinematics: mjcf_gripper.Kinematics | None = None
+
+    def portable_xml(self) -> str:
+        """The simulated model's MJCF text with every file it names (the object's
+        meshes, an MJCF gripper's assets) replaced by ``sha256:<digest>`` of the file's
+        bytes: what the model is, never where its files are installed (resume keys)."""
+
+        def digest(m: re.Match) -> str:
+            path = Path(m[1])
+            if not path.is_file():
+                return m[0]
+            return f'file="sha256:{hashlib.sha256(path.read_bytes()).hexdigest()}"'
+
+        return re.sub(r'file="([^"]+)"', digest, self.xml)
+
+    def initial_qpos(self, x_m, y_m, yaw_rad, opening_m, grasp_gap_m=None) -> np.ndarray:
+        """Initial joint positions for picks (N,) arrays -> (N, nq).
+
+        opening_m: the pads' starting gap. grasp_gap_m: the gap at which they will meet
+        the object (the object's width between them); an MJCF linkage starts raised by
+        its height compensation for that gap (None: the starting opening's).
+        """
+        x_m, y_m, yaw_rad, opening_m = (
+            np.atleast_1d(np.asarray(a, float)) for a in (x_m, y_m, yaw_rad, opening_m)
+        )
+        n = len(x_m)
+        idx = self.index
+        qpos = np.tile(self.model.qpos0, (n, 1))
+        o = idx.object_qpos
+        qpos[:, o] = x_m
+        qpos[:, o + 1] = y_m
+        qpos[:, o + 2] = 0.0  # object frame origin on the table
+        qpos[:, o + 3] = np.cos(yaw_rad / 2)
+        qpos[:, o + 4 : o + 6] = 0.0
+        qpos[:, o + 6] = np.sin(yaw_rad / 2)
+        travel = 0.5 * (idx.stroke_m - opening_m)
+        qpos[:, idx.lift_qpos] = 0.0
+        if self.kinematics is None:
+            qpos[:, idx.finger_left_qpos] = travel
+            qpos[:, idx.finger_right_qpos] = travel
+            return qpos
+        kin = self.kinematics
+        qpos[:, list(idx.gripper_qpos)] = kin.joint_positions(kin.travel_at_opening(opening_m))
+        gap = opening_m if grasp_gap_m is None else np.asarray(grasp_gap_m, float)
+        qpos[:, idx.lift_qpos] = kin.height_compensation_m(np.broadcast_to(gap, (n,)))
+        return qpos
+
+    def pad_centre_z_m(self, data: mujoco.MjData) -> float:
+        """Height of the pads' centre above the table in a simulation of this scene, m
+        (the mean of the pad geoms' centres: an MJCF gripper's, or the parallel jaw's
+        two pad boxes)."""
+        names = [self.model.geom(g).name for g in range(self.model.ngeom)]
+        pads = [g for g, name in enumerate(names) if _is_pad_geom(name, self.gripper)]
+        return float(np.mean(data.geom_xpos[pads, 2]))
+
+
+def _is_pad_geom(name: str, gripper: GripperSpec) -> bool:
+    if gripper.mjcf is None:
+        return name in ("pad_left", "pad_right")
+    pads = gripper.mjcf.pad_left_geoms + gripper.mjcf.pad_right_geoms
+    return name in {mjcf_gripper.PREFIX + g for g in pads}
+
+
+def _fmt(values) -> str:
+    return " ".join(f"{float(v):.9g}" for v in np.ravel(values))
+
+
+def scene_xml(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    mjc: MujocoContact,
+    solver: SolverParams,
+    fingertip_height_mm: float,
+    kinematics: mjcf_gripper.Kinematics | None = None,
+) -> str:
+    """MJCF text of the scene (deterministic: same inputs, same text).
+
+    With an MJCF gripper (its measured ``kinematics``) the text holds the ``gripper``
+    body without fingers and pairs naming the gripper's pad geoms: attach the gripper
+    (``mjcf_gripper.attach``) before compiling it.
+    """
+    pad_h = gripper.pad_height_mm * 1e-3
+    z_grip = fingertip_height_mm * 1e-3 + 0.5 * pad_h  # pad centres
+
+    meshes = [
+        f'<mesh name="visual" vertex="{_fmt(obj.mesh.vertices)}" face="{_fmt(obj.mesh.faces)}"/>'
+    ]
+    pad_pieces = obj.pad_pieces(gripper.finger_depth_mm, gripper.finger_width_mm)
+    meshes += [
+        f'<mesh name="piece{i}" vertex="{_fmt(v)}" maxhullvert="{MAX_HULL_VERTICES}"/>'
+        for i, v in enumerate(pad_pieces)
+    ]
+    # a rigid body on a plane touches it only on its convex hull: one table pair. The
+    # hull is capped at MAX_HULL_VERTICES (32) (MuJoCo/MJX want no face of more than 20); for a
+    # flat object that trims the support polygon's corners by well under a millimetre
+    hull = _fmt(np.vstack(obj.pieces))
+    meshes.append(f'<mesh name="hull" vertex="{hull}" maxhullvert="{MAX_HULL_VERTICES}"/>')
+    pieces = "\n".join(
+        f'      <geom name="piece{i}" type="mesh" mesh="piece{i}" group="3" rgba=".9 .5 .1 .5"/>'
+        for i in range(len(pad_pieces))
+    )
+    pieces += '\n      <geom name="hull" type="mesh" mesh="hull" group="4" rgba=".5 .5 .5 .3"/>'
+    inertia = obj.inertia_kg_m2
+    full = _fmt(
+        [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
+    )
+    pad_fr = _fmt([mjc.pad_friction, mjc.pad_friction, mjc.pad_torsion_m, 0.0001, 0.0001])
+    tab_fr = _fmt([mjc.table_friction, mjc.table_friction, 0.005, 0.0001, 0.0001])
+    if gripper.mjcf is None:
+        pad_geoms = [("pad_left", "pad_left"), ("pad_right", "pad_right")]
+    else:
+        # pair names start with pad_left / pad_right (SceneIndex.pad_pairs finds them)
+        pad_geoms = [
+            (f"{side}{k}", mjcf_gripper.PREFIX + g)
+            for side, geoms in (
+                ("pad_left", gripper.mjcf.pad_left_geoms),
+                ("pad_right", gripper.mjcf.pad_right_geoms),
+            )
+            for k, g in enumerate(geoms)
+        ]
+    pairs = []
+    for i in range(len(pad_pieces)):
+        for pad, geom in pad_geoms:
+            pairs.append(
+                f'    <pair name="{pad}_piece{i}" geom1="{geom}" geom2="piece{i}" condim="4" '
+                f'friction="{pad_fr}" solref="{_fmt(mjc.pad_solref)}" '
+                f'solimp="{_fmt(mjc.pad_solimp)}"/>'
+            )
+    if gripper.mjcf is not None and gripper.mjcf.link_contacts:
+        for i in range(len(pad_pieces)):
+            for k, link in enumerate(mjcf_gripper.link_geoms(gripper.mjcf)):
+                pairs.append(
+                    f'    <pair name="link{k}_piece{i}" geom1="{mjcf_gripper.PREFIX + link}" '
+                    f'geom2="piece{i}" condim="3" friction="{pad_fr}" '
+                    f'solref="{_fmt(mjc.pad_solref)}" solimp="{_fmt(mjc.pad_solimp)}"/>'
+                )
+    pairs.append(
+        f'    <pair name="table_hull" geom1="table" geom2="hull" condim="3" '
+        f'friction="{tab_fr}" solref="{_fmt(mjc.table_solref)}" '
+        f'solimp="{_fmt(mjc.table_solimp)}"/>'
+    )
+    table_size = _fmt([TABLE_HALF_SIZE_M, TABLE_HALF_SIZE_M, 0.01])
+    lift_range = _fmt([-LIFT_FORCE_LIMIT_N, LIFT_FORCE_LIMIT_N])
+    actuators = f"""    <position name="lift" joint="lift" kp="{LIFT_STIFFNESS_N_PER_M:.9g}"
+              kv="{LIFT_DAMPING_NS_PER_M:.9g}" forcerange="{lift_range}"/>"""
+    if kinematics is None:
+        gripper_body = _parallel_jaw_body_xml(gripper, z_grip)
+        actuators += "\n" + _parallel_jaw_actuators_xml(gripper)
+    else:
+        # the pads' centre at the grasp height when fully open (lift 0)
+        z_mount = z_grip - float(kinematics.pad_centre_z[0])
+        gripper_body = f"""    <body name="gripper" pos="0 0 {z_mount:.9g}" gravcomp="1">
+      <joint name="lift" type="slide" axis="0 0 1"/>
+      <inertial pos="0 0 0" mass="{MJCF_CARRIAGE_MASS_KG:.9g}" diaginertia="1e-3 1e-3 1e-3"/>
+    </body>"""
+    return f"""<mujoco model="mjx_pick {obj.name} {gripper.name}">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{solver.timestep_s:.9g}" cone="{solver.cone}" impratio="{solver.impratio:.9g}"
+          iterations="{solver.iterations}" ls_iterations="{solver.ls_iterations}"
+          tolerance="{solver.tolerance:.9g}" noslip_iterations="{solver.noslip_iterations}"
+          integrator="{ {"euler": "Euler"}.get(solver.integrator, solver.integrator) }"/>
+  <default>
+    <geom contype="0" conaffinity="0"/>
+  </default>
+  <visual><global offwidth="1280" offheight="960"/></visual>
+  <asset>
+    {chr(10).join("    " + m for m in meshes).strip()}
+    <texture name="grid" type="2d" builtin="checker" width="256" height="256"
+             rgb1=".85 .85 .85" rgb2=".75 .75 .75"/>
+    <material name="grid" texture="grid" texrepeat="20 20"/>
+  </asset>
+  <worldbody>
+    <light pos="0 -0.3 0.6" dir="0 0.4 -1" diffuse=".8 .8 .8"/>
+    <geom name="table" type="plane" size="{table_size}" material="grid"/>
+    <camera name="top" pos="0 0 0.45" xyaxes="1 0 0 0 1 0"/>
+    <camera name="side" pos="0 -0.35 0.12" xyaxes="1 0 0 0 0.2 1"/>
+    <body name="object">
+      <freejoint name="object"/>
+      <inertial pos="{_fmt(obj.com_m)}" mass="{obj.mass_kg:.9g}" fullinertia="{full}"/>
+      <site name="object_com" pos="{_fmt(obj.com_m)}"/>
+      <geom name="object_visual" type="mesh" mesh="visual" group="1" rgba=".2 .45 .8 1" mass="0"/>
+{pieces}
+    </body>
+{gripper_body}
+  </worldbody>
+  <contact>
+{chr(10).join(pairs)}
+  </contact>
+  <actuator>
+{actuators}
+  </actuator>
+  <sensor>
+    <accelerometer name="object_acc" site="object_com"/>
+  </sensor>
+</mujoco>
+"""
+
+
+def _parallel_jaw_body_xml(gripper: GripperSpec, z_grip: float) -> str:
+    """The parametric gripper: a body on the lift with two sliding pad fingers."""
+    stroke = gripper.stroke_mm * 1e-3
+    depth = gripper.finger_depth_mm * 1e-3
+    width = gripper.finger_width_mm * 1e-3
+    pad_h = gripper.pad_height_mm * 1e-3
+    fmass = gripper.finger_mass_g * 1e-3
+    finger_link_h = 0.03
+    pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
+    return f"""    <body name="gripper" pos="0 0 {z_grip:.9g}" gravcomp="1">
+      <joint name="lift" type="slide" axis="0 0 1"/>
+      <inertial pos="0 0 {0.5 * pad_h + 0.06:.9g}" mass="{gripper.body_mass_g * 1e-3:.9g}"
+                diaginertia="1e-3 1e-3 1e-3"/>
+      <geom name="gripper_body" type="box" group="2" rgba=".25 .25 .25 1" mass="0"
+            size="{0.5 * stroke + depth + 0.01:.9g} {0.5 * width + 0.01:.9g} 0.03"
+            pos="0 0 {0.5 * pad_h + finger_link_h + 0.03:.9g}"/>
+      <body name="finger_left" pos="{-0.5 * stroke - 0.5 * depth:.9g} 0 0" gravcomp="1">
+        <joint name="finger_left" type="slide" axis="1 0 0" range="0 {0.5 * stroke:.9g}"/>
+        <geom name="pad_left" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
+        <geom name="link_left" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
+              size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
+              pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
+      </body>
+      <body name="finger_right" pos="{0.5 * stroke + 0.5 * depth:.9g} 0 0" gravcomp="1">
+        <joint name="finger_right" type="slide" axis="-1 0 0" range="0 {0.5 * stroke:.9g}"/>
+        <geom name="pad_right" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
+        <geom name="link_right" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
+              size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
+              pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
+      </body>
+    </body>"""
+
+
+def _parallel_jaw_actuators_xml(gripper: GripperSpec) -> str:
+    """The parametric gripper's finger servos (position, force-limited)."""
+    stroke = gripper.stroke_mm * 1e-3
+    kp = gripper.drive_stiffness_n_per_mm * 1e3
+    kv = gripper.drive_damping_ns_per_mm * 1e3
+    fmax = gripper.force_max_n
+    return f"""    <position name="finger_left" joint="finger_left" kp="{kp:.9g}" kv="{kv:.9g}"
+              forcerange="{-fmax:.9g} {fmax:.9g}" ctrlrange="-0.05 {0.5 * stroke + 0.05:.9g}"/>
+    <position name="finger_right" joint="finger_right" kp="{kp:.9g}" kv="{kv:.9g}"
+              forcerange="{-fmax:.9g} {fmax:.9g}" ctrlrange="-0.05 {0.5 * stroke + 0.05:.9g}"/>"""
+
+
+def build_scene(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    contact: ContactParams | None = None,
+    solver: SolverParams | None = None,
+    grasp: GraspConfig | None = None,
+) -> Scene:
+    """Compile the scene for (object, gripper, contact, solver settings, procedure).
+
+    The procedure (grasp) sets the fingertips' height (its grasp-height rule).
+    """
+    contact = contact or ContactParams()
+    solver = solver or SolverParams()
+    grasp = grasp or GraspConfig()
+    patch = pad_patch_mm(obj, gripper, grasp)
+    mjc = mujoco_contact(contact, solver, obj.mass_kg, patch)
+    tip_mm, _ = pad_band_mm(obj, gripper, grasp)
+    kin = None if gripper.mjcf is None else mjcf_gripper.characterise(gripper.mjcf)
+    xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin)
+    if kin is None:
+        model = mujoco.MjModel.from_xml_string(xml)
+    else:
+        spec = mujoco.MjSpec.from_string(xml)
+        mjcf_gripper.attach(spec, gripper.mjcf, "gripper")
+        model = spec.compile()
+        xml = spec.to_xml()
+    model.qpos0[:] = 0.0
+    model.qpos0[model.jnt_qposadr[model.joint("object").id] + 3] = 1.0
+
+    def pairs(prefixes) -> tuple[int, ...]:
+        return tuple(i for i in range(model.npair) if model.pair(i).name.startswith(prefixes))
+
+    def qadr(joint: str) -> int:
+        return int(model.jnt_qposadr[model.joint(joint).id])
+
+    if kin is None:
+        names = {
+            "finger_left_body": "finger_left",
+            "finger_right_body": "finger_right",
+            "finger_left_qpos": "finger_left",
+            "finger_right_qpos": "finger_right",
+            "finger_left_actuator": "finger_left",
+            "finger_right_actuator": "finger_right",
+        }
+        mjcf_fields = {}
+    else:
+        p, act = mjcf_gripper.PREFIX, gripper.mjcf.actuator
+        names = {
+            "finger_left_body": p + kin.pad_bodies[0],
+            "finger_right_body": p + kin.pad_bodies[1],
+            "finger_left_qpos": p + kin.finger_joints[0],
+            "finger_right_qpos": p + kin.finger_joints[1],
+            "finger_left_actuator": p + act,
+            "finger_right_actuator": p + act,
+        }
+        mjcf_fields = {
+            "drive": kin.drive_map(),
+            "gripper_qpos": tuple(qadr(p + j) for j in kin.joint_names),
+        }
+    index = SceneIndex(
+        object_body=model.body("object").id,
+        gripper_body=model.body("gripper").id,
+        finger_left_body=model.body(names["finger_left_body"]).id,
+        finger_right_body=model.body(names["finger_right_body"]).id,
+        object_qpos=qadr("object"),
+        lift_qpos=qadr("lift"),
+        finger_left_qpos=qadr(names["finger_left_qpos"]),
+        finger_right_qpos=qadr(names["finger_right_qpos"]),
+        lift_actuator=model.actuator("lift").id,
+        finger_left_actuator=model.actuator(names["finger_left_actuator"]).id,
+        finger_right_actuator=model.actuator(names["finger_right_actuator"]).id,
+        pad_pairs=pairs(("pad_left", "pad_right")),
+        table_pairs=pairs(("table",)),
+        pad_bottom_z0_m=tip_mm * 1e-3,
+        stroke_m=gripper.stroke_mm * 1e-3,
+        **mjcf_fields,
+    )
+    return Scene(
+        model=model,
+        xml=xml,
+        index=index,
+        contact=mjc,
+        object=obj,
+        gripper=gripper,
+        solver=solver,
+        pad_patch_mm=tuple(float(v) for v in patch),
+        kinematics=kin,
+    )

@@ -1,0 +1,301 @@
+"""What every backend shares: batched inputs, per-pick overrides, the Backend protocol
+and backend choice.
+
+A backend turns :class:`PickInputs` (N pick-points: initial joint positions, per-pick
+controller parameters and contact-pair parameters) into per-pick results (the dict of
+``mjx_pick.kernels.grasp.finalize``) and, on request, traces. MuJoCo Warp and MJX's JAX
+physics (GPU) and the MuJoCo C engine (CPU) implement it; ``make_backend`` picks one.
+Callers do not run backends themselves: ``mjx_pick.engine.runner`` does (chunks, progress,
+cancellation, timing).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import inspect
+from typing import NamedTuple, Protocol
+
+import jax
+import numpy as np
+
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.gripper import GripperSpec
+from mjx_pick.core.physics import ContactParams, SolverParams, mujoco_contact
+from mjx_pick.core.pickpoints import PickBatch
+from mjx_pick.core.procedure import GraspConfig, broadcast_params
+from mjx_pick.core.scene import Scene
+from mjx_pick.kernels import grasp as gk
+
+# per-pick contact overrides accepted by make_inputs (besides GraspParams' fields)
+CONTACT_OVERRIDES = (
+    "pad_friction",
+    "pad_torsion",
+    "table_friction",
+    "pad_solref",
+    "table_solref",
+    "pad_solimp",
+    "table_solimp",
+)
+
+
+class PickInputs(NamedTuple):
+    """Everything N simulations need, batched along the first axis."""
+
+    qpos0: np.ndarray  # (N, nq)
+    params: gk.GraspParams  # fields (N,)
+    pair_friction: np.ndarray  # (N, npair, 5)
+    pair_solref: np.ndarray  # (N, npair, 2)
+    pair_solimp: np.ndarray  # (N, npair, 5)
+
+    def __len__(self) -> int:
+        return len(self.qpos0)
+
+    def replace(self, **fields) -> PickInputs:
+        """A copy with some fields replaced (NamedTuple's _replace relies on len()
+        counting the fields, which __len__ redefines)."""
+        return PickInputs(**{**self._asdict(), **fields})
+
+    def take(self, index) -> PickInputs:
+        return jax.tree.map(lambda a: a[index], self)
+
+    def pad_to(self, n: int) -> PickInputs:
+        """Pad to n entries with copies of the first (results of the copies are dropped)."""
+        extra = n - len(self)
+        if extra <= 0:
+            return self
+        return jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[:1], extra, axis=0)]), self)
+
+
+def addresses(scene: Scene) -> gk.Addresses:
+    i = scene.index
+    return gk.Addresses(
+        object_qpos=i.object_qpos,
+        lift_qpos=i.lift_qpos,
+        finger_left_qpos=i.finger_left_qpos,
+        finger_right_qpos=i.finger_right_qpos,
+        object_body=i.object_body,
+        finger_left_body=i.finger_left_body,
+        finger_right_body=i.finger_right_body,
+        lift_actuator=i.lift_actuator,
+        finger_left_actuator=i.finger_left_actuator,
+        finger_right_actuator=i.finger_right_actuator,
+        nu=scene.model.nu,
+        drive=i.drive,
+    )
+
+
+def make_inputs(
+    scene: Scene, grasp: GraspConfig, picks: PickBatch, overrides: dict | None = None
+) -> PickInputs:
+    """Batched inputs for picks; overrides maps a parameter to one value or (N,) values.
+
+    Override names: GraspParams fields (SI: force_n, kp, ...) and CONTACT_OVERRIDES
+    (pad_friction, pad_torsion [m], table_friction, pad_solref (2,), table_solref (2,),
+    pad_solimp (5,), table_solimp (5,)). A pad_friction override scales the scene's
+    torsional friction with it (both come from the same Coulomb coefficient) unless
+    pad_torsion is given too.
+    """
+    overrides = dict(overrides or {})
+    n = len(picks)
+    # the gap the pads close to (the object's width between them): the MJCF linkage's
+    # height compensation
+    grasp_gap_m = (picks.opening_mm - picks.gap_left_mm - picks.gap_right_mm) * 1e-3
+    qpos0 = scene.initial_qpos(
+        picks.x_mm * 1e-3,
+        picks.y_mm * 1e-3,
+        np.deg2rad(picks.yaw_deg),
+        picks.opening_mm * 1e-3,
+        grasp_gap_m,
+    ).astype(np.float32)
+    contact = {k: overrides.pop(k) for k in CONTACT_OVERRIDES if k in overrides}
+    params = broadcast_params(grasp.params(scene.object, scene.gripper), n, **overrides)
+    m = scene.model
+    friction = np.broadcast_to(m.pair_friction, (n, m.npair, 5)).astype(np.float32).copy()
+    solref = np.broadcast_to(m.pair_solref, (n, m.npair, 2)).astype(np.float32).copy()
+    solimp = np.broadcast_to(m.pair_solimp, (n, m.npair, 5)).astype(np.float32).copy()
+    pads, table = list(scene.index.pad_pairs), list(scene.index.table_pairs)
+    if "pad_friction" in contact:
+        mu = np.broadcast_to(np.asarray(contact["pad_friction"], np.float32), (n,))
+        friction[:, pads, 0] = mu[:, None]
+        friction[:, pads, 1] = mu[:, None]
+        friction[:, pads, 2] = mu[:, None] * np.float32(scene.contact.torsion_per_friction_m)
+    if "pad_torsion" in contact:
+        torsion = np.broadcast_to(np.asarray(contact["pad_torsion"], np.float32), (n,))
+        friction[:, pads, 2] = torsion[:, None]
+    if "table_friction" in contact:
+        mu = np.broadcast_to(np.asarray(contact["table_friction"], np.float32), (n,))
+        friction[:, table, 0] = mu[:, None]
+        friction[:, table, 1] = mu[:, None]
+    if "pad_solref" in contact:
+        solref[:, pads] = np.broadcast_to(np.asarray(contact["pad_solref"], np.float32), (n, 2))[
+            :, None
+        ]
+    if "table_solref" in contact:
+        ref = np.broadcast_to(np.asarray(contact["table_solref"], np.float32), (n, 2))
+        solref[:, table] = ref[:, None]
+    for name, pairs in (("pad_solimp", pads), ("table_solimp", table)):
+        if name in contact:
+            imp = np.broadcast_to(np.asarray(contact[name], np.float32), (n, 5))
+            solimp[:, pairs] = imp[:, None]
+    if np.any(friction[..., 0] < 0) or np.any(~np.isfinite(friction)):
+        raise ConfigError("friction overrides must be finite and >= 0")
+    return PickInputs(qpos0, params, friction, solref, solimp)
+
+
+@dataclasses.dataclass
+class RunStats:
+    """Timing of one backend call: compile time apart from run time."""
+
+    compile_s: float = 0.0
+    run_s: float = 0.0
+    n: int = 0
+
+
+class Backend(Protocol):
+    """What the engine needs of a backend (one module implements it; see FACTORIES).
+
+    A backend simulates every pick-point on its own: a pick's result must not depend on
+    which other pick-points share its call, so the engine may split a run into chunks
+    (whole numbers of batches: the same compiled programs, hence the same rounding).
+    A device backend may also have ``devices`` (a list of JAX devices) and
+    ``device_bytes_per_pick()``: the engine then sizes chunks from free device memory.
+    """
+
+    name: str  # as in FACTORIES
+    device: str  # what it runs on, in words ("cpu:2 threads", "gpu:NVIDIA H100 x2")
+    stats: RunStats  # compile time apart from run time, summed over calls
+    scene: Scene
+    batch_size: int  # simulations per device program (slots of a refilled pool)
+
+    def run(self, inputs: PickInputs, record: bool = False) -> tuple[dict, np.ndarray | None]:
+        """Per-pick results (numpy, (N,) each: ``kernels.grasp.finalize``'s fields) and,
+        with record, traces (N, T, F) at the control rate (``kernels.grasp.TRACE_FIELDS``)."""
+        ...
+
+
+def has_accelerator() -> bool:
+    """Whether JAX sees a GPU or TPU (device batches are sized for it)."""
+    return any(d.platform in ("gpu", "tpu", "cuda", "rocm") for d in jax.devices())
+
+
+# The backends: name -> "module:factory", imported only when chosen. A factory is called
+# as factory(scene, grasp, batch_size, **options) and returns a Backend; its keyword
+# parameters are the options it takes. A new backend is one module with such a factory
+# (a class implementing Backend is one), added here.
+FACTORIES = {
+    "warp": "mjx_pick.engine.warp_backend:make_warp_backend",
+    "mjx": "mjx_pick.engine.mjx_backend:MjxBackend",
+    "mujoco": "mjx_pick.engine.c_backend:MujocoBackend",
+}
+BACKENDS = ("auto", *FACTORIES)
+
+
+def make_backend(
+    name: str,
+    scene: Scene,
+    grasp: GraspConfig,
+    batch_size: int,
+    nthread: int | None = None,
+    devices=None,
+    **options,
+) -> Backend:
+    """A backend by name: 'warp', 'mjx', 'mujoco' or 'auto'.
+
+    'warp': MJX with MuJoCo Warp physics on an NVIDIA GPU (needs warp-lang, the gpu
+    extra; a ConfigError says what is missing). 'mjx': MJX's JAX physics on JAX's
+    devices (forward-mode derivatives). 'mujoco': the C engine on CPU threads. 'auto':
+    'warp' where it can run (an NVIDIA GPU and warp-lang), else 'mujoco' -- on a GPU
+    without warp-lang the C engine's threads beat MJX's JAX physics (issue 17).
+
+    devices: MJX/Warp shard each batch over these (default: every local device; Warp:
+    every CUDA device). nthread: the C engine's threads. options: passed to the MJX or
+    Warp backend (refill, ticks_per_call, shrink_levels; Warp: buffers, graph_mode).
+    """
+    name = resolve_backend(name)
+    grasp.substeps(scene.solver)  # validates the control period against the time step
+    module, _, attr = FACTORIES[name].partition(":")
+    factory = getattr(importlib.import_module(module), attr)
+    takes = inspect.signature(factory).parameters
+    # a factory with **options checks them itself (Warp passes them on per device)
+    open_ended = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in takes.values())
+    unknown = [] if open_ended else sorted(k for k in options if k not in takes)
+    if unknown:
+        raise ConfigError(f"backend {name!r} takes no options {unknown}")
+    # devices and nthread are hints for the backends that have them (MJX/Warp shard over
+    # devices, the C engine runs threads); another backend ignores them
+    for key, value in (("devices", devices), ("nthread", nthread)):
+        if value is not None and key in takes:
+            options[key] = value
+    return factory(scene, grasp, batch_size, **options)
+
+
+def resolve_backend(name: str) -> str:
+    """The backend a name runs: 'auto' becomes 'warp' where it can run, else 'mujoco'."""
+    if name not in BACKENDS:
+        allowed = ", ".join(repr(b) for b in BACKENDS)
+        raise ConfigError(f"backend = {name!r} is not allowed: choose one of {allowed}")
+    if name == "auto":
+        from mjx_pick.engine.devices import warp_problem
+
+        return "mujoco" if warp_problem() else "warp"
+    return name
+
+
+def default_batch_size(backend_name: str) -> int:
+    """Simulations per backend call (slots of Warp's refilled pool): measured best."""
+    name = resolve_backend(backend_name)
+    if name == "mujoco":
+        return 1024  # 80 pick-points/s at 256, 92 at 1024 (2 cores, RESULTS.md)
+    if name == "warp":
+        # per GPU (every GPU runs its own pool): H100, 3,523/s at 32,768 slots, 3,176/s
+        # at 16,384 (before the pool shrank in its tail; RESULTS.md)
+        from mjx_pick.engine.devices import nvidia_gpus
+
+        return 32768 * max(len(nvidia_gpus()), 1)
+    return 8192 if has_accelerator() else 64
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """Every physical setting of one simulated variant: gripper, contact, solver, grasp.
+
+    Sweeps, gripper comparisons, design searches, robustness and calibration all run
+    lists of (Settings, PickBatch) jobs through one ``engine.Simulator``.
+    """
+
+    gripper: GripperSpec = dataclasses.field(default_factory=GripperSpec)
+    contact: ContactParams = dataclasses.field(default_factory=ContactParams)
+    solver: SolverParams = dataclasses.field(default_factory=SolverParams)
+    grasp: GraspConfig = dataclasses.field(default_factory=GraspConfig)
+
+    def structure(self) -> tuple:
+        """What fixes the compiled simulation: the scene (gripper, solver) and the scan
+        length. Everything else (contact, controller, phases) is per-pick data."""
+        return (
+            self.gripper,
+            self.solver,
+            self.grasp.n_ticks(),
+            self.grasp.substeps(self.solver),
+            self.grasp.grasp_height,
+            self.grasp.fingertip_clearance_mm,
+        )
+
+    def overrides(self, scene: Scene, n: int) -> dict:
+        """Per-pick overrides for make_inputs that give n pick-points these settings.
+
+        scene: the compiled scene of these settings' structure (its object and pad
+        patch are these settings' too: the patch depends on gripper and grasp height).
+        """
+        obj = scene.object
+        mjc = mujoco_contact(self.contact, self.solver, obj.mass_kg, scene.pad_patch_mm)
+        params = self.grasp.params(obj, self.gripper)._asdict()
+        out = {name: np.full(n, v, np.float32) for name, v in params.items()}
+        out["pad_friction"] = np.full(n, mjc.pad_friction, np.float32)
+        out["pad_torsion"] = np.full(n, mjc.pad_torsion_m, np.float32)
+        out["table_friction"] = np.full(n, mjc.table_friction, np.float32)
+        out["pad_solref"] = np.tile(np.asarray(mjc.pad_solref, np.float32), (n, 1))
+        out["table_solref"] = np.tile(np.asarray(mjc.table_solref, np.float32), (n, 1))
+        out["pad_solimp"] = np.tile(np.asarray(mjc.pad_solimp, np.float32), (n, 1))
+        out["table_solimp"] = np.tile(np.asarray(mjc.table_solimp, np.float32), (n, 1))
+        return out

@@ -1,0 +1,169 @@
+"""MuJoCo C backend: the same pick-points on ``mujoco.batch`` (CPU threads).
+
+Physics runs in the C engine, one simulation per pick-point on a thread pool (MuJoCo
+>= 4.0). Once per control period the shared tick (``mjx_pick.kernels.grasp.tick``:
+measure, P controller, phase machine, metrics) runs for the whole batch as one jitted
+``vmap`` on the CPU, exactly the code MJX runs, then every simulation still running
+advances ``n_substeps`` physics steps. Finished pick-points (DONE) stop stepping.
+
+MuJoCo C normally resets a simulation whose state blows up; here auto-reset is
+disabled (as in MJX, a blown-up state stays non-finite), so a non-finite state, an
+absurd speed, a MuJoCo error or a reset that happens anyway all mark the pick-point
+``diverged``.
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import os
+import time
+
+import jax
+import mujoco
+import mujoco.batch
+import numpy as np
+
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.core.scene import Scene
+from mjx_pick.engine.backend import PickInputs, RunStats, addresses
+from mjx_pick.kernels import grasp as gk
+
+
+@functools.cache
+def _tick_fn(ad: gk.Addresses):
+    vtick = jax.vmap(gk.tick, in_axes=(0, None, 0, 0, 0, 0, 0, 0, 0))
+    return jax.jit(
+        lambda p, s, a, qpos, qvel, cfrc, pos0, quat0: vtick(
+            p, ad, s, a, qpos, qvel, cfrc, pos0, quat0
+        )
+    )
+
+
+@functools.cache
+def _finalize_fn():
+    return jax.jit(jax.vmap(gk.finalize))
+
+
+def tick_rows(n: int) -> int:
+    """Rows the jitted tick runs for a chunk of n simulations: the next power of two (at
+    least 8). XLA compiles the tick once per shape (3-5 s on a 2-core CPU); studies and
+    calibration call with many chunk sizes, and a few shapes serve them all. The extra
+    rows repeat the last simulation's state and are dropped."""
+    return max(8, 1 << (int(n) - 1).bit_length())
+
+
+def _pad(x, rows: int):
+    """x (n, ...) padded to (rows, ...) by repeating its last row (finite values)."""
+    x = np.asarray(x)
+    if len(x) == rows:
+        return x
+    return np.concatenate([x, np.repeat(x[-1:], rows - len(x), axis=0)])
+
+
+class MujocoBackend:
+    """Runs PickInputs on mujoco.batch.Batch in chunks of batch_size simulations."""
+
+    name = "mujoco"
+
+    def __init__(
+        self, scene: Scene, grasp: GraspConfig, batch_size: int, nthread: int | None = None
+    ):
+        self.scene, self.grasp = scene, grasp
+        self.batch_size = int(batch_size)
+        self.nthread = int(nthread or os.cpu_count() or 1)
+        self.device = f"cpu:{self.nthread} threads"
+        self.stats = RunStats()
+        self.ad = addresses(scene)
+        self._cpu = jax.devices("cpu")[0]
+        self._batches: dict[int, mujoco.batch.Batch] = {}
+
+    def _batch(self, n: int) -> mujoco.batch.Batch:
+        if n not in self._batches:
+            model = copy.copy(self.scene.model)
+            model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+            self._batches[n] = mujoco.batch.Batch(model, nsim=n, nthread=self.nthread)
+        return self._batches[n]
+
+    def run(self, inputs: PickInputs, record: bool = False):
+        """Simulate all inputs; returns (results dict of (N,) arrays, traces (N, T, F) or None)."""
+        results, traces = [], []
+        for start in range(0, len(inputs), self.batch_size):
+            chunk = inputs.take(slice(start, start + self.batch_size))
+            with jax.default_device(self._cpu):
+                out, rows = self._run_chunk(chunk, record)
+            results.append(out)
+            if record:
+                traces.append(rows)
+        self.stats.n += len(inputs)
+        merged = {k: np.concatenate([r[k] for r in results]) for k in results[0]}
+        return merged, (np.concatenate(traces) if record else None)
+
+    def _run_chunk(self, inputs: PickInputs, record: bool):
+        n = len(inputs)
+        ad = self.ad
+        n_sub = self.grasp.substeps(self.scene.solver)
+        n_ticks = self.grasp.n_ticks()
+        t_compile = time.perf_counter()
+        b = self._batch(n)
+        b.reset(stage=mujoco.mjtStage.mjSTAGE_NONE.value)
+        b.expand("pair_friction")[:] = inputs.pair_friction
+        b.expand("pair_solref")[:] = inputs.pair_solref
+        b.expand("pair_solimp")[:] = inputs.pair_solimp
+        qpos, qvel, ctrl = b.bind("qpos"), b.bind("qvel"), b.bind("ctrl")
+        cfrc, sim_time = b.bind("cfrc_ext"), b.bind("time")
+        qpos[:] = inputs.qpos0
+        qvel[:] = 0.0
+        # the controller runs on `rows` >= n rows (tick_rows); physics on the n alone
+        rows_n = tick_rows(n)
+        qpos0 = _pad(inputs.qpos0, rows_n)
+        params = jax.tree.map(lambda x: _pad(x, rows_n), inputs.params)
+        o = ad.object_qpos
+        pos0, quat0 = qpos0[:, o : o + 3], qpos0[:, o + 3 : o + 7]
+        s, a = jax.vmap(lambda q: gk.initial(ad, q))(qpos0)
+        u0 = jax.vmap(lambda st, q: gk.command(ad, st, q))(s, qpos0)
+        ctrl[:] = np.asarray(u0)[:n]
+        b.forward()
+        tick = _tick_fn(ad)
+
+        def state():
+            return _pad(qpos, rows_n), _pad(qvel, rows_n), _pad(cfrc, rows_n)
+
+        tick.lower(params, s, a, *state(), pos0, quat0).compile()
+        self.stats.compile_s += time.perf_counter() - t_compile
+
+        t_run = time.perf_counter()
+        broken = np.zeros(n, bool)
+        rows = []
+        dt = n_sub * self.scene.model.opt.timestep
+        for k in range(n_ticks):
+            s, a, u, row = tick(params, s, a, *state(), pos0, quat0)
+            if record:
+                rows.append(np.asarray(row)[:n])
+            running = (np.asarray(s.phase)[:n] != gk.DONE) & ~np.asarray(a.diverged)[:n]
+            if not running.any():
+                break
+            ctrl[:] = np.asarray(u)[:n]
+            ids = np.flatnonzero(running)
+            failed = np.zeros(n, bool)
+            try:
+                b.step(ids=ids, nstep=n_sub)
+            except mujoco.batch.SimulationError as err:
+                failed[err.ids] = True
+            # a MuJoCo auto-reset (bad accelerations) sends time back: a blow-up
+            failed[ids] |= sim_time[ids] < (k + 1) * dt - 0.5 * dt
+            if failed.any():
+                broken |= failed
+                qpos[failed] = np.nan  # the next tick flags them diverged
+        if broken.any():
+            s, a, _, _ = tick(params, s, a, *state(), pos0, quat0)
+        out = {k: np.asarray(v)[:n] for k, v in _finalize_fn()(params, a).items()}
+        self.stats.run_s += time.perf_counter() - t_run
+        traces = None
+        if record:
+            traces = np.stack(rows, axis=1)
+            if traces.shape[1] < n_ticks:  # all finished early: hold the last row
+                pad = np.repeat(traces[:, -1:], n_ticks - traces.shape[1], axis=1)
+                pad[..., 0] = traces[:, -1:, 0] + dt * np.arange(1, n_ticks - traces.shape[1] + 1)
+                traces = np.concatenate([traces, pad], axis=1)
+        return out, traces

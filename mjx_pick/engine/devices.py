@@ -1,0 +1,80 @@
+"""Which engines this machine can run: JAX's CUDA devices and whether MuJoCo Warp loads.
+
+Kept apart from the Warp backend so that choosing a backend (``backend.make_backend``
+with 'auto') asks these questions without importing the backend that needs the answer.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.metadata
+import importlib.util
+import os
+
+import jax
+
+# set to 1: let the Warp backend run on the CPU (warp-lang's CPU device; tests only)
+ALLOW_CPU_ENV = "MJX_PICK_WARP_CPU"
+
+
+def nvidia_gpus() -> list:
+    """JAX's CUDA devices (empty when JAX has no CUDA backend)."""
+    try:
+        return list(jax.devices("cuda"))
+    except RuntimeError:
+        return []
+
+
+def warp_pin() -> str | None:
+    """mujoco-mjx's own requirement on warp-lang (its 'warp' extra), e.g. '==1.18.0'."""
+    try:
+        reqs = importlib.metadata.requires("mujoco-mjx") or []
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    for r in reqs:
+        name, _, rest = r.partition(";")
+        if name.strip().startswith("warp-lang"):
+            return name.strip()[len("warp-lang") :].strip() or None
+    return None
+
+
+@functools.cache
+def warp_problem() -> str | None:
+    """Why the Warp backend cannot run here, or None when it can.
+
+    Checked in order: a CUDA GPU that JAX sees (unless MJX_PICK_WARP_CPU=1),
+    warp-lang installed, at mujoco-mjx's pinned version, importable, and seeing the GPU.
+    Never imports warp when there is no GPU (so ``auto`` on a CPU machine stays quiet).
+    """
+    allow_cpu = os.environ.get(ALLOW_CPU_ENV, "") == "1"
+    if not nvidia_gpus() and not allow_cpu:
+        return "JAX sees no NVIDIA (CUDA) GPU"
+    if importlib.util.find_spec("warp") is None:
+        return "warp-lang is not installed"
+    try:
+        version = importlib.metadata.version("warp-lang")
+    except importlib.metadata.PackageNotFoundError:
+        version = None
+    pin = warp_pin()
+    if version and pin:
+        try:
+            from packaging.specifiers import SpecifierSet
+
+            if version not in SpecifierSet(pin):
+                return f"warp-lang {version} is installed, but mujoco-mjx needs warp-lang{pin}"
+        except ImportError:  # packaging absent: trust the installed version
+            pass
+    try:
+        import warp as wp
+
+        wp.config.quiet = True  # no banner on stdout
+        wp.init()
+        from mujoco.mjx import warp as mjxw
+
+        if not mjxw.WARP_INSTALLED:
+            return "mujoco.mjx could not import warp"
+        if not allow_cpu and wp.get_cuda_device_count() < 1:
+            return "warp-lang sees no CUDA device (driver too old for its CUDA build?)"
+    except Exception as err:  # any failure to load warp's native library
+        return f"warp-lang does not load: {type(err).__name__}: {err}"
+    return None

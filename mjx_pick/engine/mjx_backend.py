@@ -1,0 +1,688 @@
+"""MJX backend: every pick-point of a batch in ONE jitted computation (GPU, or CPU).
+
+Two MJX implementations run the same program: ``impl='jax'`` (MJX's JAX physics: any
+device, forward-mode derivatives) and ``impl='warp'`` (MuJoCo Warp kernels called from
+JAX, NVIDIA GPUs; ``mjx_pick.engine.warp_backend`` builds it). :class:`Physics` holds what
+differs: the device model, the initial data and how to read buffer overflow.
+
+``rollout_one`` simulates one pick-point: ``lax.scan`` over control periods, each
+running the shared tick (measure, P controller, phase machine, metrics) and
+``n_substeps`` MJX physics steps. The batch is ``vmap`` of it, jitted once per batch
+shape; per-pick contact-pair parameters enter as traced model fields, so sweeps and
+gradients need no new code.
+
+Slot refill (``refill=True``): instead of simulating every pick-point for the longest
+possible pick, a fixed pool of simulation slots runs rounds of ``ticks_per_call``
+control periods inside ONE device program (``make_pool``); after each round, each slot
+whose pick ended (DONE, diverged, or out of ticks) takes the next pick-point. A pick's
+accumulators stop changing once it is DONE or diverged (``kernels.grasp.accumulate``),
+so a refilled run gives the same results as one that simulates every pick to the end;
+results are written in pick-point order.
+
+With several local devices the batch axis is sharded over all of them (a one-axis
+``Mesh``, ``NamedSharding`` for the data and ``shard_map`` for the program):
+pick-points are independent, so each device simulates its slice and nothing is
+communicated. Runs over several machines go through Ray (``mjx_pick.engine.cluster``: one
+actor per GPU), not ``jax.distributed``.
+
+Only per-pick summaries leave the device; full traces are produced only when asked
+(``record=True``), for the few pick-points whose plots are wanted (they are
+re-simulated: a trace of every pick of a large batch would not fit in memory).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import os
+import time
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+from mujoco import mjx
+
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.core.scene import Scene
+from mjx_pick.engine.backend import PickInputs, RunStats, addresses
+from mjx_pick.kernels import grasp as gk
+
+# TF32 matrix products would change contact solutions on GPUs: the rollouts are traced
+# with full-precision products, without changing the process-wide default (a user's own
+# JAX code keeps its setting)
+MATMUL_PRECISION = os.environ.get("MJX_PICK_MATMUL", "highest")
+
+
+def _precise(fn):
+    """fn, traced with MATMUL_PRECISION for its matrix products (scoped to it alone)."""
+
+    def traced(*args):
+        with jax.default_matmul_precision(MATMUL_PRECISION):
+            return fn(*args)
+
+    return traced
+
+
+# control periods per refill round of a pool: a finished slot idles up to this many
+# ticks before it is refilled (0.1 s of simulated time at the 5 ms period), while the
+# round's fixed work (a restart forward, merges, gathers) stays small next to its ~100
+# physics steps per slot. Measured on an H100 (door opener, 16,384 slots): 20 ticks
+# 3,176 pick-points/s, 40 ticks 3,079/s (RESULTS.md, issue 17)
+DEFAULT_TICKS_PER_CALL = 20
+# halvings of a pool in a run's tail (make_pool). Predicted with a schedule model fitted
+# to the H100 figures (RESULTS.md, issue 17): 3 levels lift 109,770 door-opener picks
+# in 32,768 slots from 0.78 to 0.93 slot occupancy (+15 %), 40,000 picks (one evaluate
+# chunk) from 0.55 to 0.89
+DEFAULT_SHRINK_LEVELS = 3
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Physics:
+    """What a rollout program closes over: the device model and initial data.
+
+    impl: 'jax' or 'warp'. overflow(d) -> int32 bitmask of buffer overflows of one
+    simulation (a warp ``OverflowType`` subset; always 0 for 'jax', whose buffers hold
+    every possible contact). nefc(d) -> int32 constraint rows in use (-1 for 'jax').
+    nacon(d) -> int32 contacts in use over ALL simulations of the call (-1 for 'jax').
+    """
+
+    model: mjx.Model
+    data0: mjx.Data
+    impl: str
+    overflow: Callable = lambda d: jnp.int32(0)
+    nefc: Callable = lambda d: jnp.int32(-1)
+    nacon: Callable = lambda d: jnp.int32(-1)
+
+
+def jax_physics(scene: Scene) -> Physics:
+    """MJX's JAX implementation on JAX's default device."""
+    mx = mjx.put_model(scene.model, impl="jax")
+    return Physics(mx, mjx.make_data(mx), "jax")
+
+
+class Diagnostics(NamedTuple):
+    """Per-simulation buffer use, read after a run (int32 each)."""
+
+    overflow: jax.Array  # OR of the overflow bits raised at any step
+    nefc_max: jax.Array  # most constraint rows in use at any step (-1: not tracked)
+    nacon_max: jax.Array  # most contacts of the whole call in use at any step (-1: not tracked)
+
+
+def _physics_steps(phys: Physics, m, d, diag: Diagnostics, n_sub: int):
+    """n_sub physics steps, folding each step's buffer use into diag."""
+
+    def physics(carry, _):
+        d, g = carry
+        d = mjx.step(m, d)
+        g = Diagnostics(
+            g.overflow | phys.overflow(d),
+            jnp.maximum(g.nefc_max, phys.nefc(d)),
+            jnp.maximum(g.nacon_max, phys.nacon(d)),
+        )
+        return (d, g), None
+
+    (d, diag), _ = jax.lax.scan(physics, (d, diag), None, length=n_sub)
+    return d, diag
+
+
+def _initial(
+    phys: Physics, ad: gk.Addresses, qpos0, params, pair_friction, pair_solref, pair_solimp
+):
+    """One pick's model, data (after mj_forward), control state and accumulators."""
+    m = phys.model.replace(
+        pair_friction=pair_friction, pair_solref=pair_solref, pair_solimp=pair_solimp
+    )
+    s, a = gk.initial(ad, qpos0)
+    d = phys.data0.replace(qpos=qpos0, ctrl=gk.command(ad, s, qpos0))
+    d = mjx.forward(m, d)
+    diag = Diagnostics(phys.overflow(d), phys.nefc(d), phys.nacon(d))
+    return m, d, s, a, diag
+
+
+def make_rollout(
+    scene: Scene,
+    grasp: GraspConfig,
+    record: bool,
+    mesh: Mesh | None = None,
+    phys: Physics | None = None,
+    diagnostics: bool = False,
+):
+    """The batched rollout: (qpos0, params, friction, solref, solimp) -> (results,
+    traces), or (results, traces, Diagnostics) with diagnostics, jitted. Every pick
+    runs all ``grasp.n_ticks()`` ticks; traces are None unless record.
+
+    mesh: with several devices, each runs its slice of the batch as its own program
+    (``shard_map``). Left to the SPMD partitioner, the vmapped constraint solver's
+    while-loop test ("is any simulation still iterating?") became an all-reduce across
+    devices at every solver iteration of every physics step (seen in the compiled HLO):
+    a synchronisation that cost 10-16 % of the time on 2-8 H200s.
+    phys: the MJX implementation (default: the JAX one).
+    """
+    phys = phys or jax_physics(scene)
+    ad = addresses(scene)
+    n_sub = grasp.substeps(scene.solver)
+    n_ticks = grasp.n_ticks()
+    o = ad.object_qpos
+
+    def rollout_one(qpos0, params, pair_friction, pair_solref, pair_solimp):
+        m, d, s, a, diag = _initial(
+            phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp
+        )
+        pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
+
+        def control_period(carry, _):
+            d, s, a, g = carry
+            s, a, ctrl, row = gk.tick(
+                params, ad, s, a, d.qpos, d.qvel, d._impl.cfrc_ext, pos0, quat0
+            )
+            d, g = _physics_steps(phys, m, d.replace(ctrl=ctrl), g, n_sub)
+            return (d, s, a, g), (row if record else None)
+
+        (_, _, a, diag), rows = jax.lax.scan(control_period, (d, s, a, diag), None, length=n_ticks)
+        if diagnostics:
+            return gk.finalize(params, a), rows, diag
+        return gk.finalize(params, a), rows
+
+    return jax.jit(_precise(_shard(jax.vmap(rollout_one), mesh)))
+
+
+def _shard(batched, mesh: Mesh | None):
+    if mesh is None or mesh.size <= 1:
+        return batched
+    spec = PartitionSpec("batch")
+    # check_vma off: MJX's solver mixes device-varying and uniform values in
+    # lax.cond branches, which the varying-axis type check rejects
+    return jax.shard_map(batched, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
+
+
+class Slot(NamedTuple):
+    """One simulation slot of a refilled pool (batched along the pool axis)."""
+
+    d: tuple  # the leaves of its mjx.Data (an mjx.Data inside a call)
+    pair_friction: jax.Array  # (npair, 5)
+    pair_solref: jax.Array  # (npair, 2)
+    pair_solimp: jax.Array  # (npair, 5)
+    params: gk.GraspParams
+    s: gk.ControlState
+    a: gk.Accumulators
+    pos0: jax.Array  # (3,) m, the object's initial position
+    quat0: jax.Array  # (4,) its initial orientation
+    k: jax.Array  # int32, control ticks this pick has run
+    diag: Diagnostics
+
+
+def _slot_axes(phys: Physics):
+    """vmap axes of a Slot, whose Data is carried as its tuple of leaves: 0 everywhere,
+    except (Warp) the Data fields that Warp keeps once for all simulations of a call --
+    the contact buffer and its counters. Mapped like the rest, the pool's carried state
+    would hold a copy of the whole contact buffer per slot (slots x naconmax contacts).
+    (A Data-shaped axes tree is no help: vmap cannot match a prefix tree against
+    Warp's Data node.)"""
+    if phys.impl != "warp":
+        return 0
+    from mujoco.mjx._src.types import tree_path_to_attr_str
+    from mujoco.mjx.warp import types as mjxw_types
+
+    batched = mjxw_types._BATCH_DIM["Data"]  # the rule Data.where follows
+    paths = jax.tree_util.tree_flatten_with_path(phys.data0)[0]
+    d_axes = tuple(0 if batched.get(tree_path_to_attr_str(p), True) else None for p, _ in paths)
+    return Slot(d_axes, *([0] * (len(Slot._fields) - 1)))
+
+
+def shrink_sizes(slots: int, levels: int) -> tuple[int, ...]:
+    """Pool sizes of a run's tail: slots, halved up to `levels` times while the halves
+    stay whole numbers (slots per device)."""
+    sizes = [int(slots)]
+    while len(sizes) <= levels and sizes[-1] % 2 == 0 and sizes[-1] > 1:
+        sizes.append(sizes[-1] // 2)
+    return tuple(sizes)
+
+
+def make_pool(
+    scene: Scene,
+    grasp: GraspConfig,
+    ticks_per_call: int,
+    slots: int,
+    mesh: Mesh | None = None,
+    physics_for: Callable[[int], Physics] | None = None,
+    shrink_levels: int = 0,
+):
+    """A refilled pool of `slots` simulations as ONE jitted program:
+    (valid, qpos0, params, friction, solref, solimp) -> (results, ticks, Diagnostics,
+    rounds).
+
+    The inputs hold N pick-points (valid (N,) bool: False for padding, which comes
+    last). Every slot starts a pick; then, in a ``lax.while_loop`` until every pick has
+    ended, all slots run ``ticks_per_call`` control periods (a round), the picks that
+    ended write their results to row pick-id of the (N,) outputs, and their slots take
+    the next picks in order. A slot's pick freezes once it is finished (DONE, diverged,
+    or ``grasp.n_ticks()`` ticks run): its control state and accumulators no longer
+    change, exactly as in ``make_rollout`` where nothing accumulates after DONE, though
+    its physics keeps stepping (a vmapped program steps every slot) until it is
+    refilled. ticks: (N,) int32 control periods each pick ran; rounds: (L,) int32
+    rounds run at each pool size of ``shrink_sizes(slots per device, shrink_levels)``
+    (per device).
+
+    The tail (``shrink_levels`` > 0): once every pick has been handed out, the pool
+    keeps stepping slots whose last pick has ended until the longest-running pick
+    ends. When at most half of the slots are still live, the live ones are moved into
+    a pool of half the size (their state gathered; for Warp, a fresh contact buffer of
+    the smaller size -- contacts are found anew at every step), up to
+    ``shrink_levels`` times. A pick's physics and control do not depend on which slot
+    or pool size runs it, so the results are those of a run without shrinking.
+
+    physics_for(n_worlds) -> Physics: the device model and initial data for a pool of
+    n_worlds simulations per device (Warp sizes its contact buffer by it; default: MJX's
+    JAX physics).
+    """
+    physics_for = physics_for or (lambda n_worlds: jax_physics(scene))
+    n_dev = mesh.size if mesh is not None and mesh.size > 1 else 1
+    sizes = shrink_sizes(slots // n_dev, shrink_levels)
+    phys = physics_for(sizes[0])
+    ad = addresses(scene)
+    n_sub = grasp.substeps(scene.solver)
+    n_ticks = grasp.n_ticks()
+    o = ad.object_qpos
+
+    def done(slot: Slot):
+        return (slot.s.phase == gk.DONE) | slot.a.diverged | (slot.k >= n_ticks)
+
+    def programs(phys: Physics):
+        """(batched start, batched advance, Slot axes) of a pool run with phys (Warp's
+        Data tree holds its contact buffer's size: one set per pool size)."""
+        axes = _slot_axes(phys)
+        d_tree = jax.tree.structure(phys.data0)
+
+        def start(qpos0, params, pair_friction, pair_solref, pair_solimp) -> Slot:
+            _, d, s, a, diag = _initial(
+                phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp
+            )
+            pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
+            args = (pair_friction, pair_solref, pair_solimp, params, s, a, pos0, quat0)
+            return Slot(tuple(d_tree.flatten_up_to(d)), *args, jnp.int32(0), diag)
+
+        def advance_one(slot: Slot, fresh, *inputs):
+            new = start(*inputs)
+            # Data goes through Data.where: Warp's shared contact buffer is kept, not merged
+            d = d_tree.unflatten(slot.d).where(fresh, d_tree.unflatten(new.d))
+            rest = jax.tree.map(
+                lambda n, c: jnp.where(fresh, n, c), new._replace(d=None), slot._replace(d=None)
+            )
+            slot = rest._replace(d=d)
+            m = phys.model.replace(
+                pair_friction=slot.pair_friction,
+                pair_solref=slot.pair_solref,
+                pair_solimp=slot.pair_solimp,
+            )
+
+            def control_period(slot: Slot, _):
+                s, a, ctrl, _ = gk.tick(
+                    slot.params,
+                    ad,
+                    slot.s,
+                    slot.a,
+                    slot.d.qpos,
+                    slot.d.qvel,
+                    slot.d._impl.cfrc_ext,
+                    slot.pos0,
+                    slot.quat0,
+                )
+                # a finished pick's control state, metrics and buffer counts stay as they are
+                frozen = done(slot)
+                keep = lambda old, new: jax.tree.map(lambda x, y: jnp.where(frozen, x, y), old, new)
+                ctrl = jnp.where(frozen, slot.d.ctrl, ctrl)
+                d, diag = _physics_steps(phys, m, slot.d.replace(ctrl=ctrl), slot.diag, n_sub)
+                k = slot.k + jnp.where(frozen, 0, 1).astype(jnp.int32)
+                slot = slot._replace(
+                    d=d, s=keep(slot.s, s), a=keep(slot.a, a), k=k, diag=keep(slot.diag, diag)
+                )
+                return slot, None
+
+            slot, _ = jax.lax.scan(control_period, slot, None, length=ticks_per_call)
+            slot = slot._replace(d=tuple(d_tree.flatten_up_to(slot.d)))
+            return slot, gk.finalize(slot.params, slot.a), done(slot), slot.k, slot.diag
+
+        advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 6, out_axes=(axes, 0, 0, 0, 0))
+        return jax.vmap(start, out_axes=axes), advance, axes
+
+    physes = [phys] + [physics_for(size) for size in sizes[1:]]
+    levels = [programs(p) for p in physes]
+    starts = levels[0][0]
+
+    def compact(state: Slot, order, level: int) -> Slot:
+        """The slots at `order` (live ones first) as the pool of `level`: gathered state;
+        for Data fields kept once per call (Warp's contact buffer), that pool's own."""
+        small = jax.tree.leaves(physes[level].data0)
+        axes = levels[level][2]
+        d_axes = axes.d if isinstance(axes, Slot) else (axes,) * len(small)
+        d = tuple(
+            x[order] if axis == 0 else fresh_leaf
+            for x, axis, fresh_leaf in zip(state.d, d_axes, small, strict=True)
+        )
+        rest = jax.tree.map(lambda x: x[order], state._replace(d=None))
+        return rest._replace(d=d)
+
+    def run_queue(valid, *inputs):
+        n = valid.shape[0]
+        n_valid = jnp.sum(valid.astype(jnp.int32))
+        size = sizes[0]
+        ids = jnp.arange(size, dtype=jnp.int32)
+
+        def gather(pick):
+            i = jnp.clip(pick, 0, n - 1)
+            return tuple(jax.tree.map(lambda x: x[i], inputs))
+
+        pick0 = jnp.where(ids < n_valid, ids, -1)
+        fresh0 = jnp.ones(size, bool)
+        # every slot is fresh in the first round: zeros of the right shapes will do
+        zeros = jax.tree.map(
+            lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(starts, *gather(pick0))
+        )
+        shapes = jax.eval_shape(levels[0][1], zeros, fresh0, *gather(pick0))
+        _, out_s, _, ticks_s, diag_s = shapes
+        rows = jax.tree.map(
+            lambda x: jnp.zeros((n,) + x.shape[1:], x.dtype), (out_s, ticks_s, diag_s)
+        )
+
+        def body(c, advance):
+            state, pick, fresh, nxt, rows, rounds = c
+            state, out, finished, ticks, diag = advance(state, fresh, *gather(pick))
+            ended = finished & (pick >= 0)
+            at = jnp.where(ended, pick, n)  # row n is out of range: dropped
+            rows = jax.tree.map(lambda r, v: r.at[at].set(v, mode="drop"), rows, (out, ticks, diag))
+            # the ended slots take the next picks, in slot order
+            new = nxt + jnp.cumsum(ended.astype(jnp.int32)) - 1
+            ok = ended & (new < n_valid)
+            pick = jnp.where(ended, jnp.where(ok, new, -1), pick)
+            nxt = nxt + jnp.sum(ok.astype(jnp.int32))
+            return state, pick, ok, nxt, rows, rounds + 1
+
+        carry = (zeros, pick0, fresh0, jnp.minimum(size, n_valid), rows, jnp.int32(0))
+        rounds = []
+        for level, size in enumerate(sizes):
+            last = level == len(sizes) - 1
+
+            def cond(c, last=last, half=size // 2):
+                live = c[1] >= 0
+                # leave for the next, smaller pool once the queue is empty and at most
+                # half of the slots are live
+                shrink = (c[3] >= n_valid) & (jnp.sum(live.astype(jnp.int32)) <= half)
+                return jnp.any(live) & (last | ~shrink)
+
+            step = functools.partial(body, advance=levels[level][1])
+            state, pick, fresh, nxt, rows, k = jax.lax.while_loop(cond, step, carry)
+            rounds.append(k)
+            if not last:
+                # live slots first, in slot order; the rest of the smaller pool is idle
+                order = jnp.argsort(pick < 0, stable=True)[: sizes[level + 1]]
+                state = compact(state, order, level + 1)
+                carry = (state, pick[order], fresh[order], nxt, rows, jnp.int32(0))
+        out, ticks, diag = rows
+        return out, ticks, diag, jnp.stack(rounds)
+
+    return jax.jit(_precise(_shard(run_queue, mesh)))
+
+
+@dataclasses.dataclass
+class PoolStats:
+    """Work of refilled runs: how much of the pool's stepping simulated live picks."""
+
+    rounds: int = 0  # rounds of ticks_per_call control periods (summed over devices)
+    slot_ticks: int = 0  # slots x ticks per round, summed over rounds
+    pick_ticks: int = 0  # ticks run by picks up to their end, summed over picks
+    picks: int = 0
+
+    @property
+    def occupancy(self) -> float:
+        """Fraction of slot-ticks that simulated a pick that had not ended."""
+        return self.pick_ticks / self.slot_ticks if self.slot_ticks else float("nan")
+
+    @property
+    def ticks_per_pick(self) -> float:
+        return self.pick_ticks / self.picks if self.picks else float("nan")
+
+
+class MjxBackend:
+    """Runs PickInputs in fixed-size batches (padded), one compile per batch size.
+
+    refill: run through a pool of ``batch_size`` slots refilled as picks end (see the
+    module docstring); a run of fewer picks than the pool uses a smaller pool (rounded
+    up to a multiple of ``POOL_QUANTUM`` so that small runs of different sizes share
+    compiles). shrink_levels: halvings of the pool in a run's tail (see make_pool).
+    Traces (``record=True``) always use the full-length rollout.
+    """
+
+    name = "mjx"
+    impl = "jax"
+    POOL_QUANTUM = 256
+
+    def __init__(
+        self,
+        scene: Scene,
+        grasp: GraspConfig,
+        batch_size: int,
+        devices=None,
+        refill: bool = False,
+        ticks_per_call: int = DEFAULT_TICKS_PER_CALL,
+        shrink_levels: int = DEFAULT_SHRINK_LEVELS,
+    ):
+        if int(ticks_per_call) < 1:
+            raise ValueError(f"ticks_per_call = {ticks_per_call} must be >= 1")
+        if int(shrink_levels) < 0:
+            raise ValueError(f"shrink_levels = {shrink_levels} must be >= 0")
+        if self.impl == "jax" and scene.solver.noslip_iterations > 0:
+            # MJX's JAX physics has no no-slip solver and would ignore the setting
+            raise ConfigError(
+                f"solver.noslip_iterations = {scene.solver.noslip_iterations}: the 'mjx' "
+                "backend (MJX's JAX physics) has no no-slip solver; set it to 0 or use "
+                "the 'mujoco' or 'warp' backend"
+            )
+        self.scene, self.grasp = scene, grasp
+        self.devices = list(devices) if devices is not None else jax.local_devices()
+        n_dev = len(self.devices)
+        # every device gets the same number of simulations
+        self.batch_size = int(-(-int(batch_size) // n_dev) * n_dev)
+        d0 = self.devices[0]
+        self.device = f"{d0.platform}:{d0.device_kind}" + (f" x{n_dev}" if n_dev > 1 else "")
+        self.mesh = Mesh(np.asarray(self.devices), ("batch",))
+        self.sharding = NamedSharding(self.mesh, PartitionSpec("batch"))
+        self.refill = bool(refill)
+        self.ticks_per_call = int(ticks_per_call)
+        self.shrink_levels = int(shrink_levels)
+        self.stats = RunStats()
+        self.pool_stats = PoolStats()
+        self.last_diagnostics: Diagnostics | None = None
+        self._compiled = {}
+
+    # --- what an implementation changes
+    def physics(self, n_worlds: int) -> Physics:
+        """The MJX model and data for programs of n_worlds simulations per device."""
+        return jax_physics(self.scene)
+
+    def check_diagnostics(self, diag: Diagnostics, inputs: PickInputs) -> None:
+        """Called after each run with every pick's Diagnostics (numpy)."""
+
+    # --- full-length batches
+    def _compiled_for(self, args, record: bool):
+        key = ("rollout", len(args[0]), record)
+        if key not in self._compiled:
+            t0 = time.perf_counter()
+            per_device = len(args[0]) // len(self.devices)
+            phys = self.physics(per_device)
+            fn = make_rollout(self.scene, self.grasp, record, self.mesh, phys, diagnostics=True)
+            self._compiled[key] = fn.lower(*args).compile()
+            self.stats.compile_s += time.perf_counter() - t0
+        return self._compiled[key]
+
+    def device_bytes_per_pick(self) -> int:
+        """Rough device memory of one simulation: 4x its mjx.Data (measured peak on an H100
+        at batch 16384: 1.5x; at 4096: 3x -- fixed overheads)."""
+        d = self.physics(1).data0
+        return 4 * sum(int(x.nbytes) for x in jax.tree.leaves(d) if hasattr(x, "nbytes"))
+
+    def run(self, inputs: PickInputs, record: bool = False):
+        """Simulate all inputs; returns (results dict of (N,) arrays, traces (N, T, F) or None)."""
+        if self.refill and not record and len(inputs):
+            merged, diag = self._run_pool(inputs)
+            traces = None
+        else:
+            merged, traces, diag = self._run_batches(inputs, record)
+        self.last_diagnostics = diag
+        self.check_diagnostics(diag, inputs)
+        self.stats.n += len(inputs)
+        return merged, traces
+
+    def _run_batches(self, inputs: PickInputs, record: bool):
+        n = len(inputs)
+        n_dev = len(self.devices)
+        size = self.batch_size
+        if record:  # a few re-simulated pick-points: a small batch
+            size = min(size, -(-max(n, 1) // n_dev) * n_dev)
+        results, traces, diags = [], [], []
+        for start in range(0, n, size):
+            chunk = inputs.take(slice(start, start + size))
+            m = len(chunk)
+            args = tuple(jax.device_put(a, self.sharding) for a in chunk.pad_to(size))
+            fn = self._compiled_for(args, record)
+            t0 = time.perf_counter()
+            out, rows, diag = jax.block_until_ready(fn(*args))
+            self.stats.run_s += time.perf_counter() - t0
+            results.append({k: np.asarray(v)[:m] for k, v in out.items()})
+            diags.append(jax.tree.map(lambda x, m=m: np.asarray(x)[:m], diag))
+            if record:
+                traces.append(np.asarray(rows)[:m])
+        merged = {k: np.concatenate([r[k] for r in results]) for k in results[0]}
+        diag = jax.tree.map(lambda *x: np.concatenate(x), *diags)
+        return merged, (np.concatenate(traces) if record else None), diag
+
+    # --- refilled pool
+    def pool_size(self, n: int) -> int:
+        """Slots for a run of n picks: the batch size, or fewer for a small run."""
+        n_dev = len(self.devices)
+        q = self.POOL_QUANTUM * n_dev
+        return min(self.batch_size, -(-n // q) * q)
+
+    def _pool_fn(self, size: int, args):
+        """The compiled pool program for `size` slots and these inputs' shapes."""
+        key = ("pool", size, len(args[0]))
+        if key not in self._compiled:
+            t0 = time.perf_counter()
+            fn = make_pool(
+                self.scene,
+                self.grasp,
+                self.ticks_per_call,
+                size,
+                self.mesh,
+                self.physics,
+                self.shrink_levels,
+            )
+            self._compiled[key] = fn.lower(*args).compile()
+            self.stats.compile_s += time.perf_counter() - t0
+        return self._compiled[key]
+
+    def _run_pool(self, inputs: PickInputs):
+        """Every pick through a pool of slots refilled as picks end, in one device call;
+        (results, Diagnostics) in pick-point order."""
+        n = len(inputs)
+        size = self.pool_size(n)
+        # the queue is padded to a whole number of pools: runs of similar size (the
+        # chunks of a long evaluation) share one compiled program
+        n_pad = -(-n // size) * size
+        put = lambda a: jax.device_put(a, self.sharding)
+        args = (put(np.arange(n_pad) < n),) + tuple(put(a) for a in inputs.pad_to(n_pad))
+        fn = self._pool_fn(size, args)
+        t0 = time.perf_counter()
+        out, ticks, diag, rounds = jax.block_until_ready(fn(*args))
+        self.stats.run_s += time.perf_counter() - t0
+        n_dev = len(self.devices)
+        sizes = np.asarray(shrink_sizes(size // n_dev, self.shrink_levels))
+        rounds = np.asarray(rounds, np.int64).reshape(n_dev, len(sizes))
+        ticks = np.asarray(ticks)[:n]
+        st = self.pool_stats
+        st.rounds += int(rounds.sum())
+        st.slot_ticks += int((rounds * sizes).sum()) * self.ticks_per_call
+        st.pick_ticks += int(ticks.sum())
+        st.picks += n
+        results = {k: np.array(v)[:n] for k, v in out.items()}
+        return results, Diagnostics(*(np.array(x)[:n] for x in diag))
+
+
+class DeviceThreads:
+    """Several single-device backends as one: each runs a contiguous share of the
+    pick-points on its own device, from its own host thread, and nothing passes between
+    devices. Results come back in pick-point order.
+
+    Why threads and not one sharded program: Warp's contact buffer is one array for all
+    simulations of a call, which the pool carries unsharded, and each device's
+    program should run (and be refilled) at its own pace -- a device whose picks end
+    sooner must not wait for another's. JAX releases the GIL while a device program
+    runs, so the devices work at the same time.
+
+    parts: backends of one class, one device each, built for the same scene and
+    procedure.
+    """
+
+    def __init__(self, parts: list):
+        if len(parts) < 2:
+            raise ValueError(f"DeviceThreads needs >= 2 backends, got {len(parts)}")
+        self.parts = list(parts)
+        p0 = self.parts[0]
+        self.name, self.scene, self.grasp = p0.name, p0.scene, p0.grasp
+        self.batch_size = sum(p.batch_size for p in self.parts)
+        self.devices = [d for p in self.parts for d in p.devices]
+        self.device = f"{p0.device} x{len(self.parts)}"
+        self.refill = p0.refill
+        self.stats = RunStats()
+        self.pool_stats = PoolStats()
+        self.last_diagnostics: Diagnostics | None = None
+
+    def shares(self, n: int) -> list[slice]:
+        """Contiguous, near-equal shares of n pick-points, one per device."""
+        bounds = np.linspace(0, n, len(self.parts) + 1).round().astype(int)
+        return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+    def pool_size(self, n: int) -> int:
+        return sum(
+            p.pool_size(s.stop - s.start) for p, s in zip(self.parts, self.shares(n), strict=True)
+        )
+
+    @property
+    def growths(self) -> int:
+        return sum(getattr(p, "growths", 0) for p in self.parts)
+
+    @property
+    def buffers(self):
+        return getattr(self.parts[0], "buffers", None)
+
+    def run(self, inputs: PickInputs, record: bool = False):
+        from concurrent.futures import ThreadPoolExecutor
+
+        shares = self.shares(len(inputs))
+        compile0 = [p.stats.compile_s for p in self.parts]
+        before = [dataclasses.replace(p.pool_stats) for p in self.parts]
+        t0 = time.perf_counter()
+        with ThreadPoolExecutor(len(self.parts)) as pool:
+            futures = [
+                pool.submit(p.run, inputs.take(s), record)
+                for p, s in zip(self.parts, shares, strict=True)
+            ]
+            outs = [f.result() for f in futures]  # re-raises a part's error
+        wall = time.perf_counter() - t0
+        # compiles run side by side too: the run is the wall time less the longest
+        compiled = [p.stats.compile_s - c for p, c in zip(self.parts, compile0, strict=True)]
+        self.stats.compile_s += max(compiled)
+        self.stats.run_s += max(wall - max(compiled), 0.0)
+        self.stats.n += len(inputs)
+        for p, b in zip(self.parts, before, strict=True):
+            for f in dataclasses.fields(PoolStats):
+                now = getattr(p.pool_stats, f.name) - getattr(b, f.name)
+                setattr(self.pool_stats, f.name, getattr(self.pool_stats, f.name) + now)
+        merged = {k: np.concatenate([o[0][k] for o in outs]) for k in outs[0][0]}
+        traces = np.concatenate([o[1] for o in outs]) if record else None
+        diags = [p.last_diagnostics for p in self.parts]
+        self.last_diagnostics = Diagnostics(*(np.concatenate(x) for x in zip(*diags, strict=True)))
+        return merged, traces

@@ -1,0 +1,223 @@
+"""The study-facing simulator: what sweep, compare, design, robustness, minimum force
+and calibration run their (settings, pick-points) jobs through.
+
+A :class:`Simulator` groups jobs whose settings share a scene structure into one batch
+of per-pick parameters and runs it on the runner (:class:`~mjx_pick.engine.runner.Engine`,
+or a Ray cluster's ``cluster.RayEngine``); it caches scenes and backends so a loop that
+runs again compiles nothing new. :func:`marking_stops` and :func:`showing_progress` are
+the pieces every study wraps its runs in; :func:`differentiable_rollout` is the one path
+that does not go through the runner (it says why).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from mjx_pick.core.objects import ObjectModel
+from mjx_pick.core.pickpoints import PickBatch
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.core.scene import Scene, build_scene
+from mjx_pick.engine.backend import Backend, Settings, make_inputs
+from mjx_pick.engine.runner import Cancelled, ChunkStore, Engine, ProgressFn
+from mjx_pick.outputs.progress import ProgressBar
+from mjx_pick.outputs.rundir import finish
+
+
+@contextlib.contextmanager
+def marking_stops(out_dir: str | Path | None, command: str) -> Iterator[None]:
+    """Inside it, a run stopped by a cancel event (:class:`Cancelled`) or Ctrl-C marks
+    the command's output folder "cancelled" or "interrupted" before the stop goes on:
+    a folder must never be left saying "running" (out_dir None: nothing to mark)."""
+    try:
+        yield
+    except (Cancelled, KeyboardInterrupt) as stop:
+        if out_dir is not None:
+            status = "cancelled" if isinstance(stop, Cancelled) else "interrupted"
+            finish(out_dir, status, command=command)
+        raise
+
+
+@contextlib.contextmanager
+def showing_progress(
+    engine: Engine, desc: str, unit: str = "sim", enabled: bool = True
+) -> Iterator[ProgressBar | None]:
+    """Inside it, the engine's progress goes to a :class:`~mjx_pick.outputs.progress.ProgressBar`
+    (on stderr): every run through the engine adds to the one bar. Nothing is shown when
+    not enabled or when the engine already reports to someone (an outer study's bar, a
+    caller's callback)."""
+    if not enabled or engine.on_progress is not None:
+        yield None
+        return
+    with ProgressBar(desc, unit) as bar:
+        engine.on_progress = bar
+        try:
+            yield bar
+        finally:
+            engine.on_progress = None
+
+
+class Simulator:
+    """Runs (Settings, PickBatch) jobs for one object, batching what can share a program.
+
+    Jobs whose settings share a structure (``Settings.structure``) run as ONE batch of
+    pick-points x variants with per-pick parameters -- one compile, one engine run
+    (chunked by the engine). Scenes and backends are cached, so a loop that calls
+    ``run`` again (a bisection, an optimiser) compiles nothing new.
+
+    Args:
+      obj: the object every job simulates.
+      backend, batch_size: as :class:`Engine` (ignored when engine is given).
+      engine: run through this engine (its backend choice, progress and cancel event).
+      ray: run on a Ray cluster ("auto" or "HOST:PORT": ``cluster.RayEngine``; ignored
+        when engine is given); :meth:`close` ends its actors.
+      on_progress: the engine's progress callback, ``(done, total)`` in pick-point
+        simulations of each :meth:`run` (ignored when engine is given).
+    """
+
+    def __init__(
+        self,
+        obj: ObjectModel,
+        backend: str = "auto",
+        batch_size: int | None = None,
+        *,
+        engine: Engine | None = None,
+        ray: str | None = None,
+        on_progress: ProgressFn | None = None,
+    ) -> None:
+        self.object = obj
+        if engine is None and ray is not None:
+            from mjx_pick.engine.cluster import RayEngine
+
+            engine = RayEngine(ray, backend, batch_size, on_progress=on_progress)
+        self.engine = engine or Engine(backend, batch_size, on_progress=on_progress)
+        self.backend_name = self.engine.backend_name
+        self.batch_size = self.engine.batch_size
+        self._backends: dict[tuple, Backend] = {}
+        self.rollouts = 0  # pick-point simulations run so far
+
+    def close(self) -> None:
+        """Release the engine's resources (a Ray cluster's actors)."""
+        self.engine.close()
+
+    @property
+    def backends(self) -> list[Backend]:
+        """The backends built so far: one per scene structure (one compile each on MJX)."""
+        return list(self._backends.values())
+
+    def adopt(self, settings: Settings, backend: Backend) -> None:
+        """Reuse a backend built elsewhere for settings' structure (no new compile)."""
+        self._backends[settings.structure()] = backend
+        self.engine.adopt(backend)
+
+    def backend(self, settings: Settings) -> Backend:
+        key = settings.structure()
+        if key not in self._backends:
+            scene = build_scene(
+                self.object, settings.gripper, settings.contact, settings.solver, settings.grasp
+            )
+            self._backends[key] = self.engine.make(scene, settings.grasp)
+        return self._backends[key]
+
+    def run(
+        self, jobs: list[tuple[Settings, PickBatch]], store: ChunkStore | None = None
+    ) -> list[dict]:
+        """Per-job results (the dict of ``kernels.grasp.finalize``, (len(picks),) arrays).
+
+        The engine's on_progress gets (done, total) over all jobs of this call. store:
+        chunks finished by an earlier run are read from it, new ones saved to it
+        (:class:`ChunkStore`).
+        """
+        for settings, _ in jobs:
+            settings.grasp.check_gripper(settings.gripper)
+        groups: dict[tuple, list[int]] = {}
+        for j, (settings, _) in enumerate(jobs):
+            groups.setdefault(settings.structure(), []).append(j)
+        results: list[dict | None] = [None] * len(jobs)
+        total = sum(len(p) for _, p in jobs)
+        done = 0
+        report = self.engine.on_progress
+        if report is not None:
+            report(0, total)
+        for structure, members in groups.items():
+            live = [j for j in members if len(jobs[j][1])]
+            for j in members:
+                if not len(jobs[j][1]):
+                    results[j] = {}
+            if not live:
+                continue
+            backend = self.backend(jobs[live[0]][0])
+            parts = []
+            for j in live:
+                settings, picks = jobs[j]
+                parts.append(
+                    make_inputs(
+                        backend.scene,
+                        settings.grasp,
+                        picks,
+                        settings.overrides(backend.scene, len(picks)),
+                    )
+                )
+            inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
+            offset = done
+
+            def progress(k: int, _n: int, offset=offset) -> None:
+                # a group's start (k = 0) is where the previous one ended: said already
+                if report is not None and k > 0:
+                    report(offset + k, total)
+
+            view = store.scene(backend, structure) if store is not None else None
+            out = self.engine.run(backend, inputs, on_progress=progress, store=view).results
+            done += len(inputs)
+            self.rollouts += len(inputs)
+            start = 0
+            for j in live:
+                n = len(jobs[j][1])
+                results[j] = {k: v[start : start + n] for k, v in out.items()}
+                start += n
+        return results
+
+
+@contextlib.contextmanager
+def study_simulator(
+    obj: ObjectModel,
+    simulator: Simulator | None = None,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    ray: str | None = None,
+) -> Iterator[Simulator]:
+    """The simulator a study runs on: the caller's (left open: it may serve further
+    studies), else a new one for obj -- on a Ray cluster with ray -- closed when the
+    study ends (a cluster's actors released)."""
+    if simulator is not None:
+        yield simulator
+        return
+    sim = Simulator(obj, backend, batch_size, ray=ray)
+    try:
+        yield sim
+    finally:
+        sim.close()
+
+
+def differentiable_rollout(scene: Scene, grasp: GraspConfig, record: bool):
+    """The batched MJX rollout (JAX physics) as a JAX function, for forward-mode derivatives.
+
+    (qpos0 (N, nq), params (fields (N,)), pair_friction (N, npair, 5), pair_solref
+    (N, npair, 2), pair_solimp (N, npair, 5)) -> (results of (N,) arrays, traces
+    (N, T, F) or None), every pick run for all ``grasp.n_ticks()`` control periods.
+
+    Why calibration's ``jax.jacfwd`` calls this and not :meth:`Engine.run`: a
+    derivative needs the whole rollout inside the caller's trace, while a backend's
+    ``run`` hands back numpy arrays after the device finished (the trace ends there),
+    splits the work into chunks and batches on the host, may refill slots (Warp, which
+    has no derivatives at all) and records timing as it goes. It is the very program
+    ``MjxBackend`` compiles for full-length batches (``mjx_backend.make_rollout``), so
+    its values are those of backend 'mjx'.
+    """
+    from mjx_pick.engine.mjx_backend import make_rollout
+
+    return make_rollout(scene, grasp, record)

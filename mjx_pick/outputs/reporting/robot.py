@@ -1,0 +1,94 @@
+"""Pick-points as gripper poses for a robot, optionally in a frame of the user's."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyarrow as pa
+
+from mjx_pick.core.config import ConfigError
+
+__all__ = ["frame_matrix", "robot_picks"]
+
+
+def _rot_z(deg: float) -> np.ndarray:
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def frame_matrix(frame) -> np.ndarray:
+    """4x4 transform (mm) from (x_mm, y_mm, z_mm, roll_deg, pitch_deg, yaw_deg)."""
+    from scipy.spatial.transform import Rotation
+
+    values = [float(v) for v in frame]
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        raise ConfigError(
+            f"frame = {frame!r} must be 6 finite numbers: x_mm, y_mm, z_mm, roll_deg, "
+            "pitch_deg, yaw_deg (the object frame's pose in your frame)"
+        )
+    t = np.eye(4)
+    t[:3, :3] = Rotation.from_euler("xyz", values[3:], degrees=True).as_matrix()
+    t[:3, 3] = values[:3]
+    return t
+
+
+def robot_picks(
+    table: pa.Table,
+    pick_height_mm: float,
+    k: int = 10,
+    frame=None,
+    robust: pa.Table | None = None,
+) -> list[dict]:
+    """The top-k pick-points (by robust probability when given, else by score among
+    successes) as gripper poses.
+
+    A pick-point is the object's pose in the gripper frame; the robot needs the
+    gripper's pose in the object frame (origin at the centre of mass, on the table; z
+    up) -- its inverse, at the pick height -- or, with frame (the object frame's pose in
+    the user's frame, see frame_matrix), in the user's frame. The gripper frame is this
+    project's: x the closing axis, z up (the gripper approaches along -z).
+    """
+    from scipy.spatial.transform import Rotation
+
+    rows = table.to_pylist()
+    by_id = {r["pick_id"]: r for r in rows}
+    if robust is not None:
+        order = [r["pick_id"] for r in robust.to_pylist() if r["pick_id"] in by_id]
+        prob = {r["pick_id"]: r for r in robust.to_pylist()}
+    else:
+        from mjx_pick.core.metrics import best_successes
+
+        best = best_successes(np.asarray(table["success"]), np.asarray(table["score"], float), k)
+        order = [rows[i]["pick_id"] for i in best]
+        prob = {}
+    user = frame_matrix(frame) if frame is not None else None
+    out = []
+    for pid in order[:k]:
+        r = by_id[pid]
+        rot = _rot_z(-r["yaw_deg"])  # gripper axes in the object frame
+        pos = -rot @ np.array([r["x_mm"], r["y_mm"], 0.0]) + np.array([0, 0, pick_height_mm])
+        t = np.eye(4)
+        t[:3, :3], t[:3, 3] = rot, pos
+        if user is not None:
+            t = user @ t
+        q = Rotation.from_matrix(t[:3, :3]).as_quat()  # x, y, z, w
+        entry = {
+            "pick_id": int(pid),
+            "object_in_gripper": {"x_mm": r["x_mm"], "y_mm": r["y_mm"], "yaw_deg": r["yaw_deg"]},
+            "gripper_pose": {
+                "frame": "user" if user is not None else "object",
+                "position_mm": [round(float(v), 4) for v in t[:3, 3]],
+                "quaternion_wxyz": [round(float(v), 6) for v in (q[3], q[0], q[1], q[2])],
+                "matrix": [[round(float(v), 6) for v in row] for row in t],
+            },
+            "opening_mm": r["opening_mm"],
+            "score": r["score"],
+            "success": r["success"],
+            "success_probability": prob[pid]["robust_p"] if pid in prob else None,
+            "success_probability_ci": [prob[pid]["robust_ci_low"], prob[pid]["robust_ci_high"]]
+            if pid in prob
+            else None,
+        }
+        out.append(entry)
+    return out

@@ -1,0 +1,108 @@
+"""A finished evaluate folder, loaded once for every part of a report."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import shapely
+import shapely.affinity
+
+from mjx_pick.core.config import ConfigError, from_mapping
+from mjx_pick.core.gripper import GripperSpec
+from mjx_pick.kernels import grasp as gk
+
+__all__ = ["Run"]
+
+
+@dataclasses.dataclass
+class Run:
+    """An evaluate output folder, read back."""
+
+    path: Path
+    table: pa.Table
+    traces: pa.Table | None
+    config: dict
+    summary: dict
+    outline: shapely.Polygon  # object silhouette, mm, object frame
+    gripper: GripperSpec
+
+    @classmethod
+    def load(cls, run_dir: str | os.PathLike) -> Run:
+        path = Path(run_dir)
+        need = ("results.parquet", "config.json", "summary.json")
+        missing = [n for n in need if not (path / n).is_file()]
+        if missing:
+            raise ConfigError(
+                f"{path} is not an evaluate output folder: missing {', '.join(missing)}"
+            )
+        config = json.loads((path / "config.json").read_text())
+        wkt = config.get("object", {}).get("outline_wkt")
+        if not wkt:
+            raise ConfigError(f"{path}/config.json has no object outline (made by an old version)")
+        traces = (
+            pq.read_table(path / "traces.parquet") if (path / "traces.parquet").is_file() else None
+        )
+        return cls(
+            path=path,
+            table=_success_labelled(pq.read_table(path / "results.parquet")),
+            traces=traces,
+            config=config,
+            summary=_success_counted(json.loads((path / "summary.json").read_text())),
+            outline=shapely.from_wkt(wkt),
+            gripper=from_mapping(GripperSpec, config["gripper"]),
+        )
+
+    def trace(self, pick_id: int) -> dict[str, np.ndarray]:
+        """One pick-point's trace: TRACE_FIELDS columns (T,), phase as names."""
+        if self.traces is None:
+            raise ConfigError(f"{self.path} has no traces.parquet (evaluate with n_traces > 0)")
+        ids = np.asarray(self.traces["pick_id"])
+        rows = self.traces.filter(pa.array(ids == pick_id))
+        if rows.num_rows == 0:
+            raise ConfigError(f"pick-point {pick_id} was not traced in {self.path}")
+        return {name: np.asarray(rows[name]) for name in rows.column_names}
+
+    def traced(self) -> list[tuple[int, str]]:
+        """(pick_id, 'best' | 'worst') of every traced pick-point, best first."""
+        if self.traces is None:
+            return []
+        ids = np.asarray(self.traces["pick_id"])
+        ranks = np.asarray(self.traces["rank"].to_pylist(), dtype=object)
+        seen = {}
+        for i, r in zip(ids, ranks, strict=True):
+            seen.setdefault(int(i), r)
+        return sorted(seen.items(), key=lambda kv: kv[1] != "best")
+
+    def row(self, pick_id: int) -> dict:
+        ids = np.asarray(self.table["pick_id"])
+        k = int(np.flatnonzero(ids == pick_id)[0])
+        return {name: self.table[name][k].as_py() for name in self.table.column_names}
+
+
+def _success_labelled(table: pa.Table) -> pa.Table:
+    """A results table whose successes read "success" (older runs wrote "none")."""
+    if "failure" not in table.column_names:
+        return table
+    labels = np.asarray(table["failure"].to_pylist(), dtype=object)
+    old = labels == gk.OLD_SUCCESS_LABEL
+    if not old.any():
+        return table
+    labels[old] = gk.SUCCESS
+    k = table.column_names.index("failure")
+    return table.set_column(k, "failure", pa.array(labels.tolist(), pa.string()))
+
+
+def _success_counted(summary: dict) -> dict:
+    """A summary whose outcome counts name success "success" (older runs: "none")."""
+    failures = summary.get("failures")
+    if isinstance(failures, dict) and gk.OLD_SUCCESS_LABEL in failures:
+        summary["failures"] = {
+            (gk.SUCCESS if k == gk.OLD_SUCCESS_LABEL else k): v for k, v in failures.items()
+        }
+    return summary

@@ -1,0 +1,109 @@
+"""The printable 1:1 positioning template (PDF, one page per pick-point)."""
+
+from __future__ import annotations
+
+import io
+import os
+
+import shapely
+import shapely.affinity
+
+from mjx_pick.core.config import ConfigError, write_atomic
+from mjx_pick.core.gripper import GripperSpec
+from mjx_pick.outputs.plots import add_polygon
+
+__all__ = ["PAPERS_MM", "SCALE_BAR_COLOUR", "positioning_template"]
+
+PAPERS_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4)}
+
+
+SCALE_BAR_COLOUR = "#010203"  # a colour nothing else uses: tests find the bar by it
+
+
+def _pose(x_mm: float, y_mm: float, yaw_deg: float, outline: shapely.Polygon):
+    return shapely.affinity.translate(
+        shapely.affinity.rotate(outline, yaw_deg, origin=(0, 0)), x_mm, y_mm
+    )
+
+
+def positioning_template(
+    outline: shapely.Polygon,
+    gripper: GripperSpec,
+    picks: list[dict],
+    path: str | os.PathLike,
+    paper: str = "a4",
+    title: str = "",
+) -> int:
+    """Printable 1:1 template, one page per pick-point; returns the page count.
+
+    picks: dicts with x_mm, y_mm, yaw_deg, opening_mm and a label. Page coordinates
+    are millimetres (the axes fill the page), so the drawing is at true scale when
+    printed at 100 % ("actual size").
+    """
+    from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle, Rectangle
+
+    if paper not in PAPERS_MM:
+        raise ConfigError(f"paper = {paper!r} is not allowed: choose {', '.join(PAPERS_MM)}")
+    pw, ph = PAPERS_MM[paper]
+    cx, cy = pw / 2, ph / 2 + 15
+    buf = io.BytesIO()
+    with PdfPages(buf) as pdf:
+        for number, pick in enumerate(picks, start=1):
+            fig = Figure(figsize=(pw / 25.4, ph / 25.4))
+            ax = fig.add_axes((0, 0, 1, 1))
+            ax.set_xlim(0, pw)
+            ax.set_ylim(0, ph)
+            ax.set_axis_off()
+            posed = shapely.affinity.translate(
+                _pose(pick["x_mm"], pick["y_mm"], pick["yaw_deg"], outline), cx, cy
+            )
+            extent = max(posed.bounds[2] - posed.bounds[0], posed.bounds[3] - posed.bounds[1])
+            if extent > min(pw, ph) - 30:
+                raise ConfigError(
+                    f"the object ({extent:.0f} mm) does not fit a {paper} page at 1:1"
+                )
+            add_polygon(ax, posed, fc="#cfe0f5", ec="k", lw=1.2)
+            half = 0.5 * pick["opening_mm"]
+            d, w = gripper.finger_depth_mm, gripper.finger_width_mm
+            for x0 in (cx - half - d, cx + half):
+                ax.add_patch(
+                    Rectangle((x0, cy - w / 2), d, w, fc="#333333", alpha=0.55, ec="k", lw=0.8)
+                )
+            ax.plot([cx - 12, cx + 12], [cy, cy], color="r", lw=0.6)
+            ax.plot([cx, cx], [cy - 12, cy + 12], color="r", lw=0.6)
+            ax.add_patch(Circle((cx, cy), 2.0, fill=False, ec="r", lw=0.6))
+            ax.annotate(
+                "",
+                xy=(cx + half + d + 10, cy + w / 2 + 8),
+                xytext=(cx + half + d - 10, cy + w / 2 + 8),
+                arrowprops={"arrowstyle": "<->", "lw": 0.6},
+            )
+            ax.text(
+                cx + half + d, cy + w / 2 + 10, "closing axis (gripper x)", fontsize=6, ha="center"
+            )
+            ax.text(pw / 2, ph - 15, f"{title}", ha="center", fontsize=11)
+            ax.text(pw / 2, ph - 23, f"{number}. {pick['label']}", ha="center", fontsize=10)
+            ax.text(
+                pw / 2,
+                ph - 30,
+                f"object at x = {pick['x_mm']:.1f} mm, y = {pick['y_mm']:.1f} mm, yaw = "
+                f"{pick['yaw_deg']:.1f} deg from the gripper centre (crosshair); "
+                f"opening {pick['opening_mm']:.1f} mm",
+                ha="center",
+                fontsize=7,
+            )
+            ax.plot([20, 120], [20, 20], color=SCALE_BAR_COLOUR, lw=2, solid_capstyle="butt")
+            for xt in (20, 70, 120):
+                ax.plot([xt, xt], [18, 22], color=SCALE_BAR_COLOUR, lw=0.8)
+            ax.text(
+                70,
+                24,
+                "100 mm: check it measures 100 mm (print at actual size)",
+                ha="center",
+                fontsize=7,
+            )
+            pdf.savefig(fig)
+    write_atomic(path, buf.getvalue())
+    return len(picks)

@@ -1,0 +1,418 @@
+"""The fit: an estimator's ask/tell loop over a Problem, checkpointed with orbax; and a
+least-squares fit with MuJoCo's system-identification optimiser (``mujoco.sysid``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mjx_pick.core.config import ConfigError, check_range, to_dict
+from mjx_pick.core.physics import ContactParams
+from mjx_pick.outputs.progress import ProgressBar
+from mjx_pick.outputs.rundir import claim, config_hash, finish
+from mjx_pick.studies.calibration import estimators as E
+from mjx_pick.studies.calibration.identify import data_nll, identifiability, theta_of_z
+from mjx_pick.studies.calibration.parameters import fitted_contact
+
+
+@dataclasses.dataclass
+class CalibrationResult:
+    contact: ContactParams  # the fitted contact parameters (TOML-ready)
+    values: dict[str, float]  # the answer: identified parameters fitted, the rest at start
+    initial: dict[str, float]
+    history: list[dict]  # per step: step, loss, best_loss, values, wall_s, rollouts
+    accuracy_before: dict | None
+    accuracy_after: dict | None
+    out_dir: Path | None
+    estimator: str = "cma"
+    optimum: dict[str, float] | None = None  # the estimator's answer, every parameter
+    identifiability: dict | None = None
+    not_identified: tuple[str, ...] = ()
+    rollouts: int = 0
+    wall_s: float = 0.0
+
+
+class _Checkpoints:
+    """Fit state (estimator state, step, history) saved with orbax-checkpoint."""
+
+    def __init__(self, path: Path):
+        import orbax.checkpoint as ocp
+
+        self.ocp = ocp
+        self.mngr = ocp.CheckpointManager(
+            path.absolute(), options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True)
+        )
+
+    def latest(self) -> dict | None:
+        step = self.mngr.latest_step()
+        if step is None:
+            return None
+        return self.mngr.restore(step, args=self.ocp.args.StandardRestore())
+
+    def save(self, step: int, state: dict) -> None:
+        self.mngr.save(step, args=self.ocp.args.StandardSave(state), force=True)
+        self.mngr.wait_until_finished()
+
+    def close(self) -> None:
+        self.mngr.close()
+
+
+def calibrate(
+    problem,
+    *,
+    steps: int = 200,
+    learning_rate: float = 0.1,
+    estimator: str = "cma",
+    samples: int = 2,
+    sigma: float = 0.2,
+    batch: int | None = None,
+    popsize: int | None = None,
+    seed: int = 0,
+    budget: int | None = None,
+    target: float | None = None,
+    checkpoint_every: int = 10,
+    out: str | Path | None = None,
+    resume: bool = False,
+    holdout=None,
+    identify: bool = True,
+    log=None,
+    progress: bool = False,
+) -> CalibrationResult:
+    """Fit problem's parameters; see ``estimators`` for the estimators.
+
+    Args:
+      steps: estimator steps (each one engine batch).
+      estimator: 'cma' (default: CMA-ES won the equal-budget comparison,
+        benchmarks/RESULTS.md), 'smoothed', 'random' or 'jvp' (MJX forward mode).
+      learning_rate, samples, sigma: Adam's step and the smoothing's quadrature node
+        pairs per parameter and spread in theta (smoothed; learning_rate: jvp too).
+      batch: draws per step (random); popsize: CMA-ES population; seed: both.
+      budget: stop once this many pick-point simulations were spent.
+      target: stop once a simulated loss is at or below it.
+      checkpoint_every: steps between orbax checkpoints (with out); resume continues.
+      holdout: a Problem on held-out pick-points for the accuracy before and after.
+      identify: after the fit, intervals and identifiability (``identify.py``); the
+        parameters not identified keep their starting values in the answer.
+      log: called with each step's history entry (progress output).
+      progress: a progress bar of the steps on stderr (``progress.ProgressBar``; print
+        log lines with ``progress.echo`` so that they do not break it).
+    """
+    est = E.make(
+        estimator,
+        steps,
+        learning_rate=learning_rate,
+        samples=samples,
+        sigma=sigma,
+        batch=batch,
+        popsize=popsize,
+        seed=seed,
+    )
+    check_range("calibrate", "steps", steps, 0, 1_000_000)
+    check_range("calibrate", "checkpoint_every", checkpoint_every, 1)
+    if budget is not None:
+        check_range("calibrate", "budget", budget, 1)
+    space = problem.space
+    base = problem.settings.contact
+    initial = dict(problem.start)
+    state = est.init(problem.start_theta())
+    step, history, wall0 = 0, [], 0.0
+    # every vector simulated and its data -log likelihood: the empirical profile of
+    # the identifiability check (identify.py), at no simulation cost
+    visited: list[tuple[np.ndarray, np.ndarray]] = []
+    best = math.inf
+    out_dir = Path(out) if out is not None else None
+    ckpt = request = None
+    if out_dir is not None:
+        if (out_dir / "checkpoint").is_dir() and not resume:
+            raise ConfigError(f"{out_dir} holds an earlier fit: pass --resume or another --out")
+        request = {"object": problem.object.summary(), "names": list(problem.names)}
+        request.update(settings=to_dict(problem.settings), steps=steps, estimator=estimator)
+        request.update(learning_rate=learning_rate, samples=samples, sigma=sigma, seed=seed)
+        request.update(noise=to_dict(problem.noise), bounds=[space.lo.tolist(), space.hi.tolist()])
+        claim(out_dir, "calibrate", config_hash(request), resume=resume)
+        ckpt = _Checkpoints(out_dir / "checkpoint")
+        saved = ckpt.latest() if resume else None
+        if saved is not None:
+            state = E.loads(saved["state"])
+            history = E.loads(saved["history"])
+            step, wall0 = int(saved["step"]), float(saved["wall_s"])
+            if "visited" in saved:  # (checkpoints of earlier versions lack it)
+                visited = E.loads(saved["visited"])
+            best = min([h["best_loss"] for h in history], default=math.inf)
+    acc_before = None
+    if holdout is not None and step == 0:
+        acc_before = holdout.accuracy(problem.start_theta())
+    t0 = time.perf_counter() - wall0
+    spent0 = problem.rollouts - (history[-1]["rollouts"] if history else 0)
+    bar = ProgressBar(f"calibrating ({estimator})", "step", enabled=progress, total=steps)
+    bar(step, steps)
+    try:
+        while step < steps:
+            if budget is not None and problem.rollouts - spent0 >= budget:
+                break
+            if target is not None and best <= target:
+                break
+            thetas = est.ask(state)
+            grad, diverged = None, None
+            if estimator == "jvp":
+                loss, grad = problem.mjx_loss_and_grad(thetas[0])
+                losses = np.array([loss])
+            else:
+                ev = problem.evaluate(thetas)
+                losses, diverged = ev.loss, ev.diverged
+                visited.append((np.asarray(thetas, np.float32), data_nll(problem, ev)))
+            try:
+                state = est.tell(state, thetas, losses, grad)
+            except FloatingPointError:
+                # a zeroed NaN would be a silent "no change": stop and say where
+                raise ConfigError(
+                    f"calibration step {step}: the {estimator!r} gradient is not finite at "
+                    f"{space.as_dict(thetas[0])} (a simulation diverged or its derivative "
+                    "blew up); narrow the parameter ranges or use estimator 'smoothed'"
+                ) from None
+            best = min(best, float(np.nanmin(losses)))
+            centre = estimator in ("smoothed", "jvp")
+            entry = {
+                "step": step,
+                # smoothed / jvp: the loss at the iterate; search: the batch's best
+                "loss": float(losses[0] if centre else np.nanmin(losses)),
+                "best_loss": best,
+                "values": space.as_dict(est.best(state)),
+                # rows that blew up (at the iterate, or the batch's fewest)
+                "diverged": None
+                if diverged is None
+                else int(diverged[0] if centre else diverged.min()),
+                "wall_s": round(time.perf_counter() - t0, 3),
+                "rollouts": problem.rollouts - spent0,
+            }
+            history.append(entry)
+            if log is not None:
+                log(entry)
+            step += 1
+            bar.note(f"best loss {best:.4g}")
+            bar(step, steps)
+            if ckpt is not None and (step % checkpoint_every == 0 or step == steps):
+                ckpt.save(
+                    step,
+                    {
+                        "state": E.dumps(state),
+                        "history": E.dumps(history),
+                        "visited": E.dumps(visited),
+                        "step": np.int64(step),
+                        "wall_s": np.float64(time.perf_counter() - t0),
+                    },
+                )
+    finally:
+        bar.close()
+        if ckpt is not None:
+            ckpt.close()
+    theta = est.best(state)
+    result = _finish(
+        problem,
+        theta,
+        initial,
+        history,
+        acc_before,
+        holdout,
+        identify,
+        estimator,
+        out_dir,
+        base,
+        visited,
+    )
+    result.rollouts = problem.rollouts - spent0
+    result.wall_s = time.perf_counter() - t0
+    if out_dir is not None:
+        from mjx_pick.studies.calibration.outputs import write_result
+
+        write_result(result, problem, out_dir)
+        meta = problem.engine.describe(time.perf_counter() - t0)
+        meta["timing"]["rollouts"] = result.rollouts
+        if estimator == "jvp":  # the gradients ran on MJX's JAX physics, beside the engine
+            import jax
+
+            d = jax.devices()[0]
+            meta.update(backend="mjx", device=f"{d.platform}:{d.device_kind}")
+        finish(out_dir, command="calibrate", config=request, **meta)
+        # the fit is complete and written: its checkpoints served only a resume
+        shutil.rmtree(out_dir / "checkpoint", ignore_errors=True)
+    return result
+
+
+def _finish(
+    problem,
+    theta,
+    initial,
+    history,
+    acc_before,
+    holdout,
+    identify,
+    estimator,
+    out_dir,
+    base,
+    visited=(),
+) -> CalibrationResult:
+    space = problem.space
+    optimum = space.as_dict(theta)
+    ident, lost = None, ()
+    values = dict(optimum)
+    if identify:
+        seen = None
+        if visited:
+            seen = (
+                np.concatenate([t for t, _ in visited]),
+                np.concatenate([v for _, v in visited]),
+            )
+        ident = identifiability(problem, theta, visited=seen)
+        lost = tuple(n for n in problem.names if not ident[n]["identified"])
+        for n in lost:  # not pinned by the data: keep the start, do not pretend
+            values[n] = initial[n]
+    answer = space.theta([values[n] for n in problem.names])
+    acc_after = holdout.accuracy(answer) if holdout is not None else None
+    contact = fitted_contact(base, values)
+    return CalibrationResult(
+        contact,
+        values,
+        initial,
+        history,
+        acc_before,
+        acc_after,
+        out_dir,
+        estimator,
+        optimum,
+        ident,
+        lost,
+    )
+
+
+class _Budget(Exception):
+    pass
+
+
+def least_squares(
+    problem,
+    *,
+    max_iters: int = 30,
+    eps: float = 0.03,
+    budget: int | None = None,
+    identify: bool = True,
+    holdout=None,
+    log=None,
+    out: str | Path | None = None,
+    progress: bool = False,
+) -> CalibrationResult:
+    """Levenberg-Marquardt on the residuals with ``mujoco.sysid.optimize`` (MuJoCo's
+    ``minimize.least_squares``; its finite-difference Jacobian runs all P shifted
+    vectors as ONE engine batch).
+
+    The sysid parameters are each parameter's position in its bounds, u in [0, 1]
+    (z = z_lo + u (z_hi - z_lo)), so that one relative step ``eps`` suits them all.
+    Where it fits: smooth residuals (traces, lift times). Outcome residuals are steps
+    smoothed over ``temperature_mm``: a local method stalls on their plateaus.
+    With ``out``, writes the results folder as ``calibrate`` does (no checkpoints: a
+    killed fit starts again). progress: a progress bar of the residual evaluations
+    (steps; their number is not known ahead) on stderr.
+    """
+    from mujoco import sysid
+
+    check_range("calibrate", "max_iters", max_iters, 1, 10_000)
+    out_dir = None if out is None else Path(out)
+    if out_dir is not None:
+        request = {
+            "object": problem.object.summary(),
+            "names": list(problem.names),
+            "estimator": "lsq",
+            "max_iters": max_iters,
+            "bounds": [problem.space.lo.tolist(), problem.space.hi.tolist()],
+            "priors": [problem.space.prior_mean.tolist(), problem.space.prior_sd.tolist()],
+        }
+        claim(out_dir, "calibrate", config_hash(request), resume=False)
+    space = problem.space
+    initial = dict(problem.start)
+    z0 = space.z([initial[n] for n in problem.names])
+    u0 = (z0 - space.z_lo) / (space.z_hi - space.z_lo)
+    params = sysid.ParameterDict()
+    for i, n in enumerate(problem.names):
+        params.add(sysid.Parameter(n, float(np.clip(u0[i], 0.01, 0.99)), 0.0, 1.0))
+    history: list[dict] = []
+    best = {"loss": math.inf, "theta": problem.start_theta()}
+    visited: list[tuple[np.ndarray, np.ndarray]] = []  # as in calibrate
+    t0 = time.perf_counter()
+    spent0 = problem.rollouts
+
+    def residual_fn(x, _params):
+        x = np.asarray(x, float)
+        cols = x[:, None] if x.ndim == 1 else x
+        if budget is not None and problem.rollouts - spent0 >= budget:
+            raise _Budget
+        z = space.z_lo[:, None] + cols * (space.z_hi - space.z_lo)[:, None]
+        thetas = theta_of_z(space, z.T)
+        ev = problem.evaluate(thetas)
+        visited.append((np.asarray(thetas, np.float32), data_nll(problem, ev)))
+        i = int(np.argmin(ev.loss))
+        if ev.loss[i] < best["loss"]:
+            best.update(loss=float(ev.loss[i]), theta=thetas[i])
+        entry = {
+            "step": len(history),
+            "loss": float(ev.loss[0]),
+            "best_loss": best["loss"],
+            "values": space.as_dict(best["theta"]),
+            "diverged": int(ev.diverged.min()),
+            "wall_s": round(time.perf_counter() - t0, 3),
+            "rollouts": problem.rollouts - spent0,
+        }
+        history.append(entry)
+        if log is not None:
+            log(entry)
+        bar.note(f"best loss {best['loss']:.4g}")
+        bar.advance()
+        r = ev.residuals.T  # (M, S)
+        return [r[:, 0] if x.ndim == 1 else r], None, None
+
+    import io
+
+    bar = ProgressBar("calibrating (lsq)", "step", enabled=progress)
+    try:
+        # output: MuJoCo's optimiser prints every iteration unless given a stream
+        sysid.optimize(
+            params,
+            residual_fn,
+            optimizer="mujoco",
+            verbose=False,
+            max_iters=max_iters,
+            eps=eps,
+            output=io.StringIO(),
+        )
+    except _Budget:
+        pass
+    finally:
+        bar.close()
+    result = _finish(
+        problem,
+        best["theta"],
+        initial,
+        history,
+        None,
+        holdout,
+        identify,
+        "least_squares",
+        out_dir,
+        problem.settings.contact,
+        visited,
+    )
+    result.rollouts = problem.rollouts - spent0
+    result.wall_s = time.perf_counter() - t0
+    if out_dir is not None:
+        from mjx_pick.studies.calibration.outputs import write_result
+
+        write_result(result, problem, out_dir)
+        meta = problem.engine.describe(result.wall_s)
+        meta["timing"]["rollouts"] = result.rollouts
+        finish(out_dir, command="calibrate", config=request, **meta)
+    return result

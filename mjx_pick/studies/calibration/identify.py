@@ -1,0 +1,574 @@
+"""Which parameters the data pin down: intervals from the curvature of the loss.
+
+At the fitted point, the residuals' Jacobian J (noise units per unit of each
+parameter's coordinate z: the value, or its log for log parameters) is taken by central
+finite differences -- every shifted vector in ONE engine batch -- and
+``mujoco.sysid.calculate_intervals`` turns J^T J (the Gauss-Newton curvature of the
+negative log likelihood) into 95 % intervals. Its eigen-decomposition gives an infinite
+interval to a parameter along a direction the data do not see at all.
+
+The residuals are already in units of their noise (``loss.py``), so the noise variance
+is 1 -- not re-estimated from the residuals, as ``calculate_intervals`` otherwise does
+(a noiseless synthetic fit would have zero-width intervals).
+
+The Jacobian is taken at two steps (5 % and 1.25 % of the bounds): where the two
+intervals differ by more than 2x the loss is not locally quadratic -- residuals that
+jump, as an outcome flips or a slipping part drops a tick earlier -- and the curvature
+is no measure of what the data pin down. A parameter is identified when the two agree
+and the data ALONE give it a 95 % interval narrower than a quarter of its prior's (with
+the default priors: narrower than half its bounds, in z) -- or, where they disagree,
+when theta lies in a basin: the data's likelihood ratio excludes both coarse steps at
+95 % and the loss rises at most half as much at the fine step (jagged residuals rise as
+much at any step; its interval is then at most the coarse step).
+
+Both tests are local: on a jagged loss a point can sit in one narrow basin of several.
+So a parameter must also pass a global check: the data's negative log likelihood along
+each parameter over its whole bounds (``profile_points`` values evenly spaced in z, the
+others at theta: a slice, in the same engine batch as the local steps). Every slice
+point that the likelihood ratio does not exclude at 95 % (a rise of less than chi2_95(1)
+/ 2 = 1.92 above the best of theta and its local steps, plus the loss's own wiggle: the
+largest |rise| at the fine steps) must lie within the local interval widened by one
+slice spacing -- no second basin, no plateau as deep as the answer, no better point
+elsewhere. The reported interval is the local one widened to the farthest value kept (a
+flat-bottomed basin is wider than its curvature says); the slice's own 95 % set (its
+extent, plus one spacing) is reported as the global interval. The rest are reported as
+not identified, and a fit keeps them at their starting values instead of pretending to
+have fitted them.
+
+Both checks so far hold the other parameters where the fit left them, and a slice cannot
+see a valley that runs ACROSS parameters: more pad friction with less grip force (the
+gripper's force offset) explains the same outcomes, so a fit that is off in both sits in
+a slice that looks like a basin (benchmarks/RESULTS.md: over 12 benchmark fits, 9
+parameters passed the slice and the truth lay in only 5 of their intervals). So a
+parameter that passes them must also pass a profile likelihood check (Raue et al. 2009,
+Bioinformatics 25:1923): its value fixed at the ends of its interval and further out
+(``profile_scales`` x its half-width, clipped to the bounds) and the OTHER parameters
+re-optimised there; the profile is the lowest data negative log likelihood found. Two
+sources, the first free:
+
+* empirical: every parameter vector the fit itself simulated (``visited``, recorded by
+  ``fit.calibrate`` and ``fit.least_squares``) bounds the profile from above -- a vector
+  whose likelihood is not excluded keeps its value of each parameter, whatever the
+  others are. CMA-ES's population follows the valley as its covariance adapts to it,
+  but stops where the fit stopped: alone it missed valleys (RESULTS.md).
+* refit: at each profile point the others' best of two starts -- theta's values and
+  the valley's linear continuation (their Gauss-Newton optimum given the fixed value) --
+  then a small CMA-ES (``estimators.cma_es``, ``profile_popsize`` x ``profile_steps``
+  vectors, in units of the others' interval half-widths) from the better one; all points
+  of all parameters advance together, one engine batch per generation (as the finite
+  differences and slices above are one batch).
+
+A profile point is kept when its rise is under the slice's threshold (chi2_95(1) / 2
+above the best of theta and its local steps, plus the loss's wiggle). The interval is
+widened to the farthest value kept (either source); the parameter stays identified only
+if that interval is still narrow by the local test's ratio rule, and if neither end is
+open: an outermost profile point that is kept and not at a bound says the 95 % set
+reaches at least that far -- where it ends is not measured, so no interval is claimed.
+A parameter fitted alone has no others to re-optimise: its profile points are the
+likelihood there (P simulations' worth, as a slice).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from mjx_pick.core.config import ConfigError, check_range
+from mjx_pick.studies.calibration import estimators as E
+
+Z95 = 1.959964
+CHI2_95 = 3.841459  # chi-square, 1 degree of freedom, 95 %
+
+
+def identifiability(
+    problem,
+    theta,
+    *,
+    step: float = 0.05,
+    ratio: float = 0.25,
+    profile_points: int = 12,
+    visited=None,
+    profile_steps: int = 4,
+    profile_popsize: int = 6,
+    profile_sigma: float = 1.0,
+    profile_scales=(1.0, 1.5, 3.0),
+    seed: int = 0,
+) -> dict:
+    """Intervals and identifiability of problem's parameters at theta.
+
+    Args:
+      step: finite-difference step, a fraction of each parameter's bounds in z.
+      ratio: identified iff the data-only 95 % half-width < ratio x the prior's.
+      profile_points: G, slice points per parameter over its bounds (the global check,
+        module docstring; P x G more parameter vectors); 0 skips it.
+      visited: (thetas (N, P), data negative log likelihoods (N,)) the fit simulated:
+        the empirical profile (no simulation); None: none.
+      profile_steps: CMA-ES generations of the refit profile per point; 0: only its
+        two starts (theta's other values and the valley's linear continuation).
+      profile_popsize: vectors per generation and profile point. The refit costs, per
+        parameter that reaches it, up to 2 x len(profile_scales) points x (2 +
+        profile_popsize x profile_steps) vectors (defaults: 156), all parameters'
+        points in 1 + profile_steps engine batches.
+      profile_sigma: CMA-ES's initial step, in units of each other parameter's
+        interval half-width (clipped to 2-25 % of its bounds).
+      profile_scales: where the profile is taken, multiples (>= 1 first: the interval's
+        end) of the interval's half-width in z, on both sides; empty: no profile.
+      seed: the refit's CMA-ES seed.
+
+    Returns:
+      {name: {value, interval (lo, hi) natural units, half_width_z, data_half_width_z
+      (and at the fine step), prior_half_width_z, curvature (J^T J diagonal, data only),
+      locally_quadratic, basin, local (the local tests' verdict), global (the slice:
+      z and natural values (G,), nll_rise (G,), interval, passed), slice_identified and
+      slice_interval (the verdict and interval before the profile), profile (None, or
+      {threshold, empirical: {points, reach_z, interval, passed} | None, refit:
+      {points: [{z, value, scale, nll_rise, others, kept}], reach_z, open, interval,
+      passed} | None, half_width_z, interval, passed}), identified}}, plus
+      'correlation' (P x P, data + prior), 'rollouts' spent (the refit's as
+      'profile_rollouts'), 'rows', 'wall_s'.
+    """
+    check_range("calibrate", "identify step", step, 0, 0.5, lo_open=True)
+    check_range("calibrate", "ratio", ratio, 0, lo_open=True)
+    check_range("calibrate", "profile_points", profile_points, 0, 1000)
+    check_range("calibrate", "profile_steps", profile_steps, 0, 1000)
+    check_range("calibrate", "profile_popsize", profile_popsize, 2, 10_000)
+    check_range("calibrate", "profile_sigma", profile_sigma, 0, 6, lo_open=True)
+    scales = tuple(profile_scales)
+    for c in scales:
+        check_range("calibrate", "profile_scales", c, 1, 100)
+    t_start = time.perf_counter()
+    space = problem.space
+    theta = np.asarray(theta, np.float32)
+    p = len(theta)
+    z0 = space.z(np.asarray(space.values(theta), float))
+    if visited is not None:
+        v_theta, v_nll = (np.asarray(a, float) for a in visited)
+        if v_theta.ndim != 2 or v_theta.shape[1] != p or v_nll.shape != v_theta.shape[:1]:
+            raise ConfigError(
+                f"identifiability: visited must be (thetas (N, {p}), nll (N,)); got "
+                f"{v_theta.shape} and {v_nll.shape}"
+            )
+    zs = [z0]
+    # central differences at two steps (h and h / 4), all in one batch: on a smooth loss
+    # they agree; where the residuals jump (an outcome flips, a slipping part drops a
+    # few ticks earlier) the difference does not shrink with the step, J grows like
+    # 1 / h, and the local curvature says nothing about the data's reach
+    for frac in (step, step / 4):
+        h = frac * (space.z_hi - space.z_lo)
+        for i in range(p):
+            for sign in (1.0, -1.0):
+                z = z0.copy()
+                z[i] = np.clip(z0[i] + sign * h[i], space.z_lo[i], space.z_hi[i])
+                zs.append(z)
+    # the slices: parameter i over its bounds, the others at theta
+    grid = (
+        np.linspace(0.01, 0.99, profile_points)[None, :] * (space.z_hi - space.z_lo)[:, None]
+        + space.z_lo[:, None]
+    )  # (P, G)
+    for i in range(p if profile_points else 0):
+        for g in grid[i]:
+            z = z0.copy()
+            z[i] = g
+            zs.append(z)
+    zs = np.asarray(zs)
+    spent0 = problem.rollouts
+    ev = problem.evaluate(theta_of_z(space, zs))
+    n = ev.n_data
+    jacs = []
+    for k in range(2):
+        res = ev.residuals[1 + 2 * p * k : 1 + 2 * p * (k + 1)]
+        zk = zs[1 + 2 * p * k : 1 + 2 * p * (k + 1)]
+        dz = np.diag(zk[0::2] - zk[1::2])  # (P,): the actual central steps
+        jacs.append(((res[0::2] - res[1::2]) / dz[:, None]).T)  # (M, P)
+    jac = jacs[0]
+    out = {"rows": len(problem.outcomes), "residuals": n}
+    j_data = jac[:n]
+    half_data = _intervals(j_data)
+    half_fine = _intervals(jacs[1][:n])
+    half_all = _intervals(jac)
+    prior_half = Z95 * space.prior_sd
+    curv = np.sum(j_data**2, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        agree = np.abs(np.log(half_fine / half_data)) < np.log(2.0)
+    # the data's negative log likelihood at every shifted vector, relative to theta's
+    nll = data_nll(problem, ev)
+    rise = (nll[1 : 1 + 4 * p] - nll[0]).reshape(2, p, 2)  # (step, parameter, side)
+    slice_rise = (nll[1 + 4 * p :] - nll[0]).reshape(-1, max(profile_points, 1))  # (P | 0, G)
+    coarse, fine = rise[0].min(axis=-1), rise[1].max(axis=-1)
+    # a basin: both coarse steps are excluded at 95 % (likelihood ratio, 1 dof) and the
+    # loss grows with the distance (jagged residuals rise as much at the fine step)
+    basin = (coarse > CHI2_95 / 2) & (fine < 0.5 * coarse)
+    h = step * (space.z_hi - space.z_lo)
+    half_all = np.where(~agree & basin, np.minimum(half_all, h), half_all)
+    lo = space.natural(np.maximum(z0 - half_all, space.z_lo))
+    hi = space.natural(np.minimum(z0 + half_all, space.z_hi))
+    value = space.natural(z0)
+    spacing = (space.z_hi - space.z_lo) * 0.98 / max(profile_points - 1, 1)
+    wide_z = half_all.copy()  # the local half-widths, widened by the slice
+    thr = np.zeros(p)  # the likelihood-ratio threshold per parameter, relative to theta
+    for i, name in enumerate(space.names):
+        narrow = bool(np.isfinite(half_data[i]) and half_data[i] < ratio * prior_half[i])
+        local = (narrow and bool(agree[i])) or bool(basin[i])
+        glob, interval = None, [float(lo[i]), float(hi[i])]
+        steps_rise = np.concatenate([rise[0, i], rise[1, i]])
+        thr[i] = _threshold(steps_rise)
+        if profile_points:
+            # the four local steps of parameter i and their rises join the slice
+            steps_z = (
+                zs[1 + 2 * i : 3 + 2 * i, i].tolist()
+                + zs[1 + 2 * (p + i) : 3 + 2 * (p + i), i].tolist()
+            )
+            glob = _global(
+                grid[i], slice_rise[i], z0[i], half_all[i], spacing[i], steps_z, steps_rise
+            )
+            glob["values"] = space.natural(_at(z0, i, grid[i]))[:, i].tolist()
+            ends = [max(glob.pop("lo_z"), space.z_lo[i]), min(glob.pop("hi_z"), space.z_hi[i])]
+            glob["interval"] = space.natural(_at(z0, i, np.array(ends)))[:, i].tolist()
+            wide = glob["half_width_z"]
+            if wide is not None:  # the local interval, widened to what the slice keeps
+                wide_z[i] = wide
+                interval = _interval(space, z0, i, wide)
+        ok = local and (glob is None or glob["passed"])
+        out[name] = {
+            "value": float(value[i]),
+            "interval": interval,
+            "local_interval": [float(lo[i]), float(hi[i])],
+            "half_width_z": _num(wide_z[i]),
+            "data_half_width_z": _num(half_data[i]),
+            "data_half_width_z_fine_step": _num(half_fine[i]),
+            "prior_half_width_z": float(prior_half[i]),
+            "curvature": float(curv[i]),
+            "log": bool(space.log[i]),
+            # the two steps' intervals within 2x of each other
+            "locally_quadratic": bool(agree[i]),
+            # the data's -log likelihood rise at the coarse step (the smaller side) and
+            # at the fine one (the larger)
+            "nll_rise": [float(coarse[i]), float(fine[i])],
+            "basin": bool(basin[i]),
+            "local": local,
+            "global": glob,
+            # the verdict and interval of the local tests and the slice: given the
+            # others' values (what the profile below checks)
+            "slice_identified": ok,
+            "slice_interval": interval,
+            "profile": None,
+            "identified": ok,
+        }
+    limit = ratio * prior_half  # the local test's narrowness rule, per parameter
+    seen = (v_theta, v_nll) if visited is not None else None
+    options = (profile_points, profile_steps, profile_popsize, profile_sigma, seed)
+    _profile(out, problem, z0, nll[0], thr, wide_z, limit, seen, scales, j_data, options)
+    cov = _covariance(jac)
+    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = cov / np.outer(sd, sd)
+    out["correlation"] = np.where(np.isfinite(corr), corr, 0.0).round(4).tolist()
+    out["rollouts"] = problem.rollouts - spent0
+    out.setdefault("profile_rollouts", 0)
+    out["wall_s"] = time.perf_counter() - t_start
+    return out
+
+
+def _profile(out, problem, z0, nll0, thr, wide_z, limit, seen, scales, j_data, options):
+    """The profile likelihood check (module docstring), in place on out: for each
+    parameter the local tests and the slice identify, the empirical profile from seen
+    (thetas (N, P), nll (N,)) or None, then the refit at ``scales`` x its half-width;
+    out[name]'s interval, half_width_z, profile and identified are updated.
+
+    nll0: theta's data -log likelihood; thr (P,): the likelihood-ratio thresholds
+    relative to theta; wide_z (P,): the half-widths after the slice (z); limit (P,):
+    the largest half-width still narrow; j_data: the data's Jacobian at theta (M, P);
+    options: (profile_points, profile_steps, profile_popsize, profile_sigma, seed)."""
+    profile_points, profile_steps, profile_popsize, profile_sigma, seed = options
+    space = problem.space
+    p = len(z0)
+    # the profile: only parameters the tests above identify, and only with an interval
+    todo = [i for i, nm in enumerate(space.names) if out[nm]["identified"]]
+    todo = [i for i in todo if np.isfinite(wide_z[i])] if scales else []
+
+    def verdict(i, reach, open_end=False) -> tuple[float, bool]:
+        # the half-width widened to the farthest value kept; still narrow (the local
+        # test's rule) and not open-ended?
+        half = max(wide_z[i], reach)
+        return half, bool((half <= wide_z[i] or half < limit[i]) and not open_end)
+
+    if seen is not None:
+        v_theta, v_nll = seen
+        v_z = space.z(np.asarray(space.values(v_theta.astype(np.float32)), float))
+        v_rise = np.where(np.isfinite(v_nll), v_nll - nll0, np.inf)
+        for i in todo:
+            emp = _empirical(space, z0, i, v_z, v_rise, thr[i], max(profile_points, 12))
+            half, emp["passed"] = verdict(i, emp["reach_z"])
+            emp["interval"] = _interval(space, z0, i, half)
+            prof = out[space.names[i]]["profile"] = {"threshold": float(thr[i])}
+            prof.update(empirical=emp, refit=None)
+        # a parameter the fit's own vectors already widen out of the ratio: no refit
+        todo = [i for i in todo if out[space.names[i]]["profile"]["empirical"]["passed"]]
+    if todo:
+        specs = []  # (parameter, scale, side, z)
+        for i in todo:
+            for side in (-1.0, 1.0):
+                prev = z0[i]
+                for c in sorted(scales):
+                    zi = float(np.clip(z0[i] + side * c * wide_z[i], space.z_lo[i], space.z_hi[i]))
+                    if abs(zi - prev) > 1e-9:  # clipped to a bound once: once is enough
+                        specs.append((i, c, side, zi))
+                    prev = zi
+        spent = problem.rollouts
+        # the CMA-ES's unit per other parameter: its interval's half-width, within 2-25 %
+        # of its bounds (an unbounded or unidentified one: a quarter of them)
+        span = space.z_hi - space.z_lo
+        scale = np.clip(np.where(np.isfinite(wide_z), wide_z, span), 0.02 * span, 0.25 * span)
+        best_nll, best_z = _refit(
+            problem,
+            z0,
+            specs,
+            j_data,
+            scale,
+            profile_steps,
+            profile_popsize,
+            profile_sigma,
+            seed,
+        )
+        out["profile_rollouts"] = problem.rollouts - spent
+        for i in todo:
+            name = space.names[i]
+            ks = [k for k, s in enumerate(specs) if s[0] == i]
+            points, reach, open_end = [], 0.0, False
+            for side in (-1.0, 1.0):
+                on_side = [k for k in ks if specs[k][2] == side]
+                for k in on_side:
+                    _, c, _, zi = specs[k]
+                    r = float(best_nll[k] - nll0)
+                    kept = bool(r < thr[i])
+                    if kept:
+                        reach = max(reach, abs(zi - z0[i]))
+                    natural = space.natural(best_z[k])
+                    points.append(
+                        {
+                            "z": zi,
+                            "value": float(natural[i]),
+                            "scale": side * c,
+                            "nll_rise": r,
+                            "others": {
+                                space.names[j]: float(natural[j]) for j in range(p) if j != i
+                            },
+                            "kept": kept,
+                        }
+                    )
+                # the outermost point kept and not at a bound: the 95 % set goes on
+                if on_side:
+                    zi = specs[on_side[-1]][3]
+                    at_bound = zi <= space.z_lo[i] + 1e-9 or zi >= space.z_hi[i] - 1e-9
+                    open_end |= points[-1]["kept"] and not at_bound
+            half, passed = verdict(i, reach, open_end)
+            refit = {
+                "points": points,
+                "reach_z": reach,
+                "open": open_end,
+                "interval": _interval(space, z0, i, half),
+                "passed": passed,
+            }
+            prof = out[name]["profile"]
+            if prof is None:
+                prof = out[name]["profile"] = {"threshold": float(thr[i]), "empirical": None}
+            prof["refit"] = refit
+    for i, name in enumerate(space.names):
+        prof = out[name]["profile"]
+        if prof is None:
+            continue
+        parts = [prof[k] for k in ("empirical", "refit") if prof.get(k) is not None]
+        reach = max([q["reach_z"] for q in parts], default=0.0)
+        half = max(wide_z[i], reach)
+        prof["half_width_z"] = float(half)
+        prof["interval"] = _interval(space, z0, i, half)
+        prof["passed"] = all(q["passed"] for q in parts)
+        out[name]["interval"] = prof["interval"]
+        out[name]["half_width_z"] = _num(half)
+        out[name]["identified"] = out[name]["slice_identified"] and prof["passed"]
+
+
+def data_nll(problem, ev) -> np.ndarray:
+    """The data's negative log likelihood (S,) of an Evaluation: the loss per trial
+    without the prior, times the trials (``loss.py``)."""
+    return (np.asarray(ev.loss, float) - ev.terms.get("prior", 0.0)) * problem.data.total_trials
+
+
+def _threshold(steps_rise) -> float:
+    """The likelihood-ratio threshold relative to theta from the four local steps'
+    rises (coarse +-, fine +-): chi2_95(1) / 2 above the best of theta and its steps
+    (theta may sit on a slope), plus the loss's own wiggle: the largest |rise| at the
+    fine steps (on a quadratic loss a sixteenth of the coarse rise; on a jagged one as
+    large as any: a rise smaller than what 1.25 % of the bounds already gives is no
+    evidence)."""
+    steps_rise = np.asarray(steps_rise, float)
+    wiggle = float(np.max(np.abs(steps_rise[2:])))  # the fine steps
+    ref = min(0.0, float(steps_rise.min()))
+    return CHI2_95 / 2 + wiggle + ref
+
+
+def _interval(space, z0, i, half) -> list[float]:
+    """Parameter i's natural interval z0[i] +- half (z), clipped to the bounds."""
+    ends = [max(z0[i] - half, space.z_lo[i]), min(z0[i] + half, space.z_hi[i])]
+    return space.natural(_at(z0, i, np.array(ends)))[:, i].tolist()
+
+
+def _empirical(space, z0, i, v_z, v_rise, thr, bins) -> dict:
+    """The empirical profile of parameter i from the fit's own vectors v_z (N, P) in z
+    and their rises v_rise (N,) above theta's: every vector under the threshold keeps
+    its value of i (the profile there is at most its rise). Reported per bin of i's
+    bounds: the lowest rise seen and the others' values there."""
+    kept = v_rise < thr
+    reach = float(np.max(np.abs(v_z[kept, i] - z0[i]), initial=0.0))
+    edges = np.linspace(space.z_lo[i], space.z_hi[i], bins + 1)
+    which = np.clip(np.searchsorted(edges, v_z[:, i], side="right") - 1, 0, bins - 1)
+    points = []
+    for b in range(bins):
+        idx = np.flatnonzero(which == b)
+        if not len(idx):
+            continue
+        k = idx[int(np.argmin(v_rise[idx]))]
+        natural = space.natural(v_z[k])
+        points.append(
+            {
+                "z": float(v_z[k, i]),
+                "value": float(natural[i]),
+                "nll_rise": float(v_rise[k]),
+                "others": {nm: float(natural[j]) for j, nm in enumerate(space.names) if j != i},
+                "vectors": len(idx),
+            }
+        )
+    return {"points": points, "vectors": int(len(v_z)), "kept": int(kept.sum()), "reach_z": reach}
+
+
+def _refit(problem, z0, specs, jac, scale, steps, popsize, sigma, seed):
+    """The profile by re-optimisation: for each (i, scale, side, z) of specs, parameter
+    i fixed at z and the others fitted to the data's negative log likelihood.
+
+    Two starts per spec, both simulated in one first batch: theta's other values (the
+    slice's point) and the valley's linear continuation, the others' Gauss-Newton
+    optimum given z (jac: the data's Jacobian (M, P) at theta) -- along a valley across
+    parameters the others must move with i, and a search started at theta's values
+    would have to find the valley first. From the better one a small CMA-ES
+    (``estimators.cma_es``) searches the others in units of scale (P,) (z per unit:
+    their local half-widths, so that sigma 1 is a step of one interval), every spec's
+    population in ONE engine batch per generation. Returns the lowest nll (K,) and its
+    vector in z (K, P) per spec."""
+    space = problem.space
+    p, k_n = len(z0), len(specs)
+    lo, hi = space.z_lo, space.z_hi
+    z0 = np.asarray(z0, float)
+    starts = np.repeat(z0[None], k_n, axis=0)
+    for k, (i, _, _, zi) in enumerate(specs):
+        starts[k, i] = zi
+    best_nll = np.full(k_n, np.inf)
+    best_z = starts.copy()
+
+    def run(batch_z, owners):
+        nll = data_nll(problem, problem.evaluate(theta_of_z(space, batch_z)))
+        nll = np.where(np.isfinite(nll), nll, np.inf)
+        for k in range(k_n):
+            m = np.flatnonzero(owners == k)
+            j = m[int(np.argmin(nll[m]))]
+            if nll[j] < best_nll[k]:
+                best_nll[k], best_z[k] = nll[j], batch_z[j]
+        return nll
+
+    if p == 1:  # nothing to re-optimise: the likelihood at the points
+        run(starts, np.arange(k_n))
+        return best_nll, best_z
+    others = [np.delete(np.arange(p), s[0]) for s in specs]
+    h = jac.T @ jac
+    linear = starts.copy()
+    for k, (i, _, _, zi) in enumerate(specs):
+        o = others[k]
+        linear[k, o] = z0[o] - np.linalg.pinv(h[np.ix_(o, o)]) @ h[o, i] * (zi - z0[i])
+    linear = np.clip(linear, lo, hi)
+    run(np.concatenate([starts, linear]), np.tile(np.arange(k_n), 2))
+    mean = best_z.copy()  # the better start
+    est = E.cma_es(popsize, sigma, seed)
+    states = [est.init(np.zeros(p - 1)) for _ in range(k_n)]
+    for _ in range(steps):
+        asked = [est.ask(s) for s in states]  # (popsize, P - 1) each, in units of scale
+        full = []
+        for k in range(k_n):
+            z = np.repeat(mean[k][None], len(asked[k]), axis=0)
+            o = others[k]
+            z[:, o] = np.clip(mean[k, o] + asked[k] * scale[o], lo[o], hi[o])
+            full.append(z)
+        owners = np.concatenate([np.full(len(a), k) for k, a in enumerate(asked)])
+        nll = run(np.concatenate(full), owners)
+        for k in range(k_n):
+            m = np.flatnonzero(owners == k)
+            states[k] = est.tell(states[k], asked[k], np.minimum(nll[m], 1e30))
+    return best_nll, best_z
+
+
+def _global(grid, rise, z0, half, spacing, steps_z, steps_rise) -> dict:
+    """The slice's verdict for one parameter: grid (G,) z values, rise (G,) the data's
+    -log likelihood above theta's; half: the local 95 % half-width (z); steps_z,
+    steps_rise (4,): the local steps (coarse +-, fine +-) and their rises.
+
+    A value is kept (not excluded at 95 %) when its rise is under :func:`_threshold`
+    (returned relative to theta)."""
+    steps_z, steps_rise = np.asarray(steps_z, float), np.asarray(steps_rise, float)
+    thr = _threshold(steps_rise)
+    kept = rise < thr
+    kept_z = np.concatenate([grid[kept], steps_z[steps_rise < thr]])
+    reach = float(np.max(np.abs(kept_z - z0), initial=0.0))
+    zk = np.append(grid[kept], z0)
+    outside = np.abs(grid[kept] - z0) > half + spacing  # False where half is infinite
+    return {
+        "z": grid.tolist(),
+        "nll_rise": rise.tolist(),
+        "threshold": thr,
+        "lo_z": float(zk.min() - spacing),
+        "hi_z": float(zk.max() + spacing),
+        # the local half-width, widened to the farthest value kept (z)
+        "half_width_z": _num(max(half, reach)),
+        # a value as likely as theta outside its local interval: another basin, a
+        # plateau, or a better answer the fit missed
+        "passed": bool(np.isfinite(half) and not outside.any()),
+        "better_elsewhere": bool((rise < -thr).any()),
+    }
+
+
+def _at(z0, i, values) -> np.ndarray:
+    """(G, P) copies of z0 with coordinate i set to each of values (G,)."""
+    z = np.repeat(np.asarray(z0, float)[None], len(values), axis=0)
+    z[:, i] = values
+    return z
+
+
+def _intervals(jac: np.ndarray) -> np.ndarray:
+    """95 % half-widths from J (M, P) with unit noise (module docstring)."""
+    from mujoco import sysid
+
+    m, p = jac.shape
+    if m <= p or not np.any(jac):
+        return np.full(p, np.inf)
+    # calculate_intervals estimates the noise variance as |r|^2 / (m - p): residuals of
+    # that size make it exactly 1
+    unit = np.full(m, np.sqrt((m - p) / m))
+    _, half = sysid.calculate_intervals([unit], jac)
+    # it uses Student's t; with unit variance known the normal quantile is the right one
+    from scipy.special import stdtrit
+
+    return np.asarray(half, float) * Z95 / stdtrit(m - p, 0.975)
+
+
+def _covariance(jac: np.ndarray) -> np.ndarray:
+    h = jac.T @ jac
+    return np.linalg.pinv(h)
+
+
+def _num(x) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def theta_of_z(space, z: np.ndarray) -> np.ndarray:
+    """z (..., P) -> theta without the 2 % margin of ParamSpace.theta (a step may reach
+    the bounds)."""
+    u = (np.asarray(z) - space.z_lo) / (space.z_hi - space.z_lo)
+    u = np.clip(u, 1e-4, 1 - 1e-4)
+    return np.log(u / (1 - u)).astype(np.float32)

@@ -1,0 +1,465 @@
+"""Gripper comparison and gripper design search (the paper's applications 2 and 3).
+
+Every gripper sees the SAME candidate pick-points: the object's seeded candidate stream
+(poses depend on the object only), kept where at least one gripper is feasible.
+Feasibility is then decided per gripper, and a pick-point a gripper cannot take
+(too wide for its stroke, a finger on the object, too little coverage) counts as a
+failure of that gripper with score 0: for a cell that must pick the object wherever
+it lies, not reaching a pose is as bad as dropping it. Rates over the gripper's own
+feasible pick-points are reported beside them.
+
+Grippers are ranked by success rate (or mean score) with 95% intervals (Wilson for
+rates, normal for means), and each is tested against the leader on the shared
+pick-points with an exact McNemar test (paired successes).
+
+The design search samples gripper variants (Latin hypercube within bounds on any
+numeric GripperSpec field, e.g. finger width, finger depth, stroke), keeps the best
+third of them on a growing number of pick-points (successive halving), and compares
+the winner with the base gripper on FRESH pick-points, so that its figure is not
+inflated by having been selected on the same data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import ConfigError, check_range, to_dict, write_json, write_parquet
+from mjx_pick.core.gripper import GripperSpec
+from mjx_pick.core.metrics import mcnemar_p, rate_summary, results_table
+from mjx_pick.core.objects import ObjectModel
+from mjx_pick.engine.backend import Settings
+from mjx_pick.engine.runner import open_study_store
+from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress, study_simulator
+from mjx_pick.outputs.rundir import claim, config_hash, finish, portable_object
+
+
+@dataclasses.dataclass
+class Comparison:
+    """Outcome of compare(): one ranking row per gripper and the per-pick table."""
+
+    ranking: list[dict]  # best first
+    table: pa.Table  # one row per gripper x shared candidate
+    names: list[str]  # gripper names in the order given (the rows below)
+    success: np.ndarray  # (G, n) bool
+    score: np.ndarray  # (G, n) float, 0 where infeasible
+    feasible: np.ndarray  # (G, n) bool
+    candidates: dict  # x_mm, y_mm, yaw_deg, pick_id (n,)
+    out_dir: Path | None
+    # resume found the comparison already complete: read back, nothing simulated
+    already_complete: bool = False
+
+
+def shared_candidates(
+    obj: ObjectModel,
+    grippers: list[GripperSpec],
+    n: int,
+    seed: int = 0,
+    config: pp.PickConfig | None = None,
+    grasp=None,
+) -> tuple[dict, list[pp.PickBatch], np.ndarray]:
+    """The first n candidates of the seeded stream that some gripper can take.
+
+    Returns:
+      candidates (x_mm, y_mm, yaw_deg, pick_id: (n,) each), per gripper the PickBatch of
+      its feasible candidates (pick_id = candidate id), and reasons (G, n) int.
+    """
+    check_range("compare", "n", n, 1, 1e8)
+    checkers = [pp.FeasibilityChecker(obj, g, config, grasp) for g in grippers]
+    parts, found, drawn = [], 0, 0
+    for ids, x, y, yaw in pp.candidate_blocks(checkers[0], seed):
+        if found >= n or drawn >= checkers[0].config.max_candidates:
+            break
+        drawn += len(ids)
+        checks = [c(x, y, yaw) for c in checkers]
+        r = np.stack([res["reason"] for res in checks])
+        keep = np.flatnonzero((r == 0).any(axis=0))[: n - found]
+        found += len(keep)
+        parts.append(
+            (
+                ids[keep],
+                x[keep],
+                y[keep],
+                yaw[keep],
+                [{k: v[keep] for k, v in res.items()} for res in checks],
+            )
+        )
+    if found == 0:
+        raise ConfigError(
+            f"none of {', '.join(g.name for g in grippers)} can take {obj.name} at any of "
+            f"{drawn} candidate poses: check the strokes against the object's size"
+        )
+    ids, x, y, yaw = (np.concatenate([p[i] for p in parts]) for i in range(4))
+    cand = {"x_mm": x, "y_mm": y, "yaw_deg": yaw, "pick_id": ids}
+    batches = []
+    for g in range(len(grippers)):
+        res = {k: np.concatenate([p[4][g][k] for p in parts]) for k in parts[0][4][g]}
+        batches.append(pp.feasible_batch(ids, x, y, yaw, res, "compare"))
+    reasons = np.stack(
+        [np.concatenate([p[4][g]["reason"] for p in parts]) for g in range(len(grippers))]
+    )
+    return cand, batches, reasons
+
+
+def fit_to(base: Settings, gripper: GripperSpec) -> Settings:
+    """base with gripper, its grip force and closing speed clipped to the gripper's
+    ranges: a gripper that cannot squeeze F_d is compared at its strongest."""
+    g = base.grasp
+    grasp = dataclasses.replace(
+        g,
+        grip_force_n=float(np.clip(g.grip_force_n, gripper.force_min_n, gripper.force_max_n)),
+        closing_speed_mm_s=float(
+            np.clip(g.closing_speed_mm_s, gripper.speed_min_mm_s, gripper.speed_max_mm_s)
+        ),
+    )
+    return dataclasses.replace(base, gripper=gripper, grasp=grasp)
+
+
+def compare(
+    obj: ObjectModel,
+    grippers: list[GripperSpec],
+    base: Settings | None = None,
+    *,
+    n: int = 200,
+    seed: int = 0,
+    rank_by: str = "success",
+    pick_config: pp.PickConfig | None = None,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    simulator: Simulator | None = None,
+    out: str | Path | None = None,
+    overwrite: bool = False,
+    resume: bool = False,
+    ray: str | None = None,
+    progress: bool = False,
+) -> Comparison:
+    """Simulate one shared candidate set on every gripper and rank them (out, resume,
+    ray, progress: as sweep's)."""
+    if rank_by not in ("success", "score"):
+        raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
+    if len(grippers) < 1:
+        raise ConfigError("compare needs at least one gripper")
+    names = [g.name for g in grippers]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"gripper names must differ: {names}")
+    base = base or Settings()
+    pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
+    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+        request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
+        request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
+        request.update(picks=to_dict(pick_config))
+        store, complete = open_study_store(
+            out, "compare", request, resume=resume, overwrite=overwrite
+        )
+        if complete:
+            return _read_comparison(Path(out), obj, grippers, base, n, seed, pick_config)
+        t0 = time.perf_counter()
+        cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
+        n_cand = len(cand["pick_id"])
+        jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]
+        desc = f"compare: {len(jobs)} grippers ({sim.engine.backend_name})"
+        with marking_stops(out, "compare"), showing_progress(sim.engine, desc, "sim", progress):
+            outs = sim.run(jobs, store)
+        success = np.zeros((len(grippers), n_cand), bool)
+        score = np.zeros((len(grippers), n_cand))
+        tables = []
+        for g, (b, out_g) in enumerate(zip(batches, outs, strict=True)):
+            ok = reasons[g] == 0
+            if len(b):
+                success[g, ok] = out_g["success"]
+                score[g, ok] = np.nan_to_num(out_g["score"], nan=0.0)  # diverged: no quality
+                tables.append(results_table(b, out_g, {"gripper": np.full(len(b), names[g])}))
+        rows = []
+        for g, gripper in enumerate(grippers):
+            ok = reasons[g] == 0
+            row = {"gripper": gripper.name, **rate_summary(success[g], score[g])}
+            row["grip_force_n"] = jobs[g][0].grasp.grip_force_n
+            feasible = rate_summary(success[g, ok], score[g, ok]) if ok.any() else None
+            row["feasible"] = int(ok.sum())
+            row["feasible_success_rate"] = feasible["success_rate"] if feasible else math.nan
+            row["diverged"] = int(np.sum(outs[g]["diverged"])) if len(batches[g]) else 0
+            rows.append(row)
+        key = "success_rate" if rank_by == "success" else "score_mean"
+        other = "score_mean" if rank_by == "success" else "success_rate"
+        order = sorted(range(len(rows)), key=lambda g: (-rows[g][key], -rows[g][other]))
+        lead = order[0]
+        for rank, g in enumerate(order, start=1):
+            rows[g]["rank"] = rank
+            rows[g]["p_vs_best"] = 1.0 if g == lead else mcnemar_p(success[lead], success[g])
+        ranking = [rows[g] for g in order]
+        table = pa.concat_tables(tables) if tables else pa.table({})
+        result = Comparison(ranking, table, names, success, score, reasons == 0, cand, None)
+        if out is not None:
+            out_dir = Path(out)
+            config = {
+                "object": obj.summary(),
+                "grippers": [to_dict(g) for g in grippers],
+                "base": to_dict(base),
+                "n": n,
+                "seed": seed,
+                "rank_by": rank_by,
+            }
+            write_json(out_dir / "config.json", config)
+            write_json(out_dir / "ranking.json", ranking)
+            write_parquet(out_dir / "results.parquet", table)
+            plot_comparison(obj, result, out_dir)
+            result.out_dir = out_dir
+            meta = sim.engine.describe(time.perf_counter() - t0)
+            config["picks"] = to_dict(pick_config)
+            finish(out_dir, command="compare", config=config, seed=seed, **meta)
+            store.remove()  # every row is in results.parquet now
+        return result
+
+
+def _read_comparison(out_dir: Path, obj, grippers, base, n, seed, pick_config) -> Comparison:
+    """A complete comparison's folder read back (resume has nothing to do): its ranking
+    and table, and the per-gripper arrays rebuilt from the table on the shared
+    candidates (drawn again: geometry only, nothing simulated)."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    cand, _, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
+    table = pq.read_table(out_dir / "results.parquet")
+    ranking = json.loads((out_dir / "ranking.json").read_text())
+    names = [g.name for g in grippers]
+    success = np.zeros((len(grippers), len(cand["pick_id"])), bool)
+    score = np.zeros(success.shape)
+    where = {int(pid): i for i, pid in enumerate(cand["pick_id"])}
+    if table.num_rows:
+        rows = table.select(["gripper", "pick_id", "success", "score"]).to_pydict()
+        for g, pid, ok, s in zip(*rows.values(), strict=True):
+            i = names.index(g), where[int(pid)]
+            success[i], score[i] = bool(ok), 0.0 if s is None or np.isnan(s) else s
+    feasible = reasons == 0
+    return Comparison(
+        ranking, table, names, success, score, feasible, cand, out_dir, already_complete=True
+    )
+
+
+def plot_comparison(obj: ObjectModel, result: Comparison, out_dir: Path) -> None:
+    """ranking.png (rates and scores with intervals) and maps.png (per-gripper success
+    on the silhouette: where the gripper centre lands, object frame)."""
+
+    from mjx_pick.outputs.plots import add_polygon, gripper_in_object_frame, new_figure, save_png
+
+    r = result.ranking
+    names = [row["gripper"] for row in r]
+    fig, axes = new_figure(1, 2, figsize=(10, 0.5 * len(r) + 2.5))
+    for ax, key, ci, label in (
+        (axes[0], "success_rate", "success_ci", "success rate (Wilson 95%)"),
+        (axes[1], "score_mean", "score_ci", "mean score (95%), infeasible = 0"),
+    ):
+        y = np.arange(len(r))[::-1]
+        v = np.array([row[key] for row in r])
+        lo = np.clip(np.array([row[ci][0] for row in r]), 0.0, v)
+        hi = np.clip(np.array([row[ci][1] for row in r]), v, 1.0)
+        ax.barh(y, v, xerr=[v - lo, hi - v], color="#4a78b5", capsize=3)
+        ax.set_yticks(y, names)
+        ax.set_xlim(0, 1)
+        ax.set_xlabel(label)
+    fig.tight_layout()
+    save_png(fig, out_dir / "ranking.png")
+
+    cols = min(3, len(r))
+    rows = math.ceil(len(r) / cols)
+    fig, axes = new_figure(rows, cols, figsize=(4.5 * cols, 4 * rows), squeeze=False)
+    c = result.candidates
+    centre, _ = gripper_in_object_frame(c["x_mm"], c["y_mm"], c["yaw_deg"])
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    for k, row in enumerate(result.ranking):
+        g = result.names.index(row["gripper"])
+        ax = axes.ravel()[k]
+        ax.set_axis_on()
+        add_polygon(ax, obj.polygon, fc="#dddddd", ec="k", lw=1)
+        feasible, ok = result.feasible[g], result.success[g]
+        for mask, colour, label in (
+            (~feasible & ~ok, "#bbbbbb", "infeasible"),
+            (feasible & ~ok, "#d62728", "failed"),
+            (ok, "#2ca02c", "success"),
+        ):
+            ax.scatter(centre[mask, 0], centre[mask, 1], s=6, color=colour, label=label, zorder=3)
+        ax.set_aspect("equal")
+        ax.set_title(f"{k + 1}. {row['gripper']}: {row['success_rate']:.0%}", fontsize=9)
+        ax.legend(fontsize=6, loc="upper right")
+    fig.tight_layout()
+    save_png(fig, out_dir / "maps.png")
+
+
+@dataclasses.dataclass
+class DesignResult:
+    """Outcome of design_search(): the winner against the base gripper on fresh picks."""
+
+    best: GripperSpec
+    base: GripperSpec
+    final: Comparison  # best vs base on fresh pick-points
+    rounds: list[list[dict]]  # each round's ranking
+    out_dir: Path | None
+
+
+def sample_variants(
+    gripper: GripperSpec, bounds: dict[str, tuple[float, float]], k: int, seed: int = 0
+) -> list[GripperSpec]:
+    """k gripper variants, Latin-hypercube spread within bounds (invalid ones redrawn)."""
+    from scipy.stats import qmc
+
+    from mjx_pick.studies.sweeps import numeric_fields
+
+    fields = numeric_fields(GripperSpec)
+    for name, (lo, hi) in bounds.items():
+        if name not in fields:
+            raise ConfigError(
+                f"design bound {name!r} is not a numeric gripper field: choose from "
+                + ", ".join(fields)
+            )
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ConfigError(f"design bound {name} = {lo:g}:{hi:g} must have lo < hi")
+    if not bounds:
+        raise ConfigError("a design search needs at least one bound (e.g. finger_width_mm=10:40)")
+    check_range("design", "variants", k, 1, 10_000)
+    sampler = qmc.LatinHypercube(d=len(bounds), seed=seed)
+    lo = np.array([b[0] for b in bounds.values()])
+    hi = np.array([b[1] for b in bounds.values()])
+    out, tries = [], 0
+    while len(out) < k and tries < 20 * k:
+        u = sampler.random(k - len(out))
+        tries += len(u)
+        for row in lo + u * (hi - lo):
+            values = {name: float(round(v, 1)) for name, v in zip(bounds, row, strict=True)}
+            label = "-".join(f"{_short(n)}{v:g}" for n, v in values.items())
+            try:
+                out.append(dataclasses.replace(gripper, name=f"{gripper.name}~{label}", **values))
+            except ConfigError:
+                continue  # e.g. fingers that cannot fit the stroke: draw again
+    if len(out) < k:
+        raise ConfigError(f"could draw only {len(out)} valid gripper variants within {bounds}")
+    return out
+
+
+def _short(field: str) -> str:
+    return {"finger_width_mm": "w", "finger_depth_mm": "d", "stroke_mm": "s"}.get(field, field)
+
+
+def design_search(
+    obj: ObjectModel,
+    bounds: dict[str, tuple[float, float]],
+    base: Settings | None = None,
+    *,
+    variants: int = 12,
+    n: int = 64,
+    rounds: int = 3,
+    final_n: int | None = None,
+    seed: int = 0,
+    rank_by: str = "success",
+    pick_config: pp.PickConfig | None = None,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    out: str | Path | None = None,
+    overwrite: bool = False,
+    ray: str | None = None,
+    simulator: Simulator | None = None,
+    progress: bool = False,
+) -> DesignResult:
+    """Search gripper geometry within bounds; see the module docstring.
+
+    Round r simulates the surviving variants on n * 2**r shared pick-points and keeps
+    the best third (at least one); the survivor is then compared with the base gripper
+    on final_n (default 4 n) fresh pick-points. ray: every round on a Ray cluster
+    ("auto" or "HOST:PORT"; mjx_pick.engine.cluster), this process writing out. simulator:
+    run through this one (kept open; backend, batch_size and ray are then its own).
+    progress: a progress bar on stderr (its total grows as each round starts: a
+    round's size depends on the last).
+    """
+    base = base or Settings()
+    check_range("design", "rounds", rounds, 1, 20)
+    check_range("design", "n", n, 1, 1e8)
+    if final_n is not None:
+        check_range("design", "final_n", final_n, 1, 1e8)
+    if rank_by not in ("success", "score"):
+        raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
+    t0 = time.perf_counter()
+    request = {"object": obj.summary(), "bounds": {k: list(v) for k, v in bounds.items()}}
+    request.update(base=to_dict(base), variants=variants, n=n, rounds=rounds, seed=seed)
+    request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
+    pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
+    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+        if out is not None:
+            claim(out, "design", config_hash(request), overwrite=overwrite)
+        search = {"rounds": rounds, "n": n, "final_n": final_n, "seed": seed}
+        search.update(rank_by=rank_by, pick_config=pick_config)
+        return _design(obj, base, pool, sim, bounds, request, t0, out, progress, **search)
+
+
+def _design(
+    obj, base, pool, sim, bounds, request, t0, out, progress, *,
+    rounds, n, final_n, seed, rank_by, pick_config,
+) -> DesignResult:  # fmt: skip
+    """design_search once its inputs are checked, its simulator made and out claimed."""
+    history = []
+    desc = f"design: {rounds} rounds + final ({sim.engine.backend_name})"
+    with showing_progress(sim.engine, desc, "sim", progress) as bar:
+        for r in range(rounds):
+            if bar is not None:
+                bar.note(f"round {r + 1}/{rounds}: {len(pool)} grippers")
+            res = compare(
+                obj,
+                pool,
+                base,
+                n=n * 2**r,
+                seed=seed,
+                rank_by=rank_by,
+                pick_config=pick_config,
+                simulator=sim,
+            )
+            history.append(res.ranking)
+            keep = max(1, math.ceil(len(pool) / 3)) if r < rounds - 1 else 1
+            by_name = {g.name: g for g in pool}
+            pool = [by_name[row["gripper"]] for row in res.ranking[:keep]]
+        best = pool[0]
+        contenders = [best] if best == base.gripper else [best, base.gripper]
+        if bar is not None:
+            bar.note("final: the best against the base gripper on fresh pick-points")
+        final = compare(
+            obj,
+            contenders,
+            base,
+            n=final_n or 4 * n,
+            seed=seed + 1_000_003,
+            rank_by=rank_by,
+            pick_config=pick_config,
+            simulator=sim,
+        )
+    result = DesignResult(best, base.gripper, final, history, None)
+    if out is not None:
+        out_dir = Path(out)
+        write_json(
+            out_dir / "design.json",
+            {
+                "object": obj.summary(),
+                "bounds": {k: list(v) for k, v in bounds.items()},
+                "best": to_dict(best),
+                "base": to_dict(base.gripper),
+                "final": final.ranking,
+                "rounds": history,
+                "seed": seed,
+                "rollouts": sim.rollouts,
+            },
+        )
+        from mjx_pick.core.config import to_toml, write_atomic
+
+        write_atomic(out_dir / "best_gripper.toml", to_toml(best))
+        write_parquet(out_dir / "results.parquet", final.table)
+        plot_comparison(obj, final, out_dir)
+        result.out_dir = out_dir
+        meta = sim.engine.describe(time.perf_counter() - t0)
+        finish(out_dir, command="design", config=request, seed=seed, **meta)
+    return result

@@ -1,0 +1,660 @@
+"""Evaluate pick-points end to end: object + gripper -> pick-points -> simulation -> results.
+
+``evaluate`` is the Python form of ``mjx-pick evaluate``. With ``out`` it writes:
+
+* ``config.json``  the merged configuration, versions, backend, device and seed;
+* ``scene.xml``    the MuJoCo model that was simulated;
+* ``results.parquet`` one row per pick-point (``mjx_pick.core.metrics.COLUMNS``);
+* ``summary.json`` counts, success rate, score quantiles, failure reasons, eq. (1)'s
+  F_Gmin, pick-points per second, compile time apart from run time;
+* ``traces.parquet`` long-format traces of the n best and n worst pick-points (they
+  are re-simulated with recording on: keeping traces of every pick-point of a large
+  batch would not fit in device memory).
+
+Every simulation runs through the engine: large runs go in chunks
+(``engine.run_chunks``) on a chunk executor -- this process's backend, or with
+``ray="auto" | "HOST:PORT"`` the actors of a Ray cluster (``mjx_pick.engine.cluster``); either
+way this process alone writes the folder. Each finished chunk is written atomically
+under ``chunks/`` beside the chunk plan (``chunks/plan.json``), so that ``resume=True``
+redoes nothing that finished, for the same experiment (:func:`experiment_key`). Once the
+run is complete (results, summary and traces written), ``chunks/`` is removed: its
+rows are all in results.parquet. A run that stops early keeps it for ``resume``;
+``resume`` on a complete folder simulates nothing and returns what it holds (without
+``resume`` or ``overwrite``, such a folder is refused).
+``on_progress(done, total)`` reports pick-points done after each chunk; setting the
+``cancel`` event stops the run before the next chunk (``engine.Cancelled``; the folder
+is marked "cancelled" and its finished chunks stay for ``resume``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import shutil
+import threading
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import (
+    ConfigError,
+    check_range,
+    to_dict,
+    write_atomic,
+    write_json,
+    write_parquet,
+)
+from mjx_pick.core.gripper import GripperSpec, load_gripper
+from mjx_pick.core.metrics import summarize
+from mjx_pick.core.objects import ObjectModel, load_object
+from mjx_pick.core.physics import ContactParams, SolverParams
+from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
+from mjx_pick.core.scene import Scene, build_scene
+from mjx_pick.engine import interrupts
+from mjx_pick.engine.backend import Settings
+from mjx_pick.engine.runner import (
+    Cancelled,
+    ChunkExecutor,
+    Engine,
+    LocalExecutor,
+    ProgressFn,
+    auto_chunk,
+    chunk_path,
+    plan_chunks,
+    read_chunk,
+    run_chunks,
+)
+from mjx_pick.engine.simulator import Simulator, showing_progress
+from mjx_pick.kernels import grasp as gk
+from mjx_pick.outputs.progress import ProgressBar
+from mjx_pick.outputs.rundir import claim, config_hash, finish, read_manifest, versions
+from mjx_pick.studies.pickfiles import read_picks_csv
+from mjx_pick.studies.robust import min_grip_force
+
+
+@dataclasses.dataclass
+class Evaluation:
+    """What an evaluation produced (also written to out_dir when one was given)."""
+
+    table: pa.Table
+    summary: dict
+    config: dict
+    traces: pa.Table | None
+    out_dir: Path | None
+    # resume found the run already complete: read back, nothing simulated
+    already_complete: bool = False
+
+
+def user_picks(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    x,
+    y,
+    yaw,
+    config=None,
+    grasp=None,
+    skip_infeasible: bool = False,
+) -> pp.PickBatch:
+    """Check user pick-points. Infeasible ones are an error naming rows and reasons, or,
+    with skip_infeasible, left out with a warning that names them (pick_id keeps each
+    kept row's index in the file, so results map back to it)."""
+    checker = pp.FeasibilityChecker(obj, gripper, config, grasp)
+    ids = np.arange(len(x))
+    res = checker(x, y, yaw)
+    bad = np.flatnonzero(res["reason"] != 0)
+    if len(bad):
+        shown = ", ".join(f"row {i + 2} ({pp.REASONS[res['reason'][i]]})" for i in bad[:8])
+        message = (
+            f"{len(bad)} of {len(x)} pick-points are infeasible for {gripper.name}: {shown}"
+            + (" ..." if len(bad) > 8 else "")
+        )
+        if not skip_infeasible or len(bad) == len(x):
+            hint = "" if skip_infeasible else " (--skip-infeasible leaves them out)"
+            raise ConfigError(message + hint)
+        warnings.warn(message + "; left out", stacklevel=2)
+    return checker.batch(ids, x, y, yaw, mode="user")
+
+
+def _resolve(obj, gripper) -> tuple[ObjectModel, GripperSpec]:
+    if not isinstance(obj, ObjectModel):
+        obj = load_object(obj)
+    if not isinstance(gripper, GripperSpec):
+        gripper = load_gripper(gripper)
+    return obj, gripper
+
+
+def evaluate(
+    obj: ObjectModel | str,
+    gripper: GripperSpec | str = "robotiq-2f85",
+    *,
+    n: int = 1000,
+    seed: int = 0,
+    picks: pp.PickBatch | str | Path | None = None,
+    contact: ContactParams | None = None,
+    solver: SolverParams | None = None,
+    grasp: GraspConfig | None = None,
+    pick_config: pp.PickConfig | None = None,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    out: str | Path | None = None,
+    n_traces: int = 3,
+    progress: bool = False,
+    resume: bool = False,
+    until: int | None = None,
+    min_score: float = 0.9,
+    max_n: int | None = None,
+    chunk_size: int | None = None,
+    min_force: bool = False,
+    stability_um: float = 0.0,
+    overwrite: bool = False,
+    skip_infeasible: bool = False,
+    keep_chunks: bool = False,
+    on_progress: ProgressFn | None = None,
+    cancel: threading.Event | None = None,
+    ray: str | None = None,
+    on_cluster_event=None,
+) -> Evaluation:
+    """Simulate pick-points of an object with a gripper; see the module docstring.
+
+    Args:
+      obj: an ObjectModel, a shipped asset name, or an image/mesh path (see load_object).
+      gripper: a GripperSpec, a preset name or a gripper TOML path.
+      n: pick-points to generate (Normal mode) when picks is None.
+      seed: generator seed (same seed, same pick-points).
+      picks: a PickBatch or a CSV path (x_mm, y_mm, yaw_deg) instead of generating.
+      contact, solver, grasp, pick_config: settings (defaults: the paper's).
+      backend: "auto", "warp", "mjx" or "mujoco".
+      batch_size: simulations per backend call (default: per backend).
+      out: output folder (nothing is written without one).
+      n_traces: traces kept for the n best and n worst pick-points.
+      progress: show a progress bar (tqdm, on stderr).
+      on_progress: called as on_progress(done, total) with the pick-points simulated
+        (or read back on resume) of the main run, before the first chunk and after each
+        (Optimization mode, whose total is not known ahead, reports nothing).
+      cancel: a threading.Event; once set, the run stops before its next chunk with
+        mjx_pick.engine.runner.Cancelled (the output folder keeps its finished chunks).
+      resume: continue an interrupted run of the same experiment (:func:`experiment_key`)
+        in out: finished chunks are read, not simulated; the run keeps its chunk size.
+      overwrite: replace what another command (or another configuration) wrote in out.
+      keep_chunks: keep out/chunks/ after a complete run (default: removed once every
+        row is in results.parquet; a run that stops early always keeps it).
+      skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
+        them) instead of refusing the file.
+      until, min_score, max_n: Optimization mode -- simulate batches until `until`
+        pick-points reach min_score or max_n are spent (resumable too: batch j is
+        chunk j).
+      chunk_size: pick-points per chunk written to disk (default: from device memory;
+        with ray, one actor batch). Keep it a whole number of batches: a chunk smaller
+        than a batch is a call of another shape, whose float32 rounding may differ.
+      min_force: add a min_force_n column: each pick-point's smallest successful F_d
+        within the gripper's force range (a batched bisection, about 10 more
+        simulations per pick-point; see mjx_pick.studies.robust.min_grip_force).
+      stability_um: > 0: simulate every pick-point again with the object moved this far
+        along x (micrometres, at most 100) and add success_shifted, score_shifted and
+        label_stable (the two labels agree). A label that a micrometre flips rests on a
+        threshold (a part that just holds or just slips; an edge contact that creeps
+        off the pad or not): no engine reproduces it reliably -- MuJoCo Warp's own
+        run-to-run differences flip such labels too (benchmarks/RESULTS.md, "Run-to-run
+        determinism"). One more simulation per pick-point. One probe finds about half
+        of the labels that some micrometre move flips (RESULTS.md): a flag marks a coin
+        toss; no flag promises less (robust() samples more moves).
+      ray: run the chunks on a Ray cluster: "auto" or the head's "HOST:PORT" (needs
+        the cluster extra; see mjx_pick.engine.cluster). This process still writes out.
+      on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` (an actor
+        started or answered, a chunk sent, done or lost), in the driver's loop.
+    """
+    obj, gripper = _resolve(obj, gripper)
+    contact = contact or ContactParams()
+    solver = solver or SolverParams()
+    grasp = grasp or GraspConfig()
+    pick_config = pick_config or pp.PickConfig()
+    grasp.check_gripper(gripper)
+    if ray is not None and min_force:
+        raise ConfigError(
+            "--min-force does not run on a Ray cluster yet: leave out --ray or --min-force"
+        )
+    check_range("evaluate", "stability_um", stability_um, 0, 100)
+    if ray is not None and stability_um:
+        raise ConfigError(
+            "--stability-um does not run on a Ray cluster yet: leave out --ray or --stability-um"
+        )
+    if chunk_size is not None and int(chunk_size) < 1:
+        raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
+    if resume and out is None:
+        raise ConfigError("--resume needs --out: the folder of the run to continue")
+    scene = build_scene(obj, gripper, contact, solver, grasp)
+    engine = runner = None
+    if ray is None:
+        engine = Engine(backend, batch_size, chunk_size=chunk_size or None, cancel=cancel)
+        runner = engine.make(scene, grasp)
+        executor = LocalExecutor(engine, runner, grasp)
+    else:
+        from mjx_pick.engine.cluster import RayExecutor
+
+        executor = RayExecutor(
+            ray,
+            scene,
+            grasp,
+            backend=backend,
+            batch_size=batch_size,
+            cancel=cancel,
+            on_event=on_cluster_event,
+        )
+    try:
+        return _evaluate(
+            executor,
+            engine,
+            runner,
+            scene,
+            obj,
+            gripper,
+            contact,
+            solver,
+            grasp,
+            pick_config,
+            n=n,
+            seed=seed,
+            picks=picks,
+            out=out,
+            n_traces=n_traces,
+            progress=progress,
+            resume=resume,
+            until=until,
+            min_score=min_score,
+            max_n=max_n,
+            chunk_size=chunk_size,
+            min_force=min_force,
+            stability_um=stability_um,
+            overwrite=overwrite,
+            skip_infeasible=skip_infeasible,
+            keep_chunks=keep_chunks,
+            on_progress=on_progress,
+        )
+    finally:
+        if hasattr(executor, "close"):
+            executor.close()
+
+
+def _evaluate(
+    executor: ChunkExecutor,
+    engine: Engine | None,
+    runner,
+    scene,
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    contact: ContactParams,
+    solver: SolverParams,
+    grasp: GraspConfig,
+    pick_config: pp.PickConfig,
+    *,
+    n,
+    seed,
+    picks,
+    out,
+    n_traces,
+    progress,
+    resume,
+    until,
+    min_score,
+    max_n,
+    chunk_size,
+    min_force,
+    stability_um,
+    overwrite,
+    skip_infeasible,
+    keep_chunks,
+    on_progress,
+) -> Evaluation:
+    """evaluate() once its executor (this process, or a Ray cluster) is ready."""
+    out_dir = Path(out) if out is not None else None
+    key = experiment_key(
+        scene,
+        {
+            "gripper": gripper,
+            "contact": contact,
+            "solver": solver,
+            "grasp": grasp,
+            "picks": pick_config,
+            "source": _picks_source(picks),
+            "n": n if picks is None and until is None else None,
+            "seed": seed,
+            "until": until,
+            "min_score": min_score if until is not None else None,
+            "max_n": max_n,
+            "min_force": min_force,
+            "stability_um": stability_um,
+            "backend": executor.name,
+            # a batched program's float32 rounding depends on its batch shape, on the C
+            # engine too (its per-tick kernel: engine module docstring)
+            "batch_size": executor.batch_size,
+        },
+    )
+    done = _complete_run(out_dir, key) if out_dir is not None and not overwrite else None
+    if done is not None and resume:
+        return done
+    if done is not None:  # its chunks are gone: plan_chunks would no longer see it
+        raise ConfigError(
+            f"{out_dir} holds this run, complete: pass --resume to read it back, "
+            "--overwrite to run it again, or choose another --out"
+        )
+    if out_dir is not None:  # before any simulation: a folder it may not use is refused now
+        claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite)
+
+    if until is not None:
+        max_n = max_n or 10 * until
+        batch = int(chunk_size or executor.batch_size)
+        plan = plan_chunks(out_dir, key, max_n, min(batch, max_n), resume)
+        picks_batch = None
+    else:
+        if picks is None:
+            picks_batch = pp.generate_normal(
+                obj, gripper, n, seed=seed, config=pick_config, grasp=grasp
+            )
+        elif isinstance(picks, pp.PickBatch):
+            picks_batch = picks
+        else:
+            picks_batch = user_picks(
+                obj,
+                gripper,
+                *read_picks_csv(picks),
+                config=pick_config,
+                grasp=grasp,
+                skip_infeasible=skip_infeasible,
+            )
+        if chunk_size:
+            chunk = int(chunk_size)
+        elif runner is not None:
+            chunk = auto_chunk(runner)
+        else:
+            chunk = executor.batch_size
+        plan = plan_chunks(out_dir, key, len(picks_batch), chunk, resume)
+
+    config = {
+        "object": obj.summary(),
+        "gripper": to_dict(gripper),
+        "contact": to_dict(contact),
+        "contact_in_mujoco": to_dict(scene.contact),
+        "scene": {
+            # where the pads grip (GraspConfig.grasp_height) and their contact patch
+            "fingertip_height_mm": round(scene.index.pad_bottom_z0_m * 1e3, 6),
+            "pad_patch_mm": [round(v, 6) for v in scene.pad_patch_mm],
+        },
+        "solver": to_dict(solver),
+        "grasp": to_dict(grasp),
+        "picks": to_dict(pick_config),
+        "n": int(len(picks_batch)) if picks_batch is not None else None,
+        "seed": int(seed),
+        "mode": picks_batch.mode if picks_batch is not None else "optimization",
+        "backend": executor.name,
+        "device": executor.device,
+        "batch_size": int(executor.batch_size),
+        "chunk_size": int(plan.chunk_size),
+        "ray": getattr(executor, "address", None),
+        "config_key": key,
+        "versions": versions(),
+    }
+    if out_dir is not None:
+        write_json(out_dir / "config.json", config)
+        write_atomic(out_dir / "scene.xml", scene.xml)
+
+    t0 = time.perf_counter()
+    try:
+        if until is not None:
+            picks_batch, table = _optimize(
+                executor, plan, out_dir, obj, gripper, grasp, until, min_score, seed, pick_config
+            )
+            config["n"], config["mode"] = int(len(picks_batch)), picks_batch.mode
+            if out_dir is not None:
+                write_json(out_dir / "config.json", config)
+        else:
+            table = _simulate(executor, picks_batch, plan, out_dir, progress, on_progress)
+        wall = time.perf_counter() - t0
+        summary = summarize(table)
+        mu = contact.pad_friction
+        timing = executor.describe()["timing"]
+        summary.update(
+            {
+                "object": obj.name,
+                "gripper": gripper.name,
+                "backend": executor.name,
+                "device": executor.device,
+                "f_gmin_n": min_grasp_force_n(obj, mu, grasp.safety_factor),
+                "grip_force_n": grasp.grip_force_n,
+                "candidates_checked": int(picks_batch.n_candidates),
+                "rejected": dict(picks_batch.rejected),
+                "compile_s": timing["compile_s"],
+                "run_s": timing["run_s"],
+                "wall_s": round(wall, 3),
+                # per backend (per actor on a cluster): simulations over simulating time
+                "picks_per_s": round(timing["simulations"] / timing["run_s"], 2)
+                if timing["run_s"] > 0
+                else None,
+                "simulated_s_per_pick": round(grasp.duration_s, 3),
+                "physics_steps_per_pick": grasp.n_ticks() * grasp.substeps(solver),
+            }
+        )
+        if hasattr(executor, "cluster_summary"):
+            summary["cluster"] = executor.cluster_summary()
+        settings = Settings(gripper, contact, solver, grasp)
+        if min_force or stability_um:
+            # the extra simulations below run through this run's engine and backend
+            sim = Simulator(obj, engine=engine)
+            sim.adopt(settings, runner)
+        if min_force:
+            t1 = time.perf_counter()
+            with showing_progress(engine, "minimum grip force (bisection)", "sim", progress):
+                forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
+            table = table.append_column("min_force_n", pa.array(forces))
+            # holding at the gripper's smallest force says only that the true minimum is at
+            # or below it: flagged, never presented as the minimum itself
+            at_floor = np.isfinite(forces) & (forces <= gripper.force_min_n + 1e-9)
+            table = table.append_column("min_force_at_floor", pa.array(at_floor))
+            summary["min_force_at_floor"] = int(at_floor.sum())
+            summary["min_force_s"] = round(time.perf_counter() - t1, 3)
+            summary["min_force_n_median"] = (
+                float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
+            )
+        if stability_um:
+            t1 = time.perf_counter()
+            table = _stability(table, picks_batch, sim, settings, stability_um, progress)
+            stable = table["label_stable"].to_numpy(zero_copy_only=False)
+            summary["stability_um"] = stability_um
+            summary["labels_unstable"] = int((~stable).sum())
+            summary["stability_s"] = round(time.perf_counter() - t1, 3)
+        traces = _traces(executor, picks_batch, table, n_traces) if n_traces else None
+        interrupts.raise_if_requested()  # a Ctrl-C swallowed in the last chunk: not complete
+    except (KeyboardInterrupt, Cancelled) as stop:
+        _stopped(out_dir, stop, executor, seed, config, time.perf_counter() - t0)
+        raise
+    if out_dir is not None:
+        write_parquet(out_dir / "results.parquet", table)
+        write_json(out_dir / "summary.json", summary)
+        if traces is not None:
+            write_parquet(out_dir / "traces.parquet", traces)
+        meta = executor.describe(time.perf_counter() - t0)
+        finish(out_dir, command="evaluate", config=config, seed=seed, **meta)
+        if not keep_chunks:  # every row is in results.parquet now
+            shutil.rmtree(out_dir / "chunks", ignore_errors=True)
+    return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _stability(table, picks_batch, sim: Simulator, settings, shift_um, progress):
+    """table with success_shifted, score_shifted and label_stable: every simulated
+    pick-point again with the object moved shift_um micrometres along x (one batch
+    through sim, which runs on the run's own engine and backend)."""
+    # the table's rows are the batch's pick-points in order (infeasible ones, if kept,
+    # included: they are not simulated twice -- no simulation decides their label)
+    ids = table["pick_id"].to_numpy()
+    if len(ids) != len(picks_batch) or not np.array_equal(ids, picks_batch.pick_id):
+        raise RuntimeError("evaluate: the results table does not follow its pick-points")
+    shifted = dataclasses.replace(picks_batch, x_mm=picks_batch.x_mm + shift_um * 1e-3)
+    with showing_progress(sim.engine, "stability (pick-points moved)", "sim", progress):
+        (res,) = sim.run([(settings, shifted)])
+    success = np.asarray(res["success"], bool)
+    table = table.append_column("success_shifted", pa.array(success))
+    table = table.append_column("score_shifted", pa.array(np.asarray(res["score"], float)))
+    same = success == table["success"].to_numpy(zero_copy_only=False).astype(bool)
+    return table.append_column("label_stable", pa.array(same))
+
+
+def _complete_run(out_dir: Path, key: str) -> Evaluation | None:
+    """The run in out_dir read back when it is a complete evaluate run of this
+    experiment (resume then has nothing to do), else None."""
+    import pyarrow.parquet as pq
+
+    manifest = read_manifest(out_dir)
+    need = [out_dir / n for n in ("results.parquet", "summary.json", "config.json")]
+    if (
+        manifest is None
+        or manifest.get("command") != "evaluate"
+        or manifest.get("config_key") != key
+        or manifest.get("status") != "complete"
+        or not all(p.is_file() for p in need)
+    ):
+        return None
+    traces = out_dir / "traces.parquet"
+    return Evaluation(
+        pq.read_table(need[0]),
+        json.loads(need[1].read_text()),
+        json.loads(need[2].read_text()),
+        pq.read_table(traces) if traces.is_file() else None,
+        out_dir,
+        already_complete=True,
+    )
+
+
+def _stopped(out_dir, stop: BaseException, executor, seed, config, wall_s=None) -> None:
+    """Mark a folder whose run stopped early; its finished chunks stay for --resume."""
+    if out_dir is not None:
+        status = "cancelled" if isinstance(stop, Cancelled) else "interrupted"
+        meta = executor.describe(wall_s)
+        finish(out_dir, status, command="evaluate", config=config, seed=seed, **meta)
+
+
+def _picks_source(picks) -> str:
+    """What the pick-points come from, for the output folder's configuration hash."""
+    if picks is None:
+        return "generated"
+    if isinstance(picks, pp.PickBatch):
+        data = np.stack([picks.x_mm, picks.y_mm, picks.yaw_deg]).astype(np.float64)
+        return "batch:" + config_hash(data.tobytes().hex())
+    path = Path(picks)
+    return "csv:" + (config_hash(path.read_text()) if path.is_file() else str(path))
+
+
+def _file_digest(path: str | Path) -> str:
+    """sha256 of a file's bytes (a file the scene names: what it holds, not where)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def experiment_key(scene: Scene, settings: dict) -> str:
+    """The resume key of an evaluate run: a hash of what decides its results.
+
+    * the object's content: the simulated model (``scene.xml``: the object's meshes,
+      mass and inertia, the gripper, contact and solver), with every file it names
+      replaced by a digest of the file's bytes, and the silhouette the pick-points are
+      checked against (``ObjectModel.summary`` less its ``source`` path);
+    * settings: gripper (an MJCF gripper's file by its digest), physics, procedure,
+      pick-point source and configuration, seed, mode, backend and batch size (the
+      rounding of a batched program depends on its shape) -- JSON-able values or
+      dataclasses.
+
+    Never where anything is installed (the same asset read from a checkout and from
+    site-packages gives the same key) nor the chunk size (derived from free device
+    memory; a resumed run keeps the one on disk, ``engine.ChunkPlan``).
+    """
+    xml = scene.portable_xml()
+    obj = {k: v for k, v in scene.object.summary().items() if k != "source"}
+    values = {k: to_dict(v) for k, v in settings.items()}
+    mjcf = (values.get("gripper") or {}).get("mjcf")
+    if mjcf and mjcf.get("file"):
+        file = Path(mjcf["file"])
+        mjcf["file"] = f"sha256:{_file_digest(file)}" if file.is_file() else file.name
+    text = json.dumps({"model": xml, "object": obj, **values}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _simulate(executor, picks, plan, out_dir, bar: bool, on_progress):
+    """The main run through the engine's chunked runner, with a progress bar if asked
+    (``progress.ProgressBar``, on stderr): pick-points, chunks done and, on a cluster,
+    pick-points/s per node and in all."""
+    if not bar:
+        return run_chunks(executor, picks, plan, out_dir, on_progress)
+    chunks_done = [0]
+    note = getattr(executor, "progress_note", None)
+    desc = f"simulating ({executor.name})"
+    with ProgressBar(desc, "pick", total=len(picks)) as pbar:
+
+        def chunk_done(result) -> None:
+            chunks_done[0] += 1
+            text = f"chunks {chunks_done[0]}/{plan.n_chunks} this run"
+            if note is not None:
+                text += f"; {note()}"
+            pbar.note(text)
+
+        def report(done: int, total: int) -> None:
+            pbar(done, total)
+            if on_progress is not None:
+                on_progress(done, total)
+
+        return run_chunks(executor, picks, plan, out_dir, report, on_chunk=chunk_done)
+
+
+def _optimize(executor, plan, out_dir, obj, gripper, grasp, k, min_score, seed, config):
+    """Optimization mode: batches of pick-points until k reach min_score or plan.n are
+    spent; (PickBatch, results table of every simulated pick).
+
+    Batch j is chunk j of the plan (the batches depend only on the seed and the batch
+    size, never on results): a resumed run reads the chunks on disk and simulates from
+    the first one missing, so it stops exactly where an uninterrupted run stops.
+    """
+    tables: list = []
+
+    def score_fn(b: pp.PickBatch) -> np.ndarray:
+        j = len(tables)
+        table = read_chunk(out_dir, j, b) if out_dir is not None else None
+        if table is None:
+            for result in executor.run({j: b}):
+                table = result.table
+            if out_dir is not None:
+                write_parquet(chunk_path(out_dir, j), table)
+        tables.append(table)
+        score = np.asarray(table["score"], float)
+        return np.where(np.asarray(table["success"]), np.nan_to_num(score, nan=-1.0), -1.0)
+
+    res = pp.optimize(
+        obj,
+        gripper,
+        score_fn,
+        k=k,
+        min_score=min_score,
+        max_n=plan.n,
+        batch_size=plan.chunk_size,
+        seed=seed,
+        config=config,
+        grasp=grasp,
+    )
+    return res.picks, pa.concat_tables(tables)
+
+
+def _traces(executor, picks: pp.PickBatch, table: pa.Table, n: int):
+    """Re-simulate the n best and n worst pick-points with recording on."""
+    score = np.asarray(table["score"], float)
+    order = np.argsort(np.where(np.isnan(score), -np.inf, score))
+    chosen = np.unique(np.concatenate([order[::-1][:n], order[:n]]))
+    if len(chosen) == 0:
+        return None
+    sub = picks.take(chosen)
+    rows = executor.record(sub)
+    n_pick, n_tick, _ = rows.shape
+    cols = {"pick_id": np.repeat(sub.pick_id, n_tick)}
+    for j, name in enumerate(gk.TRACE_FIELDS):
+        cols[name] = rows[:, :, j].reshape(-1)
+    cols["phase"] = np.asarray(gk.PHASES, dtype=object)[cols["phase"].astype(int)]
+    cols["rank"] = np.repeat(np.where(np.isin(chosen, order[::-1][:n]), "best", "worst"), n_tick)
+    return pa.table(cols)

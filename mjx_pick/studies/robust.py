@@ -1,0 +1,362 @@
+"""Pick-point robustness under vision error, and each pick-point's minimum grip force.
+
+Robustness (the paper's proposed next step). A vision system that reports the object
+at (x, y, yaw) is wrong by a few millimetres and degrees; the robot plans its fingers'
+opening for the reported pose and closes on the real one. For each pick-point, M
+real poses are drawn around the reported one (Gaussian, sigma_xy_mm on x and y,
+sigma_yaw_deg on yaw), the fingers start at the PLANNED opening, and each draw is
+simulated. A draw where the object reaches under a finger at that opening is a failure
+(the finger lands on it) without simulation, as is one with no object between the
+fingers. The robust success probability is the
+fraction of successful draws, with its Wilson 95% interval; pick-points are ranked by
+it (ties: by the interval's lower end, then by mean score).
+
+Minimum grip force, the physics counterpart of the analytic minimum-friction grasp
+metrics: for each pick-point, the smallest F_d in [lo, hi] at which the pick succeeds,
+found by a batched bisection (every pick-point's next F_d in one simulation batch per
+step). It assumes success is monotone in F_d over that range (more squeeze never
+hurts); a pick-point that fails at hi gets NaN, one that succeeds at lo gets lo.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pyarrow as pa
+
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import ConfigError, check_range, to_dict, write_json, write_parquet
+from mjx_pick.core.metrics import wilson_interval
+from mjx_pick.core.objects import ObjectModel, check_same_object
+from mjx_pick.engine.backend import Settings
+from mjx_pick.engine.simulator import Simulator, showing_progress, study_simulator
+from mjx_pick.outputs.rundir import claim, config_hash, finish
+
+
+def perturb(picks: pp.PickBatch, m: int, sigma_xy_mm: float, sigma_yaw_deg: float, seed: int):
+    """M real poses around each reported pose: (K*M,) x, y, yaw and the pick index."""
+    rng = np.random.default_rng(seed)
+    k = len(picks)
+    idx = np.repeat(np.arange(k), m)
+    x = picks.x_mm[idx] + rng.normal(0.0, sigma_xy_mm, k * m)
+    y = picks.y_mm[idx] + rng.normal(0.0, sigma_xy_mm, k * m)
+    yaw = picks.yaw_deg[idx] + rng.normal(0.0, sigma_yaw_deg, k * m)
+    return x, y, np.mod(yaw, 360.0), idx
+
+
+class Placements(NamedTuple):
+    """M real poses around each of K reported ones (K*M draws, pick-major).
+
+    draws: the draws that are simulated (a PickBatch of ok.sum() entries, the fingers
+    at each reported pose's planned opening); ok (K*M,): simulated (the rest fail as
+    they are: a finger lands on the object, or nothing lies between the fingers);
+    index (K*M,): the reported pick-point of each draw; reason (K*M,): the feasibility
+    check's reason code (``pickpoints.REASONS``).
+    """
+
+    draws: pp.PickBatch
+    ok: np.ndarray
+    index: np.ndarray
+    reason: np.ndarray
+
+
+def placements(
+    obj: ObjectModel,
+    picks: pp.PickBatch,
+    base: Settings,
+    m: int,
+    sigma_xy_mm: float,
+    sigma_yaw_deg: float,
+    seed: int,
+    pick_config: pp.PickConfig | None = None,
+) -> Placements:
+    """Real poses around each reported pick-point, checked with the fingers at the
+    opening planned for the reported pose (see the module docstring)."""
+    x, y, yaw, idx = perturb(picks, m, sigma_xy_mm, sigma_yaw_deg, seed)
+    checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
+    planned = picks.opening_mm[idx]
+    res = checker(x, y, yaw, opening_mm=planned)
+    # coverage is a planning rule, not physics: a real pose with little object between
+    # the fingers is simulated like any other; one with a finger on the object or
+    # nothing between the fingers fails as it is
+    ok = (res["reason"] == pp.fk.FEASIBLE) | (res["reason"] == pp.fk.COVERAGE)
+    draws = pp.PickBatch(
+        pick_id=np.arange(len(x))[ok],
+        x_mm=x[ok],
+        y_mm=y[ok],
+        yaw_deg=yaw[ok],
+        opening_mm=planned[ok],
+        coverage=res["coverage"][ok],
+        gap_left_mm=res["gap_left_mm"][ok],
+        gap_right_mm=res["gap_right_mm"][ok],
+        rejected={},
+        n_candidates=len(x),
+        mode="robustness",
+    )
+    return Placements(draws, ok, idx, np.asarray(res["reason"]))
+
+
+def check_draws(m: int, sigma_xy_mm: float, sigma_yaw_deg: float) -> None:
+    """A ConfigError unless 1 <= m <= 100000 draws, sigma_xy_mm in [0, 100] mm and
+    sigma_yaw_deg in [0, 180] deg."""
+    check_range("robustness", "m", m, 1, 100_000)
+    check_range("robustness", "sigma_xy_mm", sigma_xy_mm, 0, 100)
+    check_range("robustness", "sigma_yaw_deg", sigma_yaw_deg, 0, 180)
+
+
+def robustness(
+    obj: ObjectModel,
+    picks: pp.PickBatch,
+    base: Settings | None = None,
+    *,
+    m: int = 32,
+    sigma_xy_mm: float = 2.0,
+    sigma_yaw_deg: float = 3.0,
+    seed: int = 0,
+    pick_config: pp.PickConfig | None = None,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    simulator: Simulator | None = None,
+    out: str | Path | None = None,
+    overwrite: bool = False,
+    ray: str | None = None,
+    progress: bool = False,
+    _claimed: bool = False,
+) -> pa.Table:
+    """Robust success probability of each pick-point; rows ranked best first.
+
+    out: a new folder, or the evaluate folder the pick-points came from (its files
+    stay; robustness.parquet and robustness.json join them). ray: simulate the draws on
+    a Ray cluster ("auto" or "HOST:PORT"; mjx_pick.engine.cluster), this process writing out.
+    progress: a progress bar of the simulations on stderr.
+
+    Returns a table with pick_id, x_mm, y_mm, yaw_deg, robust_p, robust_ci_low,
+    robust_ci_high, trials, successes, landed (draws where a finger lands on the
+    object), missed (nothing between the fingers), robust_score_mean and rank.
+    """
+    check_draws(m, sigma_xy_mm, sigma_yaw_deg)
+    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+        base = base or Settings()
+        if out is not None and not _claimed:
+            request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
+            request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, k=len(picks))
+            claim(out, "robust", config_hash(request), overwrite=overwrite, joins=("evaluate",))
+        t0 = time.perf_counter()
+        k = len(picks)
+        placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, seed, pick_config)
+        draws, ok, idx = placed.draws, placed.ok, placed.index
+        desc = f"robustness: {k} pick-points x {m} draws ({sim.engine.backend_name})"
+        with showing_progress(sim.engine, desc, "sim", progress):
+            (out_d,) = sim.run([(base, draws)])
+        success = np.zeros(len(idx), bool)
+        score = np.zeros(len(idx))
+        if len(draws):
+            success[ok] = out_d["success"]
+            score[ok] = np.nan_to_num(out_d["score"], nan=0.0)
+        successes = np.bincount(idx, weights=success, minlength=k).astype(int)
+        landed = np.bincount(idx, weights=placed.reason == pp.fk.CLEARANCE, minlength=k).astype(int)
+        off_object = placed.reason == pp.fk.OFF_OBJECT
+        missed = np.bincount(idx, weights=off_object, minlength=k).astype(int)
+        mean_score = np.bincount(idx, weights=score, minlength=k) / m
+        ci = np.array([wilson_interval(int(s), m) for s in successes]).reshape(k, 2)
+        p = successes / m
+        order = np.lexsort((-mean_score, -ci[:, 0], -p))
+        rank = np.empty(k, int)
+        rank[order] = np.arange(1, k + 1)
+        table = pa.table(
+            {
+                "pick_id": picks.pick_id,
+                "x_mm": picks.x_mm,
+                "y_mm": picks.y_mm,
+                "yaw_deg": picks.yaw_deg,
+                "opening_mm": picks.opening_mm,
+                "robust_p": p,
+                "robust_ci_low": ci[:, 0],
+                "robust_ci_high": ci[:, 1],
+                "trials": np.full(k, m),
+                "successes": successes,
+                "landed": landed,
+                "missed": missed,
+                "robust_score_mean": mean_score,
+                "rank": rank,
+            }
+        ).take(pa.array(order))
+        if out is not None:
+            out_dir = Path(out)
+            write_parquet(out_dir / "robustness.parquet", table)
+            write_json(
+                out_dir / "robustness.json",
+                {
+                    "object": obj.summary(),
+                    "settings": to_dict(base),
+                    "m": m,
+                    "sigma_xy_mm": sigma_xy_mm,
+                    "sigma_yaw_deg": sigma_yaw_deg,
+                    "seed": seed,
+                    "ranking": table.slice(0, 50).to_pylist(),
+                },
+            )
+            config = {"object": obj.summary(), "settings": to_dict(base), "m": m, "k": k}
+            config.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, seed=seed)
+            config["picks"] = to_dict(pick_config)
+            # in an evaluate folder: run-robust.json beside evaluate's own run.json
+            meta = sim.engine.describe(time.perf_counter() - t0)
+            finish(out_dir, command="robust", config=config, seed=seed, **meta)
+        return table
+
+
+def min_grip_force(
+    obj: ObjectModel,
+    picks: pp.PickBatch,
+    base: Settings | None = None,
+    *,
+    lo_n: float | None = None,
+    hi_n: float | None = None,
+    tolerance_n: float = 0.5,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    simulator: Simulator | None = None,
+) -> np.ndarray:
+    """Smallest successful F_d per pick-point, N (N,); see the module docstring.
+
+    lo_n, hi_n: the bracket (default: the gripper's force range); the bisection stops
+    when every bracket is narrower than tolerance_n.
+    """
+    base = base or Settings()
+    g = base.gripper
+    lo_n = g.force_min_n if lo_n is None else float(lo_n)
+    hi_n = g.force_max_n if hi_n is None else float(hi_n)
+    check_range("min_force", "lo_n", lo_n, g.force_min_n, g.force_max_n)
+    check_range("min_force", "hi_n", hi_n, lo_n, g.force_max_n, lo_open=True)
+    check_range("min_force", "tolerance_n", tolerance_n, 0, lo_open=True)
+    sim = simulator or Simulator(obj, backend, batch_size)
+    n = len(picks)
+
+    def succeeds(force: np.ndarray, which: np.ndarray) -> np.ndarray:
+        jobs = [
+            (
+                dataclasses.replace(
+                    base, grasp=dataclasses.replace(base.grasp, grip_force_n=float(force[i]))
+                ),
+                picks.take(np.array([i])),
+            )
+            for i in which
+        ]
+        return np.array([bool(r["success"][0]) for r in sim.run(jobs)], bool)
+
+    everyone = np.arange(n)
+    at_hi = succeeds(np.full(n, hi_n), everyone)
+    at_lo = np.zeros(n, bool)
+    if at_hi.any():
+        at_lo[at_hi] = succeeds(np.full(n, lo_n), everyone[at_hi])
+    lo = np.full(n, lo_n)
+    hi = np.full(n, hi_n)
+    live = at_hi & ~at_lo
+    while live.any() and np.max(hi[live] - lo[live]) > tolerance_n:
+        which = everyone[live]
+        mid = 0.5 * (lo + hi)
+        ok = succeeds(mid, which)
+        hi[which[ok]] = mid[which[ok]]
+        lo[which[~ok]] = mid[which[~ok]]
+        live = at_hi & ~at_lo & (hi - lo > tolerance_n)
+    result = np.where(at_lo, lo_n, hi)
+    return np.where(at_hi, result, np.nan)
+
+
+def robust_best(
+    obj: ObjectModel,
+    base: Settings,
+    *,
+    results: str | Path | None = None,
+    n: int = 1000,
+    top_k: int = 10,
+    seed: int = 0,
+    pick_config: pp.PickConfig | None = None,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    ray: str | None = None,
+    simulator: Simulator | None = None,
+    progress: bool = False,
+    m: int = 32,
+    sigma_xy_mm: float = 2.0,
+    sigma_yaw_deg: float = 3.0,
+    out: str | Path | None = None,
+    overwrite: bool = False,
+) -> pa.Table:
+    """The robustness of the ``top_k`` best successful pick-points (``mjx-pick robust``).
+
+    results: an evaluate folder (or its results.parquet) of this object to take them
+    from; without it, ``n`` pick-points drawn with ``seed`` are simulated first.
+    m, sigma_xy_mm (mm), sigma_yaw_deg (deg), out, overwrite: as :func:`robustness`.
+    ray: every simulation on a Ray cluster ("auto" or "HOST:PORT"; mjx_pick.engine.cluster).
+    simulator: run through this one (e.g. a caller's on a cluster, kept open; backend,
+    batch_size and ray are then its own). Every input is checked, and out claimed,
+    before anything is simulated. progress: one progress bar on stderr over every
+    simulation (the n pick-points, then the draws).
+    """
+    pick_config = pick_config or pp.PickConfig()
+    check_draws(m, sigma_xy_mm, sigma_yaw_deg)
+    check_range("robust", "top_k", top_k, 1, 100_000)
+    if results is None:
+        check_range("robust", "n", n, 1, 1e8)
+    table = _read_results(Path(results), obj) if results is not None else None
+    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+        if out is not None:
+            request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
+            request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, top_k=top_k)
+            request.update(results=str(results) if results is not None else None, n=n)
+            key = config_hash(request)
+            claim(out, "robust", key, overwrite=overwrite, joins=("evaluate",))
+        options = {"m": m, "sigma_xy_mm": sigma_xy_mm, "sigma_yaw_deg": sigma_yaw_deg}
+        options.update(out=out, _claimed=True)
+        desc = f"robust ({sim.engine.backend_name})"
+        with showing_progress(sim.engine, desc, "sim", progress):
+            return _robust_best(obj, base, sim, table, n, top_k, seed, pick_config, options)
+
+
+def _robust_best(obj, base, sim, results, n, top_k, seed, pick_config, options) -> pa.Table:
+    """robust_best once its simulator (and progress bar) is set up; results: the
+    evaluate table to take the best pick-points from, or None."""
+    from mjx_pick.core.metrics import best_successes
+
+    if results is not None:
+        table = results
+        x, y, yaw, ids = (np.asarray(table[c]) for c in ("x_mm", "y_mm", "yaw_deg", "pick_id"))
+        success, score = np.asarray(table["success"]), np.asarray(table["score"], float)
+    else:
+        picks = pp.generate_normal(obj, base.gripper, n, seed, pick_config, base.grasp)
+        (out,) = sim.run([(base, picks)])
+        x, y, yaw, ids = picks.x_mm, picks.y_mm, picks.yaw_deg, picks.pick_id
+        success, score = out["success"], out["score"]
+    top = best_successes(success, score, top_k)
+    if len(top) == 0:
+        raise ConfigError("no successful pick-point to test: evaluate more pick-points first")
+    checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
+    picks = checker.batch(ids[top], x[top], y[top], yaw[top], "robustness")
+    return robustness(
+        obj, picks, base, seed=seed, pick_config=pick_config, simulator=sim, **options
+    )
+
+
+def _read_results(path: Path, obj: ObjectModel) -> pa.Table:
+    """An evaluate folder's results table, refused when it belongs to another object."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    table_path = path / "results.parquet" if path.is_dir() else path
+    if not table_path.is_file():
+        raise ConfigError(f"--results {path}: no results.parquet there")
+    config = table_path.parent / "config.json"
+    if config.is_file():
+        theirs = json.loads(config.read_text()).get("object") or {}
+        check_same_object(theirs, obj, f"--results {path}")
+    table = pq.read_table(table_path)
+    for col in ("pick_id", "x_mm", "y_mm", "yaw_deg", "score", "success"):
+        if col not in table.column_names:
+            raise ConfigError(f"--results {path}: no column {col!r}")
+    return table

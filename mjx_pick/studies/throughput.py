@@ -1,0 +1,338 @@
+"""Throughput measurement: pick-points per second against batch size, per backend.
+
+Used by ``benchmarks/throughput.py`` (CSV rows for RESULTS.md) and the throughput
+notebook; ``plot_throughput`` draws rows against the paper's figures. ``side_by_side``
+runs several backends (Warp, MJX's JAX physics, MuJoCo C) on the same pick-points and
+compares their labels with MuJoCo C's. Both run through ``mjx_pick.engine.runner.Engine``,
+each timed run as ONE backend call (one chunk), so a refilled pool is measured whole.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import statistics
+import time
+import warnings
+
+import jax
+import numpy as np
+
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.objects import load_object
+from mjx_pick.core.scene import build_scene
+from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.runner import Engine
+
+# Bencak et al. 2023: ~53 s for one simulation; ~4.5 s per simulation with 12 parallel
+# MATLAB workers, i.e. about 0.22 pick-points per second
+PAPER_SECONDS_PER_PICK = 53.0
+PAPER_PICKS_PER_S_12_WORKERS = 0.22
+
+
+def device_name(n: int | None = None) -> str:
+    d = jax.devices()[0]
+    n = n or len(jax.devices())
+    return f"{n}x {d.device_kind}" if d.platform != "cpu" else "cpu"
+
+
+def peak_bytes() -> int | None:
+    stats = jax.devices()[0].memory_stats() if jax.devices()[0].platform != "cpu" else None
+    return None if not stats else int(stats.get("peak_bytes_in_use", 0))
+
+
+def tile_picks(picks: pp.PickBatch, n: int, offset: int) -> pp.PickBatch:
+    idx = (np.arange(n) + offset) % len(picks)
+    return picks.take(idx)
+
+
+def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_devices=None):
+    """One throughput row: compile time apart from run time (median of repeats over
+    distinct pick-point sets, after a warm-up run), pick-points and physics steps per
+    second, peak device memory per pick-point (MJX on GPU), success rate.
+
+    repeats = 0 times the first run itself (its compile is already apart: MJX compiles
+    ahead of time), for runs where device time is short."""
+    obj = load_object(obj_name)
+    scene = build_scene(obj, gripper, solver=solver, grasp=grasp)
+    pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0, grasp=grasp)
+    devices = jax.local_devices()[:n_devices] if n_devices else None
+    # one chunk per call: each timed call is one backend call of `batch` pick-points
+    engine = Engine(backend_name, batch, chunk_size=batch, devices=devices)
+    backend = engine.make(scene, grasp)
+    steps = grasp.n_ticks() * grasp.substeps(scene.solver)
+    first = engine.run(backend, make_inputs(scene, grasp, tile_picks(pool, batch, 0)))
+    out = first.results  # compiled, then ran once (warm-up)
+    compile_s = first.timing.compile_s
+    times = [] if repeats else [first.timing.run_s]
+    for r in range(repeats):
+        inputs = make_inputs(scene, grasp, tile_picks(pool, batch, (r + 1) * 7919))
+        timed = engine.run(backend, inputs)
+        out = timed.results
+        times.append(timed.timing.run_s)
+    run_s = statistics.median(times)
+    peak = peak_bytes()
+    return {
+        "object": obj_name,
+        "backend": backend.name,
+        "device": backend.device if backend.name == "mujoco" else device_name(n_devices),
+        "batch": batch,
+        "compile_s": round(compile_s, 2),
+        "first_call_s": round(first.timing.wall_s, 2),
+        "run_s_median": round(run_s, 3),
+        "picks_per_s": round(batch / run_s, 1),
+        "physics_steps_per_s": round(batch * steps / run_s),
+        "steps_per_pick": steps,
+        "peak_mem_mb_per_pick": round(peak / batch / 2**20, 3) if peak else None,
+        "success_rate": round(float(np.mean(out["success"])), 4),
+        "diverged": int(np.sum(out["diverged"])),
+        "timestep_s": scene.solver.timestep_s,
+        "cone": scene.solver.cone,
+        "iterations": scene.solver.iterations,
+    }
+
+
+@dataclasses.dataclass(frozen=True)
+class RunSpec:
+    """One backend run of a side-by-side comparison.
+
+    n: pick-points (the first n of the shared set); batch: the backend's batch size
+    (MJX/Warp: slots of the pool with refill); options: make_backend options (refill,
+    ticks_per_call, graph_mode); warmup: pick-points run once before the timed run
+    (MJX/Warp: a full-length first call also builds Warp's kernels and captures its
+    CUDA graphs; 0: none).
+    """
+
+    backend: str
+    n: int
+    batch: int
+    options: tuple = ()
+    warmup: int = 0
+    solver: tuple = ()  # SolverParams fields replaced for this run (iterations, ...)
+    devices: int | None = None  # the first this many local devices (default: the backend's)
+
+    @property
+    def label(self) -> str:
+        opts = "".join(f",{k}={v}" for k, v in self.options + self.solver)
+        gpus = f",devices={self.devices}" if self.devices else ""
+        return f"{self.backend}{opts}{gpus}"
+
+    @classmethod
+    def parse(cls, text: str) -> RunSpec:
+        """'warp:n=65536:batch=16384:refill=1:ticks_per_call=20:warmup=16384'.
+
+        Keys: n, batch, warmup, devices (ints); backend options refill, ticks_per_call,
+        shrink_levels, graph_mode, rows (Warp's constraint rows per simulation; contacts
+        sized as usual); solver settings iterations, ls_iterations, tolerance."""
+        name, *parts = text.split(":")
+        fields: dict = {}
+        options, solver = [], []
+        for part in parts:
+            key, sep, value = part.partition("=")
+            if not sep:
+                raise ValueError(f"run {text!r}: {part!r} is not key=value")
+            if key in ("n", "batch", "warmup", "devices"):
+                fields[key] = int(value)
+            elif key in ("refill",):
+                options.append((key, value.lower() in ("1", "true", "yes")))
+            elif key in ("ticks_per_call", "shrink_levels", "rows"):
+                options.append((key, int(value)))
+            elif key in ("graph_mode",):
+                options.append((key, value))
+            elif key in ("iterations", "ls_iterations"):
+                solver.append((key, int(value)))
+            elif key in ("tolerance",):
+                solver.append((key, float(value)))
+            else:
+                raise ValueError(f"run {text!r}: unknown key {key!r}")
+        if "n" not in fields:
+            raise ValueError(f"run {text!r} needs n=")
+        fields.setdefault("batch", fields["n"])
+        return cls(name, options=tuple(options), solver=tuple(solver), **fields)
+
+    def backend_options(self, scene, grasp) -> dict:
+        """make_backend options; 'rows' becomes Warp buffers sized on the C engine with
+        that many constraint rows."""
+        opts = dict(self.options)
+        if "rows" in opts:
+            from mjx_pick.engine.warp_backend import size_buffers
+
+            sized = size_buffers(scene, grasp)
+            opts["buffers"] = dataclasses.replace(sized, rows=opts.pop("rows"))
+        if self.devices:
+            opts["devices"] = jax.local_devices()[: self.devices]
+        return opts
+
+
+def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, on_row=None):
+    """Run each RunSpec on the first n of one shared set of pick-points; one row each.
+
+    Row fields: pick-points/s (timed run only: compile, Warp's buffer sizing and the
+    warm-up apart), physics steps/s the device performed (every slot steps, finished or
+    not), steps per pick-point actually simulated (to its end; refill only: the
+    full-length rollout simulates n_ticks x substeps for every pick), slot occupancy
+    (refill: the fraction of slot-steps spent on picks that had not ended), peak device
+    memory per pick (JAX's allocator; Warp's own scratch is not in it), success rate,
+    and labels (success, failure reason) agreeing with MuJoCo C's on the pick-points
+    both ran (when a 'mujoco' run is among the runs). on_row(row) is called as each
+    row is done (a long benchmark keeps what it measured if it is cut short).
+    """
+    obj = load_object(obj_name)
+    n_max = max(r.n for r in runs)
+    with warnings.catch_warnings():  # fewer feasible than asked: repeated below
+        warnings.simplefilter("ignore", UserWarning)
+        picks = pp.generate_normal(obj, gripper, n_max, seed=seed, grasp=grasp)
+    distinct = len(picks)
+    if distinct < n_max:
+        # the generator stops at its candidate limit: repeat the set (each pick-point is
+        # simulated on its own, so a repeat costs what a new one would)
+        picks = tile_picks(picks, n_max, 0)
+    scenes: dict = {}  # per solver variant: (scene, inputs)
+
+    def scene_for(spec: RunSpec):
+        if spec.solver not in scenes:
+            variant = dataclasses.replace(solver, **dict(spec.solver))
+            scene = build_scene(obj, gripper, solver=variant, grasp=grasp)
+            scenes[spec.solver] = (scene, make_inputs(scene, grasp, picks))
+        return scenes[spec.solver]
+
+    results: dict[str, dict] = {}
+    rows = []
+    # MuJoCo C first: the reference the others' labels are compared with
+    order = sorted(runs, key=lambda r: r.backend != "mujoco")
+    for spec in order:
+        scene, inputs = scene_for(spec)
+        n_sub = grasp.substeps(scene.solver)
+        full_steps = grasp.n_ticks() * n_sub
+        n = min(spec.n, len(inputs))
+        t_build = time.perf_counter()
+        engine = Engine(spec.backend, spec.batch, **spec.backend_options(scene, grasp))
+        backend = engine.make(scene, grasp)
+        build_s = time.perf_counter() - t_build
+        warm_s = 0.0
+        if spec.warmup:
+            warm = inputs.take(slice(0, min(spec.warmup, n)))
+            warm_s = engine.run(backend, warm, chunk_size=len(warm)).timing.wall_s
+        pool = getattr(backend, "pool_stats", None)
+        before = dataclasses.replace(pool) if pool is not None else None
+        compile_before = backend.stats.compile_s
+        # the timed run is one backend call (one chunk): a refilled pool runs it whole
+        timed = engine.run(backend, inputs.take(slice(0, n)), chunk_size=n)
+        out, wall, run_s = timed.results, timed.timing.wall_s, timed.timing.run_s
+        results[spec.label] = out
+        refilled = pool is not None and pool.rounds > before.rounds
+        if refilled:
+            slot_ticks = pool.slot_ticks - before.slot_ticks
+            pick_ticks = pool.pick_ticks - before.pick_ticks
+            device_steps = slot_ticks * n_sub
+            steps_per_pick = pick_ticks * n_sub / n
+            occupancy = pick_ticks / slot_ticks
+        elif spec.backend == "mujoco":
+            device_steps = steps_per_pick = occupancy = None  # it stops finished picks
+        else:
+            padded = -(-n // backend.batch_size) * backend.batch_size
+            device_steps = padded * full_steps
+            steps_per_pick = full_steps
+            occupancy = n / padded
+        peak = peak_bytes() if spec.backend != "mujoco" else None
+        row = {
+            "object": obj_name,
+            "run": spec.label,
+            "backend": backend.name,
+            "device": backend.device,
+            "n": n,
+            "distinct_picks": min(n, distinct),
+            "batch": backend.batch_size,
+            "setup_s": round(build_s, 2),
+            "compile_s": round(backend.stats.compile_s, 2),
+            "compile_in_run_s": round(backend.stats.compile_s - compile_before, 2),
+            "warmup_s": round(warm_s, 2),
+            "run_s": round(run_s, 3),
+            "wall_s": round(wall, 3),
+            "picks_per_s": round(n / run_s, 1),
+            "physics_steps_per_s": round(device_steps / run_s) if device_steps else None,
+            "steps_per_pick": round(steps_per_pick, 1) if steps_per_pick else None,
+            "full_steps_per_pick": full_steps,
+            "occupancy": round(occupancy, 4) if occupancy is not None else None,
+            "peak_mem_mb_per_pick": round(peak / backend.batch_size / 2**20, 3) if peak else None,
+            "success_rate": round(float(np.mean(out["success"])), 4),
+            "diverged": int(np.sum(out["diverged"])),
+        }
+        buffers = getattr(backend, "buffers", None)
+        if buffers is not None:
+            diag = backend.last_diagnostics
+            row.update(
+                {
+                    "buffer_contacts": buffers.contacts,
+                    "buffer_rows": buffers.rows,
+                    "measured_contacts_c": buffers.measured_contacts,
+                    "measured_rows_c": buffers.measured_rows,
+                    "max_rows_used": int(diag.nefc_max.max()),
+                    "max_contacts_used_per_world": round(
+                        float(diag.nacon_max.max()) / backend.pool_size(n)
+                        if backend.refill
+                        else float(diag.nacon_max.max()) / backend.batch_size,
+                        2,
+                    ),
+                    "buffer_growths": backend.growths,
+                }
+            )
+        ref = next((k for k in results if k.startswith("mujoco")), None)
+        if ref is not None and ref != spec.label:
+            m = min(n, len(results[ref]["success"]))
+            c = results[ref]
+            row["labels_vs_c_n"] = m
+            row["labels_agree_vs_c"] = round(
+                float(np.mean(out["success"][:m] == c["success"][:m])), 4
+            )
+            row["failure_agree_vs_c"] = round(
+                float(np.mean(out["failure"][:m] == c["failure"][:m])), 4
+            )
+        row.update(
+            {
+                "timestep_s": scene.solver.timestep_s,
+                "cone": scene.solver.cone,
+                "iterations": scene.solver.iterations,
+                "ls_iterations": scene.solver.ls_iterations,
+                "tolerance": scene.solver.tolerance,
+                "shrink_levels": getattr(backend, "shrink_levels", None),
+                "devices": len(getattr(backend, "devices", [])) or None,
+            }
+        )
+        rows.append(row)
+        if on_row is not None:
+            on_row(row)
+    return rows
+
+
+def plot_throughput(rows: list[dict], path) -> None:
+    """Pick-points per second against batch size, one line per (object, backend, device),
+    with the paper's figures as horizontal lines (log scales)."""
+    from mjx_pick.outputs.plots import new_figure, save_png
+
+    fig, ax = new_figure(figsize=(7, 4.5))
+    keys = sorted({(r["object"], r["backend"], r["device"]) for r in rows})
+    for key in keys:
+        sel = sorted(
+            (r for r in rows if (r["object"], r["backend"], r["device"]) == key),
+            key=lambda r: r["batch"],
+        )
+        ax.plot(
+            [r["batch"] for r in sel],
+            [r["picks_per_s"] for r in sel],
+            "o-",
+            label=" / ".join(str(k) for k in key),
+        )
+    ax.axhline(
+        PAPER_PICKS_PER_S_12_WORKERS, color="r", ls="--", label="paper: 12 MATLAB workers (0.22/s)"
+    )
+    ax.axhline(
+        1.0 / PAPER_SECONDS_PER_PICK, color="r", ls=":", label="paper: one simulation (53 s)"
+    )
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("batch size (pick-points per call)")
+    ax.set_ylabel("pick-points per second")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    save_png(fig, path)
