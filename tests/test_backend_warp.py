@@ -64,13 +64,13 @@ def _fake_gpu(monkeypatch, warp_spec, version="1.18.0"):
     monkeypatch.setattr(devices, "nvidia_gpus", lambda: ["cuda:0"])
     find_spec = importlib.util.find_spec
     monkeypatch.setattr(
-        bw.importlib.util,
+        devices.importlib.util,
         "find_spec",
         lambda name, *a: warp_spec if name == "warp" else find_spec(name, *a),
     )
     real_version = importlib.metadata.version
     monkeypatch.setattr(
-        bw.importlib.metadata,
+        devices.importlib.metadata,
         "version",
         lambda name: version if name == "warp-lang" else real_version(name),
     )

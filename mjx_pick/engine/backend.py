@@ -206,7 +206,7 @@ def make_backend(
     extra; a ConfigError says what is missing). 'mjx': MJX's JAX physics on JAX's
     devices (forward-mode derivatives). 'mujoco': the C engine on CPU threads. 'auto':
     'warp' where it can run (an NVIDIA GPU and warp-lang), else 'mujoco' -- on a GPU
-    without warp-lang the C engine's threads beat MJX's JAX physics (issue 17).
+    without warp-lang the C engine's threads beat MJX's JAX physics.
 
     devices: MJX/Warp shard each batch over these (default: every local device; Warp:
     every CUDA device). nthread: the C engine's threads. options: passed to the MJX or
@@ -246,10 +246,10 @@ def default_batch_size(backend_name: str) -> int:
     """Simulations per backend call (slots of Warp's refilled pool): measured best."""
     name = resolve_backend(backend_name)
     if name == "mujoco":
-        return 1024  # 80 pick-points/s at 256, 92 at 1024 (2 cores, RESULTS.md)
+        return 1024  # a batch per call amortises the per-tick kernel's dispatch
     if name == "warp":
-        # per GPU (every GPU runs its own pool): H100, 3,523/s at 32,768 slots, 3,176/s
-        # at 16,384 (before the pool shrank in its tail; RESULTS.md)
+        # slots per GPU (every GPU runs its own pool): the largest pool that fits an
+        # H100 with room for the contact buffers; the throughput benchmark chose it
         from mjx_pick.engine.devices import nvidia_gpus
 
         return 32768 * max(len(nvidia_gpus()), 1)

@@ -70,13 +70,10 @@ def _precise(fn):
 # control periods per refill round of a pool: a finished slot idles up to this many
 # ticks before it is refilled (0.1 s of simulated time at the 5 ms period), while the
 # round's fixed work (a restart forward, merges, gathers) stays small next to its ~100
-# physics steps per slot. Measured on an H100 (door opener, 16,384 slots): 20 ticks
-# 3,176 pick-points/s, 40 ticks 3,079/s (RESULTS.md, issue 17)
+# physics steps per slot (benchmarks/throughput.py compares the choices)
 DEFAULT_TICKS_PER_CALL = 20
-# halvings of a pool in a run's tail (make_pool). Predicted with a schedule model fitted
-# to the H100 figures (RESULTS.md, issue 17): 3 levels lift 109,770 door-opener picks
-# in 32,768 slots from 0.78 to 0.93 slot occupancy (+15 %), 40,000 picks (one evaluate
-# chunk) from 0.55 to 0.89
+# halvings of a pool in a run's tail (make_pool): as picks run out, a half-empty pool
+# moves its live slots into a pool half its size, so the tail does not pay for idle slots
 DEFAULT_SHRINK_LEVELS = 3
 
 
@@ -440,10 +437,6 @@ class PoolStats:
     def occupancy(self) -> float:
         """Fraction of slot-ticks that simulated a pick that had not ended."""
         return self.pick_ticks / self.slot_ticks if self.slot_ticks else float("nan")
-
-    @property
-    def ticks_per_pick(self) -> float:
-        return self.pick_ticks / self.picks if self.picks else float("nan")
 
 
 class MjxBackend:

@@ -25,8 +25,8 @@ the throughput benchmarks (``throughput.measure``, ``side_by_side``). It owns
 Every pick-point is simulated on its own (MJX pads batches with copies whose results
 are dropped; a refilled pool gives the results of full-length rollouts), but the float32
 rounding of a batched program may depend on the batch's SHAPE: on the C engine, the
-per-tick kernel (XLA on the CPU) gave 149 of 1,024 scores one float32 step apart in
-batches of 64 and of 1,024 (labels equal; benchmarks/RESULTS.md, issue 20); it runs on
+per-tick kernel (XLA on the CPU) gave some scores one float32 step apart in batches of
+different sizes (labels equal); it runs on
 ``c_backend.tick_rows(n)`` rows, the next power of two. So results
 are bitwise the same for the same batch size and chunk size -- chunks that are whole
 numbers of batches give every call the full batch but the run's last -- which is why a

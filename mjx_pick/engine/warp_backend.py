@@ -19,7 +19,7 @@ unchanged; per-pick contact-pair parameters stay batched model fields. What diff
   forward-mode derivatives.
 * **CUDA graphs.** ``graph_mode`` 'WARP' (Warp captures each call's kernels as a CUDA
   graph and replays it while the buffers stay where they are) measured fastest on an
-  H100 (issue 17: 2,218 pick-points/s against 1,265 with 'WARP_STAGED_EX'). Hence the
+  H100 (benchmarks/warp_profile.py compares the graph modes). Hence the
   refilled pool runs as one device program per run (``mjx_backend.make_pool``): with
   a device call per refill round it lost ~70 ms per call and ran out of memory at
   32,768 slots (likely re-captured graphs, which Warp caches with their scratch).
@@ -64,8 +64,8 @@ MAX_GROWTH = 3
 # buffer margin over the largest counts measured on the sample (see size_buffers)
 CONTACT_MARGIN = 1.5
 CONTACT_SLACK = 4
-# rows x2: on an H100 Warp used up to 114 rows per world where the C sample's maximum
-# was 72 (door opener, condim-4 pads; RESULTS.md, issue 17)
+# rows x2: Warp's convex collider makes more constraint rows per world than the C
+# engine's sample shows (condim-4 pads), so rows get a wider margin than contacts
 ROW_MARGIN = 2.0
 ROW_SLACK = 16
 
@@ -130,12 +130,10 @@ def buffer_margin(measured_contacts: int, measured_rows: int) -> tuple[int, int]
     Why a margin: the sample does not hold every pick-point, per-pick contact settings
     (a friction sweep) move contacts a little, and Warp's collision functions need not
     return as many contacts per geom pair as MuJoCo C's (box-box, convex-convex with
-    multi-contact): measured on an H100, Warp used up to 114 constraint rows per world
-    where C's sample peaked at 72 (contacts are pooled over all worlds, so their margin
-    matters less: 5.5 per world on average against 24 allocated). Too large costs time
-    (Warp launches some kernels over every row: 96 rows per world ran 8 % faster than
-    320 on an H100, issue 17); too small costs a re-run, never a wrong result (overflow
-    is detected).
+    multi-contact): Warp makes more constraint rows per world than C's sample shows
+    (contacts are pooled over all worlds, so their margin matters less). Too large
+    costs time (Warp launches some kernels over every row); too small costs a re-run,
+    never a wrong result (overflow is detected).
     """
 
     def up(x: float, q: int) -> int:

@@ -72,11 +72,6 @@ class Outcomes:
     def fraction(self) -> np.ndarray:
         return self.successes / self.trials
 
-    @property
-    def force_traces(self) -> tuple:
-        """Per row the (K, 2) force trace, or None."""
-        return tuple((t or {}).get("force_n") for t in self.traces)
-
     def trace_kinds(self) -> tuple[str, ...]:
         """The trace kinds measured on at least one row."""
         have = {k for t in self.traces if t for k in t}

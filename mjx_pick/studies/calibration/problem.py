@@ -291,13 +291,6 @@ class Problem:
         )
         return total, p
 
-    def smoothed_grad(self, theta, samples: int, sigma: float):
-        """(loss at theta, gradient (P,)) of the Gaussian-smoothed loss
-        (``estimators.smoothed_gradient``)."""
-        from mjx_pick.studies.calibration.estimators import smoothed_gradient
-
-        return smoothed_gradient(self.loss, np.asarray(theta, np.float32), samples, sigma)
-
     def mjx_loss_and_grad(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
         """Loss and its forward-mode gradient through the MJX rollout.
 
