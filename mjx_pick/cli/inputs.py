@@ -61,6 +61,7 @@ def object_of(args):
         pick_height_mm=args.pick_height_mm,
         simplify_mm=args.simplify_mm,
         material=args.material,
+        largest_body=getattr(args, "largest_body", False),
     )
 
 

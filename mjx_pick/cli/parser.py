@@ -80,6 +80,11 @@ def _add_object_args(p: argparse.ArgumentParser) -> None:
         help="a mesh's resting pose: as in the file, or its most stable resting pose",
     )
     g.add_argument(
+        "--largest-body",
+        action="store_true",
+        help="a mesh of several disconnected bodies: keep the largest (default: refuse it)",
+    )
+    g.add_argument(
         "--pick-height-mm",
         type=float,
         help="fingertip height above the table at the grasp, mm (default: --grasp-height's rule)",

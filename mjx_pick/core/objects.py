@@ -517,6 +517,7 @@ def object_from_mesh(
     material: str = "pla",
     name: str | None = None,
     coacd_threshold: float = 0.04,
+    largest_body: bool = False,
 ) -> ObjectModel:
     """An object from a mesh file (STL/OBJ/PLY/GLB), resting on the table.
 
@@ -528,6 +529,9 @@ def object_from_mesh(
         probable resting pose, trimesh.poses.compute_stable_poses).
       pick_height_mm: fingertip height; default: the procedure's grasp-height rule.
       coacd_threshold: CoACD concavity threshold (smaller keeps finer concave detail).
+      largest_body: a mesh of several disconnected bodies is refused (the outline,
+        the feasibility checks and the physics must see the same solid); True keeps
+        the largest body (with its inner voids) and drops the others with a warning.
     """
     path = Path(path)
     label = name or path.stem
@@ -554,6 +558,7 @@ def object_from_mesh(
         )
     if mesh.volume < 0:
         mesh.invert()
+    mesh = _one_body(mesh, path, largest_body)
     if pose == "stable":
         transforms, _ = trimesh.poses.compute_stable_poses(mesh, n_samples=1, sigma=0.0)
         mesh.apply_transform(transforms[0])
@@ -569,10 +574,45 @@ def object_from_mesh(
     mass_kg = _mass_kg(label, mesh.volume, mass_g, density_kg_m3)
     polygon = _mesh_outline(mesh, 0.0, float(mesh.bounds[1, 2]))
     pieces = _coacd_pieces(mesh, coacd_threshold)
-    source = f"{path} (unit={unit}, pose={pose})"
+    source = f"{path} (unit={unit}, pose={pose}{', largest_body' if largest_body else ''})"
     return _finish(
         label, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
     )
+
+
+def _one_body(mesh: trimesh.Trimesh, path: Path, largest_body: bool) -> trimesh.Trimesh:
+    """The mesh if it is one connected solid; else an error naming its bodies, or, with
+    largest_body, the largest body (and the voids inside it) with a warning.
+
+    A closed shell inside another with inward normals (negative volume) is a void of
+    the solid around it, not a body of its own: a hollow part is one body.
+    """
+    shells = mesh.split(only_watertight=False)
+    if len(shells) <= 1:
+        return mesh
+    bodies = [s for s in shells if s.volume > 0]
+    voids = [s for s in shells if s.volume <= 0]
+    if len(bodies) <= 1:
+        return mesh
+    bodies.sort(key=lambda s: s.volume, reverse=True)
+    vols = ", ".join(f"{b.volume * 1e9:.6g}" for b in bodies[:6])
+    more = " ..." if len(bodies) > 6 else ""
+    if not largest_body:
+        raise ConfigError(
+            f"mesh {str(path)!r} holds {len(bodies)} disconnected bodies (volumes {vols}{more} "
+            "mm^3); the outline, the feasibility checks and the physics need one solid: join "
+            "them in CAD (a boolean union or a bridge), or keep the largest with "
+            "--largest-body (largest_body=True)"
+        )
+    kept = bodies[0]
+    inside = [v for v in voids if bool(kept.contains(v.vertices[:1])[0])]
+    warnings.warn(
+        f"mesh {path.name}: kept the largest of {len(bodies)} disconnected bodies "
+        f"({kept.volume * 1e9:.6g} mm^3), dropped {len(bodies) - 1} of volumes "
+        f"{', '.join(f'{b.volume * 1e9:.6g}' for b in bodies[1:6])}{more} mm^3",
+        stacklevel=3,
+    )
+    return trimesh.util.concatenate([kept, *inside]) if inside else kept
 
 
 def _mesh_outline(mesh: trimesh.Trimesh, z_lo_m: float, z_hi_m: float) -> Polygon:
@@ -727,6 +767,7 @@ def load_object(
     pick_height_mm: float | None = None,
     simplify_mm: float | None = None,
     material: str | None = None,
+    largest_body: bool = False,
 ) -> ObjectModel:
     """An object from a shipped asset name, an image file or a mesh file (CLI entry)."""
     text = str(source)
@@ -749,7 +790,13 @@ def load_object(
         if unit is None:
             raise ConfigError(f"mesh {text!r}: give its unit ('m' or 'mm', --unit)")
         return object_from_mesh(
-            text, unit=unit, mass_g=mass_g, density_kg_m3=density_kg_m3, pose=pose, **common
+            text,
+            unit=unit,
+            mass_g=mass_g,
+            density_kg_m3=density_kg_m3,
+            pose=pose,
+            largest_body=largest_body,
+            **common,
         )
     if suffix == "" and text in asset_names():
         return load_asset(
