@@ -231,6 +231,46 @@ def test_gripper_file_roundtrip(tmp_path):
         mp.load_gripper(str(path))
 
 
+@pytest.mark.parametrize(
+    "text, missing",
+    [
+        ("", "name, stroke_mm, finger_width_mm"),
+        ('name = "onrobot-rg2"\nstroke_mm = 110.0\nforce_max_n = 40.0\n', "finger_width_mm"),
+        (
+            'name = "mine"\n' + "".join(f"{k} = 10.0\n" for k in ("stroke_mm", "force_max_n")),
+            "finger_width_mm.*speed_max_mm_s, finger_mass_g, body_mass_g;",
+        ),
+    ],
+)
+def test_gripper_file_missing_keys_are_named_not_filled_with_a_preset(tmp_path, text, missing):
+    # they were completed with Robotiq 2F-85 values under the user's gripper name
+    path = tmp_path / "g.toml"
+    path.write_text(text)
+    with pytest.raises(mp.ConfigError, match=f"missing {missing}.*base = "):
+        mp.load_gripper(str(path))
+
+
+def test_gripper_file_can_extend_a_preset_by_name(tmp_path):
+    path = tmp_path / "g.toml"
+    path.write_text('base = "onrobot-rg2"\nname = "rg2-long"\nfinger_width_mm = 30.0\n')
+    g = mp.load_gripper(str(path))
+    rg2 = mp.load_gripper("onrobot-rg2")
+    assert g.name == "rg2-long" and g.finger_width_mm == 30.0
+    assert (g.stroke_mm, g.force_max_n) == (rg2.stroke_mm, rg2.force_max_n)
+    assert "based on onrobot-rg2" in g.source
+    # an MJCF preset's model path is its own folder's
+    path.write_text('base = "robotiq-2f85-linkage"\nname = "soft"\nforce_max_n = 100.0\n')
+    g = mp.load_gripper(str(path))
+    assert g.mjcf is not None and g.force_max_n == 100.0
+    for text, match in [
+        ('base = "robotiq-2f85"\nstroke_mm = 80.0\n', "give the gripper a name"),
+        ('base = "nope"\nname = "x"\n', "base = 'nope' is not a gripper preset"),
+    ]:
+        path.write_text(text)
+        with pytest.raises(mp.ConfigError, match=match):
+            mp.load_gripper(str(path))
+
+
 def test_mesh_bad_inputs(tmp_path):
     path = tmp_path / "b.stl"
     trimesh.creation.box([10, 10, 10]).export(path)
