@@ -104,7 +104,10 @@ def pick_config(args):
     from mjx_pick.core.pickpoints import PickConfig
 
     return override(
-        PickConfig(), safety_zone_mm=args.safety_zone_mm, min_coverage=args.min_coverage
+        PickConfig(),
+        safety_zone_mm=args.safety_zone_mm,
+        min_coverage=args.min_coverage,
+        resolution_mm=getattr(args, "resolution_mm", None),
     )
 
 

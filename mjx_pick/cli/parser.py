@@ -191,6 +191,11 @@ def _add_pick_args(p: argparse.ArgumentParser) -> None:
         help="least fraction of the region between the fingertips the object must fill "
         "(default: 0.35)",
     )
+    g.add_argument(
+        "--resolution-mm",
+        type=float,
+        help="silhouette raster of the feasibility checks, mm (default: 0.5)",
+    )
 
 
 def _add_progress(p: argparse.ArgumentParser) -> None:

@@ -25,6 +25,11 @@ class ConfigError(ValueError):
     """A user input (a setting, a file, a value) is invalid; the message says why."""
 
 
+class PlausibilityWarning(UserWarning):
+    """A user input is allowed but implausible (a density no solid has, a time step
+    above the converged one); the message gives the numbers and what to check."""
+
+
 def check_range(
     owner: str,
     field: str,

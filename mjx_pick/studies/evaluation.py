@@ -214,6 +214,7 @@ def evaluate(
     grasp = grasp or GraspConfig()
     pick_config = pick_config or pp.PickConfig()
     grasp.check_gripper(gripper)
+    pp.check_raster(obj, pick_config)  # before any allocation or folder
     if ray is not None and min_force:
         raise ConfigError(
             "--min-force does not run on a Ray cluster yet: leave out --ray or --min-force"

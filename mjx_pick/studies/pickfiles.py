@@ -44,6 +44,7 @@ def write_picks(
     simulated. Returns the pick-points.
     """
     config = config or pp.PickConfig()
+    pp.check_raster(obj, config)  # before any allocation or folder
     request = {"object": obj.summary(), "gripper": to_dict(gripper), "picks": to_dict(config)}
     request.update(n=n, seed=seed)
     folder = claim(out, "picks", config_hash(request), overwrite=overwrite)
