@@ -337,3 +337,28 @@ def test_stability_check_moves_the_object_and_marks_the_labels_it_flips(block):
         evaluate(block, n=8, grasp=FAST, backend="mujoco", stability_um=-1)
     with pytest.raises(mp.ConfigError, match="Ray"):
         evaluate(block, n=8, grasp=FAST, stability_um=1.0, ray="127.0.0.1:1")
+
+
+def test_a_presets_force_range_gives_the_default_grip_force(tmp_path, capsys):
+    # `--gripper onrobot-rg2` failed with the default 50 N (its range is 3-40 N)
+    from mjx_pick.cli import inputs
+
+    rg2 = mp.load_gripper("onrobot-rg2")
+    grasp, note = GraspConfig().fitted_to(rg2)
+    assert grasp.grip_force_n == 40.0 and "outside onrobot-rg2's 3-40 N: using 40 N" in note
+    assert GraspConfig().fitted_to(mp.load_gripper("robotiq-2f85")) == (GraspConfig(), None)
+    parse = cli.build_parser().parse_args
+    args = parse(["evaluate", "block", "--gripper", "onrobot-rg2"])
+    assert inputs.inputs_of(args)[4].grip_force_n == 40.0
+    assert "using 40 N" in capsys.readouterr().err
+    # a force the user set is never moved
+    args = parse(["evaluate", "block", "--gripper", "onrobot-rg2", "--grip-force-n", "50"])
+    assert inputs.inputs_of(args)[4].grip_force_n == 50.0
+    grasp_file = tmp_path / "g.toml"
+    grasp_file.write_text("grip_force_n = 50.0\n")
+    args = parse(["evaluate", "block", "--gripper", "onrobot-rg2", "--grasp", str(grasp_file)])
+    assert inputs.inputs_of(args)[4].grip_force_n == 50.0
+    code = cli.main(["evaluate", "block", "--gripper", "onrobot-rg2", "--grip-force-n", "50"])
+    assert code == 2 and "grip_force_n = 50 is out of range" in capsys.readouterr().err
+    with pytest.warns(UserWarning, match="using 40 N"), pytest.raises(mp.ConfigError):
+        evaluate("block", "onrobot-rg2", n=1, backend="mujoco", resume=True)  # stops: no --out

@@ -219,7 +219,10 @@ def evaluate(
     obj, gripper = _resolve(obj, gripper)
     contact = contact or ContactParams()
     solver = solver or SolverParams()
-    grasp = grasp or GraspConfig()
+    if grasp is None:  # the default procedure, its grip force within the gripper's range
+        grasp, note = GraspConfig().fitted_to(gripper)
+        if note:
+            warnings.warn(note, stacklevel=2)
     pick_config = pick_config or pp.PickConfig()
     grasp.check_gripper(gripper)
     pp.check_raster(obj, pick_config)  # before any allocation or folder
