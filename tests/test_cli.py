@@ -32,6 +32,7 @@ OVERRIDES = {
     "--fingertip-clearance-mm": ("grasp", "fingertip_clearance_mm"),
     "--safety-zone-mm": ("picks", "safety_zone_mm"),
     "--min-coverage": ("picks", "min_coverage"),
+    "--resolution-mm": ("picks", "resolution_mm"),
 }
 
 

@@ -104,8 +104,9 @@ def test_cli_evaluate_with_user_picks(tmp_path, fast_toml, capsys):
     "content, match",
     [
         ("x_mm,yaw_deg\n0,0\n", "missing column"),
-        ("x_mm,y_mm,yaw_deg\n0,zero,0\n", "row 2"),
-        ("x_mm,y_mm,yaw_deg\n0,0,0\n80,0,0\n", "row 3 \\(off_object\\)"),
+        ("x_mm,y_mm,yaw_deg\n0,zero,0\n", "line 2"),
+        ("x_mm,y_mm,yaw_deg\n0,0,0\n80,0,0\n", "pick_id 1 \\(line 3\\): off_object"),
+        ("x_mm,y_mm,yaw_deg,grip_force_n\n0,0,0,30\n", "unknown column.*grip_force_n"),
     ],
 )
 def test_cli_bad_picks_file(tmp_path, fast_toml, capsys, content, match):
@@ -169,14 +170,67 @@ def test_picks_file_with_an_infeasible_row(tmp_path, block):
     picks = tmp_path / "picks.csv"
     picks.write_text("x_mm,y_mm,yaw_deg\n0,0,0\n300,0,0\n1,0,10\n")
     grasp = GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
-    with pytest.raises(mp.ConfigError, match=r"row 3 \(off_object\).*--skip-infeasible"):
+    with pytest.raises(mp.ConfigError, match=r"pick_id 1 \(line 3\): off_object.*--skip-infe"):
         evaluate(block, picks=picks, grasp=grasp, backend="mujoco", n_traces=0)
-    with pytest.warns(UserWarning, match=r"1 of 3 .*row 3 \(off_object\); left out"):
+    with pytest.warns(UserWarning, match=r"1 of 3 .*pick_id 1 \(line 3\): off_object; left"):
         ev = evaluate(
             block, picks=picks, grasp=grasp, backend="mujoco", n_traces=0, skip_infeasible=True
         )
     # the kept rows keep their index in the file
     assert ev.table["pick_id"].to_pylist() == [0, 2]
+
+
+def test_picks_file_ids_are_kept_through_to_the_results(tmp_path, block):
+    # a pick_id column was renumbered 0, 1, ...: joining by id gave other rows
+    picks = tmp_path / "picks.csv"
+    picks.write_text("pick_id,x_mm,y_mm,yaw_deg\n7,0,0,0\n3,300,0,0\n12,1,0,10\n")
+    grasp = GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
+    with pytest.warns(UserWarning, match=r"pick_id 3 \(line 3\): off_object; left out"):
+        ev = evaluate(
+            block, picks=picks, grasp=grasp, backend="mujoco", n_traces=0, skip_infeasible=True
+        )
+    assert ev.table["pick_id"].to_pylist() == [7, 12]
+    np.testing.assert_allclose(ev.table["x_mm"].to_numpy(), [0.0, 1.0])
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        ("x_mm,y_mm,yaw_deg\n0,0,0\n1,0,0\n0,0,0\n", r"1 repeated pose.*line 4 repeats line 2"),
+        ("pick_id,x_mm,y_mm,yaw_deg\n5,0,0,0\n5,1,0,0\n", r"repeated pick_id.*line 3 repeats"),
+        ("pick_id,x_mm,y_mm,yaw_deg\n1.5,0,0,0\n", r"line 2: pick_id = '1.5' must be a whole"),
+        ("pick_id,x_mm,y_mm,yaw_deg\n-1,0,0,0\n", r"pick_id = '-1'"),
+        (
+            "x_mm,y_mm,yaw_deg,grip_force_n,note\n0,0,0,30,a\n",
+            r"unknown column\(s\) grip_force_n, note; allowed: x_mm, y_mm, yaw_deg, pick_id",
+        ),
+        ("x_mm,y_mm,yaw_deg\n0,0,0,9\n", r"line 2: more cells than columns"),
+    ],
+)
+def test_picks_file_repeats_and_unknown_columns_are_refused(tmp_path, content, match):
+    from mjx_pick.studies.pickfiles import read_picks_csv
+
+    path = tmp_path / "p.csv"
+    path.write_text(content)
+    with pytest.raises(mp.ConfigError, match=match):
+        read_picks_csv(path)
+
+
+def test_picks_file_saved_by_excel_with_a_byte_order_mark(tmp_path):
+    from mjx_pick.studies.pickfiles import read_picks_csv
+
+    path = tmp_path / "p.csv"
+    path.write_bytes("\ufeffx_mm,y_mm,yaw_deg,opening_mm,coverage\r\n1,2,3,40,0.5\r\n".encode())
+    rows = read_picks_csv(path)
+    assert (rows.pick_id.tolist(), rows.x_mm.tolist(), rows.yaw_deg.tolist()) == ([0], [1], [3])
+
+
+def test_a_bad_picks_file_is_refused_before_the_folder_is_claimed(tmp_path, block):
+    picks = tmp_path / "p.csv"
+    picks.write_text("x_mm,y_mm,yaw_deg\n0,0,0\n0,0,0\n")
+    with pytest.raises(mp.ConfigError, match="repeated pose"):
+        evaluate(block, picks=picks, backend="mujoco", out=tmp_path / "run")
+    assert not (tmp_path / "run").exists()
 
 
 def _key(obj, **settings):
@@ -283,3 +337,28 @@ def test_stability_check_moves_the_object_and_marks_the_labels_it_flips(block):
         evaluate(block, n=8, grasp=FAST, backend="mujoco", stability_um=-1)
     with pytest.raises(mp.ConfigError, match="Ray"):
         evaluate(block, n=8, grasp=FAST, stability_um=1.0, ray="127.0.0.1:1")
+
+
+def test_a_presets_force_range_gives_the_default_grip_force(tmp_path, capsys):
+    # `--gripper onrobot-rg2` failed with the default 50 N (its range is 3-40 N)
+    from mjx_pick.cli import inputs
+
+    rg2 = mp.load_gripper("onrobot-rg2")
+    grasp, note = GraspConfig().fitted_to(rg2)
+    assert grasp.grip_force_n == 40.0 and "outside onrobot-rg2's 3-40 N: using 40 N" in note
+    assert GraspConfig().fitted_to(mp.load_gripper("robotiq-2f85")) == (GraspConfig(), None)
+    parse = cli.build_parser().parse_args
+    args = parse(["evaluate", "block", "--gripper", "onrobot-rg2"])
+    assert inputs.inputs_of(args)[4].grip_force_n == 40.0
+    assert "using 40 N" in capsys.readouterr().err
+    # a force the user set is never moved
+    args = parse(["evaluate", "block", "--gripper", "onrobot-rg2", "--grip-force-n", "50"])
+    assert inputs.inputs_of(args)[4].grip_force_n == 50.0
+    grasp_file = tmp_path / "g.toml"
+    grasp_file.write_text("grip_force_n = 50.0\n")
+    args = parse(["evaluate", "block", "--gripper", "onrobot-rg2", "--grasp", str(grasp_file)])
+    assert inputs.inputs_of(args)[4].grip_force_n == 50.0
+    code = cli.main(["evaluate", "block", "--gripper", "onrobot-rg2", "--grip-force-n", "50"])
+    assert code == 2 and "grip_force_n = 50 is out of range" in capsys.readouterr().err
+    with pytest.warns(UserWarning, match="using 40 N"), pytest.raises(mp.ConfigError):
+        evaluate("block", "onrobot-rg2", n=1, backend="mujoco", resume=True)  # stops: no --out

@@ -257,7 +257,8 @@ def write_toml(tmp_path: Path, **mjcf) -> Path:
         "actuator": "fingers_actuator",
     }
     table.update(mjcf)
-    top = {"name": "mine", "force_max_n": 40.0}
+    top = {"name": "mine", "force_max_n": 40.0, "force_min_n": 20.0}
+    top.update(speed_min_mm_s=20.0, speed_max_mm_s=150.0)
     for key in [k for k in table if k.startswith("top_")]:
         top[key[4:]] = table.pop(key)
 

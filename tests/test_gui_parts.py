@@ -69,7 +69,10 @@ def test_gripper_toml_errors_name_the_problem():
         forms.gripper_from_toml('name = "g"\nstrok_mm = 80\n')
     with pytest.raises(ConfigError, match="empty"):
         forms.gripper_from_toml("")
-    assert forms.gripper_from_toml('name = "g"\nstroke_mm = 80.0\n').stroke_mm == 80.0
+    with pytest.raises(ConfigError, match="missing finger_width_mm"):
+        forms.gripper_from_toml('name = "g"\nstroke_mm = 80.0\n')
+    text = 'base = "robotiq-2f85"\nname = "g"\nstroke_mm = 80.0\n'
+    assert forms.gripper_from_toml(text).stroke_mm == 80.0
 
 
 @pytest.mark.parametrize(

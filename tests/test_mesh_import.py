@@ -168,3 +168,53 @@ def test_ycb_outline_is_the_whole_shadow(name, hull_pieces):
     shadow_rect = np.asarray(shadow.minimum_rotated_rectangle.exterior.coords)
     shadow_sides = sorted(np.linalg.norm(np.diff(shadow_rect[:3], axis=0), axis=1))
     assert sides == pytest.approx(shadow_sides, rel=0.02)
+
+
+# ------------------------------------------------------------- one body per mesh
+
+
+def two_bodies(tmp_path):
+    """A 60 x 20 x 10 mm bar and a 10 mm cube 20 mm beside it, in one STL (mm)."""
+    bar = trimesh.creation.box([60.0, 20.0, 10.0])
+    cube = trimesh.creation.box([10.0, 10.0, 10.0])
+    cube.apply_translation([0.0, 35.0, 0.0])
+    path = tmp_path / "two.stl"
+    trimesh.util.concatenate([bar, cube]).export(path)
+    return path
+
+
+def test_a_mesh_of_two_bodies_is_refused_naming_them(tmp_path, hull_pieces):
+    # the outline kept the bar alone while mass and centre of mass held both bodies
+    with pytest.raises(mp.ConfigError, match=r"2 disconnected bodies.*12000.*1000.*--largest-body"):
+        mp.load_object(two_bodies(tmp_path), unit="mm", mass_g=50.0)
+
+
+def test_largest_body_keeps_the_largest_everywhere(tmp_path, hull_pieces):
+    with pytest.warns(UserWarning, match="dropped 1 of volumes 1000"):
+        obj = mp.load_object(two_bodies(tmp_path), unit="mm", mass_g=50.0, largest_body=True)
+    # outline, mesh (mass properties) and collision pieces are the bar's alone
+    assert obj.polygon.area == pytest.approx(60.0 * 20.0, rel=1e-3)
+    assert obj.mesh.volume == pytest.approx(12000e-9, rel=1e-6)
+    assert obj.com_m[:2] == pytest.approx([0.0, 0.0], abs=1e-9)
+    assert np.ptp(np.vstack(obj.pieces)[:, 1]) == pytest.approx(0.020, rel=1e-6)
+    assert "largest_body" in obj.source
+
+
+def test_a_hollow_mesh_is_one_body(tmp_path, hull_pieces):
+    outer = trimesh.creation.box([40.0, 40.0, 40.0])
+    void = trimesh.creation.box([20.0, 20.0, 20.0])
+    void.invert()
+    path = tmp_path / "hollow.stl"
+    trimesh.util.concatenate([outer, void]).export(path)
+    obj = mp.load_object(path, unit="mm", mass_g=50.0)
+    assert obj.mesh.volume == pytest.approx((40.0**3 - 20.0**3) * 1e-9, rel=1e-6)
+
+
+def test_cli_largest_body_reaches_the_importer(tmp_path, hull_pieces):
+    args = cli.build_parser().parse_args(
+        ["picks", str(two_bodies(tmp_path)), "--unit", "mm", "--mass-g", "50", "--largest-body"]
+        + ["--out", str(tmp_path / "out")]
+    )
+    with pytest.warns(UserWarning):
+        obj, _ = inputs.objects(args)
+    assert obj.polygon.area == pytest.approx(60.0 * 20.0, rel=1e-3)

@@ -1,6 +1,7 @@
 """Object import: segmentation accuracy, holes, mass properties, meshes, bad inputs."""
 
 import math
+import warnings
 
 import cv2
 import mujoco
@@ -12,6 +13,7 @@ from mujoco import mjx
 from shapely.geometry import Point, box
 
 import mjx_pick as mp
+from mjx_pick.core.config import PlausibilityWarning
 from mjx_pick.core.objects import convex_partition, rasterize
 
 PX = 10.0  # px per mm of the drawn test images
@@ -208,6 +210,84 @@ def test_bad_numbers(tmp_path, kwargs, match):
         mp.object_from_image(path, **kwargs)
 
 
+# a 20 x 20 mm square, 5 mm thick (about 2000 mm^3)
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        # a traceback (trimesh: "mesh volume is too small") before
+        ({"px_per_mm": 1e6, "thickness_mm": 5, "mass_g": 1}, "is 0.000202 x 0.000201 mm: allowed"),
+        # 2 m across: ran silently for minutes
+        ({"px_per_mm": 0.1, "thickness_mm": 5, "mass_g": 1}, "is 2020 x 2010 mm: allowed 1 mm"),
+        ({"px_per_mm": 10, "thickness_mm": 1e5, "mass_g": 1}, "thickness_mm = 100000"),
+        ({"px_per_mm": 10, "thickness_mm": 5, "mass_g": 1e9}, "density of 4.98..e.11 kg/m.3; no"),
+        ({"px_per_mm": 10, "thickness_mm": 5, "mass_g": 1e-6}, "density of 0.000498.. kg/m.3; no"),
+        ({"px_per_mm": 10, "thickness_mm": 5, "density_kg_m3": 0.5}, "no solid is"),
+    ],
+)
+def test_implausible_scale_size_and_mass_are_refused(tmp_path, kwargs, match):
+    path = draw(tmp_path, box(0, 0, 20, 20))
+    with pytest.raises(mp.ConfigError, match=match):
+        mp.object_from_image(path, **kwargs)
+
+
+def test_unlikely_density_is_a_warning_with_numbers():
+    with pytest.warns(PlausibilityWarning, match=r"density of 30000 kg/m\^3, outside.*50-25000"):
+        mp.object_from_polygon(box(0, 0, 10, 10), thickness_mm=10, mass_g=30.0)
+    with pytest.warns(PlausibilityWarning, match=r"density_kg_m3 = 20 kg/m\^3"):
+        mp.object_from_polygon(box(0, 0, 10, 10), thickness_mm=10, density_kg_m3=20.0)
+
+
+def test_huge_image_is_refused_from_its_header(tmp_path, monkeypatch):
+    from mjx_pick.core import objects
+
+    path = draw(tmp_path, box(0, 0, 20, 20))
+    monkeypatch.setattr(objects, "MAX_IMAGE_PIXELS", 1000)
+    monkeypatch.setattr(objects.cv2, "imread", lambda *a: pytest.fail("decoded"))
+    with pytest.raises(mp.ConfigError, match=r"is 400 x 400 pixels: allowed at most 0.001 million"):
+        mp.object_from_image(path, px_per_mm=10, thickness_mm=5, mass_g=1)
+
+
+def test_mesh_face_and_file_limits(tmp_path, monkeypatch):
+    from mjx_pick.core import objects
+
+    path = tmp_path / "sphere.stl"
+    trimesh.creation.icosphere(subdivisions=3, radius=10.0).export(path)  # 1280 faces
+    monkeypatch.setattr(objects, "MAX_MESH_FACES", 1000)
+    with pytest.raises(mp.ConfigError, match="1280 triangles: allowed at most 1000; decimate"):
+        mp.load_object(path, unit="mm", mass_g=5)
+    monkeypatch.setattr(objects, "MAX_MESH_FILE_BYTES", 1000)
+    with pytest.raises(mp.ConfigError, match="MiB file: allowed at most"):
+        mp.load_object(path, unit="mm", mass_g=5)
+
+
+def test_feasibility_raster_limit_names_a_resolution_that_fits(tmp_path):
+    # a 600 mm part at the default 0.5 mm raster took 23 GB and was killed
+    big = mp.object_from_polygon(box(0, 0, 600, 400), thickness_mm=5, mass_g=3000)
+    with pytest.raises(mp.ConfigError, match=r"resolution_mm = 0.5 is too fine.*--resolution-mm"):
+        mp.evaluate(big, n=4, out=tmp_path / "run")
+    assert not (tmp_path / "run").exists()  # refused before the folder is claimed
+    import re
+
+    from mjx_pick.core import pickpoints as pp
+
+    try:
+        pp.check_raster(big)
+    except mp.ConfigError as err:
+        res = float(re.search(r"--resolution-mm ([0-9.]+)", str(err))[1])
+    pp.check_raster(big, pp.PickConfig(resolution_mm=res))  # the named one fits
+    huge = mp.object_from_polygon(box(0, 0, 990, 990), thickness_mm=5, mass_g=9000)
+    with pytest.raises(mp.ConfigError, match="even --resolution-mm 2 does not fit"):
+        pp.check_raster(huge)
+
+
+def test_timestep_above_the_converged_one_is_warned():
+    with pytest.warns(PlausibilityWarning, match=r"timestep_s = 0.005 is above 0.002 s"):
+        mp.SolverParams(timestep_s=0.005)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mp.SolverParams(timestep_s=0.002)
+
+
 def test_bad_gripper():
     with pytest.raises(mp.ConfigError, match="unknown gripper preset 'nope'"):
         mp.load_gripper("nope")
@@ -229,6 +309,46 @@ def test_gripper_file_roundtrip(tmp_path):
     path.write_text('name = "x"\nstroke_mmm = 3\n')
     with pytest.raises(mp.ConfigError, match="unknown setting.*stroke_mmm"):
         mp.load_gripper(str(path))
+
+
+@pytest.mark.parametrize(
+    "text, missing",
+    [
+        ("", "name, stroke_mm, finger_width_mm"),
+        ('name = "onrobot-rg2"\nstroke_mm = 110.0\nforce_max_n = 40.0\n', "finger_width_mm"),
+        (
+            'name = "mine"\n' + "".join(f"{k} = 10.0\n" for k in ("stroke_mm", "force_max_n")),
+            "finger_width_mm.*speed_max_mm_s, finger_mass_g, body_mass_g;",
+        ),
+    ],
+)
+def test_gripper_file_missing_keys_are_named_not_filled_with_a_preset(tmp_path, text, missing):
+    # they were completed with Robotiq 2F-85 values under the user's gripper name
+    path = tmp_path / "g.toml"
+    path.write_text(text)
+    with pytest.raises(mp.ConfigError, match=f"missing {missing}.*base = "):
+        mp.load_gripper(str(path))
+
+
+def test_gripper_file_can_extend_a_preset_by_name(tmp_path):
+    path = tmp_path / "g.toml"
+    path.write_text('base = "onrobot-rg2"\nname = "rg2-long"\nfinger_width_mm = 30.0\n')
+    g = mp.load_gripper(str(path))
+    rg2 = mp.load_gripper("onrobot-rg2")
+    assert g.name == "rg2-long" and g.finger_width_mm == 30.0
+    assert (g.stroke_mm, g.force_max_n) == (rg2.stroke_mm, rg2.force_max_n)
+    assert "based on onrobot-rg2" in g.source
+    # an MJCF preset's model path is its own folder's
+    path.write_text('base = "robotiq-2f85-linkage"\nname = "soft"\nforce_max_n = 100.0\n')
+    g = mp.load_gripper(str(path))
+    assert g.mjcf is not None and g.force_max_n == 100.0
+    for text, match in [
+        ('base = "robotiq-2f85"\nstroke_mm = 80.0\n', "give the gripper a name"),
+        ('base = "nope"\nname = "x"\n', "base = 'nope' is not a gripper preset"),
+    ]:
+        path.write_text(text)
+        with pytest.raises(mp.ConfigError, match=match):
+            mp.load_gripper(str(path))
 
 
 def test_mesh_bad_inputs(tmp_path):

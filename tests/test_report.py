@@ -218,3 +218,20 @@ def test_view_replays_the_trace_row_by_row(run_dir, monkeypatch):
     for k in (0, len(shown) // 2, len(shown) - 1):
         want = [trace[f"object_{c}_m"][k] for c in "xyz"]
         assert shown[k][1] == pytest.approx(want, abs=1e-9)
+
+
+@pytest.mark.parametrize("damaged", ["config.json", "summary.json", "results.parquet"])
+def test_a_damaged_run_file_is_an_error_naming_it(tmp_path, capsys, damaged):
+    # a traceback before (JSONDecodeError, ArrowInvalid)
+    folder = tmp_path / "run"
+    folder.mkdir()
+    config = {"object": {"outline_wkt": "POLYGON ((0 0, 10 0, 10 10, 0 0))"}, "gripper": {}}
+    (folder / "config.json").write_text(json.dumps(config))
+    (folder / "summary.json").write_text("{}")
+    (folder / "results.parquet").write_bytes(b"PAR1 not really")
+    if damaged != "results.parquet":
+        (folder / damaged).write_text('{"cut off": ')
+    with pytest.raises(mp.ConfigError, match=rf"{damaged} is damaged"):
+        Run.load(folder)
+    assert main(["report", str(folder), "--no-animations"]) == 2
+    assert f"{damaged} is damaged" in capsys.readouterr().err

@@ -41,9 +41,30 @@ def objects(args):
 
 def inputs_of(args):
     """(object, gripper, contact, solver, grasp, pick config): every one checked, every
-    problem reported together."""
+    problem reported together. A grip force set by neither --grip-force-n nor --grasp
+    is fitted into the gripper's range, with a note on stderr."""
     both, four = each_checked(lambda: objects(args), lambda: settings(args))
-    return (*both, *four)
+    contact, solver, grasp, picks = four
+    if not _force_given(args):
+        grasp, note = grasp.fitted_to(both[1])
+        if note:
+            print(f"mjx-pick: note: {note}", file=sys.stderr)
+    return (*both, contact, solver, grasp, picks)
+
+
+def _force_given(args) -> bool:
+    """Whether the user set the grip force (the flag, or a key of the --grasp file)."""
+    if getattr(args, "grip_force_n", None) is not None:
+        return True
+    if getattr(args, "grasp", None):
+        import tomllib
+        from pathlib import Path
+
+        try:
+            return "grip_force_n" in tomllib.loads(Path(args.grasp).read_text())
+        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+            return True  # load_toml has reported it already
+    return False
 
 
 def object_of(args):
@@ -61,6 +82,7 @@ def object_of(args):
         pick_height_mm=args.pick_height_mm,
         simplify_mm=args.simplify_mm,
         material=args.material,
+        largest_body=getattr(args, "largest_body", False),
     )
 
 
@@ -103,7 +125,10 @@ def pick_config(args):
     from mjx_pick.core.pickpoints import PickConfig
 
     return override(
-        PickConfig(), safety_zone_mm=args.safety_zone_mm, min_coverage=args.min_coverage
+        PickConfig(),
+        safety_zone_mm=args.safety_zone_mm,
+        min_coverage=args.min_coverage,
+        resolution_mm=getattr(args, "resolution_mm", None),
     )
 
 

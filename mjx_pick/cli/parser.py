@@ -80,6 +80,11 @@ def _add_object_args(p: argparse.ArgumentParser) -> None:
         help="a mesh's resting pose: as in the file, or its most stable resting pose",
     )
     g.add_argument(
+        "--largest-body",
+        action="store_true",
+        help="a mesh of several disconnected bodies: keep the largest (default: refuse it)",
+    )
+    g.add_argument(
         "--pick-height-mm",
         type=float,
         help="fingertip height above the table at the grasp, mm (default: --grasp-height's rule)",
@@ -185,6 +190,11 @@ def _add_pick_args(p: argparse.ArgumentParser) -> None:
         type=float,
         help="least fraction of the region between the fingertips the object must fill "
         "(default: 0.35)",
+    )
+    g.add_argument(
+        "--resolution-mm",
+        type=float,
+        help="silhouette raster of the feasibility checks, mm (default: 0.5)",
     )
 
 

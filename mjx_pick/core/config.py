@@ -25,6 +25,11 @@ class ConfigError(ValueError):
     """A user input (a setting, a file, a value) is invalid; the message says why."""
 
 
+class PlausibilityWarning(UserWarning):
+    """A user input is allowed but implausible (a density no solid has, a time step
+    above the converged one); the message gives the numbers and what to check."""
+
+
 def check_range(
     owner: str,
     field: str,
@@ -237,6 +242,34 @@ def load_toml(cls: type[T], path: str | os.PathLike, *, table: str | None = None
     if table is not None:
         data = data.get(table, {})
     return from_mapping(cls, data, where=f"{path.name}")
+
+
+class _CsvText:
+    """A user's CSV file opened for csv.DictReader: UTF-8 with or without the byte-order
+    mark that Excel writes; a file that is not UTF-8 text is a ConfigError naming it."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+
+    def __enter__(self):
+        self.fh = self.path.open(newline="", encoding="utf-8-sig")
+        return self
+
+    def __iter__(self):
+        try:
+            yield from self.fh
+        except UnicodeDecodeError as err:
+            raise ConfigError(f"{str(self.path)!r} is not UTF-8 text: {err}") from err
+
+    def __exit__(self, *exc):
+        self.fh.close()
+        return False
+
+
+def open_csv(path: str | os.PathLike) -> _CsvText:
+    """Open a user's CSV file (``with open_csv(p) as fh: csv.DictReader(fh)``): UTF-8,
+    an Excel byte-order mark accepted; undecodable bytes are a ConfigError."""
+    return _CsvText(Path(path))
 
 
 def to_dict(obj: Any) -> Any:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core import mjcf_gripper
-from mjx_pick.core.config import ConfigError, check_fields, from_mapping, load_toml, setting
+from mjx_pick.core.config import ConfigError, check_fields, from_mapping, setting
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,17 +154,86 @@ def load_gripper(name_or_path: str | os.PathLike) -> GripperSpec:
 
 
 def _load_file(path: Path) -> GripperSpec:
-    if path.is_file():
-        try:
-            data = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as err:
-            raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
-        if "mjcf" in data:
-            return mjcf_gripper_spec(data, path)
-    return load_toml(GripperSpec, path)
+    if not path.is_file():
+        raise ConfigError(f"gripper file {str(path)!r} does not exist")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
+    return gripper_from_data(data, path.name, path.parent)
 
 
-def mjcf_gripper_spec(data: dict, path: Path) -> GripperSpec:
+# what a gripper TOML must say itself (unless it names a preset as its base): a
+# missing one is an error, never a preset's value under the user's name
+REQUIRED = (
+    "name",
+    "stroke_mm",
+    "finger_width_mm",
+    "finger_depth_mm",
+    "pad_height_mm",
+    "force_min_n",
+    "force_max_n",
+    "speed_min_mm_s",
+    "speed_max_mm_s",
+    "finger_mass_g",
+    "body_mass_g",
+)
+# an MJCF gripper's geometry and masses are measured from its model
+REQUIRED_MJCF = ("name", "force_min_n", "force_max_n", "speed_min_mm_s", "speed_max_mm_s")
+
+
+def gripper_from_data(data: dict, where: str, folder: Path) -> GripperSpec:
+    """A GripperSpec from a parsed gripper TOML (where: its name for messages; folder:
+    where a relative MJCF path is read from).
+
+    Every key of ``REQUIRED`` (an MJCF gripper: ``REQUIRED_MJCF``) must be given, or
+    ``base = "PRESET"`` names the shipped preset whose values the file's keys replace;
+    the file's name is then required still (a changed preset is another gripper).
+    """
+    data = dict(data)
+    base = data.pop("base", None)
+    known = {f.name for f in dataclasses.fields(GripperSpec)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ConfigError(
+            f"{where}: unknown setting(s) {', '.join(unknown)}; known: base, "
+            f"{', '.join(sorted(known))}"
+        )
+    if base is not None:
+        names = preset_names()
+        if not isinstance(base, str) or base not in names:
+            raise ConfigError(
+                f"{where}: base = {base!r} is not a gripper preset: choose one of "
+                f"{', '.join(names)}"
+            )
+        if "name" not in data:
+            raise ConfigError(
+                f'{where}: give the gripper a name (name = "..."): it differs from its '
+                f"base {base!r}"
+            )
+        res = resources.files("mjx_pick.assets") / "grippers" / f"{base}.toml"
+        with resources.as_file(res) as p:
+            base_data = tomllib.loads(p.read_text())
+            base_folder = p.parent
+        if "mjcf" in base_data and "mjcf" not in data:
+            folder = base_folder
+        source = data.get("source", f"{where}, based on {base}: {base_data.get('source', '')}")
+        data = {**base_data, **data, "source": source}
+    need = REQUIRED_MJCF if "mjcf" in data else REQUIRED
+    missing = [k for k in need if k not in data]
+    if missing:
+        presets = ", ".join(preset_names())
+        raise ConfigError(
+            f"{where}: missing {', '.join(missing)}; a gripper file gives every one of "
+            f'{", ".join(need)}, or names the preset it changes (base = "robotiq-2f85"; '
+            f"presets: {presets})"
+        )
+    if "mjcf" in data:
+        return mjcf_gripper_spec(data, folder / where, folder=folder)
+    return from_mapping(GripperSpec, data, where=where)
+
+
+def mjcf_gripper_spec(data: dict, path: Path, folder: Path | None = None) -> GripperSpec:
     """A GripperSpec for an MJCF gripper TOML (already parsed): the [mjcf] table checked
     against the model, geometry and masses measured from it (a quasi-static close)."""
     data = dict(data)
@@ -177,7 +246,8 @@ def mjcf_gripper_spec(data: dict, path: Path) -> GripperSpec:
             f"{path.name}: {', '.join(given)} are measured from the MJCF model; remove them"
         )
     mjcf = mjcf_gripper.resolve(
-        from_mapping(mjcf_gripper.MjcfGripper, table, where=f"{path.name} [mjcf]"), path.parent
+        from_mapping(mjcf_gripper.MjcfGripper, table, where=f"{path.name} [mjcf]"),
+        folder if folder is not None else path.parent,
     )
     kin = mjcf_gripper.characterise(mjcf)
     spec = from_mapping(GripperSpec, data, where=path.name)

@@ -27,7 +27,7 @@ import trimesh
 from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.polygon import orient
 
-from mjx_pick.core.config import ConfigError, check_range
+from mjx_pick.core.config import ConfigError, PlausibilityWarning, check_range
 
 # MJX wants convex meshes of fewer than ~32 vertices for its branchless convex-convex
 # test ("sharp bits" of the MJX docs); a prism of 12 polygon corners has 24.
@@ -36,6 +36,17 @@ MAX_HULL_VERTICES = 32
 # a disconnected blob is dropped with a warning only when it is this small beside the
 # largest; otherwise the image holds several objects and we refuse to guess
 DOMINANCE_RATIO = 0.05
+# an object is 1 mm to 1 m across and at most 1 m thick: outside, the scale or the unit
+# is wrong (and the feasibility raster of a larger part would not fit in memory)
+SIZE_RANGE_MM = (1.0, 1000.0)
+# inputs refused before they are decoded or processed (memory and time)
+MAX_IMAGE_PIXELS = 100_000_000
+MAX_MESH_FACES = 500_000
+MAX_MESH_FILE_BYTES = 256 * 2**20
+# the densities of solids: outside the first range a warning, outside the second an
+# error (no solid is that light or that dense: the mass, the scale or the unit is wrong)
+DENSITY_PLAUSIBLE_KG_M3 = (50.0, 25_000.0)
+DENSITY_POSSIBLE_KG_M3 = (1.0, 1_000_000.0)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -178,6 +189,7 @@ def segment_image(path: str | os.PathLike) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"image {str(path)!r} does not exist")
+    _check_image_pixels(path)
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None or img.size == 0:
         raise ConfigError(
@@ -202,6 +214,37 @@ def segment_image(path: str | os.PathLike) -> np.ndarray:
     fg8 = cv2.morphologyEx(fg.astype(np.uint8), cv2.MORPH_OPEN, kernel)
     fg8 = cv2.morphologyEx(fg8, cv2.MORPH_CLOSE, kernel)
     return _single_component(fg8, path)
+
+
+def _check_image_pixels(path: Path) -> None:
+    """Refuse an image of more than MAX_IMAGE_PIXELS from its header, before decoding."""
+    from PIL import Image
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                w, h = im.size
+    except Image.DecompressionBombError:
+        w = h = math.inf
+    except Exception:  # noqa: BLE001 - unreadable headers are reported by the decoder
+        return
+    if w * h > MAX_IMAGE_PIXELS:
+        raise ConfigError(
+            f"image {str(path)!r} is {w} x {h} pixels: allowed at most "
+            f"{MAX_IMAGE_PIXELS / 1e6:g} million; scale it down (and --px-per-mm with it)"
+        )
+
+
+def _check_size_mm(what: str, extents_mm, hint: str) -> None:
+    """Refuse an object outside SIZE_RANGE_MM across (its largest side)."""
+    lo, hi = SIZE_RANGE_MM
+    size = float(max(extents_mm))
+    if not lo <= size <= hi:
+        dims = " x ".join(f"{e:.4g}" for e in extents_mm)
+        raise ConfigError(
+            f"{what} is {dims} mm: allowed {lo:g} mm to {hi / 1e3:g} m across; {hint}"
+        )
 
 
 def _single_component(fg8: np.ndarray, path: Path) -> np.ndarray:
@@ -310,9 +353,16 @@ def object_from_image(
     if thickness_mm is None:
         raise ConfigError("thickness_mm is required for an image object")
     check_range("object", "px_per_mm", px_per_mm, 0, lo_open=True)
-    check_range("object", "thickness_mm", thickness_mm, 0, lo_open=True)
+    check_range("object", "thickness_mm", thickness_mm, 0, SIZE_RANGE_MM[1], lo_open=True)
     check_range("object", "simplify_mm", simplify_mm, 0, 5)
     mask = segment_image(path)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    px = (cols[-1] - cols[0] + 1, rows[-1] - rows[0] + 1)
+    _check_size_mm(
+        f"the object in image {str(path)!r} ({px[0]} x {px[1]} px at px_per_mm={px_per_mm:g})",
+        [v / px_per_mm for v in px],
+        "check px_per_mm (--px-per-mm), the image's pixels per millimetre",
+    )
     polygon = mask_to_polygon(mask, px_per_mm, simplify_mm)
     label = name or Path(path).stem
     source = f"{path} (px_per_mm={px_per_mm:g}, simplify_mm={simplify_mm:g})"
@@ -345,10 +395,12 @@ def object_from_polygon(
     collision_simplify_mm is the outline tolerance of the collision pieces (the
     silhouette for the geometric checks keeps the polygon as given).
     """
-    check_range("object", "thickness_mm", thickness_mm, 0, lo_open=True)
+    check_range("object", "thickness_mm", thickness_mm, 0, SIZE_RANGE_MM[1], lo_open=True)
     polygon = orient(shapely.make_valid(polygon)) if not polygon.is_valid else orient(polygon)
     if polygon.is_empty or polygon.area <= 0:
         raise ConfigError(f"object {name!r}: the silhouette has no area")
+    x0, y0, x1, y1 = polygon.bounds
+    _check_size_mm(f"object {name!r}'s silhouette", [x1 - x0, y1 - y0], "check its scale")
     c = polygon.centroid
     polygon = shapely.affinity.translate(polygon, -c.x, -c.y)
     mesh = trimesh.creation.extrude_polygon(
@@ -381,9 +433,30 @@ def _mass_kg(name: str, volume_m3: float, mass_g: float | None, density: float |
         raise ConfigError(f"object {name!r}: give mass_g or density_kg_m3")
     if mass_g is not None:
         check_range("object", "mass_g", mass_g, 0, lo_open=True)
-        return mass_g * 1e-3
-    check_range("object", "density_kg_m3", density, 0, lo_open=True)
-    return density * volume_m3
+        mass_kg = mass_g * 1e-3
+        given = f"mass_g = {mass_g:g} in {volume_m3 * 1e9:.4g} mm^3 is a density of "
+        fix = "check mass_g (--mass-g) and the size (the scale or unit)"
+    else:
+        check_range("object", "density_kg_m3", density, 0, lo_open=True)
+        mass_kg = density * volume_m3
+        given = "density_kg_m3 = "
+        fix = "check density_kg_m3 (--density-kg-m3)"
+    rho = mass_kg / volume_m3
+    lo, hi = DENSITY_POSSIBLE_KG_M3
+    if not lo <= rho <= hi:
+        raise ConfigError(
+            f"object {name!r}: {given}{rho:.5g} kg/m^3; no solid is (allowed {lo:g} to "
+            f"{hi:g} kg/m^3): {fix}"
+        )
+    lo, hi = DENSITY_PLAUSIBLE_KG_M3
+    if not lo <= rho <= hi:
+        warnings.warn(
+            f"object {name!r}: {given}{rho:.5g} kg/m^3, outside the solids' "
+            f"{lo:g}-{hi:g} kg/m^3: {fix}",
+            PlausibilityWarning,
+            stacklevel=3,
+        )
+    return mass_kg
 
 
 def _finish(name, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source):
@@ -517,6 +590,7 @@ def object_from_mesh(
     material: str = "pla",
     name: str | None = None,
     coacd_threshold: float = 0.04,
+    largest_body: bool = False,
 ) -> ObjectModel:
     """An object from a mesh file (STL/OBJ/PLY/GLB), resting on the table.
 
@@ -528,6 +602,9 @@ def object_from_mesh(
         probable resting pose, trimesh.poses.compute_stable_poses).
       pick_height_mm: fingertip height; default: the procedure's grasp-height rule.
       coacd_threshold: CoACD concavity threshold (smaller keeps finer concave detail).
+      largest_body: a mesh of several disconnected bodies is refused (the outline,
+        the feasibility checks and the physics must see the same solid); True keeps
+        the largest body (with its inner voids) and drops the others with a warning.
     """
     path = Path(path)
     label = name or path.stem
@@ -538,12 +615,24 @@ def object_from_mesh(
         raise ConfigError(f"object.pose = {pose!r} is not allowed: choose 'as_given' or 'stable'")
     if not path.is_file():
         raise ConfigError(f"mesh {str(path)!r} does not exist")
+    size = path.stat().st_size
+    if size > MAX_MESH_FILE_BYTES:
+        raise ConfigError(
+            f"mesh {str(path)!r} is a {size / 2**20:.0f} MiB file: allowed at most "
+            f"{MAX_MESH_FILE_BYTES / 2**20:.0f} MiB; simplify it (fewer triangles)"
+        )
     try:
         mesh = trimesh.load(str(path), force="mesh", process=True)
     except Exception as err:  # noqa: BLE001 - trimesh raises many types for bad files
         raise ConfigError(f"mesh {str(path)!r} cannot be read: {err}") from err
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise ConfigError(f"mesh {str(path)!r} holds no triangles")
+    if len(mesh.faces) > MAX_MESH_FACES:
+        raise ConfigError(
+            f"mesh {str(path)!r} has {len(mesh.faces)} triangles: allowed at most "
+            f"{MAX_MESH_FACES}; decimate it (e.g. MeshLab's quadric edge collapse, or "
+            "trimesh's simplify_quadric_decimation) to a few ten thousand"
+        )
     mesh.apply_scale(scales[unit])
     if not mesh.is_watertight:
         mesh.fill_holes()
@@ -554,25 +643,60 @@ def object_from_mesh(
         )
     if mesh.volume < 0:
         mesh.invert()
+    mesh = _one_body(mesh, path, largest_body)
     if pose == "stable":
         transforms, _ = trimesh.poses.compute_stable_poses(mesh, n_samples=1, sigma=0.0)
         mesh.apply_transform(transforms[0])
     com = mesh.center_mass
     mesh.apply_translation([-com[0], -com[1], -mesh.bounds[0, 2]])
     height_mm = float(mesh.bounds[1, 2] * 1e3)
-    extent_mm = float(np.max(mesh.extents) * 1e3)
-    if not 1.0 <= extent_mm <= 1000.0:
-        raise ConfigError(
-            f"mesh {str(path)!r} is {extent_mm:.3g} mm across with unit={unit!r}; "
-            "check the unit (allowed size 1 mm to 1 m)"
-        )
+    _check_size_mm(
+        f"mesh {str(path)!r} with unit={unit!r}",
+        mesh.extents * 1e3,
+        "check the unit (--unit m or mm)",
+    )
     mass_kg = _mass_kg(label, mesh.volume, mass_g, density_kg_m3)
     polygon = _mesh_outline(mesh, 0.0, float(mesh.bounds[1, 2]))
     pieces = _coacd_pieces(mesh, coacd_threshold)
-    source = f"{path} (unit={unit}, pose={pose})"
+    source = f"{path} (unit={unit}, pose={pose}{', largest_body' if largest_body else ''})"
     return _finish(
         label, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
     )
+
+
+def _one_body(mesh: trimesh.Trimesh, path: Path, largest_body: bool) -> trimesh.Trimesh:
+    """The mesh if it is one connected solid; else an error naming its bodies, or, with
+    largest_body, the largest body (and the voids inside it) with a warning.
+
+    A closed shell inside another with inward normals (negative volume) is a void of
+    the solid around it, not a body of its own: a hollow part is one body.
+    """
+    shells = mesh.split(only_watertight=False)
+    if len(shells) <= 1:
+        return mesh
+    bodies = [s for s in shells if s.volume > 0]
+    voids = [s for s in shells if s.volume <= 0]
+    if len(bodies) <= 1:
+        return mesh
+    bodies.sort(key=lambda s: s.volume, reverse=True)
+    vols = ", ".join(f"{b.volume * 1e9:.6g}" for b in bodies[:6])
+    more = " ..." if len(bodies) > 6 else ""
+    if not largest_body:
+        raise ConfigError(
+            f"mesh {str(path)!r} holds {len(bodies)} disconnected bodies (volumes {vols}{more} "
+            "mm^3); the outline, the feasibility checks and the physics need one solid: join "
+            "them in CAD (a boolean union or a bridge), or keep the largest with "
+            "--largest-body (largest_body=True)"
+        )
+    kept = bodies[0]
+    inside = [v for v in voids if bool(kept.contains(v.vertices[:1])[0])]
+    warnings.warn(
+        f"mesh {path.name}: kept the largest of {len(bodies)} disconnected bodies "
+        f"({kept.volume * 1e9:.6g} mm^3), dropped {len(bodies) - 1} of volumes "
+        f"{', '.join(f'{b.volume * 1e9:.6g}' for b in bodies[1:6])}{more} mm^3",
+        stacklevel=3,
+    )
+    return trimesh.util.concatenate([kept, *inside]) if inside else kept
 
 
 def _mesh_outline(mesh: trimesh.Trimesh, z_lo_m: float, z_hi_m: float) -> Polygon:
@@ -727,6 +851,7 @@ def load_object(
     pick_height_mm: float | None = None,
     simplify_mm: float | None = None,
     material: str | None = None,
+    largest_body: bool = False,
 ) -> ObjectModel:
     """An object from a shipped asset name, an image file or a mesh file (CLI entry)."""
     text = str(source)
@@ -749,7 +874,13 @@ def load_object(
         if unit is None:
             raise ConfigError(f"mesh {text!r}: give its unit ('m' or 'mm', --unit)")
         return object_from_mesh(
-            text, unit=unit, mass_g=mass_g, density_kg_m3=density_kg_m3, pose=pose, **common
+            text,
+            unit=unit,
+            mass_g=mass_g,
+            density_kg_m3=density_kg_m3,
+            pose=pose,
+            largest_body=largest_body,
+            **common,
         )
     if suffix == "" and text in asset_names():
         return load_asset(

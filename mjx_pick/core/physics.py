@@ -48,10 +48,22 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 
-from mjx_pick.core.config import ConfigError, check_choice, check_fields, check_range, setting
+from mjx_pick.core.config import (
+    ConfigError,
+    PlausibilityWarning,
+    check_choice,
+    check_fields,
+    check_range,
+    setting,
+)
+
+# the largest time step whose grasp labels match those of smaller steps (the default
+# procedure, MuJoCo C; benchmarks/RESULTS.md, "Time-step convergence"): larger ones are warned about
+CONVERGED_TIMESTEP_S = 0.002
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,6 +185,15 @@ class SolverParams:
         check_fields(self, o)
         check_choice(o, "cone", self.cone, ("elliptic", "pyramidal"))
         check_choice(o, "integrator", self.integrator, ("implicitfast", "euler"))
+        if self.timestep_s > CONVERGED_TIMESTEP_S:
+            warnings.warn(
+                f"solver.timestep_s = {self.timestep_s:g} is above {CONVERGED_TIMESTEP_S:g} s, "
+                "the largest step measured to leave the labels as they are at smaller steps: "
+                "successes may turn into failures or diverge (benchmarks/RESULTS.md, "
+                f"'Time-step convergence'); use --timestep-s {CONVERGED_TIMESTEP_S:g} or less",
+                PlausibilityWarning,
+                stacklevel=3,
+            )
 
     @property
     def timeconst_s(self) -> float:

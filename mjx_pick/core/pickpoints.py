@@ -25,6 +25,9 @@ from mjx_pick.kernels import feasibility as fk
 
 REASONS = fk.REASONS
 CANDIDATE_BLOCK = 4096  # candidates are drawn in fixed blocks: same seed, same stream
+# cells of the feasibility raster (yaw bins x rows x columns, ~13 bytes each while it is
+# built): more is refused before any is allocated
+MAX_RASTER_CELLS = 200_000_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -252,9 +255,44 @@ def feasible_batch(pick_id, x_mm, y_mm, yaw_deg, res: dict, mode: str) -> PickBa
     )
 
 
+def raster_cells(radius_mm: float, res_mm: float) -> int:
+    """Cells of the feasibility raster of a silhouette of this radius (``fk.build_stack``)."""
+    n_bins = max(8, math.ceil(math.pi * radius_mm / res_mm))
+    side = 2 * (math.ceil(radius_mm / res_mm) + 2)
+    return n_bins * side * side
+
+
+def check_raster(obj: ObjectModel, config: PickConfig | None = None) -> None:
+    """Refuse, before anything is allocated, an object whose feasibility raster at
+    config.resolution_mm would exceed MAX_RASTER_CELLS (it grows as (size/resolution)^3),
+    naming the coarsest resolution that fits."""
+    config = config or PickConfig()
+    radius = max(math.hypot(x, y) for x, y in obj.polygon.exterior.coords)
+    _check_cells(obj.name, radius, config.resolution_mm)
+
+
+def _check_cells(name: str, radius_mm: float, res_mm: float) -> None:
+    cells = raster_cells(radius_mm, res_mm)
+    if cells <= MAX_RASTER_CELLS:
+        return
+    fits = math.ceil(res_mm * (cells / MAX_RASTER_CELLS) ** (1 / 3) * 102) / 100
+    coarsest = PickConfig.__dataclass_fields__["resolution_mm"].metadata["range"][1]
+    fix = (
+        f"use --resolution-mm {fits:g} or more, or check the object's scale"
+        if fits <= coarsest
+        else f"even --resolution-mm {coarsest:g} does not fit: check the object's scale"
+    )
+    raise ConfigError(
+        f"picks.resolution_mm = {res_mm:g} is too fine for {name!r} ({2 * radius_mm:.0f} mm "
+        f"across): its feasibility raster would hold {cells / 1e6:.0f} million cells "
+        f"(~{cells * 13 / 2**30:.1f} GiB), allowed {MAX_RASTER_CELLS / 1e6:.0f} million; {fix}"
+    )
+
+
 @functools.lru_cache(maxsize=8)
 def _stack_cached(key, polygon, res_mm: float):
     radius = max(math.hypot(x, y) for x, y in polygon.exterior.coords)
+    _check_cells(key[0], radius, res_mm)
     return fk.build_stack(rasterize, polygon, res_mm, radius)
 
 

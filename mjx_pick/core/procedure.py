@@ -182,6 +182,21 @@ class GraspConfig:
             )
         return int(round(n))
 
+    def fitted_to(self, gripper: GripperSpec) -> tuple[GraspConfig, str | None]:
+        """For a grip force the user did not set: this procedure with grip_force_n moved
+        into the gripper's force range (the nearest end of it) where the default lies
+        outside, and a note saying so (None where nothing changed). A force the user
+        set is never moved: check_gripper refuses it."""
+        f = min(max(self.grip_force_n, gripper.force_min_n), gripper.force_max_n)
+        if f == self.grip_force_n:
+            return self, None
+        note = (
+            f"grip force: the default {self.grip_force_n:g} N is outside {gripper.name}'s "
+            f"{gripper.force_min_n:g}-{gripper.force_max_n:g} N: using {f:g} N "
+            "(set --grip-force-n to choose)"
+        )
+        return dataclasses.replace(self, grip_force_n=f), note
+
     def check_gripper(self, gripper: GripperSpec) -> None:
         """Settings the gripper cannot do are errors naming the field and the range."""
         if not gripper.force_min_n <= self.grip_force_n <= gripper.force_max_n:

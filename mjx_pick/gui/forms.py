@@ -14,8 +14,8 @@ import re
 import tomllib
 from pathlib import Path
 
-from mjx_pick.core.config import ConfigError, from_mapping, to_toml, write_atomic
-from mjx_pick.core.gripper import GripperSpec
+from mjx_pick.core.config import ConfigError, to_toml, write_atomic
+from mjx_pick.core.gripper import GripperSpec, gripper_from_data
 from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.pickpoints import PickConfig
 from mjx_pick.core.procedure import GraspConfig
@@ -179,8 +179,8 @@ def gripper_from_toml(text: str, where: str = "gripper TOML") -> GripperSpec:
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{where} is not valid TOML: {err}") from err
     if not data:
-        raise ConfigError(f"{where} is empty: give at least name and stroke_mm")
-    return from_mapping(GripperSpec, data, where=where)
+        raise ConfigError(f"{where} is empty: give every gripper field, or base and name")
+    return gripper_from_data(data, where, Path.cwd())
 
 
 def write_inputs(settings: Settings, folder: Path) -> dict[str, Path]:

@@ -150,6 +150,7 @@ def compare(
         raise ConfigError(f"gripper names must differ: {names}")
     base = base or Settings()
     pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+    pp.check_raster(obj, pick_config)  # before any allocation or folder
     if resume and out is None:
         raise ConfigError("--resume needs --out: the folder of the run to continue")
     with study_simulator(obj, simulator, backend, batch_size, ray) as sim:

@@ -99,16 +99,24 @@ def user_picks(
     config=None,
     grasp=None,
     skip_infeasible: bool = False,
+    pick_id=None,
+    line=None,
 ) -> pp.PickBatch:
-    """Check user pick-points. Infeasible ones are an error naming rows and reasons, or,
-    with skip_infeasible, left out with a warning that names them (pick_id keeps each
-    kept row's index in the file, so results map back to it)."""
+    """Check user pick-points. Infeasible ones are an error naming them and the reasons,
+    or, with skip_infeasible, left out with a warning that names them. pick_id: each
+    point's id (default: its index), kept through to the results so that they map back
+    to the user's rows; line: each one's line in the user's file (for messages)."""
     checker = pp.FeasibilityChecker(obj, gripper, config, grasp)
-    ids = np.arange(len(x))
+    ids = np.arange(len(x)) if pick_id is None else np.asarray(pick_id, np.int64)
     res = checker(x, y, yaw)
     bad = np.flatnonzero(res["reason"] != 0)
     if len(bad):
-        shown = ", ".join(f"row {i + 2} ({pp.REASONS[res['reason'][i]]})" for i in bad[:8])
+        shown = ", ".join(
+            f"pick_id {ids[i]}"
+            + ("" if line is None else f" (line {line[i]})")
+            + f": {pp.REASONS[res['reason'][i]]}"
+            for i in bad[:8]
+        )
         message = (
             f"{len(bad)} of {len(x)} pick-points are infeasible for {gripper.name}: {shown}"
             + (" ..." if len(bad) > 8 else "")
@@ -211,9 +219,13 @@ def evaluate(
     obj, gripper = _resolve(obj, gripper)
     contact = contact or ContactParams()
     solver = solver or SolverParams()
-    grasp = grasp or GraspConfig()
+    if grasp is None:  # the default procedure, its grip force within the gripper's range
+        grasp, note = GraspConfig().fitted_to(gripper)
+        if note:
+            warnings.warn(note, stacklevel=2)
     pick_config = pick_config or pp.PickConfig()
     grasp.check_gripper(gripper)
+    pp.check_raster(obj, pick_config)  # before any allocation or folder
     if ray is not None and min_force:
         raise ConfigError(
             "--min-force does not run on a Ray cluster yet: leave out --ray or --min-force"
@@ -227,6 +239,22 @@ def evaluate(
         raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
     if resume and out is None:
         raise ConfigError("--resume needs --out: the folder of the run to continue")
+    user_batch = None
+    if picks is not None and not isinstance(picks, pp.PickBatch) and until is None:
+        # the user's file is read and checked before a simulator or a folder is made
+        rows = read_picks_csv(picks)
+        user_batch = user_picks(
+            obj,
+            gripper,
+            rows.x_mm,
+            rows.y_mm,
+            rows.yaw_deg,
+            config=pick_config,
+            grasp=grasp,
+            skip_infeasible=skip_infeasible,
+            pick_id=rows.pick_id,
+            line=rows.line,
+        )
     scene = build_scene(obj, gripper, contact, solver, grasp)
     engine = runner = None
     if ray is None:
@@ -274,6 +302,7 @@ def evaluate(
             skip_infeasible=skip_infeasible,
             keep_chunks=keep_chunks,
             on_progress=on_progress,
+            user_batch=user_batch,
         )
     finally:
         if hasattr(executor, "close"):
@@ -309,6 +338,7 @@ def _evaluate(
     skip_infeasible,
     keep_chunks,
     on_progress,
+    user_batch=None,
 ) -> Evaluation:
     """evaluate() once its executor (this process, or a Ray cluster) is ready."""
     out_dir = Path(out) if out is not None else None
@@ -358,14 +388,7 @@ def _evaluate(
         elif isinstance(picks, pp.PickBatch):
             picks_batch = picks
         else:
-            picks_batch = user_picks(
-                obj,
-                gripper,
-                *read_picks_csv(picks),
-                config=pick_config,
-                grasp=grasp,
-                skip_infeasible=skip_infeasible,
-            )
+            picks_batch = user_batch  # read and checked before the folder was claimed
         if chunk_size:
             chunk = int(chunk_size)
         elif runner is not None:

@@ -8,18 +8,20 @@ pick-point under the gripper, and candidates coloured by the check that rejected
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from mjx_pick.core import pickpoints as pp
-from mjx_pick.core.config import ConfigError, to_dict, write_atomic
+from mjx_pick.core.config import ConfigError, open_csv, to_dict, write_atomic
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.outputs import plots
 from mjx_pick.outputs.rundir import claim, config_hash, finish
 
-__all__ = ["read_picks_csv", "write_picks"]
+__all__ = ["UserPicks", "read_picks_csv", "write_picks"]
 
 # candidates drawn for the rejection picture
 _N_CANDIDATES = 2000
@@ -44,6 +46,7 @@ def write_picks(
     simulated. Returns the pick-points.
     """
     config = config or pp.PickConfig()
+    pp.check_raster(obj, config)  # before any allocation or folder
     request = {"object": obj.summary(), "gripper": to_dict(gripper), "picks": to_dict(config)}
     request.update(n=n, seed=seed)
     folder = claim(out, "picks", config_hash(request), overwrite=overwrite)
@@ -80,30 +83,100 @@ def write_picks(
     return picks
 
 
-def read_picks_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """User pick-points: a CSV with columns x_mm, y_mm, yaw_deg (a header row)."""
+# the columns a pick-point file may have: the pose (required), the user's own pick_id,
+# and what write_picks adds (recomputed by the feasibility checks, so only read over)
+PICK_COLUMNS = ("x_mm", "y_mm", "yaw_deg")
+OPTIONAL_COLUMNS = ("pick_id", "opening_mm", "coverage")
+
+
+class UserPicks(NamedTuple):
+    """Pick-points read from a CSV: each row's id (its pick_id column, else its index
+    among the data rows, from 0), pose, and line number in the file (for messages)."""
+
+    pick_id: np.ndarray
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    yaw_deg: np.ndarray
+    line: np.ndarray
+
+
+def read_picks_csv(path: str | Path) -> UserPicks:
+    """User pick-points: a CSV with a header row and columns x_mm, y_mm, yaw_deg, and
+    optionally pick_id (whole numbers >= 0, each once; default: the row's index among
+    the data rows, from 0), opening_mm and coverage (as ``write_picks`` writes them; not
+    used). Results keep each row's pick_id. Another column, a repeated pick_id or a
+    repeated pose is an error naming it. A UTF-8 byte-order mark (Excel) is accepted."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"picks file {str(path)!r} does not exist")
-    with path.open(newline="") as fh:
+    allowed = PICK_COLUMNS + OPTIONAL_COLUMNS
+    with open_csv(path) as fh:
         reader = csv.DictReader(fh)
-        need = ("x_mm", "y_mm", "yaw_deg")
-        missing = [c for c in need if c not in (reader.fieldnames or [])]
+        found = [c.strip() if isinstance(c, str) else c for c in reader.fieldnames or []]
+        reader.fieldnames = found
+        missing = [c for c in PICK_COLUMNS if c not in found]
         if missing:
             raise ConfigError(
-                f"picks file {path.name}: missing column(s) {', '.join(missing)}; "
-                f"found {reader.fieldnames}"
+                f"picks file {path.name}: missing column(s) {', '.join(missing)}; found {found}"
             )
-        rows = []
-        for i, row in enumerate(reader, start=2):
+        unknown = [c for c in found if c not in allowed]
+        if unknown:
+            raise ConfigError(
+                f"picks file {path.name}: unknown column(s) {', '.join(map(str, unknown))}; "
+                f"allowed: {', '.join(allowed)} (a setting such as grip_force_n is a "
+                "flag or a settings file, not a column)"
+            )
+        repeated = sorted({c for c in found if found.count(c) > 1})
+        if repeated:
+            raise ConfigError(f"picks file {path.name}: column(s) {repeated} repeated")
+        has_id = "pick_id" in found
+        rows, ids, lines = [], [], []
+        for k, row in enumerate(reader):
+            line = reader.line_num
+            if None in row:
+                raise ConfigError(f"picks file {path.name}, line {line}: more cells than columns")
             try:
-                rows.append([float(row[c]) for c in need])
+                rows.append([float(row[c]) for c in PICK_COLUMNS])
             except (TypeError, ValueError) as err:
-                raise ConfigError(f"picks file {path.name}, row {i}: {err}") from err
+                raise ConfigError(f"picks file {path.name}, line {line}: {err}") from err
+            ids.append(_pick_id(row["pick_id"], path, line) if has_id else k)
+            lines.append(line)
     if not rows:
         raise ConfigError(f"picks file {path.name} has no rows")
     a = np.asarray(rows, float)
+    lines = np.asarray(lines, np.int64)
     if not np.isfinite(a).all():
-        bad = int(np.flatnonzero(~np.isfinite(a).all(axis=1))[0]) + 2
-        raise ConfigError(f"picks file {path.name}, row {bad}: values must be finite")
-    return a[:, 0], a[:, 1], a[:, 2]
+        bad = lines[int(np.flatnonzero(~np.isfinite(a).all(axis=1))[0])]
+        raise ConfigError(f"picks file {path.name}, line {bad}: values must be finite")
+    ids = np.asarray(ids, np.int64)
+    _refuse_repeats(path, "pick_id", ids, lines)
+    _refuse_repeats(path, "pose (x_mm, y_mm, yaw_deg)", [tuple(r) for r in a], lines)
+    return UserPicks(ids, a[:, 0], a[:, 1], a[:, 2], lines)
+
+
+def _pick_id(text, path: Path, line: int) -> int:
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not (math.isfinite(value) and value == int(value) and 0 <= value < 2**62):
+        raise ConfigError(
+            f"picks file {path.name}, line {line}: pick_id = {text!r} must be a whole number >= 0"
+        )
+    return int(value)
+
+
+def _refuse_repeats(path: Path, what: str, values, lines: np.ndarray) -> None:
+    first: dict = {}
+    repeats = []
+    for v, line in zip(values, lines, strict=True):
+        if v in first:
+            repeats.append(f"line {line} repeats line {first[v]}")
+        else:
+            first[v] = int(line)
+    if repeats:
+        shown = "; ".join(repeats[:6]) + (" ..." if len(repeats) > 6 else "")
+        raise ConfigError(
+            f"picks file {path.name}: {len(repeats)} repeated {what}: {shown}; "
+            "each pick-point once (a repeat would be counted twice)"
+        )

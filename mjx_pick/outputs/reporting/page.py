@@ -9,7 +9,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-import pyarrow.parquet as pq
 
 from mjx_pick.core.config import ConfigError, write_atomic, write_json
 from mjx_pick.core.metrics import rate_text
@@ -17,7 +16,7 @@ from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.reporting.animation import animate
 from mjx_pick.outputs.reporting.figures import force_plot, maps
 from mjx_pick.outputs.reporting.robot import robot_picks
-from mjx_pick.outputs.reporting.run import Run
+from mjx_pick.outputs.reporting.run import Run, read_parquet
 from mjx_pick.outputs.reporting.template import PAPERS_MM, positioning_template
 
 __all__ = ["report"]
@@ -123,7 +122,7 @@ def report(
         written["templates"] = {k_: str(v) for k_, v in templates.items()}
 
         robust_path = run.path / "robustness.parquet"
-        robust = pq.read_table(robust_path) if robust_path.is_file() else None
+        robust = read_parquet(robust_path) if robust_path.is_file() else None
         tip_mm = float(run.config["scene"]["fingertip_height_mm"])
         picks = robot_picks(run.table, tip_mm, k, frame, robust)
         write_json(

@@ -12,6 +12,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import shapely
 import shapely.affinity
+import shapely.errors
 
 from mjx_pick.core.config import ConfigError, from_mapping
 from mjx_pick.core.gripper import GripperSpec
@@ -41,20 +42,30 @@ class Run:
             raise ConfigError(
                 f"{path} is not an evaluate output folder: missing {', '.join(missing)}"
             )
-        config = json.loads((path / "config.json").read_text())
-        wkt = config.get("object", {}).get("outline_wkt")
-        if not wkt:
-            raise ConfigError(f"{path}/config.json has no object outline (made by an old version)")
+        config = read_json(path / "config.json")
+        wkt = config.get("object", {}).get("outline_wkt") if isinstance(config, dict) else None
+        if not wkt or "gripper" not in config:
+            raise ConfigError(
+                f"{path}/config.json has no object outline or gripper (made by an old version, "
+                "or damaged)"
+            )
         traces = (
-            pq.read_table(path / "traces.parquet") if (path / "traces.parquet").is_file() else None
+            read_parquet(path / "traces.parquet") if (path / "traces.parquet").is_file() else None
         )
+        try:
+            outline = shapely.from_wkt(wkt)
+        except shapely.errors.ShapelyError as err:
+            raise ConfigError(f"{path}/config.json: the object outline is damaged: {err}") from err
+        summary = read_json(path / "summary.json")
+        if not isinstance(summary, dict):
+            raise ConfigError(f"{path}/summary.json is not a summary (damaged)")
         return cls(
             path=path,
-            table=_success_labelled(pq.read_table(path / "results.parquet")),
+            table=_success_labelled(read_parquet(path / "results.parquet")),
             traces=traces,
             config=config,
-            summary=_success_counted(json.loads((path / "summary.json").read_text())),
-            outline=shapely.from_wkt(wkt),
+            summary=_success_counted(summary),
+            outline=outline,
             gripper=from_mapping(GripperSpec, config["gripper"]),
         )
 
@@ -106,3 +117,23 @@ def _success_counted(summary: dict) -> dict:
             (gk.SUCCESS if k == gk.OLD_SUCCESS_LABEL else k): v for k, v in failures.items()
         }
     return summary
+
+
+def read_json(path: Path):
+    """A run folder's JSON file; a damaged one is a ConfigError naming it."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ConfigError(
+            f"{path} is damaged (not JSON: {err}); run the command that wrote it again"
+        ) from err
+
+
+def read_parquet(path: Path) -> pa.Table:
+    """A run folder's Parquet table; a damaged one is a ConfigError naming it."""
+    try:
+        return pq.read_table(path)
+    except (pa.ArrowException, OSError) as err:
+        raise ConfigError(
+            f"{path} is damaged (not a Parquet table: {err}); run the command that wrote it again"
+        ) from err

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pick.core.config import ConfigError, write_atomic
+from mjx_pick.core.config import ConfigError, open_csv, write_atomic
 
 REQUIRED = ("x_mm", "y_mm", "yaw_deg", "grip_force_n", "trials", "successes")
 OPTIONAL = ("lift_time_s", "force_trace", "trace")
@@ -113,7 +113,7 @@ def read_outcomes(path: str | Path) -> Outcomes:
             f"outcomes file {str(path)!r} does not exist (shipped examples: "
             f"{', '.join(example_outcomes())})"
         )
-    with path.open(newline="") as fh:
+    with open_csv(path) as fh:
         reader = csv.DictReader(fh)
         header = reader.fieldnames or []
         missing = [c for c in REQUIRED if c not in header]
@@ -194,7 +194,7 @@ def read_trace(path: Path, where: str, allowed: tuple[str, ...]) -> dict[str, np
     """A trace CSV: t_s plus columns of `allowed`; {kind: (K, 2) (t_s, value)}."""
     if not path.is_file():
         raise ConfigError(f"{where}: {str(path)!r} does not exist")
-    with path.open(newline="") as fh:
+    with open_csv(path) as fh:
         reader = csv.DictReader(fh)
         header = [h.strip() for h in (reader.fieldnames or [])]
         rows = list(reader)

@@ -12,6 +12,7 @@ from typing import NamedTuple
 
 from mjx_pick.core.config import (
     ConfigError,
+    open_csv,
     write_atomic,
 )
 from mjx_pick.outputs.rundir import read_manifest
@@ -84,7 +85,7 @@ def read_sheet(folder) -> tuple[list[str], list[dict]]:
     path = Path(folder) / SHEET
     if not path.is_file():
         raise ConfigError(f"{path} does not exist (the trials folder lost its sheet)")
-    with path.open(newline="") as fh:
+    with open_csv(path) as fh:
         reader = csv.DictReader(fh)
         header = [h.strip() for h in (reader.fieldnames or [])]
         rows = [{(k or "").strip(): (v or "").strip() for k, v in r.items()} for r in reader]
