@@ -17,6 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError, check_fields, check_range, setting
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import ObjectModel, rasterize
@@ -255,7 +256,24 @@ def feasible_batch(pick_id, x_mm, y_mm, yaw_deg, res: dict, mode: str) -> PickBa
 @functools.lru_cache(maxsize=8)
 def _stack_cached(key, polygon, res_mm: float):
     radius = max(math.hypot(x, y) for x, y in polygon.exterior.coords)
-    return fk.build_stack(rasterize, polygon, res_mm, radius)
+    # the rasterised yaw bins are a pure function of the silhouette: kept on disk across
+    # runs (mjx_pick.core.cache), packed to a bit per pixel
+    entry = {
+        "silhouette_sha256": cache.digest(polygon.wkb),
+        "res_mm": float(res_mm),
+        "radius_mm": float(radius),
+        "yaw_bins": fk.yaw_bins(res_mm, radius),
+    }
+
+    def compute() -> dict:
+        masks, x0 = fk.rasterize_bins(rasterize, polygon, res_mm, radius)
+        bits = np.packbits(masks.astype(bool), axis=None)
+        return {"bits": bits, "shape": np.array(masks.shape, np.int64), "x0_mm": np.array(x0)}
+
+    arrays = cache.memo("silhouettes", entry, compute)
+    shape = tuple(int(v) for v in arrays["shape"])
+    masks = np.unpackbits(arrays["bits"], count=int(np.prod(shape))).reshape(shape)
+    return fk.stack_from_masks(masks, res_mm, float(arrays["x0_mm"]))
 
 
 def _stack(name: str, silhouette, res_mm: float) -> fk.SilhouetteStack:
