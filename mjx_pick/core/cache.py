@@ -16,9 +16,11 @@ key, in the user's cache folder:
   entry's mtime), the rest for JAX's own least-recently-used store.
 
 An entry's name is a hash of what decides the result (the caller's key: the file's or
-mesh's content and every parameter) together with this package's version and the
-versions of the libraries that compute it; the entry also holds that key in full and is
-checked against it when read. Writes go to a temporary file in the same folder and are
+mesh's content and every parameter); the entry holds that key in full, with this
+package's version and the versions of the libraries that compute it, and both are
+checked when it is read. An entry of another version is thus found, not used, and
+replaced by this version's result (one warning): an upgrade renews the entries it meets
+instead of leaving them to eviction. Writes go to a temporary file in the same folder and are
 renamed into place (``os.replace``), so concurrent processes see an old, a new or no
 entry, never part of one. A corrupt entry, an entry of another version, or a folder that
 cannot be written is bypassed with one :class:`CacheWarning` (once per problem and
@@ -144,8 +146,9 @@ class Store:
 
     # ---------------------------------------------------------------- entries
     def path(self, kind: str, key: dict) -> Path:
-        """The entry's file for a key (its versions included in the name)."""
-        text = json.dumps({"kind": kind, "key": key, "versions": versions()}, sort_keys=True)
+        """The entry's file for a key. The versions are not in the name: another
+        version's entry for the same inputs is found, said once and replaced."""
+        text = json.dumps({"kind": kind, "key": key}, sort_keys=True)
         return self.folder / f"{kind}-{digest(text)[:40]}.npz"
 
     def get(self, kind: str, key: dict) -> dict[str, np.ndarray] | None:
@@ -155,8 +158,8 @@ class Store:
         try:
             with np.load(path, allow_pickle=False) as npz:
                 arrays = {name: npz[name] for name in npz.files}
-        except FileNotFoundError:
-            return None
+        except (FileNotFoundError, NotADirectoryError):
+            return None  # absent (a folder that cannot exist warns when written)
         except PermissionError as err:
             self._warn("unreadable", f"cannot be read ({err.strerror or err}); not cached")
             return None
