@@ -70,6 +70,7 @@ def same_object(a, b):
 def test_cached_mesh_equals_computed_and_skips_the_decomposition(cache_dir, mesh_file, monkeypatch):
     monkeypatch.setenv(cache.ENV_SWITCH, "0")
     computed = load(mesh_file)
+    wall = computed.wall_height_mm(2.0, 8.0)
     assert not cache_dir.exists()  # bypassed: nothing written
     monkeypatch.delenv(cache.ENV_SWITCH)
     coacd, outline = spy(monkeypatch, "_coacd_pieces"), spy(monkeypatch, "_mesh_outline")
@@ -84,6 +85,8 @@ def test_cached_mesh_equals_computed_and_skips_the_decomposition(cache_dir, mesh
     assert len(outline) == 2
     assert shapely.to_wkb(load(mesh_file).band_outline(2.0, 6.0)) == shapely.to_wkb(band)
     assert len(outline) == 2
+    # a band's side wall (mesh sections): the same from the cache, computed or read
+    assert first.wall_height_mm(2.0, 8.0) == wall == load(mesh_file).wall_height_mm(2.0, 8.0)
 
 
 def test_every_parameter_that_changes_the_result_is_in_the_key(cache_dir, mesh_file, tmp_path):

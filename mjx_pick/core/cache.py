@@ -312,13 +312,13 @@ def memo(
       compute: the pure computation; returns named numpy arrays.
     """
     st = store()
-    if st is None:
-        return compute()
-    hit = st.get(kind, key)
+    hit = st.get(kind, key) if st is not None else None
     if hit is not None:
         return hit
+    # arrays whether computed or read: the caller sees one type either way
     arrays = {k: np.asarray(v) for k, v in compute().items()}
-    st.put(kind, key, arrays)
+    if st is not None:
+        st.put(kind, key, arrays)
     return arrays
 
 
