@@ -37,7 +37,7 @@ WIDTHS = "10,14,18,22,26,30,34,38"  # mm: 8 finger widths
 def run(cmd: list[str], env: dict) -> dict:
     """One command in a new process: wall seconds, exit status, last lines of output."""
     t0 = time.perf_counter()
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT)
     wall = time.perf_counter() - t0
     if done.returncode != 0:
         sys.stderr.write(done.stdout + done.stderr)
@@ -63,12 +63,12 @@ def main() -> None:
     args = ap.parse_args()
 
     work = Path(tempfile.mkdtemp(prefix="time_to_answer."))
-    env = {**os.environ, "MJX_PICK_CACHE_DIR": str(work / "cache")}
+    env = {**os.environ, "MJX_PICK_CACHE_DIR": str(work / "cache"), "PYTHONPATH": str(ROOT)}
     env.pop("MJX_PICK_CACHE", None)
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     cli = [sys.executable, "-m", "mjx_pick.cli"]
     common = ["--backend", args.backend, "--no-progress"]
-    mesh = str(YCB / args.mesh)
+    mesh = str((YCB / args.mesh).relative_to(ROOT))  # as a user in a checkout types it
     cases = {
         "mesh": [
             "evaluate",
