@@ -5,10 +5,19 @@ on implicit rank promotion, so tests that trace MJX run under JAX's default. War
 are errors (pyproject's filterwarnings).
 """
 
+import atexit
 import os
+import shutil
+import tempfile
 
 os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=4")
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
+# the on-disk cache (object preparation, compiled programs) in a folder of this session,
+# never the user's own: its processes (CLI tests, GUI jobs) inherit the variable
+_CACHE_DIR = tempfile.mkdtemp(prefix="mjx_pick_test_cache.")
+os.environ["MJX_PICK_CACHE_DIR"] = _CACHE_DIR
+os.environ.pop("MJX_PICK_CACHE", None)
+atexit.register(shutil.rmtree, _CACHE_DIR, True)
 
 from mjx_pick.outputs.display import use_offscreen_rendering  # noqa: E402
 

@@ -10,6 +10,7 @@
   mjx-pick report DIR                               (plots, maps, animations, template, HTML)
   mjx-pick calibrate OUTCOMES.csv OBJECT --params pad_friction,stiffness --out DIR
   mjx-pick presets | assets                          (what is shipped)
+  mjx-pick cache info | clear                        (object results, compiled programs)
 
 OBJECT is a shipped asset name (``mjx-pick assets``), a top-down image (with
 --px-per-mm, --thickness-mm and --mass-g) or a mesh (with --unit and --mass-g).
@@ -18,9 +19,12 @@ Every bad input ends with one line naming the input, the value and what is allow
 
 from __future__ import annotations
 
+import os
 import sys
 
+from mjx_pick.cli.clock import process_age_s
 from mjx_pick.cli.parser import build_parser
+from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError
 from mjx_pick.engine import interrupts
 from mjx_pick.outputs.display import use_offscreen_rendering
@@ -37,7 +41,11 @@ MJX_NOTE = (
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    args.started_s = process_age_s()  # the interpreter's start and the CLI's imports
     use_offscreen_rendering()  # before anything imports MuJoCo: animations on a headless host
+    if getattr(args, "no_cache", False):
+        # the one switch the cache reads; child processes (GUI jobs, local Ray) inherit it
+        os.environ[cache.ENV_SWITCH] = "0"
     if getattr(args, "backend", None) == "mjx":
         print(MJX_NOTE, file=sys.stderr)
     try:

@@ -3,8 +3,11 @@ prints what came back. No simulation, file or results logic lives here."""
 
 from __future__ import annotations
 
+import os
 import sys
+import time
 
+from mjx_pick.cli.clock import process_age_s
 from mjx_pick.cli.inputs import (
     base_settings,
     check_contact_file,
@@ -21,10 +24,18 @@ from mjx_pick.outputs.progress import echo
 
 
 def cmd_evaluate(args) -> int:
+    t0 = time.perf_counter()
     from mjx_pick.studies.evaluation import evaluate
 
+    t1 = time.perf_counter()
     obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
     check_contact_file(args, obj, gripper, grasp, solver)
+    # what the run cannot see: imports (the CLI's and the study's) and object preparation
+    before = getattr(args, "started_s", None)
+    costs = {
+        "import_s": (before or 0.0) + t1 - t0,
+        "object_s": time.perf_counter() - t1,
+    }
     ev = evaluate(
         obj,
         gripper,
@@ -50,10 +61,12 @@ def cmd_evaluate(args) -> int:
         overwrite=args.overwrite,
         skip_infeasible=args.skip_infeasible,
         ray=args.ray,
+        fixed_costs=costs,
     )
     if ev.already_complete:
         print(f"{args.out} holds this run complete: nothing to resume, nothing simulated")
-    print_summary(ev.summary, args.out)
+    total = process_age_s() if before is not None else None
+    print_summary(ev.summary, args.out, total)
     return 0
 
 
@@ -311,7 +324,8 @@ def cmd_report(args) -> int:
     return 0
 
 
-def print_summary(s: dict, out) -> None:
+def print_summary(s: dict, out, total_s: float | None = None) -> None:
+    """The evaluate summary's lines; total_s: the process's time so far, when known."""
     from mjx_pick.core.metrics import rate_text
     from mjx_pick.kernels.grasp import SUCCESS
 
@@ -331,6 +345,12 @@ def print_summary(s: dict, out) -> None:
         ),
         ("F_Gmin, eq. (1)", f"{s['f_gmin_n']:.3f} N (F_d = {s['grip_force_n']:g} N)"),
         ("compile / run", f"{s['compile_s']:.1f} s / {s['run_s']:.1f} s"),
+    ]
+    if s.get("time_s"):
+        parts = ", ".join(f"{k} {v:.1f}" for k, v in s["time_s"].items())
+        whole = f" (process {total_s:.1f} s)" if total_s is not None else ""
+        rows.append(("time, s", parts + whole))
+    rows += [
         ("pick-points per s", f"{s['picks_per_s']}"),
     ]
     if s.get("stability_um"):
@@ -429,6 +449,41 @@ def cmd_assets(_args) -> int:
             f"{name:<12} {entry['description']} ({entry['thickness_mm']:g} mm, "
             f"{entry['mass_g']:.1f} g)"
         )
+    return 0
+
+
+def cmd_cache_info(_args) -> int:
+    from mjx_pick.core import cache
+
+    s = cache.info()
+    mb = 2.0**20
+    o, c = s["objects"], s["compiled"]
+    state = "on" if s["enabled"] else f"off ({cache.ENV_SWITCH}={os.environ[cache.ENV_SWITCH]})"
+    print(f"folder            {s['folder']} ({state})")
+    print(
+        f"object results    {o['entries']} entries, {o['bytes'] / mb:.1f} MB of "
+        f"{o['limit_bytes'] / mb:.0f} MB (least recently used evicted beyond)"
+    )
+    print(
+        f"compiled programs {c['files']} files, {c['bytes'] / mb:.1f} MB of "
+        f"{c['limit_bytes'] / mb:.0f} MB (JAX's persistent compilation cache)"
+    )
+    print(
+        f"move it: {cache.ENV_DIR}=FOLDER; size: {cache.ENV_MAX_MB}=MB (now "
+        f"{s['limit_bytes'] / mb:.0f}); bypass: --no-cache or {cache.ENV_SWITCH}=0; "
+        "empty it: mjx-pick cache clear"
+    )
+    return 0
+
+
+def cmd_cache_clear(_args) -> int:
+    from mjx_pick.core import cache
+
+    done = cache.clear()
+    print(
+        f"cleared {cache.root()}: {done['objects']} object results, "
+        f"{done['compiled_files']} compiled-program files ({done['compiled_bytes'] / 2**20:.1f} MB)"
+    )
     return 0
 
 

@@ -6,6 +6,8 @@ import argparse
 
 from mjx_pick.cli.commands import (
     cmd_assets,
+    cmd_cache_clear,
+    cmd_cache_info,
     cmd_calibrate,
     cmd_compare,
     cmd_design,
@@ -97,6 +99,12 @@ def _add_object_args(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--material",
         help="object material name, recorded with the results (default: pla; an asset: its own)",
+    )
+    g.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="neither read nor write the cache of object preparation and compiled programs "
+        "(mjx-pick cache info; the same as MJX_PICK_CACHE=0)",
     )
 
 
@@ -555,6 +563,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pa.set_defaults(func=cmd_params)
     sub.add_parser("assets", help="list shipped objects").set_defaults(func=cmd_assets)
+    ca = sub.add_parser(
+        "cache",
+        help="the cache of object preparation and compiled programs: where, how big, clear it",
+    )
+    steps = ca.add_subparsers(dest="step", required=True, parser_class=Parser)
+    steps.add_parser(
+        "info", help="its folder, entries, size and limit, and how to move or clear it"
+    ).set_defaults(func=cmd_cache_info)
+    steps.add_parser(
+        "clear", help="delete every entry (object results and compiled programs)"
+    ).set_defaults(func=cmd_cache_clear)
     _add_gui_parser(sub)
     _add_trials_parser(sub)
     _add_view_parser(sub)

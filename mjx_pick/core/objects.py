@@ -27,6 +27,7 @@ import trimesh
 from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.polygon import orient
 
+from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError, PlausibilityWarning, check_range
 
 # MJX wants convex meshes of fewer than ~32 vertices for its branchless convex-convex
@@ -122,8 +123,18 @@ class ObjectModel:
             elif self.outline is not None or (z_lo <= 0.0 and z_hi >= self.height_mm):
                 cache[key] = self.polygon  # a prism, or the whole height
             else:
-                cache[key] = _mesh_outline(self.mesh, z_lo * 1e-3, z_hi * 1e-3)
+                cache[key] = _band_outline(self._mesh_digest(), self.mesh, z_lo, z_hi)
         return cache[key]
+
+    def _mesh_digest(self) -> str:
+        """sha256 of the mesh's vertices and faces: the content key of its cached
+        outlines and sections (computed once per object)."""
+        if "_mesh_sha256" not in self.__dict__:
+            m = self.mesh
+            self.__dict__["_mesh_sha256"] = cache.digest(
+                np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+            )
+        return self.__dict__["_mesh_sha256"]
 
     def wall_height_mm(self, z_lo_mm: float, z_hi_mm: float, slices: int = 24) -> float:
         """Height of the object's side wall within a band, mm: how tall a rigid pad's
@@ -141,7 +152,11 @@ class ObjectModel:
         if self.outline is not None:
             return z_hi - z_lo
         zs = np.linspace(z_lo, z_hi, slices + 2)[1:-1]
-        areas = np.array([_section_area_mm2(self.mesh, z * 1e-3) for z in zs])
+        areas = cache.memo(
+            "sections",
+            {"mesh_sha256": self._mesh_digest(), "z_mm": zs.tolist()},
+            lambda: {"area_mm2": [_section_area_mm2(self.mesh, z * 1e-3) for z in zs]},
+        )["area_mm2"]
         if areas.max() <= 0:
             return 0.0
         return float((z_hi - z_lo) * np.mean(areas >= 0.95 * areas.max()))
@@ -608,8 +623,7 @@ def object_from_mesh(
     """
     path = Path(path)
     label = name or path.stem
-    scales = {"m": 1.0, "mm": 1e-3}
-    if unit not in scales:
+    if unit not in MESH_SCALES:
         raise ConfigError(f"object.unit = {unit!r} is not allowed: choose 'm' or 'mm'")
     if pose not in ("as_given", "stable"):
         raise ConfigError(f"object.pose = {pose!r} is not allowed: choose 'as_given' or 'stable'")
@@ -621,6 +635,45 @@ def object_from_mesh(
             f"mesh {str(path)!r} is a {size / 2**20:.0f} MiB file: allowed at most "
             f"{MAX_MESH_FILE_BYTES / 2**20:.0f} MiB; simplify it (fewer triangles)"
         )
+    # everything that decides the prepared geometry; mass and material are applied after
+    key = {
+        "file_sha256": cache.file_digest(path),
+        "suffix": path.suffix.lower(),
+        "unit": unit,
+        "pose": pose,
+        "coacd_threshold": float(coacd_threshold),
+        "max_hull_vertices": MAX_HULL_VERTICES,
+        "largest_body": bool(largest_body),
+    }
+    prepared = cache.memo(
+        "mesh", key, lambda: _prepare_mesh(path, unit, pose, coacd_threshold, largest_body)
+    )
+    # rebuilt from the arrays whether they were read or computed: one path, same bits
+    mesh = trimesh.Trimesh(prepared["vertices"], prepared["faces"], process=False)
+    height_mm = float(mesh.bounds[1, 2] * 1e3)
+    mass_kg = _mass_kg(label, mesh.volume, mass_g, density_kg_m3)
+    polygon = shapely.from_wkb(prepared["outline_wkb"].tobytes())
+    ends = np.cumsum(prepared["piece_sizes"])[:-1]
+    pieces = tuple(np.split(prepared["piece_vertices"], ends))
+    source = f"{path} (unit={unit}, pose={pose}{', largest_body' if largest_body else ''})"
+    return _finish(
+        label, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
+    )
+
+
+MESH_SCALES = {"m": 1.0, "mm": 1e-3}
+
+
+def _prepare_mesh(
+    path: Path, unit: str, pose: str, coacd_threshold: float, largest_body: bool
+) -> dict:
+    """A mesh file's geometry in the object frame: the cached part of object_from_mesh.
+
+    Returns arrays: vertices (V, 3) m and faces (F, 3) of the watertight mesh, resting on
+    the table with its centre of mass over the origin; outline_wkb, the top-down outline
+    (mm) as WKB bytes; piece_vertices (sum V_i, 3) m and piece_sizes (P,), the convex
+    collision pieces one after the other.
+    """
     try:
         mesh = trimesh.load(str(path), force="mesh", process=True)
     except Exception as err:  # noqa: BLE001 - trimesh raises many types for bad files
@@ -633,7 +686,7 @@ def object_from_mesh(
             f"{MAX_MESH_FACES}; decimate it (e.g. MeshLab's quadric edge collapse, or "
             "trimesh's simplify_quadric_decimation) to a few ten thousand"
         )
-    mesh.apply_scale(scales[unit])
+    mesh.apply_scale(MESH_SCALES[unit])
     if not mesh.is_watertight:
         mesh.fill_holes()
     if not mesh.is_watertight:
@@ -649,19 +702,20 @@ def object_from_mesh(
         mesh.apply_transform(transforms[0])
     com = mesh.center_mass
     mesh.apply_translation([-com[0], -com[1], -mesh.bounds[0, 2]])
-    height_mm = float(mesh.bounds[1, 2] * 1e3)
     _check_size_mm(
         f"mesh {str(path)!r} with unit={unit!r}",
         mesh.extents * 1e3,
         "check the unit (--unit m or mm)",
     )
-    mass_kg = _mass_kg(label, mesh.volume, mass_g, density_kg_m3)
     polygon = _mesh_outline(mesh, 0.0, float(mesh.bounds[1, 2]))
     pieces = _coacd_pieces(mesh, coacd_threshold)
-    source = f"{path} (unit={unit}, pose={pose}{', largest_body' if largest_body else ''})"
-    return _finish(
-        label, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
-    )
+    return {
+        "vertices": np.asarray(mesh.vertices, dtype=np.float64),
+        "faces": np.asarray(mesh.faces, dtype=np.int64),
+        "outline_wkb": np.frombuffer(shapely.to_wkb(polygon), np.uint8),
+        "piece_vertices": np.concatenate(pieces).astype(np.float64),
+        "piece_sizes": np.array([len(p) for p in pieces], np.int64),
+    }
 
 
 def _one_body(mesh: trimesh.Trimesh, path: Path, largest_body: bool) -> trimesh.Trimesh:
@@ -723,6 +777,20 @@ def _mesh_outline(mesh: trimesh.Trimesh, z_lo_m: float, z_hi_m: float) -> Polygo
     # a hair of growth closes the cracks between neighbouring triangles' shadows
     union = shapely.union_all(shapely.buffer(shadows, 1e-4)).buffer(-1e-4)
     return _largest_polygon(shapely.make_valid(union))
+
+
+def _band_outline(mesh_sha256: str, mesh: trimesh.Trimesh, z_lo_mm: float, z_hi_mm: float):
+    """_mesh_outline of a band (mm), through the on-disk cache (key: the mesh's content)."""
+    arrays = cache.memo(
+        "outline",
+        {"mesh_sha256": mesh_sha256, "z_lo_mm": z_lo_mm, "z_hi_mm": z_hi_mm},
+        lambda: {
+            "wkb": np.frombuffer(
+                shapely.to_wkb(_mesh_outline(mesh, z_lo_mm * 1e-3, z_hi_mm * 1e-3)), np.uint8
+            )
+        },
+    )
+    return shapely.from_wkb(arrays["wkb"].tobytes())
 
 
 def _section_area_mm2(mesh: trimesh.Trimesh, z_m: float) -> float:

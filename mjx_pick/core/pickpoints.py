@@ -17,6 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError, check_fields, check_range, setting
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import ObjectModel, rasterize
@@ -293,7 +294,24 @@ def _check_cells(name: str, radius_mm: float, res_mm: float) -> None:
 def _stack_cached(key, polygon, res_mm: float):
     radius = max(math.hypot(x, y) for x, y in polygon.exterior.coords)
     _check_cells(key[0], radius, res_mm)
-    return fk.build_stack(rasterize, polygon, res_mm, radius)
+    # the rasterised yaw bins are a pure function of the silhouette: kept on disk across
+    # runs (mjx_pick.core.cache), packed to a bit per pixel
+    entry = {
+        "silhouette_sha256": cache.digest(polygon.wkb),
+        "res_mm": float(res_mm),
+        "radius_mm": float(radius),
+        "yaw_bins": fk.yaw_bins(res_mm, radius),
+    }
+
+    def compute() -> dict:
+        masks, x0 = fk.rasterize_bins(rasterize, polygon, res_mm, radius)
+        bits = np.packbits(masks.astype(bool), axis=None)
+        return {"bits": bits, "shape": np.array(masks.shape, np.int64), "x0_mm": np.array(x0)}
+
+    arrays = cache.memo("silhouettes", entry, compute)
+    shape = tuple(int(v) for v in arrays["shape"])
+    masks = np.unpackbits(arrays["bits"], count=int(np.prod(shape))).reshape(shape)
+    return fk.stack_from_masks(masks, res_mm, float(arrays["x0_mm"]))
 
 
 def _stack(name: str, silhouette, res_mm: float) -> fk.SilhouetteStack:

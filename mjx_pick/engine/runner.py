@@ -59,7 +59,7 @@ from mjx_pick.core.metrics import results_table
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
-from mjx_pick.engine import interrupts
+from mjx_pick.engine import compiled, interrupts
 from mjx_pick.engine.backend import (
     Backend,
     PickInputs,
@@ -164,6 +164,8 @@ class Engine:
         self.nthread, self.devices, self.options = nthread, devices, options
         self.backends: list[Backend] = []  # every backend this engine ran, in order built
         self.rollouts = 0  # pick-point simulations run so far
+        # simulating starts here: compiled programs kept on disk from now on (not at import)
+        compiled.use_persistent_cache()
 
     def close(self) -> None:
         """Release what the engine holds: nothing here; a cluster's actors for

@@ -64,23 +64,41 @@ class SilhouetteStack(NamedTuple):
 
 
 def build_stack(rasterize, polygon, res_mm: float, radius_mm: float) -> SilhouetteStack:
-    """Rasterise the silhouette for yaw bins over [0, pi).
+    """Rasterise the silhouette for yaw bins over [0, pi) (:func:`yaw_bins` of them).
 
     Yaw and yaw + pi give the same checks with (x, y) negated (the gripper is symmetric),
-    so half a turn suffices. Bins: pi * radius / K <= res_mm / 2 ... i.e. at most half a
-    pixel of arc at the rim for the nearest bin.
+    so half a turn suffices.
     """
-    n_bins = max(8, int(math.ceil(math.pi * radius_mm / res_mm)))
+    masks, x0 = rasterize_bins(rasterize, polygon, res_mm, radius_mm)
+    return stack_from_masks(masks, res_mm, x0)
+
+
+def yaw_bins(res_mm: float, radius_mm: float) -> int:
+    """Yaw bins over [0, pi): pi * radius / K <= res_mm, i.e. at most half a pixel of
+    arc at the rim for the nearest bin."""
+    return max(8, int(math.ceil(math.pi * radius_mm / res_mm)))
+
+
+def rasterize_bins(rasterize, polygon, res_mm: float, radius_mm: float):
+    """(K, H, W) uint8 masks of the silhouette rotated by yaw k * pi / K, and the grids'
+    lower-left corner x0 (mm; the same for x and y and every bin)."""
+    n_bins = yaw_bins(res_mm, radius_mm)
     masks = []
     x0 = None
     for k in range(n_bins):
         mask, (gx0, _) = rasterize(polygon, res_mm, k * math.pi / n_bins, radius_mm=radius_mm)
         masks.append(mask)
         x0 = gx0
-    stack = np.stack(masks).astype(np.int32)
-    cum = np.zeros((n_bins, stack.shape[1] + 1, stack.shape[2]), np.int32)
-    np.cumsum(stack, axis=1, out=cum[:, 1:, :])
-    return SilhouetteStack(jnp.asarray(cum), float(res_mm), float(x0))
+    return np.stack(masks).astype(np.uint8), float(x0)
+
+
+def stack_from_masks(masks: np.ndarray, res_mm: float, x0_mm: float) -> SilhouetteStack:
+    """The row-cumulated stack of (K, H, W) 0/1 masks (:func:`rasterize_bins`)."""
+    masks = np.asarray(masks)
+    cum = np.zeros((masks.shape[0], masks.shape[1] + 1, masks.shape[2]), np.int32)
+    # summed straight into int32: no int32 copy of the masks (this stack is large)
+    np.cumsum(masks, axis=1, dtype=np.int32, out=cum[:, 1:, :])
+    return SilhouetteStack(jnp.asarray(cum), float(res_mm), float(x0_mm))
 
 
 def _columns(band: GripperBand, res_mm: float) -> np.ndarray:

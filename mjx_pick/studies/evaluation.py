@@ -166,6 +166,7 @@ def evaluate(
     cancel: threading.Event | None = None,
     ray: str | None = None,
     on_cluster_event=None,
+    fixed_costs: dict | None = None,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
@@ -215,6 +216,8 @@ def evaluate(
         the cluster extra; see mjx_pick.engine.cluster). This process still writes out.
       on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` (an actor
         started or answered, a chunk sent, done or lost), in the driver's loop.
+      fixed_costs: seconds the caller spent before this call, shown first in the
+        summary's ``time_s`` breakdown (the CLI: ``import_s``, ``object_s``).
     """
     obj, gripper = _resolve(obj, gripper)
     contact = contact or ContactParams()
@@ -255,6 +258,7 @@ def evaluate(
             pick_id=rows.pick_id,
             line=rows.line,
         )
+    t_scene = time.perf_counter()
     scene = build_scene(obj, gripper, contact, solver, grasp)
     engine = runner = None
     if ray is None:
@@ -273,6 +277,9 @@ def evaluate(
             cancel=cancel,
             on_event=on_cluster_event,
         )
+    # the run's fixed costs, seconds: filled in as they are paid (summary "time_s")
+    costs = {k: float(v) for k, v in (fixed_costs or {}).items()}
+    costs["scene_s"] = time.perf_counter() - t_scene  # MjModel, and the backend that holds it
     try:
         return _evaluate(
             executor,
@@ -303,6 +310,7 @@ def evaluate(
             keep_chunks=keep_chunks,
             on_progress=on_progress,
             user_batch=user_batch,
+            costs=costs,
         )
     finally:
         if hasattr(executor, "close"):
@@ -338,6 +346,7 @@ def _evaluate(
     skip_infeasible,
     keep_chunks,
     on_progress,
+    costs,
     user_batch=None,
 ) -> Evaluation:
     """evaluate() once its executor (this process, or a Ray cluster) is ready."""
@@ -375,6 +384,7 @@ def _evaluate(
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
         claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite)
 
+    t_picks = time.perf_counter()
     if until is not None:
         max_n = max_n or 10 * until
         batch = int(chunk_size or executor.batch_size)
@@ -396,6 +406,7 @@ def _evaluate(
         else:
             chunk = executor.batch_size
         plan = plan_chunks(out_dir, key, len(picks_batch), chunk, resume)
+    costs["picks_s"] = time.perf_counter() - t_picks  # sampling and the feasibility checks
 
     config = {
         "object": obj.summary(),
@@ -494,16 +505,38 @@ def _evaluate(
     except (KeyboardInterrupt, Cancelled) as stop:
         _stopped(out_dir, stop, executor, seed, config, time.perf_counter() - t0)
         raise
+    t_write = time.perf_counter()
     if out_dir is not None:
         write_parquet(out_dir / "results.parquet", table)
-        write_json(out_dir / "summary.json", summary)
         if traces is not None:
             write_parquet(out_dir / "traces.parquet", traces)
+    costs["write_s"] = time.perf_counter() - t_write
+    summary["time_s"] = _breakdown(costs, executor.describe()["timing"])
+    if out_dir is not None:
+        write_json(out_dir / "summary.json", summary)
         meta = executor.describe(time.perf_counter() - t0)
+        meta["timing"]["breakdown_s"] = summary["time_s"]
         finish(out_dir, command="evaluate", config=config, seed=seed, **meta)
         if not keep_chunks:  # every row is in results.parquet now
             shutil.rmtree(out_dir / "chunks", ignore_errors=True)
     return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _breakdown(costs: dict, timing: dict) -> dict:
+    """The run's time by part, seconds, in the order a user waits for them: import and
+    object (the caller's, when given), scene (model and backend), picks (sampling,
+    feasibility), compile (device programs; C-engine batches), simulate (every
+    simulation of the run: main, traces, extra passes) and write (results, traces)."""
+    parts = {
+        "import": costs.get("import_s"),
+        "object": costs.get("object_s"),
+        "scene": costs.get("scene_s"),
+        "picks": costs.get("picks_s"),
+        "compile": timing["compile_s"],
+        "simulate": timing["run_s"],
+        "write": costs.get("write_s"),
+    }
+    return {k: round(float(v), 3) for k, v in parts.items() if v is not None}
 
 
 def _stability(table, picks_batch, sim: Simulator, settings, shift_um, progress):

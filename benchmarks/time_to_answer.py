@@ -1,0 +1,127 @@
+"""Time to answer: whole ``mjx-pick`` commands as a user runs them, each in a new process.
+
+Each case runs twice with the cache (emptied before the first run: a part never seen,
+then the same part again) and once with ``--no-cache`` (today's cost without it). Cases:
+
+* ``mesh``: a YCB mesh never seen before (``evaluate <stl> --unit m``), ``--n-mesh`` picks;
+* ``photo``: the shipped door-opener photo object, ``--n-photo`` picks;
+* ``sweep``: 8 finger widths x ``--n-sweep`` picks (``sweep --param gripper.finger_width_mm``).
+
+It also checks that the cache changes no result: the mesh case's ``results.parquet``
+with and without the cache must be the same table. Writes one JSON under
+``benchmarks/results/`` with the wall time of every run and evaluate's fixed-cost
+breakdown (summary.json ``time_s``).
+
+  python benchmarks/time_to_answer.py --backend mujoco --n-mesh 64 --n-photo 200 --n-sweep 64
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+YCB = ROOT / "mjx_pick" / "assets" / "objects" / "ycb"
+WIDTHS = "10,14,18,22,26,30,34,38"  # mm: 8 finger widths
+
+
+def run(cmd: list[str], env: dict) -> dict:
+    """One command in a new process: wall seconds, exit status, last lines of output."""
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT)
+    wall = time.perf_counter() - t0
+    if done.returncode != 0:
+        sys.stderr.write(done.stdout + done.stderr)
+        raise SystemExit(f"failed: {' '.join(cmd)}")
+    return {"wall_s": round(wall, 2), "tail": done.stdout.strip().splitlines()[-3:]}
+
+
+def breakdown(out: Path) -> dict | None:
+    f = out / "summary.json"
+    return json.loads(f.read_text()).get("time_s") if f.is_file() else None
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--backend", default="mujoco")
+    ap.add_argument("--mesh", default="011_banana.stl", help="a file of assets/objects/ycb")
+    ap.add_argument("--mass-g", type=float, default=66.0, help="the mesh's mass, g")
+    ap.add_argument("--n-mesh", type=int, default=1024)
+    ap.add_argument("--n-photo", type=int, default=200)
+    ap.add_argument("--n-sweep", type=int, default=512)
+    ap.add_argument("--cases", default="mesh,photo,sweep")
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "time_to_answer.json"))
+    args = ap.parse_args()
+
+    work = Path(tempfile.mkdtemp(prefix="time_to_answer."))
+    env = {**os.environ, "MJX_PICK_CACHE_DIR": str(work / "cache"), "PYTHONPATH": str(ROOT)}
+    env.pop("MJX_PICK_CACHE", None)
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    cli = [sys.executable, "-m", "mjx_pick.cli"]
+    common = ["--backend", args.backend, "--no-progress"]
+    mesh = str((YCB / args.mesh).relative_to(ROOT))  # as a user in a checkout types it
+    cases = {
+        "mesh": [
+            "evaluate",
+            mesh,
+            "--unit",
+            "m",
+            "--mass-g",
+            str(args.mass_g),
+            "--n",
+            str(args.n_mesh),
+        ],
+        "photo": ["evaluate", "door_opener", "--n", str(args.n_photo)],
+        "sweep": [
+            "sweep",
+            "door_opener",
+            "--param",
+            f"gripper.finger_width_mm={WIDTHS}",
+            "--n",
+            str(args.n_sweep),
+        ],
+    }
+    record = {
+        "date": datetime.date.today().isoformat(),
+        "device": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs",
+        "commit": subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
+        ).stdout.strip(),
+        "backend": args.backend,
+        "cases": {},
+    }
+    for name in args.cases.split(","):
+        shutil.rmtree(work / "cache", ignore_errors=True)  # a part never seen
+        rows = {}
+        for label, extra in (("no_cache", ["--no-cache"]), ("first", []), ("second", [])):
+            out = work / f"{name}_{label}"
+            cmd = [*cli, *cases[name], *common, "--out", str(out), *extra]
+            rows[label] = run(cmd, env)
+            rows[label]["time_s"] = breakdown(out)
+            print(name, label, rows[label]["wall_s"], "s", rows[label]["time_s"], flush=True)
+        rows["command"] = " ".join(["mjx-pick", *cases[name], *common])
+        record["cases"][name] = rows
+    if "mesh" in record["cases"]:
+        import pyarrow.parquet as pq
+
+        a = pq.read_table(work / "mesh_no_cache" / "results.parquet")
+        b = pq.read_table(work / "mesh_second" / "results.parquet")
+        record["mesh_tables_equal"] = bool(a.equals(b))
+        print("mesh results.parquet equal with and without the cache:", a.equals(b))
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(record, indent=2) + "\n")
+    shutil.rmtree(work, ignore_errors=True)
+    print(f"written {args.out}")
+
+
+if __name__ == "__main__":
+    main()
