@@ -472,7 +472,7 @@ def open_study_store(
     key = config_hash(request)
     if resume and not overwrite and is_complete(out, command, key):
         return None, True
-    claim(out, command, key, resume=resume, overwrite=overwrite)
+    claim(out, command, key, resume=resume, overwrite=overwrite, settings=request)
     return ChunkStore(out, key, resume), False
 
 

@@ -72,7 +72,15 @@ from mjx_pick.engine.runner import (
 from mjx_pick.engine.simulator import Simulator, showing_progress
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.outputs.progress import ProgressBar
-from mjx_pick.outputs.rundir import claim, config_hash, finish, read_manifest, versions
+from mjx_pick.outputs.rundir import (
+    claim,
+    config_hash,
+    fail,
+    finish,
+    read_manifest,
+    release,
+    versions,
+)
 from mjx_pick.studies.pickfiles import read_picks_csv
 from mjx_pick.studies.robust import min_grip_force
 
@@ -312,7 +320,7 @@ def _evaluate(
 ) -> Evaluation:
     """evaluate() once its executor (this process, or a Ray cluster) is ready."""
     out_dir = Path(out) if out is not None else None
-    key = experiment_key(
+    settings = experiment_settings(
         scene,
         {
             "gripper": gripper,
@@ -334,38 +342,107 @@ def _evaluate(
             "batch_size": executor.batch_size,
         },
     )
+    key = config_hash(settings)
     done = _complete_run(out_dir, key) if out_dir is not None and not overwrite else None
     if done is not None and resume:
         return done
     if done is not None:  # its chunks are gone: plan_chunks would no longer see it
         raise ConfigError(
-            f"{out_dir} holds this run, complete: pass --resume to read it back, "
-            "--overwrite to run it again, or choose another --out"
+            f"{out_dir} holds this run, complete: pass --resume to read it back, choose "
+            "another --out, or pass --overwrite to run it again"
+        )
+    # every input is checked before the folder is claimed: a bad one leaves it as it was
+    if until is not None:
+        check_range("evaluate", "until", until, 1, 10**9)
+        max_n = max_n or 10 * until
+        check_range("evaluate", "max_n", max_n, until, 10**9)
+        picks_batch = None
+    elif picks is None:
+        picks_batch = pp.generate_normal(
+            obj, gripper, n, seed=seed, config=pick_config, grasp=grasp
+        )
+    elif isinstance(picks, pp.PickBatch):
+        picks_batch = picks
+    else:
+        picks_batch = user_picks(
+            obj,
+            gripper,
+            *read_picks_csv(picks),
+            config=pick_config,
+            grasp=grasp,
+            skip_infeasible=skip_infeasible,
         )
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
-        claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite)
+        claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite, settings=settings)
+    try:
+        return _evaluate_claimed(
+            executor,
+            engine,
+            runner,
+            scene,
+            obj,
+            gripper,
+            contact,
+            solver,
+            grasp,
+            pick_config,
+            picks_batch,
+            out_dir=out_dir,
+            key=key,
+            seed=seed,
+            n_traces=n_traces,
+            progress=progress,
+            resume=resume,
+            until=until,
+            min_score=min_score,
+            max_n=max_n,
+            chunk_size=chunk_size,
+            min_force=min_force,
+            stability_um=stability_um,
+            keep_chunks=keep_chunks,
+            on_progress=on_progress,
+        )
+    except (KeyboardInterrupt, Cancelled):
+        raise  # the folder is marked by _stopped
+    except BaseException as err:
+        if out_dir is not None:  # never left "running": the next run replaces it
+            fail(out_dir, err, command="evaluate")
+        raise
 
+
+def _evaluate_claimed(
+    executor: ChunkExecutor,
+    engine: Engine | None,
+    runner,
+    scene,
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    contact: ContactParams,
+    solver: SolverParams,
+    grasp: GraspConfig,
+    pick_config: pp.PickConfig,
+    picks_batch: pp.PickBatch | None,
+    *,
+    out_dir,
+    key,
+    seed,
+    n_traces,
+    progress,
+    resume,
+    until,
+    min_score,
+    max_n,
+    chunk_size,
+    min_force,
+    stability_um,
+    keep_chunks,
+    on_progress,
+) -> Evaluation:
+    """evaluate() once its inputs are checked and its folder (if any) claimed."""
     if until is not None:
-        max_n = max_n or 10 * until
         batch = int(chunk_size or executor.batch_size)
         plan = plan_chunks(out_dir, key, max_n, min(batch, max_n), resume)
-        picks_batch = None
     else:
-        if picks is None:
-            picks_batch = pp.generate_normal(
-                obj, gripper, n, seed=seed, config=pick_config, grasp=grasp
-            )
-        elif isinstance(picks, pp.PickBatch):
-            picks_batch = picks
-        else:
-            picks_batch = user_picks(
-                obj,
-                gripper,
-                *read_picks_csv(picks),
-                config=pick_config,
-                grasp=grasp,
-                skip_infeasible=skip_infeasible,
-            )
         if chunk_size:
             chunk = int(chunk_size)
         elif runner is not None:
@@ -477,9 +554,10 @@ def _evaluate(
         if traces is not None:
             write_parquet(out_dir / "traces.parquet", traces)
         meta = executor.describe(time.perf_counter() - t0)
-        finish(out_dir, command="evaluate", config=config, seed=seed, **meta)
+        finish(out_dir, command="evaluate", config=config, seed=seed, release_lock=False, **meta)
         if not keep_chunks:  # every row is in results.parquet now
             shutil.rmtree(out_dir / "chunks", ignore_errors=True)
+        release(out_dir)
     return Evaluation(table, summary, config, traces, out_dir)
 
 
@@ -531,9 +609,11 @@ def _complete_run(out_dir: Path, key: str) -> Evaluation | None:
 def _stopped(out_dir, stop: BaseException, executor, seed, config, wall_s=None) -> None:
     """Mark a folder whose run stopped early; its finished chunks stay for --resume."""
     if out_dir is not None:
-        status = "cancelled" if isinstance(stop, Cancelled) else "interrupted"
+        status, message = interrupts.stop_status(stop)
         meta = executor.describe(wall_s)
-        finish(out_dir, status, command="evaluate", config=config, seed=seed, **meta)
+        finish(
+            out_dir, status, command="evaluate", config=config, seed=seed, message=message, **meta
+        )
 
 
 def _picks_source(picks) -> str:
@@ -568,6 +648,12 @@ def experiment_key(scene: Scene, settings: dict) -> str:
     site-packages gives the same key) nor the chunk size (derived from free device
     memory; a resumed run keeps the one on disk, ``engine.ChunkPlan``).
     """
+    return config_hash(experiment_settings(scene, settings))
+
+
+def experiment_settings(scene: Scene, settings: dict) -> dict:
+    """What :func:`experiment_key` hashes, as JSON-able values (the output folder's
+    manifest records them, so that a refusal names each setting that changed)."""
     xml = scene.portable_xml()
     obj = {k: v for k, v in scene.object.summary().items() if k != "source"}
     values = {k: to_dict(v) for k, v in settings.items()}
@@ -575,8 +661,7 @@ def experiment_key(scene: Scene, settings: dict) -> str:
     if mjcf and mjcf.get("file"):
         file = Path(mjcf["file"])
         mjcf["file"] = f"sha256:{_file_digest(file)}" if file.is_file() else file.name
-    text = json.dumps({"model": xml, "object": obj, **values}, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    return {"model": xml, "object": obj, **values}
 
 
 def _simulate(executor, picks, plan, out_dir, bar: bool, on_progress):

@@ -46,7 +46,7 @@ def write_picks(
     config = config or pp.PickConfig()
     request = {"object": obj.summary(), "gripper": to_dict(gripper), "picks": to_dict(config)}
     request.update(n=n, seed=seed)
-    folder = claim(out, "picks", config_hash(request), overwrite=overwrite)
+    folder = claim(out, "picks", config_hash(request), overwrite=overwrite, settings=request)
     picks = pp.generate_normal(obj, gripper, n, seed=seed, config=config)
     lines = ["pick_id,x_mm,y_mm,yaw_deg,opening_mm,coverage"]
     lines += [

@@ -135,7 +135,7 @@ def calibrate(
         request.update(settings=to_dict(problem.settings), steps=steps, estimator=estimator)
         request.update(learning_rate=learning_rate, samples=samples, sigma=sigma, seed=seed)
         request.update(noise=to_dict(problem.noise), bounds=[space.lo.tolist(), space.hi.tolist()])
-        claim(out_dir, "calibrate", config_hash(request), resume=resume)
+        claim(out_dir, "calibrate", config_hash(request), resume=resume, settings=request)
         ckpt = _Checkpoints(out_dir / "checkpoint")
         saved = ckpt.latest() if resume else None
         if saved is not None:
@@ -332,7 +332,7 @@ def least_squares(
             "bounds": [problem.space.lo.tolist(), problem.space.hi.tolist()],
             "priors": [problem.space.prior_mean.tolist(), problem.space.prior_sd.tolist()],
         }
-        claim(out_dir, "calibrate", config_hash(request), resume=False)
+        claim(out_dir, "calibrate", config_hash(request), resume=False, settings=request)
     space = problem.space
     initial = dict(problem.start)
     z0 = space.z([initial[n] for n in problem.names])
