@@ -231,3 +231,23 @@ def test_sigterm_stops_a_run_like_ctrl_c(tmp_path, capsys, monkeypatch):
     manifest = read_manifest(out)
     assert manifest["status"] == "terminated" and "SIGTERM" in manifest["message"]
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored
+
+
+def test_resume_over_a_corrupt_chunk_simulates_it_again(tmp_path, capsys):
+    import json
+
+    block = mp.load_asset("block")
+    grasp = mp.GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
+    out = tmp_path / "ev"
+    kw = dict(n=4, grasp=grasp, backend="mujoco", out=out, n_traces=0, chunk_size=2)
+    first = mp.evaluate(block, keep_chunks=True, **kw)
+    # as a run killed after its chunks: the last one cut short on disk
+    manifest = read_manifest(out)
+    manifest["status"] = "interrupted"
+    (out / MANIFEST).write_text(json.dumps(manifest))
+    (out / "results.parquet").unlink()
+    bad = out / "chunks" / "part-000001.parquet"
+    bad.write_bytes(bad.read_bytes()[:40])
+    again = mp.evaluate(block, resume=True, **kw)
+    assert f"{bad}: unreadable chunk" in capsys.readouterr().err
+    assert again.table.equals(first.table)
