@@ -492,6 +492,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cb.add_argument("--holdout", help="held-out outcomes CSV for accuracy before/after")
     cb.add_argument(
+        "--force-mismatch",
+        action="store_true",
+        help="fit although the outcomes' record (OUTCOMES.toml beside the CSV) names another "
+        "mass, gripper or procedure than this run (default: refused)",
+    )
+    cb.add_argument(
         "--no-identify",
         action="store_true",
         help="skip the intervals / identifiability after the fit",
