@@ -283,3 +283,23 @@ def test_stability_check_moves_the_object_and_marks_the_labels_it_flips(block):
         evaluate(block, n=8, grasp=FAST, backend="mujoco", stability_um=-1)
     with pytest.raises(mp.ConfigError, match="Ray"):
         evaluate(block, n=8, grasp=FAST, stability_um=1.0, ray="127.0.0.1:1")
+
+
+def test_optimization_mode_stops_at_a_small_batch_and_view_finds_the_best_trace(tmp_path):
+    from mjx_pick.outputs.reporting.viewer import check_view
+    from mjx_pick.studies.evaluation import until_batch
+
+    assert until_batch(20, 1024) == 64 and until_batch(1, 1024) == 32
+    assert until_batch(1000, 256) == 256  # never above the backend's batch
+    block = mp.load_asset("block")
+    grasp = mp.GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
+    out = tmp_path / "opt"
+    ev = mp.evaluate(
+        block, until=2, min_score=0.5, grasp=grasp, backend="mujoco", out=out, n_traces=1
+    )
+    # found in the first batch of 32, not after a whole device batch (1,024 on the CPU)
+    assert ev.table.num_rows == 32 and ev.config["chunk_size"] == 32
+    run, trace, scene = check_view(out, "best")  # the README's `view --pick best`
+    assert scene.is_file() and run.traced()[0][1] == "best"
+    with pytest.raises(mp.ConfigError, match="a traced pick_id, best or worst"):
+        check_view(out, "middle")

@@ -723,10 +723,10 @@ def _add_view_parser(sub) -> None:
     vp.add_argument("run", help="an evaluate output folder with traces.parquet")
     vp.add_argument(
         "--pick",
-        type=int,
         required=True,
         metavar="ID",
-        help="pick_id of a traced pick-point (the report's forces_<ID>.png)",
+        help="pick_id of a traced pick-point (the report's forces_<ID>.png), or best / worst: "
+        "the best or worst traced one",
     )
     vp.add_argument(
         "--speed",

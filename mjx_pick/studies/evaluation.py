@@ -440,7 +440,7 @@ def _evaluate_claimed(
 ) -> Evaluation:
     """evaluate() once its inputs are checked and its folder (if any) claimed."""
     if until is not None:
-        batch = int(chunk_size or executor.batch_size)
+        batch = int(chunk_size or until_batch(until, executor.batch_size))
         plan = plan_chunks(out_dir, key, max_n, min(batch, max_n), resume)
     else:
         if chunk_size:
@@ -559,6 +559,15 @@ def _evaluate_claimed(
             shutil.rmtree(out_dir / "chunks", ignore_errors=True)
         release(out_dir)
     return Evaluation(table, summary, config, traces, out_dir)
+
+
+def until_batch(until: int, batch_size: int) -> int:
+    """Optimization mode's pick-points per batch (chunk) by default: twice those asked
+    for, rounded up to a power of two (a C-engine call of a size already compiled), at
+    least 32 and at most the backend's batch -- a run that finds its `until` early
+    stops early instead of simulating a whole device batch."""
+    want = max(32, 1 << max(int(2 * until) - 1, 1).bit_length())
+    return int(min(want, batch_size))
 
 
 def _stability(table, picks_batch, sim: Simulator, settings, shift_um, progress):
