@@ -622,3 +622,95 @@ def test_forward_mode_gradient_through_mjx(heavy_block, synthetic):
     # forward pass -- a second full compile of the rollout -- and then raises the same)
     with pytest.raises(ValueError, match="Reverse-mode differentiation does not work"):
         jax.eval_shape(jax.grad(lift), jnp.float32(0.7))
+
+
+class _Line:
+    """A stand-in Problem with one parameter, pad_friction, whose data pull it towards
+    `best` (20 residuals of `weight` noise units per unit) under a prior of 95 %
+    half-width `prior_half` around 0.86, within bounds 0.05-2."""
+
+    def __init__(self, best, weight=20.0, prior_half=10.0):
+        self.best, self.weight = best, weight
+        one = np.ones(1)
+        self.space = cal.ParamSpace(
+            ("pad_friction",), 0.05 * one, 2.0 * one, one < 0, 0.86 * one, prior_half / 1.96 * one
+        )
+        self.names = ("pad_friction",)
+        self.outcomes = [None]
+        self.data = dataclasses.make_dataclass("D", [("total_trials", float)])(1.0)
+        self.rollouts = 0
+
+    def evaluate(self, thetas):
+        v = np.asarray(self.space.values(thetas), float)[:, 0]
+        res = np.linspace(1, 2, 20) * self.weight * (v - self.best)[:, None]
+        self.rollouts += len(v)
+        return cal.Evaluation(0.5 * np.sum(res**2, axis=1), {}, np.zeros(len(v)), res, 20)
+
+
+def test_a_fit_at_a_bound_is_never_identified():
+    # the data want 2.4; the bounds stop the fit at 1.992: a narrow, curved loss there
+    problem = _Line(best=2.4)
+    u = (1.992 - 0.05) / 1.95  # the estimators search in theta = logit(u), to the bound
+    theta = np.log([u / (1 - u)]).astype(np.float32)
+    info = cal.identifiability(problem, theta)["pad_friction"]
+    assert info["at_bound"] == "upper" and not info["identified"]
+    # well inside the bounds the same data identify it
+    inside = _Line(best=1.5)
+    info = cal.identifiability(inside, inside.space.theta([1.5]))["pad_friction"]
+    assert info["at_bound"] is None and info["identified"]
+
+
+def test_the_written_value_lies_inside_the_reported_interval():
+    from mjx_pick.studies.calibration.fit import _finish, kept_value
+
+    # data that put friction near 0.55 (95 % about +-0.2) yet too loosely for the
+    # narrow prior to call it identified: the start 0.86 is outside their interval
+    problem = _Line(best=0.55, weight=1.5, prior_half=0.3)
+    res = _finish(
+        problem,
+        problem.space.theta([0.55]),
+        {"pad_friction": 0.86},
+        [],
+        None,
+        None,
+        True,
+        "cma",
+        None,
+        mp.ContactParams(),
+    )
+    info = res.identifiability["pad_friction"]
+    lo, hi = info["interval"]
+    assert not info["identified"] and hi < 0.86
+    assert lo <= res.values["pad_friction"] <= hi
+    assert res.contact.pad_friction == res.values["pad_friction"] == pytest.approx(hi)
+    assert kept_value(0.86, (0.3, 0.9)) == 0.86  # inside: the start is kept
+
+
+def test_outcomes_of_another_mass_or_gripper_are_refused_unless_forced(tmp_path, capsys):
+    rows = cal.read_outcomes("block_1kg_rg2")
+    assert rows.measured["mass_g"] == 1000 and rows.measured["gripper"] == "onrobot-rg2"
+    rg2 = mp.Settings(mp.load_gripper("onrobot-rg2"))
+    light = mp.load_asset("block")  # 43 g: not the 1 kg block that was measured
+    with pytest.raises(mp.ConfigError, match=r"mass: measured 1000 g \(block\), .* 43.2 g"):
+        cal.Problem(light, rows, ["pad_friction"], rg2)
+    with pytest.raises(mp.ConfigError, match="gripper: measured onrobot-rg2, the run's rob"):
+        cal.Problem(mp.load_asset("block", mass_g=1000), rows, ["pad_friction"])
+    with pytest.warns(UserWarning, match="forced"):
+        cal.Problem(light, rows, ["pad_friction"], rg2, force_mismatch=True)
+    cal.Problem(mp.load_asset("block", mass_g=1000), rows, ["pad_friction"], rg2)  # as measured
+    # the CLI: one line, before the output folder is claimed
+    out = tmp_path / "cal"
+    args = ["calibrate", "block_1kg_rg2", "block", "--gripper", "onrobot-rg2", "--out", str(out)]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "mass: measured 1000 g" in err and "--force-mismatch" in err
+    assert not out.exists()
+    # a record with an unknown key or a bad mass is refused
+    csv = tmp_path / "mine.csv"
+    csv.write_text("x_mm,y_mm,yaw_deg,grip_force_n,trials,successes\n0,0,0,10,1,1\n")
+    (tmp_path / "mine.toml").write_text("mass_g = -1\n")
+    with pytest.raises(mp.ConfigError, match="mine.toml: mass_g = -1"):
+        cal.read_outcomes(csv)
+    (tmp_path / "mine.toml").write_text("weight = 3\n")
+    with pytest.raises(mp.ConfigError, match="mine.toml: unknown key"):
+        cal.read_outcomes(csv)

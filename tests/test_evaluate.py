@@ -362,3 +362,31 @@ def test_a_presets_force_range_gives_the_default_grip_force(tmp_path, capsys):
     assert code == 2 and "grip_force_n = 50 is out of range" in capsys.readouterr().err
     with pytest.warns(UserWarning, match="using 40 N"), pytest.raises(mp.ConfigError):
         evaluate("block", "onrobot-rg2", n=1, backend="mujoco", resume=True)  # stops: no --out
+
+
+def test_optimization_mode_stops_at_a_small_batch_and_view_finds_the_best_trace(tmp_path):
+    from mjx_pick.outputs.reporting.viewer import check_view
+    from mjx_pick.studies.evaluation import until_batch
+
+    assert until_batch(20, 1024) == 64 and until_batch(1, 1024) == 32
+    assert until_batch(1000, 256) == 256  # never above the backend's batch
+    block = mp.load_asset("block")
+    grasp = mp.GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
+    out = tmp_path / "opt"
+    ev = mp.evaluate(
+        block,
+        until=2,
+        min_score=0.5,
+        max_n=500,
+        grasp=grasp,
+        backend="mujoco",
+        out=out,
+        n_traces=1,
+    )
+    # batches of 32 until found, not a whole device batch (1,024 on the CPU) at once
+    assert ev.config["chunk_size"] == 32
+    assert ev.table.num_rows % 32 == 0 and ev.table.num_rows < 500
+    run, trace, scene = check_view(out, "best")  # the README's `view --pick best`
+    assert scene.is_file() and run.traced()[0][1] == "best"
+    with pytest.raises(mp.ConfigError, match="a traced pick_id, best or worst"):
+        check_view(out, "middle")

@@ -10,7 +10,15 @@ import pytest
 import mjx_pick as mp
 from mjx_pick.cli import main
 from mjx_pick.core import pickpoints as pp
-from mjx_pick.outputs.rundir import MANIFEST, claim, finish, read_manifest
+from mjx_pick.outputs.rundir import (
+    MANIFEST,
+    claim,
+    config_hash,
+    end_claims,
+    finish,
+    lock_holder,
+    read_manifest,
+)
 from mjx_pick.studies.sweeps import ParamSpec, sweep
 
 
@@ -73,3 +81,173 @@ def test_sweep_into_an_evaluate_folder_is_refused_before_simulating(tmp_path, ca
     assert main(["picks", "block", "--n", "5", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "holds the results of `mjx-pick evaluate`" in err and "Traceback" not in err
+
+
+HOLDER = """
+import sys, time
+from mjx_pick.outputs.rundir import claim
+out = claim(sys.argv[1], "evaluate", "k1")
+(out / "config.json").write_text("{}")
+(out / "scene.xml").write_text("<mujoco/>")
+print("claimed", flush=True)
+time.sleep(120)
+"""
+
+
+def _hold(out):
+    """A second process that claims out and keeps writing it (until killed)."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-c", HOLDER, str(out)], stdout=subprocess.PIPE, text=True
+    )
+    assert proc.stdout.readline().strip() == "claimed"
+    return proc
+
+
+def test_a_folder_being_written_is_locked_and_a_dead_writer_is_detected(tmp_path):
+    out = tmp_path / "run"
+    proc = _hold(out)
+    try:
+        # neither a second writer nor --overwrite touches the live run's files
+        for kw in ({}, {"overwrite": True}, {"resume": True}):
+            with pytest.raises(mp.ConfigError, match=rf"pid {proc.pid} on .*started"):
+                claim(out, "evaluate", "k2", **kw)
+        assert (out / "config.json").is_file() and (out / "scene.xml").is_file()
+        assert read_manifest(out)["status"] == "running"
+        assert lock_holder(out)["pid"] == proc.pid
+    finally:
+        proc.kill()
+        proc.wait()
+        proc.stdout.close()
+    # the lock died with its process: the folder's "running" run is known dead, and a
+    # corrected configuration takes the folder without --overwrite
+    assert lock_holder(out) is None
+    claim(out, "evaluate", "k2")
+    assert read_manifest(out)["config_key"] == "k2"
+    assert not (out / "config.json").exists()  # nothing of the dead attempt is kept
+    finish(out)
+    assert lock_holder(out) is None  # released by finish
+
+
+def test_refusal_names_each_changed_setting_and_offers_a_new_folder(tmp_path):
+    out = tmp_path / "run"
+    old = {"n": 200, "contact": {"pad_friction": 0.86, "stiffness": 1.0}, "seed": 0}
+    claim(out, "evaluate", config_hash(old), settings=old)
+    (out / "chunks").mkdir()
+    (out / "chunks" / "part-000000.parquet").write_bytes(b"x")
+    finish(out, "interrupted")
+    new = {"n": 300, "contact": {"pad_friction": 0.5, "stiffness": 1.0}, "seed": 0}
+    with pytest.raises(mp.ConfigError) as err:
+        claim(out, "evaluate", config_hash(new), resume=True, settings=new)
+    text = str(err.value)
+    assert "contact.pad_friction: 0.86 -> 0.5" in text and "n: 200 -> 300" in text
+    assert "stiffness" not in text and "seed" not in text
+    assert "1 finished chunks" in text
+    assert text.index("--out NEW") < text.index("--overwrite")
+    assert (out / "chunks" / "part-000000.parquet").is_file()
+
+
+def test_a_failed_run_is_replaced_by_a_corrected_one(tmp_path):
+    out = tmp_path / "run"
+    claim(out, "evaluate", "k1")
+    (out / "config.json").write_text("{}")
+    finish(out, "failed", message="no feasible pick-point")
+    m = read_manifest(out)
+    assert (m["status"], m["message"]) == ("failed", "no feasible pick-point")
+    claim(out, "evaluate", "k2")  # no --overwrite needed: nothing finished is there
+    assert read_manifest(out)["status"] == "running" and not (out / "config.json").exists()
+
+
+def test_end_claims_marks_unfinished_folders(tmp_path):
+    out = tmp_path / "run"
+    claim(out, "evaluate", "k1")
+    assert out.resolve() in end_claims("terminated", "stopped by SIGTERM")
+    m = read_manifest(out)
+    assert (m["status"], m["message"]) == ("terminated", "stopped by SIGTERM")
+    assert lock_holder(out) is None
+
+
+TINY = ["--traces", "0", "--hold-s", "0.05", "--lift-height-mm", "5", "--no-progress"]
+
+
+def test_inputs_are_checked_before_the_folder_is_claimed(tmp_path, capsys):
+    out = tmp_path / "ev"
+    bad_csv = tmp_path / "bad.csv"
+    bad_csv.write_text("x_mm,y_mm,yaw_deg\n0,zero,0\n")
+    far = tmp_path / "far.csv"
+    far.write_text("x_mm,y_mm,yaw_deg\n500,0,0\n")  # no feasible pick-point
+    for extra in (["--n", "0"], ["--picks", str(bad_csv)], ["--picks", str(far)]):
+        assert main(["evaluate", "block", *extra, "--out", str(out), *TINY]) == 2
+        assert read_manifest(out) is None, extra  # the folder was never claimed
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def _boom(error):
+    def simulate(*args, **kwargs):
+        raise error
+
+    return simulate
+
+
+def test_an_error_after_claiming_marks_the_folder_failed_and_a_rerun_proceeds(
+    tmp_path, capsys, monkeypatch
+):
+    from mjx_pick.studies import evaluation
+
+    out = tmp_path / "ev"
+    part = out / "chunks" / "part-000000.parquet"
+    denied = PermissionError(13, "Permission denied", str(part))
+    with monkeypatch.context() as m:
+        m.setattr(evaluation, "_simulate", _boom(denied))
+        assert main(["evaluate", "block", "--n", "4", "--out", str(out), *TINY]) == 1
+    err = capsys.readouterr().err
+    assert f"{part}: Permission denied" in err and "Traceback" not in err
+    manifest = read_manifest(out)
+    assert manifest["status"] == "failed" and "Permission denied" in manifest["message"]
+    assert lock_holder(out) is None
+    # a corrected run (here: another seed) takes the folder without --overwrite
+    assert main(["evaluate", "block", "--n", "4", "--seed", "1", "--out", str(out), *TINY]) == 0
+    assert read_manifest(out)["status"] == "complete"
+    assert "replacing the files of an unfinished" in capsys.readouterr().err
+
+
+def test_sigterm_stops_a_run_like_ctrl_c(tmp_path, capsys, monkeypatch):
+    import signal
+    import time
+
+    from mjx_pick.studies import evaluation
+
+    def killed(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the handler raises here
+        raise AssertionError("SIGTERM did not stop the run")
+
+    monkeypatch.setattr(evaluation, "_simulate", killed)
+    out = tmp_path / "ev"
+    assert main(["evaluate", "block", "--n", "4", "--out", str(out), *TINY]) == 143
+    assert "terminated (SIGTERM)" in capsys.readouterr().err
+    manifest = read_manifest(out)
+    assert manifest["status"] == "terminated" and "SIGTERM" in manifest["message"]
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored
+
+
+def test_resume_over_a_corrupt_chunk_simulates_it_again(tmp_path, capsys):
+    import json
+
+    block = mp.load_asset("block")
+    grasp = mp.GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
+    out = tmp_path / "ev"
+    kw = dict(n=4, grasp=grasp, backend="mujoco", out=out, n_traces=0, chunk_size=2)
+    first = mp.evaluate(block, keep_chunks=True, **kw)
+    # as a run killed after its chunks: the last one cut short on disk
+    manifest = read_manifest(out)
+    manifest["status"] = "interrupted"
+    (out / MANIFEST).write_text(json.dumps(manifest))
+    (out / "results.parquet").unlink()
+    bad = out / "chunks" / "part-000001.parquet"
+    bad.write_bytes(bad.read_bytes()[:40])
+    again = mp.evaluate(block, resume=True, **kw)
+    assert f"{bad}: unreadable chunk" in capsys.readouterr().err
+    assert again.table.equals(first.table)

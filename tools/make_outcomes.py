@@ -39,6 +39,13 @@ def main() -> None:
     )
     HERE.mkdir(exist_ok=True)
     write_outcomes(HERE / "block_1kg_rg2.csv", out)
+    # what it was measured with: calibrate refuses to fit it to another set-up
+    (HERE / "block_1kg_rg2.toml").write_text(
+        "# What block_1kg_rg2.csv was measured with (simulated: tools/make_outcomes.py).\n"
+        "# `mjx-pick calibrate` refuses to fit it to another mass, gripper or procedure\n"
+        "# (--force-mismatch fits anyway); studies/calibration/provenance.py reads it.\n"
+        f'object = "block"\nmass_g = {obj.mass_kg * 1e3:g}\ngripper = "{hidden.gripper.name}"\n'
+    )
     print(f"{int(out.successes.sum())} of {n} held; written to {HERE / 'block_1kg_rg2.csv'}")
 
 

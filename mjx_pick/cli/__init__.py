@@ -28,6 +28,7 @@ from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError
 from mjx_pick.engine import interrupts
 from mjx_pick.outputs.display import use_offscreen_rendering
+from mjx_pick.outputs.rundir import end_claims, error_message
 
 __all__ = ["build_parser", "main"]
 
@@ -49,20 +50,33 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "backend", None) == "mjx":
         print(MJX_NOTE, file=sys.stderr)
     try:
-        with interrupts.catching_sigint():  # a Ctrl-C is never swallowed (see interrupts)
+        # a Ctrl-C is never swallowed, and SIGTERM stops a run as it does (see interrupts)
+        with interrupts.catching_sigint():
             return int(args.func(args) or 0)
     except ConfigError as err:
+        end_claims("failed", error_message(err))
         print(f"mjx-pick: error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
+        status, message = interrupts.stop_status(stop)
+        end_claims(status, message)
         out = getattr(args, "out", None)
         hint = (
             f"; what finished is kept: run the same command with --resume to continue in {out}"
             if out and hasattr(args, "resume")
             else ""
         )
-        print(f"mjx-pick: interrupted{hint}", file=sys.stderr)
-        return 130
+        what = "terminated (SIGTERM)" if status == "terminated" else "interrupted"
+        print(f"mjx-pick: {what}{hint}", file=sys.stderr)
+        return 143 if status == "terminated" else 130
+    except OSError as err:  # a disk that fills, a folder made read-only mid-run
+        end_claims("failed", error_message(err))
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"mjx-pick: error: {where}{err.strerror or err}", file=sys.stderr)
+        return 1
+    except BaseException as err:  # a bug: its traceback, but no folder left "running"
+        end_claims("failed", error_message(err))
+        raise
 
 
 if __name__ == "__main__":

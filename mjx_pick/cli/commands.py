@@ -229,6 +229,7 @@ def cmd_calibrate(args) -> int:
         priors=priors,
         replicates=args.replicates,
         noise=cal.Noise(trace_window_s=args.trace_window_s),
+        force_mismatch=args.force_mismatch,
     )
     problem = cal.Problem(obj, outcomes, names, base, backend=backend, **kw)
     holdout = None
@@ -283,9 +284,16 @@ def cmd_calibrate(args) -> int:
         where = ""
         if info:
             lo, hi = info["interval"]
-            where = f"  (95 % {lo:.4g}-{hi:.4g})" + (
-                "" if info["identified"] else "  NOT identified: kept at its start"
-            )
+            where = f"  (95 % {lo:.4g}-{hi:.4g})"
+            if info.get("at_bound"):
+                where += f"  fit at its {info['at_bound']} bound"
+            if not info["identified"] and res.values[name] == res.initial[name]:
+                where += "  NOT identified: kept at its start"
+            elif not info["identified"]:
+                where += (
+                    "  NOT identified: its start lies outside the data's interval; "
+                    "the interval's nearest end is written"
+                )
         print(f"{name}: {res.initial[name]:.4g} -> {res.values[name]:.4g}{where}")
     for label, acc in (("before", res.accuracy_before), ("after", res.accuracy_after)):
         if acc:

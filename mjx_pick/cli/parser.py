@@ -510,6 +510,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cb.add_argument("--holdout", help="held-out outcomes CSV for accuracy before/after")
     cb.add_argument(
+        "--force-mismatch",
+        action="store_true",
+        help="fit although the outcomes' record (OUTCOMES.toml beside the CSV) names another "
+        "mass, gripper or procedure than this run (default: refused)",
+    )
+    cb.add_argument(
         "--no-identify",
         action="store_true",
         help="skip the intervals / identifiability after the fit",
@@ -746,10 +752,10 @@ def _add_view_parser(sub) -> None:
     vp.add_argument("run", help="an evaluate output folder with traces.parquet")
     vp.add_argument(
         "--pick",
-        type=int,
         required=True,
         metavar="ID",
-        help="pick_id of a traced pick-point (the report's forces_<ID>.png)",
+        help="pick_id of a traced pick-point (the report's forces_<ID>.png), or best / worst: "
+        "the best or worst traced one",
     )
     vp.add_argument(
         "--speed",

@@ -10,6 +10,10 @@ reads between chunks (:func:`raise_if_requested`) -- if the first exception was
 swallowed, the run still stops at the next chunk, marked "interrupted", its finished
 chunks kept for ``--resume``.
 
+SIGTERM (``kill``, a job scheduler, a container stopping) is handled the same way: it
+raises :class:`Terminated` (a ``KeyboardInterrupt``, so every path that keeps a stopped
+run's chunks keeps them) and the folder is marked "terminated", never left "running".
+
 The record is process-wide because a signal is; it is cleared when the context ends.
 """
 
@@ -21,11 +25,29 @@ import threading
 from collections.abc import Iterator
 
 _requested = threading.Event()
+_terminated = threading.Event()
 
 
-def request() -> None:
-    """Record a Ctrl-C (what the SIGINT handler does besides raising)."""
+class Terminated(KeyboardInterrupt):
+    """The process got SIGTERM: stopped like a Ctrl-C, recorded as "terminated"."""
+
+
+def request(terminate: bool = False) -> None:
+    """Record a Ctrl-C, or with terminate a SIGTERM (what the handlers do besides
+    raising)."""
+    if terminate:
+        _terminated.set()
     _requested.set()
+
+
+def stop_status(stop: BaseException) -> tuple[str, str]:
+    """The status and message a run folder records for what stopped its run: a cancel
+    event, SIGTERM or Ctrl-C."""
+    if isinstance(stop, Terminated):
+        return "terminated", "stopped by SIGTERM; its finished chunks are kept for --resume"
+    if isinstance(stop, KeyboardInterrupt):
+        return "interrupted", "stopped by Ctrl-C; its finished chunks are kept for --resume"
+    return "cancelled", "cancelled; its finished chunks are kept for --resume"
 
 
 def requested() -> bool:
@@ -36,11 +58,14 @@ def requested() -> bool:
 def clear() -> None:
     """Forget a recorded Ctrl-C."""
     _requested.clear()
+    _terminated.clear()
 
 
 def raise_if_requested() -> None:
-    """Raise ``KeyboardInterrupt`` when a Ctrl-C was recorded (it may have been
-    swallowed where it was first raised)."""
+    """Raise ``KeyboardInterrupt`` (:class:`Terminated` for a SIGTERM) when one was
+    recorded (it may have been swallowed where it was first raised)."""
+    if _terminated.is_set():
+        raise Terminated
     if _requested.is_set():
         raise KeyboardInterrupt
 
@@ -50,17 +75,24 @@ def _on_sigint(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
+def _on_sigterm(signum, frame) -> None:
+    request(terminate=True)
+    raise Terminated
+
+
 @contextlib.contextmanager
 def catching_sigint() -> Iterator[None]:
-    """Inside it, SIGINT raises ``KeyboardInterrupt`` and is also recorded (see the
-    module docstring). Outside the main thread (where Python allows no handler) it
-    changes nothing."""
+    """Inside it, SIGINT raises ``KeyboardInterrupt`` and SIGTERM :class:`Terminated`,
+    each also recorded (see the module docstring). Outside the main thread (where
+    Python allows no handler) it changes nothing."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = signal.signal(signal.SIGINT, _on_sigint)
+    previous_term = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        signal.signal(signal.SIGTERM, previous_term)
         clear()

@@ -43,8 +43,10 @@ import hashlib
 import io
 import json
 import shutil
+import sys
 import threading
 import time
+import zipfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NamedTuple, Protocol
@@ -452,13 +454,26 @@ def read_chunk(out_dir: Path, k: int, picks: PickBatch) -> pa.Table | None:
     path = chunk_path(out_dir, k)
     if not path.is_file():
         return None
-    table = pq.read_table(path)
-    ids = np.asarray(table["pick_id"])
+    try:
+        table = pq.read_table(path)
+        ids = np.asarray(table["pick_id"])
+    except (OSError, KeyError, pa.ArrowException) as err:
+        _unreadable(path, err)
+        return None
     if len(ids) != len(picks) or not np.array_equal(ids, picks.pick_id):
         raise ConfigError(
             f"{path} does not hold the pick-points of chunk {k}: choose another --out"
         )
     return table
+
+
+def _unreadable(path: Path, err: BaseException) -> None:
+    """Say that a saved chunk cannot be read (a disk error, a copy cut short): it is
+    simulated again and written over, atomically."""
+    print(
+        f"mjx-pick: {path}: unreadable chunk ({type(err).__name__}: {err}); simulating it again",
+        file=sys.stderr,
+    )
 
 
 def open_study_store(
@@ -474,7 +489,7 @@ def open_study_store(
     key = config_hash(request)
     if resume and not overwrite and is_complete(out, command, key):
         return None, True
-    claim(out, command, key, resume=resume, overwrite=overwrite)
+    claim(out, command, key, resume=resume, overwrite=overwrite, settings=request)
     return ChunkStore(out, key, resume), False
 
 
@@ -570,8 +585,12 @@ class StoredScene:
         path = self._path(inputs)
         if not path.is_file():
             return None
-        with np.load(path) as data:
-            out = {k: data[k] for k in data.files}
+        try:
+            with np.load(path) as data:
+                out = {k: data[k] for k in data.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+            _unreadable(path, err)
+            return None
         if any(len(v) != len(inputs) for v in out.values()):
             raise ConfigError(f"{path} does not hold this chunk's results: choose another --out")
         self.store.read_chunks += 1

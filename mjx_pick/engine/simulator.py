@@ -22,6 +22,7 @@ from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene, build_scene
+from mjx_pick.engine import interrupts
 from mjx_pick.engine.backend import Backend, Settings, make_inputs
 from mjx_pick.engine.runner import Cancelled, ChunkStore, Engine, ProgressFn
 from mjx_pick.outputs.progress import ProgressBar
@@ -31,14 +32,15 @@ from mjx_pick.outputs.rundir import finish
 @contextlib.contextmanager
 def marking_stops(out_dir: str | Path | None, command: str) -> Iterator[None]:
     """Inside it, a run stopped by a cancel event (:class:`Cancelled`) or Ctrl-C marks
-    the command's output folder "cancelled" or "interrupted" before the stop goes on:
+    the command's output folder "cancelled", "interrupted" or "terminated" (SIGTERM)
+    before the stop goes on:
     a folder must never be left saying "running" (out_dir None: nothing to mark)."""
     try:
         yield
     except (Cancelled, KeyboardInterrupt) as stop:
         if out_dir is not None:
-            status = "cancelled" if isinstance(stop, Cancelled) else "interrupted"
-            finish(out_dir, status, command=command)
+            status, message = interrupts.stop_status(stop)
+            finish(out_dir, status, command=command, message=message)
         raise
 
 

@@ -2,14 +2,22 @@
 
 Every command that writes a folder (evaluate, sweep, compare, design, robust,
 calibrate, picks) first calls :func:`claim`. The folder gets a manifest,
-``mjx_pick_run.json``: the command, a hash of its configuration, its status
-(running / complete) and when. A later command refuses the folder when another command
-wrote it, or the same command with another configuration, unless the user asks to
-``overwrite`` (the folder is emptied first) or to ``resume``. A path that cannot hold
-results -- a file, a read-only place, a folder that cannot be created -- is refused
-with one line naming the path and the reason, before anything is simulated.
+``mjx_pick_run.json``: the command, a hash of its configuration and the settings
+hashed, its status and when. A later command refuses the folder when another command
+wrote it, or the same command with another configuration (naming each setting that
+changed), unless the user asks to ``overwrite`` (the folder is emptied first) or to
+``resume``. A path that cannot hold results -- a file, a read-only place, a folder that
+cannot be created -- is refused with one line naming the path and the reason, before
+anything is simulated.
 
-When the command ends -- complete, interrupted or cancelled -- :func:`finish` records the
+While a command writes a folder it holds the folder's advisory lock (``flock`` on
+``.mjx_pick.lock``): no other process -- a second writer, ``--overwrite`` -- removes or
+writes files under it, and the refusal names the process. The kernel drops the lock
+with the process, so a run killed outright leaves no stale lock: its manifest says
+"running" under a free lock, and the next claim knows it died.
+
+When the command ends -- complete, interrupted, terminated, cancelled or failed (with
+its error message) -- :func:`finish` records the
 status in the manifest and writes the run's metadata, ``run.json``: the same record
 for every command (the merged configuration, package versions, backend, device, seed,
 compile / run / wall time, status and when). A command that adds its files to another
@@ -19,20 +27,29 @@ leaves the folder's manifest and ``run.json`` alone.
 
 from __future__ import annotations
 
+import atexit
+import dataclasses
 import datetime
 import hashlib
 import json
 import os
 import platform
 import shutil
+import socket
 import sys
 import tempfile
 from importlib import metadata
 from pathlib import Path
 
-from mjx_pick.core.config import ConfigError, write_json
+from mjx_pick.core.config import ConfigError, to_dict, write_json
+
+try:
+    import fcntl
+except ImportError:  # no flock (Windows): folders are claimed without a lock
+    fcntl = None
 
 MANIFEST = "mjx_pick_run.json"
+LOCK = ".mjx_pick.lock"  # the advisory lock of a folder being written (see claim)
 RUN = "run.json"  # the run's metadata (see finish)
 
 
@@ -78,6 +95,201 @@ def _usable(path: Path) -> None:
         raise ConfigError(f"--out {path}: cannot be written ({err.strerror or err})") from err
 
 
+@dataclasses.dataclass
+class _Held:
+    """A folder this process has claimed and not yet released."""
+
+    fd: int | None  # the open lock file (None where the platform has no flock)
+    command: str
+    own: bool  # False: joined another command's folder (its manifest is not ours)
+
+
+_held: dict[Path, _Held] = {}
+_atexit_registered = False
+
+
+def _now() -> str:
+    return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+
+
+def lock_holder(path: str | os.PathLike) -> dict | None:
+    """Who is writing the folder now: the lock file's record (pid, host, command,
+    started) of a live process -- this one included -- or None when no process holds
+    the folder's lock. A lock file left by a process that died is no holder: the
+    kernel drops a flock with the process that held it."""
+    path = Path(path)
+    held = _held.get(path.resolve())
+    if held is not None:
+        return {"pid": os.getpid(), "host": socket.gethostname(), "command": held.command}
+    lock = path / LOCK
+    if fcntl is None or not lock.is_file():
+        return None
+    try:
+        fd = os.open(lock, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return _lock_record(lock)
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)
+
+
+def _lock_record(lock: Path) -> dict:
+    try:
+        return json.loads(lock.read_text()) or {}
+    except (OSError, ValueError):  # written a moment after the lock is taken
+        return {}
+
+
+def _busy(path: Path, who: dict) -> ConfigError:
+    pid, host = who.get("pid", "unknown"), who.get("host", "an unknown host")
+    what = f"`mjx-pick {who['command']}`" if who.get("command") else "another mjx-pick"
+    since = f", started {who['started']}" if who.get("started") else ""
+    return ConfigError(
+        f"--out {path}: {what} is writing this folder now (pid {pid} on {host}{since}); "
+        "wait until it ends, or choose another --out"
+    )
+
+
+def _lock(path: Path, command: str, own: bool) -> bool:
+    """Take the folder's advisory lock for this process; True when it was taken now
+    (False: this process held it already). Raises ConfigError naming the live holder."""
+    key = path.resolve()
+    if key in _held:
+        return False
+    fd = None
+    if fcntl is not None:
+        fd = os.open(path / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise _busy(path, _lock_record(path / LOCK)) from None
+        record = {
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "command": command,
+            "started": _now(),
+        }
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps(record).encode(), 0)
+    _held[key] = _Held(fd, command, own)
+    global _atexit_registered
+    if not _atexit_registered:
+        atexit.register(end_claims, "failed", "the process ended before the run finished")
+        _atexit_registered = True
+    return True
+
+
+def release(path: str | os.PathLike) -> None:
+    """Give up this process's lock on a folder (nothing when it holds none). The
+    lock file stays: a later writer takes the lock on it."""
+    held = _held.pop(Path(path).resolve(), None)
+    if held is not None and held.fd is not None:
+        fcntl.flock(held.fd, fcntl.LOCK_UN)
+        os.close(held.fd)
+
+
+def end_claims(status: str, message: str) -> list[Path]:
+    """Close every folder this process claimed and has not finished: its manifest
+    says `status` with `message` (never "running"), and its lock is released. What
+    the interfaces call when a command ends by an error or a signal, and what runs at
+    exit. Best effort: a folder that cannot be written any more (made read-only) is
+    only released -- its manifest then says "running" under no lock, which the next
+    claim reads as a run that died. Returns the folders it closed."""
+    closed = []
+    for key, held in list(_held.items()):
+        try:
+            if held.own:
+                m = read_manifest(key) or {}
+                if m.get("status") == "running":
+                    finish(key, status, command=held.command, message=message)
+            else:
+                finish(key, status, command=held.command, message=message)
+        except OSError:
+            pass
+        release(key)
+        closed.append(key)
+    return closed
+
+
+def error_message(err: BaseException) -> str:
+    """An error as one line for a manifest: a ConfigError's own text, else its type too."""
+    if isinstance(err, ConfigError):
+        return str(err)
+    text = str(err) or "(no message)"
+    return f"{type(err).__name__}: {text}"
+
+
+def fail(path: str | os.PathLike, err: BaseException, command: str | None = None) -> None:
+    """Mark a claimed folder "failed" with err's message (never left "running": the
+    next claim replaces its files) and release it. Best effort -- it runs while an
+    error goes on: a folder that cannot be written any more is only released."""
+    try:
+        finish(path, "failed", command=command, message=error_message(err))
+    except OSError:
+        release(path)
+
+
+def flat_settings(settings, prefix: str = "") -> dict:
+    """A configuration as one level of dotted names to JSON values: what a manifest
+    records, so that a refusal can name each setting that changed. Long text (a
+    simulated model's XML) is kept as its digest."""
+    value = to_dict(settings)
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            out.update(flat_settings(v, f"{prefix}{k}."))
+        return out if out or not prefix else {prefix[:-1]: {}}
+    if isinstance(value, str) and len(value) > 200:
+        value = "sha256:" + hashlib.sha256(value.encode()).hexdigest()[:16]
+    value = json.loads(json.dumps(value, default=str))
+    return {prefix[:-1] if prefix else "value": value}
+
+
+def _show(v) -> str:
+    text = "(not set)" if v is _MISSING else json.dumps(v)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+_MISSING = object()
+
+
+def changed_settings(old: dict | None, new: dict | None) -> list[str]:
+    """Each setting that differs, as 'name: old -> new' (in name order)."""
+    if old is None or new is None:
+        return []
+    names = sorted(set(old) | set(new))
+    return [
+        f"{k}: {_show(old.get(k, _MISSING))} -> {_show(new.get(k, _MISSING))}"
+        for k in names
+        if old.get(k, _MISSING) != new.get(k, _MISSING)
+    ]
+
+
+def _what_changed(old: dict, settings: dict | None) -> str:
+    lines = changed_settings(old.get("settings"), settings)
+    if not lines:
+        if old.get("settings") is None:
+            return " (that run did not record its settings)"
+        return ""
+    shown = "; ".join(lines[:8]) + (f"; and {len(lines) - 8} more" if len(lines) > 8 else "")
+    return f" -- changed: {shown}"
+
+
+def _remove_contents(path: Path) -> None:
+    """Empty a folder this project wrote (its lock and other dot files stay)."""
+    for p in path.iterdir():
+        if p.name.startswith("."):
+            continue
+        shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+
+
 def claim(
     out: str | os.PathLike,
     command: str,
@@ -86,8 +298,17 @@ def claim(
     resume: bool = False,
     overwrite: bool = False,
     joins: tuple[str, ...] = (),
+    settings: dict | None = None,
 ) -> Path:
-    """Check that `out` may take this command's results, and mark it as running.
+    """Check that `out` may take this command's results, lock it and mark it running.
+
+    The folder's advisory lock (``.mjx_pick.lock``, a ``flock``) is taken first and
+    held until :func:`finish` (or :func:`end_claims`, or the process's end): while
+    another process holds it, the folder is refused -- with --overwrite too -- naming
+    that process. A folder whose last run failed, or says "running" while no process
+    holds its lock (a run killed outright), holds nothing finished: another
+    configuration replaces its files without --overwrite; the same one continues
+    (--resume) from what it kept.
 
     Args:
       command: the writing command's name ("evaluate", "sweep", ...).
@@ -96,6 +317,8 @@ def claim(
       overwrite: empty a folder this project wrote and start again.
       joins: commands whose folder this one may add its files to (robust adds its
         ranking to an evaluate folder).
+      settings: the settings hashed into key (JSON-able); recorded in the manifest
+        (:func:`flat_settings`) so that a later refusal names what changed.
 
     Returns:
       the folder, created.
@@ -105,38 +328,78 @@ def claim(
     path = Path(out)
     _usable(path)
     old = read_manifest(path)
-    others = [p for p in path.iterdir() if p.name != MANIFEST and not p.name.startswith(".")]
-    if old is None and others:
-        raise ConfigError(
-            f"--out {path}: the folder holds files that mjx-pick did not write; choose an "
-            "empty or new folder"
-        )
-    if old is not None and old.get("command") in joins:
+    joined = old is not None and old.get("command") in joins
+    taken = _lock(path, command, own=not joined)
+    try:
+        old = read_manifest(path)  # again, now that no other process writes it
+        flat = flat_settings(settings) if settings is not None else None
+        _decide(path, command, key, old, joined, taken, resume, overwrite, flat)
+    except BaseException:
+        if taken:
+            release(path)
+        raise
+    if joined:
         return path  # add to it; its own manifest stays
-    if old is not None and not overwrite:
-        if old.get("command") != command:
-            raise ConfigError(
-                f"--out {path}: holds the results of `mjx-pick {old.get('command')}`; choose "
-                f"another folder, or pass --overwrite to replace them"
-            )
-        if old.get("config_key") != key:
-            raise ConfigError(
-                f"--out {path}: holds `mjx-pick {command}` results of another configuration; "
-                "choose another folder, or pass --overwrite to replace them"
-            )
-    if old is not None and overwrite:
-        for p in others:
-            shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
     write_json(
         path / MANIFEST,
         {
             "command": command,
             "config_key": key,
             "status": "running",
-            "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+            "started": _now(),
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "settings": flat,
         },
     )
     return path
+
+
+def _decide(path, command, key, old, joined, taken, resume, overwrite, flat) -> None:
+    """claim's checks, under the folder's lock; empties the folder where that is due."""
+    others = [p for p in path.iterdir() if p.name != MANIFEST and not p.name.startswith(".")]
+    if old is None and others:
+        raise ConfigError(
+            f"--out {path}: the folder holds files that mjx-pick did not write; choose an "
+            "empty or new folder"
+        )
+    if old is None or joined:
+        return
+    status = old.get("status")
+    # nothing finished to keep: a failed run, or a "running" one no process holds
+    abandoned = status == "failed" or (status == "running" and taken)
+    same = (old.get("command"), old.get("config_key")) == (command, key)
+    if overwrite:
+        _remove_contents(path)
+        return
+    if abandoned and not same:
+        why = old.get("message") or "it was stopped before it finished"
+        print(
+            f"mjx-pick: {path}: replacing the files of an unfinished `mjx-pick "
+            f"{old.get('command')}` run ({status}: {why})",
+            file=sys.stderr,
+        )
+        _remove_contents(path)
+        return
+    chunks = path / "chunks"
+    n_chunks = (
+        sum(1 for p in chunks.iterdir() if p.suffix in (".parquet", ".npz"))
+        if (chunks.is_dir())
+        else 0
+    )
+    kept = f" ({n_chunks} finished chunks)" if n_chunks else ""
+    if old.get("command") != command:
+        raise ConfigError(
+            f"--out {path}: holds the results of `mjx-pick {old.get('command')}`{kept}; "
+            "keep them and write elsewhere with --out NEW, or pass --overwrite to delete "
+            "them and start again"
+        )
+    if old.get("config_key") != key:
+        raise ConfigError(
+            f"--out {path}: holds `mjx-pick {command}` results of another configuration{kept}"
+            f"{_what_changed(old, flat)}. Keep them and write elsewhere with --out NEW "
+            f"(or run with the folder's settings and --resume); --overwrite deletes them"
+        )
 
 
 def versions() -> dict:
@@ -160,11 +423,17 @@ def finish(
     backend: str | None = None,
     device: str | None = None,
     timing: dict | None = None,
+    message: str | None = None,
+    release_lock: bool = True,
 ) -> Path:
     """Record that a command's run in `path` ended, and write its metadata.
 
     Args:
-      status: "complete", "interrupted" (Ctrl-C) or "cancelled" (a cancel event).
+      status: "complete", "interrupted" (Ctrl-C), "terminated" (SIGTERM), "cancelled"
+        (a cancel event) or "failed" (an error, given as message).
+      message: why the run stopped (recorded in the manifest and run.json).
+      release_lock: give up the folder's lock (:func:`claim`) once written; False for
+        a caller that still tidies the folder (then :func:`release`).
       command: the command (default: the manifest's, i.e. the folder's owner).
       config: the merged configuration of the run (JSON-able).
       seed, backend, device: what ran ('mujoco', 'cpu:2 threads', ...).
@@ -182,10 +451,14 @@ def finish(
     if own:
         manifest["status"] = status
         manifest["finished"] = now
+        manifest.pop("message", None)
+        if message:
+            manifest["message"] = message
         write_json(path / MANIFEST, manifest)
     record = {
         "command": command,
         "status": status,
+        "message": message,
         "config_key": manifest.get("config_key") if own else None,
         "started": manifest.get("started") if own else None,
         "finished": now,
@@ -196,4 +469,8 @@ def finish(
         "versions": versions(),
         "config": config,
     }
-    return write_json(path / (RUN if own else f"run-{command}.json"), record)
+    try:
+        return write_json(path / (RUN if own else f"run-{command}.json"), record)
+    finally:
+        if release_lock:
+            release(path)

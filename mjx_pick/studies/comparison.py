@@ -37,7 +37,7 @@ from mjx_pick.core.objects import ObjectModel
 from mjx_pick.engine.backend import Settings
 from mjx_pick.engine.runner import open_study_store
 from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress, study_simulator
-from mjx_pick.outputs.rundir import claim, config_hash, finish, portable_object
+from mjx_pick.outputs.rundir import claim, config_hash, finish, portable_object, release
 
 
 @dataclasses.dataclass
@@ -215,8 +215,9 @@ def compare(
             result.out_dir = out_dir
             meta = sim.engine.describe(time.perf_counter() - t0)
             config["picks"] = to_dict(pick_config)
-            finish(out_dir, command="compare", config=config, seed=seed, **meta)
+            finish(out_dir, command="compare", config=config, seed=seed, release_lock=False, **meta)
             store.remove()  # every row is in results.parquet now
+            release(out_dir)
         return result
 
 
@@ -394,7 +395,7 @@ def design_search(
     pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
     with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
         if out is not None:
-            claim(out, "design", config_hash(request), overwrite=overwrite)
+            claim(out, "design", config_hash(request), overwrite=overwrite, settings=request)
         search = {"rounds": rounds, "n": n, "final_n": final_n, "seed": seed}
         search.update(rank_by=rank_by, pick_config=pick_config)
         return _design(obj, base, pool, sim, bounds, request, t0, out, progress, **search)

@@ -72,7 +72,15 @@ from mjx_pick.engine.runner import (
 from mjx_pick.engine.simulator import Simulator, showing_progress
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.outputs.progress import ProgressBar
-from mjx_pick.outputs.rundir import claim, config_hash, finish, read_manifest, versions
+from mjx_pick.outputs.rundir import (
+    claim,
+    config_hash,
+    fail,
+    finish,
+    read_manifest,
+    release,
+    versions,
+)
 from mjx_pick.studies.pickfiles import read_picks_csv
 from mjx_pick.studies.robust import min_grip_force
 
@@ -351,7 +359,7 @@ def _evaluate(
 ) -> Evaluation:
     """evaluate() once its executor (this process, or a Ray cluster) is ready."""
     out_dir = Path(out) if out is not None else None
-    key = experiment_key(
+    settings = experiment_settings(
         scene,
         {
             "gripper": gripper,
@@ -373,32 +381,104 @@ def _evaluate(
             "batch_size": executor.batch_size,
         },
     )
+    key = config_hash(settings)
     done = _complete_run(out_dir, key) if out_dir is not None and not overwrite else None
     if done is not None and resume:
         return done
     if done is not None:  # its chunks are gone: plan_chunks would no longer see it
         raise ConfigError(
-            f"{out_dir} holds this run, complete: pass --resume to read it back, "
-            "--overwrite to run it again, or choose another --out"
+            f"{out_dir} holds this run, complete: pass --resume to read it back, choose "
+            "another --out, or pass --overwrite to run it again"
         )
-    if out_dir is not None:  # before any simulation: a folder it may not use is refused now
-        claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite)
-
+    # every input is checked before the folder is claimed: a bad one leaves it as it was
     t_picks = time.perf_counter()
     if until is not None:
+        check_range("evaluate", "until", until, 1, 10**9)
         max_n = max_n or 10 * until
-        batch = int(chunk_size or executor.batch_size)
-        plan = plan_chunks(out_dir, key, max_n, min(batch, max_n), resume)
+        check_range("evaluate", "max_n", max_n, until, 10**9)
         picks_batch = None
+    elif picks is None:
+        picks_batch = pp.generate_normal(
+            obj, gripper, n, seed=seed, config=pick_config, grasp=grasp
+        )
+    elif isinstance(picks, pp.PickBatch):
+        picks_batch = picks
     else:
-        if picks is None:
-            picks_batch = pp.generate_normal(
-                obj, gripper, n, seed=seed, config=pick_config, grasp=grasp
-            )
-        elif isinstance(picks, pp.PickBatch):
-            picks_batch = picks
-        else:
-            picks_batch = user_batch  # read and checked before the folder was claimed
+        picks_batch = user_batch  # read and checked before the scene was built
+    costs["picks_s"] = time.perf_counter() - t_picks  # sampling and the feasibility checks
+    if out_dir is not None:  # before any simulation: a folder it may not use is refused now
+        claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite, settings=settings)
+    try:
+        return _evaluate_claimed(
+            executor,
+            engine,
+            runner,
+            scene,
+            obj,
+            gripper,
+            contact,
+            solver,
+            grasp,
+            pick_config,
+            picks_batch,
+            out_dir=out_dir,
+            key=key,
+            seed=seed,
+            n_traces=n_traces,
+            progress=progress,
+            resume=resume,
+            until=until,
+            min_score=min_score,
+            max_n=max_n,
+            chunk_size=chunk_size,
+            min_force=min_force,
+            stability_um=stability_um,
+            keep_chunks=keep_chunks,
+            on_progress=on_progress,
+            costs=costs,
+        )
+    except (KeyboardInterrupt, Cancelled):
+        raise  # the folder is marked by _stopped
+    except BaseException as err:
+        if out_dir is not None:  # never left "running": the next run replaces it
+            fail(out_dir, err, command="evaluate")
+        raise
+
+
+def _evaluate_claimed(
+    executor: ChunkExecutor,
+    engine: Engine | None,
+    runner,
+    scene,
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    contact: ContactParams,
+    solver: SolverParams,
+    grasp: GraspConfig,
+    pick_config: pp.PickConfig,
+    picks_batch: pp.PickBatch | None,
+    *,
+    out_dir,
+    key,
+    seed,
+    n_traces,
+    progress,
+    resume,
+    until,
+    min_score,
+    max_n,
+    chunk_size,
+    min_force,
+    stability_um,
+    keep_chunks,
+    on_progress,
+    costs,
+) -> Evaluation:
+    """evaluate() once its inputs are checked and its folder (if any) claimed."""
+    if until is not None:
+        batch = int(chunk_size or until_batch(until, executor.batch_size))
+        plan = plan_chunks(out_dir, key, max_n, min(batch, max_n), resume)
+    else:
         if chunk_size:
             chunk = int(chunk_size)
         elif runner is not None:
@@ -406,7 +486,6 @@ def _evaluate(
         else:
             chunk = executor.batch_size
         plan = plan_chunks(out_dir, key, len(picks_batch), chunk, resume)
-    costs["picks_s"] = time.perf_counter() - t_picks  # sampling and the feasibility checks
 
     config = {
         "object": obj.summary(),
@@ -516,9 +595,10 @@ def _evaluate(
         write_json(out_dir / "summary.json", summary)
         meta = executor.describe(time.perf_counter() - t0)
         meta["timing"]["breakdown_s"] = summary["time_s"]
-        finish(out_dir, command="evaluate", config=config, seed=seed, **meta)
+        finish(out_dir, command="evaluate", config=config, seed=seed, release_lock=False, **meta)
         if not keep_chunks:  # every row is in results.parquet now
             shutil.rmtree(out_dir / "chunks", ignore_errors=True)
+        release(out_dir)
     return Evaluation(table, summary, config, traces, out_dir)
 
 
@@ -537,6 +617,15 @@ def _breakdown(costs: dict, timing: dict) -> dict:
         "write": costs.get("write_s"),
     }
     return {k: round(float(v), 3) for k, v in parts.items() if v is not None}
+
+
+def until_batch(until: int, batch_size: int) -> int:
+    """Optimization mode's pick-points per batch (chunk) by default: twice those asked
+    for, rounded up to a power of two (a C-engine call of a size already compiled), at
+    least 32 and at most the backend's batch -- a run that finds its `until` early
+    stops early instead of simulating a whole device batch."""
+    want = max(32, 1 << max(int(2 * until) - 1, 1).bit_length())
+    return int(min(want, batch_size))
 
 
 def _stability(table, picks_batch, sim: Simulator, settings, shift_um, progress):
@@ -587,9 +676,11 @@ def _complete_run(out_dir: Path, key: str) -> Evaluation | None:
 def _stopped(out_dir, stop: BaseException, executor, seed, config, wall_s=None) -> None:
     """Mark a folder whose run stopped early; its finished chunks stay for --resume."""
     if out_dir is not None:
-        status = "cancelled" if isinstance(stop, Cancelled) else "interrupted"
+        status, message = interrupts.stop_status(stop)
         meta = executor.describe(wall_s)
-        finish(out_dir, status, command="evaluate", config=config, seed=seed, **meta)
+        finish(
+            out_dir, status, command="evaluate", config=config, seed=seed, message=message, **meta
+        )
 
 
 def _picks_source(picks) -> str:
@@ -624,6 +715,12 @@ def experiment_key(scene: Scene, settings: dict) -> str:
     site-packages gives the same key) nor the chunk size (derived from free device
     memory; a resumed run keeps the one on disk, ``engine.ChunkPlan``).
     """
+    return config_hash(experiment_settings(scene, settings))
+
+
+def experiment_settings(scene: Scene, settings: dict) -> dict:
+    """What :func:`experiment_key` hashes, as JSON-able values (the output folder's
+    manifest records them, so that a refusal names each setting that changed)."""
     xml = scene.portable_xml()
     obj = {k: v for k, v in scene.object.summary().items() if k != "source"}
     values = {k: to_dict(v) for k, v in settings.items()}
@@ -631,8 +728,7 @@ def experiment_key(scene: Scene, settings: dict) -> str:
     if mjcf and mjcf.get("file"):
         file = Path(mjcf["file"])
         mjcf["file"] = f"sha256:{_file_digest(file)}" if file.is_file() else file.name
-    text = json.dumps({"model": xml, "object": obj, **values}, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    return {"model": xml, "object": obj, **values}
 
 
 def _simulate(executor, picks, plan, out_dir, bar: bool, on_progress):

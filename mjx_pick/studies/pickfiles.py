@@ -49,7 +49,7 @@ def write_picks(
     pp.check_raster(obj, config)  # before any allocation or folder
     request = {"object": obj.summary(), "gripper": to_dict(gripper), "picks": to_dict(config)}
     request.update(n=n, seed=seed)
-    folder = claim(out, "picks", config_hash(request), overwrite=overwrite)
+    folder = claim(out, "picks", config_hash(request), overwrite=overwrite, settings=request)
     picks = pp.generate_normal(obj, gripper, n, seed=seed, config=config)
     lines = ["pick_id,x_mm,y_mm,yaw_deg,opening_mm,coverage"]
     lines += [

@@ -144,7 +144,14 @@ def robustness(
         if out is not None and not _claimed:
             request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
             request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, k=len(picks))
-            claim(out, "robust", config_hash(request), overwrite=overwrite, joins=("evaluate",))
+            claim(
+                out,
+                "robust",
+                config_hash(request),
+                overwrite=overwrite,
+                joins=("evaluate",),
+                settings=request,
+            )
         t0 = time.perf_counter()
         k = len(picks)
         placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, seed, pick_config)

@@ -40,7 +40,7 @@ from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine.backend import Settings
 from mjx_pick.engine.runner import open_study_store
 from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress, study_simulator
-from mjx_pick.outputs.rundir import finish, portable_object
+from mjx_pick.outputs.rundir import finish, portable_object, release
 
 SECTIONS = {
     "contact": ContactParams,
@@ -334,8 +334,9 @@ def sweep(
             write_parquet(out_dir / "results.parquet", table)
             write_json(out_dir / "variants.json", summaries)
             plot_sweep(summaries, table, [p.name for p in params], out_dir / "sweep.png")
-            finish(out_dir, command="sweep", config=config, seed=seed, **meta)
+            finish(out_dir, command="sweep", config=config, seed=seed, release_lock=False, **meta)
             store.remove()  # every row is in results.parquet now
+            release(out_dir)
         return SweepResult(table, summaries, timing, out_dir)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +68,23 @@ class TracePose:
             data.qpos[adr["finger_right"]] = tr["finger_right_m"][k]
 
 
+def _render_in_child() -> bool:
+    """Whether this process cannot render offscreen but an EGL child can: no display,
+    no MUJOCO_GL chosen (MuJoCo takes it once, at its import: a library never sets it
+    for its caller), and libEGL present. The CLI chooses EGL for its own process
+    (``display.use_offscreen_rendering``) and renders in it."""
+    import ctypes.util
+
+    from mjx_pick.outputs.display import has_display
+
+    return (
+        "MUJOCO_GL" not in os.environ
+        and not has_display()
+        and sys.platform.startswith("linux")
+        and bool(ctypes.util.find_library("EGL"))
+    )
+
+
 def animate(
     scene_xml: str | os.PathLike,
     trace: dict,
@@ -83,6 +101,23 @@ def animate(
     height) pixels), with the time and phase written on it; one frame every ``every``
     control ticks, played in real time.
     """
+    if _render_in_child():
+        # this process chose its OpenGL back end when it imported MuJoCo, and that one
+        # cannot open a context here: render in a child that starts with EGL
+        import multiprocessing
+
+        ctx = multiprocessing.get_context("spawn")
+        saved = os.environ.get("MUJOCO_GL")
+        os.environ["MUJOCO_GL"] = "egl"  # inherited by the child at its start only
+        try:
+            with ctx.Pool(1) as pool:
+                args = (scene_xml, trace, path, every, size, gripper, mp4)
+                return pool.apply(animate, args)
+        finally:
+            if saved is None:
+                os.environ.pop("MUJOCO_GL", None)
+            else:
+                os.environ["MUJOCO_GL"] = saved
     import mujoco
     from PIL import Image, ImageDraw
 

@@ -22,16 +22,26 @@ from mjx_pick.outputs.reporting.run import Run
 __all__ = ["view"]
 
 
-def check_view(run_dir: str | os.PathLike, pick_id: int, speed: float = 1.0):
+def check_view(run_dir: str | os.PathLike, pick_id: int | str, speed: float = 1.0):
     """The run, the pick-point's trace and the model file of a replay: a ConfigError
-    naming the input when one is wrong (before anything opens a window)."""
+    naming the input when one is wrong (before anything opens a window). pick_id: a
+    traced pick_id, or "best" / "worst": the best or worst traced pick-point."""
     run = Run.load(run_dir)
     check_range("view", "speed", speed, 0, 100, lo_open=True)
-    traced = [pid for pid, _ in run.traced()]
+    ranked = run.traced()
+    traced = [pid for pid, _ in ranked]
     if run.traces is None or not traced:
         raise ConfigError(
             f"{run.path}: no traced pick-points (traces.parquet); evaluate with --traces 1 or more"
         )
+    if pick_id in ("best", "worst"):
+        # traced() lists the best first (best at its top), the worst after (worst last)
+        pick_id = traced[0] if pick_id == "best" else traced[-1]
+    else:
+        try:
+            pick_id = int(pick_id)
+        except ValueError:
+            raise ConfigError(f"--pick {pick_id!r}: a traced pick_id, best or worst") from None
     if pick_id not in traced:
         raise ConfigError(
             f"--pick {pick_id}: not traced in {run.path}; traced pick-points: "
@@ -44,9 +54,10 @@ def check_view(run_dir: str | os.PathLike, pick_id: int, speed: float = 1.0):
 
 
 def view(
-    run_dir: str | os.PathLike, pick_id: int, *, speed: float = 1.0, loop: bool = False
+    run_dir: str | os.PathLike, pick_id: int | str, *, speed: float = 1.0, loop: bool = False
 ) -> None:
-    """Replay traced pick-point pick_id of an evaluate folder in MuJoCo's viewer.
+    """Replay traced pick-point pick_id ("best", "worst" or a traced pick_id) of an
+    evaluate folder in MuJoCo's viewer.
 
     speed: playback speed, a multiple of real time; loop: replay until the window is
     closed (else the last frame stays until it is closed). The time and phase show in

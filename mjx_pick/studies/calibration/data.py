@@ -55,6 +55,8 @@ class Outcomes:
     successes: np.ndarray
     lift_time_s: np.ndarray  # NaN where not measured
     traces: tuple
+    # what the outcomes were measured with (provenance.read_measured), or None
+    measured: dict | None = None
 
     def __len__(self) -> int:
         return len(self.x_mm)
@@ -131,7 +133,10 @@ def read_outcomes(path: str | Path) -> Outcomes:
         rows = list(reader)
     if not rows:
         raise ConfigError(f"outcomes file {path.name} has no rows")
-    return outcomes_from_rows(rows, path)
+    from mjx_pick.studies.calibration.provenance import read_measured
+
+    measured = read_measured(path)  # the record beside it: mass, gripper, procedure
+    return dataclasses.replace(outcomes_from_rows(rows, path), measured=measured)
 
 
 def outcomes_from_rows(

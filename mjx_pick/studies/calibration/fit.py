@@ -135,7 +135,7 @@ def calibrate(
         request.update(settings=to_dict(problem.settings), steps=steps, estimator=estimator)
         request.update(learning_rate=learning_rate, samples=samples, sigma=sigma, seed=seed)
         request.update(noise=to_dict(problem.noise), bounds=[space.lo.tolist(), space.hi.tolist()])
-        claim(out_dir, "calibrate", config_hash(request), resume=resume)
+        claim(out_dir, "calibrate", config_hash(request), resume=resume, settings=request)
         ckpt = _Checkpoints(out_dir / "checkpoint")
         saved = ckpt.latest() if resume else None
         if saved is not None:
@@ -272,7 +272,7 @@ def _finish(
         ident = identifiability(problem, theta, visited=seen)
         lost = tuple(n for n in problem.names if not ident[n]["identified"])
         for n in lost:  # not pinned by the data: keep the start, do not pretend
-            values[n] = initial[n]
+            values[n] = ident[n]["written"] = kept_value(initial[n], ident[n]["interval"])
     answer = space.theta([values[n] for n in problem.names])
     acc_after = holdout.accuracy(answer) if holdout is not None else None
     contact = fitted_contact(base, values)
@@ -289,6 +289,15 @@ def _finish(
         ident,
         lost,
     )
+
+
+def kept_value(start: float, interval) -> float:
+    """The value written for a parameter the data do not identify: its start, or --
+    where the data's 95 % interval excludes the start -- the interval's nearest end (the
+    value closest to the start that the data allow). A written value is never outside
+    its reported interval."""
+    lo, hi = interval
+    return float(min(max(start, lo), hi))
 
 
 class _Budget(Exception):
@@ -332,7 +341,7 @@ def least_squares(
             "bounds": [problem.space.lo.tolist(), problem.space.hi.tolist()],
             "priors": [problem.space.prior_mean.tolist(), problem.space.prior_sd.tolist()],
         }
-        claim(out_dir, "calibrate", config_hash(request), resume=False)
+        claim(out_dir, "calibrate", config_hash(request), resume=False, settings=request)
     space = problem.space
     initial = dict(problem.start)
     z0 = space.z([initial[n] for n in problem.names])

@@ -66,6 +66,10 @@ open: an outermost profile point that is kept and not at a bound says the 95 % s
 reaches at least that far -- where it ends is not measured, so no interval is claimed.
 A parameter fitted alone has no others to re-optimise: its profile points are the
 likelihood there (P simulations' worth, as a slice).
+
+Last, an optimum within 2 % of a parameter's bounds, or whose interval the bound cuts,
+is never identified (``at_bound``): the bound stopped the search there, and the data
+may well prefer a value beyond it.
 """
 
 from __future__ import annotations
@@ -259,6 +263,11 @@ def identifiability(
     seen = (v_theta, v_nll) if visited is not None else None
     options = (profile_points, profile_steps, profile_popsize, profile_sigma, seed)
     _profile(out, problem, z0, nll[0], thr, wide_z, limit, seen, scales, j_data, options)
+    for i, name in enumerate(space.names):  # an optimum pressed on a bound: not fitted
+        side = at_bound(space, z0, i, out[name]["half_width_z"])
+        out[name]["at_bound"] = side
+        if side is not None:
+            out[name]["identified"] = False
     cov = _covariance(jac)
     sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
     corr = cov / np.outer(sd, sd)
@@ -267,6 +276,25 @@ def identifiability(
     out.setdefault("profile_rollouts", 0)
     out["wall_s"] = time.perf_counter() - t_start
     return out
+
+
+AT_BOUND = 0.02  # of a parameter's bounds (in z): theta's own margin (ParamSpace.theta)
+
+
+def at_bound(space, z, i: int, half_width_z: float | None = None) -> str | None:
+    """'lower' or 'upper' when z[i] lies within AT_BOUND of that bound of parameter i,
+    or its 95 % interval (half-width in z) is cut by it; else None. An optimum there is
+    where the bound stopped the search, not where the data put it: the best value may
+    lie beyond, and an interval cut at the bound is no 95 % interval -- such a
+    parameter is never reported identified."""
+    tol = AT_BOUND * (space.z_hi[i] - space.z_lo[i])
+    if half_width_z is not None and np.isfinite(half_width_z):
+        tol = max(tol, float(half_width_z))
+    if z[i] <= space.z_lo[i] + tol:
+        return "lower"
+    if z[i] >= space.z_hi[i] - tol:
+        return "upper"
+    return None
 
 
 def _profile(out, problem, z0, nll0, thr, wide_z, limit, seen, scales, j_data, options):

@@ -8,6 +8,7 @@ vectors it is given (the engine counts the simulations run).
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from typing import NamedTuple
 
 import jax
@@ -31,6 +32,7 @@ from mjx_pick.studies.calibration.parameters import (
     row_inputs,
     start_values,
 )
+from mjx_pick.studies.calibration.provenance import check_measured
 
 
 class Evaluation(NamedTuple):
@@ -60,6 +62,9 @@ class Problem:
         times are those of the pick-point itself. 1: one simulation per row.
       replica_jitter_mm: the copies' offset (mm); small: the chaos of a slipping
         grasp decorrelates them, not the offset.
+      force_mismatch: fit although the outcomes record (``outcomes.measured``) another
+        mass, gripper or procedure than obj and settings (a warning instead of a
+        ConfigError; ``provenance.py``).
     """
 
     def __init__(
@@ -80,6 +85,7 @@ class Problem:
         backend: str = "auto",
         replicates: int = 3,
         replica_jitter_mm: float = 0.05,
+        force_mismatch: bool = False,
     ) -> None:
         from mjx_pick.core.procedure import broadcast_params
         from mjx_pick.core.scene import build_scene
@@ -97,6 +103,14 @@ class Problem:
         self.settings = s = settings or Settings()
         self.object, self.outcomes = obj, outcomes
         self.names = canonical_params(names)
+        # outcomes of another mass, gripper or procedure fit confidently and wrongly
+        self.mismatches = check_measured(outcomes.measured, obj, s, force_mismatch)
+        if self.mismatches:
+            warnings.warn(
+                "fitting outcomes measured with other settings (forced): "
+                + "; ".join(self.mismatches),
+                stacklevel=2,
+            )
         g = s.gripper
         bad_f = np.flatnonzero(
             (outcomes.grip_force_n < g.force_min_n) | (outcomes.grip_force_n > g.force_max_n)

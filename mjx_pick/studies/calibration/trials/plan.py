@@ -112,7 +112,7 @@ def plan_trials(
     }
     request = {"run": src.config.get("config_key"), "object": obj.summary(), "params": names}
     request.update(options)
-    out_dir = claim(out, COMMAND, config_hash(request), overwrite=overwrite)
+    out_dir = claim(out, COMMAND, config_hash(request), overwrite=overwrite, settings=request)
     sims = Simulations(obj, src.settings, backend, batch_size)
     space = _space(obj, src.settings, sims, names, options["bounds"], options["priors"])
     z_draws = parameter_draws(space, draws, seed)
