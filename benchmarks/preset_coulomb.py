@@ -28,12 +28,12 @@ import numpy as np
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick import pickpoints as pp
-from mjx_pick.config import load_toml
-from mjx_pick.grasp import G, GraspConfig
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import load_toml
+from mjx_pick.core.physics import load_contact
+from mjx_pick.core.procedure import G, GraspConfig
+from mjx_pick.engine.backend import make_backend, make_inputs
 from mjx_pick.kernels import grasp as gk
-from mjx_pick.physics import load_contact
-from mjx_pick.simulate import make_backend, make_inputs
 
 PRESETS = ("robotiq-2f85", "robotiq-2f85-linkage", "robotiq-2f140", "onrobot-rg2", "franka-hand")
 MASSES = (0.01, 0.1, 0.5, 2.0)
@@ -191,7 +191,9 @@ def main():
             args.backend,
         )
     summarise(rows)
-    print(f"{len(rows)} picks in {time.perf_counter() - t0:.0f} s; solver {dataclasses.asdict(solver)}")
+    print(
+        f"{len(rows)} picks in {time.perf_counter() - t0:.0f} s; solver {dataclasses.asdict(solver)}"
+    )
     if args.out:
         with open(args.out, "w") as fh:
             json.dump(rows, fh, indent=1)
