@@ -75,8 +75,12 @@ def chatter_events(trace, force_n, fraction=0.02):
     return n
 
 
-def run_preset(name, solver, contact_base, grasp, masses, heights, mus, offset_um, backend):
+def run_preset(
+    name, solver, contact_base, grasp, masses, heights, mus, offset_um, backend, overrides=None
+):
     gripper = mp.load_gripper(name)
+    if overrides and gripper.mjcf is None:  # parametric presets only
+        gripper = dataclasses.replace(gripper, **overrides)
     rows = []
     width = round(0.55 * gripper.stroke_mm)  # gripped across x
     for mass, height in itertools.product(masses, heights):
@@ -171,6 +175,12 @@ def main():
     ap.add_argument("--offset-um", type=float, default=20.0)
     ap.add_argument("--backend", default="mujoco")
     ap.add_argument("--out", help="write the rows as JSON here")
+    ap.add_argument(
+        "--gripper-set",
+        action="append",
+        default=[],
+        help="FIELD=VALUE override of the parametric presets' GripperSpec (repeatable)",
+    )
     args = ap.parse_args()
     solver = load_toml(mp.SolverParams, args.solver) if args.solver else mp.SolverParams()
     contact = load_contact(args.contact)[0] if args.contact else mp.ContactParams()
@@ -189,10 +199,12 @@ def main():
             floats(args.frictions),
             args.offset_um,
             args.backend,
+            {k: float(v) for k, v in (kv.split("=") for kv in args.gripper_set)},
         )
     summarise(rows)
     print(
-        f"{len(rows)} picks in {time.perf_counter() - t0:.0f} s; solver {dataclasses.asdict(solver)}"
+        f"{len(rows)} picks in {time.perf_counter() - t0:.0f} s; "
+        f"solver {dataclasses.asdict(solver)}"
     )
     if args.out:
         with open(args.out, "w") as fh:

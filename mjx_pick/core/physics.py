@@ -139,11 +139,12 @@ class SolverParams:
     pads chatter on a line contact (a lying rod): off by default too.
     """
 
-    # 0.5 ms and 50 iterations (issue 32, benchmarks/RESULTS.md "Pad chatter"): at 1 ms /
-    # 10 the pads of the shipped presets lost contact for a step under heavy or
-    # slippery parts, the drive threw the finger ~1 mm into the part, and the rebound
-    # chattered; the preset grid went from 45 wrong labels and 13 diverged of 288 to 4 / 0
-    timestep_s: float = setting(0.0005, "s", "physics time step", lo=1e-5, hi=0.01)
+    # 1 ms with 50 solver iterations (benchmarks/RESULTS.md, "Pad chatter"): at 10
+    # iterations the solver stopped unconverged on the pads' stiff low-friction contacts
+    # (pyramidal cones stiffen them as 1 / mu^2) and heavy or slippery parts diverged;
+    # 50 removed that at the 1 ms step at about the 10-iteration cost (0.5 ms halves
+    # the wrong labels again but doubles the steps, and lets pad forces pass the limit)
+    timestep_s: float = setting(0.001, "s", "physics time step", lo=1e-5, hi=0.01)
     cone: str = "pyramidal"
     impratio: float = setting(
         1.0, "-", "frictional-to-normal constraint impedance ratio (MuJoCo's impratio)",
