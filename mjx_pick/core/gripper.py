@@ -83,6 +83,16 @@ class GripperSpec:
         lo=0,
         lo_open=True,
     )
+    # the drive's reflected inertia: the motor's rotor and gears seen at the finger's
+    # travel, J_rotor / r^2 with r the finger travel per radian of the motor; a 2F-85
+    # class drive (J ~ 1e-7 kg m^2, ~75 mm/s per finger at 3,000-6,000 rpm) reflects
+    # 2-7 kg. Off by default: it calms the pads of a finger that loses its part for a
+    # step, but a heavy part sliding through the pads then hammers them with the
+    # drive's momentum (above the gripper's maximum force; benchmarks/RESULTS.md,
+    # "Pad chatter")
+    drive_inertia_kg: float = setting(
+        0.0, "kg", "the finger drive's inertia at the finger (motor and gears)", lo=0
+    )
     drive_damping_ns_per_mm: float = setting(0.02, "N s/mm", "finger servo damping", lo=0)
     # the pads' material, recorded with results (config.json) and shown in reports; the
     # physics comes from ContactParams (pad friction, stiffness), never from this name

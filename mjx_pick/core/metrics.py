@@ -40,6 +40,11 @@ COLUMNS = {
     "tilt_max_deg": ("float64", "largest tilt of the object's vertical axis"),
     "slip_mm": ("float64", "largest lag of the object behind the gripper while grasped"),
     "t_reached_s": ("float64", "time F_d was reached (-1: never)"),
+    "chatter": (
+        "int64",
+        "times a pad's force fell below pad_contact_fraction x F_d and came back while "
+        "the part was held (lift and hold)",
+    ),
 }
 
 
@@ -94,6 +99,9 @@ def summarize(table: pa.Table) -> dict:
         "success_rate": float(success.mean()) if n else float("nan"),
         "success_ci": list(wilson_interval(int(success.sum()), int(n))),
         "diverged": int(diverged.sum()),
+        "chattered": int(np.sum(np.asarray(table["chatter"]) > 0))
+        if "chatter" in table.column_names
+        else 0,
         "failures": {name: int(np.sum(failures == name)) for name in gk.FAILURES},
         "score_mean": float(valid.mean()) if len(valid) else float("nan"),
         "score_quantiles": q,

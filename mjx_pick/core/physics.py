@@ -151,13 +151,18 @@ class SolverParams:
     pads chatter on a line contact (a lying rod): off by default too.
     """
 
+    # 1 ms with 50 solver iterations (benchmarks/RESULTS.md, "Pad chatter"): at 10
+    # iterations the solver stopped unconverged on the pads' stiff low-friction contacts
+    # (pyramidal cones stiffen them as 1 / mu^2) and heavy or slippery parts diverged;
+    # 50 removed that at the 1 ms step at about the 10-iteration cost (0.5 ms halves
+    # the wrong labels again but doubles the steps, and lets pad forces pass the limit)
     timestep_s: float = setting(0.001, "s", "physics time step", lo=1e-5, hi=0.01)
     cone: str = "pyramidal"
     impratio: float = setting(
         1.0, "-", "frictional-to-normal constraint impedance ratio (MuJoCo's impratio)",
         lo=1, hi=100,
     )  # fmt: skip
-    iterations: int = setting(10, "iterations", "constraint solver iterations", lo=1, hi=1000)
+    iterations: int = setting(50, "iterations", "constraint solver iterations", lo=1, hi=1000)
     ls_iterations: int = setting(
         8, "iterations", "line-search iterations per solver iteration", lo=1, hi=1000
     )

@@ -308,6 +308,7 @@ def _parallel_jaw_body_xml(gripper: GripperSpec, z_grip: float) -> str:
     width = gripper.finger_width_mm * 1e-3
     pad_h = gripper.pad_height_mm * 1e-3
     fmass = gripper.finger_mass_g * 1e-3
+    armature = f"{gripper.drive_inertia_kg:.9g}"  # the drive's reflected inertia
     finger_link_h = 0.03
     pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
     return f"""    <body name="gripper" pos="0 0 {z_grip:.9g}" gravcomp="1">
@@ -318,7 +319,8 @@ def _parallel_jaw_body_xml(gripper: GripperSpec, z_grip: float) -> str:
             size="{0.5 * stroke + depth + 0.01:.9g} {0.5 * width + 0.01:.9g} 0.03"
             pos="0 0 {0.5 * pad_h + finger_link_h + 0.03:.9g}"/>
       <body name="finger_left" pos="{-0.5 * stroke - 0.5 * depth:.9g} 0 0" gravcomp="1">
-        <joint name="finger_left" type="slide" axis="1 0 0" range="0 {0.5 * stroke:.9g}"/>
+        <joint name="finger_left" type="slide" axis="1 0 0"
+               range="0 {0.5 * stroke:.9g}" armature="{armature}"/>
         <geom name="pad_left" type="box" size="{pad_size}"
               mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
         <geom name="link_left" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
@@ -326,7 +328,8 @@ def _parallel_jaw_body_xml(gripper: GripperSpec, z_grip: float) -> str:
               pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
       </body>
       <body name="finger_right" pos="{0.5 * stroke + 0.5 * depth:.9g} 0 0" gravcomp="1">
-        <joint name="finger_right" type="slide" axis="-1 0 0" range="0 {0.5 * stroke:.9g}"/>
+        <joint name="finger_right" type="slide" axis="-1 0 0"
+               range="0 {0.5 * stroke:.9g}" armature="{armature}"/>
         <geom name="pad_right" type="box" size="{pad_size}"
               mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
         <geom name="link_right" type="box" group="2" mass="0" rgba=".4 .4 .4 1"

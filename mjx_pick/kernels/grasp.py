@@ -135,6 +135,14 @@ class Accumulators(NamedTuple):
     finished: jax.Array  # bool, the hold ended (success is only possible then)
     diverged: jax.Array  # bool
     t: jax.Array  # s since start
+    # chatter: a pad's force falling below the contact threshold and coming back
+    # while the part is held (the grasp window); per pad, whether it touched at the
+    # last tick and whether it has let go since it last touched
+    touch_left: jax.Array  # bool
+    touch_right: jax.Array  # bool
+    lost_left: jax.Array  # bool
+    lost_right: jax.Array  # bool
+    chatter: jax.Array  # count of returns
 
 
 def initial_state(finger_travel0, lift0=None) -> ControlState:
@@ -170,6 +178,11 @@ def initial_accumulators(like) -> Accumulators:
         finished=f,
         diverged=f,
         t=z,
+        touch_left=f,
+        touch_right=f,
+        lost_left=f,
+        lost_right=f,
+        chatter=z,
     )
 
 
@@ -311,6 +324,12 @@ def accumulate(
     d = _yaw(quat) - _yaw(quat0)
     dyaw = jnp.abs(jnp.arctan2(jnp.sin(d), jnp.cos(d)))
     obj_lift = pos[2] - pos0[2]
+    # chatter: in the window, a pad that touched, let go, and touches again
+    touch_l, touch_r = fl > pad_contact_n, fr > pad_contact_n
+    back_l = in_window & a.lost_left & touch_l
+    back_r = in_window & a.lost_right & touch_r
+    lost_l = jnp.where(in_window, (a.lost_left | (a.touch_left & ~touch_l)) & ~touch_l, False)
+    lost_r = jnp.where(in_window, (a.lost_right | (a.touch_right & ~touch_r)) & ~touch_r, False)
     lift_end = (s.phase == LIFT) & (s_next.phase == HOLD) & live
     hold_end = (s.phase == HOLD) & (s_next.phase == DONE) & live
     return Accumulators(
@@ -336,6 +355,11 @@ def accumulate(
         finished=a.finished | hold_end,
         diverged=diverged,
         t=a.t + p.dt,
+        touch_left=in_window & touch_l,
+        touch_right=in_window & touch_r,
+        lost_left=lost_l,
+        lost_right=lost_r,
+        chatter=a.chatter + back_l.astype(a.chatter.dtype) + back_r.astype(a.chatter.dtype),
     )
 
 
@@ -388,6 +412,7 @@ def finalize(p: GraspParams, a: Accumulators) -> dict:
         "max_force_right_n": a.force_right_max,
         "lift_height_mm": 1e3 * a.lift_final,
         "slip_mm": 1e3 * a.slip_max,
+        "chatter": a.chatter.astype(jnp.int32),
     }
 
 
