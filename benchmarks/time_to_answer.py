@@ -63,7 +63,9 @@ def main() -> None:
     args = ap.parse_args()
 
     work = Path(tempfile.mkdtemp(prefix="time_to_answer."))
-    env = {**os.environ, "MJX_PICK_CACHE_DIR": str(work / "cache"), "PYTHONPATH": str(ROOT)}
+    # this checkout first, then whatever the caller's path holds (a GPU machine's wheels)
+    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
+    env = {**os.environ, "MJX_PICK_CACHE_DIR": str(work / "cache"), "PYTHONPATH": path}
     env.pop("MJX_PICK_CACHE", None)
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     cli = [sys.executable, "-m", "mjx_pick.cli"]
@@ -93,7 +95,9 @@ def main() -> None:
     record = {
         "date": datetime.date.today().isoformat(),
         "device": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs",
-        "commit": subprocess.run(
+        # a copy of the tree without git (a GPU machine) names its commit in MJX_PICK_COMMIT
+        "commit": os.environ.get("MJX_PICK_COMMIT")
+        or subprocess.run(
             ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
         ).stdout.strip(),
         "backend": args.backend,

@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# The GPU measurements of one session, one part per device call (each under 10 minutes):
+#   bash benchmarks/gpu_round.sh throughput|answer|real|grid
+# Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
+# in MJX_PICK_COMMIT (the device's copy has no git).
+set -euo pipefail
+out=${OUT:-benchmarks/out}
+mkdir -p "$out"
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
+case "$1" in
+  throughput)  # the solver's iteration cap: the old 10 against the new default, same picks
+    printf 'iterations = 10\n' > /tmp/it10.toml
+    python benchmarks/throughput.py --objects door_opener --solver /tmp/it10.toml \
+      --run mujoco:n=4096:batch=1024 --run warp:n=32768:batch=32768 --out "$out/it10" --tag it10
+    python benchmarks/throughput.py --objects door_opener \
+      --run mujoco:n=4096:batch=1024 --run warp:n=32768:batch=32768 --out "$out/it50" --tag it50
+    cp "$out"/it10/*.csv "$out/throughput_it10.csv" 2>/dev/null || true
+    cp "$out"/it50/*.csv "$out/throughput_it50.csv" 2>/dev/null || true
+    ls -R "$out" ;;
+  answer)  # time to answer: a YCB part never seen, then seen (object and compile caches)
+    python benchmarks/time_to_answer.py --backend warp --cases "${CASES:-mesh}" \
+      --n-mesh 1024 --n-photo 200 --out "$out/time_to_answer_h100.json" ;;
+  real)  # six YCB parts, Warp against C on the same pick-points
+    python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp \
+      --out "$out/real_objects_h100.json" ;;
+  grid)  # the preset Coulomb grid on Warp
+    python benchmarks/preset_coulomb.py --backend warp --out "$out/preset_coulomb_warp.json" ;;
+esac
