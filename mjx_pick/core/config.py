@@ -27,7 +27,8 @@ class ConfigError(ValueError):
 
 class PlausibilityWarning(UserWarning):
     """A user input is allowed but implausible (a density no solid has, a time step
-    above the converged one); the message gives the numbers and what to check."""
+    above the converged one), or was adapted to fit (a raster coarsened to stay within
+    memory); the message gives the numbers and what to check."""
 
 
 def check_range(

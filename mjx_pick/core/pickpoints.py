@@ -18,7 +18,13 @@ from collections.abc import Callable
 import numpy as np
 
 from mjx_pick.core import cache
-from mjx_pick.core.config import ConfigError, check_fields, check_range, setting
+from mjx_pick.core.config import (
+    ConfigError,
+    PlausibilityWarning,
+    check_fields,
+    check_range,
+    setting,
+)
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import ObjectModel, rasterize
 from mjx_pick.core.procedure import GraspConfig, pad_band_mm
@@ -264,36 +270,44 @@ def raster_cells(radius_mm: float, res_mm: float) -> int:
 
 
 def check_raster(obj: ObjectModel, config: PickConfig | None = None) -> None:
-    """Refuse, before anything is allocated, an object whose feasibility raster at
-    config.resolution_mm would exceed MAX_RASTER_CELLS (it grows as (size/resolution)^3),
-    naming the coarsest resolution that fits."""
+    """Refuse, before anything is allocated, an object whose feasibility raster would
+    exceed MAX_RASTER_CELLS even at the coarsest allowed resolution (it grows as
+    (size/resolution)^3); a finer resolution than fits is coarsened when built."""
     config = config or PickConfig()
     radius = max(math.hypot(x, y) for x, y in obj.polygon.exterior.coords)
-    _check_cells(obj.name, radius, config.resolution_mm)
+    raster_resolution(obj.name, radius, config.resolution_mm)
 
 
-def _check_cells(name: str, radius_mm: float, res_mm: float) -> None:
+def raster_resolution(name: str, radius_mm: float, res_mm: float) -> float:
+    """The raster's cell size, mm: res_mm, or the finest coarser one whose raster holds
+    at most MAX_RASTER_CELLS (a PlausibilityWarning says so); a ConfigError when even the
+    coarsest allowed resolution does not fit."""
     cells = raster_cells(radius_mm, res_mm)
     if cells <= MAX_RASTER_CELLS:
-        return
+        return res_mm
     fits = math.ceil(res_mm * (cells / MAX_RASTER_CELLS) ** (1 / 3) * 102) / 100
     coarsest = PickConfig.__dataclass_fields__["resolution_mm"].metadata["range"][1]
-    fix = (
-        f"use --resolution-mm {fits:g} or more, or check the object's scale"
-        if fits <= coarsest
-        else f"even --resolution-mm {coarsest:g} does not fit: check the object's scale"
+    if fits > coarsest:
+        raise ConfigError(
+            f"{name!r} is {2 * radius_mm:.0f} mm across: its feasibility raster would hold "
+            f"{raster_cells(radius_mm, coarsest) / 1e6:.0f} million cells even at "
+            f"picks.resolution_mm = {coarsest:g} (allowed {MAX_RASTER_CELLS / 1e6:.0f} "
+            "million): check the object's scale"
+        )
+    warnings.warn(
+        f"{name!r} is {2 * radius_mm:.0f} mm across: the feasibility raster uses "
+        f"{fits:g} mm cells instead of picks.resolution_mm = {res_mm:g} to stay within "
+        f"{MAX_RASTER_CELLS / 1e6:.0f} million cells (~{MAX_RASTER_CELLS * 13 / 2**30:.1f} GiB)",
+        PlausibilityWarning,
+        stacklevel=3,
     )
-    raise ConfigError(
-        f"picks.resolution_mm = {res_mm:g} is too fine for {name!r} ({2 * radius_mm:.0f} mm "
-        f"across): its feasibility raster would hold {cells / 1e6:.0f} million cells "
-        f"(~{cells * 13 / 2**30:.1f} GiB), allowed {MAX_RASTER_CELLS / 1e6:.0f} million; {fix}"
-    )
+    return fits
 
 
 @functools.lru_cache(maxsize=8)
 def _stack_cached(key, polygon, res_mm: float):
     radius = max(math.hypot(x, y) for x, y in polygon.exterior.coords)
-    _check_cells(key[0], radius, res_mm)
+    res_mm = raster_resolution(key[0], radius, res_mm)
     # the rasterised yaw bins are a pure function of the silhouette: kept on disk across
     # runs (mjx_pick.core.cache), packed to a bit per pixel
     entry = {
