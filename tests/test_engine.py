@@ -20,7 +20,7 @@ from mjx_pick.studies.sweeps import ParamSpec, sweep
 SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
 # the solver the pinned results were taken with (impratio 1): these tests pin the
 # engine's plumbing, not the physics, whose defaults may move on
-PINNED_SOLVER = mp.SolverParams(impratio=1.0)
+PINNED_SOLVER = mp.SolverParams(impratio=1.0, iterations=10)
 
 # Results of the code BEFORE the engine refactor (commit 513b28d, MuJoCo 4.0.0, jax
 # 0.10, 2-core AMD EPYC), printed from evaluate(...).table / sweep(...).table with

@@ -52,7 +52,7 @@ ENV_SWITCH = "MJX_PICK_CACHE"  # "0", "false", "no" or "off": bypassed
 ENV_MAX_MB = "MJX_PICK_CACHE_MAX_MB"
 DEFAULT_MAX_MB = 2048.0
 OBJECT_SHARE = 0.25  # of the size limit, for object results; the rest for JAX's programs
-FORMAT = 1  # of an entry's layout; a change makes older entries "another version"
+FORMAT = 2  # of an entry's layout; a change makes older entries "another version"
 # libraries whose results an entry holds; a new version of one may change them
 LIBRARIES = ("mjx-pick", "numpy", "coacd", "trimesh", "shapely")
 _META = "__meta__"

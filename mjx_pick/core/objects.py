@@ -648,6 +648,9 @@ def object_from_mesh(
     prepared = cache.memo(
         "mesh", key, lambda: _prepare_mesh(path, unit, pose, coacd_threshold, largest_body)
     )
+    dropped = prepared["dropped_note"].tobytes().decode()
+    if dropped:  # bodies left out by largest_body: said on every load
+        warnings.warn(dropped, stacklevel=2)
     # rebuilt from the arrays whether they were read or computed: one path, same bits
     mesh = trimesh.Trimesh(prepared["vertices"], prepared["faces"], process=False)
     height_mm = float(mesh.bounds[1, 2] * 1e3)
@@ -696,7 +699,7 @@ def _prepare_mesh(
         )
     if mesh.volume < 0:
         mesh.invert()
-    mesh = _one_body(mesh, path, largest_body)
+    mesh, dropped = _one_body(mesh, path, largest_body)
     if pose == "stable":
         transforms, _ = trimesh.poses.compute_stable_poses(mesh, n_samples=1, sigma=0.0)
         mesh.apply_transform(transforms[0])
@@ -715,23 +718,25 @@ def _prepare_mesh(
         "outline_wkb": np.frombuffer(shapely.to_wkb(polygon), np.uint8),
         "piece_vertices": np.concatenate(pieces).astype(np.float64),
         "piece_sizes": np.array([len(p) for p in pieces], np.int64),
+        "dropped_note": np.frombuffer(dropped.encode(), np.uint8),
     }
 
 
-def _one_body(mesh: trimesh.Trimesh, path: Path, largest_body: bool) -> trimesh.Trimesh:
-    """The mesh if it is one connected solid; else an error naming its bodies, or, with
-    largest_body, the largest body (and the voids inside it) with a warning.
+def _one_body(mesh: trimesh.Trimesh, path: Path, largest_body: bool) -> tuple[trimesh.Trimesh, str]:
+    """(the mesh, "") if it is one connected solid; else an error naming its bodies, or,
+    with largest_body, (the largest body and the voids inside it, the note that says
+    what was dropped) -- a note the caller warns with on every load, cached or not.
 
     A closed shell inside another with inward normals (negative volume) is a void of
     the solid around it, not a body of its own: a hollow part is one body.
     """
     shells = mesh.split(only_watertight=False)
     if len(shells) <= 1:
-        return mesh
+        return mesh, ""
     bodies = [s for s in shells if s.volume > 0]
     voids = [s for s in shells if s.volume <= 0]
     if len(bodies) <= 1:
-        return mesh
+        return mesh, ""
     bodies.sort(key=lambda s: s.volume, reverse=True)
     vols = ", ".join(f"{b.volume * 1e9:.6g}" for b in bodies[:6])
     more = " ..." if len(bodies) > 6 else ""
@@ -744,13 +749,12 @@ def _one_body(mesh: trimesh.Trimesh, path: Path, largest_body: bool) -> trimesh.
         )
     kept = bodies[0]
     inside = [v for v in voids if bool(kept.contains(v.vertices[:1])[0])]
-    warnings.warn(
+    note = (
         f"mesh {path.name}: kept the largest of {len(bodies)} disconnected bodies "
         f"({kept.volume * 1e9:.6g} mm^3), dropped {len(bodies) - 1} of volumes "
-        f"{', '.join(f'{b.volume * 1e9:.6g}' for b in bodies[1:6])}{more} mm^3",
-        stacklevel=3,
+        f"{', '.join(f'{b.volume * 1e9:.6g}' for b in bodies[1:6])}{more} mm^3"
     )
-    return trimesh.util.concatenate([kept, *inside]) if inside else kept
+    return (trimesh.util.concatenate([kept, *inside]) if inside else kept), note
 
 
 def _mesh_outline(mesh: trimesh.Trimesh, z_lo_m: float, z_hi_m: float) -> Polygon:
