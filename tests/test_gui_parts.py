@@ -246,3 +246,19 @@ def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
     assert [p.state for p in ended] == ["complete"]
     assert panel.status.text.startswith("complete")
     assert not panel.busy(_Shown())
+
+
+def test_a_run_runs_the_servers_package_not_the_working_directorys(tmp_path, monkeypatch):
+    # a folder named like the package, or like one of its dependencies, where the server
+    # was started (or on PYTHONPATH) must not be what a run imports
+    here = tmp_path / "where-the-server-started"
+    (here / "mjx_pick" / "cli").mkdir(parents=True)
+    for init in ("mjx_pick/__init__.py", "mjx_pick/cli/__init__.py", "numpy.py"):
+        (here / init).write_text(f"raise SystemExit('imported the shadowing {init}')\n")
+    monkeypatch.chdir(here)
+    monkeypatch.setenv("PYTHONPATH", str(here))
+    job = jobs.Job(["evaluate", "--help"], tmp_path / "logs" / "help.log").start()
+    job.wait(120)
+    log = (tmp_path / "logs" / "help.log").read_text()
+    assert job.poll().state == "complete", log
+    assert "shadowing" not in log and "--chunk-size" in log

@@ -14,7 +14,6 @@ Progress of an evaluate run is read from its folder: each finished chunk is a fi
 from __future__ import annotations
 
 import dataclasses
-import os
 import re
 import shlex
 import signal
@@ -24,14 +23,42 @@ import time
 from pathlib import Path
 
 CANCEL_GRACE_S = 15.0  # after a SIGINT, how long a run may take to write and stop
-# the CLI with Python's Ctrl-C handler installed whatever it inherited: a server
-# started in the background of a non-interactive shell (a service, `... &`) ignores
-# SIGINT, children inherit that, and Python then installs no KeyboardInterrupt at all --
-# cancel would be a no-op (seen: a 200-pick run ran to its end after the SIGINT)
-_CLI_OBEYING_SIGINT = (
-    "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-    "from mjx_pick.cli import main; sys.exit(main(sys.argv[1:]))"
+# The child runs the very package this server runs, and nothing else from where it or the
+# server was started. Python's isolated mode (-I) leaves the working directory,
+# PYTHONPATH and the user's site-packages off sys.path, so a folder named like the package
+# (or like one of its dependencies) in the server's working directory is never imported;
+# the package is then loaded from the folder the server imported it from (argv[1]), which
+# is not put on sys.path either. -u: unbuffered output (PYTHONUNBUFFERED is ignored in
+# isolated mode), so the log shows progress as it happens.
+# Python's Ctrl-C handler is installed whatever the child inherited: a server started in
+# the background of a non-interactive shell (a service, `... &`) ignores SIGINT, children
+# inherit that, and Python then installs no KeyboardInterrupt at all -- cancel would be a
+# no-op (seen: a 200-pick run ran to its end after the SIGINT)
+_CLI_FROM_PACKAGE = """\
+import importlib.util, pathlib, signal, sys
+signal.signal(signal.SIGINT, signal.default_int_handler)
+pkg = pathlib.Path(sys.argv[1])
+spec = importlib.util.spec_from_file_location(
+    "mjx_pick", pkg / "__init__.py", submodule_search_locations=[str(pkg)]
 )
+module = importlib.util.module_from_spec(spec)
+sys.modules["mjx_pick"] = module
+spec.loader.exec_module(module)
+from mjx_pick.cli import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def package_dir() -> Path:
+    """The folder of the mjx_pick package this process runs (what a run's child loads)."""
+    import mjx_pick
+
+    return Path(mjx_pick.__file__).resolve().parent
+
+
+def child_argv(argv: list[str]) -> list[str]:
+    """The child process's command line for the CLI arguments argv (see _CLI_FROM_PACKAGE)."""
+    return [sys.executable, "-I", "-u", "-c", _CLI_FROM_PACKAGE, str(package_dir()), *argv]
 
 
 @dataclasses.dataclass
@@ -91,16 +118,17 @@ class Job:
     def start(self) -> Job:
         self.log.parent.mkdir(parents=True, exist_ok=True)
         self._chunks_before = len(self._chunks())
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
         with self.log.open("wb") as fh:
             fh.write(f"$ {self.command_line}\n".encode())
             fh.flush()
+            # every path in argv is absolute: the working directory is the logs folder,
+            # never the one the server was started from
             self._proc = subprocess.Popen(
-                [sys.executable, "-c", _CLI_OBEYING_SIGINT, *self.argv],
+                child_argv(self.argv),
                 stdout=fh,
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
-                env=env,
+                cwd=self.log.parent,
             )
         self._t0 = time.monotonic()
         return self
