@@ -463,3 +463,31 @@ def test_mesh_import_shows_its_outline(page, server):
     assert area == pytest.approx(marker_obj.area_mm2, abs=1)
     assert "mass 15.8 g" in info.inner_text()
     assert page.get_by_test_id("object-image").locator("img").is_visible()
+
+
+def import_shipped(page, name: str = "block") -> None:
+    """Tab 1: import a shipped object and wait for its outline."""
+    page.get_by_text("1 Import object model").click()
+    choose(page, "object", name)
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+
+
+def test_a_failed_import_leaves_no_object_behind(page, tmp_path):
+    """An import that fails must not leave the object imported before it in use."""
+    import cv2
+
+    import_shipped(page)
+    blank = tmp_path / "blank.png"  # decodes, but holds no object
+    cv2.imwrite(str(blank), np.full((200, 300, 3), 255, np.uint8))
+    page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(blank))
+    page.get_by_text("uploaded blank.png").wait_for()
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("import-error").filter(has_text="no object found").wait_for()
+    assert "No object imported" in page.get_by_test_id("object-info").inner_text()
+    assert not page.get_by_test_id("object-image").is_visible()
+    page.get_by_text("3 Generate input data").click()
+    page.get_by_test_id("generate").click()
+    page.get_by_test_id("generate-error").filter(has_text="import an object first").wait_for()
+    assert page.get_by_test_id("picks-info").inner_text() == ""
+

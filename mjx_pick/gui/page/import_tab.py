@@ -146,11 +146,11 @@ class ImportTab:
             obj = await run.io_bound(load_object, source, **kwargs)
             png = await run.io_bound(views.object_png, obj, image)
         except ConfigError as err:
-            self.object_info.set_text("No object imported.")
+            self.forget_object()
             self.show_error(str(err))
             return
         except Exception as err:  # noqa: BLE001 - a bad file must not show a traceback
-            self.object_info.set_text("No object imported.")
+            self.forget_object()
             self.import_error.set_text(f"{Path(source).name}: cannot be imported ({err})")
             return
         self.state.obj, self.state.obj_args = obj, args
@@ -159,6 +159,12 @@ class ImportTab:
             f"height {obj.height_mm:g} mm, mass {obj.mass_kg * 1e3:.1f} g"
         )
         show_picture(self.object_image, png)
+
+    def forget_object(self) -> None:
+        """A failed import: no object, so no later tab runs on the one imported before."""
+        self.state.obj, self.state.obj_args = None, []
+        self.object_info.set_text("No object imported.")
+        self.object_image.set_visibility(False)
 
     def show_error(self, message: str) -> None:
         """An object's ConfigError under the field it names, else above the button."""
