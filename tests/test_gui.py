@@ -491,3 +491,22 @@ def test_a_failed_import_leaves_no_object_behind(page, tmp_path):
     page.get_by_test_id("generate-error").filter(has_text="import an object first").wait_for()
     assert page.get_by_test_id("picks-info").inner_text() == ""
 
+
+def test_a_taken_run_name_is_refused_and_its_log_kept(page, server):
+    """A run name already in the work folder: refused before anything starts."""
+    _, work = server
+    (work / "taken").mkdir()
+    (work / "logs").mkdir(exist_ok=True)
+    (work / "logs" / "taken.log").write_text("the first run's log\n")
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 4)
+    page.get_by_label("run folder name").fill("taken")
+    page.get_by_test_id("start-batch").click()
+    page.locator(".q-field__messages").filter(has_text="already exists").wait_for()
+    assert "choose another name" in field_error(page, "run folder name")
+    assert page.get_by_label("run folder name").input_value() == "taken"
+    assert not page.get_by_test_id("job-title").is_visible()
+    assert (work / "logs" / "taken.log").read_text() == "the first run's log\n"
+    assert list((work / "taken").iterdir()) == []
+

@@ -262,3 +262,14 @@ def test_a_run_runs_the_servers_package_not_the_working_directorys(tmp_path, mon
     log = (tmp_path / "logs" / "help.log").read_text()
     assert job.poll().state == "complete", log
     assert "shadowing" not in log and "--chunk-size" in log
+
+
+def test_a_run_never_writes_over_another_runs_log(tmp_path):
+    log = tmp_path / "logs" / "run.log"
+    log.parent.mkdir()
+    log.write_text("the first run's log\n")
+    job = jobs.Job(["--version"], log).start()
+    job.wait(120)
+    assert log.read_text() == "the first run's log\n"
+    assert job.log == tmp_path / "logs" / "run-2.log"
+    assert job.poll().state == "complete" and "mjx-pick" in job.log.read_text()

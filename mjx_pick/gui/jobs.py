@@ -116,7 +116,8 @@ class Job:
         return shlex.join(["mjx-pick", *self.argv])
 
     def start(self) -> Job:
-        self.log.parent.mkdir(parents=True, exist_ok=True)
+        """Start the run; its log never replaces another run's (a taken name gets -2, -3)."""
+        self.log = unused_path(self.log)
         self._chunks_before = len(self._chunks())
         with self.log.open("wb") as fh:
             fh.write(f"$ {self.command_line}\n".encode())
@@ -210,6 +211,20 @@ class Job:
         last = next((ln.strip() for ln in reversed(lines) if ln.strip()), "")
         # the exception's last line, never the traceback; the log keeps the rest
         return f"the run stopped (exit code {code}): {last[-300:]}; full log: {self.log}"
+
+
+def unused_path(path: Path) -> Path:
+    """path, or path with -2, -3, ... before its suffix: the first that does not exist
+    (created empty here, so two runs started at once cannot take the same one)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for k in range(1, 10_000):
+        p = path if k == 1 else path.with_name(f"{path.stem}-{k}{path.suffix}")
+        try:
+            p.touch(exist_ok=False)
+        except FileExistsError:
+            continue
+        return p
+    raise FileExistsError(f"{path}: too many files of this name")
 
 
 def _newest_mtime(files: list[Path]) -> float | None:

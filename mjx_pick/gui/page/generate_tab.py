@@ -109,7 +109,7 @@ class GenerateTab:
             return
         settings = self.form.read()
         numbers = self.pick_numbers()
-        out = run_folder(self.state, self.run_name)
+        out = run_folder(self.state, self.run_name, resume=bool(self.resume.value))
         if settings is None or numbers is None or out is None:
             return
         n, seed = numbers
@@ -137,6 +137,7 @@ class GenerateTab:
             from mjx_pick.core.metrics import rate_text
 
             self.resume.value = False
+            self.run_name.value = f"evaluate-{stamp()}"  # this name is taken now
             s = json.loads((out / "summary.json").read_text())
             self.run_summary.set_content(
                 f"**{out.name}**: success rate {rate_text(s['successes'], s['n'])}, "
@@ -147,4 +148,3 @@ class GenerateTab:
 
         job = jobs.Job(argv, self.state.log(out.name), out, n, chunk)
         self.panel.start(f"evaluate {out.name}", job, done)
-        self.run_name.value = f"evaluate-{stamp()}"

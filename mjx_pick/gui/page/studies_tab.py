@@ -97,6 +97,7 @@ class CompareStudy:
 
         def done(progress: jobs.Progress) -> None:
             if progress.state == "complete":
+                self.name.value = f"compare-{stamp()}"  # this name is taken now
                 rows = json.loads((out / "ranking.json").read_text())
                 keys = ["rank", "gripper", "success_rate", "success_ci", "score_mean"]
                 show_rows(self.table, rows, keys + ["feasible", "p_vs_best"])
@@ -104,7 +105,6 @@ class CompareStudy:
 
         job = jobs.Job(argv, self.state.log(out.name), out)
         self.panel.start(f"compare {out.name} ({len(names)} grippers x {n})", job, done)
-        self.name.value = f"compare-{stamp()}"
 
 
 class RobustStudy:
@@ -266,6 +266,7 @@ class CalibrationStudy:
 
         def done(progress: jobs.Progress) -> None:
             if progress.state == "complete":
+                self.name.value = f"calibrate-{stamp()}"  # this name is taken now
                 self.show(out)
 
         job = jobs.Job(
@@ -277,7 +278,6 @@ class CalibrationStudy:
             unit="steps",
         )
         self.panel.start(f"calibrate {out.name} ({steps} steps)", job, done)
-        self.name.value = f"calibrate-{stamp()}"
 
     def show(self, out: Path) -> None:
         """A complete calibration: initial -> fitted values, the loss plot, Use button."""

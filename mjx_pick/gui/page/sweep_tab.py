@@ -79,11 +79,11 @@ class SweepTab:
 
         def done(progress: jobs.Progress) -> None:
             if progress.state == "complete":
+                self.name.value = f"sweep-{stamp()}"  # this name is taken now
                 self.show(out)
 
         job = jobs.Job(argv, self.state.log(out.name), out, None, None)
         self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job, done)
-        self.name.value = f"sweep-{stamp()}"
 
     def show(self, out: Path) -> None:
         """A complete sweep: one row per value, and its plot."""
