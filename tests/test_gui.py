@@ -510,3 +510,16 @@ def test_a_taken_run_name_is_refused_and_its_log_kept(page, server):
     assert (work / "logs" / "taken.log").read_text() == "the first run's log\n"
     assert list((work / "taken").iterdir()) == []
 
+
+def test_a_pick_point_count_below_one_is_refused(page):
+    """n = 0 or -5 is refused with a message, never run as 1."""
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    for n in ("0", "-5", "2.5"):
+        number(page, "pick-points", n)
+        page.get_by_test_id("generate").click()
+        page.locator(".q-field__messages").filter(has_text="a whole number").wait_for()
+        assert "from 1 to 10,000,000" in field_error(page, "pick-points")
+        assert page.get_by_label("pick-points", exact=True).input_value() == n
+        assert page.get_by_test_id("picks-info").inner_text() == ""
+        number(page, "pick-points", 3)  # the message goes with the next check

@@ -47,7 +47,7 @@ class GenerateTab:
         self.on_complete = on_complete
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
-                self.n = ui.number("pick-points", value=200, step=1, min=1).props('data-testid="n"')
+                self.n = ui.number("pick-points", value=200, step=1).props('data-testid="n"')
                 self.seed = ui.number("seed", value=0, step=1)
                 self.traces = ui.number("traced best and worst (force plots)", value=3, step=1)
                 self.chunk = ui.number(
