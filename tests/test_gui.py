@@ -523,3 +523,45 @@ def test_a_pick_point_count_below_one_is_refused(page):
         assert page.get_by_label("pick-points", exact=True).input_value() == n
         assert page.get_by_test_id("picks-info").inner_text() == ""
         number(page, "pick-points", 3)  # the message goes with the next check
+
+
+def test_one_frame_a_pick_clicked_on_the_map_is_tested_in_tab_2(page):
+    """The map draws gripper centres on the part (object frame); a click on one puts
+    that pick-point's own values -- the object's offset under the gripper, the frame of
+    the table and the test -- into tab 2, where it is feasible."""
+    from mjx_pick.core.gripper import load_gripper
+    from mjx_pick.core.objects import load_object
+    from mjx_pick.core.pickpoints import generate_normal
+    from mjx_pick.gui import views
+
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 6)
+    number(page, "seed", 0)
+    page.get_by_test_id("generate").click()
+    page.get_by_test_id("picks-info").filter(has_text="6 feasible pick-points").wait_for()
+    picks = generate_normal(load_object("block"), load_gripper("robotiq-2f85"), 6, 0)
+    _, pixels = views.picks_png(load_object("block"), picks)
+    k = 2
+    img = page.get_by_test_id("picks-map").locator("img")
+    img.wait_for()
+    natural = img.evaluate("i => i.naturalWidth")
+    box = img.bounding_box()
+    scale = box["width"] / natural
+    img.click(position={"x": pixels[k, 0] * scale, "y": pixels[k, 1] * scale})
+    page.get_by_text("2 Set gripper parameters").click()
+    expected = {
+        "object x under gripper (mm)": round(float(picks.x_mm[k]), 2),
+        "object y under gripper (mm)": round(float(picks.y_mm[k]), 2),
+        "object yaw under gripper (deg)": round(float(picks.yaw_deg[k]), 2),
+    }
+    for label, value in expected.items():
+        box = page.get_by_label(label, exact=True)
+        assert float(box.input_value()) == pytest.approx(value, abs=0.006), label
+    assert "offset under the gripper" in page.get_by_test_id("test-frame").inner_text()
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+    page.get_by_test_id("test-pick").click()
+    info = page.get_by_test_id("test-info")
+    info.filter(has_text="score").wait_for(timeout=TIMEOUT_MS)
+    assert "check: **feasible**" in info.inner_text() or "check: feasible" in info.inner_text()

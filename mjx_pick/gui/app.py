@@ -56,9 +56,16 @@ def build_page(workdir: Path, started: set[jobs.Job]) -> PageState:
         with ui.tab_panel(tab["import"]):
             ImportTab(state)
         with ui.tab_panel(tab["gripper"]):
-            form = GripperTab(state, show=lambda: tabs.set_value("gripper")).form
+            gripper = GripperTab(state, show=lambda: tabs.set_value("gripper"))
+            form = gripper.form
         with ui.tab_panel(tab["generate"]):
-            GenerateTab(state, form, panel, on_complete=lambda out: analyze.open(out))
+            GenerateTab(
+                state,
+                form,
+                panel,
+                on_complete=lambda out: analyze.open(out),
+                on_pick=gripper.use_pick,
+            )
         with ui.tab_panel(tab["analyze"]):
             analyze = AnalyzeTab(state, panel)
         with ui.tab_panel(tab["sweep"]):

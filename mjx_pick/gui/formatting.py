@@ -5,6 +5,15 @@ from __future__ import annotations
 import datetime
 import math
 
+# The one frame of every pick-point the page shows or takes: the object's planar pose
+# relative to the gripper's centre (the results table's x_mm, y_mm, yaw_deg)
+FRAME_NAME = "gripper frame (the object's offset under the gripper)"
+PICK_LABELS = {
+    "x_mm": "object x under gripper (mm)",
+    "y_mm": "object y under gripper (mm)",
+    "yaw_deg": "object yaw under gripper (deg)",
+}
+
 
 def stamp() -> str:
     """The time now, for default run folder names (``evaluate-20260101-120000``)."""

@@ -64,11 +64,25 @@ def object_png(obj: ObjectModel, image: Path | None = None) -> bytes:
     return _render(draw)
 
 
-def picks_png(obj: ObjectModel, picks: PickBatch) -> bytes:
-    """Generated pick-points on the silhouette: gripper centres and closing axes."""
-    return _render(
-        lambda path: plots.draw_candidates(obj, picks.x_mm, picks.y_mm, picks.yaw_deg, path)
-    )
+def picks_png(obj: ObjectModel, picks: PickBatch) -> tuple[bytes, np.ndarray]:
+    """Generated pick-points on the silhouette: gripper centres and closing axes (object
+    frame), and the (N, 2) pixel position of each pick-point in the PNG (NaN: not drawn)."""
+    drawn = {}
+
+    def draw(path):
+        drawn["pixels"] = plots.draw_candidates(obj, picks.x_mm, picks.y_mm, picks.yaw_deg, path)
+
+    return _render(draw), drawn["pixels"]
+
+
+def nearest_pick(pixels: np.ndarray, column: float, row: float, within: float = 12.0):
+    """Index of the pick-point drawn nearest a click at (column, row) in the image's
+    pixels, or None when none lies within `within` pixels."""
+    d = np.hypot(pixels[:, 0] - column, pixels[:, 1] - row)
+    if not np.isfinite(d).any():
+        return None
+    i = int(np.nanargmin(d))
+    return i if d[i] <= within else None
 
 
 def force_png(trace: dict, grip_force_n: float, title: str) -> bytes:

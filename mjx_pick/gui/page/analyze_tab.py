@@ -15,7 +15,7 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs, views
-from mjx_pick.gui.formatting import fmt
+from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS, fmt
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.widgets import error_label, show_picture, whole
 from mjx_pick.gui.state import PageState
@@ -23,9 +23,9 @@ from mjx_pick.gui.state import PageState
 TABLE_COLUMNS = (
     ("rank", "rank"),
     ("pick_id", "pick"),
-    ("x_mm", "x, mm"),
-    ("y_mm", "y, mm"),
-    ("yaw_deg", "yaw, deg"),
+    ("x_mm", PICK_LABELS["x_mm"]),
+    ("y_mm", PICK_LABELS["y_mm"]),
+    ("yaw_deg", PICK_LABELS["yaw_deg"]),
     ("score", "score"),
     ("success", "success"),
     ("failure", "outcome"),
@@ -170,9 +170,9 @@ class AnalyzeTab:
         pid = int(row["pick_id"])
         full = opened.row(pid)
         lines = [
-            f"**pick {pid}** (rank {row['rank']}): x {full['x_mm']:.2f} mm, y "
-            f"{full['y_mm']:.2f} mm, yaw {full['yaw_deg']:.1f} deg, opening "
-            f"{full['opening_mm']:.1f} mm",
+            f"**pick {pid}** (rank {row['rank']}): object x {full['x_mm']:.2f} mm, y "
+            f"{full['y_mm']:.2f} mm, yaw {full['yaw_deg']:.1f} deg under the gripper "
+            f"({FRAME_NAME}), opening {full['opening_mm']:.1f} mm",
             "",
             f"- score (eq. 2): **{fmt(full['score'])}**, success: **{full['success']}**, "
             f"outcome: {full['failure']}",

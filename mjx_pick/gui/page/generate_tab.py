@@ -21,9 +21,7 @@ from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
     error_label,
     need_object,
-    picture,
     run_folder,
-    show_picture,
     whole,
 )
 from mjx_pick.gui.state import PageState
@@ -41,10 +39,14 @@ class GenerateTab:
         form: SettingsForm,
         panel: JobPanel,
         on_complete: Callable[[Path], None],
+        on_pick: Callable[[float, float, float, str], None],
     ):
-        """on_complete(folder): a complete evaluate run's folder (opened in tab 4)."""
+        """on_complete(folder): a complete evaluate run's folder (opened in tab 4);
+        on_pick(x, y, yaw, what): a pick-point clicked on the map (for tab 2's test)."""
         self.state, self.form, self.panel = state, form, panel
-        self.on_complete = on_complete
+        self.on_complete, self.on_pick = on_complete, on_pick
+        self.picks = None  # the pick-points drawn on the map, and where
+        self.pixels = None
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
                 self.n = ui.number("pick-points", value=200, step=1).props('data-testid="n"')
@@ -64,7 +66,20 @@ class GenerateTab:
                 self.error = error_label().props('data-testid="generate-error"')
             with ui.column().classes("grow"):
                 self.picks_info = ui.label("").props('data-testid="picks-info"')
-                self.picks_image = picture()
+                self.map_help = ui.label(
+                    "The map shows where the gripper's centre lands on the part (object "
+                    "frame, as the outline of tab 1). Every pick-point value in the page -- "
+                    "tab 2's test, tab 4's table, the exports -- is the object's offset "
+                    "under the gripper instead (gripper frame). Click a pick-point on the "
+                    "map to put it into tab 2's test simulation."
+                ).classes("text-xs max-w-2xl")
+                self.map_help.set_visibility(False)
+                self.picks_image = (
+                    ui.interactive_image(on_mouse=self.on_map_click, events=["click"])
+                    .classes("w-full max-w-2xl cursor-pointer")
+                    .props('data-testid="picks-map"')
+                )
+                self.picks_image.set_visibility(False)
                 self.run_summary = ui.markdown("").props('data-testid="run-summary"')
 
     def pick_numbers(self) -> tuple[int, int] | None:
@@ -90,17 +105,31 @@ class GenerateTab:
             picks = await run.io_bound(
                 generate_normal, obj, settings.gripper, n, seed, settings.picks, settings.grasp
             )
-            png = await run.io_bound(views.picks_png, obj, picks)
+            png, pixels = await run.io_bound(views.picks_png, obj, picks)
         except ConfigError as err:
             self.picks_info.set_text("")
             self.error.set_text(str(err))
             return
+        self.picks, self.pixels = picks, pixels
         rejected = ", ".join(f"{k} {v}" for k, v in picks.rejected.items() if v)
         self.picks_info.set_text(
             f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates checked "
             f"(rejected: {rejected or 'none'})"
         )
-        show_picture(self.picks_image, png)
+        self.picks_image.set_source(views.data_uri(png, "image/png"))
+        self.picks_image.set_visibility(True)
+        self.map_help.set_visibility(True)
+
+    def on_map_click(self, e) -> None:
+        """The pick-point nearest a click on the map, into tab 2's test simulation."""
+        if self.picks is None:
+            return
+        i = views.nearest_pick(self.pixels, e.image_x, e.image_y)
+        if i is None:
+            return
+        p = self.picks
+        x, y, yaw = (round(float(v[i]), 2) for v in (p.x_mm, p.y_mm, p.yaw_deg))
+        self.on_pick(x, y, yaw, f"pick-point {int(p.pick_id[i])} of tab 3's map")
 
     def start_evaluate(self) -> None:
         """``mjx-pick evaluate`` with the page's object, settings and numbers."""
