@@ -51,19 +51,18 @@ def chromium_path() -> str:
     )
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
+def start_server(work: Path, log_path: Path) -> tuple[str, subprocess.Popen]:
+    """`mjx-pick gui` on a free port for the work folder; (its URL, its process)."""
     import nicegui  # noqa: F401 - the extras are required (never skipped): fail here
     import playwright  # noqa: F401
 
     from mjx_pick.gui import free_port
 
-    work = tmp_path_factory.mktemp("gui_work")
     port = free_port()
     # the server runs as a user would start it: NiceGUI switches to its own test mode
     # when it sees pytest's variable
     env = {k: v for k, v in os.environ.items() if k != "PYTEST_CURRENT_TEST"}
-    with (work.parent / "gui_server.log").open("wb") as log:
+    with log_path.open("wb") as log:
         proc = subprocess.Popen(
             [sys.executable, "-m", "mjx_pick.cli", "gui", "--no-browser", "--port", str(port)]
             + ["--workdir", str(work)],
@@ -81,15 +80,25 @@ def server(tmp_path_factory):
         except OSError:
             if proc.poll() is not None or time.monotonic() > deadline:
                 proc.kill()
-                text = (work.parent / "gui_server.log").read_text()
-                pytest.fail(f"the GUI did not start: {text}")
+                pytest.fail(f"the GUI did not start: {log_path.read_text()}")
             time.sleep(0.5)
-    yield url, work
+    return url, proc
+
+
+def stop_server(proc: subprocess.Popen) -> None:
     proc.send_signal(signal.SIGINT)
     try:
         proc.wait(30)
     except subprocess.TimeoutExpired:
         proc.kill()
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    work = tmp_path_factory.mktemp("gui_work")
+    url, proc = start_server(work, work.parent / "gui_server.log")
+    yield url, work
+    stop_server(proc)
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     shutil.copy(work.parent / "gui_server.log", ARTIFACTS / "gui_server.log")
 
@@ -565,3 +574,46 @@ def test_one_frame_a_pick_clicked_on_the_map_is_tested_in_tab_2(page):
     info = page.get_by_test_id("test-info")
     info.filter(has_text="score").wait_for(timeout=TIMEOUT_MS)
     assert "check: **feasible**" in info.inner_text() or "check: feasible" in info.inner_text()
+
+
+def test_a_generator_warning_is_shown_in_the_page(page):
+    """Asked for more pick-points than the part has feasible: the page says so."""
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 10_000_000)
+    page.get_by_test_id("generate").click()
+    page.get_by_test_id("picks-info").filter(has_text="feasible pick-points").wait_for(
+        timeout=TIMEOUT_MS
+    )
+    warning = page.get_by_test_id("picks-warning").inner_text()
+    assert re.search(r"warning: only \d+ of 10000000 pick-points are feasible", warning)
+
+
+def test_no_time_left_is_shown_once_the_server_is_gone(browser, tmp_path):
+    """A run's last progress line is not its state after the server stopped."""
+    from playwright.sync_api import expect
+
+    url, proc = start_server(tmp_path / "work", tmp_path / "server.log")
+    context = browser.new_context(viewport={"width": 1500, "height": 1000})
+    try:
+        page = context.new_page()
+        page.set_default_timeout(60_000)
+        page.goto(url)
+        import_shipped(page)
+        page.get_by_text("2 Set gripper parameters").click()
+        number(page, "lift height (mm)", 20)
+        number(page, "hold (s)", 0.1)
+        page.get_by_text("3 Generate input data").click()
+        number(page, "pick-points", 40)
+        number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+        page.get_by_label("run folder name").fill("orphan")
+        page.get_by_test_id("start-batch").click()
+        status = page.get_by_test_id("job-status")
+        status.filter(has_text=re.compile(r"s left")).wait_for(timeout=TIMEOUT_MS)
+        stop_server(proc)
+        expect(page.get_by_text("connection to the server lost")).to_be_visible()
+        expect(status).not_to_be_visible()
+    finally:
+        context.close()
+        if proc.poll() is None:
+            proc.kill()

@@ -1,6 +1,7 @@
 """The GUI's parts without a browser: form validation, uploads, runs and their cancel."""
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -233,6 +234,7 @@ def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
     panel.started, panel.job, panel.on_end = set(), None, None
     panel.title, panel.status, panel.bar = _Shown(), _Shown(), _Shown()
     panel.command, panel.cancel_button, panel.card = _Shown(), _Shown(), _Shown()
+    panel.warnings = _Shown()
     ended = []
     job = jobs.Job(["--version"], tmp_path / "version.log")
     panel.start("version", job, ended.append)
@@ -273,3 +275,47 @@ def test_a_run_never_writes_over_another_runs_log(tmp_path):
     assert log.read_text() == "the first run's log\n"
     assert job.log == tmp_path / "logs" / "run-2.log"
     assert job.poll().state == "complete" and "mjx-pick" in job.log.read_text()
+
+
+def test_evaluate_progress_counts_the_feasible_pick_points_and_never_goes_back(tmp_path):
+    # asked for 50, of which the run found 10 feasible (config.json's n), chunks of 2
+    out = tmp_path / "run"
+    (out / "chunks").mkdir(parents=True)
+    job = jobs.Job(["evaluate"], tmp_path / "run.log", out, total=50, chunk=64)
+    p = job.poll()
+    assert (p.done, p.total, p.message) == (0, 50, "checking the pick-points")
+    (out / "config.json").write_text(json.dumps({"n": 10, "chunk_size": 2}))
+    p = job.poll()
+    assert (p.done, p.total, p.rate) == (0, 10, None) and "first chunk" in p.message
+    for k in range(3):
+        part = out / "chunks" / f"part-{k:05d}.parquet"
+        part.write_bytes(b"")
+        os.utime(part, (1000.0 + k, 1000.0 + k))  # one chunk a second
+    p = job.poll()
+    assert (p.done, p.total) == (6, 10)
+    # the first chunk (compiling) starts the clock: 2 chunks of 2 in 2 s
+    assert p.rate == pytest.approx(2.0) and p.eta_s == pytest.approx(2.0)
+    for part in (out / "chunks").iterdir():  # a completing run removes its chunks
+        part.unlink()
+    assert job.poll().done == 6
+
+
+def test_a_runs_warnings_reach_the_page(tmp_path):
+    log = tmp_path / "run.log"
+    log.write_text(
+        "$ mjx-pick evaluate block --n 10000000\n"
+        "/x/evaluation.py:355: UserWarning: only 65732 of 10000000 pick-points are feasible\n"
+        "  picks_batch = pp.generate_normal(\n"
+    )
+    job = jobs.Job(["evaluate"], log)
+    assert job.poll().warnings == ("only 65732 of 10000000 pick-points are feasible",)
+
+
+def test_the_progress_chunk_moves_the_bar_every_2_percent():
+    from mjx_pick.gui.page.job_panel import status_line
+
+    assert [jobs.progress_chunk(n) for n in (1, 50, 51, 65_732)] == [1, 1, 2, 1315]
+    running = jobs.Progress("running", 3, 10, 2.0, 3.5, 9.0, "", "pick-points")
+    assert status_line(running) == (
+        "running, 3/10 pick-points, 2.0 pick-points per s, about 4 s left, 9 s"
+    )

@@ -14,6 +14,8 @@ Progress of an evaluate run is read from its folder: each finished chunk is a fi
 from __future__ import annotations
 
 import dataclasses
+import json
+import math
 import re
 import shlex
 import signal
@@ -73,6 +75,7 @@ class Progress:
     elapsed_s: float
     message: str = ""
     unit: str = "pick-points"
+    warnings: tuple[str, ...] = ()  # the run's warnings (e.g. few feasible pick-points)
 
     @property
     def fraction(self) -> float | None:
@@ -108,7 +111,8 @@ class Job:
         self._proc: subprocess.Popen | None = None
         self._t0 = 0.0
         self._cancelled_at: float | None = None
-        self._chunks_before = 0
+        self._chunks_before: set[str] = set()
+        self._done = 0  # the most pick-points seen done: a count never goes back
 
     @property
     def command_line(self) -> str:
@@ -118,7 +122,7 @@ class Job:
     def start(self) -> Job:
         """Start the run; its log never replaces another run's (a taken name gets -2, -3)."""
         self.log = unused_path(self.log)
-        self._chunks_before = len(self._chunks())
+        self._chunks_before = {f.name for f in self._chunks()}
         with self.log.open("wb") as fh:
             fh.write(f"$ {self.command_line}\n".encode())
             fh.flush()
@@ -159,42 +163,72 @@ class Job:
         if self._cancelled_at is not None and self.running:
             if now - self._cancelled_at > CANCEL_GRACE_S:
                 self._proc.kill()
+        code = self._proc.poll() if self._proc is not None else None
         done = rate = eta = None
+        total = self.total
+        message = ""
         if self.chunk and self.total:
-            files = self._chunks()
-            done = min(self.total, len(files) * self.chunk)
-            new = (len(files) - self._chunks_before) * self.chunk
-            started = self._run_started()
-            last = _newest_mtime(files)
-            if new > 0 and started is not None and last is not None:
-                # from the simulation's start to its newest finished chunk
-                rate = new / max(last - started, 1e-3)
-                eta = max(0.0, (self.total - done) / rate)
+            done, total, rate, message = self._evaluate_progress(code == 0)
+            if rate and code is None:
+                eta = max(0.0, (total - done) / rate)
         if self.steps_logged is not None and self.total:
             found = self.steps_logged.findall(self._log_text())
             done = min(self.total, int(found[-1]) + 1) if found else 0
-        code = self._proc.poll() if self._proc is not None else None
         if code is None:
             state = "running"
-            message = "stopping: finishing the current chunk" if self._cancelled_at else ""
+            if self._cancelled_at:
+                message = "stopping: finishing the current chunk"
         elif code == 0:
             state, message = "complete", ""
-            if self.total:
-                done = self.total
+            if total:
+                done = total
         elif self._cancelled_at is not None:
             state, message = "cancelled", "cancelled; what finished is kept"
         else:
             state, message = "failed", self.error_message(code)
-        return Progress(state, done, self.total, rate, eta, elapsed, message, self.unit)
+        return Progress(state, done, total, rate, eta, elapsed, message, self.unit, self.warnings())
 
-    def _run_started(self) -> float | None:
-        """When the simulation started: evaluate writes config.json just before it."""
-        if self.out is None:
-            return None
-        try:
-            return (self.out / "config.json").stat().st_mtime
-        except OSError:
-            return None
+    def _evaluate_progress(self, complete: bool):
+        """(done, total, rate, message) of an evaluate run, read from its folder.
+
+        total: the feasible pick-points the run simulates (config.json's n, written once
+        the checks are done; until then the number asked for); done: finished chunks
+        times the chunk size, never less than shown before (a complete run removes its
+        chunks); rate: pick-points per second of simulation -- the summary's once the run
+        is complete, before that the same measured between finished chunks (the first
+        chunk, which includes compiling, only starts the clock)."""
+        config = _read_json(self.out / "config.json") if self.out is not None else None
+        total, chunk = self.total, self.chunk
+        if config is not None and config.get("n"):
+            total, chunk = int(config["n"]), int(config.get("chunk_size") or chunk)
+        files = self._chunks()
+        self._done = min(total, max(self._done, len(files) * chunk))
+        message = ""
+        if config is None:
+            message = "checking the pick-points"
+        elif not files:
+            message = "simulating the first chunk (compiling first)"
+        rate = None
+        if complete:
+            summary = _read_json(self.out / "summary.json") or {}
+            rate = summary.get("picks_per_s")
+            self._done = total
+        else:
+            new = sorted(
+                t for f in files if f.name not in self._chunks_before for t in _mtimes([f])
+            )
+            if len(new) >= 2 and new[-1] > new[0]:
+                rate = (len(new) - 1) * chunk / (new[-1] - new[0])
+        return self._done, total, rate, message
+
+    def warnings(self) -> tuple[str, ...]:
+        """The run's warnings (Python's, in its log), each once, without the file and line."""
+        seen: list[str] = []
+        for m in _WARNING.finditer(self._log_text()):
+            text = m.group(1).strip()
+            if text not in seen:
+                seen.append(text)
+        return tuple(seen)
 
     def _log_text(self) -> str:
         try:
@@ -227,13 +261,57 @@ def unused_path(path: Path) -> Path:
     raise FileExistsError(f"{path}: too many files of this name")
 
 
-def _newest_mtime(files: list[Path]) -> float | None:
-    """The newest modification time of files that still exist: a run that completes
-    removes its chunk files while the page may be reading them."""
+_WARNING = re.compile(r"(?m)^\S*:\d+: \w*Warning: (.*)$")
+
+
+def _read_json(path: Path) -> dict | None:
+    """A JSON file the run writes atomically, or None while it is not there."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _mtimes(files: list[Path]) -> list[float]:
+    """The modification times of files that still exist: a run that completes removes
+    its chunk files while the page may be reading them."""
     times = []
     for f in files:
         try:
             times.append(f.stat().st_mtime)
         except FileNotFoundError:
             continue
-    return max(times, default=None)
+    return times
+
+
+def _newest_mtime(files: list[Path]) -> float | None:
+    """The newest modification time of files that still exist."""
+    return max(_mtimes(files), default=None)
+
+
+PROGRESS_STEPS = 50  # an evaluate run's bar moves at least every 2 % of its pick-points
+
+
+def progress_chunk(feasible: int) -> int:
+    """Pick-points per saved chunk of an evaluate run of `feasible` pick-points: the bar
+    moves once per chunk, so at least PROGRESS_STEPS chunks (a chunk of one at most)."""
+    return max(1, math.ceil(feasible / PROGRESS_STEPS))
+
+
+def feasible_estimate(obj, settings, n: int, seed: int, sample: int = 2000) -> int:
+    """How many of n asked pick-points an evaluate run will find feasible (it simulates
+    only those): exact when n <= sample, else from the feasible fraction of the first
+    `sample` candidates and the candidates the generator checks at most."""
+    import warnings
+
+    from mjx_pick.core.pickpoints import generate_normal
+
+    with warnings.catch_warnings():  # a short sample: its shortfall says nothing yet
+        warnings.simplefilter("ignore")
+        picks = generate_normal(
+            obj, settings.gripper, min(n, sample), seed, settings.picks, settings.grasp
+        )
+    if n <= sample or len(picks) < min(n, sample):
+        return len(picks)
+    fraction = len(picks) / max(picks.n_candidates, 1)
+    return int(min(n, fraction * settings.picks.max_candidates))

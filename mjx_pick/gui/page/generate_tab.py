@@ -7,7 +7,7 @@ a cancelled run is set up to be resumed, a complete one is opened in tab 4.
 from __future__ import annotations
 
 import json
-import math
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -27,9 +27,15 @@ from mjx_pick.gui.page.widgets import (
 from mjx_pick.gui.state import PageState
 
 
-def default_chunk(n: int) -> int:
-    """Pick-points per saved part: n/20, at least 64 (chunk overheads stay small)."""
-    return max(64, math.ceil(n / 20))
+def sample_picks(obj, settings, n: int, seed: int):
+    """The pick-points of tab 3's map and the warnings their generator gave (in the page,
+    not only in the server's log)."""
+    from mjx_pick.core.pickpoints import generate_normal
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        picks = generate_normal(obj, settings.gripper, n, seed, settings.picks, settings.grasp)
+    return picks, [str(w.message) for w in caught]
 
 
 class GenerateTab:
@@ -47,6 +53,7 @@ class GenerateTab:
         self.on_complete, self.on_pick = on_complete, on_pick
         self.picks = None  # the pick-points drawn on the map, and where
         self.pixels = None
+        self.drawn_for = None  # (object, settings, n, seed) of the map's pick-points
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
                 self.n = ui.number("pick-points", value=200, step=1).props('data-testid="n"')
@@ -66,6 +73,8 @@ class GenerateTab:
                 self.error = error_label().props('data-testid="generate-error"')
             with ui.column().classes("grow"):
                 self.picks_info = ui.label("").props('data-testid="picks-info"')
+                self.picks_warning = ui.label("").classes("text-warning text-sm")
+                self.picks_warning.props('data-testid="picks-warning"')
                 self.map_help = ui.label(
                     "The map shows where the gripper's centre lands on the part (object "
                     "frame, as the outline of tab 1). Every pick-point value in the page -- "
@@ -89,8 +98,6 @@ class GenerateTab:
 
     async def generate(self) -> None:
         """Sample the pick-points (in a worker thread) and draw them on the outline."""
-        from mjx_pick.core.pickpoints import generate_normal
-
         self.error.set_text("")
         if not need_object(self.state, self.error):
             return
@@ -102,15 +109,15 @@ class GenerateTab:
         obj = self.state.obj
         self.picks_info.set_text("generating ...")
         try:
-            picks = await run.io_bound(
-                generate_normal, obj, settings.gripper, n, seed, settings.picks, settings.grasp
-            )
+            picks, warned = await run.io_bound(sample_picks, obj, settings, n, seed)
             png, pixels = await run.io_bound(views.picks_png, obj, picks)
         except ConfigError as err:
             self.picks_info.set_text("")
             self.error.set_text(str(err))
             return
         self.picks, self.pixels = picks, pixels
+        self.drawn_for = (obj, settings, n, seed)
+        self.picks_warning.set_text("warning: " + "; ".join(warned) if warned else "")
         rejected = ", ".join(f"{k} {v}" for k, v in picks.rejected.items() if v)
         self.picks_info.set_text(
             f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates checked "
@@ -131,7 +138,7 @@ class GenerateTab:
         x, y, yaw = (round(float(v[i]), 2) for v in (p.x_mm, p.y_mm, p.yaw_deg))
         self.on_pick(x, y, yaw, f"pick-point {int(p.pick_id[i])} of tab 3's map")
 
-    def start_evaluate(self) -> None:
+    async def start_evaluate(self) -> None:
         """``mjx-pick evaluate`` with the page's object, settings and numbers."""
         self.error.set_text("")
         if self.panel.busy(self.error) or not need_object(self.state, self.error):
@@ -143,7 +150,22 @@ class GenerateTab:
             return
         n, seed = numbers
         traces = int(self.traces.value or 0)
-        chunk = int(self.chunk.value) if self.chunk.value else default_chunk(n)
+        if self.chunk.value:
+            chunk = int(self.chunk.value)
+        else:  # the bar moves every 2 % of the pick-points the run will simulate
+            obj = self.state.obj
+            drawn = self.drawn_for
+            if drawn is not None and drawn[0] is obj and drawn[1:] == (settings, n, seed):
+                feasible = len(self.picks)
+            else:
+                try:
+                    feasible = await run.io_bound(jobs.feasible_estimate, obj, settings, n, seed)
+                except ConfigError as err:
+                    self.error.set_text(str(err))
+                    return
+            chunk = jobs.progress_chunk(feasible)
+        if self.panel.busy(self.error):  # another start while this one was estimating
+            return
         flags = self.form.cli_flags(settings, self.state.workdir, out)
         argv = ["evaluate", *self.state.obj_args, *flags]
         argv += ["--n", str(n), "--seed", str(seed), "--traces", str(max(traces, 0))]

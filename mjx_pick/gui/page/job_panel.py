@@ -35,11 +35,32 @@ class JobPanel:
                 self.status = ui.label("").props('data-testid="job-status"')
                 ui.space()
                 self.cancel_button = ui.button("Cancel", on_click=self.cancel, color="red")
-            self.bar = ui.linear_progress(value=0, show_value=False).props("size=12px")
+            self.offline = ui.label(
+                "connection to the server lost: this run's state is unknown until the page "
+                "reconnects (reload it)"
+            ).classes("mjx-offline-note text-negative")
+            self.bar = (
+                ui.linear_progress(value=0, show_value=False).props("size=12px").classes("mjx-live")
+            )
+            self.warnings = (
+                ui.label("").classes("text-warning text-sm").props('data-testid="job-warnings"')
+            )
             self.command = ui.code("", language="bash").classes("w-full text-xs")
+        self.status.classes("mjx-live")
         card.set_visibility(False)
         self.card = card
         ui.timer(POLL_S, self.poll)
+        # what the page last heard is not the run's state once the server is gone: the
+        # status and bar are hidden while the connection is lost, and a note says why
+        ui.add_css(
+            ".mjx-offline-note{display:none} body.mjx-offline .mjx-offline-note{display:block}"
+            " body.mjx-offline .mjx-live{visibility:hidden}"
+        )
+        ui.add_body_html(
+            "<script>setInterval(() => document.body.classList.toggle('mjx-offline', "
+            "!!window.socket && window.did_handshake === true && !window.socket.connected),"
+            " 500);</script>"
+        )
 
     def busy(self, where: ui.label) -> bool:
         """True (and says so in where) while a run is current: no second run starts."""
@@ -59,6 +80,7 @@ class JobPanel:
         self.status.set_text("starting ...")
         self.command.set_content(job.command_line)
         self.bar.set_value(0)
+        self.warnings.set_text("")
         self.bar.props(remove="indeterminate")
         if job.total is None:
             self.bar.props("indeterminate")
@@ -77,6 +99,7 @@ class JobPanel:
         if p.fraction is not None:
             self.bar.set_value(p.fraction)
         self.status.set_text(status_line(p))
+        self.warnings.set_text("warning: " + "; ".join(p.warnings) if p.warnings else "")
         if p.state == "running":
             return
         self.bar.props(remove="indeterminate")
@@ -98,7 +121,7 @@ def status_line(p: jobs.Progress) -> str:
     if p.done is not None:
         parts.append(f"{p.done}/{p.total} {p.unit}")
     if p.rate:
-        parts.append(f"{p.rate:.1f} per s")
+        parts.append(f"{p.rate:.1f} {p.unit} per s")
     if p.eta_s is not None and p.state == "running":
         parts.append(f"about {p.eta_s:.0f} s left")
     parts.append(f"{p.elapsed_s:.0f} s")
