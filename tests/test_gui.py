@@ -617,3 +617,45 @@ def test_no_time_left_is_shown_once_the_server_is_gone(browser, tmp_path):
         context.close()
         if proc.poll() is None:
             proc.kill()
+
+
+def test_checks_before_a_run_and_no_stale_messages(page, tmp_path):
+    """An impossible mass warns, a sweep value out of its range is refused before
+    anything starts, and old messages and pick-point counts do not stay."""
+    from playwright.sync_api import expect
+
+    fake = tmp_path / "photo.png"
+    fake.write_bytes(b"this is not a PNG" * 10)
+    page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(fake))
+    page.get_by_test_id("upload-error").filter(has_text="cannot be read as an image").wait_for()
+    choose(page, "object", "block")
+    number(page, "mass (g)", 1e9)
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+    assert "denser than any solid" in page.get_by_test_id("import-warning").inner_text()
+    assert page.get_by_test_id("upload-error").inner_text() == ""
+    number(page, "mass (g)", 43.2)
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="mass 43.2 g").wait_for()
+    assert page.get_by_test_id("import-warning").inner_text() == ""
+
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 6)
+    page.get_by_test_id("generate").click()
+    info = page.get_by_test_id("picks-info")
+    info.filter(has_text="6 feasible pick-points").wait_for()
+    number(page, "pick-points", 8)  # the map's count is no longer what would run
+    expect(info).to_have_text("")
+    expect(page.get_by_test_id("picks-map")).not_to_be_visible()
+
+    page.get_by_text("Parameter sweep").click()
+    number(page, "start", 0)
+    number(page, "end", 0.4)
+    number(page, "step", 0.2)
+    number(page, "simulations per value", 2)
+    page.get_by_label("run folder name").last.fill("zero-friction")
+    page.get_by_test_id("start-sweep").click()
+    error = page.get_by_test_id("sweep-error")
+    error.filter(has_text="cannot be simulated").wait_for()
+    assert "pad friction = 0" in error.inner_text()
+    assert not page.get_by_test_id("job-title").is_visible()

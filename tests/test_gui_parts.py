@@ -319,3 +319,13 @@ def test_the_progress_chunk_moves_the_bar_every_2_percent():
     assert status_line(running) == (
         "running, 3/10 pick-points, 2.0 pick-points per s, about 4 s left, 9 s"
     )
+
+
+def test_a_sweep_value_outside_its_range_is_refused_before_the_run():
+    g = load_gripper("robotiq-2f85")
+    settings, _ = forms.build(values(), g)
+    assert forms.sweep_problem(settings, "contact.pad_friction", (0.4, 0.6)) == ""
+    problem = forms.sweep_problem(settings, "contact.pad_friction", (0.0, 0.4))
+    assert problem.startswith("pad friction = 0 cannot be simulated") and "0 <" in problem
+    problem = forms.sweep_problem(settings, "grasp.grip_force_n", (50, 500))
+    assert "grip force F_d = 500" in problem and "robotiq-2f85" in problem

@@ -52,14 +52,15 @@ def build_page(workdir: Path, started: set[jobs.Job]) -> PageState:
         tab = {name: ui.tab(name, label) for name, label in TABS}
     panel = JobPanel(started)
     analyze: AnalyzeTab | None = None  # built after the tab that opens runs in it
+    generate: GenerateTab | None = None  # built after the tab that imports objects
     with ui.tab_panels(tabs, value=tab["import"]).classes("w-full"):
         with ui.tab_panel(tab["import"]):
-            ImportTab(state)
+            ImportTab(state, on_import=lambda: generate.forget_map())
         with ui.tab_panel(tab["gripper"]):
             gripper = GripperTab(state, show=lambda: tabs.set_value("gripper"))
             form = gripper.form
         with ui.tab_panel(tab["generate"]):
-            GenerateTab(
+            generate = GenerateTab(
                 state,
                 form,
                 panel,

@@ -237,3 +237,25 @@ def sweep_values(start, end, step) -> tuple[tuple[float, ...] | None, dict]:
     if n > 50:
         return None, {"step": f"{n} values: at most 50 per sweep here (use the CLI for more)"}
     return tuple(round(start + i * step, 12) for i in range(n)), {}
+
+
+def sweep_problem(settings: Settings, name: str, values) -> str:
+    """Why a sweep of parameter name over values cannot run with these settings ('' if
+    it can): each value is checked as the sweep will set it (the parameter's range, the
+    rules between fields and against the gripper), before anything starts."""
+    from mjx_pick.engine.backend import Settings as RunSettings
+    from mjx_pick.studies.sweeps import apply, canonical
+
+    try:
+        key = canonical(name)
+    except ConfigError as err:
+        return str(err)
+    label = next((f.label for f in SETTINGS_FIELDS if f.key == key), key)
+    base = RunSettings(gripper=settings.gripper, contact=settings.contact, grasp=settings.grasp)
+    for value in values:
+        try:
+            varied = apply(base, key, value)
+            varied.grasp.check_gripper(varied.gripper)
+        except ConfigError as err:
+            return f"{label} = {value:g} cannot be simulated: {err}"
+    return ""

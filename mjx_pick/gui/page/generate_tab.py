@@ -56,8 +56,10 @@ class GenerateTab:
         self.drawn_for = None  # (object, settings, n, seed) of the map's pick-points
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
-                self.n = ui.number("pick-points", value=200, step=1).props('data-testid="n"')
-                self.seed = ui.number("seed", value=0, step=1)
+                self.n = ui.number(
+                    "pick-points", value=200, step=1, on_change=self.forget_map
+                ).props('data-testid="n"')
+                self.seed = ui.number("seed", value=0, step=1, on_change=self.forget_map)
                 self.traces = ui.number("traced best and worst (force plots)", value=3, step=1)
                 self.chunk = ui.number(
                     "chunk (pick-points per saved part; empty: automatic)", value=None, step=1
@@ -126,6 +128,17 @@ class GenerateTab:
         self.picks_image.set_source(views.data_uri(png, "image/png"))
         self.picks_image.set_visibility(True)
         self.map_help.set_visibility(True)
+
+    def forget_map(self, _=None) -> None:
+        """The map and its count no longer show what would run (another n, seed or
+        object): hidden until Generate draws them again."""
+        if self.picks is None:
+            return
+        self.picks = self.pixels = self.drawn_for = None
+        self.picks_info.set_text("")
+        self.picks_warning.set_text("")
+        self.picks_image.set_visibility(False)
+        self.map_help.set_visibility(False)
 
     def on_map_click(self, e) -> None:
         """The pick-point nearest a click on the map, into tab 2's test simulation."""

@@ -27,11 +27,30 @@ from mjx_pick.gui.uploads import (
 UPLOADED = "(uploaded file)"
 
 
+DENSEST_G_CM3 = 25.0  # above osmium's 22.6 g/cm^3: no solid part is denser
+
+
+def mass_warning(obj) -> str:
+    """A warning when the mass cannot be the part's: denser than any solid in the
+    volume of its outline times its height (at least its true volume)."""
+    volume_cm3 = obj.area_mm2 * obj.height_mm / 1000.0
+    density = obj.mass_kg * 1e3 / max(volume_cm3, 1e-9)
+    if density <= DENSEST_G_CM3:
+        return ""
+    return (
+        f"warning: {obj.mass_kg * 1e3:g} g in at most {volume_cm3:.3g} cm³ is "
+        f"{density:.3g} g/cm³, denser than any solid: check the mass (in grams)"
+    )
+
+
 class ImportTab:
-    def __init__(self, state: PageState):
+    def __init__(self, state: PageState, on_import=None):
+        """on_import(): runs after each import, also a failed one (other tabs forget
+        what they drew for the object before)."""
         from mjx_pick.core.objects import asset_manifest
 
         self.state = state
+        self.on_import = on_import
         self.upload_path: Path | None = None
         self.manifest = asset_manifest()
         with ui.row().classes("w-full no-wrap items-start"):
@@ -64,6 +83,8 @@ class ImportTab:
                     'data-testid="import"'
                 )
                 self.import_error = error_label().props('data-testid="import-error"')
+                self.import_warning = ui.label("").classes("text-warning text-sm")
+                self.import_warning.props('data-testid="import-warning"')
             with ui.column().classes("grow"):
                 self.object_info = ui.label("No object imported yet.").props(
                     'data-testid="object-info"'
@@ -83,6 +104,7 @@ class ImportTab:
 
     async def on_upload(self, e) -> None:
         self.upload_error.set_text("")
+        self.import_error.set_text("")
         name = e.file.name
         data = await e.file.read()
         self.upload.reset()  # a corrected file of the same name may follow
@@ -115,6 +137,8 @@ class ImportTab:
         from mjx_pick.core.objects import load_object
 
         self.import_error.set_text("")
+        self.upload_error.set_text("")  # an earlier upload's message is history now
+        self.import_warning.set_text("")
         for w in self.fields().values():
             w.error = None
         try:
@@ -154,6 +178,9 @@ class ImportTab:
             self.import_error.set_text(f"{Path(source).name}: cannot be imported ({err})")
             return
         self.state.obj, self.state.obj_args = obj, args
+        self.import_warning.set_text(mass_warning(obj))
+        if self.on_import is not None:
+            self.on_import()
         self.object_info.set_text(
             f"{obj.name}: outline {obj.area_mm2:.0f} mm^2, length {obj.length_mm:.1f} mm, "
             f"height {obj.height_mm:g} mm, mass {obj.mass_kg * 1e3:.1f} g"
@@ -165,6 +192,8 @@ class ImportTab:
         self.state.obj, self.state.obj_args = None, []
         self.object_info.set_text("No object imported.")
         self.object_image.set_visibility(False)
+        if self.on_import is not None:
+            self.on_import()
 
     def show_error(self, message: str) -> None:
         """An object's ConfigError under the field it names, else above the button."""

@@ -79,6 +79,7 @@ class SettingsForm:
         from mjx_pick.core.gripper import load_gripper
 
         self.base_gripper = load_gripper(self.preset.value)
+        self.toml_error.set_text("")  # the gripper of a refused TOML is not in use
         self.fill(self.base_gripper)
         # the preset's force and speed ranges bound F_d and the closing speed
         g = self.base_gripper

@@ -69,6 +69,10 @@ class SweepTab:
         if not self.param.value:
             self.error.set_text("choose a parameter")
             return
+        problem = forms.sweep_problem(settings, self.param.value, values)
+        if problem:
+            self.error.set_text(problem)
+            return
         param = f"{self.param.value}=" + ",".join(repr(v) for v in values)
         argv = [
             "sweep",
