@@ -659,3 +659,37 @@ def test_checks_before_a_run_and_no_stale_messages(page, tmp_path):
     error.filter(has_text="cannot be simulated").wait_for()
     assert "pad friction = 0" in error.inner_text()
     assert not page.get_by_test_id("job-title").is_visible()
+
+
+def test_a_reload_brings_back_the_object_settings_and_run(page, server):
+    """Runs are the server's: a reloaded page re-attaches to the run its browser tab
+    started (and draws it when it ends), with the object and settings it had; tab 4
+    says a folder still being written is running."""
+    _, work = server
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+    number(page, "grip force F_d (N)", 45)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 40)
+    number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+    page.get_by_label("run folder name").fill("gui-reload")
+    page.get_by_test_id("start-batch").click()
+    page.get_by_test_id("job-title").filter(has_text="evaluate gui-reload").wait_for()
+    page.get_by_text("4 Analyze results").click()
+    page.get_by_label("evaluate output folder").fill(str(work / "gui-reload"))
+    page.get_by_test_id("open-run").click()
+    error = page.get_by_test_id("analyze-error")
+    error.filter(has_text="still running").wait_for()
+    assert "results.parquet" not in error.inner_text()
+
+    page.reload()
+    page.get_by_test_id("job-title").filter(has_text="evaluate gui-reload").wait_for()
+    page.get_by_test_id("object-info").filter(has_text="block: outline").wait_for()
+    page.get_by_text("2 Set gripper parameters").click()
+    assert page.get_by_label("grip force F_d (N)", exact=True).input_value() == "45"
+    status = wait_job(page, "evaluate gui-reload")
+    assert status.startswith("complete") and "40/40" in status, status
+    page.get_by_text("3 Generate input data").click()
+    page.get_by_test_id("run-summary").filter(has_text="success rate").wait_for()

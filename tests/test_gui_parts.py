@@ -231,7 +231,8 @@ def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
     from mjx_pick.gui.page.job_panel import JobPanel
 
     panel = JobPanel.__new__(JobPanel)  # its logic without a browser
-    panel.started, panel.job, panel.on_end = set(), None, None
+    panel.runs, panel.owner, panel.handlers = jobs.Runs(), None, {}
+    panel.job, panel.on_end, panel.others = None, None, _Shown()
     panel.title, panel.status, panel.bar = _Shown(), _Shown(), _Shown()
     panel.command, panel.cancel_button, panel.card = _Shown(), _Shown(), _Shown()
     panel.warnings = _Shown()

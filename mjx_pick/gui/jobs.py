@@ -63,6 +63,38 @@ def child_argv(argv: list[str]) -> list[str]:
     return [sys.executable, "-I", "-u", "-c", _CLI_FROM_PACKAGE, str(package_dir()), *argv]
 
 
+class Runs:
+    """The runs this server started: server-side state, shared by every page.
+
+    A page is one load of one browser tab; the runs outlive it. A reloaded tab finds
+    the run it started (by its browser tab's id), a second tab sees the others, and the
+    server stops the running ones when it stops.
+    """
+
+    def __init__(self) -> None:
+        self._jobs: list[Job] = []
+
+    def add(self, job: Job, owner: str | None) -> None:
+        job.owner = owner
+        self._jobs.append(job)
+
+    def __iter__(self):
+        return iter(list(self._jobs))
+
+    def last_of(self, owner: str | None) -> Job | None:
+        """The newest run the browser tab owner started, running or ended."""
+        mine = [j for j in self._jobs if owner is not None and j.owner == owner]
+        return mine[-1] if mine else None
+
+    def writing(self, folder: Path) -> Job | None:
+        """The run of this server still writing folder, if any."""
+        folder = Path(folder).resolve()
+        for job in reversed(self._jobs):
+            if job.running and job.out is not None and job.out.resolve() == folder:
+                return job
+        return None
+
+
 @dataclasses.dataclass
 class Progress:
     """What the page shows about a run."""
@@ -113,6 +145,8 @@ class Job:
         self._cancelled_at: float | None = None
         self._chunks_before: set[str] = set()
         self._done = 0  # the most pick-points seen done: a count never goes back
+        self.title = " ".join(argv[:1])  # what the page calls it (set when it starts)
+        self.owner: str | None = None  # the browser tab that started it
 
     @property
     def command_line(self) -> str:

@@ -45,6 +45,7 @@ DOWNLOADS = (
 class AnalyzeTab:
     def __init__(self, state: PageState, panel: JobPanel):
         self.state, self.panel = state, panel
+        panel.handle("report", self.ended)
         with ui.row().classes("w-full items-end"):
             self.run_dir = (
                 ui.input("evaluate output folder")
@@ -136,6 +137,10 @@ class AnalyzeTab:
 
         self.error.set_text("")
         path = Path((self.run_dir.value or "").strip()).expanduser()
+        unfinished = self.unfinished(path)
+        if unfinished:
+            self.error.set_text(unfinished)
+            return
         try:
             opened = Run.load(path)
         except ConfigError as err:
@@ -160,6 +165,27 @@ class AnalyzeTab:
         self.replay_image.set_visibility(False)
         self.show_downloads()
         self.refresh_runs()
+
+    def unfinished(self, path: Path) -> str:
+        """Why an evaluate folder has no results to open yet ('' if it may have)."""
+        from mjx_pick.outputs.rundir import read_manifest
+
+        if self.panel.runs.writing(path) is not None:
+            return f"{path.name} is still running: it opens here when it is complete"
+        m = read_manifest(path) or {}
+        if m.get("command") != "evaluate" or (path / "results.parquet").is_file():
+            return ""
+        if m.get("status") == "running":
+            return (
+                f"{path.name} has no results yet: it is still running in another process, "
+                "or it stopped without finishing"
+            )
+        if m.get("status") in ("interrupted", "cancelled"):
+            return (
+                f"{path.name} was stopped before it finished: continue it in tab 3 (run "
+                f"folder name {path.name}, resume ticked)"
+            )
+        return ""
 
     async def on_select(self, e) -> None:
         """A selected pick-point: its metrics, and if traced its force plot and replay."""
@@ -222,7 +248,14 @@ class AnalyzeTab:
         if not self.export_anim.value:
             argv.append("--no-animations")
         job = jobs.Job(argv, self.state.log(f"{opened.path.name}-report"))
-        self.panel.start(f"report {opened.path.name}", job, lambda p: self.show_downloads())
+        self.panel.start(f"report {opened.path.name}", job)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        """A report ended: its run open here (also after a reload), with its downloads."""
+        run = Path(job.argv[1])
+        if self.state.run is None or self.state.run.path != run:
+            self.open(run)
+        self.show_downloads()
 
     def show_downloads(self) -> None:
         """A download button for each file the report wrote into the open run."""

@@ -51,6 +51,7 @@ class GenerateTab:
         on_pick(x, y, yaw, what): a pick-point clicked on the map (for tab 2's test)."""
         self.state, self.form, self.panel = state, form, panel
         self.on_complete, self.on_pick = on_complete, on_pick
+        panel.handle("evaluate", self.ended)
         self.picks = None  # the pick-points drawn on the map, and where
         self.pixels = None
         self.drawn_for = None  # (object, settings, n, seed) of the map's pick-points
@@ -187,28 +188,30 @@ class GenerateTab:
             argv.append("--resume")
         self.run_summary.set_content("")
 
-        def done(progress: jobs.Progress) -> None:
-            if progress.state == "cancelled":  # ready to continue: same folder, resume
-                self.run_name.value = out.name
-                self.resume.value = True
-                self.run_summary.set_content(
-                    f"**{out.name}**: cancelled; its finished chunks are kept. Start the "
-                    "batch again (resume is ticked) to continue it."
-                )
-                return
-            if progress.state != "complete":
-                return
-            from mjx_pick.core.metrics import rate_text
-
-            self.resume.value = False
-            self.run_name.value = f"evaluate-{stamp()}"  # this name is taken now
-            s = json.loads((out / "summary.json").read_text())
-            self.run_summary.set_content(
-                f"**{out.name}**: success rate {rate_text(s['successes'], s['n'])}, "
-                f"mean score {fmt(s['score_mean'])}, "
-                f"{s['picks_per_s']} pick-points/s on {s['backend']}. Open tab 4."
-            )
-            self.on_complete(out)
-
         job = jobs.Job(argv, self.state.log(out.name), out, n, chunk)
-        self.panel.start(f"evaluate {out.name}", job, done)
+        self.panel.start(f"evaluate {out.name}", job)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        """An evaluate run ended (also one started before a reload of the page)."""
+        out = job.out
+        if progress.state == "cancelled":  # ready to continue: same folder, resume
+            self.run_name.value = out.name
+            self.resume.value = True
+            self.run_summary.set_content(
+                f"**{out.name}**: cancelled; its finished chunks are kept. Start the "
+                "batch again (resume is ticked) to continue it."
+            )
+            return
+        if progress.state != "complete":
+            return
+        from mjx_pick.core.metrics import rate_text
+
+        self.resume.value = False
+        self.run_name.value = f"evaluate-{stamp()}"  # this name is taken now
+        s = json.loads((out / "summary.json").read_text())
+        self.run_summary.set_content(
+            f"**{out.name}**: success rate {rate_text(s['successes'], s['n'])}, "
+            f"mean score {fmt(s['score_mean'])}, "
+            f"{s['picks_per_s']} pick-points/s on {s['backend']}. Open tab 4."
+        )
+        self.on_complete(out)

@@ -181,11 +181,20 @@ class ImportTab:
         self.import_warning.set_text(mass_warning(obj))
         if self.on_import is not None:
             self.on_import()
+        self.show_object(obj)
+        show_picture(self.object_image, png)
+
+    async def restore(self, obj, args: list[str]) -> None:
+        """The object this browser tab imported before a reload of the page."""
+        self.state.obj, self.state.obj_args = obj, args
+        self.show_object(obj)
+        show_picture(self.object_image, await run.io_bound(views.object_png, obj, None))
+
+    def show_object(self, obj) -> None:
         self.object_info.set_text(
             f"{obj.name}: outline {obj.area_mm2:.0f} mm^2, length {obj.length_mm:.1f} mm, "
             f"height {obj.height_mm:g} mm, mass {obj.mass_kg * 1e3:.1f} g"
         )
-        show_picture(self.object_image, png)
 
     def forget_object(self) -> None:
         """A failed import: no object, so no later tab runs on the one imported before."""

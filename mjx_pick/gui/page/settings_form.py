@@ -109,6 +109,14 @@ class SettingsForm:
         self.fill(gripper)
         self.toml_error.set_text("")
 
+    def restore(self, before: SettingsForm) -> None:
+        """The settings of this browser tab's page before a reload."""
+        self.preset.value = before.preset.value
+        self.backend.value = before.backend.value
+        self.base_gripper, self.base_contact = before.base_gripper, before.base_contact
+        for key, widget in self.inputs.items():
+            widget.value = before.inputs[key].value
+
     def adopt_contact(self, contact) -> None:
         """Fitted contact parameters (the calibration study) for every later run."""
         self.base_contact = contact

@@ -27,6 +27,7 @@ class SweepTab:
         from mjx_pick.studies.sweeps import sweepable
 
         self.state, self.form, self.panel = state, form, panel
+        panel.handle("sweep", self.ended)
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
                 self.param = ui.select(
@@ -81,13 +82,13 @@ class SweepTab:
         ]
         argv += ["--param", param, "--n", str(int(n)), "--out", str(out)]
 
-        def done(progress: jobs.Progress) -> None:
-            if progress.state == "complete":
-                self.name.value = f"sweep-{stamp()}"  # this name is taken now
-                self.show(out)
-
         job = jobs.Job(argv, self.state.log(out.name), out, None, None)
-        self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job, done)
+        self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        if progress.state == "complete":
+            self.name.value = f"sweep-{stamp()}"  # this name is taken now
+            self.show(job.out)
 
     def show(self, out: Path) -> None:
         """A complete sweep: one row per value, and its plot."""
