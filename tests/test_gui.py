@@ -363,7 +363,9 @@ def test_bad_inputs_are_shown_in_the_page(page, server, tmp_path):
     number(page, "stroke width (mm)", -5)
     page.get_by_label("P gain (mm/s per N)", exact=True).fill("")
     page.get_by_test_id("test-pick").click()
-    assert "stroke_mm = -5.0 is out of range" in field_error(page, "stroke width (mm)")
+    stroke = field_error(page, "stroke width (mm)")
+    assert stroke.startswith("stroke width (mm) = -5.0 is out of range")  # the form's words
+    assert "stroke_mm = -5.0 is out of range" in stroke  # and the details
     assert "P gain is required" in field_error(page, "P gain (mm/s per N)")
     number(page, "stroke width (mm)", 85)
     number(page, "P gain (mm/s per N)", 2)
@@ -457,9 +459,14 @@ def test_studies_compare_and_calibrate(page, server):
 
 def test_mesh_import_shows_its_outline(page, server):
     """A mesh (here a YCB marker in metres) instead of an image: its top-down outline."""
+    from playwright.sync_api import expect
+
     marker = ROOT / "mjx_pick" / "assets" / "objects" / "ycb" / "040_large_marker.stl"
+    # an image has a scale and a thickness, a mesh a unit: each form shows only its own
+    expect(page.get_by_label("mesh unit", exact=True)).to_be_hidden()
     page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(marker))
     page.get_by_text("uploaded 040_large_marker.stl").wait_for()
+    expect(page.get_by_label("image scale (px per mm)", exact=True)).to_be_hidden()
     choose(page, "mesh unit", "m")
     number(page, "mass (g)", 15.8)
     page.get_by_test_id("import").click()

@@ -330,3 +330,19 @@ def test_a_sweep_value_outside_its_range_is_refused_before_the_run():
     assert problem.startswith("pad friction = 0 cannot be simulated") and "0 <" in problem
     problem = forms.sweep_problem(settings, "grasp.grip_force_n", (50, 500))
     assert "grip force F_d = 500" in problem and "robotiq-2f85" in problem
+
+
+def test_messages_use_the_forms_words_with_the_details_after():
+    g = load_gripper("robotiq-2f85")
+    _, errors = forms.build(values(gripper__stroke_mm=-5.0, contact__pad_friction=0.0), g)
+    words, details = errors["gripper.stroke_mm"].split("\n")
+    assert words == (
+        "stroke width (mm) = -5.0 is out of range: allowed 0 < stroke width (mm) <= 1000"
+    )
+    assert details.startswith("(details: gripper[robotiq-2f85].stroke_mm = -5.0")
+    assert errors["contact.pad_friction"].startswith("pad friction = 0.0 is out of range")
+    assert forms.user_words("P gain is required") == "P gain is required"
+    from mjx_pick.gui.formatting import column_label
+
+    assert column_label("robust_p") == "success probability under the errors"
+    assert column_label("x_mm") == "object x under gripper (mm)"

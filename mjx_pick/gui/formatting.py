@@ -13,6 +13,27 @@ PICK_LABELS = {
     "y_mm": "object y under gripper (mm)",
     "yaw_deg": "object yaw under gripper (deg)",
 }
+# the studies' result columns in the user's words (the JSON keys stay in the files)
+COLUMN_LABELS = {
+    **PICK_LABELS,
+    "pick_id": "pick",
+    "success_rate": "success rate",
+    "success_ci": "success rate, 95 % interval",
+    "score_mean": "mean score",
+    "score_ci": "mean score, 95 % interval",
+    "feasible": "feasible pick-points",
+    "p_vs_best": "chance the difference to the best is luck (p)",
+    "robust_p": "success probability under the errors",
+    "robust_ci_low": "its 95 % lower bound",
+    "landed": "draws with a finger on the part",
+    "n": "pick-points",
+    "successes": "successes",
+}
+
+
+def column_label(key: str) -> str:
+    """A result column's heading: its label, else the key with spaces."""
+    return COLUMN_LABELS.get(key, key.replace("_", " "))
 
 
 def stamp() -> str:

@@ -55,7 +55,7 @@ def object_png(obj: ObjectModel, image: Path | None = None) -> bytes:
         ax.set_xlabel("x, mm")
         ax.set_ylabel("y, mm")
         ax.set_title(
-            f"outline: {obj.area_mm2:.0f} mm^2, {len(obj.polygon.exterior.coords) - 1} "
+            f"outline: {obj.area_mm2:.0f} mm², {len(obj.polygon.exterior.coords) - 1} "
             "corners (+ centre of mass)"
         )
         fig.tight_layout()

@@ -80,7 +80,7 @@ class AnalyzeTab:
                         on_select=self.on_select,
                     )
                     .classes("w-full")
-                    .props('dense data-testid="picks-table"')
+                    .props('dense wrap-cells data-testid="picks-table"')
                 )
                 with ui.row().classes("items-end"):
                     self.export_n = ui.number("n best and n worst", value=3, step=1).classes("w-40")

@@ -78,6 +78,7 @@ class ImportTab:
                 self.thickness = ui.number("thickness (mm)", value=20.0, step=1)
                 self.mass = ui.number("mass (g)", value=43.2, step=1)
                 self.unit = ui.select(["mm", "m"], value="mm", label="mesh unit").classes("w-40")
+                self.unit.set_visibility(False)  # shown for an uploaded mesh only
                 self.on_asset()
                 ui.button("Import object", on_click=self.import_object).props(
                     'data-testid="import"'
@@ -96,6 +97,8 @@ class ImportTab:
 
     def on_asset(self, _=None) -> None:
         """A shipped object fills in its scale, thickness and mass."""
+        if self.asset.value != UPLOADED:
+            self.show_mesh_fields(False)
         if self.asset.value in self.manifest:
             entry = self.manifest[self.asset.value]
             self.px_per_mm.value = entry["px_per_mm"]
@@ -118,10 +121,17 @@ class ImportTab:
             self.upload_error.set_text(f"{name}: cannot be stored ({err})")
             return
         self.asset.value = UPLOADED
+        self.show_mesh_fields(Path(name).suffix.lower() in MESH_SUFFIXES)
         self.upload_error.set_text("")
         self.object_info.set_text(
             f"uploaded {name}: set its scale, thickness and mass, then Import object"
         )
+
+    def show_mesh_fields(self, mesh: bool) -> None:
+        """A mesh has a unit; an image has a scale and a thickness."""
+        self.unit.set_visibility(mesh)
+        self.px_per_mm.set_visibility(not mesh)
+        self.thickness.set_visibility(not mesh)
 
     def source(self) -> tuple[str, Path | None]:
         """The object's CLI argument (a file or a shipped name) and its image, if any."""
@@ -192,7 +202,7 @@ class ImportTab:
 
     def show_object(self, obj) -> None:
         self.object_info.set_text(
-            f"{obj.name}: outline {obj.area_mm2:.0f} mm^2, length {obj.length_mm:.1f} mm, "
+            f"{obj.name}: outline {obj.area_mm2:.0f} mm², length {obj.length_mm:.1f} mm, "
             f"height {obj.height_mm:g} mm, mass {obj.mass_kg * 1e3:.1f} g"
         )
 

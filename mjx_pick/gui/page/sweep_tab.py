@@ -8,7 +8,7 @@ from pathlib import Path
 from nicegui import ui
 
 from mjx_pick.gui import forms, jobs
-from mjx_pick.gui.formatting import fmt, stamp
+from mjx_pick.gui.formatting import column_label, fmt, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
@@ -94,7 +94,12 @@ class SweepTab:
         """A complete sweep: one row per value, and its plot."""
         variants = json.loads((out / "variants.json").read_text())
         keys = [k for k in variants[0] if k not in ("success_ci", "score_ci")]
-        self.table.columns = [{"name": k, "label": k, "field": k} for k in keys]
+        labels = {
+            f.key: f"{f.label} ({f.unit})" if f.unit else f.label for f in forms.SETTINGS_FIELDS
+        }
+        self.table.columns = [
+            {"name": k, "label": labels.get(k) or column_label(k), "field": k} for k in keys
+        ]
         self.table.rows = [{k: fmt(v[k]) for k in keys} for v in variants]
         self.table.update()
         show_picture(self.image, (out / "sweep.png").read_bytes())

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from nicegui import ui
 
-from mjx_pick.gui.formatting import fmt_cell
+from mjx_pick.gui.formatting import column_label, fmt_cell
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
 from mjx_pick.gui.views import data_uri
 
@@ -77,6 +77,8 @@ def need_object(state: PageState, where: ui.label) -> bool:
 
 def show_rows(table: ui.table, rows: list[dict], keys: list[str]) -> None:
     """Rows of a study's JSON in a table, one column per key."""
-    table.columns = [{"name": k, "label": k, "field": k, "align": "left"} for k in keys]
+    table.columns = [
+        {"name": k, "label": column_label(k), "field": k, "align": "left"} for k in keys
+    ]
     table.rows = [{k: fmt_cell(r.get(k)) for k in keys} for r in rows]
     table.update()
