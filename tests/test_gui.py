@@ -285,6 +285,18 @@ def test_paper_workflow(page, server):
     replay = page.get_by_test_id("replay").locator("img")
     replay.wait_for(timeout=TIMEOUT_MS)
     assert replay.get_attribute("src").startswith("data:image/gif;base64,")
+    # the score map on the outline: a click selects the pick-point drawn there
+    from mjx_pick.gui import views
+    from mjx_pick.outputs.reporting import Run
+
+    _, pixels = views.score_map_png(Run.load(run))
+    k = int(np.nanargmin(score))
+    img = page.get_by_test_id("score-map").locator("img")
+    scale = img.bounding_box()["width"] / img.evaluate("i => i.naturalWidth")
+    img.click(position={"x": pixels[k, 0] * scale, "y": pixels[k, 1] * scale})
+    worst = int(np.asarray(table["pick_id"])[k])
+    detail.filter(has_text=f"pick {worst} (rank").wait_for()
+    assert page.get_by_test_id("picks-table").locator("tbody tr.selected").count() == 1
     number(page, "n best and n worst", 2)
     page.get_by_test_id("export").click()
     assert wait_job(page, "report gui-run").startswith("complete")

@@ -75,6 +75,40 @@ def picks_png(obj: ObjectModel, picks: PickBatch) -> tuple[bytes, np.ndarray]:
     return _render(draw), drawn["pixels"]
 
 
+def score_map_png(run) -> tuple[bytes, np.ndarray]:
+    """A run's pick-points on its outline coloured by score (gripper centres, object
+    frame), and each pick-point's pixel in the PNG (rows in the run table's order)."""
+    t = run.table
+    x, y, yaw = (np.asarray(t[c], float) for c in ("x_mm", "y_mm", "yaw_deg"))
+    score = np.nan_to_num(np.asarray(t["score"], float), nan=0.0)
+    drawn = {}
+
+    def draw(path):
+        drawn["pixels"] = plots.draw_candidates(
+            run.outline,
+            x,
+            y,
+            yaw,
+            path,
+            values=score,
+            title=f"{len(x)} pick-points by score (gripper centres on the part, object frame)",
+        )
+
+    return _render(draw), drawn["pixels"]
+
+
+def highlighted(png: bytes, pixel) -> bytes:
+    """png with a red ring around pixel (column, row): the selected pick-point."""
+    import cv2
+
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+    if pixel is not None and np.all(np.isfinite(pixel)):
+        centre = (int(round(pixel[0])), int(round(pixel[1])))
+        cv2.circle(img, centre, 11, (0, 0, 220), 3, lineType=cv2.LINE_AA)
+    ok, out = cv2.imencode(".png", img)
+    return out.tobytes()
+
+
 def nearest_pick(pixels: np.ndarray, column: float, row: float, within: float = 12.0):
     """Index of the pick-point drawn nearest a click at (column, row) in the image's
     pixels, or None when none lies within `within` pixels."""

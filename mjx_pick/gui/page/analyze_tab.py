@@ -46,6 +46,7 @@ class AnalyzeTab:
     def __init__(self, state: PageState, panel: JobPanel):
         self.state, self.panel = state, panel
         panel.handle("report", self.ended)
+        self.map_png, self.map_pixels, self.map_ids = b"", None, []
         with ui.row().classes("w-full items-end"):
             self.run_dir = (
                 ui.input("evaluate output folder")
@@ -90,6 +91,12 @@ class AnalyzeTab:
                     )
                 self.downloads = ui.row()
             with ui.column().classes("grow"):
+                self.score_map = (
+                    ui.interactive_image(on_mouse=self.on_map_click, events=["click"])
+                    .classes("w-full max-w-xl cursor-pointer")
+                    .props('data-testid="score-map"')
+                )
+                self.score_map.set_visibility(False)
                 self.detail = ui.markdown("Select a pick-point.").props('data-testid="pick-detail"')
                 with ui.column().classes("w-full"):
                     self.force_image = (
@@ -160,6 +167,10 @@ class AnalyzeTab:
         self.table.rows = ranked_rows(opened)
         self.table.selected = []
         self.table.update()
+        self.map_png, self.map_pixels = views.score_map_png(opened)
+        self.map_ids = [int(v) for v in opened.table["pick_id"].to_pylist()]
+        self.score_map.set_source(views.data_uri(self.map_png, "image/png"))
+        self.score_map.set_visibility(True)
         self.detail.set_content("Select a pick-point (the table is ranked by score).")
         self.force_image.set_visibility(False)
         self.replay_image.set_visibility(False)
@@ -187,13 +198,31 @@ class AnalyzeTab:
             )
         return ""
 
+    async def on_map_click(self, e) -> None:
+        """A click on the score map selects the pick-point drawn nearest it."""
+        if self.state.run is None:
+            return
+        i = views.nearest_pick(self.map_pixels, e.image_x, e.image_y)
+        if i is None:
+            return
+        pid = self.map_ids[i]
+        row = next(r for r in self.table.rows if int(r["pick_id"]) == pid)
+        self.table.selected = [row]
+        self.table.update()
+        await self.show_pick(row)
+
     async def on_select(self, e) -> None:
         """A selected pick-point: its metrics, and if traced its force plot and replay."""
+        if e.selection and self.state.run is not None:
+            await self.show_pick(e.selection[0])
+
+    async def show_pick(self, row: dict) -> None:
+        """A pick-point's metrics, ringed on the map; if traced its force plot and replay."""
         opened = self.state.run
-        if not e.selection or opened is None:
-            return
-        row = e.selection[0]
         pid = int(row["pick_id"])
+        ring = self.map_pixels[self.map_ids.index(pid)]
+        png = views.highlighted(self.map_png, ring)
+        self.score_map.set_source(views.data_uri(png, "image/png"))
         full = opened.row(pid)
         lines = [
             f"**pick {pid}** (rank {row['rank']}): object x {full['x_mm']:.2f} mm, y "
