@@ -26,12 +26,13 @@ from pathlib import Path
 
 CANCEL_GRACE_S = 15.0  # after a SIGINT, how long a run may take to write and stop
 # The child runs the very package this server runs, and nothing else from where it or the
-# server was started. Python's isolated mode (-I) leaves the working directory,
-# PYTHONPATH and the user's site-packages off sys.path, so a folder named like the package
-# (or like one of its dependencies) in the server's working directory is never imported;
-# the package is then loaded from the folder the server imported it from (argv[1]), which
-# is not put on sys.path either. -u: unbuffered output (PYTHONUNBUFFERED is ignored in
-# isolated mode), so the log shows progress as it happens.
+# server was started. Python's isolated mode leaves the working directory (-P) and
+# PYTHONPATH (-E) off sys.path, so a folder named like the package (or like one of its
+# dependencies) in the server's working directory is never imported; the package is then
+# loaded from the folder the server imported it from (argv[1]), which is not put on
+# sys.path either. The user's site-packages stay as the server has them (-s only if the
+# server runs without): a `pip install --user` keeps its dependencies. -u: unbuffered
+# output (PYTHONUNBUFFERED is ignored under -E), so the log shows progress as it happens.
 # Python's Ctrl-C handler is installed whatever the child inherited: a server started in
 # the background of a non-interactive shell (a service, `... &`) ignores SIGINT, children
 # inherit that, and Python then installs no KeyboardInterrupt at all -- cancel would be a
@@ -60,7 +61,8 @@ def package_dir() -> Path:
 
 def child_argv(argv: list[str]) -> list[str]:
     """The child process's command line for the CLI arguments argv (see _CLI_FROM_PACKAGE)."""
-    return [sys.executable, "-I", "-u", "-c", _CLI_FROM_PACKAGE, str(package_dir()), *argv]
+    isolated = ["-E", "-P"] + (["-s"] if sys.flags.no_user_site else [])
+    return [sys.executable, *isolated, "-u", "-c", _CLI_FROM_PACKAGE, str(package_dir()), *argv]
 
 
 class Runs:
