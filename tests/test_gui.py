@@ -197,6 +197,8 @@ def field_error(page, label: str) -> str:
 
 def test_paper_workflow(page, server):
     """Upload, outline, gripper, test pick, pick-points, run, best pick, plot, PDF, sweep."""
+    from playwright.sync_api import expect
+
     _, work = server
     # 1 import: upload the block's top-down image, see segmentation and outline
     page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(BLOCK))
@@ -285,6 +287,16 @@ def test_paper_workflow(page, server):
     replay = page.get_by_test_id("replay").locator("img")
     replay.wait_for(timeout=TIMEOUT_MS)
     assert replay.get_attribute("src").startswith("data:image/gif;base64,")
+    # the replay in the page: the 3-D frame and the forces follow one time slider
+    frame = page.get_by_test_id("replay-frame").locator("img")
+    frame.wait_for(timeout=TIMEOUT_MS)
+    first = frame.get_attribute("src")
+    assert first.startswith("data:image/png;base64,")
+    assert page.locator(".nicegui-echart").filter(visible=True).count() == 1
+    slider = page.get_by_test_id("replay-time")
+    box = slider.bounding_box()
+    slider.click(position={"x": box["width"] - 2, "y": box["height"] / 2})  # near the end
+    expect(frame).not_to_have_attribute("src", first, timeout=60_000)
     # the score map on the outline: a click selects the pick-point drawn there
     from mjx_pick.gui import views
     from mjx_pick.outputs.reporting import Run

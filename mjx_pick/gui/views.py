@@ -9,6 +9,7 @@ Nothing here simulates: the outline is the ObjectModel's, the pick-point map is
 from __future__ import annotations
 
 import base64
+import io
 import tempfile
 from pathlib import Path
 
@@ -123,6 +124,44 @@ def force_png(trace: dict, grip_force_n: float, title: str) -> bytes:
     from mjx_pick.outputs.reporting import force_plot
 
     return _render(lambda path: force_plot(trace, grip_force_n, path, title=title))
+
+
+def replay_frame(scene_xml: Path, trace: dict, k: int) -> bytes:
+    """Row k of a recorded pick in 3-D (top and side cameras, the replay's), a PNG."""
+    from PIL import Image
+
+    from mjx_pick.outputs.reporting.animation import render_rows
+
+    (frame,) = render_rows(scene_xml, trace, [k])
+    buf = io.BytesIO()
+    Image.fromarray(frame).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def force_chart(trace: dict, grip_force_n: float) -> dict:
+    """The pad and table forces over time as ECharts options (the replay's plot; its
+    markLine is the replay's time)."""
+    t = [round(float(v), 4) for v in trace["t_s"]]
+
+    def series(name, key):
+        values = [round(float(v), 3) for v in trace[key]]
+        data = [list(p) for p in zip(t, values, strict=True)]
+        return {"name": name, "type": "line", "showSymbol": False, "data": data}
+
+    lines = [
+        series("left pad", "force_left_n"),
+        series("right pad", "force_right_n"),
+        series("object-table", "force_table_n"),
+    ]
+    lines[0]["markLine"] = {"symbol": "none", "animation": False, "data": [{"xAxis": t[0]}]}
+    return {
+        "animation": False,
+        "legend": {"top": 0},
+        "grid": {"left": 50, "right": 20, "top": 30, "bottom": 40},
+        "xAxis": {"type": "value", "name": "time, s", "nameLocation": "middle", "nameGap": 25},
+        "yAxis": {"type": "value", "name": f"force, N (F_d = {grip_force_n:g} N)"},
+        "series": lines,
+    }
 
 
 def replay_gif(scene_xml: Path, trace: dict, every: int = 12) -> bytes:

@@ -113,6 +113,23 @@ class AnalyzeTab:
                     )
                 self.force_image.set_visibility(False)
                 self.replay_image.set_visibility(False)
+                with ui.card().classes("w-full max-w-2xl") as self.replay_box:
+                    ui.label(
+                        "Replay in 3-D (the simulated model; top and side cameras) with the "
+                        "forces: move the time slider"
+                    ).classes("font-bold text-sm")
+                    self.frame = (
+                        ui.image()
+                        .props("no-transition no-spinner")
+                        .classes("w-full")
+                        .props('data-testid="replay-frame"')
+                    )
+                    self.time = ui.slider(min=0, max=1, step=1, value=0, on_change=self.on_time)
+                    self.time.props('label data-testid="replay-time"')
+                    self.chart = ui.echart({}).classes("w-full h-64")
+                self.replay_box.set_visibility(False)
+        self.replayed = None  # (scene.xml, trace) of the pick in the replay
+        self.rendering = False
         self.refresh_runs()
 
     def refresh_runs(self) -> None:
@@ -174,6 +191,8 @@ class AnalyzeTab:
         self.detail.set_content("Select a pick-point (the table is ranked by score).")
         self.force_image.set_visibility(False)
         self.replay_image.set_visibility(False)
+        self.replay_box.set_visibility(False)
+        self.replayed = None
         self.show_downloads()
         self.refresh_runs()
 
@@ -247,9 +266,11 @@ class AnalyzeTab:
             )
             self.force_image.set_visibility(False)
             self.replay_image.set_visibility(False)
+            self.replay_box.set_visibility(False)
             return
         trace = opened.trace(pid)
         f_d = float(opened.config["grasp"]["grip_force_n"])
+        await self.show_replay(opened.path / "scene.xml", trace, f_d)
         title = f"pick {pid}: score {fmt(full['score'])}, {full['failure']}"
         png = await run.io_bound(views.force_png, trace, f_d, title)
         show_picture(self.force_image, png)
@@ -260,6 +281,50 @@ class AnalyzeTab:
             self.error.set_text(str(err))
             return
         show_picture(self.replay_image, gif, "image/gif")
+
+    async def show_replay(self, scene_xml: Path, trace: dict, f_d: float) -> None:
+        """The replay of a traced pick: its first frame, the slider over its rows and
+        the forces, the slider's time marked on them."""
+        self.replayed = (scene_xml, trace)
+        self.chart.options.clear()
+        self.chart.options.update(views.force_chart(trace, f_d))
+        self.chart.update()
+        self.time.value = 0
+        self.time._props["max"] = len(trace["t_s"]) - 1  # noqa: SLF001 - no setter for it
+        self.time.update()
+        self.replay_box.set_visibility(True)
+        await self.draw_frame(0)
+
+    async def on_time(self, e) -> None:
+        if self.replayed is not None:
+            await self.draw_frame(int(e.value or 0))
+
+    async def draw_frame(self, k: int) -> None:
+        """Row k of the replayed trace: the 3-D frame and the time on the force plot; a
+        frame asked for while one renders is drawn after it (the latest wins)."""
+        scene_xml, trace = self.replayed
+        k = min(max(k, 0), len(trace["t_s"]) - 1)
+        self.chart.options["series"][0]["markLine"]["data"] = [
+            {"xAxis": round(float(trace["t_s"][k]), 4)}
+        ]
+        self.chart.update()
+        if self.rendering:
+            return
+        self.rendering = True
+        try:
+            while True:
+                try:
+                    png = await run.io_bound(views.replay_frame, scene_xml, trace, k)
+                except RuntimeError as err:  # no offscreen GL here: say so
+                    self.error.set_text(str(err))
+                    return
+                show_picture(self.frame, png)
+                latest = int(self.time.value or 0)
+                if latest == k or self.replayed is None or self.replayed[1] is not trace:
+                    return
+                k = min(max(latest, 0), len(trace["t_s"]) - 1)
+        finally:
+            self.rendering = False
 
     def export(self) -> None:
         """``mjx-pick report`` of the open run: templates, report, robot pick-points."""
