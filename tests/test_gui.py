@@ -51,19 +51,18 @@ def chromium_path() -> str:
     )
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
+def start_server(work: Path, log_path: Path) -> tuple[str, subprocess.Popen]:
+    """`mjx-pick gui` on a free port for the work folder; (its URL, its process)."""
     import nicegui  # noqa: F401 - the extras are required (never skipped): fail here
     import playwright  # noqa: F401
 
     from mjx_pick.gui import free_port
 
-    work = tmp_path_factory.mktemp("gui_work")
     port = free_port()
     # the server runs as a user would start it: NiceGUI switches to its own test mode
     # when it sees pytest's variable
     env = {k: v for k, v in os.environ.items() if k != "PYTEST_CURRENT_TEST"}
-    with (work.parent / "gui_server.log").open("wb") as log:
+    with log_path.open("wb") as log:
         proc = subprocess.Popen(
             [sys.executable, "-m", "mjx_pick.cli", "gui", "--no-browser", "--port", str(port)]
             + ["--workdir", str(work)],
@@ -81,15 +80,25 @@ def server(tmp_path_factory):
         except OSError:
             if proc.poll() is not None or time.monotonic() > deadline:
                 proc.kill()
-                text = (work.parent / "gui_server.log").read_text()
-                pytest.fail(f"the GUI did not start: {text}")
+                pytest.fail(f"the GUI did not start: {log_path.read_text()}")
             time.sleep(0.5)
-    yield url, work
+    return url, proc
+
+
+def stop_server(proc: subprocess.Popen) -> None:
     proc.send_signal(signal.SIGINT)
     try:
         proc.wait(30)
     except subprocess.TimeoutExpired:
         proc.kill()
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    work = tmp_path_factory.mktemp("gui_work")
+    url, proc = start_server(work, work.parent / "gui_server.log")
+    yield url, work
+    stop_server(proc)
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     shutil.copy(work.parent / "gui_server.log", ARTIFACTS / "gui_server.log")
 
@@ -188,6 +197,8 @@ def field_error(page, label: str) -> str:
 
 def test_paper_workflow(page, server):
     """Upload, outline, gripper, test pick, pick-points, run, best pick, plot, PDF, sweep."""
+    from playwright.sync_api import expect
+
     _, work = server
     # 1 import: upload the block's top-down image, see segmentation and outline
     page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(BLOCK))
@@ -276,6 +287,28 @@ def test_paper_workflow(page, server):
     replay = page.get_by_test_id("replay").locator("img")
     replay.wait_for(timeout=TIMEOUT_MS)
     assert replay.get_attribute("src").startswith("data:image/gif;base64,")
+    # the replay in the page: the 3-D frame and the forces follow one time slider
+    frame = page.get_by_test_id("replay-frame").locator("img")
+    frame.wait_for(timeout=TIMEOUT_MS)
+    first = frame.get_attribute("src")
+    assert first.startswith("data:image/png;base64,")
+    assert page.locator(".nicegui-echart").filter(visible=True).count() == 1
+    slider = page.get_by_test_id("replay-time")
+    box = slider.bounding_box()
+    slider.click(position={"x": box["width"] - 2, "y": box["height"] / 2})  # near the end
+    expect(frame).not_to_have_attribute("src", first, timeout=60_000)
+    # the score map on the outline: a click selects the pick-point drawn there
+    from mjx_pick.gui import views
+    from mjx_pick.outputs.reporting import Run
+
+    _, pixels = views.score_map_png(Run.load(run))
+    k = int(np.nanargmin(score))
+    img = page.get_by_test_id("score-map").locator("img")
+    scale = img.bounding_box()["width"] / img.evaluate("i => i.naturalWidth")
+    img.click(position={"x": pixels[k, 0] * scale, "y": pixels[k, 1] * scale})
+    worst = int(np.asarray(table["pick_id"])[k])
+    detail.filter(has_text=f"pick {worst} (rank").wait_for()
+    assert page.get_by_test_id("picks-table").locator("tbody tr.selected").count() == 1
     number(page, "n best and n worst", 2)
     page.get_by_test_id("export").click()
     assert wait_job(page, "report gui-run").startswith("complete")
@@ -354,7 +387,9 @@ def test_bad_inputs_are_shown_in_the_page(page, server, tmp_path):
     number(page, "stroke width (mm)", -5)
     page.get_by_label("P gain (mm/s per N)", exact=True).fill("")
     page.get_by_test_id("test-pick").click()
-    assert "stroke_mm = -5.0 is out of range" in field_error(page, "stroke width (mm)")
+    stroke = field_error(page, "stroke width (mm)")
+    assert stroke.startswith("stroke width (mm) = -5.0 is out of range")  # the form's words
+    assert "stroke_mm = -5.0 is out of range" in stroke  # and the details
     assert "P gain is required" in field_error(page, "P gain (mm/s per N)")
     number(page, "stroke width (mm)", 85)
     number(page, "P gain (mm/s per N)", 2)
@@ -448,9 +483,14 @@ def test_studies_compare_and_calibrate(page, server):
 
 def test_mesh_import_shows_its_outline(page, server):
     """A mesh (here a YCB marker in metres) instead of an image: its top-down outline."""
+    from playwright.sync_api import expect
+
     marker = ROOT / "mjx_pick" / "assets" / "objects" / "ycb" / "040_large_marker.stl"
+    # an image has a scale and a thickness, a mesh a unit: each form shows only its own
+    expect(page.get_by_label("mesh unit", exact=True)).to_be_hidden()
     page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(marker))
     page.get_by_text("uploaded 040_large_marker.stl").wait_for()
+    expect(page.get_by_label("image scale (px per mm)", exact=True)).to_be_hidden()
     choose(page, "mesh unit", "m")
     number(page, "mass (g)", 15.8)
     page.get_by_test_id("import").click()
@@ -463,3 +503,224 @@ def test_mesh_import_shows_its_outline(page, server):
     assert area == pytest.approx(marker_obj.area_mm2, abs=1)
     assert "mass 15.8 g" in info.inner_text()
     assert page.get_by_test_id("object-image").locator("img").is_visible()
+
+
+def import_shipped(page, name: str = "block") -> None:
+    """Tab 1: import a shipped object and wait for its outline."""
+    page.get_by_text("1 Import object model").click()
+    choose(page, "object", name)
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+
+
+def test_a_failed_import_leaves_no_object_behind(page, tmp_path):
+    """An import that fails must not leave the object imported before it in use."""
+    import cv2
+
+    import_shipped(page)
+    blank = tmp_path / "blank.png"  # decodes, but holds no object
+    cv2.imwrite(str(blank), np.full((200, 300, 3), 255, np.uint8))
+    page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(blank))
+    page.get_by_text("uploaded blank.png").wait_for()
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("import-error").filter(has_text="no object found").wait_for()
+    assert "No object imported" in page.get_by_test_id("object-info").inner_text()
+    assert not page.get_by_test_id("object-image").is_visible()
+    page.get_by_text("3 Generate input data").click()
+    page.get_by_test_id("generate").click()
+    page.get_by_test_id("generate-error").filter(has_text="import an object first").wait_for()
+    assert page.get_by_test_id("picks-info").inner_text() == ""
+
+
+def test_a_taken_run_name_is_refused_and_its_log_kept(page, server):
+    """A run name already in the work folder: refused before anything starts."""
+    _, work = server
+    (work / "taken").mkdir()
+    (work / "logs").mkdir(exist_ok=True)
+    (work / "logs" / "taken.log").write_text("the first run's log\n")
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 4)
+    page.get_by_label("run folder name").fill("taken")
+    page.get_by_test_id("start-batch").click()
+    page.locator(".q-field__messages").filter(has_text="already exists").wait_for()
+    assert "choose another name" in field_error(page, "run folder name")
+    assert page.get_by_label("run folder name").input_value() == "taken"
+    assert not page.get_by_test_id("job-title").is_visible()
+    assert (work / "logs" / "taken.log").read_text() == "the first run's log\n"
+    assert list((work / "taken").iterdir()) == []
+
+
+def test_a_pick_point_count_below_one_is_refused(page):
+    """n = 0 or -5 is refused with a message, never run as 1."""
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    for n in ("0", "-5", "2.5"):
+        number(page, "pick-points", n)
+        page.get_by_test_id("generate").click()
+        page.locator(".q-field__messages").filter(has_text="a whole number").wait_for()
+        assert "from 1 to 10,000,000" in field_error(page, "pick-points")
+        assert page.get_by_label("pick-points", exact=True).input_value() == n
+        assert page.get_by_test_id("picks-info").inner_text() == ""
+        number(page, "pick-points", 3)  # the message goes with the next check
+
+
+def test_one_frame_a_pick_clicked_on_the_map_is_tested_in_tab_2(page):
+    """The map draws gripper centres on the part (object frame); a click on one puts
+    that pick-point's own values -- the object's offset under the gripper, the frame of
+    the table and the test -- into tab 2, where it is feasible."""
+    from mjx_pick.core.gripper import load_gripper
+    from mjx_pick.core.objects import load_object
+    from mjx_pick.core.pickpoints import generate_normal
+    from mjx_pick.gui import views
+
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 6)
+    number(page, "seed", 0)
+    page.get_by_test_id("generate").click()
+    page.get_by_test_id("picks-info").filter(has_text="6 feasible pick-points").wait_for()
+    picks = generate_normal(load_object("block"), load_gripper("robotiq-2f85"), 6, 0)
+    _, pixels = views.picks_png(load_object("block"), picks)
+    k = 2
+    img = page.get_by_test_id("picks-map").locator("img")
+    img.wait_for()
+    natural = img.evaluate("i => i.naturalWidth")
+    box = img.bounding_box()
+    scale = box["width"] / natural
+    img.click(position={"x": pixels[k, 0] * scale, "y": pixels[k, 1] * scale})
+    page.get_by_text("2 Set gripper parameters").click()
+    expected = {
+        "object x under gripper (mm)": round(float(picks.x_mm[k]), 2),
+        "object y under gripper (mm)": round(float(picks.y_mm[k]), 2),
+        "object yaw under gripper (deg)": round(float(picks.yaw_deg[k]), 2),
+    }
+    for label, value in expected.items():
+        box = page.get_by_label(label, exact=True)
+        assert float(box.input_value()) == pytest.approx(value, abs=0.006), label
+    assert "offset under the gripper" in page.get_by_test_id("test-frame").inner_text()
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+    page.get_by_test_id("test-pick").click()
+    info = page.get_by_test_id("test-info")
+    info.filter(has_text="score").wait_for(timeout=TIMEOUT_MS)
+    assert "check: **feasible**" in info.inner_text() or "check: feasible" in info.inner_text()
+
+
+def test_a_generator_warning_is_shown_in_the_page(page):
+    """Asked for more pick-points than the part has feasible: the page says so."""
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 10_000_000)
+    page.get_by_test_id("generate").click()
+    page.get_by_test_id("picks-info").filter(has_text="feasible pick-points").wait_for(
+        timeout=TIMEOUT_MS
+    )
+    warning = page.get_by_test_id("picks-warning").inner_text()
+    assert re.search(r"warning: only \d+ of 10000000 pick-points are feasible", warning)
+
+
+def test_no_time_left_is_shown_once_the_server_is_gone(browser, tmp_path):
+    """A run's last progress line is not its state after the server stopped."""
+    from playwright.sync_api import expect
+
+    url, proc = start_server(tmp_path / "work", tmp_path / "server.log")
+    context = browser.new_context(viewport={"width": 1500, "height": 1000})
+    try:
+        page = context.new_page()
+        page.set_default_timeout(60_000)
+        page.goto(url)
+        import_shipped(page)
+        page.get_by_text("2 Set gripper parameters").click()
+        number(page, "lift height (mm)", 20)
+        number(page, "hold (s)", 0.1)
+        page.get_by_text("3 Generate input data").click()
+        number(page, "pick-points", 40)
+        number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+        page.get_by_label("run folder name").fill("orphan")
+        page.get_by_test_id("start-batch").click()
+        status = page.get_by_test_id("job-status")
+        status.filter(has_text=re.compile(r"s left")).wait_for(timeout=TIMEOUT_MS)
+        stop_server(proc)
+        expect(page.get_by_text("connection to the server lost")).to_be_visible()
+        expect(status).not_to_be_visible()
+    finally:
+        context.close()
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_checks_before_a_run_and_no_stale_messages(page, tmp_path):
+    """An impossible mass warns, a sweep value out of its range is refused before
+    anything starts, and old messages and pick-point counts do not stay."""
+    from playwright.sync_api import expect
+
+    fake = tmp_path / "photo.png"
+    fake.write_bytes(b"this is not a PNG" * 10)
+    page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(fake))
+    page.get_by_test_id("upload-error").filter(has_text="cannot be read as an image").wait_for()
+    choose(page, "object", "block")
+    number(page, "mass (g)", 1e9)
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+    assert "denser than any solid" in page.get_by_test_id("import-warning").inner_text()
+    assert page.get_by_test_id("upload-error").inner_text() == ""
+    number(page, "mass (g)", 43.2)
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="mass 43.2 g").wait_for()
+    assert page.get_by_test_id("import-warning").inner_text() == ""
+
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 6)
+    page.get_by_test_id("generate").click()
+    info = page.get_by_test_id("picks-info")
+    info.filter(has_text="6 feasible pick-points").wait_for()
+    number(page, "pick-points", 8)  # the map's count is no longer what would run
+    expect(info).to_have_text("")
+    expect(page.get_by_test_id("picks-map")).not_to_be_visible()
+
+    page.get_by_text("Parameter sweep").click()
+    number(page, "start", 0)
+    number(page, "end", 0.4)
+    number(page, "step", 0.2)
+    number(page, "simulations per value", 2)
+    page.get_by_label("run folder name").last.fill("zero-friction")
+    page.get_by_test_id("start-sweep").click()
+    error = page.get_by_test_id("sweep-error")
+    error.filter(has_text="cannot be simulated").wait_for()
+    assert "pad friction = 0" in error.inner_text()
+    assert not page.get_by_test_id("job-title").is_visible()
+
+
+def test_a_reload_brings_back_the_object_settings_and_run(page, server):
+    """Runs are the server's: a reloaded page re-attaches to the run its browser tab
+    started (and draws it when it ends), with the object and settings it had; tab 4
+    says a folder still being written is running."""
+    _, work = server
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+    number(page, "grip force F_d (N)", 45)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 40)
+    number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+    page.get_by_label("run folder name").fill("gui-reload")
+    page.get_by_test_id("start-batch").click()
+    page.get_by_test_id("job-title").filter(has_text="evaluate gui-reload").wait_for()
+    page.get_by_text("4 Analyze results").click()
+    page.get_by_label("evaluate output folder").fill(str(work / "gui-reload"))
+    page.get_by_test_id("open-run").click()
+    error = page.get_by_test_id("analyze-error")
+    error.filter(has_text="still running").wait_for()
+    assert "results.parquet" not in error.inner_text()
+
+    page.reload()
+    page.get_by_test_id("job-title").filter(has_text="evaluate gui-reload").wait_for()
+    page.get_by_test_id("object-info").filter(has_text="block: outline").wait_for()
+    page.get_by_text("2 Set gripper parameters").click()
+    assert page.get_by_label("grip force F_d (N)", exact=True).input_value() == "45"
+    status = wait_job(page, "evaluate gui-reload")
+    assert status.startswith("complete") and "40/40" in status, status
+    page.get_by_text("3 Generate input data").click()
+    page.get_by_test_id("run-summary").filter(has_text="success rate").wait_for()

@@ -1,6 +1,7 @@
 """The GUI's parts without a browser: form validation, uploads, runs and their cancel."""
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -233,9 +234,11 @@ def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
     from mjx_pick.gui.page.job_panel import JobPanel
 
     panel = JobPanel.__new__(JobPanel)  # its logic without a browser
-    panel.started, panel.job, panel.on_end = set(), None, None
+    panel.runs, panel.owner, panel.handlers = jobs.Runs(), None, {}
+    panel.job, panel.on_end, panel.others = None, None, _Shown()
     panel.title, panel.status, panel.bar = _Shown(), _Shown(), _Shown()
     panel.command, panel.cancel_button, panel.card = _Shown(), _Shown(), _Shown()
+    panel.warnings = _Shown()
     ended = []
     job = jobs.Job(["--version"], tmp_path / "version.log")
     panel.start("version", job, ended.append)
@@ -249,3 +252,100 @@ def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
     assert [p.state for p in ended] == ["complete"]
     assert panel.status.text.startswith("complete")
     assert not panel.busy(_Shown())
+
+
+def test_a_run_runs_the_servers_package_not_the_working_directorys(tmp_path, monkeypatch):
+    # a folder named like the package, or like one of its dependencies, where the server
+    # was started (or on PYTHONPATH) must not be what a run imports
+    here = tmp_path / "where-the-server-started"
+    (here / "mjx_pick" / "cli").mkdir(parents=True)
+    for init in ("mjx_pick/__init__.py", "mjx_pick/cli/__init__.py", "numpy.py"):
+        (here / init).write_text(f"raise SystemExit('imported the shadowing {init}')\n")
+    monkeypatch.chdir(here)
+    monkeypatch.setenv("PYTHONPATH", str(here))
+    job = jobs.Job(["evaluate", "--help"], tmp_path / "logs" / "help.log").start()
+    job.wait(120)
+    log = (tmp_path / "logs" / "help.log").read_text()
+    assert job.poll().state == "complete", log
+    assert "shadowing" not in log and "--chunk-size" in log
+
+
+def test_a_run_never_writes_over_another_runs_log(tmp_path):
+    log = tmp_path / "logs" / "run.log"
+    log.parent.mkdir()
+    log.write_text("the first run's log\n")
+    job = jobs.Job(["--version"], log).start()
+    job.wait(120)
+    assert log.read_text() == "the first run's log\n"
+    assert job.log == tmp_path / "logs" / "run-2.log"
+    assert job.poll().state == "complete" and "mjx-pick" in job.log.read_text()
+
+
+def test_evaluate_progress_counts_the_feasible_pick_points_and_never_goes_back(tmp_path):
+    # asked for 50, of which the run found 10 feasible (config.json's n), chunks of 2
+    out = tmp_path / "run"
+    (out / "chunks").mkdir(parents=True)
+    job = jobs.Job(["evaluate"], tmp_path / "run.log", out, total=50, chunk=64)
+    p = job.poll()
+    assert (p.done, p.total, p.message) == (0, 50, "checking the pick-points")
+    (out / "config.json").write_text(json.dumps({"n": 10, "chunk_size": 2}))
+    p = job.poll()
+    assert (p.done, p.total, p.rate) == (0, 10, None) and "first chunk" in p.message
+    for k in range(3):
+        part = out / "chunks" / f"part-{k:05d}.parquet"
+        part.write_bytes(b"")
+        os.utime(part, (1000.0 + k, 1000.0 + k))  # one chunk a second
+    p = job.poll()
+    assert (p.done, p.total) == (6, 10)
+    # the first chunk (compiling) starts the clock: 2 chunks of 2 in 2 s
+    assert p.rate == pytest.approx(2.0) and p.eta_s == pytest.approx(2.0)
+    for part in (out / "chunks").iterdir():  # a completing run removes its chunks
+        part.unlink()
+    assert job.poll().done == 6
+
+
+def test_a_runs_warnings_reach_the_page(tmp_path):
+    log = tmp_path / "run.log"
+    log.write_text(
+        "$ mjx-pick evaluate block --n 10000000\n"
+        "/x/evaluation.py:355: UserWarning: only 65732 of 10000000 pick-points are feasible\n"
+        "  picks_batch = pp.generate_normal(\n"
+    )
+    job = jobs.Job(["evaluate"], log)
+    assert job.poll().warnings == ("only 65732 of 10000000 pick-points are feasible",)
+
+
+def test_the_progress_chunk_moves_the_bar_every_2_percent():
+    from mjx_pick.gui.page.job_panel import status_line
+
+    assert [jobs.progress_chunk(n) for n in (1, 50, 51, 65_732)] == [1, 1, 2, 1315]
+    running = jobs.Progress("running", 3, 10, 2.0, 3.5, 9.0, "", "pick-points")
+    assert status_line(running) == (
+        "running, 3/10 pick-points, 2.0 pick-points per s, about 4 s left, 9 s"
+    )
+
+
+def test_a_sweep_value_outside_its_range_is_refused_before_the_run():
+    g = load_gripper("robotiq-2f85")
+    settings, _ = forms.build(values(), g)
+    assert forms.sweep_problem(settings, "contact.pad_friction", (0.4, 0.6)) == ""
+    problem = forms.sweep_problem(settings, "contact.pad_friction", (0.0, 0.4))
+    assert problem.startswith("pad friction = 0 cannot be simulated") and "0 <" in problem
+    problem = forms.sweep_problem(settings, "grasp.grip_force_n", (50, 500))
+    assert "grip force F_d = 500" in problem and "robotiq-2f85" in problem
+
+
+def test_messages_use_the_forms_words_with_the_details_after():
+    g = load_gripper("robotiq-2f85")
+    _, errors = forms.build(values(gripper__stroke_mm=-5.0, contact__pad_friction=0.0), g)
+    words, details = errors["gripper.stroke_mm"].split("\n")
+    assert words == (
+        "stroke width (mm) = -5.0 is out of range: allowed 0 < stroke width (mm) <= 1000"
+    )
+    assert details.startswith("(details: gripper[robotiq-2f85].stroke_mm = -5.0")
+    assert errors["contact.pad_friction"].startswith("pad friction = 0.0 is out of range")
+    assert forms.user_words("P gain is required") == "P gain is required"
+    from mjx_pick.gui.formatting import column_label
+
+    assert column_label("robust_p") == "success probability under the errors"
+    assert column_label("x_mm") == "object x under gripper (mm)"

@@ -15,6 +15,7 @@ load the web framework.
 
 from __future__ import annotations
 
+import uuid
 from pathlib import Path
 
 from mjx_pick.gui import jobs
@@ -31,9 +32,14 @@ TABS = (
 )
 
 
-def build_page(workdir: Path, started: set[jobs.Job]) -> PageState:
-    """One browser tab's page; started: the server's set of the jobs it started."""
-    from nicegui import ui
+def build_page(workdir: Path, runs: jobs.Runs, pages: dict | None = None) -> PageState:
+    """One browser tab's page.
+
+    runs: the server's runs; pages: the server's {browser tab id: (PageState,
+    SettingsForm)} of each browser tab's last page -- what a reload brings back (the
+    object, the open run, the settings; the run it started, from runs).
+    """
+    from nicegui import app, ui
 
     from mjx_pick.gui.page.analyze_tab import AnalyzeTab
     from mjx_pick.gui.page.generate_tab import GenerateTab
@@ -50,21 +56,47 @@ def build_page(workdir: Path, started: set[jobs.Job]) -> PageState:
         ui.label(f"runs in {workdir}").classes("text-xs opacity-80")
     with ui.tabs().classes("w-full") as tabs:
         tab = {name: ui.tab(name, label) for name, label in TABS}
-    panel = JobPanel(started)
+    panel = JobPanel(runs)
     analyze: AnalyzeTab | None = None  # built after the tab that opens runs in it
+    generate: GenerateTab | None = None  # built after the tab that imports objects
     with ui.tab_panels(tabs, value=tab["import"]).classes("w-full"):
         with ui.tab_panel(tab["import"]):
-            ImportTab(state)
+            import_tab = ImportTab(state, on_import=lambda: generate.forget_map())
         with ui.tab_panel(tab["gripper"]):
-            form = GripperTab(state, show=lambda: tabs.set_value("gripper")).form
+            gripper = GripperTab(state, show=lambda: tabs.set_value("gripper"))
+            form = gripper.form
         with ui.tab_panel(tab["generate"]):
-            GenerateTab(state, form, panel, on_complete=lambda out: analyze.open(out))
+            generate = GenerateTab(
+                state,
+                form,
+                panel,
+                on_complete=lambda out: analyze.open(out),
+                on_pick=gripper.use_pick,
+            )
         with ui.tab_panel(tab["analyze"]):
             analyze = AnalyzeTab(state, panel)
         with ui.tab_panel(tab["sweep"]):
             SweepTab(state, form, panel)
         with ui.tab_panel(tab["studies"]):
             StudiesTab(state, form, panel)
+
+    async def attach() -> None:
+        """Once the browser is connected: its tab's id, what its last page held, its run."""
+        await ui.context.client.connected()
+        tab_id = app.storage.tab.setdefault("mjx_pick_tab", uuid.uuid4().hex)
+        before = (pages or {}).get(tab_id)
+        if pages is not None:
+            pages[tab_id] = (state, form)
+        if before is not None:
+            old_state, old_form = before
+            form.restore(old_form)
+            if old_state.obj is not None:
+                await import_tab.restore(old_state.obj, old_state.obj_args)
+            if old_state.run is not None:
+                analyze.open(old_state.run.path)
+        panel.reattach(tab_id)
+
+    ui.timer(0.05, attach, once=True)
     # a bug in a handler: one line in the page, the traceback only in the server log
     ui.on_exception(
         lambda e: ui.notify(
@@ -82,14 +114,15 @@ def serve(host: str, port: int, workdir: Path, show: bool) -> None:
 
     workdir = Path(workdir).resolve()
     workdir.mkdir(parents=True, exist_ok=True)
-    started: set[jobs.Job] = set()  # kept while running, also after its tab closed
+    runs = jobs.Runs()  # server-side: they outlive the page (a reload finds them)
+    pages: dict = {}  # each browser tab's last page, by the tab's id
 
     @ui.page("/")
     def index() -> None:
-        build_page(workdir, started)
+        build_page(workdir, runs, pages)
 
     def stop_jobs() -> None:  # the server stops: runs stop as on Ctrl-C, keeping their parts
-        for job in list(started):
+        for job in runs:
             job.cancel()
 
     app.on_shutdown(stop_jobs)

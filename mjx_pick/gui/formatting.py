@@ -5,6 +5,36 @@ from __future__ import annotations
 import datetime
 import math
 
+# The one frame of every pick-point the page shows or takes: the object's planar pose
+# relative to the gripper's centre (the results table's x_mm, y_mm, yaw_deg)
+FRAME_NAME = "gripper frame (the object's offset under the gripper)"
+PICK_LABELS = {
+    "x_mm": "object x under gripper (mm)",
+    "y_mm": "object y under gripper (mm)",
+    "yaw_deg": "object yaw under gripper (deg)",
+}
+# the studies' result columns in the user's words (the JSON keys stay in the files)
+COLUMN_LABELS = {
+    **PICK_LABELS,
+    "pick_id": "pick",
+    "success_rate": "success rate",
+    "success_ci": "success rate, 95 % interval",
+    "score_mean": "mean score",
+    "score_ci": "mean score, 95 % interval",
+    "feasible": "feasible pick-points",
+    "p_vs_best": "chance the difference to the best is luck (p)",
+    "robust_p": "success probability under the errors",
+    "robust_ci_low": "its 95 % lower bound",
+    "landed": "draws with a finger on the part",
+    "n": "pick-points",
+    "successes": "successes",
+}
+
+
+def column_label(key: str) -> str:
+    """A result column's heading: its label, else the key with spaces."""
+    return COLUMN_LABELS.get(key, key.replace("_", " "))
+
 
 def stamp() -> str:
     """The time now, for default run folder names (``evaluate-20260101-120000``)."""

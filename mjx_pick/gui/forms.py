@@ -99,6 +99,27 @@ def defaults(gripper: GripperSpec) -> dict[str, float]:
     return {f.key: float(getattr(objs[f.section], f.name)) for f in SETTINGS_FIELDS}
 
 
+_INTERNAL = re.compile(
+    r"(?:gripper\[[^\]]*\]|grasp|picks|contact)\.(\w+)|\b("
+    + "|".join(f.name for f in SETTINGS_FIELDS)
+    + r")\b"
+)
+
+
+def user_words(message: str) -> str:
+    """A settings error in the form's words: each internal field name (``contact.pad_friction``,
+    ``gripper[robotiq-2f85].stroke_mm``, ``stroke_mm``) becomes its label and unit; the
+    message as the library wrote it follows as a details line."""
+    labels = {f.name: f"{f.label} ({f.unit})" if f.unit else f.label for f in SETTINGS_FIELDS}
+
+    def label(m: re.Match) -> str:
+        name = m.group(1) or m.group(2)
+        return labels.get(name, m.group(0))
+
+    words = _INTERNAL.sub(label, message)
+    return words if words == message else f"{words}\n(details: {message})"
+
+
 def field_of(message: str, section: str) -> str | None:
     """The form key a ConfigError message names (``grasp.grip_force_n = ...``), if any."""
     m = _NAMED.match(message)
@@ -142,7 +163,7 @@ def build(
         try:  # alone on the defaults: the field's own range
             dataclasses.replace(base[f.section], **{f.name: value})
         except ConfigError as err:
-            errors[f.key] = str(err)
+            errors[f.key] = user_words(str(err))
             continue
         changes[f.section][f.name] = value
     if errors:
@@ -152,7 +173,8 @@ def build(
         try:
             built[section] = dataclasses.replace(obj, **changes[section])
         except ConfigError as err:  # cross-field rules
-            errors[field_of(str(err), section) or _cross_field(section, str(err))] = str(err)
+            key = field_of(str(err), section) or _cross_field(section, str(err))
+            errors[key] = user_words(str(err))
     if errors:
         return None, errors
     if built["gripper"] != gripper and built["gripper"].name == gripper.name:
@@ -161,7 +183,7 @@ def build(
     try:
         built["grasp"].check_gripper(built["gripper"])
     except ConfigError as err:
-        errors[field_of(str(err), "grasp") or ""] = str(err)
+        errors[field_of(str(err), "grasp") or ""] = user_words(str(err))
         return None, errors
     return Settings(**built), {}
 
@@ -237,3 +259,25 @@ def sweep_values(start, end, step) -> tuple[tuple[float, ...] | None, dict]:
     if n > 50:
         return None, {"step": f"{n} values: at most 50 per sweep here (use the CLI for more)"}
     return tuple(round(start + i * step, 12) for i in range(n)), {}
+
+
+def sweep_problem(settings: Settings, name: str, values) -> str:
+    """Why a sweep of parameter name over values cannot run with these settings ('' if
+    it can): each value is checked as the sweep will set it (the parameter's range, the
+    rules between fields and against the gripper), before anything starts."""
+    from mjx_pick.engine.backend import Settings as RunSettings
+    from mjx_pick.studies.sweeps import apply, canonical
+
+    try:
+        key = canonical(name)
+    except ConfigError as err:
+        return str(err)
+    label = next((f.label for f in SETTINGS_FIELDS if f.key == key), key)
+    base = RunSettings(gripper=settings.gripper, contact=settings.contact, grasp=settings.grasp)
+    for value in values:
+        try:
+            varied = apply(base, key, value)
+            varied.grasp.check_gripper(varied.gripper)
+        except ConfigError as err:
+            return f"{label} = {value:g} cannot be simulated: {user_words(str(err))}"
+    return ""

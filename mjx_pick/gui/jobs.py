@@ -14,7 +14,8 @@ Progress of an evaluate run is read from its folder: each finished chunk is a fi
 from __future__ import annotations
 
 import dataclasses
-import os
+import json
+import math
 import re
 import shlex
 import signal
@@ -24,14 +25,76 @@ import time
 from pathlib import Path
 
 CANCEL_GRACE_S = 15.0  # after a SIGINT, how long a run may take to write and stop
-# the CLI with Python's Ctrl-C handler installed whatever it inherited: a server
-# started in the background of a non-interactive shell (a service, `... &`) ignores
-# SIGINT, children inherit that, and Python then installs no KeyboardInterrupt at all --
-# cancel would be a no-op (seen: a 200-pick run ran to its end after the SIGINT)
-_CLI_OBEYING_SIGINT = (
-    "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-    "from mjx_pick.cli import main; sys.exit(main(sys.argv[1:]))"
+# The child runs the very package this server runs, and nothing else from where it or the
+# server was started. Python's isolated mode leaves the working directory (-P) and
+# PYTHONPATH (-E) off sys.path, so a folder named like the package (or like one of its
+# dependencies) in the server's working directory is never imported; the package is then
+# loaded from the folder the server imported it from (argv[1]), which is not put on
+# sys.path either. The user's site-packages stay as the server has them (-s only if the
+# server runs without): a `pip install --user` keeps its dependencies. -u: unbuffered
+# output (PYTHONUNBUFFERED is ignored under -E), so the log shows progress as it happens.
+# Python's Ctrl-C handler is installed whatever the child inherited: a server started in
+# the background of a non-interactive shell (a service, `... &`) ignores SIGINT, children
+# inherit that, and Python then installs no KeyboardInterrupt at all -- cancel would be a
+# no-op (seen: a 200-pick run ran to its end after the SIGINT)
+_CLI_FROM_PACKAGE = """\
+import importlib.util, pathlib, signal, sys
+signal.signal(signal.SIGINT, signal.default_int_handler)
+pkg = pathlib.Path(sys.argv[1])
+spec = importlib.util.spec_from_file_location(
+    "mjx_pick", pkg / "__init__.py", submodule_search_locations=[str(pkg)]
 )
+module = importlib.util.module_from_spec(spec)
+sys.modules["mjx_pick"] = module
+spec.loader.exec_module(module)
+from mjx_pick.cli import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def package_dir() -> Path:
+    """The folder of the mjx_pick package this process runs (what a run's child loads)."""
+    import mjx_pick
+
+    return Path(mjx_pick.__file__).resolve().parent
+
+
+def child_argv(argv: list[str]) -> list[str]:
+    """The child process's command line for the CLI arguments argv (see _CLI_FROM_PACKAGE)."""
+    isolated = ["-E", "-P"] + (["-s"] if sys.flags.no_user_site else [])
+    return [sys.executable, *isolated, "-u", "-c", _CLI_FROM_PACKAGE, str(package_dir()), *argv]
+
+
+class Runs:
+    """The runs this server started: server-side state, shared by every page.
+
+    A page is one load of one browser tab; the runs outlive it. A reloaded tab finds
+    the run it started (by its browser tab's id), a second tab sees the others, and the
+    server stops the running ones when it stops.
+    """
+
+    def __init__(self) -> None:
+        self._jobs: list[Job] = []
+
+    def add(self, job: Job, owner: str | None) -> None:
+        job.owner = owner
+        self._jobs.append(job)
+
+    def __iter__(self):
+        return iter(list(self._jobs))
+
+    def last_of(self, owner: str | None) -> Job | None:
+        """The newest run the browser tab owner started, running or ended."""
+        mine = [j for j in self._jobs if owner is not None and j.owner == owner]
+        return mine[-1] if mine else None
+
+    def writing(self, folder: Path) -> Job | None:
+        """The run of this server still writing folder, if any."""
+        folder = Path(folder).resolve()
+        for job in reversed(self._jobs):
+            if job.running and job.out is not None and job.out.resolve() == folder:
+                return job
+        return None
 
 
 @dataclasses.dataclass
@@ -46,6 +109,7 @@ class Progress:
     elapsed_s: float
     message: str = ""
     unit: str = "pick-points"
+    warnings: tuple[str, ...] = ()  # the run's warnings (e.g. few feasible pick-points)
 
     @property
     def fraction(self) -> float | None:
@@ -81,7 +145,10 @@ class Job:
         self._proc: subprocess.Popen | None = None
         self._t0 = 0.0
         self._cancelled_at: float | None = None
-        self._chunks_before = 0
+        self._chunks_before: set[str] = set()
+        self._done = 0  # the most pick-points seen done: a count never goes back
+        self.title = " ".join(argv[:1])  # what the page calls it (set when it starts)
+        self.owner: str | None = None  # the browser tab that started it
 
     @property
     def command_line(self) -> str:
@@ -89,18 +156,20 @@ class Job:
         return shlex.join(["mjx-pick", *self.argv])
 
     def start(self) -> Job:
-        self.log.parent.mkdir(parents=True, exist_ok=True)
-        self._chunks_before = len(self._chunks())
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        """Start the run; its log never replaces another run's (a taken name gets -2, -3)."""
+        self.log = unused_path(self.log)
+        self._chunks_before = {f.name for f in self._chunks()}
         with self.log.open("wb") as fh:
             fh.write(f"$ {self.command_line}\n".encode())
             fh.flush()
+            # every path in argv is absolute: the working directory is the logs folder,
+            # never the one the server was started from
             self._proc = subprocess.Popen(
-                [sys.executable, "-c", _CLI_OBEYING_SIGINT, *self.argv],
+                child_argv(self.argv),
                 stdout=fh,
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
-                env=env,
+                cwd=self.log.parent,
             )
         self._t0 = time.monotonic()
         return self
@@ -130,42 +199,72 @@ class Job:
         if self._cancelled_at is not None and self.running:
             if now - self._cancelled_at > CANCEL_GRACE_S:
                 self._proc.kill()
+        code = self._proc.poll() if self._proc is not None else None
         done = rate = eta = None
+        total = self.total
+        message = ""
         if self.chunk and self.total:
-            files = self._chunks()
-            done = min(self.total, len(files) * self.chunk)
-            new = (len(files) - self._chunks_before) * self.chunk
-            started = self._run_started()
-            last = _newest_mtime(files)
-            if new > 0 and started is not None and last is not None:
-                # from the simulation's start to its newest finished chunk
-                rate = new / max(last - started, 1e-3)
-                eta = max(0.0, (self.total - done) / rate)
+            done, total, rate, message = self._evaluate_progress(code == 0)
+            if rate and code is None:
+                eta = max(0.0, (total - done) / rate)
         if self.steps_logged is not None and self.total:
             found = self.steps_logged.findall(self._log_text())
             done = min(self.total, int(found[-1]) + 1) if found else 0
-        code = self._proc.poll() if self._proc is not None else None
         if code is None:
             state = "running"
-            message = "stopping: finishing the current chunk" if self._cancelled_at else ""
+            if self._cancelled_at:
+                message = "stopping: finishing the current chunk"
         elif code == 0:
             state, message = "complete", ""
-            if self.total:
-                done = self.total
+            if total:
+                done = total
         elif self._cancelled_at is not None:
             state, message = "cancelled", "cancelled; what finished is kept"
         else:
             state, message = "failed", self.error_message(code)
-        return Progress(state, done, self.total, rate, eta, elapsed, message, self.unit)
+        return Progress(state, done, total, rate, eta, elapsed, message, self.unit, self.warnings())
 
-    def _run_started(self) -> float | None:
-        """When the simulation started: evaluate writes config.json just before it."""
-        if self.out is None:
-            return None
-        try:
-            return (self.out / "config.json").stat().st_mtime
-        except OSError:
-            return None
+    def _evaluate_progress(self, complete: bool):
+        """(done, total, rate, message) of an evaluate run, read from its folder.
+
+        total: the feasible pick-points the run simulates (config.json's n, written once
+        the checks are done; until then the number asked for); done: finished chunks
+        times the chunk size, never less than shown before (a complete run removes its
+        chunks); rate: pick-points per second of simulation -- the summary's once the run
+        is complete, before that the same measured between finished chunks (the first
+        chunk, which includes compiling, only starts the clock)."""
+        config = _read_json(self.out / "config.json") if self.out is not None else None
+        total, chunk = self.total, self.chunk
+        if config is not None and config.get("n"):
+            total, chunk = int(config["n"]), int(config.get("chunk_size") or chunk)
+        files = self._chunks()
+        self._done = min(total, max(self._done, len(files) * chunk))
+        message = ""
+        if config is None:
+            message = "checking the pick-points"
+        elif not files:
+            message = "simulating the first chunk (compiling first)"
+        rate = None
+        if complete:
+            summary = _read_json(self.out / "summary.json") or {}
+            rate = summary.get("picks_per_s")
+            self._done = total
+        else:
+            new = sorted(
+                t for f in files if f.name not in self._chunks_before for t in _mtimes([f])
+            )
+            if len(new) >= 2 and new[-1] > new[0]:
+                rate = (len(new) - 1) * chunk / (new[-1] - new[0])
+        return self._done, total, rate, message
+
+    def warnings(self) -> tuple[str, ...]:
+        """The run's warnings (Python's, in its log), each once, without the file and line."""
+        seen: list[str] = []
+        for m in _WARNING.finditer(self._log_text()):
+            text = m.group(1).strip()
+            if text not in seen:
+                seen.append(text)
+        return tuple(seen)
 
     def _log_text(self) -> str:
         try:
@@ -175,22 +274,85 @@ class Job:
 
     def error_message(self, code: int) -> str:
         """One line for the page: the CLI's own error line, else the exception's."""
-        lines = self._log_text().splitlines()
+        from mjx_pick.gui.forms import user_words
+
+        # paths inside the work folder as the page names them (relative to it)
+        work = f"{self.log.parent.parent}/"
+        lines = self._log_text().replace(work, "").splitlines()
+        log = self.log.relative_to(self.log.parent.parent)
         for line in reversed(lines):
             if "error: " in line and line.startswith("mjx-pick"):
-                return line.split("error: ", 1)[1].strip()
+                return user_words(line.split("error: ", 1)[1].strip())
         last = next((ln.strip() for ln in reversed(lines) if ln.strip()), "")
         # the exception's last line, never the traceback; the log keeps the rest
-        return f"the run stopped (exit code {code}): {last[-300:]}; full log: {self.log}"
+        return f"the run stopped (exit code {code}): {last[-300:]}; its log: {log}"
 
 
-def _newest_mtime(files: list[Path]) -> float | None:
-    """The newest modification time of files that still exist: a run that completes
-    removes its chunk files while the page may be reading them."""
+def unused_path(path: Path) -> Path:
+    """path, or path with -2, -3, ... before its suffix: the first that does not exist
+    (created empty here, so two runs started at once cannot take the same one)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for k in range(1, 10_000):
+        p = path if k == 1 else path.with_name(f"{path.stem}-{k}{path.suffix}")
+        try:
+            p.touch(exist_ok=False)
+        except FileExistsError:
+            continue
+        return p
+    raise FileExistsError(f"{path}: too many files of this name")
+
+
+_WARNING = re.compile(r"(?m)^\S*:\d+: \w*Warning: (.*)$")
+
+
+def _read_json(path: Path) -> dict | None:
+    """A JSON file the run writes atomically, or None while it is not there."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _mtimes(files: list[Path]) -> list[float]:
+    """The modification times of files that still exist: a run that completes removes
+    its chunk files while the page may be reading them."""
     times = []
     for f in files:
         try:
             times.append(f.stat().st_mtime)
         except FileNotFoundError:
             continue
-    return max(times, default=None)
+    return times
+
+
+def _newest_mtime(files: list[Path]) -> float | None:
+    """The newest modification time of files that still exist."""
+    return max(_mtimes(files), default=None)
+
+
+PROGRESS_STEPS = 50  # an evaluate run's bar moves at least every 2 % of its pick-points
+
+
+def progress_chunk(feasible: int) -> int:
+    """Pick-points per saved chunk of an evaluate run of `feasible` pick-points: the bar
+    moves once per chunk, so at least PROGRESS_STEPS chunks (a chunk of one at most)."""
+    return max(1, math.ceil(feasible / PROGRESS_STEPS))
+
+
+def feasible_estimate(obj, settings, n: int, seed: int, sample: int = 2000) -> int:
+    """How many of n asked pick-points an evaluate run will find feasible (it simulates
+    only those): exact when n <= sample, else from the feasible fraction of the first
+    `sample` candidates and the candidates the generator checks at most."""
+    import warnings
+
+    from mjx_pick.core.pickpoints import generate_normal
+
+    with warnings.catch_warnings():  # a short sample: its shortfall says nothing yet
+        warnings.simplefilter("ignore")
+        picks = generate_normal(
+            obj, settings.gripper, min(n, sample), seed, settings.picks, settings.grasp
+        )
+    if n <= sample or len(picks) < min(n, sample):
+        return len(picks)
+    fraction = len(picks) / max(picks.n_candidates, 1)
+    return int(min(n, fraction * settings.picks.max_candidates))

@@ -36,7 +36,9 @@ def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, b
     ]
     if reason != "feasible":
         return {
-            "text": "\n".join(head) + "\n- not simulated: the pick-point is infeasible",
+            "text": "\n".join(head)
+            + "\n- not simulated: the pick-point is infeasible. A feasible one: generate "
+            "pick-points in tab 3 and click one on its map.",
             "plot": None,
         }
     batch = checker.batch(np.array([0]), np.array([x]), np.array([y]), np.array([yaw]), "user")

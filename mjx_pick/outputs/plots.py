@@ -160,10 +160,16 @@ def draw_candidates(
     value_label: str = "score",
     title: str | None = None,
     max_points: int = 4000,
-) -> None:
+) -> np.ndarray:
     """Many pick-points on the silhouette (object frame): by reason label or by value.
 
+    Each pick-point (x, y, yaw: the object's offset under the gripper, gripper frame) is
+    drawn where the gripper's centre lies on the part, with its closing axis.
+
     obj: the object, or just its silhouette polygon (mm, object frame).
+    Returns: (N, 2) pixel positions (column, row from the top left) of the drawn gripper
+    centres in the PNG written, NaN for those left out (beyond max_points); a viewer
+    finds the pick-point under a click with them.
     """
     outline = getattr(obj, "polygon", obj)
     centre, axis = gripper_in_object_frame(x_mm, y_mm, yaw_deg)
@@ -204,11 +210,19 @@ def draw_candidates(
     ax.set_xlim(-r, r)
     ax.set_ylim(-r, r)
     ax.set_aspect("equal")
-    ax.set_xlabel("object x, mm")
-    ax.set_ylabel("object y, mm")
+    ax.set_xlabel("x on the part, mm (object frame)")
+    ax.set_ylabel("y on the part, mm (object frame)")
     ax.set_title(
         title
-        or f"{getattr(obj, 'name', 'object')}: {n} pick-points (gripper centres, closing axes)"
+        or f"{getattr(obj, 'name', 'object')}: {n} pick-points (gripper centres on the part, "
+        "closing axes)",
+        fontsize=10,
     )
     fig.tight_layout()
-    save_png(fig, path)
+    dpi = 120
+    save_png(fig, path, dpi=dpi)
+    shown = ax.transData.transform(centre[keep]) * (dpi / fig.dpi)
+    pixels = np.full((n, 2), np.nan)
+    pixels[keep, 0] = shown[:, 0]
+    pixels[keep, 1] = fig.get_figheight() * dpi - shown[:, 1]
+    return pixels

@@ -15,7 +15,7 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs, views
-from mjx_pick.gui.formatting import fmt
+from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS, fmt
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.widgets import error_label, show_picture, whole
 from mjx_pick.gui.state import PageState
@@ -23,9 +23,9 @@ from mjx_pick.gui.state import PageState
 TABLE_COLUMNS = (
     ("rank", "rank"),
     ("pick_id", "pick"),
-    ("x_mm", "x, mm"),
-    ("y_mm", "y, mm"),
-    ("yaw_deg", "yaw, deg"),
+    ("x_mm", PICK_LABELS["x_mm"]),
+    ("y_mm", PICK_LABELS["y_mm"]),
+    ("yaw_deg", PICK_LABELS["yaw_deg"]),
     ("score", "score"),
     ("success", "success"),
     ("failure", "outcome"),
@@ -45,6 +45,8 @@ DOWNLOADS = (
 class AnalyzeTab:
     def __init__(self, state: PageState, panel: JobPanel):
         self.state, self.panel = state, panel
+        panel.handle("report", self.ended)
+        self.map_png, self.map_pixels, self.map_ids = b"", None, []
         with ui.row().classes("w-full items-end"):
             self.run_dir = (
                 ui.input("evaluate output folder")
@@ -79,7 +81,7 @@ class AnalyzeTab:
                         on_select=self.on_select,
                     )
                     .classes("w-full")
-                    .props('dense data-testid="picks-table"')
+                    .props('dense wrap-cells data-testid="picks-table"')
                 )
                 with ui.row().classes("items-end"):
                     self.export_n = ui.number("n best and n worst", value=3, step=1).classes("w-40")
@@ -89,6 +91,12 @@ class AnalyzeTab:
                     )
                 self.downloads = ui.row()
             with ui.column().classes("grow"):
+                self.score_map = (
+                    ui.interactive_image(on_mouse=self.on_map_click, events=["click"])
+                    .classes("w-full max-w-xl cursor-pointer")
+                    .props('data-testid="score-map"')
+                )
+                self.score_map.set_visibility(False)
                 self.detail = ui.markdown("Select a pick-point.").props('data-testid="pick-detail"')
                 with ui.column().classes("w-full"):
                     self.force_image = (
@@ -105,6 +113,23 @@ class AnalyzeTab:
                     )
                 self.force_image.set_visibility(False)
                 self.replay_image.set_visibility(False)
+                with ui.card().classes("w-full max-w-2xl") as self.replay_box:
+                    ui.label(
+                        "Replay in 3-D (the simulated model; top and side cameras) with the "
+                        "forces: move the time slider"
+                    ).classes("font-bold text-sm")
+                    self.frame = (
+                        ui.image()
+                        .props("no-transition no-spinner")
+                        .classes("w-full")
+                        .props('data-testid="replay-frame"')
+                    )
+                    self.time = ui.slider(min=0, max=1, step=1, value=0, on_change=self.on_time)
+                    self.time.props('label data-testid="replay-time"')
+                    self.chart = ui.echart({}).classes("w-full h-64")
+                self.replay_box.set_visibility(False)
+        self.replayed = None  # (scene.xml, trace) of the pick in the replay
+        self.rendering = False
         self.refresh_runs()
 
     def refresh_runs(self) -> None:
@@ -136,6 +161,10 @@ class AnalyzeTab:
 
         self.error.set_text("")
         path = Path((self.run_dir.value or "").strip()).expanduser()
+        unfinished = self.unfinished(path)
+        if unfinished:
+            self.error.set_text(unfinished)
+            return
         try:
             opened = Run.load(path)
         except ConfigError as err:
@@ -155,24 +184,69 @@ class AnalyzeTab:
         self.table.rows = ranked_rows(opened)
         self.table.selected = []
         self.table.update()
+        self.map_png, self.map_pixels = views.score_map_png(opened)
+        self.map_ids = [int(v) for v in opened.table["pick_id"].to_pylist()]
+        self.score_map.set_source(views.data_uri(self.map_png, "image/png"))
+        self.score_map.set_visibility(True)
         self.detail.set_content("Select a pick-point (the table is ranked by score).")
         self.force_image.set_visibility(False)
         self.replay_image.set_visibility(False)
+        self.replay_box.set_visibility(False)
+        self.replayed = None
         self.show_downloads()
         self.refresh_runs()
 
+    def unfinished(self, path: Path) -> str:
+        """Why an evaluate folder has no results to open yet ('' if it may have)."""
+        from mjx_pick.outputs.rundir import read_manifest
+
+        if self.panel.runs.writing(path) is not None:
+            return f"{path.name} is still running: it opens here when it is complete"
+        m = read_manifest(path) or {}
+        if m.get("command") != "evaluate" or (path / "results.parquet").is_file():
+            return ""
+        if m.get("status") == "running":
+            return (
+                f"{path.name} has no results yet: it is still running in another process, "
+                "or it stopped without finishing"
+            )
+        if m.get("status") in ("interrupted", "cancelled"):
+            return (
+                f"{path.name} was stopped before it finished: continue it in tab 3 (run "
+                f"folder name {path.name}, resume ticked)"
+            )
+        return ""
+
+    async def on_map_click(self, e) -> None:
+        """A click on the score map selects the pick-point drawn nearest it."""
+        if self.state.run is None:
+            return
+        i = views.nearest_pick(self.map_pixels, e.image_x, e.image_y)
+        if i is None:
+            return
+        pid = self.map_ids[i]
+        row = next(r for r in self.table.rows if int(r["pick_id"]) == pid)
+        self.table.selected = [row]
+        self.table.update()
+        await self.show_pick(row)
+
     async def on_select(self, e) -> None:
         """A selected pick-point: its metrics, and if traced its force plot and replay."""
+        if e.selection and self.state.run is not None:
+            await self.show_pick(e.selection[0])
+
+    async def show_pick(self, row: dict) -> None:
+        """A pick-point's metrics, ringed on the map; if traced its force plot and replay."""
         opened = self.state.run
-        if not e.selection or opened is None:
-            return
-        row = e.selection[0]
         pid = int(row["pick_id"])
+        ring = self.map_pixels[self.map_ids.index(pid)]
+        png = views.highlighted(self.map_png, ring)
+        self.score_map.set_source(views.data_uri(png, "image/png"))
         full = opened.row(pid)
         lines = [
-            f"**pick {pid}** (rank {row['rank']}): x {full['x_mm']:.2f} mm, y "
-            f"{full['y_mm']:.2f} mm, yaw {full['yaw_deg']:.1f} deg, opening "
-            f"{full['opening_mm']:.1f} mm",
+            f"**pick {pid}** (rank {row['rank']}): object x {full['x_mm']:.2f} mm, y "
+            f"{full['y_mm']:.2f} mm, yaw {full['yaw_deg']:.1f} deg under the gripper "
+            f"({FRAME_NAME}), opening {full['opening_mm']:.1f} mm",
             "",
             f"- score (eq. 2): **{fmt(full['score'])}**, success: **{full['success']}**, "
             f"outcome: {full['failure']}",
@@ -192,9 +266,11 @@ class AnalyzeTab:
             )
             self.force_image.set_visibility(False)
             self.replay_image.set_visibility(False)
+            self.replay_box.set_visibility(False)
             return
         trace = opened.trace(pid)
         f_d = float(opened.config["grasp"]["grip_force_n"])
+        await self.show_replay(opened.path / "scene.xml", trace, f_d)
         title = f"pick {pid}: score {fmt(full['score'])}, {full['failure']}"
         png = await run.io_bound(views.force_png, trace, f_d, title)
         show_picture(self.force_image, png)
@@ -205,6 +281,50 @@ class AnalyzeTab:
             self.error.set_text(str(err))
             return
         show_picture(self.replay_image, gif, "image/gif")
+
+    async def show_replay(self, scene_xml: Path, trace: dict, f_d: float) -> None:
+        """The replay of a traced pick: its first frame, the slider over its rows and
+        the forces, the slider's time marked on them."""
+        self.replayed = (scene_xml, trace)
+        self.chart.options.clear()
+        self.chart.options.update(views.force_chart(trace, f_d))
+        self.chart.update()
+        self.time.value = 0
+        self.time._props["max"] = len(trace["t_s"]) - 1  # noqa: SLF001 - no setter for it
+        self.time.update()
+        self.replay_box.set_visibility(True)
+        await self.draw_frame(0)
+
+    async def on_time(self, e) -> None:
+        if self.replayed is not None:
+            await self.draw_frame(int(e.value or 0))
+
+    async def draw_frame(self, k: int) -> None:
+        """Row k of the replayed trace: the 3-D frame and the time on the force plot; a
+        frame asked for while one renders is drawn after it (the latest wins)."""
+        scene_xml, trace = self.replayed
+        k = min(max(k, 0), len(trace["t_s"]) - 1)
+        self.chart.options["series"][0]["markLine"]["data"] = [
+            {"xAxis": round(float(trace["t_s"][k]), 4)}
+        ]
+        self.chart.update()
+        if self.rendering:
+            return
+        self.rendering = True
+        try:
+            while True:
+                try:
+                    png = await run.io_bound(views.replay_frame, scene_xml, trace, k)
+                except RuntimeError as err:  # no offscreen GL here: say so
+                    self.error.set_text(str(err))
+                    return
+                show_picture(self.frame, png)
+                latest = int(self.time.value or 0)
+                if latest == k or self.replayed is None or self.replayed[1] is not trace:
+                    return
+                k = min(max(latest, 0), len(trace["t_s"]) - 1)
+        finally:
+            self.rendering = False
 
     def export(self) -> None:
         """``mjx-pick report`` of the open run: templates, report, robot pick-points."""
@@ -222,7 +342,14 @@ class AnalyzeTab:
         if not self.export_anim.value:
             argv.append("--no-animations")
         job = jobs.Job(argv, self.state.log(f"{opened.path.name}-report"))
-        self.panel.start(f"report {opened.path.name}", job, lambda p: self.show_downloads())
+        self.panel.start(f"report {opened.path.name}", job)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        """A report ended: its run open here (also after a reload), with its downloads."""
+        run = Path(job.argv[1])
+        if self.state.run is None or self.state.run.path != run:
+            self.open(run)
+        self.show_downloads()
 
     def show_downloads(self) -> None:
         """A download button for each file the report wrote into the open run."""

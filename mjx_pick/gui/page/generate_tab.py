@@ -7,7 +7,7 @@ a cancelled run is set up to be resumed, a complete one is opened in tab 4.
 from __future__ import annotations
 
 import json
-import math
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -21,17 +21,21 @@ from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
     error_label,
     need_object,
-    picture,
     run_folder,
-    show_picture,
     whole,
 )
 from mjx_pick.gui.state import PageState
 
 
-def default_chunk(n: int) -> int:
-    """Pick-points per saved part: n/20, at least 64 (chunk overheads stay small)."""
-    return max(64, math.ceil(n / 20))
+def sample_picks(obj, settings, n: int, seed: int):
+    """The pick-points of tab 3's map and the warnings their generator gave (in the page,
+    not only in the server's log)."""
+    from mjx_pick.core.pickpoints import generate_normal
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        picks = generate_normal(obj, settings.gripper, n, seed, settings.picks, settings.grasp)
+    return picks, [str(w.message) for w in caught]
 
 
 class GenerateTab:
@@ -41,14 +45,22 @@ class GenerateTab:
         form: SettingsForm,
         panel: JobPanel,
         on_complete: Callable[[Path], None],
+        on_pick: Callable[[float, float, float, str], None],
     ):
-        """on_complete(folder): a complete evaluate run's folder (opened in tab 4)."""
+        """on_complete(folder): a complete evaluate run's folder (opened in tab 4);
+        on_pick(x, y, yaw, what): a pick-point clicked on the map (for tab 2's test)."""
         self.state, self.form, self.panel = state, form, panel
-        self.on_complete = on_complete
+        self.on_complete, self.on_pick = on_complete, on_pick
+        panel.handle("evaluate", self.ended)
+        self.picks = None  # the pick-points drawn on the map, and where
+        self.pixels = None
+        self.drawn_for = None  # (object, settings, n, seed) of the map's pick-points
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
-                self.n = ui.number("pick-points", value=200, step=1, min=1).props('data-testid="n"')
-                self.seed = ui.number("seed", value=0, step=1)
+                self.n = ui.number(
+                    "pick-points", value=200, step=1, on_change=self.forget_map
+                ).props('data-testid="n"')
+                self.seed = ui.number("seed", value=0, step=1, on_change=self.forget_map)
                 self.traces = ui.number("traced best and worst (force plots)", value=3, step=1)
                 self.chunk = ui.number(
                     "chunk (pick-points per saved part; empty: automatic)", value=None, step=1
@@ -64,7 +76,22 @@ class GenerateTab:
                 self.error = error_label().props('data-testid="generate-error"')
             with ui.column().classes("grow"):
                 self.picks_info = ui.label("").props('data-testid="picks-info"')
-                self.picks_image = picture()
+                self.picks_warning = ui.label("").classes("text-warning text-sm")
+                self.picks_warning.props('data-testid="picks-warning"')
+                self.map_help = ui.label(
+                    "The map shows where the gripper's centre lands on the part (object "
+                    "frame, as the outline of tab 1). Every pick-point value in the page -- "
+                    "tab 2's test, tab 4's table, the exports -- is the object's offset "
+                    "under the gripper instead (gripper frame). Click a pick-point on the "
+                    "map to put it into tab 2's test simulation."
+                ).classes("text-xs max-w-2xl")
+                self.map_help.set_visibility(False)
+                self.picks_image = (
+                    ui.interactive_image(on_mouse=self.on_map_click, events=["click"])
+                    .classes("w-full max-w-2xl cursor-pointer")
+                    .props('data-testid="picks-map"')
+                )
+                self.picks_image.set_visibility(False)
                 self.run_summary = ui.markdown("").props('data-testid="run-summary"')
 
     def pick_numbers(self) -> tuple[int, int] | None:
@@ -74,8 +101,6 @@ class GenerateTab:
 
     async def generate(self) -> None:
         """Sample the pick-points (in a worker thread) and draw them on the outline."""
-        from mjx_pick.core.pickpoints import generate_normal
-
         self.error.set_text("")
         if not need_object(self.state, self.error):
             return
@@ -87,34 +112,74 @@ class GenerateTab:
         obj = self.state.obj
         self.picks_info.set_text("generating ...")
         try:
-            picks = await run.io_bound(
-                generate_normal, obj, settings.gripper, n, seed, settings.picks, settings.grasp
-            )
-            png = await run.io_bound(views.picks_png, obj, picks)
+            picks, warned = await run.io_bound(sample_picks, obj, settings, n, seed)
+            png, pixels = await run.io_bound(views.picks_png, obj, picks)
         except ConfigError as err:
             self.picks_info.set_text("")
             self.error.set_text(str(err))
             return
+        self.picks, self.pixels = picks, pixels
+        self.drawn_for = (obj, settings, n, seed)
+        self.picks_warning.set_text("warning: " + "; ".join(warned) if warned else "")
         rejected = ", ".join(f"{k} {v}" for k, v in picks.rejected.items() if v)
         self.picks_info.set_text(
             f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates checked "
             f"(rejected: {rejected or 'none'})"
         )
-        show_picture(self.picks_image, png)
+        self.picks_image.set_source(views.data_uri(png, "image/png"))
+        self.picks_image.set_visibility(True)
+        self.map_help.set_visibility(True)
 
-    def start_evaluate(self) -> None:
+    def forget_map(self, _=None) -> None:
+        """The map and its count no longer show what would run (another n, seed or
+        object): hidden until Generate draws them again."""
+        if self.picks is None:
+            return
+        self.picks = self.pixels = self.drawn_for = None
+        self.picks_info.set_text("")
+        self.picks_warning.set_text("")
+        self.picks_image.set_visibility(False)
+        self.map_help.set_visibility(False)
+
+    def on_map_click(self, e) -> None:
+        """The pick-point nearest a click on the map, into tab 2's test simulation."""
+        if self.picks is None:
+            return
+        i = views.nearest_pick(self.pixels, e.image_x, e.image_y)
+        if i is None:
+            return
+        p = self.picks
+        x, y, yaw = (round(float(v[i]), 2) for v in (p.x_mm, p.y_mm, p.yaw_deg))
+        self.on_pick(x, y, yaw, f"pick-point {int(p.pick_id[i])} of tab 3's map")
+
+    async def start_evaluate(self) -> None:
         """``mjx-pick evaluate`` with the page's object, settings and numbers."""
         self.error.set_text("")
         if self.panel.busy(self.error) or not need_object(self.state, self.error):
             return
         settings = self.form.read()
         numbers = self.pick_numbers()
-        out = run_folder(self.state, self.run_name)
+        out = run_folder(self.state, self.run_name, resume=bool(self.resume.value))
         if settings is None or numbers is None or out is None:
             return
         n, seed = numbers
         traces = int(self.traces.value or 0)
-        chunk = int(self.chunk.value) if self.chunk.value else default_chunk(n)
+        if self.chunk.value:
+            chunk = int(self.chunk.value)
+        else:  # the bar moves every 2 % of the pick-points the run will simulate
+            obj = self.state.obj
+            drawn = self.drawn_for
+            if drawn is not None and drawn[0] is obj and drawn[1:] == (settings, n, seed):
+                feasible = len(self.picks)
+            else:
+                try:
+                    feasible = await run.io_bound(jobs.feasible_estimate, obj, settings, n, seed)
+                except ConfigError as err:
+                    self.error.set_text(str(err))
+                    return
+            chunk = jobs.progress_chunk(feasible)
+        if self.panel.busy(self.error):  # another start while this one was estimating
+            return
         flags = self.form.cli_flags(settings, self.state.workdir, out)
         argv = ["evaluate", *self.state.obj_args, *flags]
         argv += ["--n", str(n), "--seed", str(seed), "--traces", str(max(traces, 0))]
@@ -123,28 +188,30 @@ class GenerateTab:
             argv.append("--resume")
         self.run_summary.set_content("")
 
-        def done(progress: jobs.Progress) -> None:
-            if progress.state == "cancelled":  # ready to continue: same folder, resume
-                self.run_name.value = out.name
-                self.resume.value = True
-                self.run_summary.set_content(
-                    f"**{out.name}**: cancelled; its finished chunks are kept. Start the "
-                    "batch again (resume is ticked) to continue it."
-                )
-                return
-            if progress.state != "complete":
-                return
-            from mjx_pick.core.metrics import rate_text
-
-            self.resume.value = False
-            s = json.loads((out / "summary.json").read_text())
-            self.run_summary.set_content(
-                f"**{out.name}**: success rate {rate_text(s['successes'], s['n'])}, "
-                f"mean score {fmt(s['score_mean'])}, "
-                f"{s['picks_per_s']} pick-points/s on {s['backend']}. Open tab 4."
-            )
-            self.on_complete(out)
-
         job = jobs.Job(argv, self.state.log(out.name), out, n, chunk)
-        self.panel.start(f"evaluate {out.name}", job, done)
-        self.run_name.value = f"evaluate-{stamp()}"
+        self.panel.start(f"evaluate {out.name}", job)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        """An evaluate run ended (also one started before a reload of the page)."""
+        out = job.out
+        if progress.state == "cancelled":  # ready to continue: same folder, resume
+            self.run_name.value = out.name
+            self.resume.value = True
+            self.run_summary.set_content(
+                f"**{out.name}**: cancelled; its finished chunks are kept. Start the "
+                "batch again (resume is ticked) to continue it."
+            )
+            return
+        if progress.state != "complete":
+            return
+        from mjx_pick.core.metrics import rate_text
+
+        self.resume.value = False
+        self.run_name.value = f"evaluate-{stamp()}"  # this name is taken now
+        s = json.loads((out / "summary.json").read_text())
+        self.run_summary.set_content(
+            f"**{out.name}**: success rate {rate_text(s['successes'], s['n'])}, "
+            f"mean score {fmt(s['score_mean'])}, "
+            f"{s['picks_per_s']} pick-points/s on {s['backend']}. Open tab 4."
+        )
+        self.on_complete(out)

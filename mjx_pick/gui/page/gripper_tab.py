@@ -11,10 +11,14 @@ from collections.abc import Callable
 from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
+from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS
 from mjx_pick.gui.one_pick import simulate_one_pick
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import error_label, need_object, picture, show_picture
 from mjx_pick.gui.state import PageState
+
+# one frame for every pick-point the page shows or takes (named in formatting)
+FRAME = FRAME_NAME[0].upper() + FRAME_NAME[1:]
 
 
 class GripperTab:
@@ -26,16 +30,29 @@ class GripperTab:
                 self.form = SettingsForm(show)
             with ui.column().classes("grow"):
                 ui.label("Test simulation of one pick-point").classes("font-bold")
+                ui.label(
+                    f"{FRAME}: where the object's centre (the + of tab 1) lies from the "
+                    "gripper's centre, x along the fingers' closing direction, and the "
+                    "object's rotation. Tab 4's table and the exports use it too; a click "
+                    "on tab 3's map fills it in."
+                ).classes("text-xs max-w-xl").props('data-testid="test-frame"')
                 with ui.row():
-                    self.x = ui.number("x (mm)", value=0.0, step=1).classes("w-24")
-                    self.y = ui.number("y (mm)", value=0.0, step=1).classes("w-24")
-                    self.yaw = ui.number("yaw (deg)", value=0.0, step=5).classes("w-24")
+                    self.x = ui.number(PICK_LABELS["x_mm"], value=0.0, step=1).classes("w-56")
+                    self.y = ui.number(PICK_LABELS["y_mm"], value=0.0, step=1).classes("w-56")
+                    self.yaw = ui.number(PICK_LABELS["yaw_deg"], value=0.0, step=5).classes("w-56")
                 ui.button("Test simulation", on_click=self.test_pick).props(
                     'data-testid="test-pick"'
                 )
                 self.error = error_label().props('data-testid="test-pick-error"')
                 self.info = ui.markdown("").props('data-testid="test-info"')
                 self.plot = picture()
+
+    def use_pick(self, x: float, y: float, yaw: float, what: str) -> None:
+        """A pick-point chosen elsewhere (tab 3's map) into the test fields."""
+        self.x.value, self.y.value, self.yaw.value = x, y, yaw
+        self.info.set_content(f"{what}: press Test simulation")
+        self.plot.set_visibility(False)
+        ui.notify(f"{what} ({x:g}, {y:g}, {yaw:g}) is in tab 2's test simulation")
 
     async def test_pick(self) -> None:
         """Check and simulate the pick-point of the x, y and yaw fields, in a worker thread."""

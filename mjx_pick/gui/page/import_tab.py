@@ -27,11 +27,30 @@ from mjx_pick.gui.uploads import (
 UPLOADED = "(uploaded file)"
 
 
+DENSEST_G_CM3 = 25.0  # above osmium's 22.6 g/cm^3: no solid part is denser
+
+
+def mass_warning(obj) -> str:
+    """A warning when the mass cannot be the part's: denser than any solid in the
+    volume of its outline times its height (at least its true volume)."""
+    volume_cm3 = obj.area_mm2 * obj.height_mm / 1000.0
+    density = obj.mass_kg * 1e3 / max(volume_cm3, 1e-9)
+    if density <= DENSEST_G_CM3:
+        return ""
+    return (
+        f"warning: {obj.mass_kg * 1e3:g} g in at most {volume_cm3:.3g} cm³ is "
+        f"{density:.3g} g/cm³, denser than any solid: check the mass (in grams)"
+    )
+
+
 class ImportTab:
-    def __init__(self, state: PageState):
+    def __init__(self, state: PageState, on_import=None):
+        """on_import(): runs after each import, also a failed one (other tabs forget
+        what they drew for the object before)."""
         from mjx_pick.core.objects import asset_manifest
 
         self.state = state
+        self.on_import = on_import
         self.upload_path: Path | None = None
         self.manifest = asset_manifest()
         with ui.row().classes("w-full no-wrap items-start"):
@@ -59,11 +78,14 @@ class ImportTab:
                 self.thickness = ui.number("thickness (mm)", value=20.0, step=1)
                 self.mass = ui.number("mass (g)", value=43.2, step=1)
                 self.unit = ui.select(["mm", "m"], value="mm", label="mesh unit").classes("w-40")
+                self.unit.set_visibility(False)  # shown for an uploaded mesh only
                 self.on_asset()
                 ui.button("Import object", on_click=self.import_object).props(
                     'data-testid="import"'
                 )
                 self.import_error = error_label().props('data-testid="import-error"')
+                self.import_warning = ui.label("").classes("text-warning text-sm")
+                self.import_warning.props('data-testid="import-warning"')
             with ui.column().classes("grow"):
                 self.object_info = ui.label("No object imported yet.").props(
                     'data-testid="object-info"'
@@ -75,6 +97,8 @@ class ImportTab:
 
     def on_asset(self, _=None) -> None:
         """A shipped object fills in its scale, thickness and mass."""
+        if self.asset.value != UPLOADED:
+            self.show_mesh_fields(False)
         if self.asset.value in self.manifest:
             entry = self.manifest[self.asset.value]
             self.px_per_mm.value = entry["px_per_mm"]
@@ -83,6 +107,7 @@ class ImportTab:
 
     async def on_upload(self, e) -> None:
         self.upload_error.set_text("")
+        self.import_error.set_text("")
         name = e.file.name
         data = await e.file.read()
         self.upload.reset()  # a corrected file of the same name may follow
@@ -96,10 +121,17 @@ class ImportTab:
             self.upload_error.set_text(f"{name}: cannot be stored ({err})")
             return
         self.asset.value = UPLOADED
+        self.show_mesh_fields(Path(name).suffix.lower() in MESH_SUFFIXES)
         self.upload_error.set_text("")
         self.object_info.set_text(
             f"uploaded {name}: set its scale, thickness and mass, then Import object"
         )
+
+    def show_mesh_fields(self, mesh: bool) -> None:
+        """A mesh has a unit; an image has a scale and a thickness."""
+        self.unit.set_visibility(mesh)
+        self.px_per_mm.set_visibility(not mesh)
+        self.thickness.set_visibility(not mesh)
 
     def source(self) -> tuple[str, Path | None]:
         """The object's CLI argument (a file or a shipped name) and its image, if any."""
@@ -115,6 +147,8 @@ class ImportTab:
         from mjx_pick.core.objects import load_object
 
         self.import_error.set_text("")
+        self.upload_error.set_text("")  # an earlier upload's message is history now
+        self.import_warning.set_text("")
         for w in self.fields().values():
             w.error = None
         try:
@@ -146,19 +180,39 @@ class ImportTab:
             obj = await run.io_bound(load_object, source, **kwargs)
             png = await run.io_bound(views.object_png, obj, image)
         except ConfigError as err:
-            self.object_info.set_text("No object imported.")
+            self.forget_object()
             self.show_error(str(err))
             return
         except Exception as err:  # noqa: BLE001 - a bad file must not show a traceback
-            self.object_info.set_text("No object imported.")
+            self.forget_object()
             self.import_error.set_text(f"{Path(source).name}: cannot be imported ({err})")
             return
         self.state.obj, self.state.obj_args = obj, args
+        self.import_warning.set_text(mass_warning(obj))
+        if self.on_import is not None:
+            self.on_import()
+        self.show_object(obj)
+        show_picture(self.object_image, png)
+
+    async def restore(self, obj, args: list[str]) -> None:
+        """The object this browser tab imported before a reload of the page."""
+        self.state.obj, self.state.obj_args = obj, args
+        self.show_object(obj)
+        show_picture(self.object_image, await run.io_bound(views.object_png, obj, None))
+
+    def show_object(self, obj) -> None:
         self.object_info.set_text(
-            f"{obj.name}: outline {obj.area_mm2:.0f} mm^2, length {obj.length_mm:.1f} mm, "
+            f"{obj.name}: outline {obj.area_mm2:.0f} mm², length {obj.length_mm:.1f} mm, "
             f"height {obj.height_mm:g} mm, mass {obj.mass_kg * 1e3:.1f} g"
         )
-        show_picture(self.object_image, png)
+
+    def forget_object(self) -> None:
+        """A failed import: no object, so no later tab runs on the one imported before."""
+        self.state.obj, self.state.obj_args = None, []
+        self.object_info.set_text("No object imported.")
+        self.object_image.set_visibility(False)
+        if self.on_import is not None:
+            self.on_import()
 
     def show_error(self, message: str) -> None:
         """An object's ConfigError under the field it names, else above the button."""

@@ -23,23 +23,52 @@ POLL_S = 0.5  # how often the panel reads the run's progress
 class JobPanel:
     """One browser tab's current run, shown above the tabs."""
 
-    def __init__(self, started: set[jobs.Job]):
-        """started: the server's set of the jobs it started that may still run (stopped
-        at shutdown, also those of a closed browser tab)."""
-        self.started = started
+    def __init__(self, runs: jobs.Runs, owner: str | None = None):
+        """runs: the server's runs (server-side: they outlive this page; stopped at
+        shutdown); owner: this browser tab's id (it survives a reload), once known."""
+        self.runs, self.owner = runs, owner
         self.job: jobs.Job | None = None
         self.on_end: Callable[[jobs.Progress], None] | None = None
+        # what each command's end draws, by command: a run re-attached after a reload
+        # is drawn by this page's tabs, not by the page that started it
+        self.handlers: dict[str, Callable[[jobs.Job, jobs.Progress], None]] = {}
         with ui.card().classes("w-full") as card:
             with ui.row().classes("items-center w-full"):
                 self.title = ui.label("").classes("font-bold").props('data-testid="job-title"')
                 self.status = ui.label("").props('data-testid="job-status"')
                 ui.space()
                 self.cancel_button = ui.button("Cancel", on_click=self.cancel, color="red")
-            self.bar = ui.linear_progress(value=0, show_value=False).props("size=12px")
+            self.offline = ui.label(
+                "connection to the server lost: this run's state is unknown until the page "
+                "reconnects (reload it)"
+            ).classes("mjx-offline-note text-negative")
+            self.bar = (
+                ui.linear_progress(value=0, show_value=False).props("size=12px").classes("mjx-live")
+            )
+            self.warnings = (
+                ui.label("").classes("text-warning text-sm").props('data-testid="job-warnings"')
+            )
             self.command = ui.code("", language="bash").classes("w-full text-xs")
+        self.status.classes("mjx-live")
         card.set_visibility(False)
         self.card = card
+        self.others = ui.label("").classes("text-sm").props('data-testid="other-runs"')
         ui.timer(POLL_S, self.poll)
+        # what the page last heard is not the run's state once the server is gone: the
+        # status and bar are hidden while the connection is lost, and a note says why
+        ui.add_css(
+            ".mjx-offline-note{display:none} body.mjx-offline .mjx-offline-note{display:block}"
+            " body.mjx-offline .mjx-live{visibility:hidden}"
+        )
+        ui.add_body_html(
+            "<script>setInterval(() => document.body.classList.toggle('mjx-offline', "
+            "!!window.socket && window.did_handshake === true && !window.socket.connected),"
+            " 500);</script>"
+        )
+
+    def handle(self, command: str, ended: Callable[[jobs.Job, jobs.Progress], None]) -> None:
+        """ended(job, progress) draws the results of a run of command when it ends."""
+        self.handlers[command] = ended
 
     def busy(self, where: ui.label) -> bool:
         """True (and says so in where) while a run is current: no second run starts."""
@@ -48,17 +77,41 @@ class JobPanel:
             return True
         return False
 
-    def start(self, title: str, job: jobs.Job, on_end: Callable[[jobs.Progress], None]) -> None:
-        """Start job and show it; on_end(progress) runs once, when the panel sees it end."""
+    def start(
+        self,
+        title: str,
+        job: jobs.Job,
+        on_end: Callable[[jobs.Progress], None] | None = None,
+    ) -> None:
+        """Start job and show it; when the panel sees it end it calls on_end(progress),
+        or the handler of its command (:meth:`handle`)."""
         if self.job is not None:  # callers check busy() first
             raise RuntimeError(f"a run is current ({self.title.text}): cannot start {title}")
-        self.job, self.on_end = job.start(), on_end
-        self.started.difference_update([j for j in self.started if not j.running])
-        self.started.add(job)
-        self.title.set_text(title)
+        job.title = title
+        job.start()
+        self.runs.add(job, self.owner)
+        self._show(job, on_end)
         self.status.set_text("starting ...")
+
+    def reattach(self, owner: str) -> None:
+        """This browser tab's id: show the run it started before a reload, if any (a
+        run that ended meanwhile is shown ended, its results drawn)."""
+        self.owner = owner
+        job = self.runs.last_of(owner)
+        if job is not None and self.job is None:
+            self._show(job, None)
+            self.poll()
+
+    def _show(self, job: jobs.Job, on_end) -> None:
+        self.job = job
+        if on_end is None:
+            handler = self.handlers.get(job.argv[0] if job.argv else "")
+            on_end = None if handler is None else (lambda p: handler(job, p))
+        self.on_end = on_end
+        self.title.set_text(job.title)
         self.command.set_content(job.command_line)
         self.bar.set_value(0)
+        self.warnings.set_text("")
         self.bar.props(remove="indeterminate")
         if job.total is None:
             self.bar.props("indeterminate")
@@ -71,12 +124,17 @@ class JobPanel:
 
     def poll(self) -> None:
         """Show the run's progress; when it has ended, free the panel and call on_end."""
+        others = [j for j in self.runs if j.running and j is not self.job]
+        self.others.set_text(
+            "also running on this server: " + "; ".join(j.title for j in others) if others else ""
+        )
         if self.job is None:
             return
         p = self.job.poll()
         if p.fraction is not None:
             self.bar.set_value(p.fraction)
         self.status.set_text(status_line(p))
+        self.warnings.set_text("warning: " + "; ".join(p.warnings) if p.warnings else "")
         if p.state == "running":
             return
         self.bar.props(remove="indeterminate")
@@ -98,7 +156,7 @@ def status_line(p: jobs.Progress) -> str:
     if p.done is not None:
         parts.append(f"{p.done}/{p.total} {p.unit}")
     if p.rate:
-        parts.append(f"{p.rate:.1f} per s")
+        parts.append(f"{p.rate:.1f} {p.unit} per s")
     if p.eta_s is not None and p.state == "running":
         parts.append(f"about {p.eta_s:.0f} s left")
     parts.append(f"{p.elapsed_s:.0f} s")

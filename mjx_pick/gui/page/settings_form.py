@@ -79,6 +79,7 @@ class SettingsForm:
         from mjx_pick.core.gripper import load_gripper
 
         self.base_gripper = load_gripper(self.preset.value)
+        self.toml_error.set_text("")  # the gripper of a refused TOML is not in use
         self.fill(self.base_gripper)
         # the preset's force and speed ranges bound F_d and the closing speed
         g = self.base_gripper
@@ -107,6 +108,14 @@ class SettingsForm:
         self.base_gripper = gripper
         self.fill(gripper)
         self.toml_error.set_text("")
+
+    def restore(self, before: SettingsForm) -> None:
+        """The settings of this browser tab's page before a reload."""
+        self.preset.value = before.preset.value
+        self.backend.value = before.backend.value
+        self.base_gripper, self.base_contact = before.base_gripper, before.base_contact
+        for key, widget in self.inputs.items():
+            widget.value = before.inputs[key].value
 
     def adopt_contact(self, contact) -> None:
         """Fitted contact parameters (the calibration study) for every later run."""

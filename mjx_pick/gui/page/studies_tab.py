@@ -54,6 +54,7 @@ class CompareStudy:
         from mjx_pick.core.gripper import preset_names
 
         self.state, self.form, self.panel = state, form, panel
+        panel.handle("compare", self.ended)
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
                 self.grippers = ui.select(
@@ -95,16 +96,16 @@ class CompareStudy:
         argv = ["compare", *self.state.obj_args, *flags, "--grippers", ",".join(names)]
         argv += ["--n", str(n), "--rank-by", self.rank.value, "--out", str(out)]
 
-        def done(progress: jobs.Progress) -> None:
-            if progress.state == "complete":
-                rows = json.loads((out / "ranking.json").read_text())
-                keys = ["rank", "gripper", "success_rate", "success_ci", "score_mean"]
-                show_rows(self.table, rows, keys + ["feasible", "p_vs_best"])
-                show_picture(self.image, (out / "maps.png").read_bytes())
-
         job = jobs.Job(argv, self.state.log(out.name), out)
-        self.panel.start(f"compare {out.name} ({len(names)} grippers x {n})", job, done)
-        self.name.value = f"compare-{stamp()}"
+        self.panel.start(f"compare {out.name} ({len(names)} grippers x {n})", job)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        if progress.state == "complete":
+            self.name.value = f"compare-{stamp()}"  # this name is taken now
+            rows = json.loads((job.out / "ranking.json").read_text())
+            keys = ["rank", "gripper", "success_rate", "success_ci", "score_mean"]
+            show_rows(self.table, rows, keys + ["feasible", "p_vs_best"])
+            show_picture(self.image, (job.out / "maps.png").read_bytes())
 
 
 class RobustStudy:
@@ -112,6 +113,7 @@ class RobustStudy:
 
     def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
         self.state, self.form, self.panel = state, form, panel
+        panel.handle("robust", self.ended)
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
                 self.k = ui.number("top pick-points", value=10, step=1)
@@ -167,14 +169,14 @@ class RobustStudy:
         argv += ["--sigma-xy-mm", repr(float(sig[0])), "--sigma-yaw-deg", repr(float(sig[1]))]
         argv += ["--out", str(out)]
 
-        def done(progress: jobs.Progress) -> None:
-            if progress.state == "complete":
-                rows = json.loads((out / "robustness.json").read_text())["ranking"]
-                keys = ["rank", "pick_id", "x_mm", "y_mm", "yaw_deg", "robust_p"]
-                show_rows(self.table, rows, keys + ["robust_ci_low", "landed"])
-
         job = jobs.Job(argv, self.state.log(f"{out.name}-robust"), out)
-        self.panel.start(f"robust {out.name} (top {k} x {m} draws)", job, done)
+        self.panel.start(f"robust {out.name} (top {k} x {m} draws)", job)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        if progress.state == "complete":
+            rows = json.loads((job.out / "robustness.json").read_text())["ranking"]
+            keys = ["rank", "pick_id", "x_mm", "y_mm", "yaw_deg", "robust_p"]
+            show_rows(self.table, rows, keys + ["robust_ci_low", "landed"])
 
 
 class CalibrationStudy:
@@ -184,6 +186,7 @@ class CalibrationStudy:
         from mjx_pick.studies.calibration import FITTABLE
 
         self.state, self.form, self.panel = state, form, panel
+        panel.handle("calibrate", self.ended)
         self.outcomes_path: Path | None = None
         self.fitted_contact: Path | None = None
         with ui.row().classes("w-full no-wrap items-start"):
@@ -264,10 +267,6 @@ class CalibrationStudy:
         argv += ["--params", ",".join(params), "--steps", str(steps), "--log-every", "1"]
         argv += ["--out", str(out)]
 
-        def done(progress: jobs.Progress) -> None:
-            if progress.state == "complete":
-                self.show(out)
-
         job = jobs.Job(
             argv,
             self.state.log(out.name),
@@ -276,8 +275,12 @@ class CalibrationStudy:
             steps_logged=r"(?m)^step\s+(\d+)\s",
             unit="steps",
         )
-        self.panel.start(f"calibrate {out.name} ({steps} steps)", job, done)
-        self.name.value = f"calibrate-{stamp()}"
+        self.panel.start(f"calibrate {out.name} ({steps} steps)", job)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        if progress.state == "complete":
+            self.name.value = f"calibrate-{stamp()}"  # this name is taken now
+            self.show(job.out)
 
     def show(self, out: Path) -> None:
         """A complete calibration: initial -> fitted values, the loss plot, Use button."""

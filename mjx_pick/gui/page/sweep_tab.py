@@ -8,7 +8,7 @@ from pathlib import Path
 from nicegui import ui
 
 from mjx_pick.gui import forms, jobs
-from mjx_pick.gui.formatting import fmt, stamp
+from mjx_pick.gui.formatting import column_label, fmt, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
@@ -27,6 +27,7 @@ class SweepTab:
         from mjx_pick.studies.sweeps import sweepable
 
         self.state, self.form, self.panel = state, form, panel
+        panel.handle("sweep", self.ended)
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
                 self.param = ui.select(
@@ -69,6 +70,10 @@ class SweepTab:
         if not self.param.value:
             self.error.set_text("choose a parameter")
             return
+        problem = forms.sweep_problem(settings, self.param.value, values)
+        if problem:
+            self.error.set_text(problem)
+            return
         param = f"{self.param.value}=" + ",".join(repr(v) for v in values)
         argv = [
             "sweep",
@@ -77,19 +82,24 @@ class SweepTab:
         ]
         argv += ["--param", param, "--n", str(int(n)), "--out", str(out)]
 
-        def done(progress: jobs.Progress) -> None:
-            if progress.state == "complete":
-                self.show(out)
-
         job = jobs.Job(argv, self.state.log(out.name), out, None, None)
-        self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job, done)
-        self.name.value = f"sweep-{stamp()}"
+        self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        if progress.state == "complete":
+            self.name.value = f"sweep-{stamp()}"  # this name is taken now
+            self.show(job.out)
 
     def show(self, out: Path) -> None:
         """A complete sweep: one row per value, and its plot."""
         variants = json.loads((out / "variants.json").read_text())
         keys = [k for k in variants[0] if k not in ("success_ci", "score_ci")]
-        self.table.columns = [{"name": k, "label": k, "field": k} for k in keys]
+        labels = {
+            f.key: f"{f.label} ({f.unit})" if f.unit else f.label for f in forms.SETTINGS_FIELDS
+        }
+        self.table.columns = [
+            {"name": k, "label": labels.get(k) or column_label(k), "field": k} for k in keys
+        ]
         self.table.rows = [{k: fmt(v[k]) for k in keys} for v in variants]
         self.table.update()
         show_picture(self.image, (out / "sweep.png").read_bytes())

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from nicegui import ui
 
-from mjx_pick.gui.formatting import fmt_cell
+from mjx_pick.gui.formatting import column_label, fmt_cell
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
 from mjx_pick.gui.views import data_uri
 
@@ -52,12 +52,18 @@ def whole(widget, lo: int, hi: int) -> int | None:
     return int(v)
 
 
-def run_folder(state: PageState, name_widget) -> Path | None:
-    """The output folder a run-name field names, or None with the rule under the field."""
+def run_folder(state: PageState, name_widget, resume: bool = False) -> Path | None:
+    """The output folder a run-name field names, or None with the reason under the field.
+
+    A run's name is its folder's: a name already in the work folder is refused (its
+    results and log stay as they are), unless the run resumes that folder."""
     name_widget.error = None
     out = state.run_folder(name_widget.value or "")
     if out is None:
         name_widget.error = RUN_NAME_RULE
+    elif not resume and (out.exists() or state.log(out.name).exists()):
+        name_widget.error = f"a run named {out.name} already exists here: choose another name"
+        return None
     return out
 
 
@@ -71,6 +77,8 @@ def need_object(state: PageState, where: ui.label) -> bool:
 
 def show_rows(table: ui.table, rows: list[dict], keys: list[str]) -> None:
     """Rows of a study's JSON in a table, one column per key."""
-    table.columns = [{"name": k, "label": k, "field": k, "align": "left"} for k in keys]
+    table.columns = [
+        {"name": k, "label": column_label(k), "field": k, "align": "left"} for k in keys
+    ]
     table.rows = [{k: fmt_cell(r.get(k)) for k in keys} for r in rows]
     table.update()

@@ -18,7 +18,7 @@ from mjx_pick.core.config import write_atomic
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.mjcf_gripper import PREFIX, characterise
 
-__all__ = ["TracePose", "animate", "write_mp4"]
+__all__ = ["TracePose", "animate", "render_rows", "write_mp4"]
 
 
 class TracePose:
@@ -85,39 +85,16 @@ def _render_in_child() -> bool:
     )
 
 
-def animate(
+def render_rows(
     scene_xml: str | os.PathLike,
     trace: dict,
-    path: str | os.PathLike,
-    every: int = 8,
+    rows,
     size: tuple[int, int] = (320, 240),
     gripper: GripperSpec | None = None,
-    mp4: bool = True,
-) -> int:
-    """Replay a trace in MuJoCo's offscreen renderer as a GIF, and beside it (mp4) the
-    same frames as an H.264 MP4 (``path`` with the suffix .mp4); returns the frame count.
-
-    Each frame is the top camera beside the side camera (each ``size`` = (width,
-    height) pixels), with the time and phase written on it; one frame every ``every``
-    control ticks, played in real time.
-    """
-    if _render_in_child():
-        # this process chose its OpenGL back end when it imported MuJoCo, and that one
-        # cannot open a context here: render in a child that starts with EGL
-        import multiprocessing
-
-        ctx = multiprocessing.get_context("spawn")
-        saved = os.environ.get("MUJOCO_GL")
-        os.environ["MUJOCO_GL"] = "egl"  # inherited by the child at its start only
-        try:
-            with ctx.Pool(1) as pool:
-                args = (scene_xml, trace, path, every, size, gripper, mp4)
-                return pool.apply(animate, args)
-        finally:
-            if saved is None:
-                os.environ.pop("MUJOCO_GL", None)
-            else:
-                os.environ["MUJOCO_GL"] = saved
+) -> list[np.ndarray]:
+    """Trace rows rendered in MuJoCo's offscreen renderer: for each row k in rows, the
+    top camera beside the side camera (each ``size`` = (width, height) pixels) with the
+    time and phase written on it, an RGB array (height, 2 width, 3)."""
     import mujoco
     from PIL import Image, ImageDraw
 
@@ -144,7 +121,7 @@ def animate(
         cams.append((cam, option))
     frames = []
     try:
-        for k in range(0, len(pose), every):
+        for k in rows:
             pose.apply(data, k)
             mujoco.mj_forward(model, data)
             views = []
@@ -160,7 +137,47 @@ def animate(
             frames.append(np.asarray(img))
     finally:
         renderer.close()
-    frame_s = pose.dt * every
+    return frames
+
+
+def animate(
+    scene_xml: str | os.PathLike,
+    trace: dict,
+    path: str | os.PathLike,
+    every: int = 8,
+    size: tuple[int, int] = (320, 240),
+    gripper: GripperSpec | None = None,
+    mp4: bool = True,
+) -> int:
+    """Replay a trace in MuJoCo's offscreen renderer as a GIF, and beside it (mp4) the
+    same frames as an H.264 MP4 (``path`` with the suffix .mp4); returns the frame count.
+
+    Each frame is :func:`render_rows`' (top and side cameras, time and phase); one frame
+    every ``every`` control ticks, played in real time.
+    """
+    if _render_in_child():
+        # this process chose its OpenGL back end when it imported MuJoCo, and that one
+        # cannot open a context here: render in a child that starts with EGL
+        import multiprocessing
+
+        ctx = multiprocessing.get_context("spawn")
+        saved = os.environ.get("MUJOCO_GL")
+        os.environ["MUJOCO_GL"] = "egl"  # inherited by the child at its start only
+        try:
+            with ctx.Pool(1) as pool:
+                args = (scene_xml, trace, path, every, size, gripper, mp4)
+                return pool.apply(animate, args)
+        finally:
+            if saved is None:
+                os.environ.pop("MUJOCO_GL", None)
+            else:
+                os.environ["MUJOCO_GL"] = saved
+    from PIL import Image
+
+    frames = render_rows(scene_xml, trace, range(0, len(trace["t_s"]), every), size, gripper)
+    t = trace["t_s"]
+    dt = float(t[1] - t[0]) if len(t) > 1 else 0.005
+    frame_s = dt * every
     palette = [Image.fromarray(f).convert("P", palette=Image.Palette.ADAPTIVE) for f in frames]
     buf = io.BytesIO()
     palette[0].save(
