@@ -27,6 +27,11 @@ GRASP = GraspConfig(close_timeout_s=0.6, lift_height_mm=30.0, hold_s=0.1)
 # a shorter procedure for the tests that only evaluate the loss around a point
 SHORT = GraspConfig(close_timeout_s=0.4, lift_height_mm=20.0, hold_s=0.05)
 HIDDEN = 0.62
+# the solver these fits were designed at (10 iterations, the earlier default): at the
+# 50-iteration default the 24 synthetic rows no longer exclude high friction (the
+# global slice stays under its threshold up to the bound), which the fit then honestly
+# reports as not identified -- a data-design question, not the pipeline these tests pin
+SOLVER = mp.SolverParams(iterations=10)
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +42,7 @@ def heavy_block():
 @pytest.fixture(scope="module")
 def synthetic(heavy_block):
     # 1 kg, lift accel 2 m/s^2: held iff F_d >~ m (g + a) / (2 mu) = 9.5 N at mu 0.62
-    hidden = mp.Settings(LIGHT, mp.ContactParams(pad_friction=HIDDEN), grasp=GRASP)
+    hidden = mp.Settings(LIGHT, mp.ContactParams(pad_friction=HIDDEN), grasp=GRASP, solver=SOLVER)
     f = np.repeat(np.linspace(6.0, 14.0, 12), 2)
     n = len(f)
     rng = np.random.default_rng(0)
@@ -81,7 +86,9 @@ def test_outcome_files_and_their_errors(tmp_path, heavy_block, synthetic):
         cal.canonical_params("pad_friction,stiff")
     off = cal.read_outcomes(_csv(tmp_path, head + "0,0,0,10,1,1\n200,0,0,10,1,0\n"))
     with pytest.raises(mp.ConfigError, match="1 of 2 measured pick-points are infeasible.*row 3"):
-        cal.Problem(heavy_block, off, ["pad_friction"], mp.Settings(LIGHT, grasp=GRASP))
+        cal.Problem(
+            heavy_block, off, ["pad_friction"], mp.Settings(LIGHT, grasp=GRASP, solver=SOLVER)
+        )
     with pytest.raises(
         mp.ConfigError, match=r"row 2 \(10 N\), column grip_force_n: outside robotiq-2f85"
     ):
@@ -132,7 +139,7 @@ def test_parameters_map_through_physics_as_settings_do(heavy_block, synthetic):
     # a parameter vector's inputs equal those of a scene built with those contact
     # parameters (physics.mujoco_contact: one mapping), F_d + offset per row; and the
     # differentiable (jnp) mapping gives the same arrays
-    base = mp.Settings(LIGHT, grasp=GRASP)
+    base = mp.Settings(LIGHT, grasp=GRASP, solver=SOLVER)
     names = [
         "pad_friction",
         "pad_torsion_mm",
@@ -165,7 +172,7 @@ def test_a_diverged_row_costs_the_worst_fit_not_a_perfect_one(heavy_block, synth
     # the loss of outputs that match every row's measured outcome, then the same with
     # rows flagged diverged: each such row must cost what the most wrong prediction
     # costs (it once cost nothing -- a fit could prefer parameters that blow up)
-    s = mp.Settings(LIGHT, grasp=GRASP)
+    s = mp.Settings(LIGHT, grasp=GRASP, solver=SOLVER)
     problem = cal.Problem(
         heavy_block, synthetic, ["pad_friction"], s, time_weight=0.0, force_weight=0.0
     )
@@ -195,7 +202,7 @@ def test_fit_steers_away_from_a_diverging_region(heavy_block, synthetic, monkeyp
         heavy_block,
         synthetic,
         ["pad_friction"],
-        mp.Settings(LIGHT, grasp=GRASP),
+        mp.Settings(LIGHT, grasp=GRASP, solver=SOLVER),
         time_weight=0.0,
         start={"pad_friction": 1.3},
     )
@@ -225,7 +232,9 @@ def test_fit_steers_away_from_a_diverging_region(heavy_block, synthetic, monkeyp
 
 def test_a_nan_gradient_stops_the_fit_with_a_clear_error(heavy_block, synthetic, monkeypatch):
     # a NaN turned into a zero would be a silent "no change"
-    problem = cal.Problem(heavy_block, synthetic, ["pad_friction"], mp.Settings(LIGHT, grasp=GRASP))
+    problem = cal.Problem(
+        heavy_block, synthetic, ["pad_friction"], mp.Settings(LIGHT, grasp=GRASP, solver=SOLVER)
+    )
     monkeypatch.setattr(problem, "mjx_loss_and_grad", lambda th: (1.0, np.array([np.nan])))
     with pytest.raises(mp.ConfigError, match="step 0: the 'jvp' gradient is not finite at"):
         cal.calibrate(problem, steps=3, estimator="jvp", identify=False)
@@ -483,7 +492,7 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
     assert 0 < synthetic.successes.sum() < len(synthetic), "the data must hold both outcomes"
     # the fit starts below the hidden value: this loss is not monotone between 0.62 and
     # Table 1's 0.86, where a local gradient fit stalls; below 0.62 it falls
-    base = mp.Settings(LIGHT, mp.ContactParams(pad_friction=0.45), grasp=GRASP)
+    base = mp.Settings(LIGHT, mp.ContactParams(pad_friction=0.45), grasp=GRASP, solver=SOLVER)
     problem = cal.Problem(heavy_block, synthetic, ["pad_friction"], base, backend="mujoco")
     before = problem.loss(problem.space.theta([0.45])[None])[0]
     # the smoothed gradient from below: on these 24 outcome + lift-time rows CMA-ES (the

@@ -370,7 +370,7 @@ def test_bad_inputs_are_shown_in_the_page(page, server, tmp_path):
     toml.write_text('name = "g"\nstroke_mm = = 85\n')
     page.get_by_test_id("gripper-upload").locator("input[type=file]").set_input_files(str(toml))
     page.get_by_test_id("toml-error").filter(has_text="not valid TOML").wait_for()
-    toml.write_text('name = "g"\nstroke_mm = -5\n')
+    toml.write_text('base = "robotiq-2f85"\nname = "g"\nstroke_mm = -5\n')  # extends a preset
     page.get_by_test_id("gripper-upload").locator("input[type=file]").set_input_files(str(toml))
     page.get_by_test_id("toml-error").filter(has_text="stroke_mm = -5 is out of range").wait_for()
 

@@ -32,7 +32,7 @@ from mjx_pick.outputs.rundir import end_claims, error_message
 
 __all__ = ["build_parser", "main"]
 
-# said whenever a user picks MJX's JAX physics by name (issue 16; README "Known limits")
+# said whenever a user picks MJX's JAX physics by name (README "Known limits")
 MJX_NOTE = (
     "mjx-pick: note: --backend mjx is MJX's JAX physics, kept for derivatives: at low pad "
     "friction (0.1-0.2) its pads chatter where MuJoCo C and Warp hold the part; for labels "

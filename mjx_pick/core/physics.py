@@ -106,9 +106,9 @@ class ContactParams:
     # MuJoCo impedance (dmin, dmax, width[m], midpoint, power). The pads: 0.99 instead
     # of MuJoCo's default 0.9-0.95: a soft constraint's regularisation lets a held part
     # creep down through friction at a rate that grows with (1 - d) / d; at 0.99 the
-    # creep over lift and hold dropped 5-10x. The table keeps MuJoCo's default: made
-    # as stiff, a part pushed and spun over it by the first pad changed its label with
-    # the time step in 3.5 % of door-opener picks (0 % so). benchmarks/RESULTS.md, "creep".
+    # creep over lift and hold dropped several-fold. The table keeps MuJoCo's default:
+    # made as stiff, a part pushed and spun over it by the first pad changed its label
+    # with the time step (benchmarks/RESULTS.md, "creep").
     pad_solimp: tuple[float, float, float, float, float] = (0.99, 0.99, 0.001, 0.5, 2.0)
     table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
 
@@ -154,8 +154,8 @@ class SolverParams:
     # 1 ms with 50 solver iterations (benchmarks/RESULTS.md, "Pad chatter"): at 10
     # iterations the solver stopped unconverged on the pads' stiff low-friction contacts
     # (pyramidal cones stiffen them as 1 / mu^2) and heavy or slippery parts diverged;
-    # 50 removed that at the 1 ms step at about the 10-iteration cost (0.5 ms halves
-    # the wrong labels again but doubles the steps, and lets pad forces pass the limit)
+    # 50 removed that at the 1 ms step for little extra cost (a smaller step cuts the
+    # wrong labels further but doubles the steps, and lets pad forces pass the limit)
     timestep_s: float = setting(0.001, "s", "physics time step", lo=1e-5, hi=0.01)
     cone: str = "pyramidal"
     impratio: float = setting(

@@ -38,8 +38,8 @@ have fitted them.
 Both checks so far hold the other parameters where the fit left them, and a slice cannot
 see a valley that runs ACROSS parameters: more pad friction with less grip force (the
 gripper's force offset) explains the same outcomes, so a fit that is off in both sits in
-a slice that looks like a basin (benchmarks/RESULTS.md: over 12 benchmark fits, 9
-parameters passed the slice and the truth lay in only 5 of their intervals). So a
+a slice that looks like a basin (the calibration benchmark found the truth outside
+many such slice intervals). So a
 parameter that passes them must also pass a profile likelihood check (Raue et al. 2009,
 Bioinformatics 25:1923): its value fixed at the ends of its interval and further out
 (``profile_scales`` x its half-width, clipped to the bounds) and the OTHER parameters
