@@ -244,6 +244,38 @@ def test_height_compensation_puts_pads_at_the_grasp_height(linkage, width_mm):
     assert drop > 1.0e-3
 
 
+def test_height_compensation_reaches_the_results_and_the_robot_export(linkage):
+    """Each pick's compensation is the lift the simulation started from (results column
+    ``height_compensation_mm``), 0 for a parallel jaw, and the robot export raises the
+    gripper by it."""
+    from mjx_pick.core.metrics import results_table
+    from mjx_pick.core.scene import height_compensation_mm
+    from mjx_pick.outputs.reporting.robot import robot_picks
+
+    obj = mp.object_from_polygon(box(-20, -10, 20, 10), thickness_mm=30, mass_g=60, name="b")
+    scene = mp.build_scene(obj, linkage, None, None, PROC)
+    picks = pp.generate_normal(obj, linkage, 6, seed=0, grasp=PROC)
+    comp = height_compensation_mm(linkage, picks)
+    qpos0 = make_inputs(scene, PROC, picks).qpos0
+    np.testing.assert_allclose(comp, qpos0[:, scene.index.lift_qpos] * 1e3, rtol=1e-5)
+    assert np.all(comp > 1.0)  # the pads descend as they close
+    jaw = mp.load_gripper("robotiq-2f85")
+    assert not np.any(height_compensation_mm(jaw, picks))
+    n = len(picks)
+    out = {k: np.zeros(n) for k in ("score", "t_grasp", "phi_max_deg", "t_grasp_nc")}
+    out.update(success=np.ones(n, bool), diverged=np.zeros(n, bool), failure=np.zeros(n, int))
+    out.update({k: np.zeros(n) for k in ("max_force_left_n", "max_force_right_n")})
+    out.update({k: np.zeros(n) for k in ("lift_height_mm", "yaw_max_deg", "tilt_max_deg")})
+    out.update(slip_mm=np.zeros(n), t_reached_s=np.zeros(n), chatter=np.zeros(n, int))
+    table = results_table(picks, out, linkage)
+    np.testing.assert_allclose(table["height_compensation_mm"].to_numpy(), comp)
+    exported = robot_picks(table, pick_height_mm=5.0, k=n)
+    for entry in exported:
+        raise_mm = comp[list(picks.pick_id).index(entry["pick_id"])]
+        assert entry["height_compensation_mm"] == pytest.approx(raise_mm)
+        assert entry["gripper_pose"]["position_mm"][2] == pytest.approx(5.0 + raise_mm, abs=1e-3)
+
+
 # ------------------------------------------------------------------ every input a user gets wrong
 
 

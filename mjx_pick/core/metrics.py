@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pyarrow as pa
 
+from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.kernels import grasp as gk
 
@@ -40,6 +41,11 @@ COLUMNS = {
     "tilt_max_deg": ("float64", "largest tilt of the object's vertical axis"),
     "slip_mm": ("float64", "largest lag of the object behind the gripper while grasped"),
     "t_reached_s": ("float64", "time F_d was reached (-1: never)"),
+    "height_compensation_mm": (
+        "float64",
+        "how far the gripper starts raised so its pads meet the part at the grasp height "
+        "(an MJCF linkage's; 0 for a parallel jaw)",
+    ),
     "chatter": (
         "int64",
         "times a pad's force fell below pad_contact_fraction x F_d and came back while "
@@ -48,12 +54,20 @@ COLUMNS = {
 }
 
 
-def results_table(picks: PickBatch, out: dict, extra: dict | None = None) -> pa.Table:
+def results_table(
+    picks: PickBatch, out: dict, gripper: GripperSpec, extra: dict | None = None
+) -> pa.Table:
     """One row per pick-point: the pick's pose and every metric, named with units.
 
-    extra: further (N,) columns (e.g. swept parameters), appended after COLUMNS.
+    gripper: the one that simulated them (its height compensation per pick). extra:
+    further (N,) columns (e.g. swept parameters), appended after COLUMNS.
     """
+    # here, not at the top: the scene module loads MuJoCo, which reading tables back (a
+    # report, the GUI) does not need
+    from mjx_pick.core.scene import height_compensation_mm
+
     cols = dict(picks.columns())
+    cols["height_compensation_mm"] = height_compensation_mm(gripper, picks)
     for name in COLUMNS:
         if name in cols:
             continue

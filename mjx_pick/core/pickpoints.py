@@ -118,6 +118,11 @@ class PickBatch:
         }
         return dataclasses.replace(self, **arrays)
 
+    @property
+    def grasp_gap_mm(self) -> np.ndarray:
+        """(N,) mm: the gap the pads close to, the object's width between them."""
+        return self.opening_mm - self.gap_left_mm - self.gap_right_mm
+
     def columns(self) -> dict:
         """Per-pick columns for a results table."""
         return {

@@ -439,3 +439,15 @@ def build_scene(
         pad_patch_mm=tuple(float(v) for v in patch),
         kinematics=kin,
     )
+
+
+def height_compensation_mm(gripper: GripperSpec, picks) -> np.ndarray:
+    """(N,) mm: how far each pick starts the gripper raised so that its pads, travelling
+    along their path as they close, meet the object at the grasp height (the paper's
+    section 3.5) -- an MJCF linkage's, for the gap it closes to; 0 for a parallel jaw,
+    whose pads close level. picks: a PickBatch (its grasp_gap_mm)."""
+    gap_m = np.asarray(picks.grasp_gap_mm, float) * 1e-3
+    if gripper.mjcf is None:
+        return np.zeros(len(gap_m))
+    kin = mjcf_gripper.characterise(gripper.mjcf)
+    return np.asarray(kin.height_compensation_m(gap_m), float).reshape(-1) * 1e3

@@ -100,7 +100,7 @@ def make_inputs(
     n = len(picks)
     # the gap the pads close to (the object's width between them): the MJCF linkage's
     # height compensation
-    grasp_gap_m = (picks.opening_mm - picks.gap_left_mm - picks.gap_right_mm) * 1e-3
+    grasp_gap_m = picks.grasp_gap_mm * 1e-3
     qpos0 = scene.initial_qpos(
         picks.x_mm * 1e-3,
         picks.y_mm * 1e-3,

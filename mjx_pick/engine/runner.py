@@ -358,7 +358,12 @@ class LocalExecutor:
             )
             t = out.timing
             yield ChunkDone(
-                k, results_table(sub, out.results), t.run_s, t.compile_s, t.wall_s, "local"
+                k,
+                results_table(sub, out.results, self.backend.scene.gripper),
+                t.run_s,
+                t.compile_s,
+                t.wall_s,
+                "local",
             )
 
     def record(self, picks: PickBatch) -> np.ndarray:

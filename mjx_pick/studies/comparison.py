@@ -177,7 +177,11 @@ def compare(
             if len(b):
                 success[g, ok] = out_g["success"]
                 score[g, ok] = np.nan_to_num(out_g["score"], nan=0.0)  # diverged: no quality
-                tables.append(results_table(b, out_g, {"gripper": np.full(len(b), names[g])}))
+                tables.append(
+                    results_table(
+                        b, out_g, jobs[g][0].gripper, {"gripper": np.full(len(b), names[g])}
+                    )
+                )
         rows = []
         for g, gripper in enumerate(grippers):
             ok = reasons[g] == 0

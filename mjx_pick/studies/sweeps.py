@@ -301,10 +301,10 @@ def sweep(
         if store is not None:
             timing["chunks_resumed"] = store.read_chunks  # read back, not simulated
         tables, summaries = [], []
-        for v, ((_, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
+        for v, ((variant, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
             extra = {"variant": np.full(len(picks), v)}
             extra.update({name: np.full(len(picks), value) for name, value in combo.items()})
-            tables.append(results_table(picks, out_v, extra))
+            tables.append(results_table(picks, out_v, variant.gripper, extra))
             summaries.append(
                 {
                     "variant": v,

@@ -47,7 +47,9 @@ def robot_picks(
     gripper's pose in the object frame (origin at the centre of mass, on the table; z
     up) -- its inverse, at the pick height -- or, with frame (the object frame's pose in
     the user's frame, see frame_matrix), in the user's frame. The gripper frame is this
-    project's: x the closing axis, z up (the gripper approaches along -z).
+    project's: x the closing axis, z up (the gripper approaches along -z). Its height is
+    the fingertips' pick height plus the pick's height compensation (a linkage's pads
+    descend as they close; the table's ``height_compensation_mm``, 0 for a parallel jaw).
     """
     from scipy.spatial.transform import Rotation
 
@@ -67,7 +69,11 @@ def robot_picks(
     for pid in order[:k]:
         r = by_id[pid]
         rot = _rot_z(-r["yaw_deg"])  # gripper axes in the object frame
-        pos = -rot @ np.array([r["x_mm"], r["y_mm"], 0.0]) + np.array([0, 0, pick_height_mm])
+        # a linkage starts raised so its pads meet the part at the grasp height
+        raise_mm = float(r.get("height_compensation_mm") or 0.0)
+        pos = -rot @ np.array([r["x_mm"], r["y_mm"], 0.0]) + np.array(
+            [0, 0, pick_height_mm + raise_mm]
+        )
         t = np.eye(4)
         t[:3, :3], t[:3, 3] = rot, pos
         if user is not None:
@@ -83,6 +89,7 @@ def robot_picks(
                 "matrix": [[round(float(v), 6) for v in row] for row in t],
             },
             "opening_mm": r["opening_mm"],
+            "height_compensation_mm": raise_mm,
             "score": r["score"],
             "success": r["success"],
             "success_probability": prob[pid]["robust_p"] if pid in prob else None,
