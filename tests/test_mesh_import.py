@@ -218,3 +218,31 @@ def test_cli_largest_body_reaches_the_importer(tmp_path, hull_pieces):
     with pytest.warns(UserWarning):
         obj, _ = inputs.objects(args)
     assert obj.polygon.area == pytest.approx(60.0 * 20.0, rel=1e-3)
+
+
+def test_slow_preparation_steps_are_said_as_they_start(tmp_path, capsys):
+    # a large mesh ran its decomposition for a minute and more without a word; each
+    # step says what it does as it starts, and a part seen before (cached) skips them
+    import logging
+
+    path = tmp_path / "bar.stl"
+    trimesh.creation.box((60.0, 20.0, 10.0)).export(path)
+    args = ["picks", str(path), "--unit", "mm", "--mass-g", "20", "--n", "2"]
+    logger = logging.getLogger("mjx_pick")
+    handlers, level = list(logger.handlers), logger.level
+    try:
+        for h in handlers:
+            logger.removeHandler(h)
+        assert cli.main([*args, "--out", str(tmp_path / "a")]) == 0
+        first = capsys.readouterr().err
+        assert "reading mesh bar.stl" in first and "convex decomposition" in first
+        assert "rasterising the silhouette" in first
+        assert cli.main([*args, "--out", str(tmp_path / "b")]) == 0
+        second = capsys.readouterr().err
+        assert "convex decomposition" not in second
+    finally:
+        for h in list(logger.handlers):
+            logger.removeHandler(h)
+        for h in handlers:
+            logger.addHandler(h)
+        logger.setLevel(level)

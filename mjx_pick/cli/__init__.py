@@ -19,6 +19,7 @@ Every bad input ends with one line naming the input, the value and what is allow
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
 
@@ -40,9 +41,35 @@ MJX_NOTE = (
 )
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever sys.stderr is at each message (a test's capture, a redirect
+    made after the CLI started), not to the stream of the moment it was made."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, _value) -> None:
+        pass
+
+
+def show_steps() -> None:
+    """The library's step messages (``mjx_pick.*`` loggers at INFO: a mesh being read,
+    decomposed, a silhouette rasterised) on stderr, so a step that takes a while is
+    never silent; a library user's own logging setup is left alone."""
+    logger = logging.getLogger("mjx_pick")
+    if not logger.handlers:
+        handler = _StderrHandler()
+        handler.setFormatter(logging.Formatter("mjx-pick: %(message)s"))
+        logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.started_s = process_age_s()  # the interpreter's start and the CLI's imports
+    show_steps()
     use_offscreen_rendering()  # before anything imports MuJoCo: animations on a headless host
     if getattr(args, "no_cache", False):
         # the one switch the cache reads; child processes (GUI jobs, local Ray) inherit it

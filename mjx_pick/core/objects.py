@@ -14,6 +14,7 @@ future work) are split by CoACD, whose collision-aware cuts keep concave feature
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import warnings
@@ -29,6 +30,9 @@ from shapely.geometry.polygon import orient
 
 from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError, PlausibilityWarning, check_range
+
+# what a slow preparation step is doing, said as it starts (the CLI shows it on stderr)
+log = logging.getLogger(__name__)
 
 # MJX wants convex meshes of fewer than ~32 vertices for its branchless convex-convex
 # test ("sharp bits" of the MJX docs); a prism of 12 polygon corners has 24.
@@ -678,6 +682,7 @@ def _prepare_mesh(
     collision pieces one after the other.
     """
     try:
+        log.info("reading mesh %s ...", path.name)
         mesh = trimesh.load(str(path), force="mesh", process=True)
     except Exception as err:  # noqa: BLE001 - trimesh raises many types for bad files
         raise ConfigError(f"mesh {str(path)!r} cannot be read: {err}") from err
@@ -710,7 +715,9 @@ def _prepare_mesh(
         mesh.extents * 1e3,
         "check the unit (--unit m or mm)",
     )
+    log.info("%s: top-down outline of %d triangles ...", path.name, len(mesh.faces))
     polygon = _mesh_outline(mesh, 0.0, float(mesh.bounds[1, 2]))
+    log.info("%s: convex decomposition for collisions (CoACD) ...", path.name)
     pieces = _coacd_pieces(mesh, coacd_threshold)
     return {
         "vertices": np.asarray(mesh.vertices, dtype=np.float64),

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import logging
 import math
 import warnings
 from collections.abc import Callable
@@ -30,6 +31,8 @@ from mjx_pick.core.objects import ObjectModel, rasterize
 from mjx_pick.core.procedure import GraspConfig, pad_band_mm
 from mjx_pick.kernels import feasibility as fk
 
+# what a slow step is doing, said as it starts (the CLI shows it on stderr)
+log = logging.getLogger(__name__)
 REASONS = fk.REASONS
 CANDIDATE_BLOCK = 4096  # candidates are drawn in fixed blocks: same seed, same stream
 # cells of the feasibility raster (yaw bins x rows x columns, ~13 bytes each while it is
@@ -323,6 +326,11 @@ def _stack_cached(key, polygon, res_mm: float):
     }
 
     def compute() -> dict:
+        log.info(
+            "%s: rasterising the silhouette for the feasibility checks (%d yaw bins) ...",
+            key[0],
+            fk.yaw_bins(res_mm, radius),
+        )
         masks, x0 = fk.rasterize_bins(rasterize, polygon, res_mm, radius)
         bits = np.packbits(masks.astype(bool), axis=None)
         return {"bits": bits, "shape": np.array(masks.shape, np.int64), "x0_mm": np.array(x0)}
