@@ -660,11 +660,15 @@ def test_checks_before_a_run_and_no_stale_messages(page, tmp_path):
     page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(fake))
     page.get_by_test_id("upload-error").filter(has_text="cannot be read as an image").wait_for()
     choose(page, "object", "block")
-    number(page, "mass (g)", 1e9)
+    number(page, "mass (g)", 1e9)  # no solid is that dense: refused, naming the mass
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("import-error").filter(has_text="no solid is").wait_for(timeout=60_000)
+    number(page, "mass (g)", 1e4)  # implausible, still a part: imported with a warning
     page.get_by_test_id("import").click()
     page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
     assert "denser than any solid" in page.get_by_test_id("import-warning").inner_text()
     assert page.get_by_test_id("upload-error").inner_text() == ""
+    assert page.get_by_test_id("import-error").inner_text() == ""
     number(page, "mass (g)", 43.2)
     page.get_by_test_id("import").click()
     page.get_by_test_id("object-info").filter(has_text="mass 43.2 g").wait_for()
