@@ -307,7 +307,9 @@ def raster_resolution(name: str, radius_mm: float, res_mm: float) -> float:
         f"{fits:g} mm cells instead of picks.resolution_mm = {res_mm:g} to stay within "
         f"{MAX_RASTER_CELLS / 1e6:.0f} million cells (~{MAX_RASTER_CELLS * 13 / 2**30:.1f} GiB)",
         PlausibilityWarning,
-        stacklevel=3,
+        # one place for the check before any work and the raster's build: Python's
+        # default filter then says it once per process, not once per caller
+        stacklevel=1,
     )
     return fits
 

@@ -20,7 +20,6 @@ import time.
 
 from __future__ import annotations
 
-import importlib.util
 import tempfile
 from pathlib import Path
 
@@ -57,8 +56,8 @@ def use_persistent_cache() -> Path | None:
         )
         return None
     jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_S)
-    if importlib.util.find_spec("filelock") is not None:  # JAX's eviction locks with it
-        share = int(cache.limit_bytes() * (1.0 - cache.OBJECT_SHARE))
-        jax.config.update("jax_compilation_cache_max_size", max(share, 1))
+    # JAX's eviction locks with filelock, a declared dependency
+    share = int(cache.limit_bytes() * (1.0 - cache.OBJECT_SHARE))
+    jax.config.update("jax_compilation_cache_max_size", max(share, 1))
     jax.config.update("jax_compilation_cache_dir", str(folder))
     return folder

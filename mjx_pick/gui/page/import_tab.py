@@ -12,7 +12,7 @@ from pathlib import Path
 from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
-from mjx_pick.core.objects import MESH_SUFFIXES
+from mjx_pick.core.objects import DENSITY_PLAUSIBLE_KG_M3, MESH_SUFFIXES
 from mjx_pick.gui import views
 from mjx_pick.gui.page.widgets import error_label, picture, show_picture, upload
 from mjx_pick.gui.state import PageState
@@ -27,7 +27,8 @@ from mjx_pick.gui.uploads import (
 UPLOADED = "(uploaded file)"
 
 
-DENSEST_G_CM3 = 25.0  # above osmium's 22.6 g/cm^3: no solid part is denser
+# the library's plausible density's upper end, in g/cm^3 (above osmium's 22.6)
+DENSEST_G_CM3 = DENSITY_PLAUSIBLE_KG_M3[1] / 1000.0
 
 
 def mass_warning(obj) -> str:
