@@ -9,6 +9,8 @@ friction, placed as the grid places them -- a hair off centre (20 um, 0.5 mm, 0.
 an exactly centred block is a symmetric special case that hides the pads' chatter.
 """
 
+import os
+
 import numpy as np
 import pytest
 from shapely.geometry import box
@@ -18,6 +20,8 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import G, GraspConfig
 from mjx_pick.engine.backend import make_backend, make_inputs
 
+# MJX_PICK_TEST_BACKEND=warp runs them on MuJoCo Warp on a GPU machine, as test_physics
+BACKEND = os.environ.get("MJX_PICK_TEST_BACKEND", "mujoco")
 PRESETS = ("robotiq-2f85", "robotiq-2f85-linkage", "robotiq-2f140", "onrobot-rg2", "franka-hand")
 MASSES_KG, HEIGHT_MM = (0.1, 0.5, 2.0), 30.0
 FRICTIONS = (0.1, 0.3, 1.0)
@@ -66,7 +70,7 @@ def test_coulomb_on_the_preset_with_the_default_procedure(name, mass_kg):
     picks = checker.batch(np.arange(n), x, y, yaw, mode="user")
     assert len(picks) == n, picks.rejected
     scene = mp.build_scene(block, gripper, None, None, grasp)
-    runner = make_backend("mujoco", scene, grasp, batch_size=n)
+    runner = make_backend(BACKEND, scene, grasp, batch_size=n)
     per_pick = dict(
         pad_friction=np.array([r[0] for r in rows], np.float32),
         force_n=np.array([r[1] for r in rows], np.float32),
