@@ -35,8 +35,8 @@ from mjx_pick.kernels import feasibility as fk
 log = logging.getLogger(__name__)
 REASONS = fk.REASONS
 CANDIDATE_BLOCK = 4096  # candidates are drawn in fixed blocks: same seed, same stream
-# cells of the feasibility raster (yaw bins x rows x columns, ~13 bytes each while it is
-# built): more is refused before any is allocated
+# cells of the feasibility raster (yaw bins x rows x columns, ~5 bytes each while it is
+# built: the 0/1 masks, the uint16 stack and its copy on the device): more is refused before any is allocated
 MAX_RASTER_CELLS = 200_000_000
 
 
@@ -305,7 +305,7 @@ def raster_resolution(name: str, radius_mm: float, res_mm: float) -> float:
     warnings.warn(
         f"{name!r} is {2 * radius_mm:.0f} mm across: the feasibility raster uses "
         f"{fits:g} mm cells instead of picks.resolution_mm = {res_mm:g} to stay within "
-        f"{MAX_RASTER_CELLS / 1e6:.0f} million cells (~{MAX_RASTER_CELLS * 13 / 2**30:.1f} GiB)",
+        f"{MAX_RASTER_CELLS / 1e6:.0f} million cells (~{MAX_RASTER_CELLS * 5 / 2**30:.1f} GiB)",
         PlausibilityWarning,
         # one place for the check before any work and the raster's build: Python's
         # default filter then says it once per process, not once per caller

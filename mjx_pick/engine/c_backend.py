@@ -41,6 +41,18 @@ def _tick_fn(ad: gk.Addresses):
 
 
 @functools.cache
+def _start_fn(ad: gk.Addresses):
+    """The controller's state, accumulators and first command for every row, jitted: run
+    eagerly, its few dozen operations would each compile a program of their own."""
+
+    def start(qpos0):
+        s, a = gk.initial(ad, qpos0)
+        return s, a, gk.command(ad, s, qpos0)
+
+    return jax.jit(jax.vmap(start))
+
+
+@functools.cache
 def _finalize_fn():
     return jax.jit(jax.vmap(gk.finalize))
 
@@ -120,8 +132,7 @@ class MujocoBackend:
         params = jax.tree.map(lambda x: _pad(x, rows_n), inputs.params)
         o = ad.object_qpos
         pos0, quat0 = qpos0[:, o : o + 3], qpos0[:, o + 3 : o + 7]
-        s, a = jax.vmap(lambda q: gk.initial(ad, q))(qpos0)
-        u0 = jax.vmap(lambda st, q: gk.command(ad, st, q))(s, qpos0)
+        s, a, u0 = _start_fn(ad)(qpos0)
         ctrl[:] = np.asarray(u0)[:n]
         b.forward()
         tick = _tick_fn(ad)

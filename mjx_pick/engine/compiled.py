@@ -8,7 +8,10 @@ it when it is built -- the point where a command or a study starts simulating --
 import time.
 
 * Programs that compiled in less than :data:`MIN_COMPILE_S` are not stored: reading an
-  entry costs about as much as compiling a small program, and they would fill the folder.
+  entry costs about as much as compiling the smallest programs (single operations run
+  eagerly), and they would fill the folder. The C engine's per-tick controller, the
+  feasibility check and the results' finalisation compile in tenths of a second each on
+  a CPU and together outweigh a short run's simulation: they are kept.
 * Bypassed with the rest of the cache (``MJX_PICK_CACHE=0``, the CLI's ``--no-cache``).
 * A folder set already -- ``JAX_COMPILATION_CACHE_DIR`` or the user's own
   ``jax.config.update`` -- is left as it is.
@@ -27,7 +30,7 @@ import jax
 
 from mjx_pick.core import cache
 
-MIN_COMPILE_S = 1.0  # seconds: programs that compile faster are not stored
+MIN_COMPILE_S = 0.1  # seconds: programs that compile faster are not stored
 
 
 def use_persistent_cache() -> Path | None:
