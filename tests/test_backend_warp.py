@@ -167,6 +167,33 @@ def test_size_buffers_measures_the_scene(block_scene):
     assert sizes.sample == 3
 
 
+def test_default_sizing_is_measured_once_then_read_from_the_cache(
+    block_scene, tmp_path, monkeypatch
+):
+    from mjx_pick.core import cache
+
+    monkeypatch.setenv(cache.ENV_DIR, str(tmp_path / "cache"))
+    monkeypatch.delenv(cache.ENV_SWITCH, raising=False)
+    measured = []
+    real = bw.measure_buffers
+
+    def counting(*args, **kwargs):
+        measured.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(bw, "measure_buffers", counting)
+    first = bw.size_buffers(block_scene, SHORT, n_sample=2, nthread=1)
+    again = bw.size_buffers(block_scene, SHORT, n_sample=2, nthread=1)
+    assert measured == [1] and first == again and first.sample == 2
+    # another procedure is another measurement
+    longer = dataclasses.replace(SHORT, hold_s=0.2)
+    bw.size_buffers(block_scene, longer, n_sample=2, nthread=1)
+    assert measured == [1, 1]
+    monkeypatch.setenv(cache.ENV_SWITCH, "0")  # bypassed: measured again
+    assert bw.size_buffers(block_scene, SHORT, n_sample=2, nthread=1) == first
+    assert len(measured) == 3
+
+
 # --------------------------------------------------------------------------- refill
 def test_small_run_gets_a_small_pool(block_scene):
     backend = make_backend("mjx", block_scene, SHORT, batch_size=8192, refill=True)

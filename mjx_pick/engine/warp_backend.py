@@ -47,7 +47,8 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from mjx_pick.core.config import ConfigError
+from mjx_pick.core import cache
+from mjx_pick.core.config import ConfigError, to_dict
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine.backend import PickInputs
@@ -215,22 +216,46 @@ def size_buffers(
     inputs: pick-points to measure (default: n_sample feasible pick-points of the
     scene's object and gripper, generated with seed, at the scene's contact settings).
     Returns the largest per-step counts seen with :func:`buffer_margin`'s margin. Costs
-    about n_sample full picks on the CPU (a few seconds for the door opener).
+    about n_sample full picks on the CPU (seconds); the default sample's counts are a
+    pure function of the model, the procedure and the sample, so they are kept in the
+    cache (``mjx_pick.core.cache``) and a later run of the same scene reads them back.
     """
     if inputs is None:
-        from mjx_pick.core import pickpoints as pp
-        from mjx_pick.engine.backend import make_inputs
-
         if n_sample < 1:
             raise ConfigError(f"n_sample = {n_sample} must be >= 1")
-        picks = pp.generate_normal(scene.object, scene.gripper, n_sample, seed=seed, grasp=grasp)
-        if not len(picks):
-            raise ConfigError("no feasible pick-point to size Warp's buffers with")
-        inputs = make_inputs(scene, grasp, picks)
-    ncon, nefc = measure_buffers(scene, grasp, inputs, nthread=nthread)
-    mc, mr = int(ncon.max()), int(nefc.max())
+        key = {
+            "scene_sha256": cache.digest(scene.portable_xml()),
+            "silhouette_sha256": cache.digest(scene.object.polygon.wkb),
+            "grasp": to_dict(grasp),
+            "n_sample": int(n_sample),
+            "seed": int(seed),
+            "mujoco": mujoco.__version__,
+        }
+
+        def measure() -> dict:
+            log.info("sizing Warp's buffers on %d pick-points on the C engine ...", n_sample)
+            sample = _sample_inputs(scene, grasp, n_sample, seed)
+            ncon, nefc = measure_buffers(scene, grasp, sample, nthread=nthread)
+            return {"contacts": ncon.max(), "rows": nefc.max(), "sample": len(sample)}
+
+        counts = cache.memo("warp_buffers", key, measure)
+        mc, mr, n = (int(counts[k]) for k in ("contacts", "rows", "sample"))
+    else:
+        ncon, nefc = measure_buffers(scene, grasp, inputs, nthread=nthread)
+        mc, mr, n = int(ncon.max()), int(nefc.max()), len(inputs)
     contacts, rows = buffer_margin(mc, mr)
-    return BufferSizes(contacts, rows, mc, mr, len(inputs))
+    return BufferSizes(contacts, rows, mc, mr, n)
+
+
+def _sample_inputs(scene: Scene, grasp: GraspConfig, n: int, seed: int) -> PickInputs:
+    """n feasible pick-points of the scene's object and gripper (seed), as inputs."""
+    from mjx_pick.core import pickpoints as pp
+    from mjx_pick.engine.backend import make_inputs
+
+    picks = pp.generate_normal(scene.object, scene.gripper, n, seed=seed, grasp=grasp)
+    if not len(picks):
+        raise ConfigError("no feasible pick-point to size Warp's buffers with")
+    return make_inputs(scene, grasp, picks)
 
 
 # --------------------------------------------------------------------------- backend
