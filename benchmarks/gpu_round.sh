@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|real|grid
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|real|grid
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -20,6 +20,16 @@ case "$1" in
   answer)  # time to answer: a YCB part never seen, then seen (object and compile caches)
     python benchmarks/time_to_answer.py --backend warp --cases "${CASES:-mesh}" \
       --n-mesh 1024 --n-photo 200 --out "$out/time_to_answer_h100.json" ;;
+  profile)  # where a second run of a part seen before spends its time (cProfile)
+    export MJX_PICK_CACHE_DIR=/tmp/profile_cache
+    mesh=mjx_pick/assets/objects/ycb/011_banana.stl
+    args=(evaluate "$mesh" --unit m --mass-g 66 --backend warp --n "${N:-1024}" --no-progress)
+    python -m mjx_pick.cli "${args[@]}" --out /tmp/profile_a
+    python -m mjx_pick.cli "${args[@]}" --out /tmp/profile_b
+    python -m cProfile -o "$out/profile.out" -m mjx_pick.cli "${args[@]}" --out /tmp/profile_c
+    python -c "import json, sys; [print(f, json.load(open(f'/tmp/profile_{r}/summary.json'))['time_s']) for r in 'abc' for f in [r]]"
+    python -c "import pstats; p = pstats.Stats('$out/profile.out'); p.sort_stats('cumulative').print_stats(70); p.sort_stats('tottime').print_stats(30)" > "$out/profile.txt"
+    head -c 6000 "$out/profile.txt" ;;
   real)  # six YCB parts, Warp against C on the same pick-points
     python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp \
       --out "$out/real_objects_h100.json" ;;
