@@ -264,6 +264,8 @@ def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
 
     assert shrink_sizes(8, 2) == (8, 4, 2) and shrink_sizes(8, 5) == (8, 4, 2, 1)
     assert shrink_sizes(6, 3) == (6, 3) and shrink_sizes(8, 0) == (8,)
+    # never below the smallest pool worth its own program
+    assert shrink_sizes(8192, 3, 4096) == (8192, 4096) and shrink_sizes(2048, 3, 4096) == (2048,)
     picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 1, seed=1, grasp=SHORT)
     inputs = make_inputs(block_scene, SHORT, picks.take(np.zeros(12, int)), {"pad_friction": 0.9})
     air = np.array([1, 3, 4, 6, 7, 9])  # the long picks come last: a tail of 4+ live slots
@@ -281,6 +283,7 @@ def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
         shrink_levels=1,
     )
     backend.POOL_QUANTUM = 8
+    backend.SHRINK_MIN_SLOTS = 1  # a pool of 8 that shrinks: the tail's logic at CPU size
     shrunk = backend.run(inputs)[0]
     st1 = dataclasses.replace(backend.pool_stats)
     # the same picks without shrinking, from the same compiled program (a queue of 16

@@ -230,11 +230,11 @@ def _slot_axes(phys: Physics):
     return Slot(d_axes, *([0] * (len(Slot._fields) - 1)))
 
 
-def shrink_sizes(slots: int, levels: int) -> tuple[int, ...]:
+def shrink_sizes(slots: int, levels: int, min_slots: int = 1) -> tuple[int, ...]:
     """Pool sizes of a run's tail: slots, halved up to `levels` times while the halves
-    stay whole numbers (slots per device)."""
+    stay whole numbers of at least min_slots (slots per device)."""
     sizes = [int(slots)]
-    while len(sizes) <= levels and sizes[-1] % 2 == 0 and sizes[-1] > 1:
+    while len(sizes) <= levels and sizes[-1] % 2 == 0 and sizes[-1] // 2 >= max(min_slots, 1):
         sizes.append(sizes[-1] // 2)
     return tuple(sizes)
 
@@ -247,6 +247,7 @@ def make_pool(
     mesh: Mesh | None = None,
     physics_for: Callable[[int], Physics] | None = None,
     shrink_levels: int = 0,
+    shrink_min_slots: int = 1,
 ):
     """A refilled pool of `slots` simulations as ONE jitted program:
     (valid, qpos0, params, friction, solref, solimp) -> (results, ticks, Diagnostics,
@@ -261,7 +262,8 @@ def make_pool(
     change, exactly as in ``make_rollout`` where nothing accumulates after DONE, though
     its physics keeps stepping (a vmapped program steps every slot) until it is
     refilled. ticks: (N,) int32 control periods each pick ran; rounds: (L,) int32
-    rounds run at each pool size of ``shrink_sizes(slots per device, shrink_levels)``
+    rounds run at each pool size of ``shrink_sizes(slots per device, shrink_levels,
+    shrink_min_slots)``
     (per device).
 
     The tail (``shrink_levels`` > 0): once every pick has been handed out, the pool
@@ -269,7 +271,7 @@ def make_pool(
     ends. When at most half of the slots are still live, the live ones are moved into
     a pool of half the size (their state gathered; for Warp, a fresh contact buffer of
     the smaller size -- contacts are found anew at every step), up to
-    ``shrink_levels`` times. A pick's physics and control do not depend on which slot
+    ``shrink_levels`` times, never below ``shrink_min_slots`` per device. A pick's physics and control do not depend on which slot
     or pool size runs it, so the results are those of a run without shrinking.
 
     physics_for(n_worlds) -> Physics: the device model and initial data for a pool of
@@ -278,7 +280,7 @@ def make_pool(
     """
     physics_for = physics_for or (lambda n_worlds: jax_physics(scene))
     n_dev = mesh.size if mesh is not None and mesh.size > 1 else 1
-    sizes = shrink_sizes(slots // n_dev, shrink_levels)
+    sizes = shrink_sizes(slots // n_dev, shrink_levels, shrink_min_slots)
     phys = physics_for(sizes[0])
     ad = addresses(scene)
     n_sub = grasp.substeps(scene.solver)
@@ -452,6 +454,12 @@ class MjxBackend:
     name = "mjx"
     impl = "jax"
     POOL_QUANTUM = 256
+    # the tail never shrinks a pool below this many slots per device: below a few
+    # thousand simulations a GPU step takes about as long whatever the slot count (launch
+    # latency, not the slots, sets it), so a halving saves little, while every pool size
+    # is one more trace and compile of the physics step -- seconds that a short run pays
+    # and a long one amortises (benchmarks/RESULTS.md, the pool's tail)
+    SHRINK_MIN_SLOTS = 4096
 
     def __init__(
         self,
@@ -572,6 +580,7 @@ class MjxBackend:
                 self.mesh,
                 self.physics,
                 self.shrink_levels,
+                self.SHRINK_MIN_SLOTS,
             )
             self._compiled[key] = fn.lower(*args).compile()
             self.stats.compile_s += time.perf_counter() - t0
@@ -592,7 +601,7 @@ class MjxBackend:
         out, ticks, diag, rounds = jax.block_until_ready(fn(*args))
         self.stats.run_s += time.perf_counter() - t0
         n_dev = len(self.devices)
-        sizes = np.asarray(shrink_sizes(size // n_dev, self.shrink_levels))
+        sizes = np.asarray(shrink_sizes(size // n_dev, self.shrink_levels, self.SHRINK_MIN_SLOTS))
         rounds = np.asarray(rounds, np.int64).reshape(n_dev, len(sizes))
         ticks = np.asarray(ticks)[:n]
         st = self.pool_stats

@@ -326,6 +326,7 @@ def _warp_backend_class():
                 scene, grasp, batch_size, devices, refill, ticks_per_call, shrink_levels
             )
             self.graph_mode = graph_mode
+            self._model = None  # the model on the device, made once (physics)
             if buffers is None:
                 t0 = time.perf_counter()
                 buffers = size_buffers(scene, grasp)
@@ -353,17 +354,19 @@ def _warp_backend_class():
             from mujoco.mjx.warp import types as mjxw_types
 
             device = self.devices[0]
-            mode = self.graph_mode or ("JAX" if device.platform == "cpu" else "WARP")
-            mx = mjx.put_model(
-                self.scene.model,
-                impl="warp",
-                device=device,
-                graph_mode=getattr(mjxw_types.GraphMode, mode),
-            )
-            # cfrc_ext (the pad forces) needs the post-constraint RNE pass; Warp's printed
-            # overflow warnings are replaced by the overflow check after each run
-            opt = mx.opt._impl.replace(run_rne_postconstraint=True, warn_overflow=0)
-            mx = mx.replace(opt=mx.opt.replace(_impl=opt))
+            if self._model is None:  # one transfer of the model: every pool size shares it
+                mode = self.graph_mode or ("JAX" if device.platform == "cpu" else "WARP")
+                mx = mjx.put_model(
+                    self.scene.model,
+                    impl="warp",
+                    device=device,
+                    graph_mode=getattr(mjxw_types.GraphMode, mode),
+                )
+                # cfrc_ext (the pad forces) needs the post-constraint RNE pass; Warp's
+                # printed overflow warnings are replaced by the overflow check after each run
+                opt = mx.opt._impl.replace(run_rne_postconstraint=True, warn_overflow=0)
+                self._model = mx.replace(opt=mx.opt.replace(_impl=opt))
+            mx = self._model
             d0 = mjx.make_data(
                 self.scene.model,
                 impl="warp",
