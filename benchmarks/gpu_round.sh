@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|real|grid
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|frontier|stable|real|grid
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -30,6 +30,15 @@ case "$1" in
     python -c "import json, sys; [print(f, json.load(open(f'/tmp/profile_{r}/summary.json'))['time_s']) for r in 'abc' for f in [r]]"
     python -c "import pstats; p = pstats.Stats('$out/profile.out'); p.sort_stats('cumulative').print_stats(70); p.sort_stats('tottime').print_stats(30)" > "$out/profile.txt"
     head -c 6000 "$out/profile.txt" ;;
+  frontier)  # the time step against labels: Warp at 1 and 2 ms against MuJoCo C at 1 ms
+    python benchmarks/throughput.py --objects door_opener \
+      --run mujoco:n=4096:batch=1024 --run warp:n=32768:batch=32768 \
+      --run warp:n=32768:batch=32768:timestep_s=0.002 --out "$out/frontier" --tag frontier
+    cp "$out"/frontier/*.jsonl "$out/frontier.jsonl" 2>/dev/null || true ;;
+  stable)  # Warp against C on the labels that a 1 um shift does not flip
+    python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp --stability-um 1 \
+      --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
+      --out "$out/real_objects_stable_h100.json" ;;
   real)  # six YCB parts, Warp against C on the same pick-points
     python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp \
       --out "$out/real_objects_h100.json" ;;

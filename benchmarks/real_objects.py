@@ -8,6 +8,13 @@ class that remains must be explained physically (benchmarks/RESULTS.md, "Real ob
     python benchmarks/real_objects.py --n 48 --out benchmarks/results/real_objects.json
     python benchmarks/real_objects.py --n 256 --backends mujoco,warp   # on a GPU machine
     python benchmarks/real_objects.py --n 32 --pictures benchmarks/out/real_objects
+    python benchmarks/real_objects.py --n 512 --backends mujoco,warp --stability-um 1 \
+        --objects door_opener,011_banana        # agreement on stable labels, GPU machine
+
+--objects takes the YCB manifest's names and the shipped photo part ``door_opener``.
+With --stability-um, every backend simulates each pick-point again with the object moved
+that far (evaluate's ``label_stable``), and agreement is also reported on the pick-points
+whose label is stable on the reference backend (the first) and on both.
 
 With --pictures, one PNG per (object, failure class): the first pick-point of that
 class re-simulated on MuJoCo C with its trace -- the pick in the gripper frame, the pad
@@ -37,7 +44,10 @@ def ycb_manifest() -> dict:
 
 
 def load_ycb(name: str) -> mp.ObjectModel:
-    """A shipped YCB part by its manifest name, with its published mass."""
+    """A shipped YCB part by its manifest name, with its published mass (or the shipped
+    door opener, the paper's part, by its asset name)."""
+    if name == "door_opener":
+        return mp.load_asset(name)
     entry = ycb_manifest()[name]
     folder = resources.files("mjx_pick.assets") / "objects" / "ycb"
     with resources.as_file(folder / entry["file"]) as path:
@@ -95,14 +105,15 @@ def run_object(
     pictures: str = "",
     contact=None,
     solver=None,
+    stability_um: float = 0.0,
 ) -> dict:
     """One object on each backend (the first is the reference for label agreement)."""
     t0 = time.perf_counter()
     obj = load_ycb(name)
     t_load = time.perf_counter() - t0
     grasp = mp.GraspConfig(grip_force_n=force_n)
-    row = {"object": name, "mass_g": entry["mass_g"], "height_mm": round(obj.height_mm, 2)}
-    labels = {}
+    row = {"object": name, "mass_g": round(obj.mass_kg * 1e3, 2), "height_mm": round(obj.height_mm, 2)}
+    labels, stable = {}, {}
     for backend in backends:
         ev = mp.evaluate(
             obj,
@@ -113,8 +124,11 @@ def run_object(
             contact=contact,
             solver=solver,
             backend=backend,
+            stability_um=stability_um,
         )
         table = ev.table.to_pandas()
+        if stability_um:
+            stable[backend] = table["label_stable"].to_numpy(bool)
         k, m = int(table["success"].sum()), len(table)
         lo, hi = wilson_interval(k, m)
         labels[backend] = table["success"].to_numpy()
@@ -137,6 +151,17 @@ def run_object(
     row["labels_agree"] = {
         b: float(np.mean(labels[ref] == labels[b])) for b in backends[1:] if b in labels
     }
+    if stability_um:
+        row["stable_share"] = {b: float(np.mean(v)) for b, v in stable.items()}
+        for b in backends[1:]:
+            same = labels[ref] == labels[b]
+            on_ref, on_both = stable[ref], stable[ref] & stable[b]
+            row.setdefault("labels_agree_stable", {})[b] = {
+                "stable_on_reference": float(np.mean(same[on_ref])) if on_ref.any() else None,
+                "n_stable_on_reference": int(on_ref.sum()),
+                "stable_on_both": float(np.mean(same[on_both])) if on_both.any() else None,
+                "n_stable_on_both": int(on_both.sum()),
+            }
     row["load_s"] = round(t_load, 1)
     return row
 
@@ -156,15 +181,21 @@ def main() -> None:
     ap.add_argument("--pictures", default="", help="folder for one PNG per failure class")
     ap.add_argument("--contact", help="ContactParams TOML (default: the shipped defaults)")
     ap.add_argument("--solver", help="SolverParams TOML (default: the shipped defaults)")
+    ap.add_argument(
+        "--stability-um", type=float, default=0.0, help="label_stable's shift, um (0: off)"
+    )
     args = ap.parse_args()
     manifest = ycb_manifest()
     names = [s for s in args.objects.split(",") if s] or list(manifest)
+    unknown = sorted(set(names) - set(manifest) - {"door_opener"})
+    if unknown:
+        raise SystemExit(f"--objects: unknown {unknown}; known: door_opener, {', '.join(manifest)}")
     backends = [b for b in args.backends.split(",") if b]
     rows = []
     for name in names:
         row = run_object(
             name,
-            manifest[name],
+            manifest.get(name, {}),
             args.n,
             args.seed,
             args.force_n,
@@ -172,13 +203,18 @@ def main() -> None:
             args.pictures,
             load_toml(mp.ContactParams, args.contact) if args.contact else None,
             load_toml(mp.SolverParams, args.solver) if args.solver else None,
+            args.stability_um,
         )
         rows.append(row)
         c = row[backends[0]]
         print(
             f"{name:24s} {c['success_rate']:6.1%} [{c['wilson95'][0]:.2f}, "
             f"{c['wilson95'][1]:.2f}] {c['failures']}"
-            + "".join(f" labels {b}={backends[0]} {v:.1%}" for b, v in row["labels_agree"].items()),
+            + "".join(f" labels {b}={backends[0]} {v:.1%}" for b, v in row["labels_agree"].items())
+            + "".join(
+                f" stable {b}={backends[0]} {v['stable_on_reference']} (n {v['n_stable_on_reference']})"
+                for b, v in row.get("labels_agree_stable", {}).items()
+            ),
             flush=True,
         )
     if args.out:

@@ -122,7 +122,8 @@ class RunSpec:
 
         Keys: n, batch, warmup, devices (ints); backend options refill, ticks_per_call,
         shrink_levels, graph_mode, rows (Warp's constraint rows per simulation; contacts
-        sized as usual); solver settings iterations, ls_iterations, tolerance."""
+        sized as usual); solver settings iterations, ls_iterations, tolerance,
+        timestep_s."""
         name, *parts = text.split(":")
         fields: dict = {}
         options, solver = [], []
@@ -140,7 +141,7 @@ class RunSpec:
                 options.append((key, value))
             elif key in ("iterations", "ls_iterations"):
                 solver.append((key, int(value)))
-            elif key in ("tolerance",):
+            elif key in ("tolerance", "timestep_s"):
                 solver.append((key, float(value)))
             else:
                 raise ValueError(f"run {text!r}: unknown key {key!r}")
