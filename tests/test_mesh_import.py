@@ -17,6 +17,7 @@ from shapely.geometry import Point, Polygon
 import mjx_pick as mp
 from mjx_pick import cli
 from mjx_pick.cli import inputs
+from mjx_pick.core import pickpoints as pp
 
 YCB = resources.files("mjx_pick.assets") / "objects" / "ycb"
 
@@ -246,3 +247,38 @@ def test_slow_preparation_steps_are_said_as_they_start(tmp_path, capsys):
         for h in handlers:
             logger.addHandler(h)
         logger.setLevel(level)
+
+
+def standing_fork(tmp_path):
+    """A U standing on its base (mm): a 10 mm base 26 mm long, two 10 mm prongs 60 mm
+    high with a 6 mm gap between them, 20 mm deep. One connected solid; above the
+    base the pads meet two pieces."""
+    u = Polygon([(-13, 0), (13, 0), (13, 60), (3, 60), (3, 10), (-3, 10), (-3, 60), (-13, 60)])
+    solid = trimesh.creation.extrude_polygon(u, 20.0)
+    # the U drawn in x (length) and y (height), extruded along z: height becomes z
+    solid.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    solid.apply_translation([0.0, 10.0, 0.0])
+    path = tmp_path / "fork.stl"
+    solid.export(path)
+    return path
+
+
+def test_a_band_cutting_one_solid_in_two_keeps_both_pieces(tmp_path, hull_pieces):
+    # the feasibility checks kept only the larger prong: a finger placed beside one
+    # prong came down on the other, and the pick was called feasible
+    obj = mp.load_object(standing_fork(tmp_path), unit="mm", mass_g=80.0)
+    gripper = mp.load_gripper("robotiq-2f85")
+    lo, hi = pp.pad_band_mm(obj, gripper, mp.GraspConfig())
+    assert lo > 10.0  # the pads are above the base
+    band = obj.band_outline(lo, obj.height_mm)
+    assert band.geom_type == "MultiPolygon" and len(band.geoms) == 2
+    assert band.area == pytest.approx(2 * 10.0 * 20.0, rel=1e-3)
+    checker = pp.FeasibilityChecker(obj, gripper)
+    # the gripper centred on one prong (closing along x): its far finger would land on
+    # the other prong, 6 mm away
+    res = checker([-8.0, 8.0], [0.0, 0.0], [0.0, 0.0])
+    assert (res["reason"] != pp.fk.FEASIBLE).all(), res
+    # centred on the whole fork: the fingers open around both prongs
+    whole = checker([0.0], [0.0], [0.0])
+    assert whole["reason"][0] == pp.fk.FEASIBLE
+    assert whole["opening_mm"][0] >= 26.0

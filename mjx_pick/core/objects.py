@@ -38,6 +38,7 @@ log = logging.getLogger(__name__)
 # test ("sharp bits" of the MJX docs); a prism of 12 polygon corners has 24.
 MAX_PIECE_CORNERS = 12
 MAX_HULL_VERTICES = 32
+MIN_PIECE_MM2 = 0.01  # a band outline's pieces smaller than this are arithmetic specks
 # a disconnected blob is dropped with a warning only when it is this small beside the
 # largest; otherwise the image holds several objects and we refuse to guess
 DOMINANCE_RATIO = 0.05
@@ -110,13 +111,15 @@ class ObjectModel:
         height = float(self.pieces[0][:, 2].max())
         return tuple(_prism(p, height) for p in convex_partition(filled, MAX_PIECE_CORNERS))
 
-    def band_outline(self, z_lo_mm: float, z_hi_mm: float) -> Polygon:
+    def band_outline(self, z_lo_mm: float, z_hi_mm: float) -> Polygon | MultiPolygon:
         """Top-down outline of the part of the object between two heights, mm.
 
         What fingers whose pads span z_lo..z_hi can touch or hit: a prism's silhouette
         wherever the band meets it; for a mesh, the projection of its slice (an L-part
         standing on its edge has a narrower outline in a band than its whole shadow).
-        Empty when the band misses the object.
+        A band may cut one solid into several pieces (the prongs of a standing fork
+        above its base): all are kept, since a finger can land on any of them. Empty
+        when the band misses the object.
         """
         key = (round(float(z_lo_mm), 6), round(float(z_hi_mm), 6))
         cache = self.__dict__.setdefault("_band_cache", {})
@@ -327,13 +330,21 @@ def mask_to_polygon(mask: np.ndarray, px_per_mm: float, simplify_mm: float) -> P
     return _largest_polygon(shapely.make_valid(poly))
 
 
+def _polygons(geom) -> list[Polygon]:
+    """The polygons of a geometry (a polygon, a multi-polygon or a collection)."""
+    if isinstance(geom, Polygon):
+        return [geom] if not geom.is_empty else []
+    flat = []
+    for g in getattr(geom, "geoms", []):
+        if isinstance(g, Polygon | MultiPolygon):
+            flat.extend(_polygons(g) if isinstance(g, MultiPolygon) else [g])
+    return flat
+
+
 def _largest_polygon(geom) -> Polygon:
     if isinstance(geom, Polygon):
         return orient(geom)
-    polys = [g for g in getattr(geom, "geoms", []) if isinstance(g, Polygon | MultiPolygon)]
-    flat = []
-    for g in polys:
-        flat.extend(g.geoms if isinstance(g, MultiPolygon) else [g])
+    flat = _polygons(geom)
     if not flat:
         raise ConfigError("the silhouette has no area after simplification")
     return orient(max(flat, key=lambda p: p.area))
@@ -764,13 +775,20 @@ def _one_body(mesh: trimesh.Trimesh, path: Path, largest_body: bool) -> tuple[tr
     return (trimesh.util.concatenate([kept, *inside]) if inside else kept), note
 
 
-def _mesh_outline(mesh: trimesh.Trimesh, z_lo_m: float, z_hi_m: float) -> Polygon:
+def _mesh_outline(
+    mesh: trimesh.Trimesh, z_lo_m: float, z_hi_m: float, pieces: bool = False
+) -> Polygon | MultiPolygon:
     """Top-down outline (mm) of the part of a watertight mesh between two heights (m).
 
     The shadow of a solid is the union of its triangles' shadows. That union is taken
     directly, because trimesh's projected outline came apart into dozens of slivers on
     real scanned meshes (a YCB marker kept a third of its length). The band's part is
     the mesh cut by two capped planes.
+
+    pieces: keep every piece of the shadow (a band of one solid can cut it in several:
+    the two prongs of a standing fork above its base), dropping only specks of less
+    than MIN_PIECE_MM2 left by the union's arithmetic; else the largest piece (the whole
+    height of one connected solid casts one shadow).
     """
     part = mesh
     lo, hi = mesh.bounds[:, 2]
@@ -786,18 +804,25 @@ def _mesh_outline(mesh: trimesh.Trimesh, z_lo_m: float, z_hi_m: float) -> Polygo
     area = 0.5 * np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
     shadows = shapely.polygons(tri[area > 1e-9])
     # a hair of growth closes the cracks between neighbouring triangles' shadows
-    union = shapely.union_all(shapely.buffer(shadows, 1e-4)).buffer(-1e-4)
-    return _largest_polygon(shapely.make_valid(union))
+    union = shapely.make_valid(shapely.union_all(shapely.buffer(shadows, 1e-4)).buffer(-1e-4))
+    if not pieces:
+        return _largest_polygon(union)
+    kept = [p for p in _polygons(union) if p.area >= MIN_PIECE_MM2]
+    if not kept:
+        return Polygon()
+    return orient(kept[0]) if len(kept) == 1 else MultiPolygon([orient(p) for p in kept])
 
 
 def _band_outline(mesh_sha256: str, mesh: trimesh.Trimesh, z_lo_mm: float, z_hi_mm: float):
     """_mesh_outline of a band (mm), through the on-disk cache (key: the mesh's content)."""
     arrays = cache.memo(
         "outline",
-        {"mesh_sha256": mesh_sha256, "z_lo_mm": z_lo_mm, "z_hi_mm": z_hi_mm},
+        # "pieces": every piece is kept (older entries held the largest alone)
+        {"mesh_sha256": mesh_sha256, "z_lo_mm": z_lo_mm, "z_hi_mm": z_hi_mm, "pieces": "all"},
         lambda: {
             "wkb": np.frombuffer(
-                shapely.to_wkb(_mesh_outline(mesh, z_lo_mm * 1e-3, z_hi_mm * 1e-3)), np.uint8
+                shapely.to_wkb(_mesh_outline(mesh, z_lo_mm * 1e-3, z_hi_mm * 1e-3, pieces=True)),
+                np.uint8,
             )
         },
     )

@@ -17,6 +17,7 @@ import warnings
 from collections.abc import Callable
 
 import numpy as np
+import shapely
 
 from mjx_pick.core import cache
 from mjx_pick.core.config import (
@@ -316,7 +317,7 @@ def raster_resolution(name: str, radius_mm: float, res_mm: float) -> float:
 
 @functools.lru_cache(maxsize=8)
 def _stack_cached(key, polygon, res_mm: float):
-    radius = max(math.hypot(x, y) for x, y in polygon.exterior.coords)
+    radius = float(np.hypot(*shapely.get_coordinates(polygon).T).max())  # one piece or several
     res_mm = raster_resolution(key[0], radius, res_mm)
     # the rasterised yaw bins are a pure function of the silhouette: kept on disk across
     # runs (mjx_pick.core.cache), packed to a bit per pixel
