@@ -64,3 +64,42 @@ def test_c_backend_flags_a_blow_up(block):
     assert list(out["diverged"]) == [False, True, False, False]
     assert np.isnan(out["score"][1]) and not out["success"][1]
     assert out["success"][[0, 2, 3]].sum() >= 2
+
+
+def test_set_contact_is_one_mapping_in_numpy_and_jax(block):
+    import jax.numpy as jnp
+
+    from mjx_pick.engine.backend import set_contact
+
+    scene = mp.build_scene(block, mp.GripperSpec())
+    m, n = scene.model, 3
+    base = [
+        np.broadcast_to(a, (n, *a.shape)).astype(np.float32)
+        for a in (m.pair_friction, m.pair_solref, m.pair_solimp)
+    ]
+    values = {
+        "pad_friction": np.array([0.2, 0.5, 0.9]),  # per simulation
+        "table_friction": 0.3,  # one for all
+        "pad_solref": [-5000.0, -40.0],  # one vector for all
+        "table_solimp": np.tile([0.9, 0.95, 0.001, 0.5, 2.0], (n, 1)),  # a row each
+    }
+    fr, ref, imp = set_contact(scene, *base, values)
+    pads, table = list(scene.index.pad_pairs), list(scene.index.table_pairs)
+    np.testing.assert_array_equal(fr[:, pads, 0], np.float32([[0.2] * 2, [0.5] * 2, [0.9] * 2]))
+    np.testing.assert_array_equal(fr[:, pads, 0], fr[:, pads, 1])
+    # torsion follows the Coulomb coefficient when it is not given
+    per_mu = np.float32(scene.contact.torsion_per_friction_m)
+    np.testing.assert_array_equal(fr[:, pads, 2], fr[:, pads, 0] * per_mu)
+    assert (fr[:, table, :2] == np.float32(0.3)).all()
+    assert (ref[:, pads] == np.float32([-5000.0, -40.0])).all()
+    assert (imp[:, table] == np.float32([0.9, 0.95, 0.001, 0.5, 2.0])).all()
+    # nothing else moves
+    untouched = np.ones_like(fr, bool)
+    untouched[:, pads] = False
+    untouched[:, table, :2] = False
+    np.testing.assert_array_equal(fr[untouched], base[0][untouched])
+    np.testing.assert_array_equal(imp[:, pads], base[2][:, pads])
+    # the same code in jax.numpy gives the same arrays
+    out = set_contact(scene, *(jnp.asarray(a) for a in base), values, xp=jnp)
+    for a, b in zip((fr, ref, imp), out, strict=True):
+        np.testing.assert_array_equal(a, np.asarray(b))

@@ -111,36 +111,70 @@ def make_inputs(
     contact = {k: overrides.pop(k) for k in CONTACT_OVERRIDES if k in overrides}
     params = broadcast_params(grasp.params(scene.object, scene.gripper), n, **overrides)
     m = scene.model
-    friction = np.broadcast_to(m.pair_friction, (n, m.npair, 5)).astype(np.float32).copy()
-    solref = np.broadcast_to(m.pair_solref, (n, m.npair, 2)).astype(np.float32).copy()
-    solimp = np.broadcast_to(m.pair_solimp, (n, m.npair, 5)).astype(np.float32).copy()
-    pads, table = list(scene.index.pad_pairs), list(scene.index.table_pairs)
-    if "pad_friction" in contact:
-        mu = np.broadcast_to(np.asarray(contact["pad_friction"], np.float32), (n,))
-        friction[:, pads, 0] = mu[:, None]
-        friction[:, pads, 1] = mu[:, None]
-        friction[:, pads, 2] = mu[:, None] * np.float32(scene.contact.torsion_per_friction_m)
-    if "pad_torsion" in contact:
-        torsion = np.broadcast_to(np.asarray(contact["pad_torsion"], np.float32), (n,))
-        friction[:, pads, 2] = torsion[:, None]
-    if "table_friction" in contact:
-        mu = np.broadcast_to(np.asarray(contact["table_friction"], np.float32), (n,))
-        friction[:, table, 0] = mu[:, None]
-        friction[:, table, 1] = mu[:, None]
-    if "pad_solref" in contact:
-        solref[:, pads] = np.broadcast_to(np.asarray(contact["pad_solref"], np.float32), (n, 2))[
-            :, None
-        ]
-    if "table_solref" in contact:
-        ref = np.broadcast_to(np.asarray(contact["table_solref"], np.float32), (n, 2))
-        solref[:, table] = ref[:, None]
-    for name, pairs in (("pad_solimp", pads), ("table_solimp", table)):
-        if name in contact:
-            imp = np.broadcast_to(np.asarray(contact[name], np.float32), (n, 5))
-            solimp[:, pairs] = imp[:, None]
+    friction, solref, solimp = set_contact(
+        scene,
+        np.broadcast_to(m.pair_friction, (n, m.npair, 5)).astype(np.float32),
+        np.broadcast_to(m.pair_solref, (n, m.npair, 2)).astype(np.float32),
+        np.broadcast_to(m.pair_solimp, (n, m.npair, 5)).astype(np.float32),
+        contact,
+    )
     if np.any(friction[..., 0] < 0) or np.any(~np.isfinite(friction)):
         raise ConfigError("friction overrides must be finite and >= 0")
     return PickInputs(qpos0, params, friction, solref, solimp)
+
+
+def set_contact(scene: Scene, friction, solref, solimp, values: dict, xp=np):
+    """The contact-pair arrays with named contact values written into the scene's pad
+    and table pairs: the one mapping from contact values to MuJoCo pair parameters
+    (evaluate's overrides in numpy, calibration's differentiable fit in ``jax.numpy``).
+
+    Args:
+      scene: names the pad and table pairs.
+      friction, solref, solimp: (N, npair, 5), (N, npair, 2), (N, npair, 5) base arrays.
+      values: CONTACT_OVERRIDES names; the frictions and pad_torsion (m) a scalar or (N,),
+        the solrefs (2,) or (N, 2), the solimps (5,) or (N, 5). A pad_friction without
+        a pad_torsion scales the scene's torsional friction with it (both come from the
+        same Coulomb coefficient).
+      xp: numpy or jax.numpy (differentiable in the values).
+
+    Returns:
+      (friction, solref, solimp), new arrays of the inputs' shapes and dtypes.
+    """
+    pads, table = list(scene.index.pad_pairs), list(scene.index.table_pairs)
+    values = dict(values)
+    if "pad_friction" in values and "pad_torsion" not in values:
+        per_mu = np.float32(scene.contact.torsion_per_friction_m)
+        values["pad_torsion"] = xp.asarray(values["pad_friction"], friction.dtype) * per_mu
+    # (array, pairs, columns, vector): where each value goes
+    targets = {
+        "pad_friction": ("friction", pads, (0, 1), False),
+        "pad_torsion": ("friction", pads, (2,), False),
+        "table_friction": ("friction", table, (0, 1), False),
+        "pad_solref": ("solref", pads, (0, 1), True),
+        "table_solref": ("solref", table, (0, 1), True),
+        "pad_solimp": ("solimp", pads, (0, 1, 2, 3, 4), True),
+        "table_solimp": ("solimp", table, (0, 1, 2, 3, 4), True),
+    }
+    arrays = {"friction": friction, "solref": solref, "solimp": solimp}
+    for name, (which, pairs, cols, vector) in targets.items():
+        if name in values:
+            arrays[which] = _set_pairs(arrays[which], pairs, cols, values[name], vector, xp)
+    return arrays["friction"], arrays["solref"], arrays["solimp"]
+
+
+def _set_pairs(arr, pairs, cols, value, vector: bool, xp):
+    """arr (N, npair, C) with arr[:, pairs, cols] = value; value: a scalar or (N,) when
+    not vector (the same in every column), else (len(cols),) or (N, len(cols))."""
+    n, npair, width = arr.shape
+    v = xp.asarray(value, arr.dtype)
+    # (1 or N, k): one row for every simulation, or a row each; a scalar fills k columns
+    v = v.reshape((-1, len(cols))) if vector else v.reshape((-1, 1))
+    v = xp.broadcast_to(v, (n, len(cols)))
+    zero = xp.zeros((n,), arr.dtype)
+    full = xp.stack([v[:, cols.index(c)] if c in cols else zero for c in range(width)], axis=-1)
+    mask = np.zeros((npair, width), bool)
+    mask[np.ix_(pairs, cols)] = True
+    return xp.where(mask[None], full[:, None, :], arr)
 
 
 @dataclasses.dataclass

@@ -22,6 +22,7 @@ import numpy as np
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.physics import ContactParams, pad_torsion_m, solref_terms, stiffest_spring
+from mjx_pick.engine.backend import set_contact
 
 
 class ParamInfo(NamedTuple):
@@ -245,6 +246,10 @@ def fitted_contact(base: ContactParams, values: dict[str, float]) -> ContactPara
     return dataclasses.replace(base, **{k: v for k, v in values.items() if k != "force_offset_n"})
 
 
+# the pair values a fit moves (its solimps stay the scene's)
+FITTED_PAIR_VALUES = ("pad_friction", "pad_torsion", "table_friction", "pad_solref", "table_solref")
+
+
 def row_inputs(problem_inputs, scene, settings, grip_force_n, values: dict[str, float]):
     """Per-row simulation inputs for one parameter vector: the contact through
     ``Settings.overrides`` (``physics.mujoco_contact``: solref clamping, torsion from
@@ -253,50 +258,47 @@ def row_inputs(problem_inputs, scene, settings, grip_force_n, values: dict[str, 
     n = len(grip_force_n)
     over = s.overrides(scene, n)
     f = np.asarray(grip_force_n, np.float32) + np.float32(values.get("force_offset_n", 0.0))
+    friction, solref, _ = set_contact(
+        scene,
+        problem_inputs.pair_friction,
+        problem_inputs.pair_solref,
+        problem_inputs.pair_solimp,
+        {k: over[k] for k in FITTED_PAIR_VALUES},
+    )
     return problem_inputs.replace(
-        pair_friction=_pairs(problem_inputs.pair_friction, scene, over),
-        pair_solref=_solref(problem_inputs.pair_solref, scene, over),
+        pair_friction=friction,
+        pair_solref=solref,
         params=problem_inputs.params._replace(force_n=f.astype(np.float32)),
     )
-
-
-def _pairs(friction, scene, over):
-    fr = np.array(friction, np.float32)
-    pads, table = list(scene.index.pad_pairs), list(scene.index.table_pairs)
-    fr[:, pads, 0] = over["pad_friction"][:, None]
-    fr[:, pads, 1] = over["pad_friction"][:, None]
-    fr[:, pads, 2] = over["pad_torsion"][:, None]
-    fr[:, table, 0] = over["table_friction"][:, None]
-    fr[:, table, 1] = over["table_friction"][:, None]
-    return fr
-
-
-def _solref(solref, scene, over):
-    ref = np.array(solref, np.float32)
-    ref[:, list(scene.index.pad_pairs)] = over["pad_solref"][:, None]
-    ref[:, list(scene.index.table_pairs)] = over["table_solref"][:, None]
-    return ref
 
 
 def contact_arrays_jnp(names, values, inputs, scene, settings, mass_kg):
     """(R, npair, 5) friction, (R, npair, 2) solref and (R,) force_n for values (P,),
     as jnp (differentiable: forward mode through MJX). The same mapping as
-    :func:`row_inputs`: ``physics.solref_terms`` and ``physics.pad_torsion_m``."""
+    :func:`row_inputs` (``engine.backend.set_contact``, ``physics.solref_terms`` and
+    ``physics.pad_torsion_m``)."""
     v = dict(zip(names, values, strict=True))
     base = settings.contact
     tc = settings.solver.timeconst_s
-    fr, ref = jnp.asarray(inputs.pair_friction), jnp.asarray(inputs.pair_solref)
-    pads, table = list(scene.index.pad_pairs), list(scene.index.table_pairs)
     mu = v.get("pad_friction", base.pad_friction)
     torsion_mm = v.get("pad_torsion_mm", base.pad_torsion_mm)
-    tors = pad_torsion_m(mu, torsion_mm, scene.pad_patch_mm)
-    fr = fr.at[:, pads, 0].set(mu).at[:, pads, 1].set(mu).at[:, pads, 2].set(tors)
-    tf = v.get("table_friction", base.table_friction)
-    fr = fr.at[:, table, 0].set(tf).at[:, table, 1].set(tf)
-    for side, pairs in (("pad", pads), ("table", table)):
+    contact = {
+        "pad_friction": mu,
+        "pad_torsion": pad_torsion_m(mu, torsion_mm, scene.pad_patch_mm),
+        "table_friction": v.get("table_friction", base.table_friction),
+    }
+    for side in ("pad", "table"):
         k_in = v.get(f"{side}_stiffness_n_per_mm", getattr(base, f"{side}_stiffness_n_per_mm"))
         b_in = v.get(f"{side}_damping_ns_per_mm", getattr(base, f"{side}_damping_ns_per_mm"))
         k, b = solref_terms(k_in, b_in, mass_kg, tc, xp=jnp)
-        ref = ref.at[:, pairs, 0].set(-k).at[:, pairs, 1].set(-b)
+        contact[f"{side}_solref"] = jnp.stack([-k, -b])
+    fr, ref, _ = set_contact(
+        scene,
+        jnp.asarray(inputs.pair_friction),
+        jnp.asarray(inputs.pair_solref),
+        jnp.asarray(inputs.pair_solimp),
+        contact,
+        xp=jnp,
+    )
     force = jnp.asarray(inputs.params.force_n) + v.get("force_offset_n", 0.0)
     return fr, ref, force
