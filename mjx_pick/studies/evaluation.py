@@ -289,11 +289,8 @@ def evaluate(
     costs = {k: float(v) for k, v in (fixed_costs or {}).items()}
     costs["scene_s"] = time.perf_counter() - t_scene  # MjModel, and the backend that holds it
     try:
-        return _evaluate(
-            executor,
-            engine,
-            runner,
-            scene,
+        run = _Run(executor, engine, runner, scene, costs, user_batch)
+        req = _Request(
             obj,
             gripper,
             contact,
@@ -317,73 +314,86 @@ def evaluate(
             skip_infeasible=skip_infeasible,
             keep_chunks=keep_chunks,
             on_progress=on_progress,
-            user_batch=user_batch,
-            costs=costs,
         )
+        return _evaluate(run, req)
     finally:
         if hasattr(executor, "close"):
             executor.close()
 
 
-def _evaluate(
-    executor: ChunkExecutor,
-    engine: Engine | None,
-    runner,
-    scene,
-    obj: ObjectModel,
-    gripper: GripperSpec,
-    contact: ContactParams,
-    solver: SolverParams,
-    grasp: GraspConfig,
-    pick_config: pp.PickConfig,
-    *,
-    n,
-    seed,
-    picks,
-    out,
-    n_traces,
-    progress,
-    resume,
-    until,
-    min_score,
-    max_n,
-    chunk_size,
-    min_force,
-    stability_um,
-    overwrite,
-    skip_infeasible,
-    keep_chunks,
-    on_progress,
-    costs,
-    user_batch=None,
-) -> Evaluation:
+@dataclasses.dataclass(frozen=True)
+class _Request:
+    """One evaluate() call's settings once resolved and checked (see evaluate's Args):
+    the value its steps pass down instead of two dozen loose parameters."""
+
+    obj: ObjectModel
+    gripper: GripperSpec
+    contact: ContactParams
+    solver: SolverParams
+    grasp: GraspConfig
+    pick_config: pp.PickConfig
+    n: int
+    seed: int
+    picks: pp.PickBatch | str | Path | None
+    out: str | Path | None
+    n_traces: int
+    progress: bool
+    resume: bool
+    until: int | None
+    min_score: float
+    max_n: int | None
+    chunk_size: int | None
+    min_force: bool
+    stability_um: float
+    overwrite: bool
+    skip_infeasible: bool
+    keep_chunks: bool
+    on_progress: ProgressFn | None
+
+
+@dataclasses.dataclass
+class _Run:
+    """What one evaluate() call simulates with: its executor (this process, or a Ray
+    cluster), the local engine and runner (None on a cluster), the scene, the fixed
+    costs paid so far (seconds, filled in as they are paid) and the user's checked
+    pick-points (None unless read from a file)."""
+
+    executor: ChunkExecutor
+    engine: Engine | None
+    runner: object | None
+    scene: object
+    costs: dict
+    user_batch: pp.PickBatch | None = None
+
+
+def _evaluate(run: _Run, req: _Request) -> Evaluation:
     """evaluate() once its executor (this process, or a Ray cluster) is ready."""
-    out_dir = Path(out) if out is not None else None
+    out_dir = Path(req.out) if req.out is not None else None
     settings = experiment_settings(
-        scene,
+        run.scene,
         {
-            "gripper": gripper,
-            "contact": contact,
-            "solver": solver,
-            "grasp": grasp,
-            "picks": pick_config,
-            "source": _picks_source(picks),
-            "n": n if picks is None and until is None else None,
-            "seed": seed,
-            "until": until,
-            "min_score": min_score if until is not None else None,
-            "max_n": max_n,
-            "min_force": min_force,
-            "stability_um": stability_um,
-            "backend": executor.name,
+            "gripper": req.gripper,
+            "contact": req.contact,
+            "solver": req.solver,
+            "grasp": req.grasp,
+            "picks": req.pick_config,
+            "source": _picks_source(req.picks),
+            "n": req.n if req.picks is None and req.until is None else None,
+            "seed": req.seed,
+            "until": req.until,
+            "min_score": req.min_score if req.until is not None else None,
+            "max_n": req.max_n,
+            "min_force": req.min_force,
+            "stability_um": req.stability_um,
+            "backend": run.executor.name,
             # a batched program's float32 rounding depends on its batch shape, on the C
             # engine too (its per-tick kernel: engine module docstring)
-            "batch_size": executor.batch_size,
+            "batch_size": run.executor.batch_size,
         },
     )
     key = config_hash(settings)
-    done = _complete_run(out_dir, key) if out_dir is not None and not overwrite else None
-    if done is not None and resume:
+    done = _complete_run(out_dir, key) if out_dir is not None and not req.overwrite else None
+    if done is not None and req.resume:
         return done
     if done is not None:  # its chunks are gone: plan_chunks would no longer see it
         raise ConfigError(
@@ -392,51 +402,26 @@ def _evaluate(
         )
     # every input is checked before the folder is claimed: a bad one leaves it as it was
     t_picks = time.perf_counter()
-    if until is not None:
-        check_range("evaluate", "until", until, 1, 10**9)
-        max_n = max_n or 10 * until
-        check_range("evaluate", "max_n", max_n, until, 10**9)
+    if req.until is not None:
+        check_range("evaluate", "until", req.until, 1, 10**9)
+        req = dataclasses.replace(req, max_n=req.max_n or 10 * req.until)
+        check_range("evaluate", "max_n", req.max_n, req.until, 10**9)
         picks_batch = None
-    elif picks is None:
+    elif req.picks is None:
         picks_batch = pp.generate_normal(
-            obj, gripper, n, seed=seed, config=pick_config, grasp=grasp
+            req.obj, req.gripper, req.n, seed=req.seed, config=req.pick_config, grasp=req.grasp
         )
-    elif isinstance(picks, pp.PickBatch):
-        picks_batch = picks
+    elif isinstance(req.picks, pp.PickBatch):
+        picks_batch = req.picks
     else:
-        picks_batch = user_batch  # read and checked before the scene was built
-    costs["picks_s"] = time.perf_counter() - t_picks  # sampling and the feasibility checks
+        picks_batch = run.user_batch  # read and checked before the scene was built
+    run.costs["picks_s"] = time.perf_counter() - t_picks  # sampling and the feasibility checks
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
-        claim(out_dir, "evaluate", key, resume=resume, overwrite=overwrite, settings=settings)
-    try:
-        return _evaluate_claimed(
-            executor,
-            engine,
-            runner,
-            scene,
-            obj,
-            gripper,
-            contact,
-            solver,
-            grasp,
-            pick_config,
-            picks_batch,
-            out_dir=out_dir,
-            key=key,
-            seed=seed,
-            n_traces=n_traces,
-            progress=progress,
-            resume=resume,
-            until=until,
-            min_score=min_score,
-            max_n=max_n,
-            chunk_size=chunk_size,
-            min_force=min_force,
-            stability_um=stability_um,
-            keep_chunks=keep_chunks,
-            on_progress=on_progress,
-            costs=costs,
+        claim(
+            out_dir, "evaluate", key, resume=req.resume, overwrite=req.overwrite, settings=settings
         )
+    try:
+        return _evaluate_claimed(run, req, picks_batch, out_dir, key)
     except (KeyboardInterrupt, Cancelled):
         raise  # the folder is marked by _stopped
     except BaseException as err:
@@ -446,98 +431,83 @@ def _evaluate(
 
 
 def _evaluate_claimed(
-    executor: ChunkExecutor,
-    engine: Engine | None,
-    runner,
-    scene,
-    obj: ObjectModel,
-    gripper: GripperSpec,
-    contact: ContactParams,
-    solver: SolverParams,
-    grasp: GraspConfig,
-    pick_config: pp.PickConfig,
-    picks_batch: pp.PickBatch | None,
-    *,
-    out_dir,
-    key,
-    seed,
-    n_traces,
-    progress,
-    resume,
-    until,
-    min_score,
-    max_n,
-    chunk_size,
-    min_force,
-    stability_um,
-    keep_chunks,
-    on_progress,
-    costs,
+    run: _Run, req: _Request, picks_batch: pp.PickBatch | None, out_dir: Path | None, key: str
 ) -> Evaluation:
     """evaluate() once its inputs are checked and its folder (if any) claimed."""
-    if until is not None:
-        batch = int(chunk_size or until_batch(until, executor.batch_size))
-        plan = plan_chunks(out_dir, key, max_n, min(batch, max_n), resume)
+    if req.until is not None:
+        batch = int(req.chunk_size or until_batch(req.until, run.executor.batch_size))
+        plan = plan_chunks(out_dir, key, req.max_n, min(batch, req.max_n), req.resume)
     else:
-        if chunk_size:
-            chunk = int(chunk_size)
-        elif runner is not None:
-            chunk = auto_chunk(runner)
+        if req.chunk_size:
+            chunk = int(req.chunk_size)
+        elif run.runner is not None:
+            chunk = auto_chunk(run.runner)
         else:
-            chunk = executor.batch_size
-        plan = plan_chunks(out_dir, key, len(picks_batch), chunk, resume)
+            chunk = run.executor.batch_size
+        plan = plan_chunks(out_dir, key, len(picks_batch), chunk, req.resume)
 
     config = {
-        "object": obj.summary(),
-        "gripper": to_dict(gripper),
-        "contact": to_dict(contact),
-        "contact_in_mujoco": to_dict(scene.contact),
+        "object": req.obj.summary(),
+        "gripper": to_dict(req.gripper),
+        "contact": to_dict(req.contact),
+        "contact_in_mujoco": to_dict(run.scene.contact),
         "scene": {
             # where the pads grip (GraspConfig.grasp_height) and their contact patch
-            "fingertip_height_mm": round(scene.index.pad_bottom_z0_m * 1e3, 6),
-            "pad_patch_mm": [round(v, 6) for v in scene.pad_patch_mm],
+            "fingertip_height_mm": round(run.scene.index.pad_bottom_z0_m * 1e3, 6),
+            "pad_patch_mm": [round(v, 6) for v in run.scene.pad_patch_mm],
         },
-        "solver": to_dict(solver),
-        "grasp": to_dict(grasp),
-        "picks": to_dict(pick_config),
+        "solver": to_dict(req.solver),
+        "grasp": to_dict(req.grasp),
+        "picks": to_dict(req.pick_config),
         "n": int(len(picks_batch)) if picks_batch is not None else None,
-        "seed": int(seed),
+        "seed": int(req.seed),
         "mode": picks_batch.mode if picks_batch is not None else "optimization",
-        "backend": executor.name,
-        "device": executor.device,
-        "batch_size": int(executor.batch_size),
+        "backend": run.executor.name,
+        "device": run.executor.device,
+        "batch_size": int(run.executor.batch_size),
         "chunk_size": int(plan.chunk_size),
-        "ray": getattr(executor, "address", None),
+        "ray": getattr(run.executor, "address", None),
         "config_key": key,
         "versions": versions(),
     }
     if out_dir is not None:
         write_json(out_dir / "config.json", config)
-        write_atomic(out_dir / "scene.xml", scene.xml)
+        write_atomic(out_dir / "scene.xml", run.scene.xml)
 
     t0 = time.perf_counter()
     try:
-        if until is not None:
+        if req.until is not None:
             picks_batch, table = _optimize(
-                executor, plan, out_dir, obj, gripper, grasp, until, min_score, seed, pick_config
+                run.executor,
+                plan,
+                out_dir,
+                req.obj,
+                req.gripper,
+                req.grasp,
+                req.until,
+                req.min_score,
+                req.seed,
+                req.pick_config,
             )
             config["n"], config["mode"] = int(len(picks_batch)), picks_batch.mode
             if out_dir is not None:
                 write_json(out_dir / "config.json", config)
         else:
-            table = _simulate(executor, picks_batch, plan, out_dir, progress, on_progress)
+            table = _simulate(
+                run.executor, picks_batch, plan, out_dir, req.progress, req.on_progress
+            )
         wall = time.perf_counter() - t0
         summary = summarize(table)
-        mu = contact.pad_friction
-        timing = executor.describe()["timing"]
+        mu = req.contact.pad_friction
+        timing = run.executor.describe()["timing"]
         summary.update(
             {
-                "object": obj.name,
-                "gripper": gripper.name,
-                "backend": executor.name,
-                "device": executor.device,
-                "f_gmin_n": min_grasp_force_n(obj, mu, grasp.safety_factor),
-                "grip_force_n": grasp.grip_force_n,
+                "object": req.obj.name,
+                "gripper": req.gripper.name,
+                "backend": run.executor.name,
+                "device": run.executor.device,
+                "f_gmin_n": min_grasp_force_n(req.obj, mu, req.grasp.safety_factor),
+                "grip_force_n": req.grasp.grip_force_n,
                 "candidates_checked": int(picks_batch.n_candidates),
                 "rejected": dict(picks_batch.rejected),
                 "compile_s": timing["compile_s"],
@@ -547,56 +517,60 @@ def _evaluate_claimed(
                 "picks_per_s": round(timing["simulations"] / timing["run_s"], 2)
                 if timing["run_s"] > 0
                 else None,
-                "simulated_s_per_pick": round(grasp.duration_s, 3),
-                "physics_steps_per_pick": grasp.n_ticks() * grasp.substeps(solver),
+                "simulated_s_per_pick": round(req.grasp.duration_s, 3),
+                "physics_steps_per_pick": req.grasp.n_ticks() * req.grasp.substeps(req.solver),
             }
         )
-        if hasattr(executor, "cluster_summary"):
-            summary["cluster"] = executor.cluster_summary()
-        settings = Settings(gripper, contact, solver, grasp)
-        if min_force or stability_um:
+        if hasattr(run.executor, "cluster_summary"):
+            summary["cluster"] = run.executor.cluster_summary()
+        settings = Settings(req.gripper, req.contact, req.solver, req.grasp)
+        if req.min_force or req.stability_um:
             # the extra simulations below run through this run's engine and backend
-            sim = Simulator(obj, engine=engine)
-            sim.adopt(settings, runner)
-        if min_force:
+            sim = Simulator(req.obj, engine=run.engine)
+            sim.adopt(settings, run.runner)
+        if req.min_force:
             t1 = time.perf_counter()
-            with showing_progress(engine, "minimum grip force (bisection)", "sim", progress):
-                forces = min_grip_force(obj, picks_batch, settings, simulator=sim)
+            with showing_progress(
+                run.engine, "minimum grip force (bisection)", "sim", req.progress
+            ):
+                forces = min_grip_force(req.obj, picks_batch, settings, simulator=sim)
             table = table.append_column("min_force_n", pa.array(forces))
             # holding at the gripper's smallest force says only that the true minimum is at
             # or below it: flagged, never presented as the minimum itself
-            at_floor = np.isfinite(forces) & (forces <= gripper.force_min_n + 1e-9)
+            at_floor = np.isfinite(forces) & (forces <= req.gripper.force_min_n + 1e-9)
             table = table.append_column("min_force_at_floor", pa.array(at_floor))
             summary["min_force_at_floor"] = int(at_floor.sum())
             summary["min_force_s"] = round(time.perf_counter() - t1, 3)
             summary["min_force_n_median"] = (
                 float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
             )
-        if stability_um:
+        if req.stability_um:
             t1 = time.perf_counter()
-            table = _stability(table, picks_batch, sim, settings, stability_um, progress)
+            table = _stability(table, picks_batch, sim, settings, req.stability_um, req.progress)
             stable = table["label_stable"].to_numpy(zero_copy_only=False)
-            summary["stability_um"] = stability_um
+            summary["stability_um"] = req.stability_um
             summary["labels_unstable"] = int((~stable).sum())
             summary["stability_s"] = round(time.perf_counter() - t1, 3)
-        traces = _traces(executor, picks_batch, table, n_traces) if n_traces else None
+        traces = _traces(run.executor, picks_batch, table, req.n_traces) if req.n_traces else None
         interrupts.raise_if_requested()  # a Ctrl-C swallowed in the last chunk: not complete
     except (KeyboardInterrupt, Cancelled) as stop:
-        _stopped(out_dir, stop, executor, seed, config, time.perf_counter() - t0)
+        _stopped(out_dir, stop, run.executor, req.seed, config, time.perf_counter() - t0)
         raise
     t_write = time.perf_counter()
     if out_dir is not None:
         write_parquet(out_dir / "results.parquet", table)
         if traces is not None:
             write_parquet(out_dir / "traces.parquet", traces)
-    costs["write_s"] = time.perf_counter() - t_write
-    summary["time_s"] = _breakdown(costs, executor.describe()["timing"])
+    run.costs["write_s"] = time.perf_counter() - t_write
+    summary["time_s"] = _breakdown(run.costs, run.executor.describe()["timing"])
     if out_dir is not None:
         write_json(out_dir / "summary.json", summary)
-        meta = executor.describe(time.perf_counter() - t0)
+        meta = run.executor.describe(time.perf_counter() - t0)
         meta["timing"]["breakdown_s"] = summary["time_s"]
-        finish(out_dir, command="evaluate", config=config, seed=seed, release_lock=False, **meta)
-        if not keep_chunks:  # every row is in results.parquet now
+        finish(
+            out_dir, command="evaluate", config=config, seed=req.seed, release_lock=False, **meta
+        )
+        if not req.keep_chunks:  # every row is in results.parquet now
             shutil.rmtree(out_dir / "chunks", ignore_errors=True)
         release(out_dir)
     return Evaluation(table, summary, config, traces, out_dir)
