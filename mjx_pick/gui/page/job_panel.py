@@ -88,7 +88,7 @@ class JobPanel:
         if self.job is not None:  # callers check busy() first
             raise RuntimeError(f"a run is current ({self.title.text}): cannot start {title}")
         job.title = title
-        job.start()
+        job.start(self.runs.workers)
         self.runs.add(job, self.owner)
         self._show(job, on_end)
         self.status.set_text("starting ...")
