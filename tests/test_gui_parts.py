@@ -211,9 +211,13 @@ class _Shown:
     """Stands in for a NiceGUI element: records what the panel shows."""
 
     text = ""
+    options: dict = {}
 
     def set_text(self, text):
         self.text = text
+
+    def set_options(self, options):
+        self.options = options
 
     def set_value(self, value):
         pass
@@ -238,7 +242,8 @@ def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
     panel.job, panel.on_end, panel.others = None, None, _Shown()
     panel.title, panel.status, panel.bar = _Shown(), _Shown(), _Shown()
     panel.command, panel.cancel_button, panel.card = _Shown(), _Shown(), _Shown()
-    panel.warnings = _Shown()
+    panel.warnings, panel.history, panel.listed = _Shown(), _Shown(), []
+    panel.where = _Shown()
     ended = []
     job = jobs.Job(["--version"], tmp_path / "version.log")
     panel.start("version", job, ended.append)
@@ -476,3 +481,66 @@ def test_a_killed_worker_is_reported_and_a_later_job_succeeds(tmp_path):
         assert "had stopped (killed by signal 9" in job.log.read_text()
     finally:
         workers.close()
+
+
+def test_the_export_counts_the_parts_of_the_report(tmp_path):
+    # the export with animations ran for a minute behind a bar with no count: its
+    # progress is now the report's own count of parts, read from its log
+    from mjx_pick.gui.page.job_panel import status_line
+
+    log = tmp_path / "run-report.log"
+    job = jobs.report_job(tmp_path / "run", 3, True, log)
+    assert job.argv == ["report", str(tmp_path / "run"), "--n", "3"]
+    assert "--no-animations" in jobs.report_job(tmp_path / "run", 3, False, log).argv
+    log.write_text(
+        "$ mjx-pick report run --n 3\n"
+        "report:  12% 2/17 part [00:04, 0.5 part/s]\n"
+        "report:  41% 7/17 part [00:21, 0.33 part/s]\n"
+    )
+    p = job.poll()
+    assert (p.done, p.total) == (7, 17) and p.fraction == pytest.approx(7 / 17)
+    assert status_line(p).startswith("running, 7/17 parts of the report")
+
+
+def test_a_restarted_server_remembers_the_runs_of_its_work_folder(tmp_path):
+    import fcntl
+
+    def folder(name, status, command="evaluate", argv=None):
+        out = tmp_path / name
+        out.mkdir()
+        manifest = {"command": command, "status": status, "started": "2026-11-24T01:00:00+00:00"}
+        if status != "running":
+            manifest["finished"] = "2026-11-24T01:00:12+00:00"
+        (out / "mjx_pick_run.json").write_text(json.dumps(manifest))
+        (out / "config.json").write_text(json.dumps({"n": 4, "chunk_size": 2}))
+        (tmp_path / "logs").mkdir(exist_ok=True)
+        line = f"$ mjx-pick {command} block --n 4 --out {out}\n"
+        (tmp_path / "logs" / f"{name}.log").write_text(line)
+        return out
+
+    done = folder("done", "complete")
+    (done / "summary.json").write_text(json.dumps({"picks_per_s": 3.5}))
+    folder("stopped", "interrupted")
+    folder("died", "running")  # its process ended without closing it: no lock held
+    live = folder("live", "running")
+    (tmp_path / "plain").mkdir()  # not a run folder
+    fd = os.open(live / ".mjx_pick.lock", os.O_RDWR | os.O_CREAT)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # a run of the previous server, still going
+    os.write(fd, json.dumps({"pid": os.getpid(), "command": "evaluate"}).encode())
+    try:
+        runs = jobs.Runs()
+        assert runs.recover(tmp_path) == 4
+        got = {j.title: j for j in runs}
+        assert set(got) == {"evaluate done", "evaluate stopped", "evaluate died", "evaluate live"}
+        p = got["evaluate done"].poll()
+        assert (p.state, p.done, p.total, p.rate) == ("complete", 4, 4, 3.5)
+        assert p.elapsed_s == pytest.approx(12.0)
+        assert got["evaluate done"].argv == ["evaluate", "block", "--n", "4", "--out", str(done)]
+        assert got["evaluate stopped"].poll().state == "cancelled"
+        assert got["evaluate died"].poll().state == "failed"
+        assert got["evaluate live"].running and got["evaluate live"].poll().state == "running"
+        assert runs.writing(live) is got["evaluate live"]
+        assert runs.recover(tmp_path) == 0  # known already: not added twice
+    finally:
+        os.close(fd)
+    assert not got["evaluate live"].running  # the lock released: it ended

@@ -120,6 +120,7 @@ def serve(host: str, port: int, workdir: Path, show: bool) -> None:
     workers = jobs.Workers(workdir / "logs")
     workers.prepare(jobs.DEFAULT_BACKEND)
     runs = jobs.Runs(workers)
+    runs.recover(workdir)  # a restarted server remembers the work folder's runs
     pages: dict = {}  # each browser tab's last page, by the tab's id
 
     @ui.page("/")

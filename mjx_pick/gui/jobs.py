@@ -374,6 +374,15 @@ class Runs:
         self._jobs: list[Job] = []
         self.workers = workers
 
+    def recover(self, workdir: Path) -> int:
+        """Add the runs of the work folder's run folders (:func:`recovered_runs`) that
+        this server does not know yet, oldest first: what a restarted server remembers.
+        Returns how many."""
+        known = {j.out.resolve() for j in self._jobs if j.out is not None}
+        found = [j for j in recovered_runs(workdir) if j.out.resolve() not in known]
+        self._jobs[:0] = found
+        return len(found)
+
     def add(self, job: Job, owner: str | None) -> None:
         job.owner = owner
         self._jobs.append(job)
@@ -428,13 +437,17 @@ class Job:
         chunk: int | None = None,
         steps_logged: str | None = None,
         unit: str = "pick-points",
+        counted: str | None = None,
     ):
         """total, chunk: pick-points and chunk size of an evaluate run (progress from its
         chunk files); steps_logged: a regular expression whose group 1 is the number of
         the last finished step in the run's output (calibrate's "step 12 loss ..."),
-        with total the number of steps."""
+        with total the number of steps; counted: a regular expression whose groups 1
+        and 2 are the units done and in all in the run's progress lines (the CLI's
+        progress bar in a log: "report:  40% 4/10 part ...")."""
         self.argv = list(argv)
         self.steps_logged = re.compile(steps_logged) if steps_logged else None
+        self.counted = re.compile(counted) if counted else None
         self.unit = unit
         self.log = Path(log)
         self.out = Path(out) if out is not None else None
@@ -446,6 +459,7 @@ class Job:
         self._chunks_before: set[str] = set()
         self._done = 0  # the most pick-points seen done: a count never goes back
         self.title = " ".join(argv[:1])  # what the page calls it (set when it starts)
+        self.elapsed_s: float | None = None  # a run that ended before this server started
         self.owner: str | None = None  # the browser tab that started it
 
     @property
@@ -484,6 +498,19 @@ class Job:
         return self
 
     @property
+    def where(self) -> str:
+        """Where the run runs, in the page's words."""
+        if isinstance(self._proc, WorkerRun):
+            w = self._proc.worker
+            return (
+                f"in the warm {w.backend} worker (pid {w.pid}, its job {self._proc.id}): "
+                "imports and compiled programs kept from its earlier jobs"
+            )
+        if isinstance(self._proc, FolderRun):
+            return "a run of this work folder from before the server started"
+        return "in a process of its own"
+
+    @property
     def warm(self) -> bool:
         """Whether the run went to a warm worker (not a process of its own)."""
         return isinstance(self._proc, WorkerRun)
@@ -509,7 +536,7 @@ class Job:
     def poll(self) -> Progress:
         """The run's state now; a stopped run that was asked to cancel is killed late."""
         now = time.monotonic()
-        elapsed = now - self._t0
+        elapsed = now - self._t0 if self.elapsed_s is None else self.elapsed_s
         if self._cancelled_at is not None and self.running:
             if now - self._cancelled_at > CANCEL_GRACE_S:
                 self._proc.kill()
@@ -524,6 +551,10 @@ class Job:
         if self.steps_logged is not None and self.total:
             found = self.steps_logged.findall(self._log_text())
             done = min(self.total, int(found[-1]) + 1) if found else 0
+        if self.counted is not None:
+            found = self.counted.findall(self._log_text())
+            if found:
+                done, total = int(found[-1][0]), int(found[-1][1])
         if code is None:
             state = "running"
             if self._cancelled_at:
@@ -600,6 +631,111 @@ class Job:
         last = next((ln.strip() for ln in reversed(lines) if ln.strip()), "")
         # the exception's last line, never the traceback; the log keeps the rest
         return f"the run stopped (exit code {code}): {last[-300:]}; its log: {log}"
+
+
+class FolderRun:
+    """A run this server did not start -- one of the work folder's before a restart --
+    with the calls of a ``subprocess.Popen`` (poll, wait, send_signal, kill), answered
+    from its folder: running while a process holds the folder's lock (a job of the
+    previous server's worker or child that is still going), else the exit code its
+    manifest's status stands for."""
+
+    def __init__(self, out: Path):
+        self.out = Path(out)
+        self.pid: int | None = None
+
+    def poll(self) -> int | None:
+        from mjx_pick.outputs.rundir import lock_holder, read_manifest
+
+        holder = lock_holder(self.out)
+        if holder is not None:
+            self.pid = holder.get("pid")
+            return None
+        status = (read_manifest(self.out) or {}).get("status")
+        return {"complete": 0, "interrupted": 130, "cancelled": 130, "terminated": 143}.get(
+            status, 1
+        )
+
+    def wait(self, timeout: float | None = None) -> int:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while (code := self.poll()) is None:
+            if deadline is not None and time.monotonic() > deadline:
+                raise subprocess.TimeoutExpired(str(self.out), timeout)
+            time.sleep(0.2)
+        return code
+
+    def send_signal(self, sig: int) -> None:
+        if self.poll() is None and isinstance(self.pid, int):
+            try:
+                os.kill(self.pid, sig)
+            except (ProcessLookupError, PermissionError):
+                pass
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+
+def recovered_runs(workdir: Path) -> list[Job]:
+    """A job for each run folder of the work folder (a folder with an mjx-pick
+    manifest), oldest first: its command line from its log's first line (``logs/<folder
+    name>.log``, as the GUI writes it), its state and progress from its folder."""
+    from mjx_pick.outputs.rundir import read_manifest
+
+    workdir = Path(workdir)
+    found = []
+    if not workdir.is_dir():
+        return []
+    for folder in workdir.iterdir():
+        manifest = read_manifest(folder) if folder.is_dir() else None
+        if not manifest or not manifest.get("command"):
+            continue
+        log = workdir / "logs" / f"{folder.name}.log"
+        argv = [manifest["command"], "--out", str(folder)]
+        try:
+            first = log.read_text(errors="replace").split("\n", 1)[0]
+            if first.startswith("$ mjx-pick "):
+                argv = shlex.split(first[len("$ mjx-pick ") :])
+        except (OSError, ValueError):
+            pass
+        total = chunk = None
+        if manifest["command"] == "evaluate":
+            config = _read_json(folder / "config.json") or {}
+            total, chunk = config.get("n"), config.get("chunk_size")
+        job = Job(argv, log, folder, total, chunk)
+        job.title = f"{manifest['command']} {folder.name}"
+        job._proc = FolderRun(folder)
+        started, finished = _wall(manifest.get("started")), _wall(manifest.get("finished"))
+        job._t0 = time.monotonic() - (time.time() - started if started else 0.0)
+        if started and finished and manifest.get("status") != "running":
+            job.elapsed_s = max(0.0, finished - started)  # ended: its own duration
+        if manifest.get("status") in ("interrupted", "cancelled", "terminated"):
+            job._cancelled_at = job._t0  # shown as cancelled, what finished kept
+        found.append((manifest.get("started") or "", job))
+    return [job for _, job in sorted(found, key=lambda sj: sj[0])]
+
+
+def _wall(stamp: str | None) -> float | None:
+    """An ISO time of a manifest as seconds since the epoch (None if absent or bad)."""
+    import datetime
+
+    try:
+        return datetime.datetime.fromisoformat(stamp).timestamp() if stamp else None
+    except ValueError:
+        return None
+
+
+# the report's progress lines in its log (outputs.progress.ProgressBar's line mode)
+REPORT_PARTS = r"(?m)^report: +\d+% (\d+)/(\d+) part"
+
+
+def report_job(run: Path, n: int, animations: bool, log: Path) -> Job:
+    """``mjx-pick report`` of the evaluate folder run (n best and n worst), its progress
+    counted in the report's parts (each force plot, each animation -- the slow ones --
+    the maps, each template, the robot export, the page) from its log."""
+    argv = ["report", str(run), "--n", str(int(n))]
+    if not animations:
+        argv.append("--no-animations")
+    return Job(argv, log, unit="parts of the report", counted=REPORT_PARTS)
 
 
 def unused_path(path: Path) -> Path:
