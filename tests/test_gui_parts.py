@@ -359,7 +359,7 @@ def test_messages_use_the_forms_words_with_the_details_after():
 SHORT = ["--backend", "mujoco", "--lift-height-mm", "20", "--hold-s", "0.1", "--no-progress"]
 
 
-def warm_workers(tmp_path) -> jobs.Workers:
+def warm_workers(tmp_path) -> "jobs.Workers":
     """The server's warm workers for a work folder, the MuJoCo C one started and ready."""
     workers = jobs.Workers(tmp_path / "logs")
     workers.prepare("mujoco")
