@@ -12,7 +12,9 @@ block, then:
   (its modification time) less the summary's ``simulate`` and ``write`` times (an upper
   bound: the engine's per-chunk compile calls, ``compile`` in the summary, are spread
   over the run but counted before it); and from the click to the run's checks done
-  (``config.json`` written);
+  (``config.json`` written); and from the click to the first chunk file (watched every
+  10 ms), less one chunk's simulation at the run's rate (an estimate of the click to
+  simulating);
   whether the job ran in the warm worker (its log says nothing else: the summary's
   ``import`` time is the job's own).
 
@@ -64,6 +66,17 @@ TRACK_INFO = (
 INFO_ANSWERED = f"() => window.mjxChanges >= 1 && {INFO}.innerText.includes('score')"
 
 
+def first_chunk_time(out: Path, timeout_s: float = 600.0) -> float:
+    """When the run's first chunk file appeared (watched every 10 ms from the click):
+    the start of the simulation is one chunk's simulation before it."""
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        if any((out / "chunks").glob("part-*.parquet")) or (out / "results.parquet").exists():
+            return time.time()
+        time.sleep(0.01)
+    raise TimeoutError(f"{out}: no chunk in {timeout_s} s")
+
+
 def gui_rows(n: int, work: Path) -> list[dict]:
     from playwright.sync_api import sync_playwright
     from test_gui import chromium_path, import_shipped, start_server, stop_server, wait_job
@@ -99,11 +112,15 @@ def gui_rows(n: int, work: Path) -> list[dict]:
             for k in (1, 2):
                 name = f"bench-{k}"
                 page.get_by_label("run folder name").fill(name)
+                out = work / name
                 t0 = time.time()
                 page.get_by_test_id("start-batch").click()
+                first = first_chunk_time(out)
                 status = wait_job(page, f"evaluate {name}", 600_000)
                 done = time.time()
-                out = work / name
+                summary = json.loads((out / "summary.json").read_text())
+                config = json.loads((out / "config.json").read_text())
+                chunk_s = config["chunk_size"] / summary["picks_per_s"]
                 log = (work / "logs" / f"{name}.log").read_text()
                 rows.append(
                     {
@@ -112,6 +129,9 @@ def gui_rows(n: int, work: Path) -> list[dict]:
                         "click_to_complete_s": round(done - t0, 2),
                         "click_to_simulating_s": sim_start_delay(out, t0),
                         "click_to_checked_s": checked_delay(out, t0),
+                        "click_to_first_chunk_s": round(first - t0, 2),
+                        "chunk_s": round(chunk_s, 2),
+                        "click_to_simulating_est_s": round(first - t0 - chunk_s, 2),
                         "status": status,
                         "time_s": json.loads((out / "summary.json").read_text())["time_s"],
                         "log_tail": log.strip().splitlines()[-3:],
