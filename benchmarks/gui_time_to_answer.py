@@ -143,18 +143,23 @@ def gui_rows(n: int, work: Path) -> list[dict]:
     return rows
 
 
-def rss_rows(n: int, jobs_n: int, work: Path) -> list[dict]:
+def rss_rows(n: int, jobs_n: int, work: Path, backend: str, cold: bool) -> list[dict]:
+    """jobs_n evaluate jobs of n pick-points one after another, in one warm worker of
+    backend -- or, with cold, each in a process of its own (the GUI without workers)."""
     from mjx_pick.gui import jobs
 
-    workers = jobs.Workers(work / "logs")
-    workers.prepare("mujoco")
-    w = workers.worker("mujoco")
-    w.ready.wait(300)
+    workers = None
+    w = None
+    if not cold:
+        workers = jobs.Workers(work / "logs")
+        workers.prepare(backend)
+        w = workers.worker(backend)
+        w.ready.wait(300)
     rows = []
     try:
         for k in range(jobs_n):
             out = work / f"rss-{k}"
-            argv = ["evaluate", "block", "--n", str(n), "--seed", str(k), "--backend", "mujoco"]
+            argv = ["evaluate", "block", "--n", str(n), "--seed", str(k), "--backend", backend]
             argv += ["--no-progress", "--out", str(out)]
             t0 = time.time()
             job = jobs.Job(argv, work / "logs" / f"rss-{k}.log", out, n, n).start(workers)
@@ -162,17 +167,20 @@ def rss_rows(n: int, jobs_n: int, work: Path) -> list[dict]:
             rows.append(
                 {
                     "job": k + 1,
+                    "backend": backend,
                     "warm": job.warm,
                     "code": code,
+                    "time_s": json.loads((out / "summary.json").read_text()).get("time_s"),
                     "click_to_complete_s": round(time.time() - t0, 2),
                     "click_to_simulating_s": sim_start_delay(out, t0),
                     "click_to_checked_s": checked_delay(out, t0),
-                    "rss_mb": round(w.rss[-1] / 2**20, 1) if w.rss else None,
+                    "rss_mb": round(w.rss[-1] / 2**20, 1) if w is not None and w.rss else None,
                 }
             )
             print(rows[-1], flush=True)
     finally:
-        workers.close()
+        if workers is not None:
+            workers.close()
     return rows
 
 
@@ -181,6 +189,8 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=200)
     ap.add_argument("--rss-jobs", type=int, default=10)
     ap.add_argument("--no-gui", action="store_true", help="only the worker's memory rows")
+    ap.add_argument("--rss-backend", default="mujoco", help="the backend of those jobs")
+    ap.add_argument("--cold", action="store_true", help="those jobs each in its own process")
     args = ap.parse_args()
     commit = (
         os.environ.get("MJX_PICK_COMMIT")
@@ -194,7 +204,9 @@ def main() -> None:
         gui = [] if args.no_gui else gui_rows(args.n, work)
         for row in gui:
             print(row, flush=True)
-        rss = rss_rows(args.n, args.rss_jobs, Path(tmp) / "rss") if args.rss_jobs else []
+        rss = []
+        if args.rss_jobs:
+            rss = rss_rows(args.n, args.rss_jobs, Path(tmp) / "rss", args.rss_backend, args.cold)
     result = {
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "commit": commit,
@@ -206,7 +218,9 @@ def main() -> None:
     }
     folder = ROOT / "benchmarks" / "results"
     folder.mkdir(exist_ok=True)
-    path = folder / f"gui_time_to_answer_{commit}.json"
+    tag = "" if args.no_gui else "_gui"
+    tag += f"_{args.rss_backend}{'_cold' if args.cold else ''}" if args.rss_jobs else ""
+    path = folder / f"gui_time_to_answer_{commit}{tag}.json"
     path.write_text(json.dumps(result, indent=1))
     print(f"written {path}")
 
