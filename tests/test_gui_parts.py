@@ -479,6 +479,7 @@ def test_a_killed_worker_is_reported_and_a_later_job_succeeds(tmp_path):
         ).start(workers)
         assert job.wait(300) == 0 and job.poll().state == "complete", job.log.read_text()
         assert "had stopped (killed by signal 9" in job.log.read_text()
+        assert any("had stopped (killed by signal 9" in w for w in job.poll().warnings)
     finally:
         workers.close()
 

@@ -96,7 +96,8 @@ assert _WORKER_FROM_PACKAGE != _CLI_FROM_PACKAGE
 WARM_COMMANDS = ("evaluate", "sweep", "compare", "robust")
 DEFAULT_BACKEND = "mujoco"  # the settings form's; its worker is started with the server
 # a worker whose resident memory grew by more than this since its first job is replaced
-# after the job (a leak in a library must not grow the server's machine job after job)
+# before its next job (a leak in a library must not grow the machine's memory job after
+# job)
 WORKER_GROWTH_BYTES = 1 << 30
 
 
@@ -460,6 +461,7 @@ class Job:
         self._done = 0  # the most pick-points seen done: a count never goes back
         self.title = " ".join(argv[:1])  # what the page calls it (set when it starts)
         self.elapsed_s: float | None = None  # a run that ended before this server started
+        self.notes: tuple[str, ...] = ()  # the warm workers' news when it started
         self.owner: str | None = None  # the browser tab that started it
 
     @property
@@ -477,11 +479,12 @@ class Job:
         with self.log.open("wb") as fh:
             fh.write(f"$ {self.command_line}\n".encode())
         worker = workers.take(self.argv) if workers is not None else None
-        if workers is not None:
-            with self.log.open("a") as fh:
-                for note in workers.notes:
-                    fh.write(f"mjx-pick: note: {note}\n")
+        if workers is not None:  # what happened to a worker: in the log and on the page
+            self.notes = tuple(workers.notes)
             workers.notes.clear()
+            with self.log.open("a") as fh:
+                for note in self.notes:
+                    fh.write(f"mjx-pick: note: {note}\n")
         if worker is not None:
             self._proc = worker.run(self.argv, self.log)
             return self
@@ -603,8 +606,9 @@ class Job:
         return self._done, total, rate, message
 
     def warnings(self) -> tuple[str, ...]:
-        """The run's warnings (Python's, in its log), each once, without the file and line."""
-        seen: list[str] = []
+        """The run's warnings (Python's, in its log), each once, without the file and
+        line; after what happened to a warm worker before it started (one found dead)."""
+        seen: list[str] = list(self.notes)
         for m in _WARNING.finditer(self._log_text()):
             text = m.group(1).strip()
             if text not in seen:
