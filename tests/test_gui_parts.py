@@ -420,10 +420,19 @@ def test_a_job_in_the_worker_is_cancelled_and_the_worker_serves_the_next(tmp_pat
             assert job.running, job.log.read_text()
             assert time.monotonic() < deadline
             time.sleep(0.2)
+        # another browser tab's job while the worker is busy: a process of its own
+        other = tmp_path / "other"
+        beside = jobs.Job(
+            ["evaluate", "block", "--n", "2", *SHORT, "--out", str(other)],
+            tmp_path / "logs" / "other.log",
+            other,
+        ).start(workers)
+        assert not beside.warm and beside.running
         job.cancel()
         job.wait(60)
         p = job.poll()
         assert p.state == "cancelled", job.log.read_text()
+        assert beside.wait(300) == 0 and beside.poll().state == "complete"
         assert json.loads((out / "mjx_pick_run.json").read_text())["status"] == "interrupted"
         assert 1 <= len(list((out / "chunks").glob("part-*.parquet"))) < 100
         assert "--resume" in job.log.read_text()  # the CLI's own interrupted line
