@@ -637,6 +637,10 @@ class Job:
         return f"the run stopped (exit code {code}): {last[-300:]}; its log: {log}"
 
 
+# the exit code a CLI run that ended with a folder's status had (main's return values)
+EXIT_OF_STATUS = {"complete": 0, "interrupted": 130, "cancelled": 130, "terminated": 143}
+
+
 class FolderRun:
     """A run this server did not start -- one of the work folder's before a restart --
     with the calls of a ``subprocess.Popen`` (poll, wait, send_signal, kill), answered
@@ -647,18 +651,20 @@ class FolderRun:
     def __init__(self, out: Path):
         self.out = Path(out)
         self.pid: int | None = None
+        self._code: int | None = None  # once ended, it stays so (the page polls often)
 
     def poll(self) -> int | None:
         from mjx_pick.outputs.rundir import lock_holder, read_manifest
 
+        if self._code is not None:
+            return self._code
         holder = lock_holder(self.out)
         if holder is not None:
             self.pid = holder.get("pid")
             return None
         status = (read_manifest(self.out) or {}).get("status")
-        return {"complete": 0, "interrupted": 130, "cancelled": 130, "terminated": 143}.get(
-            status, 1
-        )
+        self._code = EXIT_OF_STATUS.get(status, 1)  # "failed", or "running" and dead
+        return self._code
 
     def wait(self, timeout: float | None = None) -> int:
         deadline = None if timeout is None else time.monotonic() + timeout
