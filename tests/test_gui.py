@@ -245,6 +245,8 @@ def test_paper_workflow(page, server):
     page.get_by_test_id("start-batch").click()
     status = wait_job(page, "evaluate gui-run")
     assert status.startswith("complete") and "6/6 pick-points" in status, status
+    # the warm worker started with the server runs it (its import done before the click)
+    assert "in the warm mujoco worker" in page.get_by_test_id("job-where").inner_text()
     page.get_by_test_id("run-summary").filter(has_text="success rate").wait_for()
     shot(page, "3_generate")
     run = work / "gui-run"
@@ -309,9 +311,29 @@ def test_paper_workflow(page, server):
     worst = int(np.asarray(table["pick_id"])[k])
     detail.filter(has_text=f"pick {worst} (rank").wait_for()
     assert page.get_by_test_id("picks-table").locator("tbody tr.selected").count() == 1
+    # a pick-point the run did not trace: simulated now for its force plot and replay
+    traced = {pid for pid, _ in Run.load(run).traced()}
+    order = np.argsort(np.where(np.isnan(score), -np.inf, -score), kind="stable")
+    rank = next(
+        r for r, i in enumerate(order) if int(table["pick_id"][int(i)].as_py()) not in traced
+    )
+    untraced = int(table["pick_id"][int(order[rank])].as_py())
+    rows.nth(rank).locator(".q-checkbox").click()
+    detail.filter(has_text=f"pick {untraced} (rank {rank + 1})").wait_for()
+    detail.filter(has_text="simulated now with the run's settings").wait_for(timeout=TIMEOUT_MS)
+    expect(frame).to_be_visible(timeout=TIMEOUT_MS)
+    expect(page.get_by_test_id("force-plot").locator("img")).to_be_visible(timeout=TIMEOUT_MS)
+    # the export with animations counts the report's parts as they are written: per
+    # traced pick-point a force plot and an animation, the maps, 2 templates, export, page
     number(page, "n best and n worst", 2)
+    page.get_by_text("animations (slow)").click()
     page.get_by_test_id("export").click()
-    assert wait_job(page, "report gui-run").startswith("complete")
+    parts = 2 * len(traced) + 1 + 2 + 2
+    page.get_by_test_id("job-status").filter(
+        has_text=re.compile(rf"^running, \d+/{parts} parts of the report")
+    ).wait_for(timeout=TIMEOUT_MS)
+    status = wait_job(page, "report gui-run")
+    assert status.startswith(f"complete, {parts}/{parts} parts of the report"), status
     with page.expect_download() as info_dl:
         page.get_by_test_id("download-template_a4.pdf").click()
     pdf = Path(info_dl.value.path())
@@ -728,3 +750,40 @@ def test_a_reload_brings_back_the_object_settings_and_run(page, server):
     assert status.startswith("complete") and "40/40" in status, status
     page.get_by_text("3 Generate input data").click()
     page.get_by_test_id("run-summary").filter(has_text="success rate").wait_for()
+
+
+def test_runs_are_remembered_across_a_server_restart(browser, tmp_path):
+    """A restarted server lists the work folder's runs: one chosen is shown ended, its
+    results drawn as if this server had run it."""
+    work = tmp_path / "work"
+    url, proc = start_server(work, tmp_path / "server.log")
+    context = browser.new_context(viewport={"width": 1500, "height": 1000})
+    try:
+        page = context.new_page()
+        page.set_default_timeout(60_000)
+        page.goto(url)
+        import_shipped(page)
+        page.get_by_text("2 Set gripper parameters").click()
+        number(page, "lift height (mm)", 20)
+        number(page, "hold (s)", 0.1)
+        page.get_by_text("3 Generate input data").click()
+        number(page, "pick-points", 4)
+        page.get_by_label("run folder name").fill("before-restart")
+        page.get_by_test_id("start-batch").click()
+        assert wait_job(page, "evaluate before-restart").startswith("complete")
+        stop_server(proc)
+
+        url, proc = start_server(work, tmp_path / "server-2.log")
+        page.goto(url)
+        page.get_by_text("1 Import object model").wait_for()
+        choose(page, "runs in this work folder", "evaluate before-restart")
+        status = wait_job(page, "evaluate before-restart")
+        assert status.startswith("complete, 4/4 pick-points"), status
+        page.get_by_text("3 Generate input data").click()
+        page.get_by_test_id("run-summary").filter(has_text="success rate").wait_for()
+        page.get_by_text("4 Analyze results").click()
+        assert page.get_by_test_id("picks-table").locator("tbody tr").count() == 4
+    finally:
+        context.close()
+        if proc.poll() is None:
+            stop_server(proc)

@@ -211,9 +211,13 @@ class _Shown:
     """Stands in for a NiceGUI element: records what the panel shows."""
 
     text = ""
+    options: dict = {}
 
     def set_text(self, text):
         self.text = text
+
+    def set_options(self, options):
+        self.options = options
 
     def set_value(self, value):
         pass
@@ -238,7 +242,8 @@ def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
     panel.job, panel.on_end, panel.others = None, None, _Shown()
     panel.title, panel.status, panel.bar = _Shown(), _Shown(), _Shown()
     panel.command, panel.cancel_button, panel.card = _Shown(), _Shown(), _Shown()
-    panel.warnings = _Shown()
+    panel.warnings, panel.history, panel.listed = _Shown(), _Shown(), []
+    panel.where = _Shown()
     ended = []
     job = jobs.Job(["--version"], tmp_path / "version.log")
     panel.start("version", job, ended.append)
@@ -349,3 +354,203 @@ def test_messages_use_the_forms_words_with_the_details_after():
 
     assert column_label("robust_p") == "success probability under the errors"
     assert column_label("x_mm") == "object x under gripper (mm)"
+
+
+SHORT = ["--backend", "mujoco", "--lift-height-mm", "20", "--hold-s", "0.1", "--no-progress"]
+
+
+def warm_workers(tmp_path) -> "jobs.Workers":
+    """The server's warm workers for a work folder, the MuJoCo C one started and ready."""
+    workers = jobs.Workers(tmp_path / "logs")
+    workers.prepare("mujoco")
+    worker = workers.worker("mujoco")
+    assert worker.ready.wait(180), (tmp_path / "logs" / "worker-mujoco.log").read_text()
+    return workers
+
+
+def test_a_second_job_reuses_the_warm_worker(tmp_path, monkeypatch):
+    # the worker is started isolated like a job's own process: a package (or a
+    # dependency) shadowed where the server started, or on PYTHONPATH, is not imported
+    here = tmp_path / "where-the-server-started"
+    (here / "mjx_pick" / "cli").mkdir(parents=True)
+    for init in ("mjx_pick/__init__.py", "mjx_pick/cli/__init__.py", "numpy.py"):
+        (here / init).write_text(f"raise SystemExit('imported the shadowing {init}')\n")
+    monkeypatch.chdir(here)
+    monkeypatch.setenv("PYTHONPATH", str(here))
+    workers = warm_workers(tmp_path)
+    try:
+        pid = workers.worker("mujoco").pid
+        logs = []
+        for k in range(2):
+            out = tmp_path / f"run{k}"
+            argv = ["evaluate", "block", "--n", "4", "--seed", str(k), *SHORT, "--out", str(out)]
+            job = jobs.Job(argv, tmp_path / "logs" / f"run{k}.log", out, 4, 4).start(workers)
+            assert job.warm and job._proc.pid == pid
+            job.wait(300)
+            log = job.log.read_text()
+            logs.append(log)
+            p = job.poll()
+            assert p.state == "complete" and (p.done, p.total) == (4, 4), log
+            assert log.startswith(f"$ {job.command_line}\n") and "pick-points per s" in log
+            assert "shadowing" not in log
+            assert pq.read_table(out / "results.parquet").num_rows == 4
+            assert json.loads((out / "mjx_pick_run.json").read_text())["status"] == "complete"
+        worker = workers.worker("mujoco")
+        assert worker.pid == pid and worker.alive and worker.jobs == 2
+        # the second job's summary counts its own time, not the worker's age
+        summary = json.loads((tmp_path / "run1" / "summary.json").read_text())
+        assert summary["time_s"]["import"] < 60
+        # a command a worker does not run still gets a process of its own
+        job = jobs.Job(["report", "--help"], tmp_path / "logs" / "help.log").start(workers)
+        assert not job.warm and job.wait(120) == 0
+    finally:
+        workers.close()
+
+
+def test_a_job_in_the_worker_is_cancelled_and_the_worker_serves_the_next(tmp_path):
+    workers = warm_workers(tmp_path)
+    try:
+        out = tmp_path / "long"
+        argv = ["evaluate", "block", "--n", "200", "--seed", "1", *SHORT, "--chunk-size", "2"]
+        job = jobs.Job([*argv, "--out", str(out)], tmp_path / "logs" / "long.log", out, 200, 2)
+        job.start(workers)
+        assert job.warm
+        deadline = time.monotonic() + 240
+        while not list((out / "chunks").glob("part-*.parquet")):
+            assert job.running, job.log.read_text()
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+        # another browser tab's job while the worker is busy: a process of its own
+        other = tmp_path / "other"
+        beside = jobs.Job(
+            ["evaluate", "block", "--n", "2", *SHORT, "--out", str(other)],
+            tmp_path / "logs" / "other.log",
+            other,
+        ).start(workers)
+        assert not beside.warm and beside.running
+        job.cancel()
+        job.wait(60)
+        p = job.poll()
+        assert p.state == "cancelled", job.log.read_text()
+        assert beside.wait(300) == 0 and beside.poll().state == "complete"
+        assert json.loads((out / "mjx_pick_run.json").read_text())["status"] == "interrupted"
+        assert 1 <= len(list((out / "chunks").glob("part-*.parquet"))) < 100
+        assert "--resume" in job.log.read_text()  # the CLI's own interrupted line
+        # the same worker, still alive, resumes it: the cancel stopped the job, not it
+        worker = workers.worker("mujoco")
+        assert worker.alive
+        again = jobs.Job([*argv, "--out", str(out), "--resume"], job.log, out, 200, 2)
+        again.start(workers)
+        assert again.warm and again._proc.pid == worker.pid
+        again.wait(300)
+        assert again.poll().state == "complete", again.log.read_text()
+        assert pq.read_table(out / "results.parquet").num_rows == 200
+    finally:
+        workers.close()
+
+
+def test_a_killed_worker_is_reported_and_a_later_job_succeeds(tmp_path):
+    workers = warm_workers(tmp_path)
+    try:
+        out = tmp_path / "killed"
+        argv = ["evaluate", "block", "--n", "200", "--seed", "1", *SHORT, "--chunk-size", "2"]
+        job = jobs.Job([*argv, "--out", str(out)], tmp_path / "logs" / "k.log", out, 200, 2)
+        job.start(workers)
+        dead = workers.worker("mujoco").pid
+        deadline = time.monotonic() + 240
+        while not list((out / "chunks").glob("part-*.parquet")):
+            assert job.running and time.monotonic() < deadline, job.log.read_text()
+            time.sleep(0.2)
+        os.kill(dead, 9)
+        job.wait(60)
+        p = job.poll()
+        assert p.state == "failed"
+        assert "worker process that ran this job stopped (killed by signal 9" in p.message
+        assert "a new one is started for the next job" in p.message
+        # a new worker is started at once, and runs the next job
+        worker = workers.worker("mujoco")
+        assert worker.pid != dead and worker.ready.wait(180)
+        out2 = tmp_path / "after"
+        job = jobs.Job(
+            ["evaluate", "block", "--n", "4", *SHORT, "--out", str(out2)],
+            tmp_path / "logs" / "after.log",
+            out2,
+        ).start(workers)
+        assert job.warm and job._proc.pid == worker.pid
+        assert job.wait(300) == 0 and job.poll().state == "complete", job.log.read_text()
+        # a worker killed while idle: the next job says so in its log, and still runs
+        os.kill(worker.pid, 9)
+        worker.proc.wait(30)
+        job = jobs.Job(
+            ["evaluate", "block", "--n", "4", *SHORT, "--out", str(tmp_path / "idle")],
+            tmp_path / "logs" / "idle.log",
+            tmp_path / "idle",
+        ).start(workers)
+        assert job.wait(300) == 0 and job.poll().state == "complete", job.log.read_text()
+        assert "had stopped (killed by signal 9" in job.log.read_text()
+        assert any("had stopped (killed by signal 9" in w for w in job.poll().warnings)
+    finally:
+        workers.close()
+
+
+def test_the_export_counts_the_parts_of_the_report(tmp_path):
+    # the export with animations ran for a minute behind a bar with no count: its
+    # progress is now the report's own count of parts, read from its log
+    from mjx_pick.gui.page.job_panel import status_line
+
+    log = tmp_path / "run-report.log"
+    job = jobs.report_job(tmp_path / "run", 3, True, log)
+    assert job.argv == ["report", str(tmp_path / "run"), "--n", "3"]
+    assert "--no-animations" in jobs.report_job(tmp_path / "run", 3, False, log).argv
+    log.write_text(
+        "$ mjx-pick report run --n 3\n"
+        "report:  12% 2/17 part [00:04, 0.5 part/s]\n"
+        "report:  41% 7/17 part [00:21, 0.33 part/s]\n"
+    )
+    p = job.poll()
+    assert (p.done, p.total) == (7, 17) and p.fraction == pytest.approx(7 / 17)
+    assert status_line(p).startswith("running, 7/17 parts of the report")
+
+
+def test_a_restarted_server_remembers_the_runs_of_its_work_folder(tmp_path):
+    import fcntl
+
+    def folder(name, status, command="evaluate", argv=None):
+        out = tmp_path / name
+        out.mkdir()
+        manifest = {"command": command, "status": status, "started": "2026-11-24T01:00:00+00:00"}
+        if status != "running":
+            manifest["finished"] = "2026-11-24T01:00:12+00:00"
+        (out / "mjx_pick_run.json").write_text(json.dumps(manifest))
+        (out / "config.json").write_text(json.dumps({"n": 4, "chunk_size": 2}))
+        (tmp_path / "logs").mkdir(exist_ok=True)
+        line = f"$ mjx-pick {command} block --n 4 --out {out}\n"
+        (tmp_path / "logs" / f"{name}.log").write_text(line)
+        return out
+
+    done = folder("done", "complete")
+    (done / "summary.json").write_text(json.dumps({"picks_per_s": 3.5}))
+    folder("stopped", "interrupted")
+    folder("died", "running")  # its process ended without closing it: no lock held
+    live = folder("live", "running")
+    (tmp_path / "plain").mkdir()  # not a run folder
+    fd = os.open(live / ".mjx_pick.lock", os.O_RDWR | os.O_CREAT)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # a run of the previous server, still going
+    os.write(fd, json.dumps({"pid": os.getpid(), "command": "evaluate"}).encode())
+    try:
+        runs = jobs.Runs()
+        assert runs.recover(tmp_path) == 4
+        got = {j.title: j for j in runs}
+        assert set(got) == {"evaluate done", "evaluate stopped", "evaluate died", "evaluate live"}
+        p = got["evaluate done"].poll()
+        assert (p.state, p.done, p.total, p.rate) == ("complete", 4, 4, 3.5)
+        assert p.elapsed_s == pytest.approx(12.0)
+        assert got["evaluate done"].argv == ["evaluate", "block", "--n", "4", "--out", str(done)]
+        assert got["evaluate stopped"].poll().state == "cancelled"
+        assert got["evaluate died"].poll().state == "failed"
+        assert got["evaluate live"].running and got["evaluate live"].poll().state == "running"
+        assert runs.writing(live) is got["evaluate live"]
+        assert runs.recover(tmp_path) == 0  # known already: not added twice
+    finally:
+        os.close(fd)
+    assert not got["evaluate live"].running  # the lock released: it ended

@@ -202,6 +202,7 @@ GUI_LEVELS = {
         "formatting",
         "state",
         "one_pick",
+        "worker",
     ),
     "page parts": ("page", "page.widgets", "page.settings_form", "page.job_panel"),
     "tabs": (

@@ -3,15 +3,31 @@
 from __future__ import annotations
 
 import os
+import time
+
+# When set (a wall-clock time, time.time()): where the command the process runs now began.
+# A process that runs one command after another -- the GUI's warm worker -- sets it per
+# command, so a command's time counts from its own start, not from the process's.
+_began: float | None = None
+
+
+def begin(wall_s: float | None) -> None:
+    """Count :func:`process_age_s` from wall_s (``time.time()``) instead of the process's
+    start; None: from the process's start again."""
+    global _began
+    _began = wall_s
 
 
 def process_age_s() -> float | None:
-    """Seconds since this process started (Linux ``/proc``), or None where unknown.
+    """Seconds since this process started (Linux ``/proc``), or None where unknown; or
+    since the command it runs now began (:func:`begin`).
 
     What a user waits for before ``main`` runs -- the interpreter's start and the
     imports -- is not seen by a timer started in ``main``; the kernel's record of the
     process's start time is.
     """
+    if _began is not None:
+        return max(0.0, time.time() - _began)
     try:
         with open("/proc/self/stat") as fh:
             # the fields after the command name "(...)": field 22, starttime, is the 20th

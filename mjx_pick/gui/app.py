@@ -15,6 +15,7 @@ load the web framework.
 
 from __future__ import annotations
 
+import subprocess
 import uuid
 from pathlib import Path
 
@@ -114,7 +115,12 @@ def serve(host: str, port: int, workdir: Path, show: bool) -> None:
 
     workdir = Path(workdir).resolve()
     workdir.mkdir(parents=True, exist_ok=True)
-    runs = jobs.Runs()  # server-side: they outlive the page (a reload finds them)
+    # server-side: they outlive the page (a reload finds them); the simulation commands
+    # run in warm workers, the default backend's started now so a first job may find it
+    workers = jobs.Workers(workdir / "logs")
+    workers.prepare(jobs.DEFAULT_BACKEND)
+    runs = jobs.Runs(workers)
+    runs.recover(workdir)  # a restarted server remembers the work folder's runs
     pages: dict = {}  # each browser tab's last page, by the tab's id
 
     @ui.page("/")
@@ -124,6 +130,13 @@ def serve(host: str, port: int, workdir: Path, show: bool) -> None:
     def stop_jobs() -> None:  # the server stops: runs stop as on Ctrl-C, keeping their parts
         for job in runs:
             job.cancel()
+        for job in runs:  # then the workers end (a cancelled job first marks its folder)
+            if job.running:
+                try:
+                    job.wait(jobs.CANCEL_GRACE_S)
+                except subprocess.TimeoutExpired:
+                    pass
+        workers.close()
 
     app.on_shutdown(stop_jobs)
     ui.run(

@@ -9,6 +9,16 @@ whatever the run does to memory or the GL context cannot take the page down with
 
 Progress of an evaluate run is read from its folder: each finished chunk is a file
 ``chunks/part-*.parquet`` of ``chunk`` pick-points (``evaluate --chunk-size``).
+
+A warm worker (:class:`Workers`) serves the simulation commands: one long-lived process
+per backend, started in the same isolated mode from the same package, that runs the CLI
+command in itself (:mod:`mjx_pick.gui.worker`) -- so a second job does not pay the
+imports, the object's preparation and the compile again. To the page it is the same
+job: the same log, progress, cancel (SIGINT to the worker while the job runs), run
+folder and exit code. A worker that dies is reported in the job it ran and replaced for
+the next; one whose memory grew is replaced after its job. A job the worker cannot serve
+(another command, a Ray cluster, a worker busy with another tab's job) runs in its own
+process as before.
 """
 
 from __future__ import annotations
@@ -16,11 +26,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import re
 import shlex
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -61,8 +73,293 @@ def package_dir() -> Path:
 
 def child_argv(argv: list[str]) -> list[str]:
     """The child process's command line for the CLI arguments argv (see _CLI_FROM_PACKAGE)."""
+    return _isolated(_CLI_FROM_PACKAGE, argv)
+
+
+def _isolated(code: str, argv: list[str]) -> list[str]:
+    """python in isolated mode running code with the package folder and argv after it."""
     isolated = ["-E", "-P"] + (["-s"] if sys.flags.no_user_site else [])
-    return [sys.executable, *isolated, "-u", "-c", _CLI_FROM_PACKAGE, str(package_dir()), *argv]
+    return [sys.executable, *isolated, "-u", "-c", code, str(package_dir()), *argv]
+
+
+# The warm worker: the package loaded as for a job (see _CLI_FROM_PACKAGE), then its loop
+# (mjx_pick.gui.worker.serve) with the reply pipe's file descriptor
+_WORKER_FROM_PACKAGE = _CLI_FROM_PACKAGE.replace(
+    "from mjx_pick.cli import main\nsys.exit(main(sys.argv[2:]))\n",
+    "from mjx_pick.gui.worker import serve\nserve(int(sys.argv[2]))\n",
+)
+assert _WORKER_FROM_PACKAGE != _CLI_FROM_PACKAGE
+
+# the commands a worker runs: the simulation commands, whose fixed costs it saves. Not
+# `report` (its cost is rendering, not compiling; its GL contexts are better ended with
+# a process) nor `calibrate` (its derivative programs are large and used once).
+WARM_COMMANDS = ("evaluate", "sweep", "compare", "robust")
+DEFAULT_BACKEND = "mujoco"  # the settings form's; its worker is started with the server
+# a worker whose resident memory grew by more than this since its first job is replaced
+# before its next job (a leak in a library must not grow the machine's memory job after
+# job)
+WORKER_GROWTH_BYTES = 1 << 30
+
+
+def warm_backend(argv: list[str]) -> str | None:
+    """The backend whose worker may run the CLI command argv, or None when it runs in a
+    process of its own (a command a worker does not run, a run on a Ray cluster)."""
+    if not argv or argv[0] not in WARM_COMMANDS or "--ray" in argv or "--help" in argv:
+        return None
+    if "--backend" in argv[:-1]:
+        return argv[argv.index("--backend") + 1]
+    return "auto"
+
+
+class Worker:
+    """One warm worker process for one backend (see :mod:`mjx_pick.gui.worker`)."""
+
+    def __init__(self, backend: str, folder: Path):
+        """folder: where its own log goes (the work folder's logs/)."""
+        self.backend, self.folder = backend, Path(folder)
+        self.log = self.folder / f"worker-{backend}.log"
+        self.proc: subprocess.Popen | None = None
+        self.current: WorkerRun | None = None  # the job it runs now
+        self.ready = threading.Event()  # imported and listening
+        self.replies_read = threading.Event()  # its reply pipe closed and read to the end
+        self.pid: int | None = None
+        self.rss: list[int] = []  # its resident memory after each job, bytes
+        self.jobs = 0
+        self.on_death = None  # called when it is found dead after a job it ran
+        self._lock = threading.Lock()
+        self._ids = 0
+
+    def start(self) -> Worker:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        read, write = os.pipe()
+        with self.log.open("ab") as fh:
+            self.proc = subprocess.Popen(
+                _isolated(_WORKER_FROM_PACKAGE, [str(write)]),
+                stdin=subprocess.PIPE,
+                stdout=fh,
+                stderr=subprocess.STDOUT,
+                cwd=self.folder,
+                pass_fds=(write,),
+                # its own process group: a Ctrl-C at the server's terminal goes to the
+                # server, which cancels the running job itself, and never to an idle worker
+                start_new_session=True,
+            )
+        os.close(write)
+        self.pid = self.proc.pid
+        threading.Thread(target=self._read, args=(read,), daemon=True).start()
+        return self
+
+    def _read(self, fd: int) -> None:
+        """The reply pipe: ready, then one line per finished job (a thread)."""
+        with os.fdopen(fd) as replies:
+            for line in replies:
+                try:
+                    msg = json.loads(line)
+                except ValueError:
+                    continue
+                if "ready" in msg:
+                    self.ready.set()
+                    continue
+                with self._lock:
+                    run = self.current
+                    if run is not None and run.id == msg.get("id"):
+                        self.rss.append(int(msg.get("rss") or 0))
+                        self.jobs += 1
+                        self.current = None
+                        run.code = int(msg["code"])
+        self.replies_read.set()
+
+    @property
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    @property
+    def busy(self) -> bool:
+        return self.current is not None
+
+    @property
+    def grown(self) -> bool:
+        """Its memory grew by more than WORKER_GROWTH_BYTES since its first job."""
+        return len(self.rss) >= 2 and self.rss[-1] - self.rss[0] > WORKER_GROWTH_BYTES
+
+    def run(self, argv: list[str], log: Path) -> WorkerRun:
+        """Hand it the CLI command argv, its output appended to log."""
+        with self._lock:
+            if self.current is not None:
+                raise RuntimeError(f"the {self.backend} worker is running another job")
+            self._ids += 1
+            run = WorkerRun(self, self._ids, Path(log))
+            self.current = run
+        job = {
+            "id": run.id,
+            "argv": list(argv),
+            "log": str(log),
+            "cwd": str(Path(log).parent),
+            "started": time.time(),
+        }
+        try:
+            self.proc.stdin.write((json.dumps(job) + "\n").encode())
+            self.proc.stdin.flush()
+        except OSError:  # it died: the run's poll reports it
+            pass
+        return run
+
+    def stop(self) -> None:
+        """End it: end of input when idle (it exits), a kill if it does not in 5 s."""
+        if self.proc is None:
+            return
+        try:
+            self.proc.stdin.close()
+        except OSError:
+            pass
+        try:
+            self.proc.wait(5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+    def ended_how(self) -> str:
+        """How its process ended, in words ("killed by signal 9 (SIGKILL)", "exit code 1")."""
+        code = self.proc.poll() if self.proc is not None else None
+        if code is None:
+            return "still running"
+        if code < 0:
+            try:
+                name = signal.Signals(-code).name
+            except ValueError:
+                name = "?"
+            return f"killed by signal {-code} ({name})"
+        return f"exit code {code}"
+
+
+class WorkerRun:
+    """A job running in a worker, with the calls of the ``subprocess.Popen`` a job's
+    own process would have (poll, wait, send_signal, kill), so :class:`Job` treats both
+    alike."""
+
+    def __init__(self, worker: Worker, id_: int, log: Path):
+        self.worker, self.id, self.log = worker, id_, log
+        self.code: int | None = None  # the CLI's exit code, once the worker answered
+        self.crashed = False  # the worker died during the job
+
+    @property
+    def pid(self) -> int | None:
+        return self.worker.pid
+
+    def poll(self) -> int | None:
+        if self.code is not None:
+            return self.code
+        if self.worker.alive:
+            return None
+        self.worker.proc.wait()
+        self.worker.replies_read.wait(5)  # an answer it sent before it ended is read
+        if self.code is not None:  # it answered, then exited
+            return self.code
+        self.crashed = True
+        how = self.worker.ended_how()
+        self.code = self.worker.proc.returncode or 1
+        with self.log.open("a") as fh:  # the page shows this line (Job.error_message)
+            fh.write(
+                f"\nmjx-pick: error: the worker process that ran this job stopped ({how}, "
+                f"pid {self.worker.pid}); a new one is started for the next job\n"
+            )
+        with self.worker._lock:  # noqa: SLF001 - the worker's own state
+            self.worker.current = None
+        if self.worker.on_death is not None:
+            self.worker.on_death()
+        return self.code
+
+    def wait(self, timeout: float | None = None) -> int:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while (code := self.poll()) is None:
+            if deadline is not None and time.monotonic() > deadline:
+                raise subprocess.TimeoutExpired(f"job {self.id}", timeout)
+            time.sleep(0.05)
+        return code
+
+    def send_signal(self, sig: int) -> None:
+        """A signal for the job: sent to the worker only while it still runs this job."""
+        if self.poll() is None:
+            try:
+                os.kill(self.worker.pid, sig)
+            except ProcessLookupError:
+                pass
+
+    def kill(self) -> None:
+        """The job ignores its cancel: the worker goes with it (replaced for the next job)."""
+        if self.poll() is None:
+            self.worker.proc.kill()
+
+
+class Workers:
+    """The server's warm workers, one per backend, started with the first job for it."""
+
+    def __init__(self, folder: Path):
+        """folder: where the workers' own logs go (the work folder's logs/)."""
+        self.folder = Path(folder)
+        self._by_backend: dict[str, Worker] = {}
+        self._lock = threading.Lock()
+        self.notes: list[str] = []  # what happened to workers, for the server's page
+
+    def worker(self, backend: str) -> Worker | None:
+        """The running worker of backend (None if there is none)."""
+        return self._by_backend.get(backend)
+
+    def take(self, argv: list[str]) -> Worker | None:
+        """The idle, live worker that runs argv (started now if the backend has none,
+        replaced if it died or grew), or None: argv runs in its own process."""
+        backend = warm_backend(argv)
+        if backend is None:
+            return None
+        with self._lock:
+            w = self._by_backend.get(backend)
+            if w is not None and w.busy:
+                if w.current.poll() is None:
+                    return None  # busy with another tab's job: a process of its own
+            if w is not None and not w.alive:
+                self.notes.append(
+                    f"the {backend} worker (pid {w.pid}) had stopped ({w.ended_how()}); "
+                    "a new one was started"
+                )
+                w.stop()
+                w = None
+            elif w is not None and w.grown:
+                self.notes.append(
+                    f"the {backend} worker (pid {w.pid}) was replaced: its memory grew by "
+                    f"{(w.rss[-1] - w.rss[0]) / 2**20:.0f} MB over {w.jobs} jobs"
+                )
+                w.stop()
+                w = None
+            if w is None:
+                w = self._start(backend)
+        # a worker still importing is not waited for (the page's event loop runs this):
+        # the job runs in its own process and the worker is warm for the next one
+        if not w.ready.is_set() or not w.alive:
+            return None
+        return w
+
+    def _start(self, backend: str) -> Worker:
+        w = Worker(backend, self.folder)
+        w.on_death = lambda: self.prepare(backend)  # died in a job: warm for the next
+        self._by_backend[backend] = w.start()
+        return w
+
+    def prepare(self, backend: str) -> None:
+        """Start backend's worker now (it imports in the background), so a job finds it
+        warm; nothing if it has a live one."""
+        with self._lock:
+            w = self._by_backend.get(backend)
+            if w is None or not w.alive:
+                if w is not None:
+                    w.stop()  # its pipe closed, its process reaped
+                self._start(backend)
+
+    def close(self) -> None:
+        """Stop every worker (the server stops)."""
+        with self._lock:
+            workers, self._by_backend = list(self._by_backend.values()), {}
+        for w in workers:
+            w.stop()
 
 
 class Runs:
@@ -73,8 +370,19 @@ class Runs:
     server stops the running ones when it stops.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, workers: Workers | None = None) -> None:
+        """workers: the warm workers jobs may run in (None: each in its own process)."""
         self._jobs: list[Job] = []
+        self.workers = workers
+
+    def recover(self, workdir: Path) -> int:
+        """Add the runs of the work folder's run folders (:func:`recovered_runs`) that
+        this server does not know yet, oldest first: what a restarted server remembers.
+        Returns how many."""
+        known = {j.out.resolve() for j in self._jobs if j.out is not None}
+        found = [j for j in recovered_runs(workdir) if j.out.resolve() not in known]
+        self._jobs[:0] = found
+        return len(found)
 
     def add(self, job: Job, owner: str | None) -> None:
         job.owner = owner
@@ -130,24 +438,30 @@ class Job:
         chunk: int | None = None,
         steps_logged: str | None = None,
         unit: str = "pick-points",
+        counted: str | None = None,
     ):
         """total, chunk: pick-points and chunk size of an evaluate run (progress from its
         chunk files); steps_logged: a regular expression whose group 1 is the number of
         the last finished step in the run's output (calibrate's "step 12 loss ..."),
-        with total the number of steps."""
+        with total the number of steps; counted: a regular expression whose groups 1
+        and 2 are the units done and in all in the run's progress lines (the CLI's
+        progress bar in a log: "report:  40% 4/10 part ...")."""
         self.argv = list(argv)
         self.steps_logged = re.compile(steps_logged) if steps_logged else None
+        self.counted = re.compile(counted) if counted else None
         self.unit = unit
         self.log = Path(log)
         self.out = Path(out) if out is not None else None
         self.total = total
         self.chunk = chunk
-        self._proc: subprocess.Popen | None = None
+        self._proc: subprocess.Popen | WorkerRun | None = None
         self._t0 = 0.0
         self._cancelled_at: float | None = None
         self._chunks_before: set[str] = set()
         self._done = 0  # the most pick-points seen done: a count never goes back
         self.title = " ".join(argv[:1])  # what the page calls it (set when it starts)
+        self.elapsed_s: float | None = None  # a run that ended before this server started
+        self.notes: tuple[str, ...] = ()  # the warm workers' news when it started
         self.owner: str | None = None  # the browser tab that started it
 
     @property
@@ -155,13 +469,26 @@ class Job:
         """The same run typed at a shell."""
         return shlex.join(["mjx-pick", *self.argv])
 
-    def start(self) -> Job:
-        """Start the run; its log never replaces another run's (a taken name gets -2, -3)."""
+    def start(self, workers: Workers | None = None) -> Job:
+        """Start the run -- in a warm worker of workers when one serves it, else in a
+        process of its own; its log never replaces another run's (a taken name gets -2,
+        -3)."""
         self.log = unused_path(self.log)
         self._chunks_before = {f.name for f in self._chunks()}
+        self._t0 = time.monotonic()
         with self.log.open("wb") as fh:
             fh.write(f"$ {self.command_line}\n".encode())
-            fh.flush()
+        worker = workers.take(self.argv) if workers is not None else None
+        if workers is not None:  # what happened to a worker: in the log and on the page
+            self.notes = tuple(workers.notes)
+            workers.notes.clear()
+            with self.log.open("a") as fh:
+                for note in self.notes:
+                    fh.write(f"mjx-pick: note: {note}\n")
+        if worker is not None:
+            self._proc = worker.run(self.argv, self.log)
+            return self
+        with self.log.open("ab") as fh:
             # every path in argv is absolute: the working directory is the logs folder,
             # never the one the server was started from
             self._proc = subprocess.Popen(
@@ -171,8 +498,25 @@ class Job:
                 stdin=subprocess.DEVNULL,
                 cwd=self.log.parent,
             )
-        self._t0 = time.monotonic()
         return self
+
+    @property
+    def where(self) -> str:
+        """Where the run runs, in the page's words."""
+        if isinstance(self._proc, WorkerRun):
+            w = self._proc.worker
+            return (
+                f"in the warm {w.backend} worker (pid {w.pid}, its job {self._proc.id}): "
+                "imports and compiled programs kept from its earlier jobs"
+            )
+        if isinstance(self._proc, FolderRun):
+            return "a run of this work folder from before the server started"
+        return "in a process of its own"
+
+    @property
+    def warm(self) -> bool:
+        """Whether the run went to a warm worker (not a process of its own)."""
+        return isinstance(self._proc, WorkerRun)
 
     @property
     def running(self) -> bool:
@@ -195,7 +539,7 @@ class Job:
     def poll(self) -> Progress:
         """The run's state now; a stopped run that was asked to cancel is killed late."""
         now = time.monotonic()
-        elapsed = now - self._t0
+        elapsed = now - self._t0 if self.elapsed_s is None else self.elapsed_s
         if self._cancelled_at is not None and self.running:
             if now - self._cancelled_at > CANCEL_GRACE_S:
                 self._proc.kill()
@@ -210,6 +554,10 @@ class Job:
         if self.steps_logged is not None and self.total:
             found = self.steps_logged.findall(self._log_text())
             done = min(self.total, int(found[-1]) + 1) if found else 0
+        if self.counted is not None:
+            found = self.counted.findall(self._log_text())
+            if found:
+                done, total = int(found[-1][0]), int(found[-1][1])
         if code is None:
             state = "running"
             if self._cancelled_at:
@@ -258,8 +606,9 @@ class Job:
         return self._done, total, rate, message
 
     def warnings(self) -> tuple[str, ...]:
-        """The run's warnings (Python's, in its log), each once, without the file and line."""
-        seen: list[str] = []
+        """The run's warnings (Python's, in its log), each once, without the file and
+        line; after what happened to a warm worker before it started (one found dead)."""
+        seen: list[str] = list(self.notes)
         for m in _WARNING.finditer(self._log_text()):
             text = m.group(1).strip()
             if text not in seen:
@@ -286,6 +635,117 @@ class Job:
         last = next((ln.strip() for ln in reversed(lines) if ln.strip()), "")
         # the exception's last line, never the traceback; the log keeps the rest
         return f"the run stopped (exit code {code}): {last[-300:]}; its log: {log}"
+
+
+# the exit code a CLI run that ended with a folder's status had (main's return values)
+EXIT_OF_STATUS = {"complete": 0, "interrupted": 130, "cancelled": 130, "terminated": 143}
+
+
+class FolderRun:
+    """A run this server did not start -- one of the work folder's before a restart --
+    with the calls of a ``subprocess.Popen`` (poll, wait, send_signal, kill), answered
+    from its folder: running while a process holds the folder's lock (a job of the
+    previous server's worker or child that is still going), else the exit code its
+    manifest's status stands for."""
+
+    def __init__(self, out: Path):
+        self.out = Path(out)
+        self.pid: int | None = None
+        self._code: int | None = None  # once ended, it stays so (the page polls often)
+
+    def poll(self) -> int | None:
+        from mjx_pick.outputs.rundir import lock_holder, read_manifest
+
+        if self._code is not None:
+            return self._code
+        holder = lock_holder(self.out)
+        if holder is not None:
+            self.pid = holder.get("pid")
+            return None
+        status = (read_manifest(self.out) or {}).get("status")
+        self._code = EXIT_OF_STATUS.get(status, 1)  # "failed", or "running" and dead
+        return self._code
+
+    def wait(self, timeout: float | None = None) -> int:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while (code := self.poll()) is None:
+            if deadline is not None and time.monotonic() > deadline:
+                raise subprocess.TimeoutExpired(str(self.out), timeout)
+            time.sleep(0.2)
+        return code
+
+    def send_signal(self, sig: int) -> None:
+        if self.poll() is None and isinstance(self.pid, int):
+            try:
+                os.kill(self.pid, sig)
+            except (ProcessLookupError, PermissionError):
+                pass
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+
+def recovered_runs(workdir: Path) -> list[Job]:
+    """A job for each run folder of the work folder (a folder with an mjx-pick
+    manifest), oldest first: its command line from its log's first line (``logs/<folder
+    name>.log``, as the GUI writes it), its state and progress from its folder."""
+    from mjx_pick.outputs.rundir import read_manifest
+
+    workdir = Path(workdir)
+    found = []
+    if not workdir.is_dir():
+        return []
+    for folder in workdir.iterdir():
+        manifest = read_manifest(folder) if folder.is_dir() else None
+        if not manifest or not manifest.get("command"):
+            continue
+        log = workdir / "logs" / f"{folder.name}.log"
+        argv = [manifest["command"], "--out", str(folder)]
+        try:
+            first = log.read_text(errors="replace").split("\n", 1)[0]
+            if first.startswith("$ mjx-pick "):
+                argv = shlex.split(first[len("$ mjx-pick ") :])
+        except (OSError, ValueError):
+            pass
+        total = chunk = None
+        if manifest["command"] == "evaluate":
+            config = _read_json(folder / "config.json") or {}
+            total, chunk = config.get("n"), config.get("chunk_size")
+        job = Job(argv, log, folder, total, chunk)
+        job.title = f"{manifest['command']} {folder.name}"
+        job._proc = FolderRun(folder)
+        started, finished = _wall(manifest.get("started")), _wall(manifest.get("finished"))
+        job._t0 = time.monotonic() - (time.time() - started if started else 0.0)
+        if started and finished and manifest.get("status") != "running":
+            job.elapsed_s = max(0.0, finished - started)  # ended: its own duration
+        if manifest.get("status") in ("interrupted", "cancelled", "terminated"):
+            job._cancelled_at = job._t0  # shown as cancelled, what finished kept
+        found.append((manifest.get("started") or "", job))
+    return [job for _, job in sorted(found, key=lambda sj: sj[0])]
+
+
+def _wall(stamp: str | None) -> float | None:
+    """An ISO time of a manifest as seconds since the epoch (None if absent or bad)."""
+    import datetime
+
+    try:
+        return datetime.datetime.fromisoformat(stamp).timestamp() if stamp else None
+    except ValueError:
+        return None
+
+
+# the report's progress lines in its log (outputs.progress.ProgressBar's line mode)
+REPORT_PARTS = r"(?m)^report: +\d+% (\d+)/(\d+) part"
+
+
+def report_job(run: Path, n: int, animations: bool, log: Path) -> Job:
+    """``mjx-pick report`` of the evaluate folder run (n best and n worst), its progress
+    counted in the report's parts (each force plot, each animation -- the slow ones --
+    the maps, each template, the robot export, the page) from its log."""
+    argv = ["report", str(run), "--n", str(int(n))]
+    if not animations:
+        argv.append("--no-animations")
+    return Job(argv, log, unit="parts of the report", counted=REPORT_PARTS)
 
 
 def unused_path(path: Path) -> Path:

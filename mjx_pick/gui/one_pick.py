@@ -64,3 +64,50 @@ def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, b
     ]
     plot = views.force_png(trace, settings.grasp.grip_force_n, f"test pick ({x:g}, {y:g}, {yaw:g})")
     return {"text": "\n".join(head), "plot": plot}
+
+
+def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict]:
+    """A pick-point of an evaluate run that the run did not trace, simulated now with
+    its trace recorded, for tab 4's force plot and replay.
+
+    The run's own settings (its config.json: gripper, contact, solver, procedure,
+    pick-point checks and backend) and the pick's own pose; obj must be the run's object
+    (ConfigError naming the difference otherwise: the run folder records the object's
+    outline, not the object itself). Same settings, same backend: the same simulation
+    as the run's, up to the float rounding of another batch size.
+
+    Returns:
+      (trace: {column: array} as ``Run.trace`` gives, row: the new simulation's
+      results row).
+    """
+    from mjx_pick.core import pickpoints as pp
+    from mjx_pick.core.objects import check_same_object
+    from mjx_pick.studies.calibration.trials.runs import settings_of
+    from mjx_pick.studies.evaluation import evaluate
+
+    config = run.config
+    check_same_object(config.get("object") or {}, obj, f"run {run.path.name}")
+    settings, pick_config = settings_of(config, f"{run.path.name}/config.json")
+    row = run.row(pick_id)
+    checker = pp.FeasibilityChecker(obj, settings.gripper, pick_config, settings.grasp)
+    batch = checker.batch(
+        np.array([pick_id]),
+        np.array([row["x_mm"]]),
+        np.array([row["y_mm"]]),
+        np.array([row["yaw_deg"]]),
+        "user",
+    )
+    ev = evaluate(
+        obj,
+        settings.gripper,
+        picks=batch,
+        contact=settings.contact,
+        solver=settings.solver,
+        grasp=settings.grasp,
+        pick_config=pick_config,
+        backend=config.get("backend") or "auto",
+        n_traces=1,
+    )
+    again = {k: ev.table[k][0].as_py() for k in ev.table.column_names}
+    trace = {name: np.asarray(ev.traces[name]) for name in ev.traces.column_names}
+    return trace, again

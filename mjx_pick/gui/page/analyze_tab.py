@@ -1,8 +1,9 @@
 """Tab 4, *Analyze results*: open an evaluate folder, rank its pick-points, inspect one.
 
 Sets the page's open run (:attr:`PageState.obj` is tab 1's; :attr:`PageState.run` is
-this tab's), which the robustness study reads. A selected traced pick-point shows its
-force plot and a 3-D replay; Export runs ``mjx-pick report`` (templates, report).
+this tab's), which the robustness study reads. A selected pick-point shows its force
+plot and a 3-D replay (one the run did not trace is simulated for them); Export runs
+``mjx-pick report`` (templates, report).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from nicegui import run, ui
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs, views
 from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS, fmt
+from mjx_pick.gui.one_pick import simulate_untraced
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.widgets import error_label, show_picture, whole
 from mjx_pick.gui.state import PageState
@@ -129,6 +131,7 @@ class AnalyzeTab:
                     self.chart = ui.echart({}).classes("w-full h-64")
                 self.replay_box.set_visibility(False)
         self.replayed = None  # (scene.xml, trace) of the pick in the replay
+        self.simulated: dict = {}  # (run folder, pick id): trace of an untraced pick
         self.rendering = False
         self.refresh_runs()
 
@@ -258,18 +261,13 @@ class AnalyzeTab:
             f"mm, slip {fmt(full['slip_mm'], 2)} mm",
         ]
         self.detail.set_content("\n".join(lines))
-        if row.get("traced") != "yes":
-            self.detail.set_content(
-                "\n".join(lines)
-                + "\n\nNot traced: the run recorded the forces of its best and worst "
-                "pick-points only (tab 3, 'traced best and worst')."
-            )
-            self.force_image.set_visibility(False)
-            self.replay_image.set_visibility(False)
-            self.replay_box.set_visibility(False)
-            return
-        trace = opened.trace(pid)
         f_d = float(opened.config["grasp"]["grip_force_n"])
+        if row.get("traced") == "yes":
+            trace = opened.trace(pid)
+        else:
+            trace = await self.simulate_untraced(opened, pid, lines)
+            if trace is None:
+                return
         await self.show_replay(opened.path / "scene.xml", trace, f_d)
         title = f"pick {pid}: score {fmt(full['score'])}, {full['failure']}"
         png = await run.io_bound(views.force_png, trace, f_d, title)
@@ -281,6 +279,45 @@ class AnalyzeTab:
             self.error.set_text(str(err))
             return
         show_picture(self.replay_image, gif, "image/gif")
+
+    async def simulate_untraced(self, opened, pid: int, lines: list[str]) -> dict | None:
+        """The trace of a pick-point the run did not trace: simulated now (in a worker
+        thread) with the run's settings and the page's object, kept for this page; None
+        (and why, in the details) when it cannot be."""
+        key = (opened.path, pid)
+        if key in self.simulated:
+            return self.simulated[key]
+        self.force_image.set_visibility(False)
+        self.replay_image.set_visibility(False)
+        self.replay_box.set_visibility(False)
+        self.replayed = None
+        note = (
+            "\n\nNot traced by the run (it records the forces of its best and worst "
+            "pick-points, tab 3's 'traced best and worst'): "
+        )
+        name = (opened.config.get("object") or {}).get("name", "its object")
+        if self.state.obj is None:
+            self.detail.set_content(
+                "\n".join(lines) + note + f"import the run's object ({name}) in tab 1 to "
+                "simulate it here for its force plot and replay."
+            )
+            return None
+        self.detail.set_content("\n".join(lines) + note + "simulating it now ...")
+        try:
+            trace, again = await run.io_bound(simulate_untraced, opened, self.state.obj, pid)
+        except ConfigError as err:
+            self.detail.set_content("\n".join(lines) + note + f"it cannot be simulated here: {err}")
+            return None
+        if self.state.run is not opened:  # another run was opened meanwhile
+            return None
+        self.simulated[key] = trace
+        self.detail.set_content(
+            "\n".join(lines)
+            + note
+            + f"simulated now with the run's settings (score {fmt(again['score'])}, "
+            f"{again['failure']})."
+        )
+        return trace
 
     async def show_replay(self, scene_xml: Path, trace: dict, f_d: float) -> None:
         """The replay of a traced pick: its first frame, the slider over its rows and
@@ -338,10 +375,8 @@ class AnalyzeTab:
         n = whole(self.export_n, 1, 50)
         if n is None:
             return
-        argv = ["report", str(opened.path), "--n", str(int(n))]
-        if not self.export_anim.value:
-            argv.append("--no-animations")
-        job = jobs.Job(argv, self.state.log(f"{opened.path.name}-report"))
+        log = self.state.log(f"{opened.path.name}-report")
+        job = jobs.report_job(opened.path, n, bool(self.export_anim.value), log)
         self.panel.start(f"report {opened.path.name}", job)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:

@@ -48,11 +48,20 @@ class JobPanel:
             self.warnings = (
                 ui.label("").classes("text-warning text-sm").props('data-testid="job-warnings"')
             )
+            self.where = ui.label("").classes("text-xs").props('data-testid="job-where"')
             self.command = ui.code("", language="bash").classes("w-full text-xs")
         self.status.classes("mjx-live")
         card.set_visibility(False)
         self.card = card
         self.others = ui.label("").classes("text-sm").props('data-testid="other-runs"')
+        # every run of the server -- the work folder's from before a restart included:
+        # choosing one shows it here (its state, and its results drawn by the tabs)
+        self.listed: list[jobs.Job] = []
+        self.history = (
+            ui.select({}, label="runs in this work folder", on_change=self.on_history)
+            .classes("w-[32rem]")
+            .props('data-testid="runs-list"')
+        )
         ui.timer(POLL_S, self.poll)
         # what the page last heard is not the run's state once the server is gone: the
         # status and bar are hidden while the connection is lost, and a note says why
@@ -88,7 +97,7 @@ class JobPanel:
         if self.job is not None:  # callers check busy() first
             raise RuntimeError(f"a run is current ({self.title.text}): cannot start {title}")
         job.title = title
-        job.start()
+        job.start(self.runs.workers)
         self.runs.add(job, self.owner)
         self._show(job, on_end)
         self.status.set_text("starting ...")
@@ -110,6 +119,7 @@ class JobPanel:
         self.on_end = on_end
         self.title.set_text(job.title)
         self.command.set_content(job.command_line)
+        self.where.set_text(job.where)
         self.bar.set_value(0)
         self.warnings.set_text("")
         self.bar.props(remove="indeterminate")
@@ -122,8 +132,32 @@ class JobPanel:
         if self.job is not None:
             self.job.cancel()
 
+    def list_runs(self) -> None:
+        """The runs list's entries, newest first, each saying whether it runs."""
+        jobs_now = list(self.runs)  # oldest first: a run's key stays as runs are added
+        options = {
+            k: f"{j.title}" + (" (running)" if j.running else "")
+            for k, j in reversed(list(enumerate(jobs_now)))
+        }
+        if jobs_now != self.listed or options != self.history.options:
+            self.listed = jobs_now
+            self.history.set_options(options)
+
+    def on_history(self, e) -> None:
+        """A run chosen in the list: shown here, its results drawn (not while another
+        run is current)."""
+        if e.value is None or e.value >= len(self.listed):
+            return
+        job = self.listed[e.value]
+        if self.job is not None and self.job is not job:
+            ui.notify("a run is current: wait for it or cancel it", type="warning")
+        elif self.job is None:
+            self._show(job, None)
+            self.poll()
+
     def poll(self) -> None:
         """Show the run's progress; when it has ended, free the panel and call on_end."""
+        self.list_runs()
         others = [j for j in self.runs if j.running and j is not self.job]
         self.others.set_text(
             "also running on this server: " + "; ".join(j.title for j in others) if others else ""
@@ -131,7 +165,8 @@ class JobPanel:
         if self.job is None:
             return
         p = self.job.poll()
-        if p.fraction is not None:
+        if p.fraction is not None:  # a count (also one learnt as the run goes)
+            self.bar.props(remove="indeterminate")
             self.bar.set_value(p.fraction)
         self.status.set_text(status_line(p))
         self.warnings.set_text("warning: " + "; ".join(p.warnings) if p.warnings else "")

@@ -13,7 +13,7 @@ from pathlib import Path
 from nicegui import ui
 
 from mjx_pick.core.config import ConfigError
-from mjx_pick.gui import forms
+from mjx_pick.gui import forms, jobs
 from mjx_pick.gui.page.widgets import error_label, upload
 from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload
 
@@ -38,7 +38,8 @@ class SettingsForm:
                 label="gripper preset",
                 on_change=self.on_preset,
             ).classes("w-56")
-            self.backend = ui.select(BACKENDS, value="mujoco", label="backend").classes("w-40")
+            self.backend = ui.select(BACKENDS, value=jobs.DEFAULT_BACKEND, label="backend")
+            self.backend.classes("w-40")
         with ui.row().classes("items-center"):
             self.toml_upload = upload(
                 "or load a gripper TOML",
