@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 
 import numpy as np
 from shapely.geometry import box
@@ -147,6 +148,165 @@ def torque() -> None:
             )
 
 
+# --- pad-contact candidates for torsion like rubber (issue 32, item 5) ---------------
+# Each candidate rewrites the scene's MJCF text (the benchmark's own patch, never the
+# library's): "corners" the whole pad collides (MuJoCo's multi-point collider: four
+# overlap corners per pad on a flat face; the model before the change), "centre" one
+# contact per pad and object piece (MuJoCo's multiccd off: the collider's single point,
+# near the overlap's centre) with torsion mu r_mean, "shrunk" the corners with the
+# pad's collision box narrowed to 2 r_mean, "square" the library's collision box
+# (mjx_pick.core.scene.pad_contact_box_mm: 2 r_mean wide and, on a wall taller than
+# that, 2 r_mean tall, centred on the wall), "tiles" a 3 x 3 grid of collision boxes
+# over each pad face with one contact each (multiccd off).
+
+
+def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
+    import re
+
+    def multiccd(text: str, on: bool) -> str:
+        text = text.replace('<flag multiccd="disable"/>', "")
+        text = re.sub(r"<option([^>]*?)/>", r"<option\1></option>", text, count=1)
+        if not on:
+            text = text.replace("</option>", '<flag multiccd="disable"/></option>', 1)
+        return text
+
+    if variant == "square":
+        return xml
+    visual = re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)[1]
+    hx, hy, hz = (float(v) for v in visual.split())
+    pad = re.compile(r'<geom name="(pad_left|pad_right)" type="box" size="([^"]+)" pos="([^"]+)"')
+
+    def whole(m):
+        return f'<geom name="{m[1]}" type="box" size="{visual}" pos="0 0 0"'
+
+    xml = pad.sub(whole, xml)
+    if variant == "corners":
+        return xml
+    if variant == "centre":
+        return multiccd(xml, False)
+    if variant == "shrunk":
+
+        def narrow(m):
+            return f'<geom name="{m[1]}" type="box" size="{hx:.9g} {r_mean_m:.9g} {hz:.9g}" pos="0 0 0"'
+
+        return pad.sub(narrow, xml)
+    if variant == "tiles":
+
+        def tile(m):
+            return (
+                "\n".join(
+                    f'<geom name="{m[1]}_t{k}" type="box" size="{hx:.9g} {hy / 3:.9g} {hz / 3:.9g}" '
+                    f'pos="0 {2 * jy * hy / 3:.9g} {2 * jz * hz / 3:.9g}" mass="0"/>'
+                    for k, (jy, jz) in enumerate((a, b) for a in (-1, 0, 1) for b in (-1, 0, 1))
+                )
+                + f'\n<geom name="{m[1]}" type="box" size="{m[2]}" pos="0 0 0" contype="0"'
+            )
+
+        xml = pad.sub(tile, xml)
+        pair = re.compile(
+            r'<pair name="(pad_left|pad_right)_piece(\d+)" geom1="(pad_left|pad_right)" (.*?)/>'
+        )
+
+        def pairs(m):
+            rest = re.sub(
+                r'friction="(\S+) (\S+) (\S+) ',
+                lambda f: f'friction="{f[1]} {f[2]} {mu_t_tile_m:.9g} ',
+                m[4],
+            )
+            return "\n    ".join(
+                f'<pair name="{m[1]}_t{k}_piece{m[2]}" geom1="{m[3]}_t{k}" {rest}/>'
+                for k in range(9)
+            )
+
+        return multiccd(pair.sub(pairs, xml), False)
+    raise ValueError(variant)
+
+
+def _rod_mesh_part(length_mm, diameter_mm, mass_kg):
+    import tempfile
+    from pathlib import Path
+
+    import trimesh
+
+    rod = trimesh.creation.cylinder(radius=diameter_mm / 2e3, height=length_mm / 1e3, sections=24)
+    rod.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    rod.apply_translation([0, 0, -rod.bounds[0, 2]])
+    with tempfile.TemporaryDirectory() as tmp:
+        rod.export(Path(tmp) / "rod.stl")
+        return mp.object_from_mesh(Path(tmp) / "rod.stl", unit="m", mass_g=mass_kg * 1e3)
+
+
+def rubber(variants, loads, cases_wanted=None) -> None:
+    """Off-centre parts against a uniform-pressure rubber pad: the lever at which each
+    part first turns out of the grasp, as a multiple of the rubber pad's lever d_r
+    (mjx_pick.core.holding over a uniform patch), per pad-contact candidate and load
+    x = m (g + a) / (2 mu F)."""
+    from unittest import mock
+
+    from mjx_pick.core import holding, physics
+    from mjx_pick.core import scene as scene_mod
+
+    mu = 0.5
+    cases = {
+        "bar 20x20x200": lambda m: mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=20, mass_g=m * 1e3
+        ),
+        "bar 20x40x200": lambda m: mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=40, mass_g=m * 1e3
+        ),
+        "plate 20x3x200": lambda m: mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=3, mass_g=m * 1e3
+        ),
+        "rod d20x200 lying": lambda m: _rod_mesh_part(200, 20, m),
+    }
+    mass = {
+        "bar 20x20x200": 0.6,
+        "bar 20x40x200": 0.6,
+        "plate 20x3x200": 0.1,
+        "rod d20x200 lying": 0.3,
+    }
+    factors = np.linspace(0.5, 1.5, 21)
+    original = scene_mod.scene_xml
+    for label, make in cases.items():
+        if cases_wanted and not any(c in label for c in cases_wanted):
+            continue
+        part = make(mass[label])
+        for x in loads:
+            grasp0 = mp.GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.5)
+            weight = mass[label] * (G + grasp0.lift_accel_mm_s2 * 1e-3)
+            force = weight / (2 * mu * x)
+            grasp = dataclasses.replace(grasp0, grip_force_n=force)
+            contact = mp.ContactParams(pad_friction=mu)
+            base = mp.build_scene(part, FREE, contact, None, grasp)
+            w, h = (v * 1e-3 for v in base.pad_patch_mm)
+            d_r = holding.hold_limit_m(
+                holding.uniform_patch_points(w, h), force, weight, mu, 0.0, "elliptic"
+            )
+            r_mean = physics.patch_mean_radius_mm(w * 1e3, h * 1e3) * 1e-3
+            pad_h = FREE.pad_height_mm * 1e-3
+            mu_t_tile = (
+                mu * physics.patch_mean_radius_mm(w * 1e3 / 3, min(h, pad_h / 3) * 1e3) * 1e-3
+            )
+            row = []
+            for variant in variants:
+
+                def patched(*a, _v=variant, **k):
+                    return _xml_with(original(*a, **k), _v, mu_t_tile, r_mean)
+
+                with mock.patch.object(scene_mod, "scene_xml", patched):
+                    picks = _centred(part, grasp, factors * d_r * 1e3)
+                    out, scene = _run(part, picks, grasp, contact)
+                ok = out["success"]
+                first = factors[np.argmax(~ok)] if (~ok).any() else np.nan
+                last = factors[: np.argmax(~ok)][-1] if (~ok).any() and ok[0] else np.nan
+                row.append(f"{variant} ({last:.2f}, {first:.2f}] div {int(out['diverged'].sum())}")
+            print(
+                f"{label}, {mass[label]} kg, x {x:.2f} (F {force:.1f} N), patch "
+                f"{w * 1e3:.1f}x{h * 1e3:.1f} mm, d_r {d_r * 1e3:.1f} mm: " + "; ".join(row),
+                flush=True,
+            )
+
+
 def coulomb(backend: str) -> None:
     """tests/test_physics.py's Coulomb grid on a backend: hold at 1.3x the force against
     m (g + a), fail at 0.8x the force against m g; forces within 0.5-235 N."""
@@ -186,11 +346,20 @@ def coulomb(backend: str) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("creep", "convergence", "torque", "coulomb"))
+    ap.add_argument("what", choices=("creep", "convergence", "torque", "coulomb", "rubber"))
     ap.add_argument("--backend", default="mujoco", help="coulomb: the backend to test")
+    ap.add_argument("--variants", default="corners,centre", help="rubber: pad-contact candidates")
+    ap.add_argument("--loads", default="0.1,0.25,0.5", help="rubber: loads m (g + a) / (2 mu F)")
+    ap.add_argument("--cases", default="", help="rubber: parts whose label contains one of these")
     args = ap.parse_args()
     if args.what == "coulomb":
         coulomb(args.backend)
+    elif args.what == "rubber":
+        rubber(
+            args.variants.split(","),
+            [float(v) for v in args.loads.split(",")],
+            [c for c in args.cases.split(",") if c],
+        )
     else:
         {"creep": creep, "convergence": convergence, "torque": torque}[args.what]()
 

@@ -87,7 +87,9 @@ def pad_contacts(scene: Scene, squeeze_m: float = 1e-4) -> PadContacts:
     d.qpos[:] = m.qpos0
     d.qpos[qadr[0]], d.qpos[qadr[1]] = travel
     mujoco.mj_forward(m, d)
-    left, right = d.geom_xpos[m.geom("pad_left").id], d.geom_xpos[m.geom("pad_right").id]
+    # the grip frame's origin: between the pads as built (not their collision boxes)
+    left = d.geom_xpos[m.geom("pad_left_visual").id]
+    right = d.geom_xpos[m.geom("pad_right_visual").id]
     origin = 0.5 * (left + right)
     points, pad = [], []
     for c in d.contact[: d.ncon]:
