@@ -4,8 +4,15 @@
     python benchmarks/pad_contact.py convergence  # door-opener labels, dt 1 vs 0.5 ms
     python benchmarks/pad_contact.py torque       # off-centre bar and rod: where they turn
     python benchmarks/pad_contact.py coulomb --backend warp   # tests' Coulomb grid, any backend
+    python benchmarks/pad_contact.py rubber --variants corners,square  # levers vs a rubber pad
+    python benchmarks/pad_contact.py torsion --variants corners,square # pure torsion vs rubber
 
-Each prints a table; the figures are in benchmarks/RESULTS.md ("Pad contact").
+rubber and torsion compare pad-contact candidates (the "--variants" below: corners,
+centre, shrunk, square, tiles; "square" is the library's own) with a uniformly pressed
+rubber pad.
+
+Each prints a table; the figures are in benchmarks/RESULTS.md ("Pad contact", "Torsion
+like rubber").
 """
 
 from __future__ import annotations
@@ -187,7 +194,8 @@ def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
     if variant == "shrunk":
 
         def narrow(m):
-            return f'<geom name="{m[1]}" type="box" size="{hx:.9g} {r_mean_m:.9g} {hz:.9g}" pos="0 0 0"'
+            size = f"{hx:.9g} {r_mean_m:.9g} {hz:.9g}"
+            return f'<geom name="{m[1]}" type="box" size="{size}" pos="0 0 0"'
 
         return pad.sub(narrow, xml)
     if variant == "tiles":
@@ -195,7 +203,8 @@ def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
         def tile(m):
             return (
                 "\n".join(
-                    f'<geom name="{m[1]}_t{k}" type="box" size="{hx:.9g} {hy / 3:.9g} {hz / 3:.9g}" '
+                    f'<geom name="{m[1]}_t{k}" type="box" '
+                    f'size="{hx:.9g} {hy / 3:.9g} {hz / 3:.9g}" '
                     f'pos="0 {2 * jy * hy / 3:.9g} {2 * jz * hz / 3:.9g}" mass="0"/>'
                     for k, (jy, jz) in enumerate((a, b) for a in (-1, 0, 1) for b in (-1, 0, 1))
                 )
@@ -290,8 +299,8 @@ def rubber(variants, loads, cases_wanted=None) -> None:
             row = []
             for variant in variants:
 
-                def patched(*a, _v=variant, **k):
-                    return _xml_with(original(*a, **k), _v, mu_t_tile, r_mean)
+                def patched(*a, _v=variant, _t=mu_t_tile, _r=r_mean, **k):
+                    return _xml_with(original(*a, **k), _v, _t, _r)
 
                 with mock.patch.object(scene_mod, "scene_xml", patched):
                     picks = _centred(part, grasp, factors * d_r * 1e3)
@@ -303,6 +312,106 @@ def rubber(variants, loads, cases_wanted=None) -> None:
             print(
                 f"{label}, {mass[label]} kg, x {x:.2f} (F {force:.1f} N), patch "
                 f"{w * 1e3:.1f}x{h * 1e3:.1f} mm, d_r {d_r * 1e3:.1f} mm: " + "; ".join(row),
+                flush=True,
+            )
+
+
+def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tuple[float, float]:
+    """(torque N m, mean pad normal force N) at which a part squeezed by both pads
+    starts to turn about the grip axis: the fingers' servos drive to the closed end of
+    their range, limited to force_n; the part hangs clear of the table; a torque about
+    the world x axis (the grip axis) ramps at rate N m/s until the part has turned 2 deg
+    (fast enough that the soft contacts' creep turns it by much less before it slips).
+    The pads' normal force is read from the contacts at that moment."""
+    import mujoco
+
+    m, ix = scene.model, scene.index
+    d = mujoco.MjData(m)
+    if not gravity:
+        m.opt.gravity[:] = 0.0
+    d.qpos[:] = m.qpos0
+    d.qpos[ix.object_qpos + 2] = 0.005  # clear of the table
+    for act in (ix.finger_left_actuator, ix.finger_right_actuator):
+        m.actuator_forcerange[act] = (-force_n, force_n)
+        d.ctrl[act] = m.actuator_ctrlrange[act, 1]
+    d.ctrl[ix.lift_actuator] = 0.005
+    body = ix.object_body
+    pads = {m.geom("pad_left").id, m.geom("pad_right").id}
+    pads |= {g for g in range(m.ngeom) if m.geom(g).name.startswith(("pad_left_t", "pad_right_t"))}
+
+    def pad_normal_n() -> float:
+        f6, total = np.zeros(6), 0.0
+        for i, c in enumerate(d.contact[: d.ncon]):
+            if int(c.geom[0]) in pads or int(c.geom[1]) in pads:
+                mujoco.mj_contactForce(m, d, i, f6)
+                total += f6[0]
+        return total / 2
+
+    for _ in range(int(0.5 / m.opt.timestep)):  # close and settle
+        mujoco.mj_step(m, d)
+    q0 = d.xquat[body].copy()
+    q0_inv = np.array([q0[0], -q0[1], -q0[2], -q0[3]])
+    dq = np.zeros(4)
+    for k in range(int(20.0 / m.opt.timestep)):
+        d.xfrc_applied[body, 3] = rate * k * m.opt.timestep
+        mujoco.mj_step(m, d)
+        mujoco.mju_mulQuat(dq, d.xquat[body], q0_inv)
+        if 2 * np.degrees(np.arccos(min(1.0, abs(dq[0])))) > 2.0:
+            return float(d.xfrc_applied[body, 3]), pad_normal_n()
+    return float("nan"), pad_normal_n()
+
+
+def torsion(variants) -> None:
+    """The torque the pads transmit about the grip axis before the part turns, against a
+    uniformly pressed rubber pad's 2 mu N r_mean (two pads, each pressed with N, read
+    from the contacts; r_mean the patch's mean radius), with no gravity (pure torsion),
+    per pad-contact candidate and force."""
+    from unittest import mock
+
+    from mjx_pick.core import physics
+    from mjx_pick.core import scene as scene_mod
+
+    mu = 0.5
+    parts = {
+        "bar 20x20x200": mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=20, mass_g=300
+        ),
+        "bar 20x40x200": mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=40, mass_g=300
+        ),
+        "plate 20x3x200": mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=3, mass_g=50
+        ),
+        "block 50x30x60": mp.object_from_polygon(
+            box(-25, -15, 25, 15), thickness_mm=60, mass_g=300
+        ),
+        "rod d20x200 lying": _rod_mesh_part(200, 20, 0.3),
+    }
+    original = scene_mod.scene_xml
+    for label, part in parts.items():
+        for force in (10.0, 30.0, 100.0):
+            grasp = mp.GraspConfig(grip_force_n=force)
+            contact = mp.ContactParams(pad_friction=mu)
+            w, h = mp.build_scene(part, FREE, contact, None, grasp).pad_patch_mm
+            r_mean = physics.patch_mean_radius_mm(w, h) * 1e-3
+            pad_h = FREE.pad_height_mm
+            mu_t_tile = mu * physics.patch_mean_radius_mm(w / 3, min(h, pad_h / 3)) * 1e-3
+            ref = 2 * mu * force * r_mean
+            row = []
+            for variant in variants:
+
+                def patched(*a, _v=variant, _t=mu_t_tile, _r=r_mean, **k):
+                    return _xml_with(original(*a, **k), _v, _t, _r)
+
+                with mock.patch.object(scene_mod, "scene_xml", patched):
+                    scene = mp.build_scene(part, FREE, contact, None, grasp)
+                # the rubber pad's torque in 0.25 s
+                torque, normal = _torsion_capacity(scene, force, False, ref / 0.25)
+                ratio = torque / (2 * mu * normal * r_mean) if normal > 0 else float("nan")
+                row.append(f"{variant} {ratio:.2f} (N {normal:.1f})")
+            print(
+                f"{label}, F {force:g} N, patch {w:.1f}x{h:.1f} mm, rubber 2 mu F r_mean "
+                f"{ref:.3f} N m; engine / rubber: " + ", ".join(row),
                 flush=True,
             )
 
@@ -346,7 +455,9 @@ def coulomb(backend: str) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("creep", "convergence", "torque", "coulomb", "rubber"))
+    ap.add_argument(
+        "what", choices=("creep", "convergence", "torque", "coulomb", "rubber", "torsion")
+    )
     ap.add_argument("--backend", default="mujoco", help="coulomb: the backend to test")
     ap.add_argument("--variants", default="corners,centre", help="rubber: pad-contact candidates")
     ap.add_argument("--loads", default="0.1,0.25,0.5", help="rubber: loads m (g + a) / (2 mu F)")
@@ -354,6 +465,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.what == "coulomb":
         coulomb(args.backend)
+    elif args.what == "torsion":
+        torsion(args.variants.split(","))
     elif args.what == "rubber":
         rubber(
             args.variants.split(","),

@@ -34,11 +34,21 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   the object's side wall within the pads' band (``ObjectModel.wall_height_mm``; a rigid
   curved side touches a flat rubber pad only near its widest section).
   ``pad_torsion_mm`` sets mu_t directly. Where the collider spreads a contact over
-  several points (the four corners of a pad on a flat face, the two ends of a line
-  contact), their Coulomb friction also resists spin, at the patch's edges rather than
-  its mean radius: the grasp then holds 1.5-1.9x the torque of a uniform-pressure pad.
-  ``mjx_pick.core.holding`` states the model's capacity from those points (the tests check
-  the simulated threshold against it); benchmarks/RESULTS.md ("Torque") gives the gap.
+  several points (the four corners of a pad's overlap with a flat face, the two ends of
+  a line contact), their Coulomb friction also resists spin, at the corners: with
+  pyramidal cones a corner at (a, b) from the patch centre resists with mu N max(|a|,
+  |b|). A parametric pad therefore collides through a box cut to the patch's mean
+  radius (``mjx_pick.core.scene.pad_contact_box_mm``: its corners at most r_mean from
+  the patch centre), so that the grasp's torque about the grip axis is a uniformly
+  pressed pad's: mu N r_mean in pure torsion (the uniform-pressure result for a flat
+  contact, e.g. a disc's 2/3 mu N R: Goyal, Ruina and Papadopoulos, "Planar sliding
+  with dry friction", Wear 143, 1991). The cost: the pad touches a part only within
+  that box (2 r_mean wide, half the pad's width on a thin part), so a part that covers
+  only the pad's outer edge is not gripped. An MJCF gripper's pads keep their own
+  geoms. ``mjx_pick.core.holding`` states the model's capacity from the contact points
+  and the rubber pad's for comparison (tests/test_physics.py checks the simulated
+  threshold against the latter); benchmarks/RESULTS.md ("Torsion like rubber") gives
+  the figures.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
   the impedance instead), the penetration depth for full damping (solimp's width plays a
   similar role), the static/dynamic split and the stiction/friction transition
