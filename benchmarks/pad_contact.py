@@ -8,8 +8,8 @@
     python benchmarks/pad_contact.py torsion --variants corners,square # pure torsion vs rubber
 
 rubber and torsion compare pad-contact candidates (the "--variants" below: corners,
-centre, shrunk, square, tiles; "square" is the library's own) with a uniformly pressed
-rubber pad.
+centre, shrunk, square, tiles; "corners" is the library's default pad_contact "pad",
+"square" its "mean_radius") with a uniformly pressed rubber pad.
 
 Each prints a table; the figures are in benchmarks/RESULTS.md ("Pad contact", "Torsion
 like rubber").
@@ -156,15 +156,16 @@ def torque() -> None:
 
 
 # --- pad-contact candidates for torsion like rubber (issue 32, item 5) ---------------
-# Each candidate rewrites the scene's MJCF text (the benchmark's own patch, never the
-# library's): "corners" the whole pad collides (MuJoCo's multi-point collider: four
-# overlap corners per pad on a flat face; the model before the change), "centre" one
-# contact per pad and object piece (MuJoCo's multiccd off: the collider's single point,
-# near the overlap's centre) with torsion mu r_mean, "shrunk" the corners with the
-# pad's collision box narrowed to 2 r_mean, "square" the library's collision box
-# (mjx_pick.core.scene.pad_contact_box_mm: 2 r_mean wide and, on a wall taller than
-# that, 2 r_mean tall, centred on the wall), "tiles" a 3 x 3 grid of collision boxes
-# over each pad face with one contact each (multiccd off).
+# Each candidate rewrites the MJCF text of a scene built with pad_contact "mean_radius"
+# (the benchmark's own patch, never the library's): "corners" the whole pad collides
+# (MuJoCo's multi-point collider: four overlap corners per pad on a flat face; the
+# library's default, pad_contact "pad"), "centre" one contact per pad and object piece
+# (MuJoCo's multiccd off: the collider's single point, near the overlap's centre) with
+# torsion mu r_mean, "shrunk" the corners with the pad's collision box narrowed to
+# 2 r_mean, "square" the library's "mean_radius" box (mjx_pick.core.scene.
+# pad_contact_box_mm: 2 r_mean wide and, on a wall taller than that, 2 r_mean tall,
+# centred on the wall), "tiles" a 3 x 3 grid of collision boxes over each pad face with
+# one contact each (multiccd off).
 
 
 def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
@@ -285,7 +286,7 @@ def rubber(variants, loads, cases_wanted=None) -> None:
             weight = mass[label] * (G + grasp0.lift_accel_mm_s2 * 1e-3)
             force = weight / (2 * mu * x)
             grasp = dataclasses.replace(grasp0, grip_force_n=force)
-            contact = mp.ContactParams(pad_friction=mu)
+            contact = mp.ContactParams(pad_friction=mu, pad_contact="mean_radius")
             base = mp.build_scene(part, FREE, contact, None, grasp)
             w, h = (v * 1e-3 for v in base.pad_patch_mm)
             d_r = holding.hold_limit_m(
@@ -391,7 +392,7 @@ def torsion(variants) -> None:
     for label, part in parts.items():
         for force in (10.0, 30.0, 100.0):
             grasp = mp.GraspConfig(grip_force_n=force)
-            contact = mp.ContactParams(pad_friction=mu)
+            contact = mp.ContactParams(pad_friction=mu, pad_contact="mean_radius")
             w, h = mp.build_scene(part, FREE, contact, None, grasp).pad_patch_mm
             r_mean = physics.patch_mean_radius_mm(w, h) * 1e-3
             pad_h = FREE.pad_height_mm

@@ -8,9 +8,10 @@ about the grip axis, and what resists that depends on where the pads touch.
 MuJoCo does not model a pad's pressure field. Its box-convex collider represents a flat
 pad on a flat face by up to four contact points at the corners of their overlap (a
 line contact by its two ends, a point by one), each pressed with an equal share of the
-pad's force when neither body tilts. The overlap is that of the pad's collision box
-(:func:`mjx_pick.core.scene.pad_contact_box_mm`, cut so that its corners sit at the
-patch's mean radius) with the part. Each point is a soft-finger contact (condim 4,
+pad's force when neither body tilts. The overlap is that of the pad's collision geom
+with the part: the whole pad, or with ``ContactParams.pad_contact = "mean_radius"`` a
+box cut so that its corners sit at the patch's mean radius
+(:func:`mjx_pick.core.scene.pad_contact_box_mm`). Each point is a soft-finger contact (condim 4,
 :mod:`mjx_pick.core.physics`): Coulomb friction mu in the pad plane and torsional friction
 mu_t about the normal. With pyramidal cones (the default) the three share one budget,
 |f_1| / mu + |f_2| / mu + |tau| / mu_t <= N; with elliptic cones their Euclidean norm
@@ -91,8 +92,11 @@ def pad_contacts(scene: Scene, squeeze_m: float = 1e-4) -> PadContacts:
     d.qpos[qadr[0]], d.qpos[qadr[1]] = travel
     mujoco.mj_forward(m, d)
     # the grip frame's origin: between the pads as built (not their collision boxes)
-    left = d.geom_xpos[m.geom("pad_left_visual").id]
-    right = d.geom_xpos[m.geom("pad_right_visual").id]
+    built = (
+        "_visual" if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "pad_left_visual") >= 0 else ""
+    )
+    left = d.geom_xpos[m.geom(f"pad_left{built}").id]
+    right = d.geom_xpos[m.geom(f"pad_right{built}").id]
     origin = 0.5 * (left + right)
     points, pad = [], []
     for c in d.contact[: d.ncon]:

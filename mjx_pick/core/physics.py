@@ -37,18 +37,22 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   several points (the four corners of a pad's overlap with a flat face, the two ends of
   a line contact), their Coulomb friction also resists spin, at the corners: with
   pyramidal cones a corner at (a, b) from the patch centre resists with mu N max(|a|,
-  |b|). A parametric pad therefore collides through a box cut to the patch's mean
-  radius (``mjx_pick.core.scene.pad_contact_box_mm``: its corners at most r_mean from
-  the patch centre), so that the grasp's torque about the grip axis is a uniformly
-  pressed pad's: mu N r_mean in pure torsion (the uniform-pressure result for a flat
-  contact, e.g. a disc's 2/3 mu N R: Goyal, Ruina and Papadopoulos, "Planar sliding
-  with dry friction", Wear 143, 1991). The cost: the pad touches a part only within
-  that box (2 r_mean wide, half the pad's width on a thin part), so a part that covers
-  only the pad's outer edge is not gripped. An MJCF gripper's pads keep their own
+  |b|) of its normal force N. With the whole pad colliding (``pad_contact = "pad"``,
+  the default) the grasp then holds 1.5-1.9x the torque of a uniformly pressed pad,
+  whose limit in pure torsion is mu N r_mean (the uniform-pressure result for a flat
+  contact, a disc's 2/3 mu N R; Goyal, Ruina and Papadopoulos, "Planar sliding with dry
+  friction", Wear 143, 1991). ``pad_contact = "mean_radius"`` makes a parametric pad
+  collide through a box cut to the patch's mean radius
+  (``mjx_pick.core.scene.pad_contact_box_mm``: its corners at most r_mean from the
+  patch centre), which brings the torque to a rubber pad's within about 20 %. Not the
+  default: the pad touches a part only within that box (2 r_mean wide, half the pad's
+  width on a thin part), and a face wider than the box, turned a few degrees in the
+  grip, is met by the box's edge with the face's tilted normal instead of the pad's
+  face: at low pad friction that pushes the part out (a 43 g block at pad friction 0.1
+  held in 51 % of random picks instead of 73 %). An MJCF gripper's pads keep their own
   geoms. ``mjx_pick.core.holding`` states the model's capacity from the contact points
-  and the rubber pad's for comparison (tests/test_physics.py checks the simulated
-  threshold against the latter); benchmarks/RESULTS.md ("Torsion like rubber") gives
-  the figures.
+  and a rubber pad's for comparison; benchmarks/RESULTS.md ("Torque", "Torsion like
+  rubber") gives the figures.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
   the impedance instead), the penetration depth for full damping (solimp's width plays a
   similar role), the static/dynamic split and the stiction/friction transition
@@ -74,6 +78,10 @@ from mjx_pick.core.config import (
 # the largest time step whose grasp labels match those of smaller steps (the default
 # procedure, MuJoCo C; benchmarks/RESULTS.md, "Time-step convergence"): larger ones are warned about
 CONVERGED_TIMESTEP_S = 0.002
+
+
+# what a parametric pad collides through (ContactParams.pad_contact)
+PAD_CONTACTS = ("pad", "mean_radius")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,10 +129,17 @@ class ContactParams:
     # with the time step (benchmarks/RESULTS.md, "creep").
     pad_solimp: tuple[float, float, float, float, float] = (0.99, 0.99, 0.001, 0.5, 2.0)
     table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
+    # what a parametric pad collides through (module docstring, "Pad contacts"): "pad",
+    # the whole pad (MuJoCo's corner contacts resist spin at the patch's edges), or
+    # "mean_radius", a box cut so that its corners sit at the patch's mean radius
+    # (torsion like a uniformly pressed rubber pad; a part's face wider than the box and
+    # turned in the grip is met by the box's edge, which costs slippery grasps)
+    pad_contact: str = "pad"
 
     def __post_init__(self):
         o = "contact"
         check_fields(self, o)
+        check_choice(o, "pad_contact", self.pad_contact, PAD_CONTACTS)
         for name in ("pad_solimp", "table_solimp"):
             value = getattr(self, name)
             if len(value) != 5:

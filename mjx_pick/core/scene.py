@@ -97,7 +97,9 @@ def pad_patch_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
 
 
 def pad_contact_box_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
-    """(half width, half height, height offset) of a parametric pad's collision box, mm.
+    """(half width, half height, height offset) of a parametric pad's collision box, mm,
+    with ``ContactParams.pad_contact = "mean_radius"`` (the default lets the whole pad
+    collide).
 
     MuJoCo's collider puts a flat pad's contact points at the corners of its overlap
     with a flat face (the two ends of a line contact). With pyramidal cones a corner at
@@ -108,7 +110,8 @@ def pad_contact_box_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfi
     is taller than 2 r_mean, to 2 r_mean in height centred on the wall: every corner
     then sits at most r_mean from the patch centre. The offset is the box centre's
     height above the pad's centre (0 where the box keeps the pad's height). The visual
-    pad keeps the gripper's size.
+    pad keeps the gripper's size. What it costs (a part is touched only within the box;
+    a face turned in the grip is met by the box's edge): ``mjx_pick.core.physics``.
     """
     width, height = pad_patch_mm(obj, gripper, grasp)
     r = patch_mean_radius_mm(width, height)
@@ -188,13 +191,16 @@ class Scene:
         (the mean of the pad geoms' centres: an MJCF gripper's, or the parallel jaw's
         two pad boxes)."""
         names = [self.model.geom(g).name for g in range(self.model.ngeom)]
-        pads = [g for g, name in enumerate(names) if _is_pad_geom(name, self.gripper)]
+        if "pad_left_visual" in names:  # a collision box stands for the pads as built
+            pads = [names.index("pad_left_visual"), names.index("pad_right_visual")]
+        else:
+            pads = [g for g, name in enumerate(names) if _is_pad_geom(name, self.gripper)]
         return float(np.mean(data.geom_xpos[pads, 2]))
 
 
 def _is_pad_geom(name: str, gripper: GripperSpec) -> bool:
     if gripper.mjcf is None:
-        return name in ("pad_left_visual", "pad_right_visual")
+        return name in ("pad_left", "pad_right")
     pads = gripper.mjcf.pad_left_geoms + gripper.mjcf.pad_right_geoms
     return name in {mjcf_gripper.PREFIX + g for g in pads}
 
@@ -343,10 +349,11 @@ def _parallel_jaw_body_xml(
 ) -> str:
     """The parametric gripper: a body on the lift with two sliding pad fingers.
 
-    Each finger carries its pad twice: ``pad_left`` / ``pad_right``, the collision box
-    the pad pairs name (``pad_box_mm``: half width, half height and height offset, mm;
-    None: the whole pad), and ``pad_left_visual`` / ``pad_right_visual``, the pad as
-    built, which carries the finger's mass and collides with nothing."""
+    Each finger's pad is ``pad_left`` / ``pad_right``, the geom the pad pairs name. With
+    ``pad_box_mm`` (half width, half height and height offset of a collision box, mm)
+    that geom is the box, and ``pad_left_visual`` / ``pad_right_visual``, the pad as
+    built, carries the finger's mass and collides with nothing; None: the whole pad
+    collides."""
     stroke = gripper.stroke_mm * 1e-3
     depth = gripper.finger_depth_mm * 1e-3
     width = gripper.finger_width_mm * 1e-3
@@ -355,10 +362,18 @@ def _parallel_jaw_body_xml(
     armature = f"{gripper.drive_inertia_kg:.9g}"  # the drive's reflected inertia
     finger_link_h = 0.03
     pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
-    if pad_box_mm is None:
-        pad_box_mm = (0.5 * width * 1e3, 0.5 * pad_h * 1e3, 0.0)
-    box_size = _fmt([0.5 * depth, pad_box_mm[0] * 1e-3, pad_box_mm[1] * 1e-3])
-    box_pos = _fmt([0.0, 0.0, pad_box_mm[2] * 1e-3])
+
+    def pad(side: str) -> str:
+        if pad_box_mm is None:  # the whole pad collides
+            return f"""<geom name="pad_{side}" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>"""
+        box_size = _fmt([0.5 * depth, pad_box_mm[0] * 1e-3, pad_box_mm[1] * 1e-3])
+        box_pos = _fmt([0.0, 0.0, pad_box_mm[2] * 1e-3])
+        return f"""<geom name="pad_{side}_visual" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
+        <geom name="pad_{side}" type="box" size="{box_size}" pos="{box_pos}"
+              mass="0" group="3" rgba=".9 .2 .2 .5"/>"""
+
     return f"""    <body name="gripper" pos="0 0 {z_grip:.9g}" gravcomp="1">
       <joint name="lift" type="slide" axis="0 0 1"/>
       <inertial pos="0 0 {0.5 * pad_h + 0.06:.9g}" mass="{gripper.body_mass_g * 1e-3:.9g}"
@@ -369,10 +384,7 @@ def _parallel_jaw_body_xml(
       <body name="finger_left" pos="{-0.5 * stroke - 0.5 * depth:.9g} 0 0" gravcomp="1">
         <joint name="finger_left" type="slide" axis="1 0 0"
                range="0 {0.5 * stroke:.9g}" armature="{armature}"/>
-        <geom name="pad_left_visual" type="box" size="{pad_size}"
-              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
-        <geom name="pad_left" type="box" size="{box_size}" pos="{box_pos}"
-              mass="0" group="3" rgba=".9 .2 .2 .5"/>
+        {pad("left")}
         <geom name="link_left" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
               size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
               pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
@@ -380,10 +392,7 @@ def _parallel_jaw_body_xml(
       <body name="finger_right" pos="{0.5 * stroke + 0.5 * depth:.9g} 0 0" gravcomp="1">
         <joint name="finger_right" type="slide" axis="-1 0 0"
                range="0 {0.5 * stroke:.9g}" armature="{armature}"/>
-        <geom name="pad_right_visual" type="box" size="{pad_size}"
-              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
-        <geom name="pad_right" type="box" size="{box_size}" pos="{box_pos}"
-              mass="0" group="3" rgba=".9 .2 .2 .5"/>
+        {pad("right")}
         <geom name="link_right" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
               size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
               pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
@@ -421,7 +430,8 @@ def build_scene(
     mjc = mujoco_contact(contact, solver, obj.mass_kg, patch)
     tip_mm, _ = pad_band_mm(obj, gripper, grasp)
     kin = None if gripper.mjcf is None else mjcf_gripper.characterise(gripper.mjcf)
-    box = pad_contact_box_mm(obj, gripper, grasp) if kin is None else None
+    mean_radius = kin is None and contact.pad_contact == "mean_radius"
+    box = pad_contact_box_mm(obj, gripper, grasp) if mean_radius else None
     xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin, box)
     if kin is None:
         model = mujoco.MjModel.from_xml_string(xml)
