@@ -44,15 +44,15 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   friction", Wear 143, 1991). ``pad_contact = "mean_radius"`` makes a parametric pad
   collide through a box cut to the patch's mean radius
   (``mjx_pick.core.scene.pad_contact_box_mm``: its corners at most r_mean from the
-  patch centre), which brings the torque to a rubber pad's within about 20 %. Not the
-  default: the pad touches a part only within that box (2 r_mean wide, half the pad's
-  width on a thin part), and a face wider than the box, turned a few degrees in the
-  grip, is met by the box's edge with the face's tilted normal instead of the pad's
-  face: at low pad friction that pushes the part out (a 43 g block at pad friction 0.1
-  held in 51 % of random picks instead of 73 %). An MJCF gripper's pads keep their own
-  geoms. ``mjx_pick.core.holding`` states the model's capacity from the contact points
-  and a rubber pad's for comparison; benchmarks/RESULTS.md ("Torque", "Torsion like
-  rubber") gives the figures.
+  patch centre), which brings the torque close to a rubber pad's where the load is a
+  small part of the pads' friction capacity. Not the default: the pad touches a part
+  only within that box (2 r_mean wide, half the pad's width on a thin part), and a
+  face wider than the box, turned a few degrees in the grip, is met by the box's edge
+  with the face's tilted normal instead of the pad's face: at low pad friction that
+  pushes the part out, and slippery parts were lost more often. An MJCF gripper's pads
+  keep their own geoms. ``mjx_pick.core.holding`` states the model's capacity from the
+  contact points and a rubber pad's for comparison; benchmarks/RESULTS.md ("Torque",
+  "Torsion like rubber") gives the figures.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
   the impedance instead), the penetration depth for full damping (solimp's width plays a
   similar role), the static/dynamic split and the stiction/friction transition
