@@ -8,7 +8,7 @@
     python benchmarks/pad_contact.py torsion --variants corners,square # pure torsion vs rubber
 
 rubber and torsion compare pad-contact candidates (the "--variants" below: corners,
-centre, shrunk, square, tiles; "corners" is the library's default pad_contact "pad",
+centre, shrunk, square, guarded, tiles; "corners" is the library's default pad_contact "pad",
 "square" its "mean_radius") with a uniformly pressed rubber pad.
 
 Each prints a table; the figures are in benchmarks/RESULTS.md ("Pad contact", "Torsion
@@ -164,7 +164,8 @@ def torque() -> None:
 # torsion mu r_mean, "shrunk" the corners with the pad's collision box narrowed to
 # 2 r_mean, "square" the library's "mean_radius" box (mjx_pick.core.scene.
 # pad_contact_box_mm: 2 r_mean wide and, on a wall taller than that, 2 r_mean tall,
-# centred on the wall), "tiles" a 3 x 3 grid of collision boxes over each pad face with
+# centred on the wall), "guarded" that box and the whole pad recessed 0.1 mm as a
+# frictionless guard, "tiles" a 3 x 3 grid of collision boxes over each pad face with
 # one contact each (multiccd off).
 
 
@@ -180,6 +181,28 @@ def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
 
     if variant == "square":
         return xml
+    if variant == "guarded":
+        # the "mean_radius" box, and the whole pad recessed 0.1 mm behind its face as a
+        # frictionless guard (condim 1): it meets only a part turned in the grip
+        import re as _re
+
+        visual = _re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)[1]
+        for side, dx in (("left", -1e-4), ("right", 1e-4)):
+            xml = xml.replace(
+                f'<geom name="pad_{side}" type="box"',
+                f'<geom name="pad_{side}_guard" type="box" size="{visual}" pos="{dx:.9g} 0 0" '
+                f'mass="0" group="3"/>\n        <geom name="pad_{side}" type="box"',
+                1,
+            )
+        pair = _re.compile(r'<pair name="(pad_left|pad_right)_piece(\d+)" geom1="(\S+)" (.*?)/>')
+
+        def guard(m):
+            rest = m[4].replace('condim="4"', 'condim="1"')
+            return (
+                m[0] + f'\n    <pair name="{m[1]}_guard_piece{m[2]}" geom1="{m[3]}_guard" {rest}/>'
+            )
+
+        return pair.sub(guard, xml)
     visual = re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)[1]
     hx, hy, hz = (float(v) for v in visual.split())
     pad = re.compile(r'<geom name="(pad_left|pad_right)" type="box" size="([^"]+)" pos="([^"]+)"')
