@@ -4,14 +4,22 @@
     python benchmarks/pad_contact.py convergence  # door-opener labels, dt 1 vs 0.5 ms
     python benchmarks/pad_contact.py torque       # off-centre bar and rod: where they turn
     python benchmarks/pad_contact.py coulomb --backend warp   # tests' Coulomb grid, any backend
+    python benchmarks/pad_contact.py rubber --variants corners,square  # levers vs a rubber pad
+    python benchmarks/pad_contact.py torsion --variants corners,square # pure torsion vs rubber
 
-Each prints a table; the figures are in benchmarks/RESULTS.md ("Pad contact").
+rubber and torsion compare pad-contact candidates (the "--variants" below: corners,
+centre, shrunk, square, guarded, tiles; "corners" is the library's default pad_contact "pad",
+"square" its "mean_radius") with a uniformly pressed rubber pad.
+
+Each prints a table; the figures are in benchmarks/RESULTS.md ("Pad contact", "Torsion
+like rubber").
 """
 
 from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 
 import numpy as np
 from shapely.geometry import box
@@ -147,6 +155,291 @@ def torque() -> None:
             )
 
 
+# --- pad-contact candidates for torsion like rubber (issue 32, item 5) ---------------
+# Each candidate rewrites the MJCF text of a scene built with pad_contact "mean_radius"
+# (the benchmark's own patch, never the library's): "corners" the whole pad collides
+# (MuJoCo's multi-point collider: four overlap corners per pad on a flat face; the
+# library's default, pad_contact "pad"), "centre" one contact per pad and object piece
+# (MuJoCo's multiccd off: the collider's single point, near the overlap's centre) with
+# torsion mu r_mean, "shrunk" the corners with the pad's collision box narrowed to
+# 2 r_mean, "square" the library's "mean_radius" box (mjx_pick.core.scene.
+# pad_contact_box_mm: 2 r_mean wide and, on a wall taller than that, 2 r_mean tall,
+# centred on the wall), "guarded" that box and the whole pad recessed 0.1 mm as a
+# frictionless guard, "tiles" a 3 x 3 grid of collision boxes over each pad face with
+# one contact each (multiccd off).
+
+
+def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
+    import re
+
+    def multiccd(text: str, on: bool) -> str:
+        text = text.replace('<flag multiccd="disable"/>', "")
+        text = re.sub(r"<option([^>]*?)/>", r"<option\1></option>", text, count=1)
+        if not on:
+            text = text.replace("</option>", '<flag multiccd="disable"/></option>', 1)
+        return text
+
+    if variant == "square":
+        return xml
+    if variant == "guarded":
+        # the "mean_radius" box, and the whole pad recessed 0.1 mm behind its face as a
+        # frictionless guard (condim 1): it meets only a part turned in the grip
+        import re as _re
+
+        visual = _re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)[1]
+        for side, dx in (("left", -1e-4), ("right", 1e-4)):
+            xml = xml.replace(
+                f'<geom name="pad_{side}" type="box"',
+                f'<geom name="pad_{side}_guard" type="box" size="{visual}" pos="{dx:.9g} 0 0" '
+                f'mass="0" group="3"/>\n        <geom name="pad_{side}" type="box"',
+                1,
+            )
+        pair = _re.compile(r'<pair name="(pad_left|pad_right)_piece(\d+)" geom1="(\S+)" (.*?)/>')
+
+        def guard(m):
+            rest = m[4].replace('condim="4"', 'condim="1"')
+            return (
+                m[0] + f'\n    <pair name="{m[1]}_guard_piece{m[2]}" geom1="{m[3]}_guard" {rest}/>'
+            )
+
+        return pair.sub(guard, xml)
+    visual = re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)[1]
+    hx, hy, hz = (float(v) for v in visual.split())
+    pad = re.compile(r'<geom name="(pad_left|pad_right)" type="box" size="([^"]+)" pos="([^"]+)"')
+
+    def whole(m):
+        return f'<geom name="{m[1]}" type="box" size="{visual}" pos="0 0 0"'
+
+    xml = pad.sub(whole, xml)
+    if variant == "corners":
+        return xml
+    if variant == "centre":
+        return multiccd(xml, False)
+    if variant == "shrunk":
+
+        def narrow(m):
+            size = f"{hx:.9g} {r_mean_m:.9g} {hz:.9g}"
+            return f'<geom name="{m[1]}" type="box" size="{size}" pos="0 0 0"'
+
+        return pad.sub(narrow, xml)
+    if variant == "tiles":
+
+        def tile(m):
+            return (
+                "\n".join(
+                    f'<geom name="{m[1]}_t{k}" type="box" '
+                    f'size="{hx:.9g} {hy / 3:.9g} {hz / 3:.9g}" '
+                    f'pos="0 {2 * jy * hy / 3:.9g} {2 * jz * hz / 3:.9g}" mass="0"/>'
+                    for k, (jy, jz) in enumerate((a, b) for a in (-1, 0, 1) for b in (-1, 0, 1))
+                )
+                + f'\n<geom name="{m[1]}" type="box" size="{m[2]}" pos="0 0 0" contype="0"'
+            )
+
+        xml = pad.sub(tile, xml)
+        pair = re.compile(
+            r'<pair name="(pad_left|pad_right)_piece(\d+)" geom1="(pad_left|pad_right)" (.*?)/>'
+        )
+
+        def pairs(m):
+            rest = re.sub(
+                r'friction="(\S+) (\S+) (\S+) ',
+                lambda f: f'friction="{f[1]} {f[2]} {mu_t_tile_m:.9g} ',
+                m[4],
+            )
+            return "\n    ".join(
+                f'<pair name="{m[1]}_t{k}_piece{m[2]}" geom1="{m[3]}_t{k}" {rest}/>'
+                for k in range(9)
+            )
+
+        return multiccd(pair.sub(pairs, xml), False)
+    raise ValueError(variant)
+
+
+def _rod_mesh_part(length_mm, diameter_mm, mass_kg):
+    import tempfile
+    from pathlib import Path
+
+    import trimesh
+
+    rod = trimesh.creation.cylinder(radius=diameter_mm / 2e3, height=length_mm / 1e3, sections=24)
+    rod.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    rod.apply_translation([0, 0, -rod.bounds[0, 2]])
+    with tempfile.TemporaryDirectory() as tmp:
+        rod.export(Path(tmp) / "rod.stl")
+        return mp.object_from_mesh(Path(tmp) / "rod.stl", unit="m", mass_g=mass_kg * 1e3)
+
+
+def rubber(variants, loads, cases_wanted=None) -> None:
+    """Off-centre parts against a uniform-pressure rubber pad: the lever at which each
+    part first turns out of the grasp, as a multiple of the rubber pad's lever d_r
+    (mjx_pick.core.holding over a uniform patch), per pad-contact candidate and load
+    x = m (g + a) / (2 mu F)."""
+    from unittest import mock
+
+    from mjx_pick.core import holding, physics
+    from mjx_pick.core import scene as scene_mod
+
+    mu = 0.5
+    cases = {
+        "bar 20x20x200": lambda m: mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=20, mass_g=m * 1e3
+        ),
+        "bar 20x40x200": lambda m: mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=40, mass_g=m * 1e3
+        ),
+        "plate 20x3x200": lambda m: mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=3, mass_g=m * 1e3
+        ),
+        "rod d20x200 lying": lambda m: _rod_mesh_part(200, 20, m),
+    }
+    mass = {
+        "bar 20x20x200": 0.6,
+        "bar 20x40x200": 0.6,
+        "plate 20x3x200": 0.1,
+        "rod d20x200 lying": 0.3,
+    }
+    factors = np.linspace(0.5, 1.5, 21)
+    original = scene_mod.scene_xml
+    for label, make in cases.items():
+        if cases_wanted and not any(c in label for c in cases_wanted):
+            continue
+        part = make(mass[label])
+        for x in loads:
+            grasp0 = mp.GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.5)
+            weight = mass[label] * (G + grasp0.lift_accel_mm_s2 * 1e-3)
+            force = weight / (2 * mu * x)
+            grasp = dataclasses.replace(grasp0, grip_force_n=force)
+            contact = mp.ContactParams(pad_friction=mu, pad_contact="mean_radius")
+            base = mp.build_scene(part, FREE, contact, None, grasp)
+            w, h = (v * 1e-3 for v in base.pad_patch_mm)
+            d_r = holding.hold_limit_m(
+                holding.uniform_patch_points(w, h), force, weight, mu, 0.0, "elliptic"
+            )
+            r_mean = physics.patch_mean_radius_mm(w * 1e3, h * 1e3) * 1e-3
+            pad_h = FREE.pad_height_mm * 1e-3
+            mu_t_tile = (
+                mu * physics.patch_mean_radius_mm(w * 1e3 / 3, min(h, pad_h / 3) * 1e3) * 1e-3
+            )
+            row = []
+            for variant in variants:
+
+                def patched(*a, _v=variant, _t=mu_t_tile, _r=r_mean, **k):
+                    return _xml_with(original(*a, **k), _v, _t, _r)
+
+                with mock.patch.object(scene_mod, "scene_xml", patched):
+                    picks = _centred(part, grasp, factors * d_r * 1e3)
+                    out, scene = _run(part, picks, grasp, contact)
+                ok = out["success"]
+                first = factors[np.argmax(~ok)] if (~ok).any() else np.nan
+                last = factors[: np.argmax(~ok)][-1] if (~ok).any() and ok[0] else np.nan
+                row.append(f"{variant} ({last:.2f}, {first:.2f}] div {int(out['diverged'].sum())}")
+            print(
+                f"{label}, {mass[label]} kg, x {x:.2f} (F {force:.1f} N), patch "
+                f"{w * 1e3:.1f}x{h * 1e3:.1f} mm, d_r {d_r * 1e3:.1f} mm: " + "; ".join(row),
+                flush=True,
+            )
+
+
+def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tuple[float, float]:
+    """(torque N m, mean pad normal force N) at which a part squeezed by both pads
+    starts to turn about the grip axis: the fingers' servos drive to the closed end of
+    their range, limited to force_n; the part hangs clear of the table; a torque about
+    the world x axis (the grip axis) ramps at rate N m/s until the part has turned 2 deg
+    (fast enough that the soft contacts' creep turns it by much less before it slips).
+    The pads' normal force is read from the contacts at that moment."""
+    import mujoco
+
+    m, ix = scene.model, scene.index
+    d = mujoco.MjData(m)
+    if not gravity:
+        m.opt.gravity[:] = 0.0
+    d.qpos[:] = m.qpos0
+    d.qpos[ix.object_qpos + 2] = 0.005  # clear of the table
+    for act in (ix.finger_left_actuator, ix.finger_right_actuator):
+        m.actuator_forcerange[act] = (-force_n, force_n)
+        d.ctrl[act] = m.actuator_ctrlrange[act, 1]
+    d.ctrl[ix.lift_actuator] = 0.005
+    body = ix.object_body
+    pads = {m.geom("pad_left").id, m.geom("pad_right").id}
+    pads |= {g for g in range(m.ngeom) if m.geom(g).name.startswith(("pad_left_t", "pad_right_t"))}
+
+    def pad_normal_n() -> float:
+        f6, total = np.zeros(6), 0.0
+        for i, c in enumerate(d.contact[: d.ncon]):
+            if int(c.geom[0]) in pads or int(c.geom[1]) in pads:
+                mujoco.mj_contactForce(m, d, i, f6)
+                total += f6[0]
+        return total / 2
+
+    for _ in range(int(0.5 / m.opt.timestep)):  # close and settle
+        mujoco.mj_step(m, d)
+    q0 = d.xquat[body].copy()
+    q0_inv = np.array([q0[0], -q0[1], -q0[2], -q0[3]])
+    dq = np.zeros(4)
+    for k in range(int(20.0 / m.opt.timestep)):
+        d.xfrc_applied[body, 3] = rate * k * m.opt.timestep
+        mujoco.mj_step(m, d)
+        mujoco.mju_mulQuat(dq, d.xquat[body], q0_inv)
+        if 2 * np.degrees(np.arccos(min(1.0, abs(dq[0])))) > 2.0:
+            return float(d.xfrc_applied[body, 3]), pad_normal_n()
+    return float("nan"), pad_normal_n()
+
+
+def torsion(variants) -> None:
+    """The torque the pads transmit about the grip axis before the part turns, against a
+    uniformly pressed rubber pad's 2 mu N r_mean (two pads, each pressed with N, read
+    from the contacts; r_mean the patch's mean radius), with no gravity (pure torsion),
+    per pad-contact candidate and force."""
+    from unittest import mock
+
+    from mjx_pick.core import physics
+    from mjx_pick.core import scene as scene_mod
+
+    mu = 0.5
+    parts = {
+        "bar 20x20x200": mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=20, mass_g=300
+        ),
+        "bar 20x40x200": mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=40, mass_g=300
+        ),
+        "plate 20x3x200": mp.object_from_polygon(
+            box(-10, -100, 10, 100), thickness_mm=3, mass_g=50
+        ),
+        "block 50x30x60": mp.object_from_polygon(
+            box(-25, -15, 25, 15), thickness_mm=60, mass_g=300
+        ),
+        "rod d20x200 lying": _rod_mesh_part(200, 20, 0.3),
+    }
+    original = scene_mod.scene_xml
+    for label, part in parts.items():
+        for force in (10.0, 30.0, 100.0):
+            grasp = mp.GraspConfig(grip_force_n=force)
+            contact = mp.ContactParams(pad_friction=mu, pad_contact="mean_radius")
+            w, h = mp.build_scene(part, FREE, contact, None, grasp).pad_patch_mm
+            r_mean = physics.patch_mean_radius_mm(w, h) * 1e-3
+            pad_h = FREE.pad_height_mm
+            mu_t_tile = mu * physics.patch_mean_radius_mm(w / 3, min(h, pad_h / 3)) * 1e-3
+            ref = 2 * mu * force * r_mean
+            row = []
+            for variant in variants:
+
+                def patched(*a, _v=variant, _t=mu_t_tile, _r=r_mean, **k):
+                    return _xml_with(original(*a, **k), _v, _t, _r)
+
+                with mock.patch.object(scene_mod, "scene_xml", patched):
+                    scene = mp.build_scene(part, FREE, contact, None, grasp)
+                # the rubber pad's torque in 0.25 s
+                torque, normal = _torsion_capacity(scene, force, False, ref / 0.25)
+                ratio = torque / (2 * mu * normal * r_mean) if normal > 0 else float("nan")
+                row.append(f"{variant} {ratio:.2f} (N {normal:.1f})")
+            print(
+                f"{label}, F {force:g} N, patch {w:.1f}x{h:.1f} mm, rubber 2 mu F r_mean "
+                f"{ref:.3f} N m; engine / rubber: " + ", ".join(row),
+                flush=True,
+            )
+
+
 def coulomb(backend: str) -> None:
     """tests/test_physics.py's Coulomb grid on a backend: hold at 1.3x the force against
     m (g + a), fail at 0.8x the force against m g; forces within 0.5-235 N."""
@@ -186,11 +479,24 @@ def coulomb(backend: str) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("creep", "convergence", "torque", "coulomb"))
+    ap.add_argument(
+        "what", choices=("creep", "convergence", "torque", "coulomb", "rubber", "torsion")
+    )
     ap.add_argument("--backend", default="mujoco", help="coulomb: the backend to test")
+    ap.add_argument("--variants", default="corners,centre", help="rubber: pad-contact candidates")
+    ap.add_argument("--loads", default="0.1,0.25,0.5", help="rubber: loads m (g + a) / (2 mu F)")
+    ap.add_argument("--cases", default="", help="rubber: parts whose label contains one of these")
     args = ap.parse_args()
     if args.what == "coulomb":
         coulomb(args.backend)
+    elif args.what == "torsion":
+        torsion(args.variants.split(","))
+    elif args.what == "rubber":
+        rubber(
+            args.variants.split(","),
+            [float(v) for v in args.loads.split(",")],
+            [c for c in args.cases.split(",") if c],
+        )
     else:
         {"creep": creep, "convergence": convergence, "torque": torque}[args.what]()
 

@@ -8,7 +8,10 @@ about the grip axis, and what resists that depends on where the pads touch.
 MuJoCo does not model a pad's pressure field. Its box-convex collider represents a flat
 pad on a flat face by up to four contact points at the corners of their overlap (a
 line contact by its two ends, a point by one), each pressed with an equal share of the
-pad's force when neither body tilts. Each point is a soft-finger contact (condim 4,
+pad's force when neither body tilts. The overlap is that of the pad's collision geom
+with the part: the whole pad, or with ``ContactParams.pad_contact = "mean_radius"`` a
+box cut so that its corners sit at the patch's mean radius
+(:func:`mjx_pick.core.scene.pad_contact_box_mm`). Each point is a soft-finger contact (condim 4,
 :mod:`mjx_pick.core.physics`): Coulomb friction mu in the pad plane and torsional friction
 mu_t about the normal. With pyramidal cones (the default) the three share one budget,
 |f_1| / mu + |f_2| / mu + |tau| / mu_t <= N; with elliptic cones their Euclidean norm
@@ -17,11 +20,12 @@ the largest lever d of the centre of mass from the grip axis at which some frict
 forces within every point's cone carry the weight and its torque. Nothing in it is
 fitted to simulations; tests/test_physics.py checks the simulated threshold against it.
 
-A rubber pad under uniform pressure holds less torque: its friction acts at the mean
-radius of the patch, while corner points act at the patch's edges.
-:func:`uniform_patch_points` gives that reference (a grid over the patch, isotropic
-friction): ``benchmarks/pad_contact.py torque`` reports both, and the gap says by how
-much an off-centre pick's label on a flat face is optimistic.
+The reference is a rubber pad under uniform pressure with isotropic friction:
+:func:`uniform_patch_points` (a grid over the patch) in :func:`hold_limit_m` with
+elliptic cones and no torsion is its limit surface (Goyal, Ruina and Papadopoulos,
+Wear 143, 1991): in pure torsion mu N r_mean, r_mean the patch's mean radius.
+``benchmarks/pad_contact.py torque`` and ``rubber`` report the model's capacity, the
+simulated threshold and the rubber pad's.
 """
 
 from __future__ import annotations
@@ -87,7 +91,12 @@ def pad_contacts(scene: Scene, squeeze_m: float = 1e-4) -> PadContacts:
     d.qpos[:] = m.qpos0
     d.qpos[qadr[0]], d.qpos[qadr[1]] = travel
     mujoco.mj_forward(m, d)
-    left, right = d.geom_xpos[m.geom("pad_left").id], d.geom_xpos[m.geom("pad_right").id]
+    # the grip frame's origin: between the pads as built (not their collision boxes)
+    built = (
+        "_visual" if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "pad_left_visual") >= 0 else ""
+    )
+    left = d.geom_xpos[m.geom(f"pad_left{built}").id]
+    right = d.geom_xpos[m.geom(f"pad_right{built}").id]
     origin = 0.5 * (left + right)
     points, pad = [], []
     for c in d.contact[: d.ncon]:

@@ -153,11 +153,17 @@ class ObjectModel:
         5 % of the widest one (by area; for a cylinder of radius R a strip of 0.62 R,
         close to the contact of a ~1 mm deep rubber pad) count as wall.
         """
+        return self.wall_mm(z_lo_mm, z_hi_mm, slices)[0]
+
+    def wall_mm(self, z_lo_mm: float, z_hi_mm: float, slices: int = 24) -> tuple[float, float]:
+        """(height, centre height above the table) of the side wall within a band, mm:
+        the wall as :meth:`wall_height_mm` counts it, and the mean height of its slices
+        (the band's middle where there is no wall)."""
         z_lo, z_hi = max(z_lo_mm, 0.0), min(z_hi_mm, self.height_mm)
         if z_hi <= z_lo:
-            return 0.0
+            return 0.0, 0.5 * (z_lo_mm + z_hi_mm)
         if self.outline is not None:
-            return z_hi - z_lo
+            return z_hi - z_lo, 0.5 * (z_lo + z_hi)
         zs = np.linspace(z_lo, z_hi, slices + 2)[1:-1]
         areas = cache.memo(
             "sections",
@@ -165,8 +171,9 @@ class ObjectModel:
             lambda: {"area_mm2": [_section_area_mm2(self.mesh, z * 1e-3) for z in zs]},
         )["area_mm2"]
         if areas.max() <= 0:
-            return 0.0
-        return float((z_hi - z_lo) * np.mean(areas >= 0.95 * areas.max()))
+            return 0.0, 0.5 * (z_lo + z_hi)
+        wall = np.asarray(areas) >= 0.95 * areas.max()
+        return float((z_hi - z_lo) * np.mean(wall)), float(np.mean(zs[wall]))
 
     @property
     def area_mm2(self) -> float:

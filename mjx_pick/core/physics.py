@@ -34,11 +34,25 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   the object's side wall within the pads' band (``ObjectModel.wall_height_mm``; a rigid
   curved side touches a flat rubber pad only near its widest section).
   ``pad_torsion_mm`` sets mu_t directly. Where the collider spreads a contact over
-  several points (the four corners of a pad on a flat face, the two ends of a line
-  contact), their Coulomb friction also resists spin, at the patch's edges rather than
-  its mean radius: the grasp then holds 1.5-1.9x the torque of a uniform-pressure pad.
-  ``mjx_pick.core.holding`` states the model's capacity from those points (the tests check
-  the simulated threshold against it); benchmarks/RESULTS.md ("Torque") gives the gap.
+  several points (the four corners of a pad's overlap with a flat face, the two ends of
+  a line contact), their Coulomb friction also resists spin, at the corners: with
+  pyramidal cones a corner at (a, b) from the patch centre resists with mu N max(|a|,
+  |b|) of its normal force N. With the whole pad colliding (``pad_contact = "pad"``,
+  the default) the grasp then holds 1.5-1.9x the torque of a uniformly pressed pad,
+  whose limit in pure torsion is mu N r_mean (the uniform-pressure result for a flat
+  contact, a disc's 2/3 mu N R; Goyal, Ruina and Papadopoulos, "Planar sliding with dry
+  friction", Wear 143, 1991). ``pad_contact = "mean_radius"`` makes a parametric pad
+  collide through a box cut to the patch's mean radius
+  (``mjx_pick.core.scene.pad_contact_box_mm``: its corners at most r_mean from the
+  patch centre), which brings the torque close to a rubber pad's where the load is a
+  small part of the pads' friction capacity. Not the default: the pad touches a part
+  only within that box (2 r_mean wide, half the pad's width on a thin part), and a
+  face wider than the box, turned a few degrees in the grip, is met by the box's edge
+  with the face's tilted normal instead of the pad's face: at low pad friction that
+  pushes the part out, and slippery parts were lost more often. An MJCF gripper's pads
+  keep their own geoms. ``mjx_pick.core.holding`` states the model's capacity from the
+  contact points and a rubber pad's for comparison; benchmarks/RESULTS.md ("Torque",
+  "Torsion like rubber") gives the figures.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
   the impedance instead), the penetration depth for full damping (solimp's width plays a
   similar role), the static/dynamic split and the stiction/friction transition
@@ -64,6 +78,10 @@ from mjx_pick.core.config import (
 # the largest time step whose grasp labels match those of smaller steps (the default
 # procedure, MuJoCo C; benchmarks/RESULTS.md, "Time-step convergence"): larger ones are warned about
 CONVERGED_TIMESTEP_S = 0.002
+
+
+# what a parametric pad collides through (ContactParams.pad_contact)
+PAD_CONTACTS = ("pad", "mean_radius")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,10 +129,17 @@ class ContactParams:
     # with the time step (benchmarks/RESULTS.md, "creep").
     pad_solimp: tuple[float, float, float, float, float] = (0.99, 0.99, 0.001, 0.5, 2.0)
     table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
+    # what a parametric pad collides through (module docstring, "Pad contacts"): "pad",
+    # the whole pad (MuJoCo's corner contacts resist spin at the patch's edges), or
+    # "mean_radius", a box cut so that its corners sit at the patch's mean radius
+    # (torsion like a uniformly pressed rubber pad; a part's face wider than the box and
+    # turned in the grip is met by the box's edge, which costs slippery grasps)
+    pad_contact: str = "pad"
 
     def __post_init__(self):
         o = "contact"
         check_fields(self, o)
+        check_choice(o, "pad_contact", self.pad_contact, PAD_CONTACTS)
         for name in ("pad_solimp", "table_solimp"):
             value = getattr(self, name)
             if len(value) != 5:

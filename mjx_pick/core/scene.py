@@ -37,7 +37,13 @@ import numpy as np
 from mjx_pick.core import mjcf_gripper
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import MAX_HULL_VERTICES, ObjectModel
-from mjx_pick.core.physics import ContactParams, MujocoContact, SolverParams, mujoco_contact
+from mjx_pick.core.physics import (
+    ContactParams,
+    MujocoContact,
+    SolverParams,
+    mujoco_contact,
+    patch_mean_radius_mm,
+)
 from mjx_pick.core.procedure import GraspConfig, pad_band_mm
 from mjx_pick.kernels.grasp import DriveMap
 
@@ -88,6 +94,36 @@ def pad_patch_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
         sides = np.linalg.norm(np.diff(rect[:3], axis=0), axis=1)
         width = min(width, float(sides.min()))
     return width, obj.wall_height_mm(lo, hi)
+
+
+def pad_contact_box_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
+    """(half width, half height, height offset) of a parametric pad's collision box, mm,
+    with ``ContactParams.pad_contact = "mean_radius"`` (the default lets the whole pad
+    collide).
+
+    MuJoCo's collider puts a flat pad's contact points at the corners of its overlap
+    with a flat face (the two ends of a line contact). With pyramidal cones a corner at
+    (a, b) from the patch centre resists spin about the grip axis with mu N max(|a|, |b|)
+    of its normal force N, where a uniformly pressed rubber pad resists with mu N r_mean
+    (r_mean the patch's mean radius, ``mjx_pick.core.physics``). The collision box is
+    therefore cut to the pad's central 2 r_mean in width, and, where the object's wall
+    is taller than 2 r_mean, to 2 r_mean in height centred on the wall: every corner
+    then sits at most r_mean from the patch centre. The offset is the box centre's
+    height above the pad's centre (0 where the box keeps the pad's height). The visual
+    pad keeps the gripper's size. What it costs (a part is touched only within the box;
+    a face turned in the grip is met by the box's edge): ``mjx_pick.core.physics``.
+    """
+    width, height = pad_patch_mm(obj, gripper, grasp)
+    r = patch_mean_radius_mm(width, height)
+    lo, hi = pad_band_mm(obj, gripper, grasp)
+    half_w = min(r, 0.5 * gripper.finger_width_mm)
+    if height <= 2 * r:
+        return half_w, 0.5 * gripper.pad_height_mm, 0.0
+    _, centre = obj.wall_mm(lo, hi)
+    # the box stays within the pad's height
+    dz = centre - 0.5 * (lo + hi)
+    limit = 0.5 * gripper.pad_height_mm - r
+    return half_w, r, float(np.clip(dz, -limit, limit))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -155,7 +191,10 @@ class Scene:
         (the mean of the pad geoms' centres: an MJCF gripper's, or the parallel jaw's
         two pad boxes)."""
         names = [self.model.geom(g).name for g in range(self.model.ngeom)]
-        pads = [g for g, name in enumerate(names) if _is_pad_geom(name, self.gripper)]
+        if "pad_left_visual" in names:  # a collision box stands for the pads as built
+            pads = [names.index("pad_left_visual"), names.index("pad_right_visual")]
+        else:
+            pads = [g for g, name in enumerate(names) if _is_pad_geom(name, self.gripper)]
         return float(np.mean(data.geom_xpos[pads, 2]))
 
 
@@ -177,8 +216,12 @@ def scene_xml(
     solver: SolverParams,
     fingertip_height_mm: float,
     kinematics: mjcf_gripper.Kinematics | None = None,
+    pad_box_mm: tuple[float, float, float] | None = None,
 ) -> str:
     """MJCF text of the scene (deterministic: same inputs, same text).
+
+    pad_box_mm: the parallel jaw's pad collision box (:func:`pad_contact_box_mm`);
+    None: the whole pad collides.
 
     With an MJCF gripper (its measured ``kinematics``) the text holds the ``gripper``
     body without fingers and pairs naming the gripper's pad geoms: attach the gripper
@@ -249,7 +292,7 @@ def scene_xml(
     actuators = f"""    <position name="lift" joint="lift" kp="{LIFT_STIFFNESS_N_PER_M:.9g}"
               kv="{LIFT_DAMPING_NS_PER_M:.9g}" forcerange="{lift_range}"/>"""
     if kinematics is None:
-        gripper_body = _parallel_jaw_body_xml(gripper, z_grip)
+        gripper_body = _parallel_jaw_body_xml(gripper, z_grip, pad_box_mm)
         actuators += "\n" + _parallel_jaw_actuators_xml(gripper)
     else:
         # the pads' centre at the grasp height when fully open (lift 0)
@@ -301,8 +344,16 @@ def scene_xml(
 """
 
 
-def _parallel_jaw_body_xml(gripper: GripperSpec, z_grip: float) -> str:
-    """The parametric gripper: a body on the lift with two sliding pad fingers."""
+def _parallel_jaw_body_xml(
+    gripper: GripperSpec, z_grip: float, pad_box_mm: tuple[float, float, float] | None = None
+) -> str:
+    """The parametric gripper: a body on the lift with two sliding pad fingers.
+
+    Each finger's pad is ``pad_left`` / ``pad_right``, the geom the pad pairs name. With
+    ``pad_box_mm`` (half width, half height and height offset of a collision box, mm)
+    that geom is the box, and ``pad_left_visual`` / ``pad_right_visual``, the pad as
+    built, carries the finger's mass and collides with nothing; None: the whole pad
+    collides."""
     stroke = gripper.stroke_mm * 1e-3
     depth = gripper.finger_depth_mm * 1e-3
     width = gripper.finger_width_mm * 1e-3
@@ -311,6 +362,18 @@ def _parallel_jaw_body_xml(gripper: GripperSpec, z_grip: float) -> str:
     armature = f"{gripper.drive_inertia_kg:.9g}"  # the drive's reflected inertia
     finger_link_h = 0.03
     pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
+
+    def pad(side: str) -> str:
+        if pad_box_mm is None:  # the whole pad collides
+            return f"""<geom name="pad_{side}" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>"""
+        box_size = _fmt([0.5 * depth, pad_box_mm[0] * 1e-3, pad_box_mm[1] * 1e-3])
+        box_pos = _fmt([0.0, 0.0, pad_box_mm[2] * 1e-3])
+        return f"""<geom name="pad_{side}_visual" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
+        <geom name="pad_{side}" type="box" size="{box_size}" pos="{box_pos}"
+              mass="0" group="3" rgba=".9 .2 .2 .5"/>"""
+
     return f"""    <body name="gripper" pos="0 0 {z_grip:.9g}" gravcomp="1">
       <joint name="lift" type="slide" axis="0 0 1"/>
       <inertial pos="0 0 {0.5 * pad_h + 0.06:.9g}" mass="{gripper.body_mass_g * 1e-3:.9g}"
@@ -321,8 +384,7 @@ def _parallel_jaw_body_xml(gripper: GripperSpec, z_grip: float) -> str:
       <body name="finger_left" pos="{-0.5 * stroke - 0.5 * depth:.9g} 0 0" gravcomp="1">
         <joint name="finger_left" type="slide" axis="1 0 0"
                range="0 {0.5 * stroke:.9g}" armature="{armature}"/>
-        <geom name="pad_left" type="box" size="{pad_size}"
-              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
+        {pad("left")}
         <geom name="link_left" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
               size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
               pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
@@ -330,8 +392,7 @@ def _parallel_jaw_body_xml(gripper: GripperSpec, z_grip: float) -> str:
       <body name="finger_right" pos="{0.5 * stroke + 0.5 * depth:.9g} 0 0" gravcomp="1">
         <joint name="finger_right" type="slide" axis="-1 0 0"
                range="0 {0.5 * stroke:.9g}" armature="{armature}"/>
-        <geom name="pad_right" type="box" size="{pad_size}"
-              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
+        {pad("right")}
         <geom name="link_right" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
               size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
               pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
@@ -369,7 +430,9 @@ def build_scene(
     mjc = mujoco_contact(contact, solver, obj.mass_kg, patch)
     tip_mm, _ = pad_band_mm(obj, gripper, grasp)
     kin = None if gripper.mjcf is None else mjcf_gripper.characterise(gripper.mjcf)
-    xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin)
+    mean_radius = kin is None and contact.pad_contact == "mean_radius"
+    box = pad_contact_box_mm(obj, gripper, grasp) if mean_radius else None
+    xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin, box)
     if kin is None:
         model = mujoco.MjModel.from_xml_string(xml)
     else:
