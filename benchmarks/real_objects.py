@@ -112,7 +112,11 @@ def run_object(
     obj = load_ycb(name)
     t_load = time.perf_counter() - t0
     grasp = mp.GraspConfig(grip_force_n=force_n)
-    row = {"object": name, "mass_g": round(obj.mass_kg * 1e3, 2), "height_mm": round(obj.height_mm, 2)}
+    row = {
+        "object": name,
+        "mass_g": round(obj.mass_kg * 1e3, 2),
+        "height_mm": round(obj.height_mm, 2),
+    }
     labels, stable = {}, {}
     for backend in backends:
         ev = mp.evaluate(
@@ -212,7 +216,8 @@ def main() -> None:
             f"{c['wilson95'][1]:.2f}] {c['failures']}"
             + "".join(f" labels {b}={backends[0]} {v:.1%}" for b, v in row["labels_agree"].items())
             + "".join(
-                f" stable {b}={backends[0]} {v['stable_on_reference']} (n {v['n_stable_on_reference']})"
+                f" stable {b}={backends[0]} {v['stable_on_reference']}"
+                f" (n {v['n_stable_on_reference']})"
                 for b, v in row.get("labels_agree_stable", {}).items()
             ),
             flush=True,

@@ -37,7 +37,8 @@ log = logging.getLogger(__name__)
 REASONS = fk.REASONS
 CANDIDATE_BLOCK = 4096  # candidates are drawn in fixed blocks: same seed, same stream
 # cells of the feasibility raster (yaw bins x rows x columns, ~5 bytes each while it is
-# built: the 0/1 masks, the uint16 stack and its copy on the device): more is refused before any is allocated
+# built: the 0/1 masks, the uint16 stack and its copy on the device): more is refused
+# before any is allocated
 MAX_RASTER_CELLS = 200_000_000
 
 

@@ -263,16 +263,16 @@ def make_pool(
     its physics keeps stepping (a vmapped program steps every slot) until it is
     refilled. ticks: (N,) int32 control periods each pick ran; rounds: (L,) int32
     rounds run at each pool size of ``shrink_sizes(slots per device, shrink_levels,
-    shrink_min_slots)``
-    (per device).
+    shrink_min_slots)`` (per device).
 
     The tail (``shrink_levels`` > 0): once every pick has been handed out, the pool
     keeps stepping slots whose last pick has ended until the longest-running pick
     ends. When at most half of the slots are still live, the live ones are moved into
     a pool of half the size (their state gathered; for Warp, a fresh contact buffer of
     the smaller size -- contacts are found anew at every step), up to
-    ``shrink_levels`` times, never below ``shrink_min_slots`` per device. A pick's physics and control do not depend on which slot
-    or pool size runs it, so the results are those of a run without shrinking.
+    ``shrink_levels`` times, never below ``shrink_min_slots`` per device. A pick's
+    physics and control do not depend on which slot or pool size runs it, so the results
+    are those of a run without shrinking.
 
     physics_for(n_worlds) -> Physics: the device model and initial data for a pool of
     n_worlds simulations per device (Warp sizes its contact buffer by it; default: MJX's
