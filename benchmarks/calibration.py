@@ -268,7 +268,8 @@ def gradient_check_tiny() -> dict:
     def quantities(th):
         values = problem.space.values(th)
         fr, ref, force = contact_arrays_jnp(names, values, inp, problem.scene, base, obj.mass_kg)
-        out, rows = roll(inp.qpos0, inp.params._replace(force_n=force), fr, ref, inp.pair_solimp)
+        params = inp.params._replace(grip_force_n=force)
+        out, rows = roll(inp.qpos0, params, fr, ref, inp.pair_solimp)
         hold = 0.5 * (rows[:, -10:, fl] + rows[:, -10:, fr_]).mean(axis=-1)
         return jnp.concatenate([hold, out["lift_height_mm"]])  # (4,)
 

@@ -69,7 +69,7 @@ def creep() -> None:
             for dmin, dmax, impratio in variants.values():
                 contact = mp.ContactParams(pad_friction=mu, pad_solimp=(dmin, dmax, 0.001, 0.5, 2))
                 solver = mp.SolverParams(impratio=impratio)
-                out, _ = _run(block, picks, grasp, contact, solver, force_n=force)
+                out, _ = _run(block, picks, grasp, contact, solver, grip_force_n=force)
                 cols.append(" ".join(f"{s:5.2f}" for s in out["slip_mm"]))
             print(f"{mu:4.2f} {mass:5.2f}  {factors}  " + " | ".join(cols), flush=True)
 
@@ -466,7 +466,7 @@ def coulomb(backend: str) -> None:
                 None,
                 backend=backend,
                 pad_friction=np.array([r[0] for r in rows], np.float32),
-                force_n=np.array([r[1] for r in rows], np.float32),
+                grip_force_n=np.array([r[1] for r in rows], np.float32),
             )
             total += len(rows)
             for r, ok, fail in zip(rows, out["success"], out["failure"], strict=True):

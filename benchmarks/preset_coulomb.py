@@ -105,7 +105,7 @@ def run_preset(
         runner = make_backend(backend, scene, grasp, batch_size=n)
         per_pick = dict(
             pad_friction=np.array([c[0] for c in cs], np.float32),
-            force_n=np.array([c[2] for c in cs], np.float32),
+            grip_force_n=np.array([c[2] for c in cs], np.float32),
         )
         out, traces = runner.run(make_inputs(scene, grasp, picks, per_pick), record=True)
         for i, (mu, factor, force, hold) in enumerate(cs):

@@ -159,13 +159,13 @@ def test_parameters_map_through_physics_as_settings_do(heavy_block, synthetic):
     want = make_inputs(problem.scene, GRASP, problem.picks, s2.overrides(problem.scene, 4))
     np.testing.assert_allclose(got.pair_friction, want.pair_friction, rtol=1e-6)
     np.testing.assert_allclose(got.pair_solref, want.pair_solref, rtol=1e-6)
-    np.testing.assert_allclose(got.params.force_n, rows.grip_force_n + 1.25, rtol=1e-6)
+    np.testing.assert_allclose(got.params.grip_force_n, rows.grip_force_n + 1.25, rtol=1e-6)
     fr, ref, force = contact_arrays_jnp(
         names, list(values.values()), problem.inputs, problem.scene, base, heavy_block.mass_kg
     )
     np.testing.assert_allclose(np.asarray(fr), got.pair_friction, rtol=1e-5)
     np.testing.assert_allclose(np.asarray(ref), got.pair_solref, rtol=1e-5)
-    np.testing.assert_allclose(np.asarray(force), got.params.force_n, rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(force), got.params.grip_force_n, rtol=1e-6)
 
 
 def test_a_diverged_row_costs_the_worst_fit_not_a_perfect_one(heavy_block, synthetic):

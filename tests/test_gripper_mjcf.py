@@ -203,7 +203,7 @@ def test_force_regulation_with_the_linkage(linkage, block):
     checker = pp.FeasibilityChecker(block, linkage, grasp=PROC)
     picks = checker.batch(np.arange(3), np.zeros(3), np.zeros(3), np.zeros(3), mode="user")
     runner = make_backend("mujoco", scene, PROC, batch_size=3)
-    out, traces = runner.run(make_inputs(scene, PROC, picks, {"force_n": forces}), record=True)
+    out, traces = runner.run(make_inputs(scene, PROC, picks, {"grip_force_n": forces}), record=True)
     assert out["success"].all() and not out["diverged"].any()
     f = {name: traces[..., i] for i, name in enumerate(gk.TRACE_FIELDS)}
     hold = f["phase"] == gk.HOLD

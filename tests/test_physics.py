@@ -76,7 +76,7 @@ def test_coulomb_grid_on_the_c_engine(thickness_mm):
             block,
             centred(block, len(rows)),
             pad_friction=np.array([r[1] for r in rows], np.float32),
-            force_n=np.array([r[3] for r in rows], np.float32),
+            grip_force_n=np.array([r[3] for r in rows], np.float32),
         )
         for r, ok, fail in zip(rows, out["success"], out["failure"], strict=True):
             if bool(ok) != r[4]:
@@ -109,7 +109,7 @@ def test_coulomb_on_mjx():
         centred(block, len(rows)),
         backend="mjx",
         pad_friction=np.array([r[1] for r in rows], np.float32),
-        force_n=np.array([r[3] for r in rows], np.float32),
+        grip_force_n=np.array([r[3] for r in rows], np.float32),
     )
     got = [(r[1], r[2], bool(s)) for r, s in zip(rows, out["success"], strict=True)]
     assert all(s == r[4] for r, s in zip(rows, out["success"], strict=True)), got
@@ -261,7 +261,7 @@ def test_pad_force_stays_below_the_gripper_maximum_while_a_part_slips():
         block,
         centred(block, 1),
         contact=mp.ContactParams(pad_friction=0.08),
-        force_n=np.float32(200.0),
+        grip_force_n=np.float32(200.0),
     )
     assert not out["success"][0]
     assert max(out["max_force_left_n"][0], out["max_force_right_n"][0]) <= FREE.force_max_n

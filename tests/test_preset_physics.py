@@ -73,7 +73,7 @@ def test_coulomb_on_the_preset_with_the_default_procedure(name, mass_kg):
     runner = make_backend(BACKEND, scene, grasp, batch_size=n)
     per_pick = dict(
         pad_friction=np.array([r[0] for r in rows], np.float32),
-        force_n=np.array([r[1] for r in rows], np.float32),
+        grip_force_n=np.array([r[1] for r in rows], np.float32),
     )
     out, _ = runner.run(make_inputs(scene, grasp, picks, per_pick))
     assert not out["diverged"].any(), [rows[i] for i in np.flatnonzero(out["diverged"])]

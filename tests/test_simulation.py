@@ -50,7 +50,7 @@ def test_coulomb_minimum_force_matches_theory():
         picks,
         grasp,
         contact=mp.ContactParams(pad_friction=mu),
-        force_n=factors * theory,
+        grip_force_n=factors * theory,
     )
     ok = out["success"]
     assert ok[factors >= 1.1 - 1e-9].all(), (factors.round(2), ok)

@@ -215,7 +215,7 @@ class GraspConfig:
         """The kernels' parameters (float32 scalars, SI)."""
         f32 = np.float32
         return gk.GraspParams(
-            force_n=f32(self.grip_force_n),
+            grip_force_n=f32(self.grip_force_n),
             force_limit_fraction=f32(self.force_limit_fraction),
             force_max_n=f32(gripper.force_max_n),
             drive_stiffness_n_per_m=f32(gripper.drive_stiffness_n_per_mm * 1e3),

@@ -90,7 +90,7 @@ def make_inputs(
 ) -> PickInputs:
     """Batched inputs for picks; overrides maps a parameter to one value or (N,) values.
 
-    Override names: GraspParams fields (SI: force_n, kp, ...) and CONTACT_OVERRIDES
+    Override names: GraspParams fields (SI: grip_force_n, kp, ...) and CONTACT_OVERRIDES
     (pad_friction, pad_torsion [m], table_friction, pad_solref (2,), table_solref (2,),
     pad_solimp (5,), table_solimp (5,)). A pad_friction override scales the scene's
     torsional friction with it (both come from the same Coulomb coefficient) unless

@@ -60,7 +60,7 @@ OLD_SUCCESS_LABEL = "none"
 class GraspParams(NamedTuple):
     """Per-pick controller and phase settings, SI units (each a traced scalar)."""
 
-    force_n: jax.Array  # F_d, desired pad force
+    grip_force_n: jax.Array  # F_d, desired pad force
     force_limit_fraction: jax.Array  # drive force limit / F_d while the force loop runs
     force_max_n: jax.Array  # the gripper's largest force
     drive_stiffness_n_per_m: jax.Array  # finger servo stiffness (force per m of lag)
@@ -195,15 +195,15 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
     force = 0.5 * (m.force_left + m.force_right)
     t = s.t_phase + p.dt
     ph = s.phase
-    f_lim = jnp.minimum(p.force_limit_fraction * p.force_n, p.force_max_n)
+    f_lim = jnp.minimum(p.force_limit_fraction * p.grip_force_n, p.force_max_n)
     # "reached" once the force has stayed between reach_fraction * F_d and the limit
     # for reach_settle_s: the impact of the approaching pads (a light part bounces
     # between them) must not start the lift (reach_settle_s = 0: the paper's rule)
     # the band reaches at least as far above F_d as below it: with F_d at the gripper's
     # limit (f_lim = F_d) a force held at F_d dithers across f_lim by float noise (an
     # MJCF drive, whose force limit is not exactly F_d at the pads, showed it)
-    upper = jnp.maximum(f_lim, (2.0 - p.reach_fraction) * p.force_n)
-    steady = (ph == CLOSE) & (force >= p.reach_fraction * p.force_n) & (force <= upper)
+    upper = jnp.maximum(f_lim, (2.0 - p.reach_fraction) * p.grip_force_n)
+    steady = (ph == CLOSE) & (force >= p.reach_fraction * p.grip_force_n) & (force <= upper)
     t_steady = jnp.where(steady, s.t_steady + p.dt, 0.0)
     reached = steady & (t_steady >= p.reach_settle_s - 1e-6)
     nxt = jnp.select(
@@ -228,10 +228,10 @@ def control_step(p: GraspParams, s: ControlState, m: Measurement):
         & ~((ph == CLOSE) & (nxt == DONE))
         & ~((ph == DONE) & (s.lift_target <= s.lift_start))
     )
-    v = jnp.clip(p.kp * (p.force_n - force), -p.v_open, p.v_close)
+    v = jnp.clip(p.kp * (p.grip_force_n - force), -p.v_open, p.v_close)
     # until a pad touches, the fingers approach at the set closing speed, as the real
     # gripper does (the P law alone would creep in at kp * F_d: 1.6 mm/s for F_d = 0.8 N)
-    touching = jnp.maximum(m.force_left, m.force_right) > p.pad_contact_fraction * p.force_n
+    touching = jnp.maximum(m.force_left, m.force_right) > p.pad_contact_fraction * p.grip_force_n
     v = jnp.where(touching, v, p.v_close)
     finger_target = s.finger_target + jnp.where(active, v * p.dt, 0.0)
     # anti-windup once engaged (touching, or holding: a pad bouncing off a sliding part
@@ -312,7 +312,7 @@ def accumulate(
     quat = jnp.where(live, m.object_quat, quat0)
     pos = jnp.where(live, m.object_pos, pos0)
 
-    pad_contact_n = p.pad_contact_fraction * p.force_n
+    pad_contact_n = p.pad_contact_fraction * p.grip_force_n
     contact = jnp.maximum(fl, fr) > pad_contact_n
     gripping = jnp.minimum(fl, fr) > pad_contact_n
     on_table = ft > p.table_contact_n

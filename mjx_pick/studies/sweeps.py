@@ -2,7 +2,7 @@
 
 A parameter is named ``section.field`` after the settings dataclass it changes:
 ``contact.`` (ContactParams), ``grasp.`` (GraspConfig), ``gripper.`` (GripperSpec) or
-``solver.`` (SolverParams); ``controller.force_n``, ``controller.kp``,
+``solver.`` (SolverParams); ``grasp.grip_force_n``, ``controller.kp``,
 ``controller.v_close`` and ``controller.v_open`` are aliases of the grasp fields
 grip_force_n, kp_mm_s_per_n, closing_speed_mm_s and opening_speed_mm_s. Values:
 
@@ -120,7 +120,7 @@ def canonical(name: str) -> str:
     if section not in SECTIONS or field not in numeric_fields(SECTIONS[section]):
         raise ConfigError(
             f"unknown parameter {name!r}: use section.field with a numeric field of "
-            f"{', '.join(SECTIONS)} (e.g. contact.pad_friction, controller.force_n, "
+            f"{', '.join(SECTIONS)} (e.g. contact.pad_friction, grasp.grip_force_n, "
             "gripper.finger_width_mm); `mjx-pick params` lists them all"
         )
     return full

@@ -268,12 +268,12 @@ def row_inputs(problem_inputs, scene, settings, grip_force_n, values: dict[str, 
     return problem_inputs.replace(
         pair_friction=friction,
         pair_solref=solref,
-        params=problem_inputs.params._replace(force_n=f.astype(np.float32)),
+        params=problem_inputs.params._replace(grip_force_n=f.astype(np.float32)),
     )
 
 
 def contact_arrays_jnp(names, values, inputs, scene, settings, mass_kg):
-    """(R, npair, 5) friction, (R, npair, 2) solref and (R,) force_n for values (P,),
+    """(R, npair, 5) friction, (R, npair, 2) solref and (R,) grip_force_n for values (P,),
     as jnp (differentiable: forward mode through MJX). The same mapping as
     :func:`row_inputs` (``engine.backend.set_contact``, ``physics.solref_terms`` and
     ``physics.pad_torsion_m``)."""
@@ -300,5 +300,5 @@ def contact_arrays_jnp(names, values, inputs, scene, settings, mass_kg):
         contact,
         xp=jnp,
     )
-    force = jnp.asarray(inputs.params.force_n) + v.get("force_offset_n", 0.0)
+    force = jnp.asarray(inputs.params.grip_force_n) + v.get("force_offset_n", 0.0)
     return fr, ref, force

@@ -319,7 +319,7 @@ class Problem:
                 fr, ref, force = contact_arrays_jnp(
                     self.names, values, inp, self.scene, self.settings, self.object.mass_kg
                 )
-                params = inp.params._replace(force_n=force)
+                params = inp.params._replace(grip_force_n=force)
                 out, rows = roll(inp.qpos0, params, fr, ref, inp.pair_solimp)
                 sim = self.split(dict(out), rows, xp=jnp)
                 sp = self.space
