@@ -156,14 +156,14 @@ def torque() -> None:
 
 
 # --- pad-contact candidates for torsion like rubber (issue 32, item 5) ---------------
-# Each candidate rewrites the MJCF text of a scene built with pad_contact "mean_radius"
+# Each candidate rewrites the MJCF text of a scene built with pad_collision "mean_radius"
 # (the benchmark's own patch, never the library's): "corners" the whole pad collides
 # (MuJoCo's multi-point collider: four overlap corners per pad on a flat face; the
 # library's default, pad_contact "pad"), "centre" one contact per pad and object piece
 # (MuJoCo's multiccd off: the collider's single point, near the overlap's centre) with
 # torsion mu r_mean, "shrunk" the corners with the pad's collision box narrowed to
 # 2 r_mean, "square" the library's "mean_radius" box (mjx_pick.core.scene.
-# pad_contact_box_mm: 2 r_mean wide and, on a wall taller than that, 2 r_mean tall,
+# pad_collision_box_mm: 2 r_mean wide and, on a wall taller than that, 2 r_mean tall,
 # centred on the wall), "guarded" that box and the whole pad recessed 0.1 mm as a
 # frictionless guard, "tiles" a 3 x 3 grid of collision boxes over each pad face with
 # one contact each (multiccd off).

@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -489,6 +490,42 @@ def test_a_killed_worker_is_reported_and_a_later_job_succeeds(tmp_path):
         assert job.wait(300) == 0 and job.poll().state == "complete", job.log.read_text()
         assert "had stopped (killed by signal 9" in job.log.read_text()
         assert any("had stopped (killed by signal 9" in w for w in job.poll().warnings)
+    finally:
+        workers.close()
+
+
+def test_a_job_started_right_after_its_worker_died_mid_job_does_not_hang(tmp_path):
+    # the next job's start polled the dead worker's job under the workers' lock, whose
+    # crash path starts the successor under the same lock: the server froze
+    workers = warm_workers(tmp_path)
+    try:
+        out = tmp_path / "killed"
+        argv = ["evaluate", "block", "--n", "200", "--seed", "1", *SHORT, "--chunk-size", "2"]
+        first = jobs.Job([*argv, "--out", str(out)], tmp_path / "logs" / "k.log", out, 200, 2)
+        first.start(workers)
+        dead = workers.worker("mujoco")
+        deadline = time.monotonic() + 240
+        while not list((out / "chunks").glob("part-*.parquet")):
+            assert first.running and time.monotonic() < deadline, first.log.read_text()
+            time.sleep(0.2)
+        os.kill(dead.pid, 9)
+        dead.proc.wait(30)
+        started = []
+        out2 = tmp_path / "next"
+        job = jobs.Job(
+            ["evaluate", "block", "--n", "4", *SHORT, "--out", str(out2)],
+            tmp_path / "logs" / "next.log",
+            out2,
+        )
+        starter = threading.Thread(target=lambda: started.append(job.start(workers)))
+        starter.start()
+        starter.join(30)
+        assert not starter.is_alive(), "starting a job hung on the dead worker"
+        assert job.wait(300) == 0 and job.poll().state == "complete", job.log.read_text()
+        # one successor, and it is the one the workers hold
+        successor = workers.worker("mujoco")
+        assert successor.pid != dead.pid and successor.alive
+        assert first.poll().state == "failed"
     finally:
         workers.close()
 

@@ -125,7 +125,7 @@ def lying_rod(tmp_path, mass_kg):
     return mp.object_from_mesh(tmp_path / "rod.stl", unit="m", mass_g=mass_kg * 1e3, name="rod")
 
 
-def torque_case(shape, tmp_path, pad_contact):
+def torque_case(shape, tmp_path, pad_collision):
     """A 200 mm part, its grasp and its scene: the bar (flat faces) or the lying rod."""
     mass, force, mu = (0.6, 30.0, 0.5) if shape == "bar" else (0.3, 20.0, 0.5)
     if shape == "bar":
@@ -133,7 +133,7 @@ def torque_case(shape, tmp_path, pad_contact):
     else:
         part = lying_rod(tmp_path, mass)
     grasp = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.5, grip_force_n=force)
-    contact = mp.ContactParams(pad_friction=mu, pad_contact=pad_contact)
+    contact = mp.ContactParams(pad_friction=mu, pad_collision=pad_collision)
     scene = mp.build_scene(part, FREE, contact, None, grasp)
     return part, grasp, contact, scene, mass * (G + ACCEL), force, mu
 
@@ -167,7 +167,7 @@ def test_torque_threshold_is_the_capacity_the_model_states(shape, tmp_path):
 
 @pytest.mark.parametrize("shape", ["bar", "rod"])
 def test_torque_threshold_is_a_rubber_pads_with_the_mean_radius_box(shape, tmp_path):
-    # the same parts with pad_contact "mean_radius" (each pad collides through a box
+    # the same parts with pad_collision "mean_radius" (each pad collides through a box
     # whose corners sit at the patch's mean radius). The reference is a rubber pad
     # pressed uniformly over the contact patch with isotropic Coulomb friction
     # (mjx_pick.core.holding over a grid of the patch: the limit surface of Goyal, Ruina
@@ -348,10 +348,10 @@ def test_noslip_setting_reaches_the_model_and_is_refused_where_unsupported():
 
 def test_mean_radius_pad_box_reaches_the_model_and_is_checked():
     block = mp.object_from_polygon(box(-25, -15, 25, 15), thickness_mm=20, mass_g=300)
-    contact = mp.ContactParams(pad_contact="mean_radius")
+    contact = mp.ContactParams(pad_collision="mean_radius")
     scene = mp.build_scene(block, FREE, contact, None, PROC)
     m = scene.model
-    half_w, half_h, dz = scene_mod.pad_contact_box_mm(block, FREE, PROC)
+    half_w, half_h, dz = scene_mod.pad_collision_box_mm(block, FREE, PROC)
     # the collision box: its corners at the patch's mean radius, centred on the wall
     r = physics.patch_mean_radius_mm(*scene.pad_patch_mm)
     assert (half_w, half_h) == pytest.approx((r, r))
@@ -366,5 +366,5 @@ def test_mean_radius_pad_box_reaches_the_model_and_is_checked():
     # the default: the whole pad collides, as before
     whole = mp.build_scene(block, FREE, None, None, PROC).model.geom("pad_left")
     assert whole.size[1:] * 1e3 == pytest.approx([FREE.finger_width_mm / 2, FREE.pad_height_mm / 2])
-    with pytest.raises(mp.ConfigError, match="pad_contact"):
-        mp.ContactParams(pad_contact="disc")
+    with pytest.raises(mp.ConfigError, match="pad_collision"):
+        mp.ContactParams(pad_collision="disc")

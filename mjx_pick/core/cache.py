@@ -284,6 +284,13 @@ def warn_once(folder: Path, problem: str, text: str) -> None:
     warnings.warn(text, CacheWarning, stacklevel=4)
 
 
+def reset_warnings() -> None:
+    """Say every cache problem again, as a new process would (a long-lived worker runs
+    each job as if it were one)."""
+    with _warned_lock:
+        _warned.clear()
+
+
 _stores: dict[tuple[str, int], Store] = {}
 
 

@@ -9,9 +9,9 @@ MuJoCo does not model a pad's pressure field. Its box-convex collider represents
 pad on a flat face by up to four contact points at the corners of their overlap (a
 line contact by its two ends, a point by one), each pressed with an equal share of the
 pad's force when neither body tilts. The overlap is that of the pad's collision geom
-with the part: the whole pad, or with ``ContactParams.pad_contact = "mean_radius"`` a
+with the part: the whole pad, or with ``ContactParams.pad_collision = "mean_radius"`` a
 box cut so that its corners sit at the patch's mean radius
-(:func:`mjx_pick.core.scene.pad_contact_box_mm`). Each point is a soft-finger contact (condim 4,
+(:func:`mjx_pick.core.scene.pad_collision_box_mm`). Each point is a soft-finger contact (condim 4,
 :mod:`mjx_pick.core.physics`): Coulomb friction mu in the pad plane and torsional friction
 mu_t about the normal. With pyramidal cones (the default) the three share one budget,
 |f_1| / mu + |f_2| / mu + |tau| / mu_t <= N; with elliptic cones their Euclidean norm

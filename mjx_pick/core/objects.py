@@ -897,8 +897,8 @@ def rasterize(
       mask (H, W) uint8 and (x0, y0) of the grid's lower-left corner, mm.
     """
     rot = shapely.affinity.rotate(polygon, yaw_rad, origin=(0, 0), use_radians=True)
-    if radius_mm is None:
-        radius_mm = max(math.hypot(x, y) for x, y in rot.exterior.coords)
+    if radius_mm is None:  # one piece or several
+        radius_mm = float(np.hypot(*shapely.get_coordinates(rot).T).max())
     half = int(math.ceil(radius_mm / mm_per_px)) + pad_px
     x0 = y0 = -half * mm_per_px
     centres = x0 + (np.arange(2 * half) + 0.5) * mm_per_px

@@ -37,13 +37,13 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   several points (the four corners of a pad's overlap with a flat face, the two ends of
   a line contact), their Coulomb friction also resists spin, at the corners: with
   pyramidal cones a corner at (a, b) from the patch centre resists with mu N max(|a|,
-  |b|) of its normal force N. With the whole pad colliding (``pad_contact = "pad"``,
+  |b|) of its normal force N. With the whole pad colliding (``pad_collision = "pad"``,
   the default) the grasp then holds 1.5-1.9x the torque of a uniformly pressed pad,
   whose limit in pure torsion is mu N r_mean (the uniform-pressure result for a flat
   contact, a disc's 2/3 mu N R; Goyal, Ruina and Papadopoulos, "Planar sliding with dry
-  friction", Wear 143, 1991). ``pad_contact = "mean_radius"`` makes a parametric pad
+  friction", Wear 143, 1991). ``pad_collision = "mean_radius"`` makes a parametric pad
   collide through a box cut to the patch's mean radius
-  (``mjx_pick.core.scene.pad_contact_box_mm``: its corners at most r_mean from the
+  (``mjx_pick.core.scene.pad_collision_box_mm``: its corners at most r_mean from the
   patch centre), which brings the torque close to a rubber pad's where the load is a
   small part of the pads' friction capacity. Not the default: the pad touches a part
   only within that box (2 r_mean wide, half the pad's width on a thin part), and a
@@ -80,8 +80,8 @@ from mjx_pick.core.config import (
 CONVERGED_TIMESTEP_S = 0.002
 
 
-# what a parametric pad collides through (ContactParams.pad_contact)
-PAD_CONTACTS = ("pad", "mean_radius")
+# what a parametric pad collides through (ContactParams.pad_collision)
+PAD_COLLISIONS = ("pad", "mean_radius")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -134,12 +134,12 @@ class ContactParams:
     # "mean_radius", a box cut so that its corners sit at the patch's mean radius
     # (torsion like a uniformly pressed rubber pad; a part's face wider than the box and
     # turned in the grip is met by the box's edge, which costs slippery grasps)
-    pad_contact: str = "pad"
+    pad_collision: str = "pad"
 
     def __post_init__(self):
         o = "contact"
         check_fields(self, o)
-        check_choice(o, "pad_contact", self.pad_contact, PAD_CONTACTS)
+        check_choice(o, "pad_collision", self.pad_collision, PAD_COLLISIONS)
         for name in ("pad_solimp", "table_solimp"):
             value = getattr(self, name)
             if len(value) != 5:

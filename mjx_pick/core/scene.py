@@ -83,11 +83,14 @@ class SceneIndex:
 def pad_patch_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
     """(width, height) of a pad's contact patch on the object, mm (``mjx_pick.core.physics``).
 
-    Width: the pad's, or the object's smallest width in the pads' band if narrower.
+    Width: the pad's, or the object's smallest width in the pads' band if narrower (of
+    its largest piece where the band cuts the object in several: a pad presses on one).
     Height: the object's side wall within the band.
     """
     lo, hi = pad_band_mm(obj, gripper, grasp)
     band = obj.band_outline(lo, hi)
+    if band.geom_type == "MultiPolygon":
+        band = max(band.geoms, key=lambda piece: piece.area)
     width = gripper.finger_width_mm
     if not band.is_empty:
         rect = np.asarray(band.minimum_rotated_rectangle.exterior.coords)
@@ -96,9 +99,9 @@ def pad_patch_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
     return width, obj.wall_height_mm(lo, hi)
 
 
-def pad_contact_box_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
+def pad_collision_box_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
     """(half width, half height, height offset) of a parametric pad's collision box, mm,
-    with ``ContactParams.pad_contact = "mean_radius"`` (the default lets the whole pad
+    with ``ContactParams.pad_collision = "mean_radius"`` (the default lets the whole pad
     collide).
 
     MuJoCo's collider puts a flat pad's contact points at the corners of its overlap
@@ -220,7 +223,7 @@ def scene_xml(
 ) -> str:
     """MJCF text of the scene (deterministic: same inputs, same text).
 
-    pad_box_mm: the parallel jaw's pad collision box (:func:`pad_contact_box_mm`);
+    pad_box_mm: the parallel jaw's pad collision box (:func:`pad_collision_box_mm`);
     None: the whole pad collides.
 
     With an MJCF gripper (its measured ``kinematics``) the text holds the ``gripper``
@@ -430,8 +433,8 @@ def build_scene(
     mjc = mujoco_contact(contact, solver, obj.mass_kg, patch)
     tip_mm, _ = pad_band_mm(obj, gripper, grasp)
     kin = None if gripper.mjcf is None else mjcf_gripper.characterise(gripper.mjcf)
-    mean_radius = kin is None and contact.pad_contact == "mean_radius"
-    box = pad_contact_box_mm(obj, gripper, grasp) if mean_radius else None
+    mean_radius = kin is None and contact.pad_collision == "mean_radius"
+    box = pad_collision_box_mm(obj, gripper, grasp) if mean_radius else None
     xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin, box)
     if kin is None:
         model = mujoco.MjModel.from_xml_string(xml)

@@ -10,8 +10,8 @@ import time.
 * Programs that compiled in less than :data:`MIN_COMPILE_S` are not stored: reading an
   entry costs about as much as compiling the smallest programs (single operations run
   eagerly), and they would fill the folder. The C engine's per-tick controller, the
-  feasibility check and the results' finalisation compile in tenths of a second each on
-  a CPU and together outweigh a short run's simulation: they are kept.
+  feasibility check and the results' finalisation are small programs, yet together they
+  can cost a short run more than its simulation: they are kept.
 * Bypassed with the rest of the cache (``MJX_PICK_CACHE=0``, the CLI's ``--no-cache``).
 * A folder set already -- ``JAX_COMPILATION_CACHE_DIR`` or the user's own
   ``jax.config.update`` -- is left as it is.

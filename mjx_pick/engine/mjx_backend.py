@@ -454,11 +454,10 @@ class MjxBackend:
     name = "mjx"
     impl = "jax"
     POOL_QUANTUM = 256
-    # the tail never shrinks a pool below this many slots per device: below a few
-    # thousand simulations a GPU step takes about as long whatever the slot count (launch
-    # latency, not the slots, sets it), so a halving saves little, while every pool size
-    # is one more trace and compile of the physics step -- seconds that a short run pays
-    # and a long one amortises (benchmarks/RESULTS.md, the pool's tail)
+    # the tail never shrinks a pool below this many slots per device: a small pool's GPU
+    # step is bound by kernel launches more than by its slot count, so a halving saves
+    # little, while every pool size is one more trace and compile of the physics step,
+    # which a short run pays and a long one amortises
     SHRINK_MIN_SLOTS = 4096
 
     def __init__(

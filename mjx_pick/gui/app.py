@@ -128,9 +128,11 @@ def serve(host: str, port: int, workdir: Path, show: bool) -> None:
         build_page(workdir, runs, pages)
 
     def stop_jobs() -> None:  # the server stops: runs stop as on Ctrl-C, keeping their parts
-        for job in runs:
+        # (its own runs only: one a previous server left running is not this one's to stop)
+        mine = [job for job in runs if job.started_here]
+        for job in mine:
             job.cancel()
-        for job in runs:  # then the workers end (a cancelled job first marks its folder)
+        for job in mine:  # then the workers end (a cancelled job first marks its folder)
             if job.running:
                 try:
                     job.wait(jobs.CANCEL_GRACE_S)

@@ -30,6 +30,7 @@ import os
 import re
 import shlex
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -132,9 +133,13 @@ class Worker:
     def start(self) -> Worker:
         self.folder.mkdir(parents=True, exist_ok=True)
         read, write = os.pipe()
+        # JAX takes three quarters of a GPU's memory at its first use and keeps it; a job's
+        # own process gave it back when it ended, a worker lives on: it allocates as needed
+        env = {**os.environ, "XLA_PYTHON_CLIENT_PREALLOCATE": "false"}
         with self.log.open("ab") as fh:
             self.proc = subprocess.Popen(
                 _isolated(_WORKER_FROM_PACKAGE, [str(write)]),
+                env=env,
                 stdin=subprocess.PIPE,
                 stdout=fh,
                 stderr=subprocess.STDOUT,
@@ -311,11 +316,16 @@ class Workers:
         backend = warm_backend(argv)
         if backend is None:
             return None
+        # a busy worker's job is polled outside the lock: a worker that died in it calls
+        # back (on_death -> prepare), which takes the lock and may start its successor
+        w = self._by_backend.get(backend)
+        running = w.current if w is not None else None
+        if running is not None and running.poll() is None:
+            return None  # busy with another tab's job: a process of its own
         with self._lock:
-            w = self._by_backend.get(backend)
+            w = self._by_backend.get(backend)  # after that poll: perhaps a successor
             if w is not None and w.busy:
-                if w.current.poll() is None:
-                    return None  # busy with another tab's job: a process of its own
+                return None
             if w is not None and not w.alive:
                 self.notes.append(
                     f"the {backend} worker (pid {w.pid}) had stopped ({w.ended_how()}); "
@@ -519,6 +529,11 @@ class Job:
         return isinstance(self._proc, WorkerRun)
 
     @property
+    def started_here(self) -> bool:
+        """Whether this server started the run (not one recovered from its folder)."""
+        return not isinstance(self._proc, FolderRun)
+
+    @property
     def running(self) -> bool:
         return self._proc is not None and self._proc.poll() is None
 
@@ -660,7 +675,10 @@ class FolderRun:
             return self._code
         holder = lock_holder(self.out)
         if holder is not None:
-            self.pid = holder.get("pid")
+            # a process of this machine can be signalled; another host's (a work folder
+            # on a shared disk) only watched
+            here = holder.get("host") in (None, socket.gethostname())
+            self.pid = holder.get("pid") if here else None
             return None
         status = (read_manifest(self.out) or {}).get("status")
         self._code = EXIT_OF_STATUS.get(status, 1)  # "failed", or "running" and dead

@@ -72,6 +72,7 @@ def run_job(argv: list[str], log: str, cwd: str, started: float | None) -> int:
     import importlib
 
     from mjx_pick.cli import clock, main
+    from mjx_pick.core import cache
     from mjx_pick.outputs.rundir import end_claims
 
     env = dict(os.environ)
@@ -86,6 +87,7 @@ def run_job(argv: list[str], log: str, cwd: str, started: float | None) -> int:
         os.dup2(fd, 2)
         os.chdir(cwd)
         clock.begin(started)
+        cache.reset_warnings()  # a bypassed cache is said in every job's log
         warnings.onceregistry.clear()  # "once" warnings: shown again, as in a new process
         with warnings.catch_warnings():  # the filters back after, "already shown" reset
             signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -135,5 +137,13 @@ def serve(reply_fd: int) -> None:
         if not line.strip():
             continue
         job = json.loads(line)
-        code = run_job(job["argv"], job["log"], job["cwd"], job.get("started"))
+        try:
+            code = run_job(job["argv"], job["log"], job["cwd"], job.get("started"))
+        except Exception as err:  # its log or folder unusable: this job fails, not the worker
+            code = 1
+            try:
+                with open(job["log"], "a") as fh:
+                    fh.write(f"\nmjx-pick: error: the job could not start: {err}\n")
+            except OSError:
+                pass
         reply.write(json.dumps({"id": job["id"], "code": code, "rss": rss_bytes()}) + "\n")

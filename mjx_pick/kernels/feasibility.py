@@ -101,9 +101,9 @@ def stack_from_masks(masks: np.ndarray, res_mm: float, x0_mm: float) -> Silhouet
         raise ValueError(f"a raster of {n_rows} rows does not fit the uint16 stack")
     cum = np.empty((n_bins, n_rows + 1, n_cols), np.uint16)
     cum[:, 0] = 0
-    # one row at a time: each add is over a contiguous (K, W) slab, where numpy's cumsum
-    # along the middle axis walks memory with a stride of a row (several times slower on
-    # a stack of hundreds of MB); uint16 halves the memory the stack and its copy move
+    # one row at a time: each add runs over K rows of W contiguous cells, where numpy's
+    # cumsum along the middle axis steps through memory a row at a time (slow on a large
+    # stack); uint16 halves the memory the stack and its copy move
     for i in range(n_rows):
         np.add(cum[:, i], masks[:, i], out=cum[:, i + 1], casting="unsafe")
     return SilhouetteStack(jnp.asarray(cum), float(res_mm), float(x0_mm))

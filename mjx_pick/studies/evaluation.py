@@ -289,7 +289,7 @@ def evaluate(
     costs = {k: float(v) for k, v in (fixed_costs or {}).items()}
     costs["scene_s"] = time.perf_counter() - t_scene  # MjModel, and the backend that holds it
     try:
-        run = _Run(executor, engine, runner, scene, costs, user_batch)
+        ctx = _Context(executor, engine, runner, scene, costs, user_batch)
         req = _Request(
             obj,
             gripper,
@@ -315,7 +315,7 @@ def evaluate(
             keep_chunks=keep_chunks,
             on_progress=on_progress,
         )
-        return _evaluate(run, req)
+        return _evaluate(ctx, req)
     finally:
         if hasattr(executor, "close"):
             executor.close()
@@ -352,7 +352,7 @@ class _Request:
 
 
 @dataclasses.dataclass
-class _Run:
+class _Context:
     """What one evaluate() call simulates with: its executor (this process, or a Ray
     cluster), the local engine and runner (None on a cluster), the scene, the fixed
     costs paid so far (seconds, filled in as they are paid) and the user's checked
@@ -366,11 +366,11 @@ class _Run:
     user_batch: pp.PickBatch | None = None
 
 
-def _evaluate(run: _Run, req: _Request) -> Evaluation:
+def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
     """evaluate() once its executor (this process, or a Ray cluster) is ready."""
     out_dir = Path(req.out) if req.out is not None else None
     settings = experiment_settings(
-        run.scene,
+        ctx.scene,
         {
             "gripper": req.gripper,
             "contact": req.contact,
@@ -385,10 +385,10 @@ def _evaluate(run: _Run, req: _Request) -> Evaluation:
             "max_n": req.max_n,
             "min_force": req.min_force,
             "stability_um": req.stability_um,
-            "backend": run.executor.name,
+            "backend": ctx.executor.name,
             # a batched program's float32 rounding depends on its batch shape, on the C
             # engine too (its per-tick kernel: engine module docstring)
-            "batch_size": run.executor.batch_size,
+            "batch_size": ctx.executor.batch_size,
         },
     )
     key = config_hash(settings)
@@ -414,14 +414,14 @@ def _evaluate(run: _Run, req: _Request) -> Evaluation:
     elif isinstance(req.picks, pp.PickBatch):
         picks_batch = req.picks
     else:
-        picks_batch = run.user_batch  # read and checked before the scene was built
-    run.costs["picks_s"] = time.perf_counter() - t_picks  # sampling and the feasibility checks
+        picks_batch = ctx.user_batch  # read and checked before the scene was built
+    ctx.costs["picks_s"] = time.perf_counter() - t_picks  # sampling and the feasibility checks
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
         claim(
             out_dir, "evaluate", key, resume=req.resume, overwrite=req.overwrite, settings=settings
         )
     try:
-        return _evaluate_claimed(run, req, picks_batch, out_dir, key)
+        return _evaluate_claimed(ctx, req, picks_batch, out_dir, key)
     except (KeyboardInterrupt, Cancelled):
         raise  # the folder is marked by _stopped
     except BaseException as err:
@@ -431,30 +431,30 @@ def _evaluate(run: _Run, req: _Request) -> Evaluation:
 
 
 def _evaluate_claimed(
-    run: _Run, req: _Request, picks_batch: pp.PickBatch | None, out_dir: Path | None, key: str
+    ctx: _Context, req: _Request, picks_batch: pp.PickBatch | None, out_dir: Path | None, key: str
 ) -> Evaluation:
     """evaluate() once its inputs are checked and its folder (if any) claimed."""
     if req.until is not None:
-        batch = int(req.chunk_size or until_batch(req.until, run.executor.batch_size))
+        batch = int(req.chunk_size or until_batch(req.until, ctx.executor.batch_size))
         plan = plan_chunks(out_dir, key, req.max_n, min(batch, req.max_n), req.resume)
     else:
         if req.chunk_size:
             chunk = int(req.chunk_size)
-        elif run.runner is not None:
-            chunk = auto_chunk(run.runner)
+        elif ctx.runner is not None:
+            chunk = auto_chunk(ctx.runner)
         else:
-            chunk = run.executor.batch_size
+            chunk = ctx.executor.batch_size
         plan = plan_chunks(out_dir, key, len(picks_batch), chunk, req.resume)
 
     config = {
         "object": req.obj.summary(),
         "gripper": to_dict(req.gripper),
         "contact": to_dict(req.contact),
-        "contact_in_mujoco": to_dict(run.scene.contact),
+        "contact_in_mujoco": to_dict(ctx.scene.contact),
         "scene": {
             # where the pads grip (GraspConfig.grasp_height) and their contact patch
-            "fingertip_height_mm": round(run.scene.index.pad_bottom_z0_m * 1e3, 6),
-            "pad_patch_mm": [round(v, 6) for v in run.scene.pad_patch_mm],
+            "fingertip_height_mm": round(ctx.scene.index.pad_bottom_z0_m * 1e3, 6),
+            "pad_patch_mm": [round(v, 6) for v in ctx.scene.pad_patch_mm],
         },
         "solver": to_dict(req.solver),
         "grasp": to_dict(req.grasp),
@@ -462,23 +462,23 @@ def _evaluate_claimed(
         "n": int(len(picks_batch)) if picks_batch is not None else None,
         "seed": int(req.seed),
         "mode": picks_batch.mode if picks_batch is not None else "optimization",
-        "backend": run.executor.name,
-        "device": run.executor.device,
-        "batch_size": int(run.executor.batch_size),
+        "backend": ctx.executor.name,
+        "device": ctx.executor.device,
+        "batch_size": int(ctx.executor.batch_size),
         "chunk_size": int(plan.chunk_size),
-        "ray": getattr(run.executor, "address", None),
+        "ray": getattr(ctx.executor, "address", None),
         "config_key": key,
         "versions": versions(),
     }
     if out_dir is not None:
         write_json(out_dir / "config.json", config)
-        write_atomic(out_dir / "scene.xml", run.scene.xml)
+        write_atomic(out_dir / "scene.xml", ctx.scene.xml)
 
     t0 = time.perf_counter()
     try:
         if req.until is not None:
             picks_batch, table = _optimize(
-                run.executor,
+                ctx.executor,
                 plan,
                 out_dir,
                 req.obj,
@@ -494,18 +494,18 @@ def _evaluate_claimed(
                 write_json(out_dir / "config.json", config)
         else:
             table = _simulate(
-                run.executor, picks_batch, plan, out_dir, req.progress, req.on_progress
+                ctx.executor, picks_batch, plan, out_dir, req.progress, req.on_progress
             )
         wall = time.perf_counter() - t0
         summary = summarize(table)
         mu = req.contact.pad_friction
-        timing = run.executor.describe()["timing"]
+        timing = ctx.executor.describe()["timing"]
         summary.update(
             {
                 "object": req.obj.name,
                 "gripper": req.gripper.name,
-                "backend": run.executor.name,
-                "device": run.executor.device,
+                "backend": ctx.executor.name,
+                "device": ctx.executor.device,
                 "f_gmin_n": min_grasp_force_n(req.obj, mu, req.grasp.safety_factor),
                 "grip_force_n": req.grasp.grip_force_n,
                 "candidates_checked": int(picks_batch.n_candidates),
@@ -521,17 +521,17 @@ def _evaluate_claimed(
                 "physics_steps_per_pick": req.grasp.n_ticks() * req.grasp.substeps(req.solver),
             }
         )
-        if hasattr(run.executor, "cluster_summary"):
-            summary["cluster"] = run.executor.cluster_summary()
+        if hasattr(ctx.executor, "cluster_summary"):
+            summary["cluster"] = ctx.executor.cluster_summary()
         settings = Settings(req.gripper, req.contact, req.solver, req.grasp)
         if req.min_force or req.stability_um:
             # the extra simulations below run through this run's engine and backend
-            sim = Simulator(req.obj, engine=run.engine)
-            sim.adopt(settings, run.runner)
+            sim = Simulator(req.obj, engine=ctx.engine)
+            sim.adopt(settings, ctx.runner)
         if req.min_force:
             t1 = time.perf_counter()
             with showing_progress(
-                run.engine, "minimum grip force (bisection)", "sim", req.progress
+                ctx.engine, "minimum grip force (bisection)", "sim", req.progress
             ):
                 forces = min_grip_force(req.obj, picks_batch, settings, simulator=sim)
             table = table.append_column("min_force_n", pa.array(forces))
@@ -551,21 +551,21 @@ def _evaluate_claimed(
             summary["stability_um"] = req.stability_um
             summary["labels_unstable"] = int((~stable).sum())
             summary["stability_s"] = round(time.perf_counter() - t1, 3)
-        traces = _traces(run.executor, picks_batch, table, req.n_traces) if req.n_traces else None
+        traces = _traces(ctx.executor, picks_batch, table, req.n_traces) if req.n_traces else None
         interrupts.raise_if_requested()  # a Ctrl-C swallowed in the last chunk: not complete
     except (KeyboardInterrupt, Cancelled) as stop:
-        _stopped(out_dir, stop, run.executor, req.seed, config, time.perf_counter() - t0)
+        _stopped(out_dir, stop, ctx.executor, req.seed, config, time.perf_counter() - t0)
         raise
     t_write = time.perf_counter()
     if out_dir is not None:
         write_parquet(out_dir / "results.parquet", table)
         if traces is not None:
             write_parquet(out_dir / "traces.parquet", traces)
-    run.costs["write_s"] = time.perf_counter() - t_write
-    summary["time_s"] = _breakdown(run.costs, run.executor.describe()["timing"])
+    ctx.costs["write_s"] = time.perf_counter() - t_write
+    summary["time_s"] = _breakdown(ctx.costs, ctx.executor.describe()["timing"])
     if out_dir is not None:
         write_json(out_dir / "summary.json", summary)
-        meta = run.executor.describe(time.perf_counter() - t0)
+        meta = ctx.executor.describe(time.perf_counter() - t0)
         meta["timing"]["breakdown_s"] = summary["time_s"]
         finish(
             out_dir, command="evaluate", config=config, seed=req.seed, release_lock=False, **meta

@@ -132,6 +132,7 @@ class AnalyzeTab:
                 self.replay_box.set_visibility(False)
         self.replayed = None  # (scene.xml, trace) of the pick in the replay
         self.simulated: dict = {}  # (run folder, pick id): trace of an untraced pick
+        self.shown = None  # (run, pick id) the details show now
         self.rendering = False
         self.refresh_runs()
 
@@ -242,6 +243,7 @@ class AnalyzeTab:
         """A pick-point's metrics, ringed on the map; if traced its force plot and replay."""
         opened = self.state.run
         pid = int(row["pick_id"])
+        self.shown = (opened, pid)  # what the awaits below draw for, unless it changes
         ring = self.map_pixels[self.map_ids.index(pid)]
         png = views.highlighted(self.map_png, ring)
         self.score_map.set_source(views.data_uri(png, "image/png"))
@@ -266,11 +268,13 @@ class AnalyzeTab:
             trace = opened.trace(pid)
         else:
             trace = await self.simulate_untraced(opened, pid, lines)
-            if trace is None:
+            if trace is None or self.shown != (opened, pid):  # another pick chosen meanwhile
                 return
         await self.show_replay(opened.path / "scene.xml", trace, f_d)
         title = f"pick {pid}: score {fmt(full['score'])}, {full['failure']}"
         png = await run.io_bound(views.force_png, trace, f_d, title)
+        if self.shown != (opened, pid):
+            return
         show_picture(self.force_image, png)
         self.replay_image.set_visibility(False)
         try:
@@ -278,7 +282,8 @@ class AnalyzeTab:
         except RuntimeError as err:  # no offscreen GL here: say so, keep the plot
             self.error.set_text(str(err))
             return
-        show_picture(self.replay_image, gif, "image/gif")
+        if self.shown == (opened, pid):
+            show_picture(self.replay_image, gif, "image/gif")
 
     async def simulate_untraced(self, opened, pid: int, lines: list[str]) -> dict | None:
         """The trace of a pick-point the run did not trace: simulated now (in a worker
@@ -308,9 +313,9 @@ class AnalyzeTab:
         except ConfigError as err:
             self.detail.set_content("\n".join(lines) + note + f"it cannot be simulated here: {err}")
             return None
-        if self.state.run is not opened:  # another run was opened meanwhile
-            return None
         self.simulated[key] = trace
+        if self.state.run is not opened or self.shown != (opened, pid):
+            return None  # another run or pick was chosen meanwhile: it says its own
         self.detail.set_content(
             "\n".join(lines)
             + note
