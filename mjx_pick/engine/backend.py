@@ -47,6 +47,10 @@ class PickInputs(NamedTuple):
     pair_friction: np.ndarray  # (N, npair, 5)
     pair_solref: np.ndarray  # (N, npair, 2)
     pair_solimp: np.ndarray  # (N, npair, 5)
+    # per-simulation model fields, MjModel name -> (N, *field shape) float64: the values
+    # of a gripper variant that shares the backend's compiled program
+    # (``engine.variants``); empty: the backend's own model for every pick
+    model: dict = {}  # noqa: RUF012 (never mutated: replaced whole)
 
     def __len__(self) -> int:
         return len(self.qpos0)
