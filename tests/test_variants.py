@@ -85,6 +85,16 @@ def test_structural_changes_get_a_program_of_their_own(block):
     assert va.varying_fields(base.model, [base.model], va.carried_fields("mjx")) == ()
 
 
+def test_a_variants_name_is_no_structure(block):
+    # design names its variants after their values ("robotiq-2f85~w23.4-..."), and the
+    # model after the gripper: the names' lengths and addresses are no program
+    a = mp.build_scene(block, _gripper())
+    b = mp.build_scene(block, _gripper(name="robotiq-2f85~w38.4-d11.3-s96.5", finger_width_mm=38.4))
+    assert a.model.nnames != b.model.nnames
+    for backend in ("mujoco", "mjx", "warp"):
+        assert va.program_key(a, FAST, backend) == va.program_key(b, FAST, backend)
+
+
 def test_mjx_models_differ_only_in_carried_fields(block):
     # what MJX's put_model derives from a variant's model (its numpy-side fields,
     # static in a program) must not differ: only the carried, traced fields may

@@ -41,9 +41,10 @@ from mjx_pick.engine.backend import PickInputs, addresses, resolve_backend
 
 # per-pick inputs of their own (PickInputs.pair_friction/solref/solimp)
 PAIR_FIELDS = ("pair_friction", "pair_solref", "pair_solimp")
-# bookkeeping of names and text: never read by the physics (a variant's name changes
-# their addresses, not the simulation)
-_NAME_FIELDS = ("names_map", "text_adr", "text_size")
+# bookkeeping of names and paths: never read by the physics (a variant's name -- the
+# model is named after the gripper -- changes their lengths and addresses, not the
+# simulation)
+_NAME_FIELDS = ("names_map", "nnames", "nnames_map", "npaths")
 # the smallest mass MuJoCo and Warp treat as a mass (a value crossing it changes what
 # Warp's model builder derives from it: see program_key)
 _MINVAL = 1e-15
@@ -105,14 +106,12 @@ def program_key(scene: Scene, grasp: GraspConfig, backend: str) -> tuple:
     h = hashlib.sha256()
     sizes = []
     for field in sorted(dir(m)):
-        if field.startswith("_") or field.startswith(("name_", "names", "paths", "text_")):
+        if field.startswith(("_", "name_")) or field in _NAME_FIELDS or field in PAIR_FIELDS:
             continue
         value = getattr(m, field)
         if isinstance(value, int):
             sizes.append((field, value))
         elif isinstance(value, np.ndarray):
-            if field in _NAME_FIELDS or field in PAIR_FIELDS:
-                continue
             h.update(field.encode())
             if field in carried:
                 _digest(h, value != 0)
