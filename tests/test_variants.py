@@ -66,6 +66,20 @@ def test_geometry_variants_keep_the_structure(door_opener, fields, backend):
     assert varying and all(f.startswith(("name_", "names")) for f in rest), rest
 
 
+def test_solver_tolerances_and_impedance_ratio_are_data(block):
+    base = mp.build_scene(block, _gripper())
+    solver = mp.SolverParams(impratio=mp.SolverParams().impratio * 2, tolerance=1e-6)
+    other = mp.build_scene(block, _gripper(), solver=solver)
+    for backend in ("mujoco", "mjx"):
+        assert va.program_key(base, FAST, backend) == va.program_key(other, FAST, backend)
+        fields = va.varying_fields(base.model, [other.model], va.carried_fields(backend))
+        assert fields == ("opt.impratio", "opt.tolerance")
+    # Warp holds the ratio as a derived 1/sqrt: a program per ratio there
+    assert va.program_key(base, FAST, "warp") != va.program_key(other, FAST, "warp")
+    tol = mp.build_scene(block, _gripper(), solver=mp.SolverParams(tolerance=1e-6))
+    assert va.program_key(base, FAST, "warp") == va.program_key(tol, FAST, "warp")
+
+
 def test_structural_changes_get_a_program_of_their_own(block):
     base = mp.build_scene(block, _gripper())
     key = va.program_key(base, FAST, "mjx")
@@ -184,6 +198,27 @@ def test_c_sweep_of_finger_widths_equals_a_scene_per_width(block):
     # the widths do differ: not one model run three times
     scores = [np.asarray(_variant_rows(res.table, v)["score"]) for v in range(3)]
     assert not np.array_equal(scores[0], scores[2])
+
+
+def test_c_sweep_of_solver_options_equals_a_scene_per_value(block):
+    sim = mp.Simulator(block, "mujoco")
+    params = [
+        ParamSpec.parse("solver.impratio=1,10"),
+        ParamSpec.parse("solver.tolerance=1e-8,1e-5"),
+    ]
+    res = mp.sweep(block, params, mp.Settings(grasp=FAST), n=4, simulator=sim)
+    assert len(sim.backends) == 1 and sim.scenes == 4
+    for v, combo in enumerate(res.variants):
+        solver = mp.SolverParams(
+            impratio=combo["solver.impratio"], tolerance=combo["solver.tolerance"]
+        )
+        alone = mp.evaluate(block, n=4, solver=solver, grasp=FAST, backend="mujoco")
+        rows = _variant_rows(res.table, v)
+        for c in ("success", "score", "phi_max_deg", "slip_mm", "max_force_left_n", "t_reached_s"):
+            assert np.array_equal(np.asarray(rows[c]), np.asarray(alone.table[c])), (combo, c)
+    # the options do change the physics: not one model run four times
+    slips = {tuple(np.asarray(_variant_rows(res.table, v)["slip_mm"])) for v in range(4)}
+    assert len(slips) > 1
 
 
 def test_c_backend_restores_fields_a_later_chunk_does_not_carry(block):

@@ -27,6 +27,7 @@ import numpy as np
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine.backend import PickInputs, RunStats, addresses
+from mjx_pick.engine.variants import model_value
 from mjx_pick.kernels import grasp as gk
 
 
@@ -92,7 +93,7 @@ class MujocoBackend:
         an earlier chunk and this one does not carry goes back to the scene's values."""
         done = self._expanded.setdefault(id(b), set())
         for name in done - set(fields):
-            b.expand(name)[:] = getattr(self.scene.model, name)
+            b.expand(name)[:] = model_value(self.scene.model, name)
         for name, values in fields.items():
             b.expand(name)[:] = values
             done.add(name)

@@ -130,8 +130,16 @@ def _pick_model(phys: Physics, pair_friction, pair_solref, pair_solimp, model):
     """One pick's mjx.Model: the compiled one with this pick's contact-pair parameters
     and model fields (model: MjModel field name -> this pick's values, a gripper
     variant's; ``engine.variants``), each in the device model's dtype."""
-    fields = {k: jnp.asarray(v, getattr(phys.model, k).dtype) for k, v in (model or {}).items()}
-    return phys.model.replace(
+    m = phys.model
+    fields, options = {}, {}
+    for k, v in (model or {}).items():
+        if k.startswith("opt."):  # a solver option (engine.variants.OPT_FIELDS)
+            options[k[4:]] = jnp.asarray(v, getattr(m.opt, k[4:]).dtype)
+        else:
+            fields[k] = jnp.asarray(v, getattr(m, k).dtype)
+    if options:
+        m = m.replace(opt=m.opt.replace(**options))
+    return m.replace(
         pair_friction=pair_friction, pair_solref=pair_solref, pair_solimp=pair_solimp, **fields
     )
 

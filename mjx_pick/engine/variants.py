@@ -22,8 +22,12 @@ Which fields a backend can take per simulation (:func:`carried_fields`): float f
 ``MjModel`` that ``mujoco.batch`` can expand and that MJX keeps as traced arrays (a
 field MJX holds as numpy is read while tracing and baked into the program); on Warp,
 also only those its model holds per world (``mjx.warp.types._BATCH_DIM``), or that it
-does not read at all. The contact-pair fields are left out: they are already per-pick
-inputs (``PickInputs.pair_*``, from each variant's own scene).
+does not read at all. Solver values that are model options are carried the same way,
+named ``opt.<field>`` (:data:`OPT_FIELDS`: the solver's tolerances and, except on Warp,
+the impedance ratio -- Warp's model holds it as a derived ``impratio_invsqrt`` that the
+MJX model's ``opt.impratio`` does not reach, so impedance-ratio variants get a program
+each there). The contact-pair fields are left out: they are already per-pick inputs
+(``PickInputs.pair_*``, from each variant's own scene).
 """
 
 from __future__ import annotations
@@ -39,6 +43,9 @@ from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine.backend import PickInputs, addresses, resolve_backend
 
+# solver options a backend may take per simulation (MjOption fields, as mujoco.batch
+# names them): traced arrays in MJX's Option, expandable in a batch
+OPT_FIELDS = ("opt.impratio", "opt.tolerance", "opt.ls_tolerance")
 # per-pick inputs of their own (PickInputs.pair_friction/solref/solimp)
 PAIR_FIELDS = ("pair_friction", "pair_solref", "pair_solimp")
 # bookkeeping of names and paths: never read by the physics (a variant's name -- the
@@ -73,14 +80,27 @@ def carried_fields(backend: str) -> frozenset[str]:
         # a field MJX holds as numpy is static in its programs; one it lacks is unread
         if field in hints and hints[field] is not np.ndarray:
             out.add(field)
+    out.update(f for f in OPT_FIELDS if f in mujoco.batch.MODEL_FIELDS)
     if name == "warp":
         from mujoco.mjx.warp import types as mjxw_types
 
         # fields Warp's model holds once for all worlds would be read from the first
         # variant only; fields it does not hold at all are not read by Warp
         per_world = mjxw_types._BATCH_DIM["Model"]
-        out = {f for f in out if per_world.get(f, True)}
+        options = mjxw_types._BATCH_DIM["Option"]
+        out = {
+            f
+            for f in out
+            if (options.get(f[4:], False) if f.startswith("opt.") else per_world.get(f, True))
+        }
     return frozenset(out)
+
+
+def model_value(model: mujoco.MjModel, name: str) -> np.ndarray:
+    """A model field's values by its batch name: an MjModel array, or ``opt.<field>``."""
+    if name.startswith("opt."):
+        return np.asarray(getattr(model.opt, name[4:]))
+    return getattr(model, name)
 
 
 def _digest(h, value) -> None:
@@ -122,7 +142,8 @@ def program_key(scene: Scene, grasp: GraspConfig, backend: str) -> tuple:
         value = getattr(m.opt, field)
         if not field.startswith("_") and isinstance(value, int | float | np.ndarray):
             h.update(field.encode())
-            _digest(h, np.asarray(value))
+            value = np.asarray(value)
+            _digest(h, value != 0 if f"opt.{field}" in carried else value)
     if name == "mujoco":
         _digest(h, np.float64(m.stat.meaninertia))
     return (
@@ -140,7 +161,7 @@ def varying_fields(base: mujoco.MjModel, models, carried: frozenset[str]) -> tup
         sorted(
             f
             for f in carried
-            if any(not np.array_equal(getattr(base, f), getattr(m, f)) for m in models)
+            if any(not np.array_equal(model_value(base, f), model_value(m, f)) for m in models)
         )
     )
 
@@ -150,7 +171,8 @@ def with_model_fields(inputs: PickInputs, model: mujoco.MjModel, names) -> PickI
     ``inputs.model[name]`` (N, *field shape), float64 as MuJoCo holds them (MJX and
     Warp cast to their float32 on the device)."""
     n = len(inputs)
-    fields = {
-        f: np.broadcast_to(getattr(model, f), (n, *getattr(model, f).shape)).copy() for f in names
-    }
+    fields = {}
+    for f in names:
+        value = model_value(model, f)
+        fields[f] = np.broadcast_to(value, (n, *value.shape)).astype(np.float64)
     return inputs.replace(model=fields)
