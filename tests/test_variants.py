@@ -158,6 +158,12 @@ def test_warp_models_differ_only_in_carried_fields(block):
     }
     differ = {d for d in differ if not d.startswith("stat")}  # unread by the physics
     assert differ and differ <= carried | set(va.PAIR_FIELDS), differ - carried
+    # Warp's model holds MuJoCo's values, reshaped row-major (what the rollout does with
+    # a pick's carried values), never transformed
+    for f in differ - set(va.PAIR_FIELDS):
+        leaf = np.asarray(getattr(mb, f))
+        mine = np.asarray(va.model_value(b.model, f), np.float32).reshape(leaf.shape)
+        np.testing.assert_array_equal(leaf, mine, err_msg=f)
 
 
 def backend_fields(backend) -> tuple:
@@ -271,3 +277,35 @@ def test_mjx_sweep_of_finger_widths_compiles_once_and_agrees_per_scene(block):
         rows = _variant_rows(res.table, v)
         assert np.array_equal(np.asarray(rows["success"]), alone["success"]), v
         assert np.allclose(np.asarray(rows["score"]), alone["score"], atol=0.02), v
+
+
+@pytest.mark.mjx
+def test_warp_sweep_of_finger_widths_compiles_once_and_agrees_per_scene(door_opener):
+    # GPU machine: JAX_PLATFORMS=cuda,cpu (benchmarks/gpu_round.sh variants)
+    from mjx_pick.engine.devices import warp_problem
+
+    if warp_problem():
+        pytest.skip(f"MuJoCo Warp cannot run here: {warp_problem()}")
+    n = 256
+    sim = mp.Simulator(door_opener, "warp")
+    spec = ParamSpec.parse("gripper.finger_width_mm=" + ",".join(f"{w:g}" for w in WIDTHS))
+    res = mp.sweep(door_opener, [spec], mp.Settings(grasp=FAST), n=n, simulator=sim)
+    (backend,) = sim.backends
+    # one pool program per GPU (re-made only if Warp's buffers had to grow)
+    for part in getattr(backend, "parts", [backend]):
+        assert len(part._compiled) == 1, list(part._compiled)
+    assert res.timing["programs"] == 1 and res.timing["scenes"] == 3
+    c = mp.sweep(door_opener, [spec], mp.Settings(grasp=FAST), n=n, backend="mujoco")
+    for v, w in enumerate(WIDTHS):
+        alone = mp.evaluate(
+            door_opener, _gripper(finger_width_mm=w), n=n, grasp=FAST, backend="warp"
+        )
+        rows = _variant_rows(res.table, v)
+        same = np.mean(np.asarray(rows["success"]) == np.asarray(alone.table["success"]))
+        # the same program but for the batched fields: labels as per scene (a pick on
+        # a knife's edge may flip with the float32 rounding of a batched field)
+        assert same >= 0.99, (w, same)
+        engines = np.mean(
+            np.asarray(rows["success"]) == np.asarray(_variant_rows(c.table, v)["success"])
+        )
+        assert engines >= 0.95, (w, engines)

@@ -136,7 +136,11 @@ def _pick_model(phys: Physics, pair_friction, pair_solref, pair_solimp, model):
         if k.startswith("opt."):  # a solver option (engine.variants.OPT_FIELDS)
             options[k[4:]] = jnp.asarray(v, getattr(m.opt, k[4:]).dtype)
         else:
-            fields[k] = jnp.asarray(v, getattr(m, k).dtype)
+            # MuJoCo's layout in the device model's shape: Warp's model holds some
+            # fields in its own shape (geom_aabb (ngeom, 2, 3) for MuJoCo's (ngeom, 6)),
+            # filled from MuJoCo's array in row-major order
+            like = getattr(m, k)
+            fields[k] = jnp.reshape(jnp.asarray(v, like.dtype), like.shape)
     if options:
         m = m.replace(opt=m.opt.replace(**options))
     return m.replace(
