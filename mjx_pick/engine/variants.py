@@ -19,15 +19,16 @@ compile time (body inertia from geom sizes, ``geom_rbound``/``geom_aabb``,
 ``body_subtreemass``, ``actuator_acc0``, ``dof_invweight0``, ...) are each variant's.
 
 Which fields a backend can take per simulation (:func:`carried_fields`): float fields of
-``MjModel`` that ``mujoco.batch`` can expand and that MJX keeps as traced arrays (a
-field MJX holds as numpy is read while tracing and baked into the program); on Warp,
-also only those its model holds per world (``mjx.warp.types._BATCH_DIM``), or that it
-does not read at all. Solver values that are model options are carried the same way,
-named ``opt.<field>`` (:data:`OPT_FIELDS`: the solver's tolerances and, except on Warp,
-the impedance ratio -- Warp's model holds it as a derived ``impratio_invsqrt`` that the
-MJX model's ``opt.impratio`` does not reach, so impedance-ratio variants get a program
-each there). The contact-pair fields are left out: they are already per-pick inputs
-(``PickInputs.pair_*``, from each variant's own scene).
+``MjModel`` that ``mujoco.batch`` can expand (the C engine: all of them); on MJX only
+those it keeps as traced arrays (a field MJX holds as numpy is read while tracing and
+baked into the program); on Warp, also only those its model holds per world
+(``mjx.warp.types._BATCH_DIM``), or that it does not read at all. Solver values that
+are model options are carried the same way, named ``opt.<field>`` (:data:`OPT_FIELDS`:
+the solver's tolerances and, except on Warp, the impedance ratio -- Warp's model holds
+it as a derived ``impratio_invsqrt`` that the MJX model's ``opt.impratio`` does not
+reach, so impedance-ratio variants get a program each there). The contact-pair fields
+are left out: they are already per-pick inputs (``PickInputs.pair_*``, from each
+variant's own scene).
 """
 
 from __future__ import annotations
@@ -65,22 +66,26 @@ def carried_fields(backend: str) -> frozenset[str]:
     C engine's batch can expand, what MJX traces, and (Warp) what Warp keeps per world.
     """
     import mujoco.batch
-    from mujoco import mjx
 
     name = resolve_backend(backend)
-    hints = typing.get_type_hints(mjx.Model)
     probe = mujoco.MjModel.from_xml_string("<mujoco/>")
     out = set()
     for field in mujoco.batch.MODEL_FIELDS:
         if field.startswith("opt.") or field in PAIR_FIELDS:
             continue
         template = getattr(probe, field, None)
-        if not isinstance(template, np.ndarray) or template.dtype.kind != "f":
-            continue
-        # a field MJX holds as numpy is static in its programs; one it lacks is unread
-        if field in hints and hints[field] is not np.ndarray:
+        if isinstance(template, np.ndarray) and template.dtype.kind == "f":
             out.add(field)
     out.update(f for f in OPT_FIELDS if f in mujoco.batch.MODEL_FIELDS)
+    if name == "mujoco":
+        # the C engine takes any of them; MJX is not imported for it (seconds of a
+        # C run's start)
+        return frozenset(out)
+    from mujoco import mjx
+
+    # a field MJX holds as numpy is static in its programs; one it lacks is unread
+    hints = typing.get_type_hints(mjx.Model)
+    out = {f for f in out if f.startswith("opt.") or (f in hints and hints[f] is not np.ndarray)}
     if name == "warp":
         from mujoco.mjx.warp import types as mjxw_types
 
