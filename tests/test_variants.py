@@ -266,17 +266,57 @@ def test_mjx_sweep_of_finger_widths_compiles_once_and_agrees_per_scene(block):
     assert len(backend._compiled) == 1 and len(sim.backends) == 1
     assert backend.stats.compile_s == compiled_s
     # per scene, the width farthest from the backend's own scene (the first, 12 mm):
-    # one compile more, the same pick-points
-    for v in (2,):
-        g = _gripper(finger_width_mm=WIDTHS[v])
-        scene = mp.build_scene(block, g)
-        picks = pp.generate_normal(block, g, 2, 0, grasp=TINY)
-        alone, _ = make_backend("mjx", scene, TINY, batch_size=8).run(
-            make_inputs(scene, TINY, picks)
-        )
-        rows = _variant_rows(res.table, v)
-        assert np.array_equal(np.asarray(rows["success"]), alone["success"]), v
-        assert np.allclose(np.asarray(rows["score"]), alone["score"], atol=0.02), v
+    # one compile more, the same pick-points. Labels agree here (2 of 2 measured); a
+    # pad slamming into the block is chaotic in float32 -- the same program at another
+    # batch size moves the block's attitude by 4e-4 within 4 steps -- so another CPU's
+    # rounding may flip one (the physics itself is checked step by step below)
+    v = 2
+    g = _gripper(finger_width_mm=WIDTHS[v])
+    scene = mp.build_scene(block, g)
+    picks = pp.generate_normal(block, g, 2, 0, grasp=TINY)
+    alone, _ = make_backend("mjx", scene, TINY, batch_size=8).run(make_inputs(scene, TINY, picks))
+    rows = _variant_rows(res.table, v)
+    assert np.mean(np.asarray(rows["success"]) == alone["success"]) >= 0.5
+    assert not np.asarray(rows["diverged"]).any()
+
+
+@pytest.mark.mjx
+def test_mjx_steps_of_a_carried_variant_equal_its_own_scene(block):
+    # the physics of a variant carried as batched model fields is its own scene's: the
+    # first physics steps agree to float32 rounding (before any chaos can grow)
+    from mujoco import mjx
+
+    from mjx_pick.core import pickpoints as pp
+    from mjx_pick.engine.backend import make_inputs
+    from mjx_pick.engine.mjx_backend import _pick_model, jax_physics
+
+    narrow = mp.build_scene(block, _gripper(finger_width_mm=12.0))
+    wide = mp.build_scene(block, _gripper(finger_width_mm=30.0, pad_height_mm=30.0))
+    picks = pp.generate_normal(block, wide.gripper, 4, 0, grasp=TINY)
+    inputs = make_inputs(wide, TINY, picks)
+    names = va.varying_fields(narrow.model, [wide.model], va.carried_fields("mjx"))
+    carried = {
+        k: np.asarray(v, np.float32)
+        for k, v in va.with_model_fields(inputs, wide.model, names).model.items()
+    }
+
+    def steps(phys, qpos0, pf, ps, pi, model):
+        m = _pick_model(phys, pf, ps, pi, model)
+        d = phys.data0.replace(qpos=qpos0)
+        for _ in range(3):
+            d = mjx.step(m, d)
+        return d.qpos, d.qvel, d._impl.cfrc_ext, d.geom_xpos, d.qacc
+
+    pairs = (inputs.pair_friction, inputs.pair_solref, inputs.pair_solimp)
+    own = jax.jit(jax.vmap(lambda *a: steps(jax_physics(wide), *a)))(inputs.qpos0, *pairs, {})
+    shared = jax.jit(jax.vmap(lambda *a: steps(jax_physics(narrow), *a)))(
+        inputs.qpos0, *pairs, carried
+    )
+    for x, y in zip(own, shared, strict=True):
+        np.testing.assert_allclose(np.asarray(y), np.asarray(x), rtol=1e-5, atol=1e-6)
+    # and the narrow scene's own geometry (its taller pads sit elsewhere) is not the wide one's
+    plain = jax.jit(jax.vmap(lambda *a: steps(jax_physics(narrow), *a)))(inputs.qpos0, *pairs, {})
+    assert not np.allclose(np.asarray(plain[3]), np.asarray(own[3]), rtol=1e-5, atol=1e-6)
 
 
 @pytest.mark.mjx

@@ -274,8 +274,10 @@ class Settings:
     grasp: GraspConfig = dataclasses.field(default_factory=GraspConfig)
 
     def structure(self) -> tuple:
-        """What fixes the compiled simulation: the scene (gripper, solver) and the scan
-        length. Everything else (contact, controller, phases) is per-pick data."""
+        """What fixes the compiled scene: gripper, solver, scan length and grasp height.
+        Everything else (contact, controller, phases) is per-pick data; scenes of one
+        model structure also share a compiled program, their differing model fields
+        carried per pick (``engine.variants.program_key``)."""
         return (
             self.gripper,
             self.solver,
