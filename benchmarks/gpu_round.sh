@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|frontier|stable|real|grid
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|frontier|stable|real|grid|variants|variants_sweep
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -42,6 +42,14 @@ case "$1" in
   real)  # six YCB parts, Warp against C on the same pick-points
     python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp \
       --out "$out/real_objects_h100.json" ;;
+  variants)  # gripper variants as data on Warp, the tests: Warp's model differs only in
+    # carried fields, a sweep of 3 widths compiles once and agrees per scene and with C
+    JAX_PLATFORMS=cuda,cpu python -m pytest -o addopts="" -o filterwarnings=ignore -q -s \
+      tests/test_variants.py 2>&1 | tee "$out/test_variants_warp.log" || true
+    python benchmarks/variant_programs.py --object door_opener > "$out/variant_programs.json" ;;
+  variants_sweep)  # time to answer, a sweep of 8 finger widths x 512 on Warp (one compile)
+    python benchmarks/time_to_answer.py --backend warp --cases sweep --n-sweep 512 \
+      --out "$out/time_to_answer_sweep_h100.json" ;;
   grid)  # the preset Coulomb grid on Warp
     python benchmarks/preset_coulomb.py --backend warp --out "$out/preset_coulomb_warp.json" ;;
 esac

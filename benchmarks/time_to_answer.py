@@ -46,8 +46,13 @@ def run(cmd: list[str], env: dict) -> dict:
 
 
 def breakdown(out: Path) -> dict | None:
+    """evaluate's fixed-cost breakdown (summary.json), or a sweep's timing (config.json:
+    compile and run seconds, scenes built, compiled programs)."""
     f = out / "summary.json"
-    return json.loads(f.read_text()).get("time_s") if f.is_file() else None
+    if f.is_file():
+        return json.loads(f.read_text()).get("time_s")
+    f = out / "config.json"
+    return json.loads(f.read_text()).get("timing") if f.is_file() else None
 
 
 def main() -> None:

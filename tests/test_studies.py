@@ -77,7 +77,8 @@ def test_sweep_success_rises_with_pad_friction(heavy_block, tmp_path):
     assert json.loads((tmp_path / "variants.json").read_text())[3]["n"] == 8
 
 
-def test_sweep_of_gripper_geometry_builds_a_scene_per_value(block):
+def test_sweep_of_gripper_geometry_shares_one_program(block):
+    # a scene per width, one backend: the widths' model fields ride with the pick-points
     sim = mp.Simulator(block, "mujoco")
     res = mp.sweep(
         block,
@@ -86,7 +87,8 @@ def test_sweep_of_gripper_geometry_builds_a_scene_per_value(block):
         n=4,
         simulator=sim,
     )
-    assert len(res.variants) == 4 and len(sim.backends) == 2
+    assert len(res.variants) == 4 and len(sim.backends) == 1 and sim.scenes == 2
+    assert res.timing["programs"] == 1 and res.timing["scenes"] == 2
     assert res.table.num_rows == 16
 
 

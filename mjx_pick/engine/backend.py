@@ -47,6 +47,10 @@ class PickInputs(NamedTuple):
     pair_friction: np.ndarray  # (N, npair, 5)
     pair_solref: np.ndarray  # (N, npair, 2)
     pair_solimp: np.ndarray  # (N, npair, 5)
+    # per-simulation model fields, MjModel name -> (N, *field shape) float64: the values
+    # of a gripper variant that shares the backend's compiled program
+    # (``engine.variants``); empty: the backend's own model for every pick
+    model: dict = {}  # noqa: RUF012 (never mutated: replaced whole)
 
     def __len__(self) -> int:
         return len(self.qpos0)
@@ -304,8 +308,10 @@ class Settings:
     grasp: GraspConfig = dataclasses.field(default_factory=GraspConfig)
 
     def structure(self) -> tuple:
-        """What fixes the compiled simulation: the scene (gripper, solver) and the scan
-        length. Everything else (contact, controller, phases) is per-pick data."""
+        """What fixes the compiled scene: gripper, solver, scan length and grasp height.
+        Everything else (contact, controller, phases) is per-pick data; scenes of one
+        model structure also share a compiled program, their differing model fields
+        carried per pick (``engine.variants.program_key``)."""
         return (
             self.gripper,
             self.solver,

@@ -27,6 +27,7 @@ import numpy as np
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine.backend import PickInputs, RunStats, addresses
+from mjx_pick.engine.variants import model_value
 from mjx_pick.kernels import grasp as gk
 
 
@@ -89,6 +90,7 @@ class MujocoBackend:
         self.ad = addresses(scene)
         self._cpu = jax.devices("cpu")[0]
         self._batches: dict[int, mujoco.batch.Batch] = {}
+        self._expanded: dict[int, set[str]] = {}  # id(batch) -> model fields it expanded
 
     def _batch(self, n: int) -> mujoco.batch.Batch:
         if n not in self._batches:
@@ -96,6 +98,17 @@ class MujocoBackend:
             model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
             self._batches[n] = mujoco.batch.Batch(model, nsim=n, nthread=self.nthread)
         return self._batches[n]
+
+    def _set_model_fields(self, b: mujoco.batch.Batch, fields: dict) -> None:
+        """Each simulation's model fields (a gripper variant's: ``engine.variants``):
+        fields maps an MjModel field to (n, *shape) values. A field a batch expanded for
+        an earlier chunk and this one does not carry goes back to the scene's values."""
+        done = self._expanded.setdefault(id(b), set())
+        for name in done - set(fields):
+            b.expand(name)[:] = model_value(self.scene.model, name)
+        for name, values in fields.items():
+            b.expand(name)[:] = values
+            done.add(name)
 
     def run(self, inputs: PickInputs, record: bool = False):
         """Simulate all inputs; returns (results dict of (N,) arrays, traces (N, T, F) or None)."""
@@ -122,6 +135,7 @@ class MujocoBackend:
         b.expand("pair_friction")[:] = inputs.pair_friction
         b.expand("pair_solref")[:] = inputs.pair_solref
         b.expand("pair_solimp")[:] = inputs.pair_solimp
+        self._set_model_fields(b, inputs.model)
         qpos, qvel, ctrl = b.bind("qpos"), b.bind("qvel"), b.bind("ctrl")
         cfrc, sim_time = b.bind("cfrc_ext"), b.bind("time")
         qpos[:] = inputs.qpos0

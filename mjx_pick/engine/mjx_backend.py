@@ -126,13 +126,40 @@ def _physics_steps(phys: Physics, m, d, diag: Diagnostics, n_sub: int):
     return d, diag
 
 
+def _pick_model(phys: Physics, pair_friction, pair_solref, pair_solimp, model):
+    """One pick's mjx.Model: the compiled one with this pick's contact-pair parameters
+    and model fields (model: MjModel field name -> this pick's values, a gripper
+    variant's; ``engine.variants``), each in the device model's dtype."""
+    m = phys.model
+    fields, options = {}, {}
+    for k, v in (model or {}).items():
+        if k.startswith("opt."):  # a solver option (engine.variants.OPT_FIELDS)
+            options[k[4:]] = jnp.asarray(v, getattr(m.opt, k[4:]).dtype)
+        else:
+            # MuJoCo's layout in the device model's shape: Warp's model holds some
+            # fields in its own shape (geom_aabb (ngeom, 2, 3) for MuJoCo's (ngeom, 6)),
+            # filled from MuJoCo's array in row-major order
+            like = getattr(m, k)
+            fields[k] = jnp.reshape(jnp.asarray(v, like.dtype), like.shape)
+    if options:
+        m = m.replace(opt=m.opt.replace(**options))
+    return m.replace(
+        pair_friction=pair_friction, pair_solref=pair_solref, pair_solimp=pair_solimp, **fields
+    )
+
+
 def _initial(
-    phys: Physics, ad: gk.Addresses, qpos0, params, pair_friction, pair_solref, pair_solimp
+    phys: Physics,
+    ad: gk.Addresses,
+    qpos0,
+    params,
+    pair_friction,
+    pair_solref,
+    pair_solimp,
+    model=None,
 ):
     """One pick's model, data (after mj_forward), control state and accumulators."""
-    m = phys.model.replace(
-        pair_friction=pair_friction, pair_solref=pair_solref, pair_solimp=pair_solimp
-    )
+    m = _pick_model(phys, pair_friction, pair_solref, pair_solimp, model)
     s, a = gk.initial(ad, qpos0)
     d = phys.data0.replace(qpos=qpos0, ctrl=gk.command(ad, s, qpos0))
     d = mjx.forward(m, d)
@@ -148,9 +175,11 @@ def make_rollout(
     phys: Physics | None = None,
     diagnostics: bool = False,
 ):
-    """The batched rollout: (qpos0, params, friction, solref, solimp) -> (results,
-    traces), or (results, traces, Diagnostics) with diagnostics, jitted. Every pick
-    runs all ``grasp.n_ticks()`` ticks; traces are None unless record.
+    """The batched rollout: (qpos0, params, friction, solref, solimp[, model]) ->
+    (results, traces), or (results, traces, Diagnostics) with diagnostics, jitted. Every
+    pick runs all ``grasp.n_ticks()`` ticks; traces are None unless record. model: per-pick
+    model fields (``PickInputs.model``: name -> (N, ...)), batched mjx.Model fields of
+    the one program; left out, every pick runs the scene's model.
 
     mesh: with several devices, each runs its slice of the batch as its own program
     (``shard_map``). Left to the SPMD partitioner, the vmapped constraint solver's
@@ -165,9 +194,9 @@ def make_rollout(
     n_ticks = grasp.n_ticks()
     o = ad.object_qpos
 
-    def rollout_one(qpos0, params, pair_friction, pair_solref, pair_solimp):
+    def rollout_one(qpos0, params, pair_friction, pair_solref, pair_solimp, model=None):
         m, d, s, a, diag = _initial(
-            phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp
+            phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp, model
         )
         pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
 
@@ -203,6 +232,7 @@ class Slot(NamedTuple):
     pair_friction: jax.Array  # (npair, 5)
     pair_solref: jax.Array  # (npair, 2)
     pair_solimp: jax.Array  # (npair, 5)
+    model: dict  # the pick's model fields (PickInputs.model), name -> (...)
     params: gk.GraspParams
     s: gk.ControlState
     a: gk.Accumulators
@@ -250,8 +280,9 @@ def make_pool(
     shrink_min_slots: int = 1,
 ):
     """A refilled pool of `slots` simulations as ONE jitted program:
-    (valid, qpos0, params, friction, solref, solimp) -> (results, ticks, Diagnostics,
-    rounds).
+    (valid, qpos0, params, friction, solref, solimp, model) -> (results, ticks,
+    Diagnostics, rounds); model: per-pick model fields as in make_rollout (a dict,
+    possibly empty).
 
     The inputs hold N pick-points (valid (N,) bool: False for padding, which comes
     last). Every slot starts a pick; then, in a ``lax.while_loop`` until every pick has
@@ -296,12 +327,12 @@ def make_pool(
         axes = _slot_axes(phys)
         d_tree = jax.tree.structure(phys.data0)
 
-        def start(qpos0, params, pair_friction, pair_solref, pair_solimp) -> Slot:
+        def start(qpos0, params, pair_friction, pair_solref, pair_solimp, model) -> Slot:
             _, d, s, a, diag = _initial(
-                phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp
+                phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp, model
             )
             pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
-            args = (pair_friction, pair_solref, pair_solimp, params, s, a, pos0, quat0)
+            args = (pair_friction, pair_solref, pair_solimp, model, params, s, a, pos0, quat0)
             return Slot(tuple(d_tree.flatten_up_to(d)), *args, jnp.int32(0), diag)
 
         def advance_one(slot: Slot, fresh, *inputs):
@@ -312,10 +343,8 @@ def make_pool(
                 lambda n, c: jnp.where(fresh, n, c), new._replace(d=None), slot._replace(d=None)
             )
             slot = rest._replace(d=d)
-            m = phys.model.replace(
-                pair_friction=slot.pair_friction,
-                pair_solref=slot.pair_solref,
-                pair_solimp=slot.pair_solimp,
+            m = _pick_model(
+                phys, slot.pair_friction, slot.pair_solref, slot.pair_solimp, slot.model
             )
 
             def control_period(slot: Slot, _):
@@ -345,7 +374,7 @@ def make_pool(
             slot = slot._replace(d=tuple(d_tree.flatten_up_to(slot.d)))
             return slot, gk.finalize(slot.params, slot.a), done(slot), slot.k, slot.diag
 
-        advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 6, out_axes=(axes, 0, 0, 0, 0))
+        advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 7, out_axes=(axes, 0, 0, 0, 0))
         return jax.vmap(start, out_axes=axes), advance, axes
 
     physes = [phys] + [physics_for(size) for size in sizes[1:]]
@@ -424,6 +453,20 @@ def make_pool(
         return out, ticks, diag, jnp.stack(rounds)
 
     return jax.jit(_precise(_shard(run_queue, mesh)))
+
+
+def _single(inputs: PickInputs) -> PickInputs:
+    """inputs with their model fields in float32, as the device model holds them (MuJoCo's
+    float64 values, rounded once on the host)."""
+    if not inputs.model:
+        return inputs
+    return inputs.replace(model={k: np.asarray(v, np.float32) for k, v in inputs.model.items()})
+
+
+def _fields_key(args) -> tuple:
+    """The per-pick model fields of a call's inputs (PickInputs order), names and
+    shapes: one compiled program per set."""
+    return tuple((k, tuple(v.shape[1:])) for k, v in sorted(args[5].items()))
 
 
 @dataclasses.dataclass
@@ -508,7 +551,7 @@ class MjxBackend:
 
     # --- full-length batches
     def _compiled_for(self, args, record: bool):
-        key = ("rollout", len(args[0]), record)
+        key = ("rollout", len(args[0]), record, _fields_key(args))
         if key not in self._compiled:
             t0 = time.perf_counter()
             per_device = len(args[0]) // len(self.devices)
@@ -537,6 +580,7 @@ class MjxBackend:
         return merged, traces
 
     def _run_batches(self, inputs: PickInputs, record: bool):
+        inputs = _single(inputs)
         n = len(inputs)
         n_dev = len(self.devices)
         size = self.batch_size
@@ -568,7 +612,7 @@ class MjxBackend:
 
     def _pool_fn(self, size: int, args):
         """The compiled pool program for `size` slots and these inputs' shapes."""
-        key = ("pool", size, len(args[0]))
+        key = ("pool", size, len(args[0]), _fields_key(args[1:]))
         if key not in self._compiled:
             t0 = time.perf_counter()
             fn = make_pool(
@@ -588,6 +632,7 @@ class MjxBackend:
     def _run_pool(self, inputs: PickInputs):
         """Every pick through a pool of slots refilled as picks end, in one device call;
         (results, Diagnostics) in pick-point order."""
+        inputs = _single(inputs)
         n = len(inputs)
         size = self.pool_size(n)
         # the queue is padded to a whole number of pools: runs of similar size (the

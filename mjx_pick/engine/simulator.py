@@ -1,10 +1,12 @@
 """The study-facing simulator: what sweep, compare, design, robustness, minimum force
 and calibration run their (settings, pick-points) jobs through.
 
-A :class:`Simulator` groups jobs whose settings share a scene structure into one batch
-of per-pick parameters and runs it on the runner (:class:`~mjx_pick.engine.runner.Engine`,
-or a Ray cluster's ``cluster.RayEngine``); it caches scenes and backends so a loop that
-runs again compiles nothing new. :func:`marking_stops` and :func:`showing_progress` are
+A :class:`Simulator` groups jobs whose scenes share one compiled program
+(``engine.variants``: the same model structure, a gripper variant's numbers carried per
+pick-point as model fields) into one batch of per-pick parameters and runs it on the
+runner (:class:`~mjx_pick.engine.runner.Engine`, or a Ray cluster's
+``cluster.RayEngine``); it caches scenes and backends so a loop that runs again
+compiles nothing new. :func:`marking_stops` and :func:`showing_progress` are
 the pieces every study wraps its runs in; :func:`differentiable_rollout` is the one path
 that does not go through the runner (it says why).
 """
@@ -25,6 +27,12 @@ from mjx_pick.core.scene import Scene, build_scene
 from mjx_pick.engine import interrupts
 from mjx_pick.engine.backend import Backend, Settings, make_inputs
 from mjx_pick.engine.runner import Cancelled, ChunkStore, Engine, ProgressFn
+from mjx_pick.engine.variants import (
+    carried_fields,
+    program_key,
+    varying_fields,
+    with_model_fields,
+)
 from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.rundir import finish
 
@@ -66,10 +74,15 @@ def showing_progress(
 class Simulator:
     """Runs (Settings, PickBatch) jobs for one object, batching what can share a program.
 
-    Jobs whose settings share a structure (``Settings.structure``) run as ONE batch of
-    pick-points x variants with per-pick parameters -- one compile, one engine run
-    (chunked by the engine). Scenes and backends are cached, so a loop that calls
-    ``run`` again (a bisection, an optimiser) compiles nothing new.
+    Every job's scene is compiled (once per ``Settings.structure``); jobs whose scenes
+    share a program (``variants.program_key``: contact and controller settings always;
+    gripper variants of one model structure -- finger width, pad height, stroke,
+    masses, force limit -- with their differing model fields carried per pick-point)
+    run as ONE batch of pick-points x variants on one backend -- one compile, one engine
+    run (chunked by the engine). A job whose model has another structure (another
+    collision mesh, solver option or scan length) gets a backend of its own. Scenes and
+    backends are cached, so a loop that calls ``run`` again (a bisection, an optimiser,
+    a design search's rounds) compiles nothing new.
 
     Args:
       obj: the object every job simulates.
@@ -99,7 +112,12 @@ class Simulator:
         self.engine = engine or Engine(backend, batch_size, on_progress=on_progress)
         self.backend_name = self.engine.backend_name
         self.batch_size = self.engine.batch_size
-        self._backends: dict[tuple, Backend] = {}
+        self._scenes: dict[tuple, Scene] = {}  # Settings.structure() -> its scene
+        self._keys: dict[tuple, tuple] = {}  # Settings.structure() -> program_key
+        self._backends: dict[tuple, Backend] = {}  # program_key -> backend
+        # program_key -> the model fields its runs carry so far: a set that only grows,
+        # so that later runs (a design search's rounds) call the same compiled program
+        self._carried: dict[tuple, tuple[str, ...]] = {}
         self.rollouts = 0  # pick-point simulations run so far
 
     def close(self) -> None:
@@ -108,21 +126,42 @@ class Simulator:
 
     @property
     def backends(self) -> list[Backend]:
-        """The backends built so far: one per scene structure (one compile each on MJX)."""
+        """The backends built so far: one per program (one compile each on MJX/Warp)."""
         return list(self._backends.values())
 
+    @property
+    def scenes(self) -> int:
+        """Scenes compiled so far (one per gripper, solver and grasp height seen)."""
+        return len(self._scenes)
+
     def adopt(self, settings: Settings, backend: Backend) -> None:
-        """Reuse a backend built elsewhere for settings' structure (no new compile)."""
-        self._backends[settings.structure()] = backend
+        """Reuse a backend built elsewhere for settings' scene (no new compile)."""
+        self._scenes[settings.structure()] = backend.scene
+        self._backends[self._program(settings)] = backend
         self.engine.adopt(backend)
 
-    def backend(self, settings: Settings) -> Backend:
+    def scene(self, settings: Settings) -> Scene:
+        """settings' own compiled scene (cached by ``Settings.structure``)."""
         key = settings.structure()
-        if key not in self._backends:
-            scene = build_scene(
+        if key not in self._scenes:
+            self._scenes[key] = build_scene(
                 self.object, settings.gripper, settings.contact, settings.solver, settings.grasp
             )
-            self._backends[key] = self.engine.make(scene, settings.grasp)
+        return self._scenes[key]
+
+    def _program(self, settings: Settings) -> tuple:
+        key = settings.structure()
+        if key not in self._keys:
+            name = self.engine.backend_name
+            self._keys[key] = program_key(self.scene(settings), settings.grasp, name)
+        return self._keys[key]
+
+    def backend(self, settings: Settings) -> Backend:
+        """The backend settings run on: the one of their program, built on first use
+        from the first scene of that program."""
+        key = self._program(settings)
+        if key not in self._backends:
+            self._backends[key] = self.engine.make(self.scene(settings), settings.grasp)
         return self._backends[key]
 
     def run(
@@ -138,14 +177,14 @@ class Simulator:
             settings.grasp.check_gripper(settings.gripper)
         groups: dict[tuple, list[int]] = {}
         for j, (settings, _) in enumerate(jobs):
-            groups.setdefault(settings.structure(), []).append(j)
+            groups.setdefault(self._program(settings), []).append(j)
         results: list[dict | None] = [None] * len(jobs)
         total = sum(len(p) for _, p in jobs)
         done = 0
         report = self.engine.on_progress
         if report is not None:
             report(0, total)
-        for structure, members in groups.items():
+        for program, members in groups.items():
             live = [j for j in members if len(jobs[j][1])]
             for j in members:
                 if not len(jobs[j][1]):
@@ -153,17 +192,23 @@ class Simulator:
             if not live:
                 continue
             backend = self.backend(jobs[live[0]][0])
+            structure = jobs[live[0]][0].structure()
+            scenes = [self.scene(jobs[j][0]) for j in live]
+            # the model fields in which this run's variants differ from the backend's
+            # scene, added to those carried before (same program, same inputs' shapes)
+            carried = set(self._carried.get(program, ()))
+            fields = carried_fields(self.engine.backend_name)
+            carried |= set(varying_fields(backend.scene.model, [s.model for s in scenes], fields))
+            self._carried[program] = names = tuple(sorted(carried))
             parts = []
-            for j in live:
+            for j, scene in zip(live, scenes, strict=True):
                 settings, picks = jobs[j]
-                parts.append(
-                    make_inputs(
-                        backend.scene,
-                        settings.grasp,
-                        picks,
-                        settings.overrides(backend.scene, len(picks)),
-                    )
+                # every variant's own scene: its pick-points' start, contact and
+                # controller parameters and model fields are its own
+                part = make_inputs(
+                    scene, settings.grasp, picks, settings.overrides(scene, len(picks))
                 )
+                parts.append(with_model_fields(part, scene.model, names) if names else part)
             inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
             offset = done
 

@@ -11,9 +11,12 @@ grip_force_n, kp_mm_s_per_n, closing_speed_mm_s and opening_speed_mm_s. Values:
 * ``lo:hi``        a range for random sweeps (``random=K`` draws K variants uniformly).
 
 Contact, controller and phase settings are per-pick data of one compiled simulation,
-so every variant that shares the scene and the scan length runs in ONE batch of
-pick-points x variants (``engine.Simulator``). Gripper geometry and solver settings
-change the scene: each such value is a batch (and, on MJX, a compile) of its own.
+and so are gripper variants that keep the model's structure (finger width, pad height,
+stroke, masses, force limit: their model fields are carried per pick-point,
+``engine.variants``): every variant that shares the program runs in ONE batch of
+pick-points x variants (``engine.Simulator``), one compile on MJX and Warp. A value
+that changes the model's structure (the object's collision pieces for a finger that
+fits a hole, a solver setting, the scan length) is a batch and a compile of its own.
 Pick-points are drawn per gripper geometry with the same seed, so variants that share
 a gripper see the same pick-points (paired).
 """
@@ -292,7 +295,8 @@ def sweep(
         n_sims = sum(len(p) for _, p in jobs)
         timing = {
             "simulations": n_sims,
-            "scenes": len(sim.backends),
+            "scenes": sim.scenes,  # compiled MuJoCo models
+            "programs": len(sim.backends),  # backends (compiled programs on MJX/Warp)
             "compile_s": round(compile_s, 3),
             "run_s": round(run_s, 3),
             "wall_s": round(wall, 3),

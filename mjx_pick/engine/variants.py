@@ -1,0 +1,183 @@
+"""Gripper variants as data: which scenes can share ONE compiled program, and the
+per-simulation model fields that make each variant what it is.
+
+Two settings whose compiled MuJoCo models have the same structure -- every size, id,
+address, type, mesh and option the same -- differ only in numbers a simulation reads
+at run time: a pad's half-sizes, a finger's mass and inertia, joint and control
+ranges, servo gains (a sweep over finger width, pad height, stroke, finger mass, force
+limit or drive stiffness). Such variants run on one backend (one compile on MJX and
+Warp): each pick-point carries its variant's values of the fields that differ
+(``PickInputs.model``, (N, ...) each), and every backend applies them per simulation --
+the C engine through ``mujoco.batch.Batch.expand``, MJX and Warp as batched
+``mjx.Model`` fields under ``vmap`` (the way per-pick contact-pair parameters already
+enter). Anything else (another mesh, another number of collision pieces, another
+solver setting, another scan length) gets a backend of its own.
+
+The values are never edited by hand: every variant's scene is compiled on its own and
+its fields are read from its own ``MjModel``, so the quantities MuJoCo derives at
+compile time (body inertia from geom sizes, ``geom_rbound``/``geom_aabb``,
+``body_subtreemass``, ``actuator_acc0``, ``dof_invweight0``, ...) are each variant's.
+
+Which fields a backend can take per simulation (:func:`carried_fields`): float fields of
+``MjModel`` that ``mujoco.batch`` can expand (the C engine: all of them); on MJX only
+those it keeps as traced arrays (a field MJX holds as numpy is read while tracing and
+baked into the program); on Warp, also only those its model holds per world
+(``mjx.warp.types._BATCH_DIM``), or that it does not read at all. Solver values that
+are model options are carried the same way, named ``opt.<field>`` (:data:`OPT_FIELDS`:
+the solver's tolerances and, except on Warp, the impedance ratio -- Warp's model holds
+it as a derived ``impratio_invsqrt`` that the MJX model's ``opt.impratio`` does not
+reach, so impedance-ratio variants get a program each there). The contact-pair fields
+are left out: they are already per-pick inputs (``PickInputs.pair_*``, from each
+variant's own scene).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import typing
+
+import mujoco
+import numpy as np
+
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.core.scene import Scene
+from mjx_pick.engine.backend import PickInputs, addresses, resolve_backend
+
+# solver options a backend may take per simulation (MjOption fields, as mujoco.batch
+# names them): traced arrays in MJX's Option, expandable in a batch
+OPT_FIELDS = ("opt.impratio", "opt.tolerance", "opt.ls_tolerance")
+# per-pick inputs of their own (PickInputs.pair_friction/solref/solimp)
+PAIR_FIELDS = ("pair_friction", "pair_solref", "pair_solimp")
+# bookkeeping of names and paths: never read by the physics (a variant's name -- the
+# model is named after the gripper -- changes their lengths and addresses, not the
+# simulation)
+_NAME_FIELDS = ("names_map", "nnames", "nnames_map", "npaths")
+# the smallest mass MuJoCo and Warp treat as a mass (a value crossing it changes what
+# Warp's model builder derives from it: see program_key)
+_MINVAL = 1e-15
+
+
+@functools.cache
+def carried_fields(backend: str) -> frozenset[str]:
+    """The model fields a backend applies per simulation, by backend name.
+
+    'mujoco', 'mjx', 'warp' (or 'auto', resolved here). The intersection of what the
+    C engine's batch can expand, what MJX traces, and (Warp) what Warp keeps per world.
+    """
+    import mujoco.batch
+
+    name = resolve_backend(backend)
+    probe = mujoco.MjModel.from_xml_string("<mujoco/>")
+    out = set()
+    for field in mujoco.batch.MODEL_FIELDS:
+        if field.startswith("opt.") or field in PAIR_FIELDS:
+            continue
+        template = getattr(probe, field, None)
+        if isinstance(template, np.ndarray) and template.dtype.kind == "f":
+            out.add(field)
+    out.update(f for f in OPT_FIELDS if f in mujoco.batch.MODEL_FIELDS)
+    if name == "mujoco":
+        # the C engine takes any of them; MJX is not imported for it (seconds of a
+        # C run's start)
+        return frozenset(out)
+    from mujoco import mjx
+
+    # a field MJX holds as numpy is static in its programs; one it lacks is unread
+    hints = typing.get_type_hints(mjx.Model)
+    out = {f for f in out if f.startswith("opt.") or (f in hints and hints[f] is not np.ndarray)}
+    if name == "warp":
+        from mujoco.mjx.warp import types as mjxw_types
+
+        # fields Warp's model holds once for all worlds would be read from the first
+        # variant only; fields it does not hold at all are not read by Warp
+        per_world = mjxw_types._BATCH_DIM["Model"]
+        options = mjxw_types._BATCH_DIM["Option"]
+        out = {
+            f
+            for f in out
+            if (options.get(f[4:], False) if f.startswith("opt.") else per_world.get(f, True))
+        }
+    return frozenset(out)
+
+
+def model_value(model: mujoco.MjModel, name: str) -> np.ndarray:
+    """A model field's values by its batch name: an MjModel array, or ``opt.<field>``."""
+    if name.startswith("opt."):
+        return np.asarray(getattr(model.opt, name[4:]))
+    return getattr(model, name)
+
+
+def _digest(h, value) -> None:
+    a = np.ascontiguousarray(value)
+    h.update(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes())
+
+
+def program_key(scene: Scene, grasp: GraspConfig, backend: str) -> tuple:
+    """What decides whether scenes may share one compiled program on a backend.
+
+    Equal keys: the two models differ at most in the values of ``carried_fields(backend)``
+    and the contact pairs, and the rollouts are the same program (addresses, scan length,
+    physics steps per control period). The key holds every size, a digest of every other
+    array and option of the model, the zero pattern of the carried fields (a field
+    that becomes zero or non-zero changes what Warp's model builder derives: an affine
+    gain, a massless body), and on the C engine the mean inertia, which its solver
+    scales by and which a batch cannot give per simulation.
+    """
+    m = scene.model
+    name = resolve_backend(backend)
+    carried = carried_fields(name)
+    h = hashlib.sha256()
+    sizes = []
+    for field in sorted(dir(m)):
+        if field.startswith(("_", "name_")) or field in _NAME_FIELDS or field in PAIR_FIELDS:
+            continue
+        value = getattr(m, field)
+        if isinstance(value, int):
+            sizes.append((field, value))
+        elif isinstance(value, np.ndarray):
+            h.update(field.encode())
+            if field in carried:
+                _digest(h, value != 0)
+                _digest(h, np.abs(value) >= _MINVAL)
+            else:
+                _digest(h, value)
+    for field in sorted(dir(m.opt)):
+        value = getattr(m.opt, field)
+        if not field.startswith("_") and isinstance(value, int | float | np.ndarray):
+            h.update(field.encode())
+            value = np.asarray(value)
+            _digest(h, value != 0 if f"opt.{field}" in carried else value)
+    if name == "mujoco":
+        _digest(h, np.float64(m.stat.meaninertia))
+    return (
+        tuple(sizes),
+        h.hexdigest(),
+        addresses(scene),
+        grasp.n_ticks(),
+        grasp.substeps(scene.solver),
+    )
+
+
+def varying_fields(base: mujoco.MjModel, models, carried: frozenset[str]) -> tuple[str, ...]:
+    """The carried fields in which any of models differs from base (sorted names)."""
+    return tuple(
+        sorted(
+            f
+            for f in carried
+            if any(not np.array_equal(model_value(base, f), model_value(m, f)) for m in models)
+        )
+    )
+
+
+def with_model_fields(inputs: PickInputs, model: mujoco.MjModel, names) -> PickInputs:
+    """inputs with every pick-point carrying model's values of the fields `names`:
+    ``inputs.model[name]`` (N, *field shape), float64 as MuJoCo holds them (MJX and
+    Warp cast to their float32 on the device)."""
+    n = len(inputs)
+    fields = {}
+    for f in names:
+        value = model_value(model, f)
+        fields[f] = np.broadcast_to(value, (n, *value.shape)).astype(np.float64)
+    return inputs.replace(model=fields)
