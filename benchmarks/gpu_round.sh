@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|frontier|stable|real|grid|variants|variants_sweep
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|frontier|stable|real|grid|variants|variants_sweep|design
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -47,6 +47,9 @@ case "$1" in
     JAX_PLATFORMS=cuda,cpu python -m pytest -o addopts="" -o filterwarnings=ignore -q -s \
       tests/test_variants.py 2>&1 | tee "$out/test_variants_warp.log" || true
     python benchmarks/variant_programs.py --object door_opener > "$out/variant_programs.json" ;;
+  design)  # time to answer, design's defaults on the door opener (one compile for all)
+    python benchmarks/time_to_answer.py --backend warp --cases design --runs first,second \
+      --out "$out/time_to_answer_design_h100.json" ;;
   variants_sweep)  # time to answer, a sweep of 8 finger widths x 512 on Warp (one compile)
     python benchmarks/time_to_answer.py --backend warp --cases sweep --n-sweep 512 \
       --out "$out/time_to_answer_sweep_h100.json" ;;

@@ -5,7 +5,10 @@ then the same part again) and once with ``--no-cache`` (today's cost without it)
 
 * ``mesh``: a YCB mesh never seen before (``evaluate <stl> --unit m``), ``--n-mesh`` picks;
 * ``photo``: the shipped door-opener photo object, ``--n-photo`` picks;
-* ``sweep``: 8 finger widths x ``--n-sweep`` picks (``sweep --param gripper.finger_width_mm``).
+* ``sweep``: 8 finger widths x ``--n-sweep`` picks (``sweep --param gripper.finger_width_mm``);
+* ``design``: ``design door_opener`` with its defaults (12 variants, 3 rounds).
+
+``--runs`` picks which of the three runs to make (a GPU call's time is short).
 
 It also checks that the cache changes no result: the mesh case's ``results.parquet``
 with and without the cache must be the same table. Writes one JSON under
@@ -63,7 +66,10 @@ def main() -> None:
     ap.add_argument("--n-mesh", type=int, default=1024)
     ap.add_argument("--n-photo", type=int, default=200)
     ap.add_argument("--n-sweep", type=int, default=512)
-    ap.add_argument("--cases", default="mesh,photo,sweep")
+    ap.add_argument("--cases", default="mesh,photo,sweep", help="of mesh,photo,sweep,design")
+    ap.add_argument(
+        "--runs", default="no_cache,first,second", help="which of no_cache,first,second"
+    )
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "time_to_answer.json"))
     args = ap.parse_args()
 
@@ -88,6 +94,8 @@ def main() -> None:
             str(args.n_mesh),
         ],
         "photo": ["evaluate", "door_opener", "--n", str(args.n_photo)],
+        # design's defaults: 12 variants over 3 rounds of successive halving
+        "design": ["design", "door_opener"],
         "sweep": [
             "sweep",
             "door_opener",
@@ -111,7 +119,8 @@ def main() -> None:
     for name in args.cases.split(","):
         shutil.rmtree(work / "cache", ignore_errors=True)  # a part never seen
         rows = {}
-        for label, extra in (("no_cache", ["--no-cache"]), ("first", []), ("second", [])):
+        runs = {"no_cache": ["--no-cache"], "first": [], "second": []}
+        for label, extra in ((k, runs[k]) for k in args.runs.split(",")):
             out = work / f"{name}_{label}"
             cmd = [*cli, *cases[name], *common, "--out", str(out), *extra]
             rows[label] = run(cmd, env)
@@ -119,7 +128,7 @@ def main() -> None:
             print(name, label, rows[label]["wall_s"], "s", rows[label]["time_s"], flush=True)
         rows["command"] = " ".join(["mjx-pick", *cases[name], *common])
         record["cases"][name] = rows
-    if "mesh" in record["cases"]:
+    if "mesh" in record["cases"] and {"no_cache", "second"} <= set(args.runs.split(",")):
         import pyarrow.parquet as pq
 
         a = pq.read_table(work / "mesh_no_cache" / "results.parquet")
