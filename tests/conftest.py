@@ -40,6 +40,18 @@ def strict_rank_promotion(request):
         yield
 
 
+@pytest.fixture(scope="module", autouse=True)
+def release_compiled_programs():
+    """A test worker runs many files: after each, JAX's compiled programs (MJX's run to
+    gigabytes) are dropped, so that a worker's memory does not add them up file after
+    file (two workers on a CI machine of a few tens of GB)."""
+    yield
+    import gc
+
+    jax.clear_caches()
+    gc.collect()
+
+
 @pytest.fixture(scope="session")
 def door_opener():
     import mjx_pick
