@@ -308,6 +308,14 @@ def cluster_sim(cluster, block):
     sim.close()
 
 
+@pytest.fixture()
+def fresh_cluster_sim(cluster_sim, block):
+    """A Simulator with no history on the same cluster actors, as a resumed run in a new
+    process has: the model fields a simulator carries grow with the studies it ran
+    (``engine.variants``), and they are part of a chunk's identity on disk."""
+    return Simulator(block, engine=cluster_sim.engine)
+
+
 def test_robust_on_the_cluster_equals_one_process(cluster_sim, block):
     # the n pick-points, then the top-k's perturbed draws, all through the RayEngine
     run = {"n": 32, "top_k": 4, "m": 8, "seed": 2}
@@ -339,7 +347,8 @@ def _same_outputs(a: Path, b: Path, names: tuple[str, ...]) -> None:
             assert (a / name).read_text() == (b / name).read_text(), name
 
 
-def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(cluster_sim, block, tmp_path):
+def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(fresh_cluster_sim, block, tmp_path):
+    cluster_sim = fresh_cluster_sim
     # started on the cluster (chunks of one actor batch per actor: 2 x 16), stopped as
     # Ctrl-C stops it after its first chunk, resumed without Ray: the chunk on disk is
     # read back (the chunk size with it), the rest simulated here; the outputs are
@@ -374,7 +383,8 @@ def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(cluster_sim, block,
     assert again.already_complete and again.table.equals(resumed.table)
 
 
-def test_compare_killed_then_resumed_on_the_cluster(cluster_sim, block, tmp_path):
+def test_compare_killed_then_resumed_on_the_cluster(fresh_cluster_sim, block, tmp_path):
+    cluster_sim = fresh_cluster_sim
     # `mjx-pick compare` without Ray, killed (SIGKILL) once a chunk is on disk, then
     # resumed on the cluster: only the missing chunks are simulated there, and the
     # outputs are those of one uninterrupted run without Ray
