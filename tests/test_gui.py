@@ -755,6 +755,8 @@ def test_a_reload_brings_back_the_object_settings_and_run(page, server):
 def test_runs_are_remembered_across_a_server_restart(browser, tmp_path):
     """A restarted server lists the work folder's runs: one chosen is shown ended, its
     results drawn as if this server had run it."""
+    from playwright.sync_api import expect
+
     work = tmp_path / "work"
     url, proc = start_server(work, tmp_path / "server.log")
     context = browser.new_context(viewport={"width": 1500, "height": 1000})
@@ -782,7 +784,9 @@ def test_runs_are_remembered_across_a_server_restart(browser, tmp_path):
         page.get_by_text("3 Generate input data").click()
         page.get_by_test_id("run-summary").filter(has_text="success rate").wait_for()
         page.get_by_text("4 Analyze results").click()
-        assert page.get_by_test_id("picks-table").locator("tbody tr").count() == 4
+        # the tab draws the run's table once the click is handled: wait for it
+        rows = page.get_by_test_id("picks-table").locator("tbody tr")
+        expect(rows).to_have_count(4, timeout=TIMEOUT_MS)
     finally:
         context.close()
         if proc.poll() is None:
