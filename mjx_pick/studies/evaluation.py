@@ -311,7 +311,6 @@ def evaluate(
             min_force=min_force,
             stability_um=stability_um,
             overwrite=overwrite,
-            skip_infeasible=skip_infeasible,
             keep_chunks=keep_chunks,
             on_progress=on_progress,
         )
@@ -346,7 +345,6 @@ class _Request:
     min_force: bool
     stability_um: float
     overwrite: bool
-    skip_infeasible: bool
     keep_chunks: bool
     on_progress: ProgressFn | None
 
