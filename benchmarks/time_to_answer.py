@@ -6,7 +6,8 @@ then the same part again) and once with ``--no-cache`` (today's cost without it)
 * ``mesh``: a YCB mesh never seen before (``evaluate <stl> --unit m``), ``--n-mesh`` picks;
 * ``photo``: the shipped door-opener photo object, ``--n-photo`` picks;
 * ``sweep``: 8 finger widths x ``--n-sweep`` picks (``sweep --param gripper.finger_width_mm``);
-* ``design``: ``design door_opener`` with its defaults (12 variants, 3 rounds).
+* ``design``: ``design door_opener --bound finger_width_mm=10:40``, design's defaults
+  otherwise (12 variants, 3 rounds).
 
 ``--runs`` picks which of the three runs to make (a GPU call's time is short).
 
@@ -95,7 +96,7 @@ def main() -> None:
         ],
         "photo": ["evaluate", "door_opener", "--n", str(args.n_photo)],
         # design's defaults: 12 variants over 3 rounds of successive halving
-        "design": ["design", "door_opener"],
+        "design": ["design", "door_opener", "--bound", "finger_width_mm=10:40"],
         "sweep": [
             "sweep",
             "door_opener",

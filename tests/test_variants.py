@@ -53,17 +53,12 @@ def _differing(a, b) -> set[str]:
 def test_geometry_variants_keep_the_structure(door_opener, fields, backend):
     a = mp.build_scene(door_opener, _gripper())
     b = mp.build_scene(door_opener, _gripper(**fields))
-    if backend == "warp" and not va.WARP_CARRIES_MODEL_FIELDS:
-        # a Warp variant gets a program of its own for now (variants.py says why)
-        assert va.carried_fields("warp") == frozenset()
-        assert va.program_key(a, FAST, backend) != va.program_key(b, FAST, backend)
-    carried = va.batchable_fields(backend)
+    carried = va.carried_fields(backend)
     if backend == "mujoco" and a.model.stat.meaninertia != b.model.stat.meaninertia:
         # the C engine's solver scales by the mean inertia, which a batch cannot vary
         assert va.program_key(a, FAST, backend) != va.program_key(b, FAST, backend)
         return
-    if va.carried_fields(backend) == carried:
-        assert va.program_key(a, FAST, backend) == va.program_key(b, FAST, backend)
+    assert va.program_key(a, FAST, backend) == va.program_key(b, FAST, backend)
     # the rule covers every difference: carried fields, the per-pick contact pairs and
     # the names' bookkeeping, nothing else
     varying = set(va.varying_fields(a.model, [b.model], carried))
@@ -79,11 +74,10 @@ def test_solver_tolerances_and_impedance_ratio_are_data(block):
         assert va.program_key(base, FAST, backend) == va.program_key(other, FAST, backend)
         fields = va.varying_fields(base.model, [other.model], va.carried_fields(backend))
         assert fields == ("opt.impratio", "opt.tolerance")
-    # Warp holds the ratio as a derived 1/sqrt: a program per ratio there, and no
-    # model field is carried on Warp for now (variants.WARP_CARRIES_MODEL_FIELDS)
+    # Warp holds the ratio as a derived 1/sqrt: a program per ratio there
     assert va.program_key(base, FAST, "warp") != va.program_key(other, FAST, "warp")
-    assert "opt.impratio" not in va.batchable_fields("warp")
-    assert "opt.tolerance" in va.batchable_fields("warp")
+    assert "opt.impratio" not in va.carried_fields("warp")
+    assert "opt.tolerance" in va.carried_fields("warp")
 
 
 def test_structural_changes_get_a_program_of_their_own(block):
@@ -154,7 +148,7 @@ def test_warp_models_differ_only_in_carried_fields(block):
         pytest.skip(warp_problem())
     a = mp.build_scene(block, _gripper())
     b = mp.build_scene(block, _gripper(finger_width_mm=30.0, pad_height_mm=30.0, stroke_mm=100.0))
-    carried = va.batchable_fields("warp")
+    carried = va.carried_fields("warp")
     ma, mb = mjx.put_model(a.model, impl="warp"), mjx.put_model(b.model, impl="warp")
     la, lb = (
         jax.tree_util.tree_flatten_with_path(ma)[0],
@@ -338,9 +332,8 @@ def test_warp_sweep_of_finger_widths_compiles_once_and_agrees_per_scene(door_ope
     sim = mp.Simulator(door_opener, "warp")
     spec = ParamSpec.parse("gripper.finger_width_mm=" + ",".join(f"{w:g}" for w in WIDTHS))
     res = mp.sweep(door_opener, [spec], mp.Settings(grasp=FAST), n=n, simulator=sim)
-    # one pool program per backend and GPU (re-made only if Warp's buffers had to grow);
-    # a backend per variant while Warp carries no model fields
-    programs = 1 if va.WARP_CARRIES_MODEL_FIELDS else len(WIDTHS)
+    # one pool program per backend and GPU (re-made only if Warp's buffers had to grow)
+    programs = 1
     assert len(sim.backends) == programs
     for backend in sim.backends:
         for part in getattr(backend, "parts", [backend]):

@@ -18,8 +18,7 @@ its fields are read from its own ``MjModel``, so the quantities MuJoCo derives a
 compile time (body inertia from geom sizes, ``geom_rbound``/``geom_aabb``,
 ``body_subtreemass``, ``actuator_acc0``, ``dof_invweight0``, ...) are each variant's.
 
-Which fields a backend can take per simulation (:func:`batchable_fields`; what it does
-take: :func:`carried_fields`, none on Warp for now): float fields of
+Which fields a backend takes per simulation (:func:`carried_fields`): float fields of
 ``MjModel`` that ``mujoco.batch`` can expand (the C engine: all of them); on MJX only
 those it keeps as traced arrays (a field MJX holds as numpy is read while tracing and
 baked into the program); on Warp, also only those its model holds per world
@@ -59,24 +58,8 @@ _NAME_FIELDS = ("names_map", "nnames", "nnames_map", "npaths")
 _MINVAL = 1e-15
 
 
-# MuJoCo Warp takes the fields of batchable_fields("warp") per world, and a program
-# carrying them runs right in the process that compiled it, but it failed in every later
-# process on the same machine (Warp's FFI callback: "unknown stream"; benchmarks/
-# RESULTS.md). Until that is understood, a Warp variant gets a program of its own.
-WARP_CARRIES_MODEL_FIELDS = False
-
-
-def carried_fields(backend: str) -> frozenset[str]:
-    """The model fields a backend applies per simulation, by backend name ('mujoco',
-    'mjx', 'warp' or 'auto'): :func:`batchable_fields`, none on Warp unless
-    WARP_CARRIES_MODEL_FIELDS."""
-    if resolve_backend(backend) == "warp" and not WARP_CARRIES_MODEL_FIELDS:
-        return frozenset()
-    return batchable_fields(backend)
-
-
 @functools.cache
-def batchable_fields(backend: str) -> frozenset[str]:
+def carried_fields(backend: str) -> frozenset[str]:
     """The model fields a backend can apply per simulation, by backend name.
 
     'mujoco', 'mjx', 'warp' (or 'auto', resolved here). The intersection of what the

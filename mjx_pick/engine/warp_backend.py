@@ -280,6 +280,33 @@ def describe_overflow(bits: int) -> str:
 
 
 @functools.cache
+def keep_xla_stream_registrations() -> None:
+    """Make a ``wp.Stream`` that wraps a CUDA stream it does not own leave that stream
+    registered with Warp when the wrapper is freed (owned streams are destroyed as before).
+
+    Warp's JAX FFI wraps XLA's stream in a new ``wp.Stream`` on each call it captures,
+    and Warp's registry of streams is keyed by the raw handle without a count: freeing
+    ANY wrapper unregisters the handle. A wrapper of an earlier call that Python's cyclic
+    garbage collector frees while a newer wrapper of the same stream begins its graph
+    capture leaves that capture on an "unknown stream", and the whole program fails --
+    seen with programs that carry model fields, in every process after the first on a
+    machine (benchmarks/warp_stream_repro.py reproduces it; with this, or with the
+    collector off, it runs). XLA's streams live as long as the process, so keeping them
+    registered costs one CUDA event per graph capture. Idempotent."""
+    import warp as wp
+
+    if getattr(wp.Stream.__del__, "keeps_foreign_streams", False):
+        return
+    free = wp.Stream.__del__
+
+    def __del__(stream) -> None:
+        if stream.owner:
+            free(stream)
+
+    __del__.keeps_foreign_streams = True
+    wp.Stream.__del__ = __del__
+
+
 def _warp_backend_class():
     from mjx_pick.engine.mjx_backend import (
         DEFAULT_SHRINK_LEVELS,
@@ -313,6 +340,7 @@ def _warp_backend_class():
             graph_mode: str | None = None,
         ):
             check_warp()
+            keep_xla_stream_registrations()
             if graph_mode is not None and graph_mode not in GRAPH_MODES:
                 raise ConfigError(f"graph_mode = {graph_mode!r} is not one of {GRAPH_MODES}")
             if devices is None:
