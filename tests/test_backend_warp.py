@@ -113,6 +113,30 @@ def test_gpu_extra_pins_warp_like_mujoco_mjx():
 
 
 # --------------------------------------------------------------------------- buffers
+def test_streams_warp_does_not_own_stay_registered(monkeypatch):
+    # Warp's registry of CUDA streams has no count: freeing any wrapper of XLA's stream
+    # unregistered it under a newer wrapper's graph capture (GPU evidence:
+    # benchmarks/warp_stream_repro.py). Here a stand-in for warp.Stream, as CI has no warp.
+    import sys
+    import types
+
+    freed = []
+
+    class Stream:
+        def __init__(self, owner):
+            self.owner = owner
+
+        def __del__(self):
+            freed.append(self.owner)
+
+    monkeypatch.setitem(sys.modules, "warp", types.SimpleNamespace(Stream=Stream))
+    bw.keep_xla_stream_registrations()
+    bw.keep_xla_stream_registrations()  # idempotent: one layer, not two
+    Stream(owner=False)  # freed at once (CPython counts references)
+    Stream(owner=True)
+    assert freed == [True]
+
+
 def test_buffer_margin_and_sizes():
     contacts, rows = bw.buffer_margin(15, 60)
     assert contacts >= 1.5 * 15 and contacts % 4 == 0
