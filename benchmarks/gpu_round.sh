@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|frontier|stable|real|grid|variants|variants_sweep|design
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|real|grid|variants|variants_sweep|design|contacts
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -53,6 +53,17 @@ case "$1" in
   variants_sweep)  # time to answer, a sweep of 8 finger widths x 512 on Warp (one compile)
     python benchmarks/time_to_answer.py --backend warp --cases sweep --n-sweep 512 \
       --out "$out/time_to_answer_sweep_h100.json" ;;
+  floor)  # what any Warp process pays before a pick is simulated: imports and CUDA starts
+    t() { local s=$EPOCHREALTIME; "$@" >/dev/null 2>&1; awk -v a="$s" -v b="$EPOCHREALTIME" -v c="${*: -1}" 'BEGIN { printf "%.2f s: %s\n", b - a, c }'; }
+    t python -c "pass"
+    t python -c "import jax; jax.devices()"
+    t python -c "import mjx_pick.cli"
+    t python -c "import jax, mujoco; from mujoco import mjx; jax.devices()"
+    t python -c "import jax, warp as wp; jax.devices(); wp.init()"
+    t python -c "import jax, warp as wp; from mujoco import mjx; from mujoco.mjx.third_party import mujoco_warp; jax.devices(); wp.init()" ;;
+  contacts)  # C and Warp collision on the same states (pad contacts per pad, span)
+    (cd benchmarks && python contact_sets.py --objects "${OBJECTS:-011_banana,050_medium_clamp,040_large_marker}" \
+      --n "${N:-64}" --out "$out/contact_sets_h100.json") ;;
   grid)  # the preset Coulomb grid on Warp
     python benchmarks/preset_coulomb.py --backend warp --out "$out/preset_coulomb_warp.json" ;;
 esac
