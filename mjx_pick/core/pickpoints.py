@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 import shapely
+import shapely.affinity
 
 from mjx_pick.core import cache
 from mjx_pick.core.config import (
@@ -242,14 +243,19 @@ class FeasibilityChecker:
 
     def ranges(self) -> tuple[float, float]:
         """The x and y offset ranges in mm (defaults: half the object's length)."""
-        half = 0.5 * self.object.length_mm
-        xr = self.config.x_range_mm if self.config.x_range_mm is not None else half
-        yr = self.config.y_range_mm if self.config.y_range_mm is not None else half
-        return xr, yr
+        return offset_ranges(self.object, self.config)
 
     def batch(self, pick_id, x_mm, y_mm, yaw_deg, mode: str) -> PickBatch:
         """Check candidates and keep the feasible ones as a PickBatch."""
         return feasible_batch(pick_id, x_mm, y_mm, yaw_deg, self(x_mm, y_mm, yaw_deg), mode)
+
+
+def offset_ranges(obj: ObjectModel, config: PickConfig) -> tuple[float, float]:
+    """The x and y offset ranges in mm (defaults: half the object's length)."""
+    half = 0.5 * obj.length_mm
+    xr = config.x_range_mm if config.x_range_mm is not None else half
+    yr = config.y_range_mm if config.y_range_mm is not None else half
+    return xr, yr
 
 
 def feasible_batch(pick_id, x_mm, y_mm, yaw_deg, res: dict, mode: str) -> PickBatch:
@@ -286,6 +292,164 @@ def check_raster(obj: ObjectModel, config: PickConfig | None = None) -> None:
     config = config or PickConfig()
     radius = max(math.hypot(x, y) for x, y in obj.polygon.exterior.coords)
     raster_resolution(obj.name, radius, config.resolution_mm)
+
+
+# yaws over half a turn at which check_stroke measures the outline (the gripper is
+# symmetric: yaw and yaw + 180 deg grip the same section)
+STROKE_YAWS = 90
+# below this fraction of the configured yaws with a section that fits, a warning says
+# that most candidates will be dropped as too wide
+STROKE_FEW_YAWS = 0.25
+
+
+@dataclasses.dataclass(frozen=True)
+class StrokeFit:
+    """How the outline between the pads fits the stroke (``check_stroke``).
+
+    yaw_deg: (K,) the yaws measured, over [0, 180); width_mm: (K,) the narrowest
+    section the pads could close on at each (inf where none): the extent, along the
+    closing direction, of the outline's pieces in a finger-wide band that fill at least
+    min_coverage of the pads' region. narrowest_mm: their minimum; fits: the fraction of
+    the configured yaws whose section plus the two safety zones fits the stroke."""
+
+    yaw_deg: np.ndarray
+    width_mm: np.ndarray
+    narrowest_mm: float
+    fits: float
+
+
+def stroke_fit(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
+) -> StrokeFit:
+    """Measure the outline the pads meet (the FeasibilityChecker's) against the stroke,
+    from its polygon alone: no raster, a fraction of a second.
+
+    At each yaw, finger-wide bands across the rotated outline are cut into their
+    connected pieces; pieces whose extents along the closing direction overlap must lie
+    between the pads together (a finger landing on one would fail clearance), so they
+    are merged, and every run of neighbouring merged pieces is a section the pads might
+    close on if its area fills min_coverage of pads' region over its own extent. These
+    are necessary conditions of the feasibility checks (the safety zone and the
+    clearance beside the pads are left out), so a section too wide here is too wide for
+    the sampler; the bands' spacing (an eighth of the finger width) and the yaw step
+    (2 deg) make the width an estimate to about a millimetre on a part 100 mm across.
+    """
+    config = config or PickConfig()
+    lo, hi = pad_band_mm(obj, gripper, grasp or GraspConfig())
+    outline = obj.band_outline(lo, max(hi, obj.height_mm))
+    # a tenth of a millimetre changes no width that matters and keeps a mesh's outline
+    # (thousands of vertices) cheap to cut
+    outline = shapely.simplify(outline, 0.1, preserve_topology=True)
+    w, c_min = float(gripper.finger_width_mm), float(config.min_coverage)
+    xr, yr = offset_ranges(obj, config)
+    yaws = np.arange(STROKE_YAWS) * (180.0 / STROKE_YAWS)
+    widths = np.full(STROKE_YAWS, np.inf)
+    for k, yaw in enumerate(yaws):
+        rotated = shapely.affinity.rotate(outline, yaw, origin=(0.0, 0.0))
+        x0, y0, x1, y1 = rotated.bounds
+        # the gripper centre's y in this frame is a drawn offset: within +-yr
+        c0, c1 = max(y0 - 0.5 * w, -yr), min(y1 + 0.5 * w, yr)
+        if c1 < c0:
+            continue
+        centres = np.linspace(c0, c1, max(2, math.ceil((c1 - c0) / (w / 8.0)) + 1))
+        bands = shapely.box(x0 - 1.0, centres - 0.5 * w, x1 + 1.0, centres + 0.5 * w)
+        cut = shapely.intersection(rotated, bands)
+        parts, band_of = shapely.get_parts(cut, return_index=True)
+        if not len(parts):
+            continue
+        areas = shapely.area(parts)
+        solid = areas > 0.0  # a band's edge along an outline's edge cuts off bare lines
+        parts, band_of, areas = parts[solid], band_of[solid], areas[solid]
+        bounds = shapely.bounds(parts)
+        for b in np.unique(band_of):
+            sel = band_of == b
+            widths[k] = min(widths[k], _narrowest_run(bounds[sel], areas[sel], w, c_min, xr))
+    lo_yaw, hi_yaw = config.yaw_min_deg, config.yaw_max_deg
+    wanted = np.mod(yaws - lo_yaw, 360.0) <= hi_yaw - lo_yaw  # in the configured range
+    wanted |= np.mod(yaws + 180.0 - lo_yaw, 360.0) <= hi_yaw - lo_yaw
+    room = gripper.stroke_mm - 2.0 * config.safety_zone_mm
+    fits = float(np.mean(widths[wanted] <= room)) if wanted.any() else 0.0
+    return StrokeFit(yaws, widths, float(widths.min()), fits)
+
+
+def _narrowest_run(bounds, areas, w: float, c_min: float, xr: float) -> float:
+    """The narrowest opening (without safety zones) over runs of neighbouring pieces of
+    one band (bounds: (P, 4) xmin, ymin, xmax, ymax; areas: (P,)) whose area fills c_min
+    of w times it; inf if none. The pads centre on a run, or as near as the drawn x
+    offsets (+-xr) reach: off-centre, the opening spans the run's far side twice."""
+    order = np.argsort(bounds[:, 0])
+    clusters: list[list[float]] = []  # [xmin, xmax, area] of pieces overlapping in x
+    for i in order:
+        a, b = bounds[i, 0], bounds[i, 2]
+        if clusters and a <= clusters[-1][1]:
+            clusters[-1][1] = max(clusters[-1][1], b)
+            clusters[-1][2] += areas[i]
+        else:
+            clusters.append([a, b, areas[i]])
+    best = math.inf
+    for i in range(len(clusters)):
+        area = 0.0
+        for j in range(i, len(clusters)):
+            a, b = clusters[i][0], clusters[j][1]
+            if b - a >= best:
+                break
+            area += clusters[j][2]
+            centre = min(max(0.5 * (a + b), -xr), xr)
+            opening = 2.0 * max(b - centre, centre - a)
+            if opening < best and area >= c_min * w * opening:
+                best = opening
+    return best
+
+
+def check_stroke(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
+) -> StrokeFit:
+    """Before any raster, scene or folder: refuse a part the pads can close on in no
+    direction (its narrowest section, ``stroke_fit``, is wider than the stroke: the
+    sampler would draw max_candidates and find none); warn, with the numbers, when it
+    fits only without the safety zone or at few of the configured yaws."""
+    config = config or PickConfig()
+    fit = stroke_fit(obj, gripper, config, grasp)
+    stroke, zone = gripper.stroke_mm, config.safety_zone_mm
+    where = f"{obj.name!r} with {gripper.name} (stroke {stroke:g} mm)"
+    if fit.narrowest_mm > stroke:
+        width = (
+            f"{fit.narrowest_mm:.1f} mm wide"
+            if math.isfinite(fit.narrowest_mm)
+            else "wider than the pads' region"
+        )
+        raise ConfigError(
+            f"{where}: the part is {width} at its narrowest (a finger-wide section that "
+            f"fills min_coverage = {config.min_coverage:g} of the pads' region), wider than "
+            "the stroke in every direction, so no pick-point can be feasible: use a gripper "
+            "with a larger stroke, or check the object's scale"
+        )
+    need = fit.narrowest_mm + 2.0 * zone
+    if need > stroke:
+        warnings.warn(
+            f"{where}: the part's narrowest section is {fit.narrowest_mm:.1f} mm; with the "
+            f"{zone:g} mm safety zone on each side the pads need {need:.1f} mm: few or no "
+            "pick-points may be feasible (lower picks.safety_zone_mm, or use a gripper with "
+            "a larger stroke)",
+            PlausibilityWarning,
+            stacklevel=2,
+        )
+    elif fit.fits < STROKE_FEW_YAWS:
+        warnings.warn(
+            f"{where}: the part fits between the pads (narrowest section "
+            f"{fit.narrowest_mm:.1f} mm plus {zone:g} mm safety zones) at only "
+            f"{100 * fit.fits:.0f} % of the yaws in picks' range: most candidates will be "
+            "too wide and the feasible pick-points cluster at those yaws",
+            PlausibilityWarning,
+            stacklevel=2,
+        )
+    return fit
 
 
 def raster_resolution(name: str, radius_mm: float, res_mm: float) -> float:
