@@ -15,6 +15,8 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError, PlausibilityWarning
 from mjx_pick.core.gripper import load_gripper, preset_names
 from mjx_pick.core.objects import asset_names, load_asset, load_object, object_from_polygon
+from mjx_pick.core.physics import ContactParams
+from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.studies import evaluation
 
 DISC_PNG = Path(__file__).resolve().parents[1] / "mjx_pick/assets/objects/disc.png"  # 50 mm
@@ -111,3 +113,20 @@ def test_every_shipped_asset_fits_every_preset_without_a_word(asset):
             warnings.simplefilter("error", PlausibilityWarning)  # shown only, elsewhere
             fit = pp.check_stroke(obj, load_gripper(name))
         assert fit.narrowest_mm < 60.0 and fit.fits >= 0.9, (asset, name)
+
+
+def test_the_gui_checks_with_the_same_function_before_sampling(no_work, monkeypatch):
+    from mjx_pick.gui import forms, jobs
+    from mjx_pick.gui.page.generate_tab import sample_picks
+
+    settings = forms.Settings(
+        load_gripper("robotiq-2f85"), pp.PickConfig(), GraspConfig(), ContactParams()
+    )
+    with pytest.raises(ConfigError, match="wider than the stroke"):
+        jobs.feasible_estimate(disc_photo(200.0), settings, 100, 0)  # before a run starts
+    with pytest.raises(ConfigError, match="wider than the stroke"):
+        sample_picks(disc_photo(200.0), settings, 100, 0)  # tab 3's map
+    # a warning goes to the page with the numbers, then sampling starts
+    monkeypatch.setattr(pp, "generate_normal", lambda *args: "sampled")
+    picks, warned = sample_picks(disc_photo(140.0), settings, 100, 0)
+    assert picks == "sampled" and any("safety zone" in w and " mm" in w for w in warned)
