@@ -152,3 +152,14 @@ def test_the_gui_checks_with_the_same_function_before_sampling(tmp_path, no_work
     along = dataclasses.replace(settings, picks=pp.PickConfig(yaw_min_deg=-5, yaw_max_deg=5))
     picks, warned = sample_picks(bar_mesh(tmp_path), along, 100, 0)
     assert picks == "sampled" and any("at only 0 % of the yaws" in w for w in warned)
+
+
+def test_pads_that_miss_the_part_are_left_to_the_feasibility_checks_message():
+    # the fingertips at the block's top: the pads meet no outline (no traceback here;
+    # the checker that follows says what to change)
+    obj = load_asset("block", pick_height_mm=20)
+    gripper = load_gripper("robotiq-2f85")
+    assert pp.check_stroke(obj, gripper) is None
+    assert pp.stroke_fit(obj, gripper).narrowest_mm == float("inf")
+    with pytest.raises(ConfigError, match="lower pick_height_mm"):
+        pp.FeasibilityChecker(obj, gripper)

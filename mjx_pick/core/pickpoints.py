@@ -345,6 +345,9 @@ def stroke_fit(
     config = config or PickConfig()
     lo, hi = pad_band_mm(obj, gripper, grasp or GraspConfig())
     outline = obj.band_outline(lo, max(hi, obj.height_mm))
+    if outline.is_empty:  # nothing between the pads (FeasibilityChecker refuses it)
+        yaws = np.arange(STROKE_YAWS) * (180.0 / STROKE_YAWS)
+        return StrokeFit(yaws, np.full(STROKE_YAWS, np.inf), math.inf, 0.0)
     # a tenth of a millimetre moves no edge further than the raster's rounding and keeps
     # a mesh's outline (thousands of vertices) cheap to cut; taken off the bound below
     simplify_mm = 0.1
@@ -397,6 +400,8 @@ def _whole_width_fits(obj, gripper, config, grasp) -> bool:
     fits but whose sections are too sparse for min_coverage is left to the sampler)."""
     lo, hi = pad_band_mm(obj, gripper, grasp or GraspConfig())
     outline = obj.band_outline(lo, max(hi, obj.height_mm))
+    if outline.is_empty:  # the pads miss the part: FeasibilityChecker's error names it
+        return True
     xy = shapely.get_coordinates(outline.convex_hull)
     yaws = np.deg2rad(np.arange(STROKE_YAWS) * (180.0 / STROKE_YAWS))
     x = xy[:, 0][None, :] * np.cos(yaws)[:, None] - xy[:, 1][None, :] * np.sin(yaws)[:, None]
