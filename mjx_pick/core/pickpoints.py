@@ -327,7 +327,7 @@ def stroke_fit(
     grasp: GraspConfig | None = None,
 ) -> StrokeFit:
     """Bound, from the outline the pads meet (the FeasibilityChecker's) alone, the
-    narrowest opening any pick-point could need: no raster, a fraction of a second.
+    narrowest opening any pick-point could need: no raster (cheap beside building one).
 
     A feasible pick-point's band (finger-wide, across the closing direction) cuts the
     outline into pieces; those between the pads lie there whole (a piece reaching under
@@ -457,7 +457,7 @@ def check_stroke(
     wider than the stroke; the sampler would draw max_candidates and find none); warn,
     with the numbers, when it may fit at few of the configured yaws. Returns the fit,
     or None when the whole part fits between the pads at enough yaws to say nothing
-    (most parts: a few microseconds instead of stroke_fit's fraction of a second)."""
+    (most parts: a projection of its hull, without stroke_fit's band cuts)."""
     config = config or PickConfig()
     if _whole_width_fits(obj, gripper, config, grasp):
         return None
