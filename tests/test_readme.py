@@ -4,8 +4,10 @@ Code blocks marked ``<!-- ci:example SUBS -->`` are run: a bash block one comman
 time through the CLI's ``main`` (in this process: one import, shared compiles), the
 Python block in a child process with no display and no MUJOCO_GL (as a user's headless
 script). SUBS are the only changes, declared in the README beside the block:
-``--flag=V`` sets that flag's value in bash lines, ``name=V`` sets ``name=<number>`` in
-Python (small n, few steps: the examples as written take minutes on 2 cores).
+``--flag=V`` sets that flag's value in bash lines that give it, ``CMD:--flag=V`` gives it
+to every ``mjx-pick CMD`` line (``report:--anim-every=32``: fewer animation frames, the
+same rendering), ``name=V`` sets ``name=<number>`` in Python (small n, few steps, few
+frames: the examples as written take minutes on 2 cores, most of it rendering).
 
 Not run here: `mjx-pick gui` and `view` (they need a browser or a display: their own
 tests cover them), `--ray` lines (a cluster: tests/test_cluster.py), the YCB mesh lines
@@ -53,9 +55,13 @@ def bash_commands(code: str, subs: dict) -> list[list[str]]:
             text = " ".join(cmd)
             if any(s in text for s in SKIP):
                 continue
-            for flag, value in subs.items():
+            for key, value in subs.items():
+                command, _, flag = key.rpartition(":")
                 if flag in cmd:
-                    cmd[cmd.index(flag) + 1] = value
+                    if not command or cmd[1] == command:
+                        cmd[cmd.index(flag) + 1] = value
+                elif command and cmd[1] == command:
+                    cmd += [flag, value]
             out.append(cmd[1:])
     return out
 
@@ -69,6 +75,16 @@ def workdir(tmp_path, monkeypatch):
 
 def test_the_readme_marks_its_examples():
     assert len(examples("bash")) >= 1 and len(examples("python")) == 1
+
+
+def test_subs_set_given_flags_and_add_a_commands_own():
+    subs = {"--n": "6", "report:--anim-every": "32"}
+    code = "mjx-pick evaluate x --n 1000 && mjx-pick report runs/do\nmjx-pick report r --n 3\n"
+    assert bash_commands(code, subs) == [
+        ["evaluate", "x", "--n", "6"],
+        ["report", "runs/do", "--anim-every", "32"],
+        ["report", "r", "--n", "6", "--anim-every", "32"],
+    ]
 
 
 def test_readme_bash_examples(workdir, capsys):

@@ -235,3 +235,39 @@ def test_a_damaged_run_file_is_an_error_naming_it(tmp_path, capsys, damaged):
         Run.load(folder)
     assert main(["report", str(folder), "--no-animations"]) == 2
     assert f"{damaged} is damaged" in capsys.readouterr().err
+
+
+def test_a_headless_report_renders_every_animation_in_one_child(run_dir, tmp_path, monkeypatch):
+    """A script with no display and no MUJOCO_GL renders in an EGL child: one for the
+    whole report, not one per animation (each start imports MuJoCo and this package)."""
+    import multiprocessing
+
+    from mjx_pick.outputs.reporting import animation
+
+    pools = []
+
+    class InProcessPool:  # stands in for the spawned child: counts starts, runs here
+        def __init__(self, n):
+            pools.append(n)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def apply(self, fn, args):
+            return _render_here(fn, args)
+
+    def _render_here(fn, args):
+        with monkeypatch.context() as m:
+            m.setattr(animation, "_render_in_child", lambda: False)  # the child can render
+            return fn(*args)
+
+    class Context:
+        Pool = InProcessPool
+
+    monkeypatch.setattr(animation, "_render_in_child", lambda: True)
+    monkeypatch.setattr(multiprocessing, "get_context", lambda method: Context())
+    out = report(run_dir, tmp_path / "r", n=2, k=4, anim_every=200, anim_size=(80, 60))
+    assert len(out["animations"]) == 2 and pools == [1]

@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 import shapely
+import shapely.affinity
 
 from mjx_pick.core import cache
 from mjx_pick.core.config import (
@@ -242,14 +243,19 @@ class FeasibilityChecker:
 
     def ranges(self) -> tuple[float, float]:
         """The x and y offset ranges in mm (defaults: half the object's length)."""
-        half = 0.5 * self.object.length_mm
-        xr = self.config.x_range_mm if self.config.x_range_mm is not None else half
-        yr = self.config.y_range_mm if self.config.y_range_mm is not None else half
-        return xr, yr
+        return offset_ranges(self.object, self.config)
 
     def batch(self, pick_id, x_mm, y_mm, yaw_deg, mode: str) -> PickBatch:
         """Check candidates and keep the feasible ones as a PickBatch."""
         return feasible_batch(pick_id, x_mm, y_mm, yaw_deg, self(x_mm, y_mm, yaw_deg), mode)
+
+
+def offset_ranges(obj: ObjectModel, config: PickConfig) -> tuple[float, float]:
+    """The x and y offset ranges in mm (defaults: half the object's length)."""
+    half = 0.5 * obj.length_mm
+    xr = config.x_range_mm if config.x_range_mm is not None else half
+    yr = config.y_range_mm if config.y_range_mm is not None else half
+    return xr, yr
 
 
 def feasible_batch(pick_id, x_mm, y_mm, yaw_deg, res: dict, mode: str) -> PickBatch:
@@ -286,6 +292,204 @@ def check_raster(obj: ObjectModel, config: PickConfig | None = None) -> None:
     config = config or PickConfig()
     radius = max(math.hypot(x, y) for x, y in obj.polygon.exterior.coords)
     raster_resolution(obj.name, radius, config.resolution_mm)
+
+
+# yaws over half a turn at which check_stroke measures the outline (the gripper is
+# symmetric: yaw and yaw + 180 deg grip the same section)
+STROKE_YAWS = 180
+# band positions every 1/STROKE_BAND_STEPS of the finger width
+STROKE_BAND_STEPS = 16
+# below this fraction of the configured yaws with a section that may fit, a warning
+# says that most candidates will be dropped as too wide
+STROKE_FEW_YAWS = 0.25
+
+
+@dataclasses.dataclass(frozen=True)
+class StrokeFit:
+    """How the outline between the pads fits the stroke (``stroke_fit``).
+
+    yaw_deg: (K,) the yaws measured, over [0, 180); opening_mm: (K,) at each, a lower
+    bound of the narrowest opening (safety zones left out) that the feasibility checks
+    could accept within half a yaw step (inf where none); narrowest_mm: their minimum;
+    fits: the fraction of the configured yaws where that opening plus the two safety
+    zones may fit the stroke."""
+
+    yaw_deg: np.ndarray
+    opening_mm: np.ndarray
+    narrowest_mm: float
+    fits: float
+
+
+def stroke_fit(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
+) -> StrokeFit:
+    """Bound, from the outline the pads meet (the FeasibilityChecker's) alone, the
+    narrowest opening any pick-point could need: no raster (cheap beside building one).
+
+    A feasible pick-point's band (finger-wide, across the closing direction) cuts the
+    outline into pieces; those between the pads lie there whole (a piece reaching under
+    a finger fails clearance), span at most the opening less the safety zones, and fill
+    min_coverage of the pads' region. Here, at each of STROKE_YAWS yaws, bands are
+    sampled every STROKE_BAND_STEPS-th of the finger width and narrowed so that every
+    band in between, at any yaw within half a step, contains one (the outline moves at
+    most its radius times half a step); what a band loses that way is at most its lost
+    width times the opening, which the coverage test here forgives. Runs of neighbouring
+    pieces (those overlapping along the closing direction merged: they go together)
+    that pass it give the bound, centred on the run as far as the drawn offsets reach,
+    less the yaw's movement and a raster cell (the checks' own rounding). So a part whose
+    bound plus the safety zones exceeds the stroke has no feasible pick-point.
+    """
+    config = config or PickConfig()
+    lo, hi = pad_band_mm(obj, gripper, grasp or GraspConfig())
+    outline = obj.band_outline(lo, max(hi, obj.height_mm))
+    if outline.is_empty:  # nothing between the pads (FeasibilityChecker refuses it)
+        yaws = np.arange(STROKE_YAWS) * (180.0 / STROKE_YAWS)
+        return StrokeFit(yaws, np.full(STROKE_YAWS, np.inf), math.inf, 0.0)
+    # a tenth of a millimetre moves no edge further than the raster's rounding and keeps
+    # a mesh's outline (thousands of vertices) cheap to cut; taken off the bound below
+    simplify_mm = 0.1
+    outline = shapely.simplify(outline, simplify_mm, preserve_topology=True)
+    radius = float(np.hypot(*shapely.get_coordinates(outline).T).max())
+    w, c_min = float(gripper.finger_width_mm), float(config.min_coverage)
+    step = w / STROKE_BAND_STEPS
+    slack = radius * math.sin(0.5 * math.pi / STROKE_YAWS) + simplify_mm  # half a yaw step
+    width = w - step - 2.0 * slack  # the band every band in reach contains
+    fill = c_min * w - step - 2.0 * slack  # least area per mm of opening in that band
+    slop = 2.0 * slack + config.resolution_mm
+    xr, yr = offset_ranges(obj, config)
+    yaws = np.arange(STROKE_YAWS) * (180.0 / STROKE_YAWS)
+    openings = np.full(STROKE_YAWS, np.inf)
+    for k, yaw in enumerate(yaws):
+        if width <= 0.0:  # too coarse to bound anything: never a refusal
+            openings[k] = 0.0
+            continue
+        rotated = shapely.affinity.rotate(outline, yaw, origin=(0.0, 0.0))
+        x0, y0, x1, y1 = rotated.bounds
+        # band centres in reach (the gripper centre's y is a drawn offset, +-yr)
+        c0, c1 = max(y0 - 0.5 * w, -yr - slack), min(y1 + 0.5 * w, yr + slack)
+        if c1 < c0:
+            continue
+        edges = np.linspace(c0, c1, max(2, math.ceil((c1 - c0) / step) + 1))
+        centres = 0.5 * (edges[:-1] + edges[1:])
+        bands = shapely.box(x0 - 1.0, centres - 0.5 * width, x1 + 1.0, centres + 0.5 * width)
+        cut = shapely.intersection(rotated, bands)
+        parts, band_of = shapely.get_parts(cut, return_index=True)
+        areas = shapely.area(parts)
+        solid = areas > 0.0  # a band's edge along an outline's edge cuts off bare lines
+        parts, band_of, areas = parts[solid], band_of[solid], areas[solid]
+        bounds = shapely.bounds(parts)
+        for b in np.unique(band_of):
+            sel = band_of == b
+            run = _narrowest_run(bounds[sel], areas[sel], fill, xr + slack)
+            openings[k] = min(openings[k], max(run - slop, 0.0))
+    lo_yaw, hi_yaw = config.yaw_min_deg, config.yaw_max_deg
+    wanted = np.mod(yaws - lo_yaw, 360.0) <= hi_yaw - lo_yaw  # in the configured range
+    wanted |= np.mod(yaws + 180.0 - lo_yaw, 360.0) <= hi_yaw - lo_yaw
+    room = gripper.stroke_mm - 2.0 * config.safety_zone_mm
+    fits = float(np.mean(openings[wanted] <= room)) if wanted.any() else 0.0
+    return StrokeFit(yaws, openings, float(openings.min()), fits)
+
+
+def _whole_width_fits(obj, gripper, config, grasp) -> bool:
+    """Whether the whole outline the pads meet, centred between them (within the drawn
+    x offsets), fits the stroke less the safety zones at STROKE_FEW_YAWS of the
+    configured yaws or more: check_stroke then says nothing (a part whose whole width
+    fits but whose sections are too sparse for min_coverage is left to the sampler)."""
+    lo, hi = pad_band_mm(obj, gripper, grasp or GraspConfig())
+    outline = obj.band_outline(lo, max(hi, obj.height_mm))
+    if outline.is_empty:  # the pads miss the part: FeasibilityChecker's error names it
+        return True
+    xy = shapely.get_coordinates(outline.convex_hull)
+    yaws = np.deg2rad(np.arange(STROKE_YAWS) * (180.0 / STROKE_YAWS))
+    x = xy[:, 0][None, :] * np.cos(yaws)[:, None] - xy[:, 1][None, :] * np.sin(yaws)[:, None]
+    left, right = x.min(axis=1), x.max(axis=1)
+    xr, _ = offset_ranges(obj, config)
+    centre = np.clip(0.5 * (left + right), -xr, xr)
+    opening = 2.0 * np.maximum(right - centre, centre - left) + config.resolution_mm
+    room = gripper.stroke_mm - 2.0 * config.safety_zone_mm
+    lo_yaw, hi_yaw = config.yaw_min_deg, config.yaw_max_deg
+    deg = np.rad2deg(yaws)
+    wanted = np.mod(deg - lo_yaw, 360.0) <= hi_yaw - lo_yaw
+    wanted |= np.mod(deg + 180.0 - lo_yaw, 360.0) <= hi_yaw - lo_yaw
+    return bool(wanted.any()) and float(np.mean(opening[wanted] <= room)) >= STROKE_FEW_YAWS
+
+
+def _narrowest_run(bounds, areas, fill: float, xr: float) -> float:
+    """The narrowest opening over runs of neighbouring pieces of one band (bounds:
+    (P, 4) xmin, ymin, xmax, ymax; areas: (P,)) holding at least fill mm^2 per mm of
+    it; inf if none. The pads centre on a run, or as near as the drawn x offsets (+-xr)
+    reach: off-centre, the opening spans the run's far side twice."""
+    order = np.argsort(bounds[:, 0])
+    clusters: list[list[float]] = []  # [xmin, xmax, area] of pieces overlapping in x
+    for i in order:
+        a, b = bounds[i, 0], bounds[i, 2]
+        if clusters and a <= clusters[-1][1]:
+            clusters[-1][1] = max(clusters[-1][1], b)
+            clusters[-1][2] += areas[i]
+        else:
+            clusters.append([a, b, areas[i]])
+    best = math.inf
+    for i in range(len(clusters)):
+        area = 0.0
+        for j in range(i, len(clusters)):
+            a, b = clusters[i][0], clusters[j][1]
+            if b - a >= best:
+                break
+            area += clusters[j][2]
+            centre = min(max(0.5 * (a + b), -xr), xr)
+            opening = 2.0 * max(b - centre, centre - a)
+            if opening < best and area >= fill * opening:
+                best = opening
+    return best
+
+
+def check_stroke(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
+) -> StrokeFit | None:
+    """Before any raster, scene or folder: refuse a part that no pick-point can fit
+    (``stroke_fit``: the narrowest opening it could need, plus the safety zones, is
+    wider than the stroke; the sampler would draw max_candidates and find none); warn,
+    with the numbers, when it may fit at few of the configured yaws. Returns the fit,
+    or None when the whole part fits between the pads at enough yaws to say nothing
+    (most parts: a projection of its hull, without stroke_fit's band cuts)."""
+    config = config or PickConfig()
+    if _whole_width_fits(obj, gripper, config, grasp):
+        return None
+    fit = stroke_fit(obj, gripper, config, grasp)
+    stroke, zone = gripper.stroke_mm, config.safety_zone_mm
+    where = f"{obj.name!r} with {gripper.name} (stroke {stroke:g} mm)"
+    if fit.narrowest_mm > stroke:
+        raise ConfigError(
+            f"{where}: the part is at least {fit.narrowest_mm:.1f} mm wide between the pads "
+            f"at every pose (a finger-wide section that fills min_coverage = "
+            f"{config.min_coverage:g} of the pads' region), wider than the stroke, so no "
+            "pick-point can be feasible: use a gripper with a larger stroke, or check the "
+            "object's scale"
+        )
+    if fit.narrowest_mm + 2.0 * zone > stroke:
+        raise ConfigError(
+            f"{where}: the part is at least {fit.narrowest_mm:.1f} mm wide between the pads "
+            f"at every pose; with the {zone:g} mm safety zone on each side the fingers need "
+            f"{fit.narrowest_mm + 2.0 * zone:.1f} mm, more than the stroke, so no pick-point "
+            f"can be feasible: lower --safety-zone-mm (picks.safety_zone_mm) below "
+            f"{0.5 * (stroke - fit.narrowest_mm):.1f}, or use a gripper with a larger stroke"
+        )
+    if fit.fits < STROKE_FEW_YAWS:
+        warnings.warn(
+            f"{where}: the part may fit between the pads (at least {fit.narrowest_mm:.1f} mm "
+            f"plus {zone:g} mm safety zones) at only {100 * fit.fits:.0f} % of the yaws in "
+            "picks' range: most candidates will be too wide, and the feasible pick-points "
+            "cluster at those yaws",
+            PlausibilityWarning,
+            stacklevel=2,
+        )
+    return fit
 
 
 def raster_resolution(name: str, radius_mm: float, res_mm: float) -> float:

@@ -823,10 +823,13 @@ def feasible_estimate(obj, settings, n: int, seed: int, sample: int = 2000) -> i
     `sample` candidates and the candidates the generator checks at most."""
     import warnings
 
-    from mjx_pick.core.pickpoints import generate_normal
+    from mjx_pick.core.pickpoints import check_stroke, generate_normal
 
     with warnings.catch_warnings():  # a short sample: its shortfall says nothing yet
         warnings.simplefilter("ignore")
+        # a part no pose fits is refused before the raster and the draws, not once the
+        # run's job has started (its log shows the warnings check_stroke gives)
+        check_stroke(obj, settings.gripper, settings.picks, settings.grasp)
         picks = generate_normal(
             obj, settings.gripper, min(n, sample), seed, settings.picks, settings.grasp
         )

@@ -237,6 +237,10 @@ def evaluate(
     pick_config = pick_config or pp.PickConfig()
     grasp.check_gripper(gripper)
     pp.check_raster(obj, pick_config)  # before any allocation or folder
+    if not isinstance(picks, pp.PickBatch):  # a batch given here was checked when drawn
+        # a part wider than the stroke everywhere: refused now, not after a raster, a
+        # scene and max_candidates draws that find no pick-point
+        pp.check_stroke(obj, gripper, pick_config, grasp)
     if ray is not None and min_force:
         raise ConfigError(
             "--min-force does not run on a Ray cluster yet: leave out --ray or --min-force"

@@ -47,6 +47,7 @@ def write_picks(
     """
     config = config or pp.PickConfig()
     pp.check_raster(obj, config)  # before any allocation or folder
+    pp.check_stroke(obj, gripper, config)  # a part no pose fits: refused before the draws
     request = {"object": obj.summary(), "gripper": to_dict(gripper), "picks": to_dict(config)}
     request.update(n=n, seed=seed)
     folder = claim(out, "picks", config_hash(request), overwrite=overwrite, settings=request)

@@ -30,10 +30,12 @@ from mjx_pick.gui.state import PageState
 def sample_picks(obj, settings, n: int, seed: int):
     """The pick-points of tab 3's map and the warnings their generator gave (in the page,
     not only in the server's log)."""
-    from mjx_pick.core.pickpoints import generate_normal
+    from mjx_pick.core.pickpoints import check_stroke, generate_normal
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
+        # a part no pose fits is refused before the raster and the draws (as the CLI)
+        check_stroke(obj, settings.gripper, settings.picks, settings.grasp)
         picks = generate_normal(obj, settings.gripper, n, seed, settings.picks, settings.grasp)
     return picks, [str(w.message) for w in caught]
 

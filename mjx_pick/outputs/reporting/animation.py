@@ -7,6 +7,7 @@ the animations here and for ``mjx-pick view`` (``reporting.viewer``).
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 import sys
@@ -18,7 +19,7 @@ from mjx_pick.core.config import write_atomic
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.mjcf_gripper import PREFIX, characterise
 
-__all__ = ["TracePose", "animate", "render_rows", "write_mp4"]
+__all__ = ["TracePose", "animate", "render_pool", "render_rows", "write_mp4"]
 
 
 class TracePose:
@@ -140,6 +141,30 @@ def render_rows(
     return frames
 
 
+@contextlib.contextmanager
+def render_pool():
+    """Where animations render: None for this process, or (where it cannot render
+    offscreen but an EGL child can, :func:`_render_in_child`) one child process that
+    starts with EGL. A report opens it once for all its animations: a child costs the
+    imports of MuJoCo and this package, a few seconds, each time one starts."""
+    if not _render_in_child():
+        yield None
+        return
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    saved = os.environ.get("MUJOCO_GL")
+    os.environ["MUJOCO_GL"] = "egl"  # inherited by the child at its start only
+    try:
+        with ctx.Pool(1) as pool:
+            yield pool
+    finally:
+        if saved is None:
+            os.environ.pop("MUJOCO_GL", None)
+        else:
+            os.environ["MUJOCO_GL"] = saved
+
+
 def animate(
     scene_xml: str | os.PathLike,
     trace: dict,
@@ -148,30 +173,23 @@ def animate(
     size: tuple[int, int] = (320, 240),
     gripper: GripperSpec | None = None,
     mp4: bool = True,
+    pool=None,
 ) -> int:
     """Replay a trace in MuJoCo's offscreen renderer as a GIF, and beside it (mp4) the
     same frames as an H.264 MP4 (``path`` with the suffix .mp4); returns the frame count.
 
     Each frame is :func:`render_rows`' (top and side cameras, time and phase); one frame
-    every ``every`` control ticks, played in real time.
+    every ``every`` control ticks, played in real time. pool: a :func:`render_pool`
+    that several animations share (default: one opened for this one).
     """
+    args = (scene_xml, trace, path, every, size, gripper, mp4)
+    if pool is not None:
+        return pool.apply(animate, args)
     if _render_in_child():
         # this process chose its OpenGL back end when it imported MuJoCo, and that one
         # cannot open a context here: render in a child that starts with EGL
-        import multiprocessing
-
-        ctx = multiprocessing.get_context("spawn")
-        saved = os.environ.get("MUJOCO_GL")
-        os.environ["MUJOCO_GL"] = "egl"  # inherited by the child at its start only
-        try:
-            with ctx.Pool(1) as pool:
-                args = (scene_xml, trace, path, every, size, gripper, mp4)
-                return pool.apply(animate, args)
-        finally:
-            if saved is None:
-                os.environ.pop("MUJOCO_GL", None)
-            else:
-                os.environ["MUJOCO_GL"] = saved
+        with render_pool() as child:
+            return child.apply(animate, args)
     from PIL import Image
 
     frames = render_rows(scene_xml, trace, range(0, len(trace["t_s"]), every), size, gripper)

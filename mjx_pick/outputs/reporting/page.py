@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import contextlib
 import html
 import json
 import os
@@ -13,7 +14,7 @@ import numpy as np
 from mjx_pick.core.config import ConfigError, write_atomic, write_json
 from mjx_pick.core.metrics import rate_text
 from mjx_pick.outputs.progress import ProgressBar
-from mjx_pick.outputs.reporting.animation import animate
+from mjx_pick.outputs.reporting.animation import animate, render_pool
 from mjx_pick.outputs.reporting.figures import force_plot, maps
 from mjx_pick.outputs.reporting.robot import robot_picks
 from mjx_pick.outputs.reporting.run import Run, read_parquet
@@ -58,7 +59,8 @@ def report(
     # parts: per traced pick-point a force plot (and an animation), the maps, each
     # template, the robot export, the page
     parts = len(traced) * (2 if animations else 1) + 1 + len(PAPERS_MM) + 2
-    with ProgressBar("report", "part", enabled=progress, total=parts) as bar:
+    pool = render_pool() if animations and traced else contextlib.nullcontext()
+    with ProgressBar("report", "part", enabled=progress, total=parts) as bar, pool as child:
         forces, anims = [], []
         for pid, rank in traced:
             trace = run.trace(pid)
@@ -75,8 +77,9 @@ def report(
             if animations:
                 g = out_dir / f"anim_{pid}.gif"
                 frames = animate(
-                    run.path / "scene.xml", trace, g, anim_every, anim_size, run.gripper
-                )
+                    run.path / "scene.xml", trace, g, anim_every, anim_size, run.gripper,
+                    pool=child,
+                )  # fmt: skip
                 anims.append((g, f"{label} ({frames} frames; video: {g.with_suffix('.mp4').name})"))
                 bar.advance()
         written["forces"] = [str(p) for p, _ in forces]
