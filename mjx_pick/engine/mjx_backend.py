@@ -657,7 +657,7 @@ class MjxBackend:
         return results, Diagnostics(*(np.array(x)[:n] for x in diag))
 
 
-class DeviceThreads:
+class _DeviceThreads:
     """Several single-device backends as one: each runs a contiguous share of the
     pick-points on its own device, from its own host thread, and nothing passes between
     devices. Results come back in pick-point order.
@@ -674,7 +674,7 @@ class DeviceThreads:
 
     def __init__(self, parts: list):
         if len(parts) < 2:
-            raise ValueError(f"DeviceThreads needs >= 2 backends, got {len(parts)}")
+            raise ValueError(f"_DeviceThreads needs >= 2 backends, got {len(parts)}")
         self.parts = list(parts)
         p0 = self.parts[0]
         self.name, self.scene, self.grasp = p0.name, p0.scene, p0.grasp

@@ -19,6 +19,7 @@ from mjx_pick.outputs.rundir import claim, config_hash, finish
 from mjx_pick.studies.calibration import estimators as E
 from mjx_pick.studies.calibration.identify import data_nll, identifiability, theta_of_z
 from mjx_pick.studies.calibration.parameters import fitted_contact
+from mjx_pick.studies.options import RunOptions
 
 
 @dataclasses.dataclass
@@ -65,6 +66,7 @@ class _Checkpoints:
 
 def calibrate(
     problem,
+    options: RunOptions | None = None,
     *,
     steps: int = 200,
     learning_rate: float = 0.1,
@@ -73,16 +75,13 @@ def calibrate(
     sigma: float = 0.2,
     batch: int | None = None,
     popsize: int | None = None,
-    seed: int = 0,
     budget: int | None = None,
     target: float | None = None,
     checkpoint_every: int = 10,
-    out: str | Path | None = None,
-    resume: bool = False,
     holdout=None,
     identify: bool = True,
     log=None,
-    progress: bool = False,
+    **run,
 ) -> CalibrationResult:
     """Fit problem's parameters; see ``estimators`` for the estimators.
 
@@ -100,9 +99,16 @@ def calibrate(
       identify: after the fit, intervals and identifiability (``identify.py``); the
         parameters not identified keep their starting values in the answer.
       log: called with each step's history entry (progress output).
-      progress: a progress bar of the steps on stderr (``progress.ProgressBar``; print
-        log lines with ``progress.echo`` so that they do not break it).
+      options, or its fields as keywords (``options.RunOptions``; the backend, batch
+        size and pick-points are the problem's): seed (random, CMA-ES, smoothed draws),
+        out (the results folder and its checkpoints), resume (continue from out's last
+        checkpoint: the optimiser's state, not simulated chunks), progress (a progress
+        bar of the steps on stderr, ``progress.ProgressBar``; print log lines with
+        ``progress.echo`` so that they do not break it).
     """
+    opts = RunOptions.of(options, **run)
+    opts.only("calibrate", "seed", "out", "resume", "progress")
+    seed, out, resume, progress = opts.seed, opts.out, opts.resume, opts.progress
     est = E.make(
         estimator,
         steps,
@@ -232,7 +238,7 @@ def calibrate(
         from mjx_pick.studies.calibration.outputs import write_result
 
         write_result(result, problem, out_dir)
-        meta = problem.engine.describe(time.perf_counter() - t0)
+        meta = problem.runner.describe(time.perf_counter() - t0)
         meta["timing"]["rollouts"] = result.rollouts
         if estimator == "jvp":  # the gradients ran on MJX's JAX physics, beside the engine
             import jax
@@ -306,6 +312,7 @@ class _Budget(Exception):
 
 def least_squares(
     problem,
+    options: RunOptions | None = None,
     *,
     max_iters: int = 30,
     eps: float = 0.03,
@@ -313,8 +320,7 @@ def least_squares(
     identify: bool = True,
     holdout=None,
     log=None,
-    out: str | Path | None = None,
-    progress: bool = False,
+    **run,
 ) -> CalibrationResult:
     """Levenberg-Marquardt on the residuals with ``mujoco.sysid.optimize`` (MuJoCo's
     ``minimize.least_squares``; its finite-difference Jacobian runs all P shifted
@@ -326,8 +332,13 @@ def least_squares(
     smoothed over ``temperature_mm``: a local method stalls on their plateaus.
     With ``out``, writes the results folder as ``calibrate`` does (no checkpoints: a
     killed fit starts again). progress: a progress bar of the residual evaluations
-    (steps; their number is not known ahead) on stderr.
+    (steps; their number is not known ahead) on stderr. options, or its fields as
+    keywords (``options.RunOptions``): out and progress (a seed is allowed and unused:
+    the method draws nothing).
     """
+    opts = RunOptions.of(options, **run)
+    opts.only("least_squares", "seed", "out", "progress")
+    out, progress = opts.out, opts.progress
     from mujoco import sysid
 
     check_range("calibrate", "max_iters", max_iters, 1, 10_000)
@@ -421,7 +432,7 @@ def least_squares(
         from mjx_pick.studies.calibration.outputs import write_result
 
         write_result(result, problem, out_dir)
-        meta = problem.engine.describe(result.wall_s)
+        meta = problem.runner.describe(result.wall_s)
         meta["timing"]["rollouts"] = result.rollouts
         finish(out_dir, command="calibrate", config=request, **meta)
     return result
