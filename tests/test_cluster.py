@@ -287,8 +287,9 @@ def test_driver_killed_then_resumed_equals_one_process(cluster, block, tmp_path)
 
 
 def test_sweep_on_the_cluster_equals_one_process(cluster, block):
-    # the studies run their pick-points x variants batches through a Ray runner (``cluster.ray_runner``): each
-    # engine chunk is cut into one actor batch per actor and put back in order
+    # the studies run their pick-points x variants batches through a Ray runner
+    # (``cluster.ray_runner``): each runner chunk is cut into one actor batch per actor
+    # and put back in order
     address, _, _ = cluster
     params = [mp.ParamSpec.parse("contact.pad_friction=0.5:0.9:2")]
     run = {"n": 32, "backend": "mujoco", "batch_size": 16, "seed": 1}
