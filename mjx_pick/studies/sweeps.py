@@ -301,20 +301,7 @@ def sweep(
         }
         if store is not None:
             timing["chunks_resumed"] = store.read_chunks  # read back, not simulated
-        tables, summaries = [], []
-        for v, ((variant, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
-            extra = {"variant": np.full(len(picks), v)}
-            extra.update({name: np.full(len(picks), value) for name, value in combo.items()})
-            tables.append(results_table(picks, out_v, variant.gripper, extra))
-            summaries.append(
-                {
-                    "variant": v,
-                    **combo,
-                    **rate_summary(out_v["success"], out_v["score"]),
-                    "diverged": int(np.sum(out_v["diverged"])),
-                }
-            )
-        table = pa.concat_tables(tables)
+        table, summaries = _variant_tables(jobs, outs, combos)
         out_dir = Path(out) if out is not None else None
         if out_dir is not None:
             config = {
@@ -339,6 +326,25 @@ def sweep(
             store.remove()  # every row is in results.parquet now
             release(out_dir)
         return SweepResult(table, summaries, timing, out_dir)
+
+
+def _variant_tables(jobs, outs, combos) -> tuple[pa.Table, list[dict]]:
+    """The sweep's table (one row per pick-point x variant, with the variant's index and
+    parameter values as columns) and one summary per variant (rates, diverged runs)."""
+    tables, summaries = [], []
+    for v, ((variant, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
+        extra = {"variant": np.full(len(picks), v)}
+        extra.update({name: np.full(len(picks), value) for name, value in combo.items()})
+        tables.append(results_table(picks, out_v, variant.gripper, extra))
+        summaries.append(
+            {
+                "variant": v,
+                **combo,
+                **rate_summary(out_v["success"], out_v["score"]),
+                "diverged": int(np.sum(out_v["diverged"])),
+            }
+        )
+    return pa.concat_tables(tables), summaries
 
 
 def _read_sweep(out_dir: Path) -> SweepResult:
