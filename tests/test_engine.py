@@ -326,3 +326,30 @@ def test_a_cancelled_sweep_or_compare_marks_its_folder(block, tmp_path):
         manifest = json.loads((out / "mjx_pick_run.json").read_text())
         assert manifest["command"] == command and manifest["status"] == "cancelled"
         assert json.loads((out / "run.json").read_text())["status"] == "cancelled"
+
+
+def test_a_study_resumes_from_chunks_that_a_simulator_with_another_history_wrote(block, tmp_path):
+    # a long-lived simulator carries the model fields of every variant it ran (one
+    # compiled program for all of them); a chunk is named by its rows' settings and
+    # inputs, not by that set, so a fresh simulator (a resumed run in a new process)
+    # finds the chunks the long-lived one wrote
+    params = [ParamSpec.parse("gripper.finger_width_mm=18,22")]
+    run = {"n": 4, "seed": 1, "backend": "mujoco", "batch_size": 4}
+    settings = mp.Settings(grasp=SHORT)
+    used = Simulator(block, "mujoco", 4)
+    sweep(block, [ParamSpec.parse("gripper.finger_mass_g=30,50")], settings, **run, simulator=used)
+    out = tmp_path / "sw"
+
+    def ctrl_c(done: int, _total: int) -> None:
+        if done > 0:
+            raise KeyboardInterrupt
+
+    used.runner.on_progress = ctrl_c
+    with pytest.raises(KeyboardInterrupt):
+        sweep(block, params, settings, **run, simulator=used, out=out)
+    used.runner.on_progress = None
+    assert len(list((out / "chunks").glob("part-*.parquet"))) == 1
+    resumed = sweep(block, params, settings, **run, out=out, resume=True)
+    assert resumed.timing["chunks_resumed"] == 1 and resumed.table.num_rows == 8
+    whole = sweep(block, params, settings, **run)
+    assert resumed.table.equals(whole.table)
