@@ -118,8 +118,8 @@ def _start_node(log: Path, head_port, head: bool, up, temps: list[Path]):
 
 
 def _chunk_workers(nodes: list[subprocess.Popen]) -> list[int]:
-    """Pids of this cluster's ChunkWorker actors (Ray titles an actor's process
-    ray::<class>[.<method>])."""
+    """Pids of this cluster's worker actors (``cluster._Worker``; Ray titles an actor's
+    process ray::<class>[.<method>])."""
     pids = []
     for node in nodes:
         for pid in session_pids(node.pid):
@@ -127,7 +127,7 @@ def _chunk_workers(nodes: list[subprocess.Popen]) -> list[int]:
                 title = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
             except OSError:
                 continue
-            if title.startswith(b"ray::ChunkWorker"):
+            if title.startswith(b"ray::_Worker"):
                 pids.append(pid)
     return pids
 
@@ -155,7 +155,7 @@ def test_worker_killed_mid_chunk_is_rerun_elsewhere(cluster, block, tmp_path):
         # after the second chunk both actors are busy with more queued: kill one mid-chunk
         if done >= 2 * CHUNK and not killed:
             pids = _chunk_workers(nodes)
-            assert pids, "no ChunkWorker process found"
+            assert pids, "no worker actor process found"
             os.kill(pids[0], signal.SIGKILL)
             killed.append(pids[0])
 
