@@ -159,6 +159,8 @@ def cmd_design(args) -> int:
         rounds=args.rounds,
         rank_by=args.rank_by,
     )
+    if res.final.already_complete:
+        print(f"{args.out} holds this design search complete: nothing to resume, nothing simulated")
     print(f"best variant: {res.best.name}")
     for field in bounds:
         print(f"  {field}: {getattr(res.best, field):g} (base {getattr(res.base, field):g})")

@@ -35,9 +35,9 @@ from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.engine.backend import Settings
-from mjx_pick.engine.chunks import open_store
+from mjx_pick.engine.chunks import ChunkStore, open_store
 from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
-from mjx_pick.outputs.rundir import claim, config_hash, finish, portable_object, release
+from mjx_pick.outputs.rundir import finish, portable_object, release
 from mjx_pick.studies.options import RunOptions
 
 
@@ -130,11 +130,14 @@ def compare(
     *,
     rank_by: str = "success",
     simulator: Simulator | None = None,
+    _store: ChunkStore | None = None,
     **run,
 ) -> Comparison:
     """Simulate one shared candidate set (n pick-points, default 200) on every gripper
     and rank them. options, or its fields as keywords (``options.RunOptions``): as
-    sweep's (out, resume, ray, progress, ...); simulator: as sweep's."""
+    sweep's (out, resume, ray, progress, ...); simulator: as sweep's. _store: the
+    chunks of a study that runs this comparison as one of its steps (design), used
+    without out."""
     opts = RunOptions.of(options, **run)
     if rank_by not in ("success", "score"):
         raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
@@ -154,6 +157,7 @@ def compare(
         store, complete = open_store(
             out, "compare", request, resume=opts.resume, overwrite=opts.overwrite
         )
+        store = store if store is not None else _store
         if complete:
             return _read_comparison(Path(out), obj, grippers, base, n, seed, pick_config)
         t0 = time.perf_counter()
@@ -234,17 +238,20 @@ def _ranking(grippers, jobs, batches, outs, reasons, success, score, rank_by) ->
     return [rows[g] for g in order]
 
 
-def _read_comparison(out_dir: Path, obj, grippers, base, n, seed, pick_config) -> Comparison:
+def _read_comparison(
+    out_dir: Path, obj, grippers, base, n, seed, pick_config, ranking=None
+) -> Comparison:
     """A complete comparison's folder read back (resume has nothing to do): its ranking
-    and table, and the per-gripper arrays rebuilt from the table on the shared
-    candidates (drawn again: geometry only, nothing simulated)."""
+    (ranking.json, unless given) and table, and the per-gripper arrays rebuilt from the
+    table on the shared candidates (drawn again: geometry only, nothing simulated)."""
     import json
 
     import pyarrow.parquet as pq
 
     cand, _, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
     table = pq.read_table(out_dir / "results.parquet")
-    ranking = json.loads((out_dir / "ranking.json").read_text())
+    if ranking is None:
+        ranking = json.loads((out_dir / "ranking.json").read_text())
     names = [g.name for g in grippers]
     success = np.zeros((len(grippers), len(cand["pick_id"])), bool)
     score = np.zeros(success.shape)
@@ -382,16 +389,17 @@ def design_search(
     Round r simulates the surviving variants on n * 2**r shared pick-points (n: 64 by
     default) and keeps the best third (at least one); the survivor is then compared
     with the base gripper on final_n (default 4 n) fresh pick-points. options, or its
-    fields as keywords (``options.RunOptions``; resume is not used): ray runs every
+    fields as keywords (``options.RunOptions``): out is saved to as the rounds go (their
+    finished chunks, ``engine.chunks.ChunkStore``), so that resume continues an
+    interrupted search (on a complete one: reads it back); ray runs every
     round on a Ray cluster ("auto" or "HOST:PORT"; mjx_pick.engine.cluster), this process
     writing out; progress: a progress bar on stderr (its total grows as each round
     starts: a round's size depends on the last). simulator: run through this one (kept
     open; backend, batch_size and ray are then its own).
     """
     opts = RunOptions.of(options, **run)
-    if opts.resume:
-        raise ConfigError("design does not resume: run it again (or choose another --out)")
     n, seed, pick_config, out = opts.n_or(64), opts.seed, opts.pick_config, opts.out
+    opts.check_resume()
     base = base or Settings()
     check_range("design", "rounds", rounds, 1, 20)
     check_range("design", "n", n, 1, 1e8)
@@ -405,18 +413,25 @@ def design_search(
     request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
     pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
     with opts.simulator(obj, simulator) as sim:
-        if out is not None:
-            claim(out, "design", config_hash(request), overwrite=opts.overwrite, settings=request)
+        store, complete = open_store(
+            out, "design", request, resume=opts.resume, overwrite=opts.overwrite
+        )
         search = {"rounds": rounds, "n": n, "final_n": final_n, "seed": seed}
         search.update(rank_by=rank_by, pick_config=pick_config)
-        return _design(obj, base, pool, sim, bounds, request, t0, out, opts.progress, **search)
+        if complete:
+            return _read_design(Path(out), obj, base, pool, **search)
+        with marking_stops(out, "design"):
+            return _design(
+                obj, base, pool, sim, bounds, request, t0, out, opts.progress, store, **search
+            )
 
 
 def _design(
-    obj, base, pool, sim, bounds, request, t0, out, progress, *,
+    obj, base, pool, sim, bounds, request, t0, out, progress, store, *,
     rounds, n, final_n, seed, rank_by, pick_config,
 ) -> DesignResult:  # fmt: skip
-    """design_search once its inputs are checked, its simulator made and out claimed."""
+    """design_search once its inputs are checked, its simulator made and out claimed
+    (store: its chunks there, or None)."""
     history = []
     desc = f"design: {rounds} rounds + final ({sim.runner.backend_name})"
     with showing_progress(sim.runner, desc, "sim", progress) as bar:
@@ -432,6 +447,7 @@ def _design(
                 rank_by=rank_by,
                 pick_config=pick_config,
                 simulator=sim,
+                _store=store,
             )
             history.append(res.ranking)
             keep = max(1, math.ceil(len(pool) / 3)) if r < rounds - 1 else 1
@@ -450,6 +466,7 @@ def _design(
             rank_by=rank_by,
             pick_config=pick_config,
             simulator=sim,
+            _store=store,
         )
     result = DesignResult(best, base.gripper, final, history, None)
     if out is not None:
@@ -474,5 +491,26 @@ def _design(
         plot_comparison(obj, final, out_dir)
         result.out_dir = out_dir
         meta = sim.runner.describe(time.perf_counter() - t0)
-        finish(out_dir, command="design", config=request, seed=seed, **meta)
+        finish(out_dir, command="design", config=request, seed=seed, release_lock=False, **meta)
+        store.remove()  # every row is in the outputs now
+        release(out_dir)
     return result
+
+
+def _read_design(
+    out_dir: Path, obj, base, pool, *, rounds, n, final_n, seed, rank_by, pick_config
+) -> DesignResult:
+    """A complete design search's folder read back (resume has nothing to do): the
+    winner is the pool's variant of that name (the pool is drawn again from the seed),
+    the final comparison rebuilt as compare's (:func:`_read_comparison`)."""
+    import json
+
+    saved = json.loads((out_dir / "design.json").read_text())
+    best = {g.name: g for g in pool}[saved["best"]["name"]]
+    contenders = [best] if best == base.gripper else [best, base.gripper]
+    picks = pick_config or pp.PickConfig()
+    final_seed = seed + 1_000_003
+    final = _read_comparison(
+        out_dir, obj, contenders, base, final_n or 4 * n, final_seed, picks, saved["final"]
+    )
+    return DesignResult(best, base.gripper, final, saved["rounds"], out_dir)
