@@ -19,6 +19,12 @@ claim their output folder (``rundir.claim``) under a configuration key; a
   carry for other variants it ran, so a chunk is found again by any simulator that
   runs the same rows, in this process or on a Ray cluster.
 
+Why one store of named parquet chunks: a study's chunks must be found by content (a
+design search's rounds, a bisection's steps are not numbered ahead), which a plan of
+numbered chunks cannot do, while evaluate's numbered chunks are content too once named
+under the run's key; parquet holds evaluate's result rows (with their pick ids, checked
+on reading) and a study's result arrays alike, and the GUI counts ``part-*`` files.
+
 A chunk file that cannot be read (a disk error, a copy cut short) is simulated again
 and written over. Once a run's outputs are written the chunks are removed (every row is
 in the outputs); a run that stops early keeps them for ``resume``.
