@@ -26,7 +26,7 @@ import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine.backend import make_inputs
-from mjx_pick.engine.runner import Engine
+from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 
 
@@ -42,7 +42,7 @@ def perturbed_success(scene, grasp, picks: pp.PickBatch, copies: int, seed: int)
         y_mm=rep.y_mm + rng.normal(0, 0.2, len(idx)),
         yaw_deg=rep.yaw_deg + rng.normal(0, 0.2, len(idx)),
     )
-    out = Engine("mujoco", 256).simulate(scene, grasp, make_inputs(scene, grasp, rep)).results
+    out = Runner("mujoco", 256).simulate(scene, grasp, make_inputs(scene, grasp, rep)).results
     return out["success"].reshape(n, copies).mean(axis=1)
 
 
@@ -68,10 +68,10 @@ def main() -> None:
     res = {}
     timing = {}
     for name, batch in (("mujoco", 256), ("mjx", args.mjx_batch)):
-        engine = Engine(name, batch)
-        backend = engine.make(scene, grasp)
+        runner = Runner(name, batch)
+        backend = runner.make(scene, grasp)
         t0 = time.perf_counter()
-        res[name] = engine.run(backend, inputs).results
+        res[name] = runner.run(backend, inputs).results
         timing[name] = {
             "wall_s": round(time.perf_counter() - t0, 2),
             "compile_s": round(backend.stats.compile_s, 2),

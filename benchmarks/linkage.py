@@ -37,7 +37,7 @@ from mjx_pick.core import mjcf_gripper
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import write_json
 from mjx_pick.engine.backend import make_inputs
-from mjx_pick.engine.runner import Engine
+from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.studies.comparison import compare
 
@@ -173,7 +173,7 @@ def picture(obj, grippers, cand_row, grasp, config, path: Path) -> None:
             np.arange(1), [cand_row["x_mm"]], [cand_row["y_mm"]], [cand_row["yaw_deg"]], "user"
         )
         scene = mp.build_scene(obj, gripper, None, None, grasp)
-        out, traces, _ = Engine("mujoco", 1).simulate(
+        out, traces, _ = Runner("mujoco", 1).simulate(
             scene, grasp, make_inputs(scene, grasp, picks), record=True
         )
         tr = {f: traces[0, :, i] for i, f in enumerate(gk.TRACE_FIELDS)}

@@ -28,7 +28,7 @@ import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import G
 from mjx_pick.engine.backend import make_inputs
-from mjx_pick.engine.runner import Engine
+from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 
 FREE = mp.GripperSpec(name="test-gripper", force_min_n=0.01)
@@ -43,7 +43,7 @@ def _centred(obj, grasp, y_mm):
 def _run(obj, picks, grasp, contact, solver=None, backend="mujoco", **per_pick):
     scene = mp.build_scene(obj, FREE, contact, solver, grasp)
     inputs = make_inputs(scene, grasp, picks, per_pick)
-    return Engine(backend, len(picks)).simulate(scene, grasp, inputs).results, scene
+    return Runner(backend, len(picks)).simulate(scene, grasp, inputs).results, scene
 
 
 def creep() -> None:
@@ -86,7 +86,7 @@ def convergence() -> None:
         for dt in (0.001, 0.0005):
             scene = mp.build_scene(obj, gripper, contact, mp.SolverParams(timestep_s=dt), grasp)
             inputs = make_inputs(scene, grasp, picks)
-            outs.append(Engine("mujoco", len(picks)).simulate(scene, grasp, inputs).results)
+            outs.append(Runner("mujoco", len(picks)).simulate(scene, grasp, inputs).results)
         a, b = outs
         reasons = collections.Counter(gk.FAILURES[i] for i in a["failure"])
         print(

@@ -58,7 +58,7 @@ def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
     """Re-simulate the first pick of a failure class with its trace and draw why."""
     from mjx_pick.core import pickpoints as pp
     from mjx_pick.engine.backend import make_inputs
-    from mjx_pick.engine.runner import Engine
+    from mjx_pick.engine.runner import Runner
     from mjx_pick.outputs.plots import new_figure, pick_on_axes, save_png
 
     gripper = mp.load_gripper("robotiq-2f85")
@@ -67,7 +67,7 @@ def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
     picks = checker.batch(np.arange(1), [r.x_mm], [r.y_mm], [r.yaw_deg], "user")
     scene = mp.build_scene(obj, gripper, None, None, grasp)
     traces = (
-        Engine("mujoco", 1)
+        Runner("mujoco", 1)
         .simulate(scene, grasp, make_inputs(scene, grasp, picks), record=True)
         .traces
     )

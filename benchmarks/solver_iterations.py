@@ -17,7 +17,7 @@ import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine.backend import make_inputs
-from mjx_pick.engine.runner import Engine
+from mjx_pick.engine.runner import Runner
 
 VARIANTS = {
     "default (10/8)": {},
@@ -37,10 +37,10 @@ def main() -> None:
     base = None
     for label, kw in VARIANTS.items():
         scene = mp.build_scene(obj, gripper, solver=dataclasses.replace(mp.SolverParams(), **kw))
-        engine = Engine("mujoco", len(picks))
-        backend = engine.make(scene, grasp)
+        runner = Runner("mujoco", len(picks))
+        backend = runner.make(scene, grasp)
         t0 = time.perf_counter()
-        out = engine.run(backend, make_inputs(scene, grasp, picks)).results
+        out = runner.run(backend, make_inputs(scene, grasp, picks)).results
         base = base or out
         print(
             f"{label:15s} {time.perf_counter() - t0:6.2f} s  success {out['success'].mean():.3f}  "

@@ -11,6 +11,7 @@ Everything else is internal and may change between versions.
 from __future__ import annotations
 
 import importlib
+import warnings
 from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
@@ -43,7 +44,8 @@ _PUBLIC = {
     "ConfigError": "core.config",
     # engine: the one simulation path
     "Cancelled": "engine.runner",
-    "Engine": "engine.runner",
+    "Runner": "engine.runner",
+    "Engine": "engine.runner",  # deprecated: Runner's old name (_RENAMED)
     "Simulator": "engine.simulator",
     "Settings": "engine.backend",
     # studies
@@ -59,7 +61,11 @@ _PUBLIC = {
     # outputs
     "report": "outputs.reporting",
     "use_offscreen_rendering": "outputs.display",
+    "RunOptions": "studies.options",
 }
+
+# old public name -> its new name: kept, with a DeprecationWarning, for one release
+_RENAMED = {"Engine": "Runner"}
 
 __all__ = [
     "Cancelled",
@@ -74,6 +80,8 @@ __all__ = [
     "ParamSpec",
     "PickBatch",
     "PickConfig",
+    "RunOptions",
+    "Runner",
     "Scene",
     "Settings",
     "Simulator",
@@ -126,13 +134,15 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load lazily
     from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
     from mjx_pick.core.scene import Scene, build_scene
     from mjx_pick.engine.backend import Settings
-    from mjx_pick.engine.runner import Cancelled, Engine
+    from mjx_pick.engine.runner import Cancelled, Runner
+    from mjx_pick.engine.runner import Runner as Engine
     from mjx_pick.engine.simulator import Simulator
     from mjx_pick.outputs.display import use_offscreen_rendering
     from mjx_pick.outputs.reporting import report
     from mjx_pick.studies.calibration import calibrate
     from mjx_pick.studies.comparison import compare, design_search
     from mjx_pick.studies.evaluation import Evaluation, evaluate
+    from mjx_pick.studies.options import RunOptions
     from mjx_pick.studies.robust import min_grip_force, robustness
     from mjx_pick.studies.sweeps import ParamSpec, sweep
 
@@ -141,6 +151,14 @@ def __getattr__(name: str):
     module = _PUBLIC.get(name)
     if module is None:
         raise AttributeError(f"module 'mjx_pick' has no attribute {name!r}")
+    if name in _RENAMED:  # not cached: each use of the old name says so
+        new = _RENAMED[name]
+        warnings.warn(
+            f"mjx_pick.{name} is now mjx_pick.{new}; the old name goes in the next release",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return __getattr__(new)
     value = getattr(importlib.import_module(f"mjx_pick.{module}"), name)
     globals()[name] = value  # later look-ups skip this function
     return value

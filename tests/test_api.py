@@ -11,12 +11,22 @@ def test_public_names_import():
     assert len(set(names)) == len(names), "duplicate names in __all__"
     assert not [n for n in names if n.startswith("_")], "private names in __all__"
     for name in names:
+        if name in mjx_pick._RENAMED:
+            continue  # a deprecated old name: test_renamed_names_warn_and_give_the_new_one
         assert hasattr(mjx_pick, name), f"__all__ names {name!r}, which does not import"
         value = getattr(mjx_pick, name)
         # every public name is a class, a function or a module of the package
         assert callable(value) or inspect.ismodule(value), (name, type(value))
         owner = getattr(value, "__module__", getattr(value, "__name__", ""))
         assert owner.startswith("mjx_pick"), f"{name} comes from {owner}, not mjx_pick"
+
+
+def test_renamed_names_warn_and_give_the_new_one():
+    import pytest
+
+    for old, new in mjx_pick._RENAMED.items():
+        with pytest.warns(DeprecationWarning, match=f"now mjx_pick.{new}"):
+            assert getattr(mjx_pick, old) is getattr(mjx_pick, new)
 
 
 def test_kernels_install_under_the_package():

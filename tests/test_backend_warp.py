@@ -341,7 +341,7 @@ def test_device_threads_run_shares_side_by_side_in_pick_order(block_scene):
     import threading
 
     from mjx_pick.engine.backend import RunStats
-    from mjx_pick.engine.mjx_backend import DeviceThreads, Diagnostics, PoolStats
+    from mjx_pick.engine.mjx_backend import Diagnostics, PoolStats, _DeviceThreads
 
     barrier = threading.Barrier(2, timeout=20)
 
@@ -367,8 +367,8 @@ def test_device_threads_run_shares_side_by_side_in_pick_order(block_scene):
             return {"x": x, "device": np.full(n, self.devices[0])}, None
 
     with pytest.raises(ValueError, match=">= 2"):
-        DeviceThreads([StandIn(0)])
-    both = DeviceThreads([StandIn(0), StandIn(1)])
+        _DeviceThreads([StandIn(0)])
+    both = _DeviceThreads([StandIn(0), StandIn(1)])
     assert both.shares(11) == [slice(0, 6), slice(6, 11)]
     assert both.pool_size(11) == 6 + 5 and both.batch_size == 16
     picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 11, seed=0, grasp=SHORT)

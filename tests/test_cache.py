@@ -255,7 +255,7 @@ COMPILED = textwrap.dedent(
     import jax
     from mjx_pick.engine import compiled, runner
     print(jax.config.jax_compilation_cache_dir)  # importing sets nothing
-    runner.Engine("mujoco")
+    runner.Runner("mujoco")
     print(jax.config.jax_compilation_cache_dir)
     print(jax.config.jax_persistent_cache_min_compile_time_secs == compiled.MIN_COMPILE_S)
     """

@@ -118,8 +118,8 @@ def _start_node(log: Path, head_port, head: bool, up, temps: list[Path]):
 
 
 def _chunk_workers(nodes: list[subprocess.Popen]) -> list[int]:
-    """Pids of this cluster's ChunkWorker actors (Ray titles an actor's process
-    ray::<class>[.<method>])."""
+    """Pids of this cluster's worker actors (``cluster._Worker``; Ray titles an actor's
+    process ray::<class>[.<method>])."""
     pids = []
     for node in nodes:
         for pid in session_pids(node.pid):
@@ -127,7 +127,7 @@ def _chunk_workers(nodes: list[subprocess.Popen]) -> list[int]:
                 title = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
             except OSError:
                 continue
-            if title.startswith(b"ray::ChunkWorker"):
+            if title.startswith(b"ray::_Worker"):
                 pids.append(pid)
     return pids
 
@@ -155,7 +155,7 @@ def test_worker_killed_mid_chunk_is_rerun_elsewhere(cluster, block, tmp_path):
         # after the second chunk both actors are busy with more queued: kill one mid-chunk
         if done >= 2 * CHUNK and not killed:
             pids = _chunk_workers(nodes)
-            assert pids, "no ChunkWorker process found"
+            assert pids, "no worker actor process found"
             os.kill(pids[0], signal.SIGKILL)
             killed.append(pids[0])
 
@@ -287,8 +287,9 @@ def test_driver_killed_then_resumed_equals_one_process(cluster, block, tmp_path)
 
 
 def test_sweep_on_the_cluster_equals_one_process(cluster, block):
-    # the studies run their pick-points x variants batches through a RayEngine: each
-    # engine chunk is cut into one actor batch per actor and put back in order
+    # the studies run their pick-points x variants batches through a Ray runner
+    # (``cluster.ray_runner``): each runner chunk is cut into one actor batch per actor
+    # and put back in order
     address, _, _ = cluster
     params = [mp.ParamSpec.parse("contact.pad_friction=0.5:0.9:2")]
     run = {"n": 32, "backend": "mujoco", "batch_size": 16, "seed": 1}
@@ -308,16 +309,8 @@ def cluster_sim(cluster, block):
     sim.close()
 
 
-@pytest.fixture()
-def fresh_cluster_sim(cluster_sim, block):
-    """A Simulator with no history on the same cluster actors, as a resumed run in a new
-    process has: the model fields a simulator carries grow with the studies it ran
-    (``engine.variants``), and they are part of a chunk's identity on disk."""
-    return Simulator(block, engine=cluster_sim.engine)
-
-
 def test_robust_on_the_cluster_equals_one_process(cluster_sim, block):
-    # the n pick-points, then the top-k's perturbed draws, all through the RayEngine
+    # the n pick-points, then the top-k's perturbed draws, all through the Ray runner
     run = {"n": 32, "top_k": 4, "m": 8, "seed": 2}
     local = robust_best(block, mp.Settings(grasp=GRASP), **run, backend="mujoco", batch_size=16)
     remote = robust_best(block, mp.Settings(grasp=GRASP), **run, simulator=cluster_sim)
@@ -347,8 +340,7 @@ def _same_outputs(a: Path, b: Path, names: tuple[str, ...]) -> None:
             assert (a / name).read_text() == (b / name).read_text(), name
 
 
-def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(fresh_cluster_sim, block, tmp_path):
-    cluster_sim = fresh_cluster_sim
+def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(cluster_sim, block, tmp_path):
     # started on the cluster (chunks of one actor batch per actor: 2 x 16), stopped as
     # Ctrl-C stops it after its first chunk, resumed without Ray: the chunk on disk is
     # read back (the chunk size with it), the rest simulated here; the outputs are
@@ -363,13 +355,13 @@ def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(fresh_cluster_sim, 
         if done > 0:
             raise KeyboardInterrupt
 
-    cluster_sim.engine.on_progress = ctrl_c
+    cluster_sim.runner.on_progress = ctrl_c
     try:
         with pytest.raises(KeyboardInterrupt):
             mp.sweep(block, params, settings, **run, simulator=cluster_sim, out=out)
     finally:
-        cluster_sim.engine.on_progress = None
-    assert len(list((out / "chunks").glob("*.npz"))) == 1
+        cluster_sim.runner.on_progress = None
+    assert len(list((out / "chunks").glob("part-*.parquet"))) == 1
     assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
     with pytest.raises(mp.ConfigError, match="pass --resume"):
         mp.sweep(block, params, settings, **run, out=out)  # refused before simulating
@@ -383,8 +375,7 @@ def test_sweep_stopped_on_the_cluster_resumes_on_one_machine(fresh_cluster_sim, 
     assert again.already_complete and again.table.equals(resumed.table)
 
 
-def test_compare_killed_then_resumed_on_the_cluster(fresh_cluster_sim, block, tmp_path):
-    cluster_sim = fresh_cluster_sim
+def test_compare_killed_then_resumed_on_the_cluster(cluster_sim, block, tmp_path):
     # `mjx-pick compare` without Ray, killed (SIGKILL) once a chunk is on disk, then
     # resumed on the cluster: only the missing chunks are simulated there, and the
     # outputs are those of one uninterrupted run without Ray
@@ -405,22 +396,22 @@ def test_compare_killed_then_resumed_on_the_cluster(fresh_cluster_sim, block, tm
         proc = subprocess.Popen(cmd, env=env, stdout=sink, stderr=subprocess.STDOUT, cwd=tmp_path)
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and proc.poll() is None:
-            if list((out / "chunks").glob("*.npz")):
+            if list((out / "chunks").glob("part-*.parquet")):
                 break
             time.sleep(0.05)
         alive = proc.poll() is None
         proc.send_signal(signal.SIGKILL)
         proc.wait()
     assert alive, f"compare ended before it could be killed: {log.read_text()}"
-    kept = list((out / "chunks").glob("*.npz"))
-    on_disk = sum(len(np.load(f)["success"]) for f in kept)
+    kept = list((out / "chunks").glob("part-*.parquet"))
+    on_disk = sum(pq.read_table(f).num_rows for f in kept)
     simulated = int(np.sum(reference.feasible))
     assert kept and on_disk < simulated and not (out / "ranking.json").exists()
-    before = cluster_sim.engine.pool.simulated
+    before = cluster_sim.runner.cluster.simulated
     resumed = mp.compare(
         block, grippers, settings, **run, simulator=cluster_sim, out=out, resume=True
     )
-    assert cluster_sim.engine.pool.simulated - before == simulated - on_disk
+    assert cluster_sim.runner.cluster.simulated - before == simulated - on_disk
     assert resumed.table.equals(reference.table)
     _same_outputs(out, tmp_path / "ref", ("results.parquet", "ranking.json"))
     again = mp.compare(block, grippers, settings, **run, out=out, resume=True)

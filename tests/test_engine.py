@@ -12,7 +12,7 @@ import pytest
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.runner import Cancelled, Engine
+from mjx_pick.engine.runner import Cancelled, Runner
 from mjx_pick.engine.simulator import Simulator
 from mjx_pick.studies.evaluation import evaluate
 from mjx_pick.studies.sweeps import ParamSpec, sweep
@@ -238,8 +238,8 @@ def test_the_cli_handler_records_ctrl_c_and_forgets_it_after_the_command():
 
 def test_simulator_reports_progress_over_all_jobs_and_honours_cancel(block):
     calls = []
-    engine = Engine("mujoco", 2, chunk_size=2, on_progress=lambda d, t: calls.append((d, t)))
-    sim = Simulator(block, engine=engine)
+    runner = Runner("mujoco", 2, chunk_size=2, on_progress=lambda d, t: calls.append((d, t)))
+    sim = Simulator(block, runner=runner)
     picks = pp.generate_normal(block, mp.GripperSpec(), 3, seed=1, grasp=SHORT)
     base = mp.Settings(grasp=SHORT)
     strong = mp.Settings(
@@ -248,17 +248,17 @@ def test_simulator_reports_progress_over_all_jobs_and_honours_cancel(block):
     a, b = sim.run([(base, picks), (strong, picks)])
     # both jobs share one structure: one batch of 6 pick-points in chunks of 2
     assert calls == [(0, 6), (2, 6), (4, 6), (6, 6)]
-    assert len(sim.backends) == 1 and sim.rollouts == engine.rollouts == 6
+    assert len(sim.backends) == 1 and sim.rollouts == runner.rollouts == 6
     assert len(a["success"]) == len(b["success"]) == 3
-    timing = engine.timing
+    timing = runner.timing
     assert timing.n == 6 and timing.compile_s > 0 and timing.run_s > 0
 
     cancel = threading.Event()
     cancel.set()
-    stopped = Simulator(block, engine=Engine("mujoco", 2, cancel=cancel))
+    stopped = Simulator(block, runner=Runner("mujoco", 2, cancel=cancel))
     with pytest.raises(Cancelled):
         stopped.run([(base, picks)])
-    assert stopped.engine.rollouts == 0
+    assert stopped.runner.rollouts == 0
 
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -320,9 +320,36 @@ def test_a_cancelled_sweep_or_compare_marks_its_folder(block, tmp_path):
     }
     for command, run in runs.items():
         out = tmp_path / command
-        sim = Simulator(block, engine=Engine("mujoco", 2, cancel=cancel))
+        sim = Simulator(block, runner=Runner("mujoco", 2, cancel=cancel))
         with pytest.raises(Cancelled):
             run(sim, out)
         manifest = json.loads((out / "mjx_pick_run.json").read_text())
         assert manifest["command"] == command and manifest["status"] == "cancelled"
         assert json.loads((out / "run.json").read_text())["status"] == "cancelled"
+
+
+def test_a_study_resumes_from_chunks_that_a_simulator_with_another_history_wrote(block, tmp_path):
+    # a long-lived simulator carries the model fields of every variant it ran (one
+    # compiled program for all of them); a chunk is named by its rows' settings and
+    # inputs, not by that set, so a fresh simulator (a resumed run in a new process)
+    # finds the chunks the long-lived one wrote
+    params = [ParamSpec.parse("gripper.finger_width_mm=18,22")]
+    run = {"n": 4, "seed": 1, "backend": "mujoco", "batch_size": 4}
+    settings = mp.Settings(grasp=SHORT)
+    used = Simulator(block, "mujoco", 4)
+    sweep(block, [ParamSpec.parse("gripper.finger_mass_g=30,50")], settings, **run, simulator=used)
+    out = tmp_path / "sw"
+
+    def ctrl_c(done: int, _total: int) -> None:
+        if done > 0:
+            raise KeyboardInterrupt
+
+    used.runner.on_progress = ctrl_c
+    with pytest.raises(KeyboardInterrupt):
+        sweep(block, params, settings, **run, simulator=used, out=out)
+    used.runner.on_progress = None
+    assert len(list((out / "chunks").glob("part-*.parquet"))) == 1
+    resumed = sweep(block, params, settings, **run, out=out, resume=True)
+    assert resumed.timing["chunks_resumed"] == 1 and resumed.table.num_rows == 8
+    whole = sweep(block, params, settings, **run)
+    assert resumed.table.equals(whole.table)

@@ -131,6 +131,41 @@ def test_design_search_finds_a_stroke_that_fits(block, tmp_path):
     assert mp.load_gripper(tmp_path / "best_gripper.toml") == res.best
 
 
+def test_design_search_stopped_resumes_from_its_chunks_and_a_complete_one_reads_back(
+    block, tmp_path
+):
+    # the rounds' chunks are kept under out as they finish (the resume every command
+    # has): a search stopped after its first chunk resumes to the uninterrupted result
+    grasp = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
+    base = mp.Settings(grasp=grasp)
+    bounds = {"finger_width_mm": (14.0, 30.0)}
+    run = dict(variants=2, n=4, rounds=2, final_n=4, backend="mujoco", batch_size=4)
+    whole = mp.design_search(block, bounds, base, **run, out=tmp_path / "whole")
+    sim = mp.Simulator(block, "mujoco", 4)
+
+    def ctrl_c(done: int, _total: int) -> None:
+        if done > 0:
+            raise KeyboardInterrupt
+
+    sim.runner.on_progress = ctrl_c
+    out = tmp_path / "cut"
+    with pytest.raises(KeyboardInterrupt):
+        mp.design_search(block, bounds, base, **run, out=out, simulator=sim)
+    assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
+    assert len(list((out / "chunks").glob("part-*.parquet"))) == 1
+    with pytest.raises(mp.ConfigError, match="pass --resume"):
+        mp.design_search(block, bounds, base, **run, out=out)
+    resumed = mp.design_search(block, bounds, base, **run, out=out, resume=True)
+    assert resumed.best == whole.best
+    assert json.dumps(resumed.rounds) == json.dumps(whole.rounds)  # NaN-safe equality
+    assert resumed.final.table.equals(whole.final.table)
+    assert not (out / "chunks").exists(), "a complete search's chunks are removed"
+    again = mp.design_search(block, bounds, base, **run, out=out, resume=True)
+    assert again.final.already_complete and again.best == whole.best
+    assert json.dumps(again.rounds) == json.dumps(whole.rounds)  # NaN-safe
+    assert json.dumps(again.final.ranking) == json.dumps(whole.final.ranking)
+
+
 def test_min_grip_force_of_a_centred_block_matches_coulomb(heavy_block):
     # the smallest force that lifts a centred block is Coulomb's with the lift's
     # acceleration, m (g + a) / (2 mu). At a = 4 m/s^2 it is 1.41x the static need, so

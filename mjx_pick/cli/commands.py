@@ -17,7 +17,7 @@ from mjx_pick.cli.inputs import (
     name_ranges,
     objects,
     pick_config,
-    study_options,
+    run_options,
 )
 from mjx_pick.core.config import ConfigError
 from mjx_pick.outputs.progress import echo
@@ -39,28 +39,19 @@ def cmd_evaluate(args) -> int:
     ev = evaluate(
         obj,
         gripper,
-        n=args.n,
-        seed=args.seed,
+        run_options(args, picks_cfg),
         picks=args.picks,
         contact=contact,
         solver=solver,
         grasp=grasp,
-        pick_config=picks_cfg,
-        backend=args.backend,
-        batch_size=args.batch_size,
-        out=args.out,
         n_traces=args.traces,
-        progress=not args.no_progress,
-        resume=args.resume,
         until=args.until,
         min_score=args.min_score,
         max_n=args.max,
         chunk_size=args.chunk_size,
         min_force=args.min_force,
         stability_um=args.stability_um,
-        overwrite=args.overwrite,
         skip_infeasible=args.skip_infeasible,
-        ray=args.ray,
         fixed_costs=costs,
     )
     if ev.already_complete:
@@ -96,9 +87,8 @@ def cmd_sweep(args) -> int:
         obj,
         params,
         base,
+        run_options(args, picks_cfg),
         random=args.random,
-        resume=args.resume,
-        **study_options(args, picks_cfg),
     )
     if res.already_complete:
         print(f"{args.out} holds this sweep complete: nothing to resume, nothing simulated")
@@ -132,9 +122,8 @@ def cmd_compare(args) -> int:
         obj,
         grippers(args.grippers),
         base,
+        run_options(args, picks_cfg),
         rank_by=args.rank_by,
-        resume=args.resume,
-        **study_options(args, picks_cfg),
     )
     if res.already_complete:
         print(f"{args.out} holds this comparison complete: nothing to resume, nothing simulated")
@@ -165,11 +154,13 @@ def cmd_design(args) -> int:
         obj,
         bounds,
         base,
+        run_options(args, picks_cfg),
         variants=args.variants,
         rounds=args.rounds,
         rank_by=args.rank_by,
-        **study_options(args, picks_cfg),
     )
+    if res.final.already_complete:
+        print(f"{args.out} holds this design search complete: nothing to resume, nothing simulated")
     print(f"best variant: {res.best.name}")
     for field in bounds:
         print(f"  {field}: {getattr(res.best, field):g} (base {getattr(res.base, field):g})")
@@ -189,20 +180,12 @@ def cmd_robust(args) -> int:
     table = robust_best(
         obj,
         base,
+        run_options(args, picks_cfg),
         results=args.results,
-        n=args.n,
         top_k=args.top_k,
-        seed=args.seed,
-        pick_config=picks_cfg,
-        backend=args.backend,
-        batch_size=args.batch_size,
         m=args.m,
         sigma_xy_mm=args.sigma_xy_mm,
         sigma_yaw_deg=args.sigma_yaw_deg,
-        out=args.out,
-        overwrite=args.overwrite,
-        ray=args.ray,
-        progress=not args.no_progress,
     )
     _print_rows(
         table.slice(0, 20).to_pylist(),
@@ -247,36 +230,38 @@ def cmd_calibrate(args) -> int:
                 f"  {values}{blown}"
             )
 
+    from mjx_pick.studies.options import RunOptions
+
+    # the fit's run options: its backend and pick-points are the problem's
+    run = RunOptions(
+        seed=args.seed, out=args.out, resume=args.resume, progress=not args.no_progress
+    )
     if args.estimator == "lsq":
         if args.resume:
             raise ConfigError("--resume: estimator 'lsq' keeps no checkpoints; run it again")
         res = cal.least_squares(
             problem,
+            run,
             max_iters=args.steps,
             budget=args.budget,
             holdout=holdout,
             identify=not args.no_identify,
             log=log,
-            out=args.out,
-            progress=not args.no_progress,
         )
     else:
         res = cal.calibrate(
             problem,
+            run,
             steps=args.steps,
             learning_rate=args.lr,
             estimator=args.estimator,
             samples=args.samples,
             sigma=args.sigma,
-            seed=args.seed,
             budget=args.budget,
             checkpoint_every=args.checkpoint_every,
-            out=args.out,
-            resume=args.resume,
             holdout=holdout,
             identify=not args.no_identify,
             log=log,
-            progress=not args.no_progress,
         )
     ident = res.identifiability or {}
     for name in names:

@@ -146,20 +146,24 @@ def base_settings(args):
     return obj, Settings(gripper, contact, solver, grasp), picks_cfg
 
 
-def study_options(args, picks_cfg) -> dict:
-    """The keyword arguments every study (sweep, compare, design) takes from the CLI."""
-    return {
-        "n": args.n,
-        "seed": args.seed,
+def run_options(args, picks_cfg=None):
+    """The run options of a command (``studies.options.RunOptions``), built once from
+    its arguments: the ones a command does not have keep their defaults."""
+    from mjx_pick.studies.options import RunOptions
+
+    given = {
+        "n": getattr(args, "n", None),
+        "seed": getattr(args, "seed", 0),
         "pick_config": picks_cfg,
-        "backend": args.backend,
-        "batch_size": args.batch_size,
-        "out": args.out,
-        "overwrite": args.overwrite,
-        "progress": not args.no_progress,
-        # --ray: sweep, compare and design (robust passes it itself)
-        **({"ray": args.ray} if getattr(args, "ray", None) is not None else {}),
+        "backend": getattr(args, "backend", "auto"),
+        "batch_size": getattr(args, "batch_size", None),
+        "out": getattr(args, "out", None),
+        "overwrite": getattr(args, "overwrite", False),
+        "resume": getattr(args, "resume", False),
+        "ray": getattr(args, "ray", None),
+        "progress": not getattr(args, "no_progress", True),
     }
+    return RunOptions(**given)
 
 
 def grippers(text: str):

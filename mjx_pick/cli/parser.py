@@ -391,6 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="success",
         help="rank by success rate or by mean score, eq. (2)",
     )
+    _add_resume(ds)
     _add_ray(ds)
     ds.set_defaults(func=cmd_design, n=64)
 

@@ -1,19 +1,21 @@
-"""Ray as the distributed engine: the chunks of a run on the actors of a Ray cluster.
+"""Ray: the runner's chunks on the actors of a Ray cluster.
 
-``evaluate(..., ray="auto" | "HOST:PORT")`` (``mjx-pick evaluate --ray``) runs its chunks
-through a :class:`RayExecutor` instead of this process's backend; ``sweep`` and
-``compare`` run through a :class:`RayEngine`. Both feed one :class:`ActorPool`. Who owns
-what (docs/cluster.md says why):
+:func:`ray_runner` makes a ``runner.Runner`` whose backends and chunks run on a Ray
+cluster's actors: ``evaluate(..., ray="auto" | "HOST:PORT")`` (``mjx-pick evaluate
+--ray``) hands each chunk to one actor (``Runner.chunks``); the studies (``sweep``,
+``compare``, ...) call its backends, whose calls are cut into actor batches spread over
+the actors. Everything here but :func:`ray_runner`, the cluster events and the local
+cluster helpers is the runner's implementation. Who owns what (docs/cluster.md says why):
 
 * the driver (the process that called evaluate) owns the experiment: it draws the
-  pick-points, cuts them into chunks (``engine.ChunkPlan``), hands chunks out, and is
-  the only writer of the output folder -- every chunk file, the one results table,
-  summary, config and traces;
-* an actor (:class:`ChunkWorker`) owns a backend: one per GPU on GPU nodes (the GPU
+  pick-points, cuts them into chunks (``engine.chunks.ChunkStore``), hands chunks out,
+  and is the only writer of the output folder -- every chunk file, the one results
+  table, summary, config and traces;
+* an actor (:class:`_Worker`) owns a backend: one per GPU on GPU nodes (the GPU
   backend), one per node on CPU nodes (the MuJoCo C engine on all the node's CPUs). It
   gets the driver's compiled scene (the MjModel travels with it: no object, mesh or MJCF
-  file has to exist on the node), simulates the chunks it is given through the same
-  ``engine.LocalExecutor`` a single-machine run uses, and returns result rows.
+  file has to exist on the node), simulates the chunks it is given through a runner of
+  its own, as a single-machine run does, and returns result rows.
 
 Faults: an actor that dies (its process killed, its node gone) loses only the chunks it
 held; they go back to the queue and run on another actor, and the driver starts a new
@@ -48,7 +50,7 @@ from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine import interrupts
 from mjx_pick.engine.backend import BACKENDS, RunStats, default_batch_size
-from mjx_pick.engine.runner import Cancelled, ChunkDone, Engine, LocalExecutor
+from mjx_pick.engine.runner import Cancelled, ChunkDone, Runner
 from mjx_pick.outputs.rundir import versions
 
 INSTALL_HINT = "pip install 'mjx-pick[cluster]'"
@@ -133,7 +135,7 @@ def connect(address: str) -> bool:
 
 @dataclasses.dataclass(frozen=True)
 class Simulated:
-    """What :meth:`ChunkWorker.simulate` returns: one piece of a backend call."""
+    """What :meth:`_Worker.simulate` returns: one piece of a backend call."""
 
     results: dict  # (N,) numpy arrays (kernels.grasp.finalize)
     traces: np.ndarray | None  # (N, T, F) with record, else None
@@ -143,7 +145,7 @@ class Simulated:
     where: str  # the node's label
 
 
-class ChunkWorker:
+class _Worker:
     """The body of one Ray actor: backends on one node (all its CPUs) or one GPU.
 
     Scenes arrive by reference with each call, boxed in a list so that Ray does not
@@ -162,7 +164,7 @@ class ChunkWorker:
         import ray
 
         self.backend_name, self.batch_size, self.nthread = backend, batch_size, nthread
-        self._locals: dict[str, LocalExecutor] = {}
+        self._locals: dict = {}  # scene key -> the chunks of a runner of its own
         node = ray.get_runtime_context().get_node_id()
         # two nodes can share a host (tests, benchmarks): the node id tells them apart
         self.label = f"{socket.gethostname()}/{node[:6]}"
@@ -178,15 +180,15 @@ class ChunkWorker:
             "versions": {k: v for k, v in versions().items() if k in SAME_VERSIONS},
         }
 
-    def _local(self, key: str, box: list, grasp: GraspConfig) -> LocalExecutor:
+    def _local(self, key: str, box: list, grasp: GraspConfig):
         if key not in self._locals:
             import ray
 
             scene = ray.get(box[0])
-            engine = Engine(self.backend_name, self.batch_size, nthread=self.nthread)
+            runner = Runner(self.backend_name, self.batch_size, nthread=self.nthread)
             if len(self._locals) >= self.KEEP:
                 self._locals.pop(next(iter(self._locals)))
-            self._locals[key] = LocalExecutor(engine, engine.make(scene, grasp), grasp)
+            self._locals[key] = runner.chunks(runner.make(scene, grasp), grasp)
         return self._locals[key]
 
     def run_chunk(self, key: str, box: list, grasp: GraspConfig, k: int, picks: PickBatch):
@@ -200,9 +202,8 @@ class ChunkWorker:
 
     def simulate(self, key: str, box: list, grasp: GraspConfig, inputs, record: bool):
         """A backend call on prepared inputs (``simulate.PickInputs``): :class:`Simulated`."""
-        local = self._local(key, box, grasp)
         t0 = time.perf_counter()
-        out = local.engine.run(local.backend, inputs, record=record, chunk_size=len(inputs) or 1)
+        out = self._local(key, box, grasp).simulate(inputs, record)
         t = out.timing
         wall = time.perf_counter() - t0
         return Simulated(out.results, out.traces, t.compile_s, t.run_s, wall, self.label)
@@ -210,7 +211,7 @@ class ChunkWorker:
 
 @dataclasses.dataclass(frozen=True)
 class ClusterEvent:
-    """One step of the driver's work on the cluster, as :class:`ActorPool` reports it to
+    """One step of the driver's work on the cluster, as the runner's actor pool reports it to
     its ``on_event`` callback (for a display of the nodes, for tests that act at a given
     point of a run). The callback runs in the driver's loop: while it runs, nothing is
     handed out or collected (the actors go on with the calls they hold).
@@ -246,7 +247,7 @@ class _Slot:
     num_gpus: float
     nthread: int
     actor: object = None
-    info: dict | None = None  # ChunkWorker.info once it answered
+    info: dict | None = None  # _Worker.info once it answered
     ready_ref: object = None  # its pending info() call
     inflight: int = 0
 
@@ -291,7 +292,7 @@ def _batch_size(backend: str, batch_size: int | None, gpus: bool) -> int:
     return 8192 if gpus else 64
 
 
-class ActorPool:
+class _ActorPool:
     """The actors of one run on a Ray cluster, and the fault-tolerant loop that feeds
     them: see the module docstring.
 
@@ -303,7 +304,7 @@ class ActorPool:
       address: 'auto' or 'HOST:PORT' / 'ray://HOST:PORT' of the cluster's head.
       backend: 'auto', 'mujoco', 'warp' or 'mjx' (:func:`cluster_backend`).
       batch_size: simulations per backend call on each actor.
-      cancel: once set, :meth:`map` stops with ``engine.Cancelled``.
+      cancel: once set, :meth:`map` stops with ``runner.Cancelled``.
       depth: calls queued on each actor (2: the next one is there while the driver
         handles the last).
       max_attempts: runs of one call that may end in a dead actor before the run fails
@@ -369,6 +370,14 @@ class ActorPool:
         )
         return f"ray: {nodes} nodes, {len(ready)} actors ({kind})"
 
+    def backend(self, scene: Scene, grasp: GraspConfig) -> _RayBackend:
+        """A backend for scene and grasp whose calls run on the actors."""
+        return _RayBackend(self, scene, grasp)
+
+    def chunks(self, scene: Scene, grasp: GraspConfig) -> _RayChunks:
+        """Whole chunks of scene and grasp, one per actor call."""
+        return _RayChunks(self, scene, grasp)
+
     def scene_box(self, scene: Scene) -> tuple[str, list]:
         """(key, [ObjectRef]) of a scene in the object store, put there once."""
         entry = self._scenes.get(id(scene))
@@ -388,7 +397,7 @@ class ActorPool:
 
         ray = self._ray
         if self._actor_class is None:
-            self._actor_class = ray.remote(ChunkWorker)
+            self._actor_class = ray.remote(_Worker)
         slot.actor = self._actor_class.options(
             num_cpus=slot.num_cpus,
             num_gpus=slot.num_gpus,
@@ -484,7 +493,7 @@ class ActorPool:
         """Run calls on the actors; yield (key, result) as each finishes, in any order.
 
         Args:
-          calls: key -> (ChunkWorker method name, its arguments).
+          calls: key -> (_Worker method name, its arguments).
           sizes: key -> pick-points the call simulates (for the accounting).
 
         A call whose actor dies goes back to the front of the queue (a new actor starts
@@ -619,34 +628,13 @@ class ActorPool:
             self._connected = False
 
 
-class RayExecutor:
-    """evaluate's chunks on a Ray cluster (``engine.ChunkExecutor``): each chunk is one
-    call on one actor; this process writes every chunk as it comes back.
+class _RayChunks:
+    """A runner's chunks on a Ray cluster (``Runner.chunks``): each chunk is one call on
+    one actor; the driver writes every chunk as it comes back."""
 
-    Args: address, backend, batch_size, cancel: as :class:`ActorPool`; scene, grasp:
-    what every chunk simulates.
-    """
-
-    def __init__(
-        self,
-        address: str,
-        scene: Scene,
-        grasp: GraspConfig,
-        *,
-        backend: str = "auto",
-        batch_size: int | None = None,
-        cancel: threading.Event | None = None,
-        **pool_options,
-    ):
-        self.pool = ActorPool(
-            address, backend=backend, batch_size=batch_size, cancel=cancel, **pool_options
-        )
-        self.address, self.name, self.batch_size = (
-            self.pool.address,
-            self.pool.name,
-            self.pool.batch_size,
-        )
-        self.scene, self.grasp = scene, grasp
+    def __init__(self, pool: _ActorPool, scene: Scene, grasp: GraspConfig):
+        self.pool, self.scene, self.grasp = pool, scene, grasp
+        self.address, self.name, self.batch_size = pool.address, pool.name, pool.batch_size
 
     @property
     def device(self) -> str:
@@ -683,20 +671,17 @@ class RayExecutor:
             timing["wall_s"] = round(wall_s, 3)
         return {"backend": self.name, "device": self.device, "timing": timing}
 
-    def close(self) -> None:
-        self.pool.close()
 
-
-class RayBackend:
-    """A ``simulate.Backend`` whose calls run on a Ray cluster: each call's inputs are
+class _RayBackend:
+    """A ``backend.Backend`` whose calls run on a Ray cluster: each call's inputs are
     cut into pieces of one actor batch, spread over the actors and put back in order.
 
-    What :class:`RayEngine` makes for a scene: the studies (sweep, compare) run their
+    What a Ray runner makes for a scene: the studies (sweep, compare, ...) run their
     batches of pick-points x variants through it unchanged. ``batch_size`` is one batch
-    per planned actor, so that each engine chunk keeps every actor busy.
+    per planned actor, so that each runner chunk keeps every actor busy.
     """
 
-    def __init__(self, pool: ActorPool, scene: Scene, grasp: GraspConfig):
+    def __init__(self, pool: _ActorPool, scene: Scene, grasp: GraspConfig):
         self.pool, self.scene, self.grasp = pool, scene, grasp
         self.name = pool.name
         self.batch_size = pool.batch_size * max(pool.planned, 1)
@@ -728,44 +713,36 @@ class RayBackend:
         return results, traces
 
 
-class RayEngine(Engine):
-    """An :class:`engine.Engine` whose backends run on a Ray cluster (:class:`RayBackend`).
+def ray_runner(
+    address: str,
+    backend: str = "auto",
+    batch_size: int | None = None,
+    *,
+    chunk_size: int | None = None,
+    on_progress=None,
+    cancel: threading.Event | None = None,
+    on_event: Callable[[ClusterEvent], None] | None = None,
+) -> Runner:
+    """A ``runner.Runner`` whose backends and chunks run on the Ray cluster at address
+    ('auto' or 'HOST:PORT' / 'ray://HOST:PORT'). Everything else of the runner --
+    chunks, progress, cancellation, timing -- is the runner's. The cluster is checked
+    now (a bad address, a missing Ray: one line before any simulation); actors start on
+    the first call. Call ``close()`` at the end (it ends the actors).
 
-    For the studies (``sweep(..., ray=...)``, ``compare(..., ray=...)``): everything
-    else of the engine -- chunks, progress, cancellation, timing -- is the engine's.
-    Call :meth:`close` at the end (it ends the actors).
+    backend: as :func:`cluster_backend`; batch_size: simulations per call on each actor;
+    on_event: called with each :class:`ClusterEvent`, in the driver's loop.
     """
-
-    def __init__(
-        self,
-        address: str,
-        backend: str = "auto",
-        batch_size: int | None = None,
-        *,
-        chunk_size: int | None = None,
-        on_progress=None,
-        cancel: threading.Event | None = None,
-        on_event: Callable[[ClusterEvent], None] | None = None,
-    ):
-        self.pool = ActorPool(
-            address, backend=backend, batch_size=batch_size, cancel=cancel, on_event=on_event
-        )
-        super().__init__(
-            self.pool.name,
-            self.pool.batch_size,
-            chunk_size=chunk_size,
-            on_progress=on_progress,
-            cancel=cancel,
-        )
-
-    def make(self, scene: Scene, grasp: GraspConfig) -> RayBackend:
-        grasp.substeps(scene.solver)  # validates the control period, as make_backend does
-        backend = RayBackend(self.pool, scene, grasp)
-        self.backends.append(backend)
-        return backend
-
-    def close(self) -> None:
-        self.pool.close()
+    pool = _ActorPool(
+        address, backend=backend, batch_size=batch_size, cancel=cancel, on_event=on_event
+    )
+    return Runner(
+        pool.name,
+        pool.batch_size,
+        chunk_size=chunk_size,
+        on_progress=on_progress,
+        cancel=cancel,
+        cluster=pool,
+    )
 
 
 # ------------------------------------------------------- local clusters (one host)

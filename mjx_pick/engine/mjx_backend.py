@@ -312,147 +312,154 @@ def make_pool(
     physics_for = physics_for or (lambda n_worlds: jax_physics(scene))
     n_dev = mesh.size if mesh is not None and mesh.size > 1 else 1
     sizes = shrink_sizes(slots // n_dev, shrink_levels, shrink_min_slots)
-    phys = physics_for(sizes[0])
     ad = addresses(scene)
-    n_sub = grasp.substeps(scene.solver)
-    n_ticks = grasp.n_ticks()
-    o = ad.object_qpos
-
-    def done(slot: Slot):
-        return (slot.s.phase == gk.DONE) | slot.a.diverged | (slot.k >= n_ticks)
-
-    def programs(phys: Physics):
-        """(batched start, batched advance, Slot axes) of a pool run with phys (Warp's
-        Data tree holds its contact buffer's size: one set per pool size)."""
-        axes = _slot_axes(phys)
-        d_tree = jax.tree.structure(phys.data0)
-
-        def start(qpos0, params, pair_friction, pair_solref, pair_solimp, model) -> Slot:
-            _, d, s, a, diag = _initial(
-                phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp, model
-            )
-            pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
-            args = (pair_friction, pair_solref, pair_solimp, model, params, s, a, pos0, quat0)
-            return Slot(tuple(d_tree.flatten_up_to(d)), *args, jnp.int32(0), diag)
-
-        def advance_one(slot: Slot, fresh, *inputs):
-            new = start(*inputs)
-            # Data goes through Data.where: Warp's shared contact buffer is kept, not merged
-            d = d_tree.unflatten(slot.d).where(fresh, d_tree.unflatten(new.d))
-            rest = jax.tree.map(
-                lambda n, c: jnp.where(fresh, n, c), new._replace(d=None), slot._replace(d=None)
-            )
-            slot = rest._replace(d=d)
-            m = _pick_model(
-                phys, slot.pair_friction, slot.pair_solref, slot.pair_solimp, slot.model
-            )
-
-            def control_period(slot: Slot, _):
-                s, a, ctrl, _ = gk.tick(
-                    slot.params,
-                    ad,
-                    slot.s,
-                    slot.a,
-                    slot.d.qpos,
-                    slot.d.qvel,
-                    slot.d._impl.cfrc_ext,
-                    slot.pos0,
-                    slot.quat0,
-                )
-                # a finished pick's control state, metrics and buffer counts stay as they are
-                frozen = done(slot)
-                keep = lambda old, new: jax.tree.map(lambda x, y: jnp.where(frozen, x, y), old, new)
-                ctrl = jnp.where(frozen, slot.d.ctrl, ctrl)
-                d, diag = _physics_steps(phys, m, slot.d.replace(ctrl=ctrl), slot.diag, n_sub)
-                k = slot.k + jnp.where(frozen, 0, 1).astype(jnp.int32)
-                slot = slot._replace(
-                    d=d, s=keep(slot.s, s), a=keep(slot.a, a), k=k, diag=keep(slot.diag, diag)
-                )
-                return slot, None
-
-            slot, _ = jax.lax.scan(control_period, slot, None, length=ticks_per_call)
-            slot = slot._replace(d=tuple(d_tree.flatten_up_to(slot.d)))
-            return slot, gk.finalize(slot.params, slot.a), done(slot), slot.k, slot.diag
-
-        advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 7, out_axes=(axes, 0, 0, 0, 0))
-        return jax.vmap(start, out_axes=axes), advance, axes
-
-    physes = [phys] + [physics_for(size) for size in sizes[1:]]
-    levels = [programs(p) for p in physes]
-    starts = levels[0][0]
-
-    def compact(state: Slot, order, level: int) -> Slot:
-        """The slots at `order` (live ones first) as the pool of `level`: gathered state;
-        for Data fields kept once per call (Warp's contact buffer), that pool's own."""
-        small = jax.tree.leaves(physes[level].data0)
-        axes = levels[level][2]
-        d_axes = axes.d if isinstance(axes, Slot) else (axes,) * len(small)
-        d = tuple(
-            x[order] if axis == 0 else fresh_leaf
-            for x, axis, fresh_leaf in zip(state.d, d_axes, small, strict=True)
-        )
-        rest = jax.tree.map(lambda x: x[order], state._replace(d=None))
-        return rest._replace(d=d)
+    n_sub, n_ticks = grasp.substeps(scene.solver), grasp.n_ticks()
+    # one physics (Warp: a contact buffer sized for it) and one set of programs per size
+    physes = [physics_for(size) for size in sizes]
+    levels = [_pool_programs(p, ad, n_sub, n_ticks, ticks_per_call) for p in physes]
 
     def run_queue(valid, *inputs):
-        n = valid.shape[0]
-        n_valid = jnp.sum(valid.astype(jnp.int32))
-        size = sizes[0]
-        ids = jnp.arange(size, dtype=jnp.int32)
-
-        def gather(pick):
-            i = jnp.clip(pick, 0, n - 1)
-            return tuple(jax.tree.map(lambda x: x[i], inputs))
-
-        pick0 = jnp.where(ids < n_valid, ids, -1)
-        fresh0 = jnp.ones(size, bool)
-        # every slot is fresh in the first round: zeros of the right shapes will do
-        zeros = jax.tree.map(
-            lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(starts, *gather(pick0))
-        )
-        shapes = jax.eval_shape(levels[0][1], zeros, fresh0, *gather(pick0))
-        _, out_s, _, ticks_s, diag_s = shapes
-        rows = jax.tree.map(
-            lambda x: jnp.zeros((n,) + x.shape[1:], x.dtype), (out_s, ticks_s, diag_s)
-        )
-
-        def body(c, advance):
-            state, pick, fresh, nxt, rows, rounds = c
-            state, out, finished, ticks, diag = advance(state, fresh, *gather(pick))
-            ended = finished & (pick >= 0)
-            at = jnp.where(ended, pick, n)  # row n is out of range: dropped
-            rows = jax.tree.map(lambda r, v: r.at[at].set(v, mode="drop"), rows, (out, ticks, diag))
-            # the ended slots take the next picks, in slot order
-            new = nxt + jnp.cumsum(ended.astype(jnp.int32)) - 1
-            ok = ended & (new < n_valid)
-            pick = jnp.where(ended, jnp.where(ok, new, -1), pick)
-            nxt = nxt + jnp.sum(ok.astype(jnp.int32))
-            return state, pick, ok, nxt, rows, rounds + 1
-
-        carry = (zeros, pick0, fresh0, jnp.minimum(size, n_valid), rows, jnp.int32(0))
-        rounds = []
-        for level, size in enumerate(sizes):
-            last = level == len(sizes) - 1
-
-            def cond(c, last=last, half=size // 2):
-                live = c[1] >= 0
-                # leave for the next, smaller pool once the queue is empty and at most
-                # half of the slots are live
-                shrink = (c[3] >= n_valid) & (jnp.sum(live.astype(jnp.int32)) <= half)
-                return jnp.any(live) & (last | ~shrink)
-
-            step = functools.partial(body, advance=levels[level][1])
-            state, pick, fresh, nxt, rows, k = jax.lax.while_loop(cond, step, carry)
-            rounds.append(k)
-            if not last:
-                # live slots first, in slot order; the rest of the smaller pool is idle
-                order = jnp.argsort(pick < 0, stable=True)[: sizes[level + 1]]
-                state = compact(state, order, level + 1)
-                carry = (state, pick[order], fresh[order], nxt, rows, jnp.int32(0))
-        out, ticks, diag = rows
-        return out, ticks, diag, jnp.stack(rounds)
+        return _run_queue(sizes, physes, levels, valid, *inputs)
 
     return jax.jit(_precise(_shard(run_queue, mesh)))
+
+
+def _finished(slot: Slot, n_ticks: int):
+    """Whether each slot's pick has ended: DONE, diverged, or n_ticks control periods run."""
+    return (slot.s.phase == gk.DONE) | slot.a.diverged | (slot.k >= n_ticks)
+
+
+def _pool_programs(phys: Physics, ad, n_sub: int, n_ticks: int, ticks_per_call: int):
+    """(batched start, batched advance, Slot axes) of a pool run with phys (Warp's Data
+    tree holds its contact buffer's size: one set per pool size). advance runs
+    ticks_per_call control periods of n_sub physics steps on every slot, the slots
+    marked fresh first restarted on their new pick's inputs."""
+    axes = _slot_axes(phys)
+    d_tree = jax.tree.structure(phys.data0)
+    o = ad.object_qpos
+
+    def start(qpos0, params, pair_friction, pair_solref, pair_solimp, model) -> Slot:
+        _, d, s, a, diag = _initial(
+            phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp, model
+        )
+        pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
+        args = (pair_friction, pair_solref, pair_solimp, model, params, s, a, pos0, quat0)
+        return Slot(tuple(d_tree.flatten_up_to(d)), *args, jnp.int32(0), diag)
+
+    def advance_one(slot: Slot, fresh, *inputs):
+        new = start(*inputs)
+        # Data goes through Data.where: Warp's shared contact buffer is kept, not merged
+        d = d_tree.unflatten(slot.d).where(fresh, d_tree.unflatten(new.d))
+        rest = jax.tree.map(
+            lambda n, c: jnp.where(fresh, n, c), new._replace(d=None), slot._replace(d=None)
+        )
+        slot = rest._replace(d=d)
+        m = _pick_model(phys, slot.pair_friction, slot.pair_solref, slot.pair_solimp, slot.model)
+
+        def control_period(slot: Slot, _):
+            s, a, ctrl, _ = gk.tick(
+                slot.params,
+                ad,
+                slot.s,
+                slot.a,
+                slot.d.qpos,
+                slot.d.qvel,
+                slot.d._impl.cfrc_ext,
+                slot.pos0,
+                slot.quat0,
+            )
+            # a finished pick's control state, metrics and buffer counts stay as they are
+            frozen = _finished(slot, n_ticks)
+            keep = lambda old, new: jax.tree.map(lambda x, y: jnp.where(frozen, x, y), old, new)
+            ctrl = jnp.where(frozen, slot.d.ctrl, ctrl)
+            d, diag = _physics_steps(phys, m, slot.d.replace(ctrl=ctrl), slot.diag, n_sub)
+            k = slot.k + jnp.where(frozen, 0, 1).astype(jnp.int32)
+            slot = slot._replace(
+                d=d, s=keep(slot.s, s), a=keep(slot.a, a), k=k, diag=keep(slot.diag, diag)
+            )
+            return slot, None
+
+        slot, _ = jax.lax.scan(control_period, slot, None, length=ticks_per_call)
+        slot = slot._replace(d=tuple(d_tree.flatten_up_to(slot.d)))
+        return slot, gk.finalize(slot.params, slot.a), _finished(slot, n_ticks), slot.k, slot.diag
+
+    advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 7, out_axes=(axes, 0, 0, 0, 0))
+    return jax.vmap(start, out_axes=axes), advance, axes
+
+
+def _compact(state: Slot, order, phys: Physics, axes) -> Slot:
+    """The slots at `order` (live ones first) as the pool of phys (its programs' Slot
+    axes): gathered state; for Data fields kept once per call (Warp's contact buffer),
+    that pool's own."""
+    small = jax.tree.leaves(phys.data0)
+    d_axes = axes.d if isinstance(axes, Slot) else (axes,) * len(small)
+    d = tuple(
+        x[order] if axis == 0 else fresh_leaf
+        for x, axis, fresh_leaf in zip(state.d, d_axes, small, strict=True)
+    )
+    rest = jax.tree.map(lambda x: x[order], state._replace(d=None))
+    return rest._replace(d=d)
+
+
+def _run_queue(sizes, physes, levels, valid, *inputs):
+    """The pool's queue (see make_pool): every pick of inputs (valid (N,) bool, padding
+    last) through slots refilled in rounds, at each pool size of sizes in turn (physes,
+    levels: their physics and programs); (results, ticks, Diagnostics, rounds)."""
+    starts = levels[0][0]
+    n = valid.shape[0]
+    n_valid = jnp.sum(valid.astype(jnp.int32))
+    size = sizes[0]
+    ids = jnp.arange(size, dtype=jnp.int32)
+
+    def gather(pick):
+        i = jnp.clip(pick, 0, n - 1)
+        return tuple(jax.tree.map(lambda x: x[i], inputs))
+
+    pick0 = jnp.where(ids < n_valid, ids, -1)
+    fresh0 = jnp.ones(size, bool)
+    # every slot is fresh in the first round: zeros of the right shapes will do
+    zeros = jax.tree.map(
+        lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(starts, *gather(pick0))
+    )
+    shapes = jax.eval_shape(levels[0][1], zeros, fresh0, *gather(pick0))
+    _, out_s, _, ticks_s, diag_s = shapes
+    rows = jax.tree.map(lambda x: jnp.zeros((n,) + x.shape[1:], x.dtype), (out_s, ticks_s, diag_s))
+
+    def body(c, advance):
+        state, pick, fresh, nxt, rows, rounds = c
+        state, out, finished, ticks, diag = advance(state, fresh, *gather(pick))
+        ended = finished & (pick >= 0)
+        at = jnp.where(ended, pick, n)  # row n is out of range: dropped
+        rows = jax.tree.map(lambda r, v: r.at[at].set(v, mode="drop"), rows, (out, ticks, diag))
+        # the ended slots take the next picks, in slot order
+        new = nxt + jnp.cumsum(ended.astype(jnp.int32)) - 1
+        ok = ended & (new < n_valid)
+        pick = jnp.where(ended, jnp.where(ok, new, -1), pick)
+        nxt = nxt + jnp.sum(ok.astype(jnp.int32))
+        return state, pick, ok, nxt, rows, rounds + 1
+
+    carry = (zeros, pick0, fresh0, jnp.minimum(size, n_valid), rows, jnp.int32(0))
+    rounds = []
+    for level, size in enumerate(sizes):
+        last = level == len(sizes) - 1
+
+        def cond(c, last=last, half=size // 2):
+            live = c[1] >= 0
+            # leave for the next, smaller pool once the queue is empty and at most
+            # half of the slots are live
+            shrink = (c[3] >= n_valid) & (jnp.sum(live.astype(jnp.int32)) <= half)
+            return jnp.any(live) & (last | ~shrink)
+
+        step = functools.partial(body, advance=levels[level][1])
+        state, pick, fresh, nxt, rows, k = jax.lax.while_loop(cond, step, carry)
+        rounds.append(k)
+        if not last:
+            # live slots first, in slot order; the rest of the smaller pool is idle
+            order = jnp.argsort(pick < 0, stable=True)[: sizes[level + 1]]
+            state = _compact(state, order, physes[level + 1], levels[level + 1][2])
+            carry = (state, pick[order], fresh[order], nxt, rows, jnp.int32(0))
+    out, ticks, diag = rows
+    return out, ticks, diag, jnp.stack(rounds)
 
 
 def _single(inputs: PickInputs) -> PickInputs:
@@ -657,7 +664,7 @@ class MjxBackend:
         return results, Diagnostics(*(np.array(x)[:n] for x in diag))
 
 
-class DeviceThreads:
+class _DeviceThreads:
     """Several single-device backends as one: each runs a contiguous share of the
     pick-points on its own device, from its own host thread, and nothing passes between
     devices. Results come back in pick-point order.
@@ -674,7 +681,7 @@ class DeviceThreads:
 
     def __init__(self, parts: list):
         if len(parts) < 2:
-            raise ValueError(f"DeviceThreads needs >= 2 backends, got {len(parts)}")
+            raise ValueError(f"_DeviceThreads needs >= 2 backends, got {len(parts)}")
         self.parts = list(parts)
         p0 = self.parts[0]
         self.name, self.scene, self.grasp = p0.name, p0.scene, p0.grasp

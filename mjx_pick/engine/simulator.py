@@ -4,8 +4,8 @@ and calibration run their (settings, pick-points) jobs through.
 A :class:`Simulator` groups jobs whose scenes share one compiled program
 (``engine.variants``: the same model structure, a gripper variant's numbers carried per
 pick-point as model fields) into one batch of per-pick parameters and runs it on the
-runner (:class:`~mjx_pick.engine.runner.Engine`, or a Ray cluster's
-``cluster.RayEngine``); it caches scenes and backends so a loop that runs again
+runner (:class:`~mjx_pick.engine.runner.Runner`, in this process or on a Ray cluster:
+``cluster.ray_runner``); it caches scenes and backends so a loop that runs again
 compiles nothing new. :func:`marking_stops` and :func:`showing_progress` are
 the pieces every study wraps its runs in; :func:`differentiable_rollout` is the one path
 that does not go through the runner (it says why).
@@ -26,7 +26,8 @@ from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene, build_scene
 from mjx_pick.engine import interrupts
 from mjx_pick.engine.backend import Backend, Settings, make_inputs
-from mjx_pick.engine.runner import Cancelled, ChunkStore, Engine, ProgressFn
+from mjx_pick.engine.chunks import ChunkStore, row_digests
+from mjx_pick.engine.runner import Cancelled, ProgressFn, Runner
 from mjx_pick.engine.variants import (
     carried_fields,
     program_key,
@@ -54,21 +55,21 @@ def marking_stops(out_dir: str | Path | None, command: str) -> Iterator[None]:
 
 @contextlib.contextmanager
 def showing_progress(
-    engine: Engine, desc: str, unit: str = "sim", enabled: bool = True
+    runner: Runner, desc: str, unit: str = "sim", enabled: bool = True
 ) -> Iterator[ProgressBar | None]:
-    """Inside it, the engine's progress goes to a :class:`~mjx_pick.outputs.progress.ProgressBar`
-    (on stderr): every run through the engine adds to the one bar. Nothing is shown when
-    not enabled or when the engine already reports to someone (an outer study's bar, a
+    """Inside it, the runner's progress goes to a :class:`~mjx_pick.outputs.progress.ProgressBar`
+    (on stderr): every run through the runner adds to the one bar. Nothing is shown when
+    not enabled or when the runner already reports to someone (an outer study's bar, a
     caller's callback)."""
-    if not enabled or engine.on_progress is not None:
+    if not enabled or runner.on_progress is not None:
         yield None
         return
     with ProgressBar(desc, unit) as bar:
-        engine.on_progress = bar
+        runner.on_progress = bar
         try:
             yield bar
         finally:
-            engine.on_progress = None
+            runner.on_progress = None
 
 
 class Simulator:
@@ -78,20 +79,20 @@ class Simulator:
     share a program (``variants.program_key``: contact and controller settings always;
     gripper variants of one model structure -- finger width, pad height, stroke,
     masses, force limit -- with their differing model fields carried per pick-point)
-    run as ONE batch of pick-points x variants on one backend -- one compile, one engine
-    run (chunked by the engine). A job whose model has another structure (another
+    run as ONE batch of pick-points x variants on one backend -- one compile, one runner
+    call (chunked by the runner). A job whose model has another structure (another
     collision mesh, solver option or scan length) gets a backend of its own. Scenes and
     backends are cached, so a loop that calls ``run`` again (a bisection, an optimiser,
     a design search's rounds) compiles nothing new.
 
     Args:
       obj: the object every job simulates.
-      backend, batch_size: as :class:`Engine` (ignored when engine is given).
-      engine: run through this engine (its backend choice, progress and cancel event).
-      ray: run on a Ray cluster ("auto" or "HOST:PORT": ``cluster.RayEngine``; ignored
-        when engine is given); :meth:`close` ends its actors.
-      on_progress: the engine's progress callback, ``(done, total)`` in pick-point
-        simulations of each :meth:`run` (ignored when engine is given).
+      backend, batch_size: as :class:`Runner` (ignored when runner is given).
+      runner: run through this runner (its backend choice, progress and cancel event).
+      ray: run on a Ray cluster ("auto" or "HOST:PORT": ``cluster.ray_runner``; ignored
+        when runner is given); :meth:`close` ends its actors.
+      on_progress: the runner's progress callback, ``(done, total)`` in pick-point
+        simulations of each :meth:`run` (ignored when runner is given).
     """
 
     def __init__(
@@ -100,18 +101,18 @@ class Simulator:
         backend: str = "auto",
         batch_size: int | None = None,
         *,
-        engine: Engine | None = None,
+        runner: Runner | None = None,
         ray: str | None = None,
         on_progress: ProgressFn | None = None,
     ) -> None:
         self.object = obj
-        if engine is None and ray is not None:
-            from mjx_pick.engine.cluster import RayEngine
+        if runner is None and ray is not None:
+            from mjx_pick.engine.cluster import ray_runner
 
-            engine = RayEngine(ray, backend, batch_size, on_progress=on_progress)
-        self.engine = engine or Engine(backend, batch_size, on_progress=on_progress)
-        self.backend_name = self.engine.backend_name
-        self.batch_size = self.engine.batch_size
+            runner = ray_runner(ray, backend, batch_size, on_progress=on_progress)
+        self.runner = runner or Runner(backend, batch_size, on_progress=on_progress)
+        self.backend_name = self.runner.backend_name
+        self.batch_size = self.runner.batch_size
         self._scenes: dict[tuple, Scene] = {}  # Settings.structure() -> its scene
         self._keys: dict[tuple, tuple] = {}  # Settings.structure() -> program_key
         self._backends: dict[tuple, Backend] = {}  # program_key -> backend
@@ -121,8 +122,8 @@ class Simulator:
         self.rollouts = 0  # pick-point simulations run so far
 
     def close(self) -> None:
-        """Release the engine's resources (a Ray cluster's actors)."""
-        self.engine.close()
+        """Release the runner's resources (a Ray cluster's actors)."""
+        self.runner.close()
 
     @property
     def backends(self) -> list[Backend]:
@@ -138,7 +139,7 @@ class Simulator:
         """Reuse a backend built elsewhere for settings' scene (no new compile)."""
         self._scenes[settings.structure()] = backend.scene
         self._backends[self._program(settings)] = backend
-        self.engine.adopt(backend)
+        self.runner.adopt(backend)
 
     def scene(self, settings: Settings) -> Scene:
         """settings' own compiled scene (cached by ``Settings.structure``)."""
@@ -152,7 +153,7 @@ class Simulator:
     def _program(self, settings: Settings) -> tuple:
         key = settings.structure()
         if key not in self._keys:
-            name = self.engine.backend_name
+            name = self.runner.backend_name
             self._keys[key] = program_key(self.scene(settings), settings.grasp, name)
         return self._keys[key]
 
@@ -161,7 +162,7 @@ class Simulator:
         from the first scene of that program."""
         key = self._program(settings)
         if key not in self._backends:
-            self._backends[key] = self.engine.make(self.scene(settings), settings.grasp)
+            self._backends[key] = self.runner.make(self.scene(settings), settings.grasp)
         return self._backends[key]
 
     def run(
@@ -169,9 +170,9 @@ class Simulator:
     ) -> list[dict]:
         """Per-job results (the dict of ``kernels.grasp.finalize``, (len(picks),) arrays).
 
-        The engine's on_progress gets (done, total) over all jobs of this call. store:
+        The runner's on_progress gets (done, total) over all jobs of this call. store:
         chunks finished by an earlier run are read from it, new ones saved to it
-        (:class:`ChunkStore`).
+        (``chunks.ChunkStore``: a chunk is named by its rows' settings and inputs).
         """
         for settings, _ in jobs:
             settings.grasp.check_gripper(settings.gripper)
@@ -181,7 +182,7 @@ class Simulator:
         results: list[dict | None] = [None] * len(jobs)
         total = sum(len(p) for _, p in jobs)
         done = 0
-        report = self.engine.on_progress
+        report = self.runner.on_progress
         if report is not None:
             report(0, total)
         for program, members in groups.items():
@@ -197,7 +198,7 @@ class Simulator:
             # the model fields in which this run's variants differ from the backend's
             # scene, added to those carried before (same program, same inputs' shapes)
             carried = set(self._carried.get(program, ()))
-            fields = carried_fields(self.engine.backend_name)
+            fields = carried_fields(self.runner.backend_name)
             carried |= set(varying_fields(backend.scene.model, [s.model for s in scenes], fields))
             self._carried[program] = names = tuple(sorted(carried))
             parts = []
@@ -217,8 +218,11 @@ class Simulator:
                 if report is not None and k > 0:
                     report(offset + k, total)
 
-            view = store.scene(backend, structure) if store is not None else None
-            out = self.engine.run(backend, inputs, on_progress=progress, store=view).results
+            view = None
+            if store is not None:
+                rows = row_digests([jobs[j][0] for j in live], [len(jobs[j][1]) for j in live])
+                view = store.for_backend(backend, structure, rows)
+            out = self.runner.run(backend, inputs, on_progress=progress, store=view).results
             done += len(inputs)
             self.rollouts += len(inputs)
             start = 0
@@ -257,7 +261,7 @@ def differentiable_rollout(scene: Scene, grasp: GraspConfig, record: bool):
     (N, npair, 2), pair_solimp (N, npair, 5)) -> (results of (N,) arrays, traces
     (N, T, F) or None), every pick run for all ``grasp.n_ticks()`` control periods.
 
-    Why calibration's ``jax.jacfwd`` calls this and not :meth:`Engine.run`: a
+    Why calibration's ``jax.jacfwd`` calls this and not :meth:`Runner.run`: a
     derivative needs the whole rollout inside the caller's trace, while a backend's
     ``run`` hands back numpy arrays after the device finished (the trace ends there),
     splits the work into chunks and batches on the host, may refill slots (Warp, which

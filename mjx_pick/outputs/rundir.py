@@ -437,7 +437,7 @@ def finish(
       command: the command (default: the manifest's, i.e. the folder's owner).
       config: the merged configuration of the run (JSON-able).
       seed, backend, device: what ran ('mujoco', 'cpu:2 threads', ...).
-      timing: seconds, e.g. ``engine.Engine.describe()['timing']`` plus wall_s.
+      timing: seconds, e.g. ``runner.Runner.describe()['timing']`` plus wall_s.
 
     Returns:
       the metadata file: ``run.json``, or ``run-<command>.json`` for a command that

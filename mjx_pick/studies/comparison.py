@@ -35,9 +35,10 @@ from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.engine.backend import Settings
-from mjx_pick.engine.runner import open_study_store
-from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress, study_simulator
-from mjx_pick.outputs.rundir import claim, config_hash, finish, portable_object, release
+from mjx_pick.engine.chunks import ChunkStore, open_store
+from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
+from mjx_pick.outputs.rundir import finish, portable_object, release
+from mjx_pick.studies.options import RunOptions
 
 
 @dataclasses.dataclass
@@ -125,22 +126,19 @@ def compare(
     obj: ObjectModel,
     grippers: list[GripperSpec],
     base: Settings | None = None,
+    options: RunOptions | None = None,
     *,
-    n: int = 200,
-    seed: int = 0,
     rank_by: str = "success",
-    pick_config: pp.PickConfig | None = None,
-    backend: str = "auto",
-    batch_size: int | None = None,
     simulator: Simulator | None = None,
-    out: str | Path | None = None,
-    overwrite: bool = False,
-    resume: bool = False,
-    ray: str | None = None,
-    progress: bool = False,
+    _store: ChunkStore | None = None,
+    **run,
 ) -> Comparison:
-    """Simulate one shared candidate set on every gripper and rank them (out, resume,
-    ray, progress: as sweep's)."""
+    """Simulate one shared candidate set (n pick-points, default 200) on every gripper
+    and rank them. options, or its fields as keywords (``options.RunOptions``): as
+    sweep's (out, resume, ray, progress, ...); simulator: as sweep's. _store: the
+    chunks of a study that runs this comparison as one of its steps (design), used
+    without out."""
+    opts = RunOptions.of(options, **run)
     if rank_by not in ("success", "score"):
         raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
     if len(grippers) < 1:
@@ -149,59 +147,22 @@ def compare(
     if len(set(names)) != len(names):
         raise ConfigError(f"gripper names must differ: {names}")
     base = base or Settings()
-    pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+    n, seed, pick_config, out = opts.n_or(200), opts.seed, opts.picks, opts.out
     pp.check_raster(obj, pick_config)  # before any allocation or folder
-    if resume and out is None:
-        raise ConfigError("--resume needs --out: the folder of the run to continue")
-    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+    opts.check_resume()
+    with opts.simulator(obj, simulator) as sim:
         request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
         request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
         request.update(picks=to_dict(pick_config))
-        store, complete = open_study_store(
-            out, "compare", request, resume=resume, overwrite=overwrite
+        store, complete = open_store(
+            out, "compare", request, resume=opts.resume, overwrite=opts.overwrite
         )
+        store = store if store is not None else _store
         if complete:
             return _read_comparison(Path(out), obj, grippers, base, n, seed, pick_config)
         t0 = time.perf_counter()
-        cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
-        n_cand = len(cand["pick_id"])
-        jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]
-        desc = f"compare: {len(jobs)} grippers ({sim.engine.backend_name})"
-        with marking_stops(out, "compare"), showing_progress(sim.engine, desc, "sim", progress):
-            outs = sim.run(jobs, store)
-        success = np.zeros((len(grippers), n_cand), bool)
-        score = np.zeros((len(grippers), n_cand))
-        tables = []
-        for g, (b, out_g) in enumerate(zip(batches, outs, strict=True)):
-            ok = reasons[g] == 0
-            if len(b):
-                success[g, ok] = out_g["success"]
-                score[g, ok] = np.nan_to_num(out_g["score"], nan=0.0)  # diverged: no quality
-                tables.append(
-                    results_table(
-                        b, out_g, jobs[g][0].gripper, {"gripper": np.full(len(b), names[g])}
-                    )
-                )
-        rows = []
-        for g, gripper in enumerate(grippers):
-            ok = reasons[g] == 0
-            row = {"gripper": gripper.name, **rate_summary(success[g], score[g])}
-            row["grip_force_n"] = jobs[g][0].grasp.grip_force_n
-            feasible = rate_summary(success[g, ok], score[g, ok]) if ok.any() else None
-            row["feasible"] = int(ok.sum())
-            row["feasible_success_rate"] = feasible["success_rate"] if feasible else math.nan
-            row["diverged"] = int(np.sum(outs[g]["diverged"])) if len(batches[g]) else 0
-            rows.append(row)
-        key = "success_rate" if rank_by == "success" else "score_mean"
-        other = "score_mean" if rank_by == "success" else "success_rate"
-        order = sorted(range(len(rows)), key=lambda g: (-rows[g][key], -rows[g][other]))
-        lead = order[0]
-        for rank, g in enumerate(order, start=1):
-            rows[g]["rank"] = rank
-            rows[g]["p_vs_best"] = 1.0 if g == lead else mcnemar_p(success[lead], success[g])
-        ranking = [rows[g] for g in order]
-        table = pa.concat_tables(tables) if tables else pa.table({})
-        result = Comparison(ranking, table, names, success, score, reasons == 0, cand, None)
+        with marking_stops(out, "compare"):
+            result = _compare(obj, grippers, base, n, seed, pick_config, rank_by, sim, store, opts)
         if out is not None:
             out_dir = Path(out)
             config = {
@@ -213,11 +174,11 @@ def compare(
                 "rank_by": rank_by,
             }
             write_json(out_dir / "config.json", config)
-            write_json(out_dir / "ranking.json", ranking)
-            write_parquet(out_dir / "results.parquet", table)
+            write_json(out_dir / "ranking.json", result.ranking)
+            write_parquet(out_dir / "results.parquet", result.table)
             plot_comparison(obj, result, out_dir)
             result.out_dir = out_dir
-            meta = sim.engine.describe(time.perf_counter() - t0)
+            meta = sim.runner.describe(time.perf_counter() - t0)
             config["picks"] = to_dict(pick_config)
             finish(out_dir, command="compare", config=config, seed=seed, release_lock=False, **meta)
             store.remove()  # every row is in results.parquet now
@@ -225,17 +186,72 @@ def compare(
         return result
 
 
-def _read_comparison(out_dir: Path, obj, grippers, base, n, seed, pick_config) -> Comparison:
+def _compare(
+    obj, grippers, base, n, seed, pick_config, rank_by, sim, store=None, opts=None
+) -> Comparison:
+    """compare's simulations and ranking (nothing written): the shared candidates on
+    every gripper through sim, chunks read from and saved to store (when given)."""
+    names = [g.name for g in grippers]
+    cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
+    n_cand = len(cand["pick_id"])
+    jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]
+    desc = f"compare: {len(jobs)} grippers ({sim.runner.backend_name})"
+    with showing_progress(sim.runner, desc, "sim", opts is not None and opts.progress):
+        outs = sim.run(jobs, store)
+    success = np.zeros((len(grippers), n_cand), bool)
+    score = np.zeros((len(grippers), n_cand))
+    tables = []
+    for g, (b, out_g) in enumerate(zip(batches, outs, strict=True)):
+        ok = reasons[g] == 0
+        if len(b):
+            success[g, ok] = out_g["success"]
+            score[g, ok] = np.nan_to_num(out_g["score"], nan=0.0)  # diverged: no quality
+            tables.append(
+                results_table(b, out_g, jobs[g][0].gripper, {"gripper": np.full(len(b), names[g])})
+            )
+    ranking = _ranking(grippers, jobs, batches, outs, reasons, success, score, rank_by)
+    table = pa.concat_tables(tables) if tables else pa.table({})
+    return Comparison(ranking, table, names, success, score, reasons == 0, cand, None)
+
+
+def _ranking(grippers, jobs, batches, outs, reasons, success, score, rank_by) -> list[dict]:
+    """One row per gripper (rates over every candidate and over its feasible ones,
+    grip force in N, diverged runs), best first by rank_by, each with its rank and
+    McNemar's p against the best."""
+    rows = []
+    for g, gripper in enumerate(grippers):
+        ok = reasons[g] == 0
+        row = {"gripper": gripper.name, **rate_summary(success[g], score[g])}
+        row["grip_force_n"] = jobs[g][0].grasp.grip_force_n
+        feasible = rate_summary(success[g, ok], score[g, ok]) if ok.any() else None
+        row["feasible"] = int(ok.sum())
+        row["feasible_success_rate"] = feasible["success_rate"] if feasible else math.nan
+        row["diverged"] = int(np.sum(outs[g]["diverged"])) if len(batches[g]) else 0
+        rows.append(row)
+    key = "success_rate" if rank_by == "success" else "score_mean"
+    other = "score_mean" if rank_by == "success" else "success_rate"
+    order = sorted(range(len(rows)), key=lambda g: (-rows[g][key], -rows[g][other]))
+    lead = order[0]
+    for rank, g in enumerate(order, start=1):
+        rows[g]["rank"] = rank
+        rows[g]["p_vs_best"] = 1.0 if g == lead else mcnemar_p(success[lead], success[g])
+    return [rows[g] for g in order]
+
+
+def _read_comparison(
+    out_dir: Path, obj, grippers, base, n, seed, pick_config, ranking=None
+) -> Comparison:
     """A complete comparison's folder read back (resume has nothing to do): its ranking
-    and table, and the per-gripper arrays rebuilt from the table on the shared
-    candidates (drawn again: geometry only, nothing simulated)."""
+    (ranking.json, unless given) and table, and the per-gripper arrays rebuilt from the
+    table on the shared candidates (drawn again: geometry only, nothing simulated)."""
     import json
 
     import pyarrow.parquet as pq
 
     cand, _, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
     table = pq.read_table(out_dir / "results.parquet")
-    ranking = json.loads((out_dir / "ranking.json").read_text())
+    if ranking is None:
+        ranking = json.loads((out_dir / "ranking.json").read_text())
     names = [g.name for g in grippers]
     success = np.zeros((len(grippers), len(cand["pick_id"])), bool)
     score = np.zeros(success.shape)
@@ -359,32 +375,31 @@ def design_search(
     obj: ObjectModel,
     bounds: dict[str, tuple[float, float]],
     base: Settings | None = None,
+    options: RunOptions | None = None,
     *,
     variants: int = 12,
-    n: int = 64,
     rounds: int = 3,
     final_n: int | None = None,
-    seed: int = 0,
     rank_by: str = "success",
-    pick_config: pp.PickConfig | None = None,
-    backend: str = "auto",
-    batch_size: int | None = None,
-    out: str | Path | None = None,
-    overwrite: bool = False,
-    ray: str | None = None,
     simulator: Simulator | None = None,
-    progress: bool = False,
+    **run,
 ) -> DesignResult:
     """Search gripper geometry within bounds; see the module docstring.
 
-    Round r simulates the surviving variants on n * 2**r shared pick-points and keeps
-    the best third (at least one); the survivor is then compared with the base gripper
-    on final_n (default 4 n) fresh pick-points. ray: every round on a Ray cluster
-    ("auto" or "HOST:PORT"; mjx_pick.engine.cluster), this process writing out. simulator:
-    run through this one (kept open; backend, batch_size and ray are then its own).
-    progress: a progress bar on stderr (its total grows as each round starts: a
-    round's size depends on the last).
+    Round r simulates the surviving variants on n * 2**r shared pick-points (n: 64 by
+    default) and keeps the best third (at least one); the survivor is then compared
+    with the base gripper on final_n (default 4 n) fresh pick-points. options, or its
+    fields as keywords (``options.RunOptions``): out is saved to as the rounds go (their
+    finished chunks, ``engine.chunks.ChunkStore``), so that resume continues an
+    interrupted search (on a complete one: reads it back); ray runs every
+    round on a Ray cluster ("auto" or "HOST:PORT"; mjx_pick.engine.cluster), this process
+    writing out; progress: a progress bar on stderr (its total grows as each round
+    starts: a round's size depends on the last). simulator: run through this one (kept
+    open; backend, batch_size and ray are then its own).
     """
+    opts = RunOptions.of(options, **run)
+    n, seed, pick_config, out = opts.n_or(64), opts.seed, opts.pick_config, opts.out
+    opts.check_resume()
     base = base or Settings()
     check_range("design", "rounds", rounds, 1, 20)
     check_range("design", "n", n, 1, 1e8)
@@ -397,22 +412,29 @@ def design_search(
     request.update(base=to_dict(base), variants=variants, n=n, rounds=rounds, seed=seed)
     request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
     pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
-    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
-        if out is not None:
-            claim(out, "design", config_hash(request), overwrite=overwrite, settings=request)
+    with opts.simulator(obj, simulator) as sim:
+        store, complete = open_store(
+            out, "design", request, resume=opts.resume, overwrite=opts.overwrite
+        )
         search = {"rounds": rounds, "n": n, "final_n": final_n, "seed": seed}
         search.update(rank_by=rank_by, pick_config=pick_config)
-        return _design(obj, base, pool, sim, bounds, request, t0, out, progress, **search)
+        if complete:
+            return _read_design(Path(out), obj, base, pool, **search)
+        with marking_stops(out, "design"):
+            return _design(
+                obj, base, pool, sim, bounds, request, t0, out, opts.progress, store, **search
+            )
 
 
 def _design(
-    obj, base, pool, sim, bounds, request, t0, out, progress, *,
+    obj, base, pool, sim, bounds, request, t0, out, progress, store, *,
     rounds, n, final_n, seed, rank_by, pick_config,
 ) -> DesignResult:  # fmt: skip
-    """design_search once its inputs are checked, its simulator made and out claimed."""
+    """design_search once its inputs are checked, its simulator made and out claimed
+    (store: its chunks there, or None)."""
     history = []
-    desc = f"design: {rounds} rounds + final ({sim.engine.backend_name})"
-    with showing_progress(sim.engine, desc, "sim", progress) as bar:
+    desc = f"design: {rounds} rounds + final ({sim.runner.backend_name})"
+    with showing_progress(sim.runner, desc, "sim", progress) as bar:
         for r in range(rounds):
             if bar is not None:
                 bar.note(f"round {r + 1}/{rounds}: {len(pool)} grippers")
@@ -425,6 +447,7 @@ def _design(
                 rank_by=rank_by,
                 pick_config=pick_config,
                 simulator=sim,
+                _store=store,
             )
             history.append(res.ranking)
             keep = max(1, math.ceil(len(pool) / 3)) if r < rounds - 1 else 1
@@ -443,6 +466,7 @@ def _design(
             rank_by=rank_by,
             pick_config=pick_config,
             simulator=sim,
+            _store=store,
         )
     result = DesignResult(best, base.gripper, final, history, None)
     if out is not None:
@@ -466,6 +490,27 @@ def _design(
         write_parquet(out_dir / "results.parquet", final.table)
         plot_comparison(obj, final, out_dir)
         result.out_dir = out_dir
-        meta = sim.engine.describe(time.perf_counter() - t0)
-        finish(out_dir, command="design", config=request, seed=seed, **meta)
+        meta = sim.runner.describe(time.perf_counter() - t0)
+        finish(out_dir, command="design", config=request, seed=seed, release_lock=False, **meta)
+        store.remove()  # every row is in the outputs now
+        release(out_dir)
     return result
+
+
+def _read_design(
+    out_dir: Path, obj, base, pool, *, rounds, n, final_n, seed, rank_by, pick_config
+) -> DesignResult:
+    """A complete design search's folder read back (resume has nothing to do): the
+    winner is the pool's variant of that name (the pool is drawn again from the seed),
+    the final comparison rebuilt as compare's (:func:`_read_comparison`)."""
+    import json
+
+    saved = json.loads((out_dir / "design.json").read_text())
+    best = {g.name: g for g in pool}[saved["best"]["name"]]
+    contenders = [best] if best == base.gripper else [best, base.gripper]
+    picks = pick_config or pp.PickConfig()
+    final_seed = seed + 1_000_003
+    final = _read_comparison(
+        out_dir, obj, contenders, base, final_n or 4 * n, final_seed, picks, saved["final"]
+    )
+    return DesignResult(best, base.gripper, final, saved["rounds"], out_dir)

@@ -11,12 +11,13 @@
   are re-simulated with recording on: keeping traces of every pick-point of a large
   batch would not fit in device memory).
 
-Every simulation runs through the engine: large runs go in chunks
-(``engine.run_chunks``) on a chunk executor -- this process's backend, or with
-``ray="auto" | "HOST:PORT"`` the actors of a Ray cluster (``mjx_pick.engine.cluster``); either
-way this process alone writes the folder. Each finished chunk is written atomically
-under ``chunks/`` beside the chunk plan (``chunks/plan.json``), so that ``resume=True``
-redoes nothing that finished, for the same experiment (:func:`experiment_key`). Once the
+Every simulation runs through the runner: large runs go in chunks
+(``runner.run_chunks``) -- on this process's backend, or with
+``ray="auto" | "HOST:PORT"`` on the actors of a Ray cluster (``mjx_pick.engine.cluster``);
+either way this process alone writes the folder. Each finished chunk is written
+atomically under ``chunks/`` beside the chunk plan (``engine.chunks.ChunkStore``, the
+resume of every command), so that ``resume=True`` redoes nothing that finished, for the
+same experiment (:func:`experiment_key`). Once the
 run is complete (results, summary and traces written), ``chunks/`` is removed: its
 rows are all in results.parquet. A run that stops early keeps it for ``resume``;
 ``resume`` on a complete folder simulates nothing and returns what it holds (without
@@ -31,7 +32,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import shutil
 import threading
 import time
 import warnings
@@ -57,15 +57,13 @@ from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
 from mjx_pick.core.scene import Scene, build_scene
 from mjx_pick.engine import interrupts
 from mjx_pick.engine.backend import Settings
+from mjx_pick.engine.chunks import ChunkStore
 from mjx_pick.engine.runner import (
     Cancelled,
-    ChunkExecutor,
-    Engine,
-    LocalExecutor,
     ProgressFn,
+    Runner,
     auto_chunk,
-    chunk_path,
-    plan_chunks,
+    chunk_name,
     read_chunk,
     run_chunks,
 )
@@ -81,6 +79,7 @@ from mjx_pick.outputs.rundir import (
     release,
     versions,
 )
+from mjx_pick.studies.options import RunOptions
 from mjx_pick.studies.pickfiles import read_picks_csv
 from mjx_pick.studies.robust import min_grip_force
 
@@ -147,41 +146,36 @@ def _resolve(obj, gripper) -> tuple[ObjectModel, GripperSpec]:
 def evaluate(
     obj: ObjectModel | str,
     gripper: GripperSpec | str = "robotiq-2f85",
+    options: RunOptions | None = None,
     *,
-    n: int = 1000,
-    seed: int = 0,
     picks: pp.PickBatch | str | Path | None = None,
     contact: ContactParams | None = None,
     solver: SolverParams | None = None,
     grasp: GraspConfig | None = None,
-    pick_config: pp.PickConfig | None = None,
-    backend: str = "auto",
-    batch_size: int | None = None,
-    out: str | Path | None = None,
     n_traces: int = 3,
-    progress: bool = False,
-    resume: bool = False,
     until: int | None = None,
     min_score: float = 0.9,
     max_n: int | None = None,
     chunk_size: int | None = None,
     min_force: bool = False,
     stability_um: float = 0.0,
-    overwrite: bool = False,
     skip_infeasible: bool = False,
     keep_chunks: bool = False,
     on_progress: ProgressFn | None = None,
     cancel: threading.Event | None = None,
-    ray: str | None = None,
     on_cluster_event=None,
     fixed_costs: dict | None = None,
+    **run,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
     Args:
       obj: an ObjectModel, a shipped asset name, or an image/mesh path (see load_object).
       gripper: a GripperSpec, a preset name or a gripper TOML path.
-      n: pick-points to generate (Normal mode) when picks is None.
+      options: the run options (``options.RunOptions``), or their fields as keywords
+        (a keyword overrides the same field of options): n, seed, pick_config,
+        backend, batch_size, out, progress, resume, overwrite, ray, as below.
+      n: pick-points to generate (Normal mode) when picks is None (default 1000).
       seed: generator seed (same seed, same pick-points).
       picks: a PickBatch or a CSV path (x_mm, y_mm, yaw_deg) instead of generating.
       contact, solver, grasp, pick_config: settings (defaults: the paper's).
@@ -227,6 +221,9 @@ def evaluate(
       fixed_costs: seconds the caller spent before this call, shown first in the
         summary's ``time_s`` breakdown (the CLI: ``import_s``, ``object_s``).
     """
+    opts = RunOptions.of(options, **run)
+    opts = dataclasses.replace(opts, n=opts.n_or(1000), pick_config=opts.picks)
+    backend, batch_size, ray = opts.backend, opts.batch_size, opts.ray
     obj, gripper = _resolve(obj, gripper)
     contact = contact or ContactParams()
     solver = solver or SolverParams()
@@ -234,7 +231,7 @@ def evaluate(
         grasp, note = GraspConfig().fitted_to(gripper)
         if note:
             warnings.warn(note, stacklevel=2)
-    pick_config = pick_config or pp.PickConfig()
+    pick_config = opts.pick_config
     grasp.check_gripper(gripper)
     pp.check_raster(obj, pick_config)  # before any allocation or folder
     if not isinstance(picks, pp.PickBatch):  # a batch given here was checked when drawn
@@ -252,8 +249,7 @@ def evaluate(
         )
     if chunk_size is not None and int(chunk_size) < 1:
         raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
-    if resume and out is None:
-        raise ConfigError("--resume needs --out: the folder of the run to continue")
+    opts.check_resume()
     user_batch = None
     if picks is not None and not isinstance(picks, pp.PickBatch) and until is None:
         # the user's file is read and checked before a simulator or a folder is made
@@ -272,104 +268,91 @@ def evaluate(
         )
     t_scene = time.perf_counter()
     scene = build_scene(obj, gripper, contact, solver, grasp)
-    engine = runner = None
     if ray is None:
-        engine = Engine(backend, batch_size, chunk_size=chunk_size or None, cancel=cancel)
-        runner = engine.make(scene, grasp)
-        executor = LocalExecutor(engine, runner, grasp)
+        runner = Runner(backend, batch_size, chunk_size=chunk_size or None, cancel=cancel)
     else:
-        from mjx_pick.engine.cluster import RayExecutor
+        from mjx_pick.engine.cluster import ray_runner
 
-        executor = RayExecutor(
-            ray,
-            scene,
-            grasp,
-            backend=backend,
-            batch_size=batch_size,
-            cancel=cancel,
-            on_event=on_cluster_event,
-        )
-    # the run's fixed costs, seconds: filled in as they are paid (summary "time_s")
-    costs = {k: float(v) for k, v in (fixed_costs or {}).items()}
-    costs["scene_s"] = time.perf_counter() - t_scene  # MjModel, and the backend that holds it
+        runner = ray_runner(ray, backend, batch_size, cancel=cancel, on_event=on_cluster_event)
     try:
-        ctx = _Context(executor, engine, runner, scene, costs, user_batch)
+        made = runner.make(scene, grasp)
+        # the run's fixed costs, seconds: filled in as they are paid (summary "time_s")
+        costs = {k: float(v) for k, v in (fixed_costs or {}).items()}
+        costs["scene_s"] = time.perf_counter() - t_scene  # MjModel, and the backend that holds it
+        ctx = _Context(runner.chunks(made, grasp), runner, made, scene, costs, user_batch)
         req = _Request(
             obj,
             gripper,
             contact,
             solver,
             grasp,
-            pick_config,
-            n=n,
-            seed=seed,
+            opts,
             picks=picks,
-            out=out,
             n_traces=n_traces,
-            progress=progress,
-            resume=resume,
             until=until,
             min_score=min_score,
             max_n=max_n,
             chunk_size=chunk_size,
             min_force=min_force,
             stability_um=stability_um,
-            overwrite=overwrite,
             keep_chunks=keep_chunks,
             on_progress=on_progress,
         )
         return _evaluate(ctx, req)
     finally:
-        if hasattr(executor, "close"):
-            executor.close()
+        runner.close()
 
 
 @dataclasses.dataclass(frozen=True)
 class _Request:
     """One evaluate() call's settings once resolved and checked (see evaluate's Args):
-    the value its steps pass down instead of two dozen loose parameters."""
+    the value its steps pass down instead of two dozen loose parameters. run: the run
+    options, n and pick_config resolved."""
 
     obj: ObjectModel
     gripper: GripperSpec
     contact: ContactParams
     solver: SolverParams
     grasp: GraspConfig
-    pick_config: pp.PickConfig
-    n: int
-    seed: int
+    run: RunOptions
     picks: pp.PickBatch | str | Path | None
-    out: str | Path | None
     n_traces: int
-    progress: bool
-    resume: bool
     until: int | None
     min_score: float
     max_n: int | None
     chunk_size: int | None
     min_force: bool
     stability_um: float
-    overwrite: bool
     keep_chunks: bool
     on_progress: ProgressFn | None
+
+    # the run options evaluate's steps read
+    n = property(lambda self: self.run.n)
+    seed = property(lambda self: self.run.seed)
+    pick_config = property(lambda self: self.run.pick_config)
+    out = property(lambda self: self.run.out)
+    progress = property(lambda self: self.run.progress)
+    resume = property(lambda self: self.run.resume)
+    overwrite = property(lambda self: self.run.overwrite)
 
 
 @dataclasses.dataclass
 class _Context:
-    """What one evaluate() call simulates with: its executor (this process, or a Ray
-    cluster), the local engine and runner (None on a cluster), the scene, the fixed
-    costs paid so far (seconds, filled in as they are paid) and the user's checked
-    pick-points (None unless read from a file)."""
+    """What one evaluate() call simulates with: its chunks (``Runner.chunks``: this
+    process, or a Ray cluster's actors), the runner and its backend for the scene, the
+    scene, the fixed costs paid so far (seconds, filled in as they are paid) and the
+    user's checked pick-points (None unless read from a file)."""
 
-    executor: ChunkExecutor
-    engine: Engine | None
-    runner: object | None
-    scene: object
+    chunks: object
+    runner: Runner
+    backend: object
+    scene: Scene
     costs: dict
     user_batch: pp.PickBatch | None = None
 
 
 def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
-    """evaluate() once its executor (this process, or a Ray cluster) is ready."""
+    """evaluate() once its runner (this process, or a Ray cluster) is ready."""
     out_dir = Path(req.out) if req.out is not None else None
     settings = experiment_settings(
         ctx.scene,
@@ -387,17 +370,17 @@ def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
             "max_n": req.max_n,
             "min_force": req.min_force,
             "stability_um": req.stability_um,
-            "backend": ctx.executor.name,
+            "backend": ctx.chunks.name,
             # a batched program's float32 rounding depends on its batch shape, on the C
             # engine too (its per-tick kernel: engine module docstring)
-            "batch_size": ctx.executor.batch_size,
+            "batch_size": ctx.chunks.batch_size,
         },
     )
     key = config_hash(settings)
     done = _complete_run(out_dir, key) if out_dir is not None and not req.overwrite else None
     if done is not None and req.resume:
         return done
-    if done is not None:  # its chunks are gone: plan_chunks would no longer see it
+    if done is not None:  # its chunks are gone: the chunk store would no longer see it
         raise ConfigError(
             f"{out_dir} holds this run, complete: pass --resume to read it back, choose "
             "another --out, or pass --overwrite to run it again"
@@ -436,19 +419,74 @@ def _evaluate_claimed(
     ctx: _Context, req: _Request, picks_batch: pp.PickBatch | None, out_dir: Path | None, key: str
 ) -> Evaluation:
     """evaluate() once its inputs are checked and its folder (if any) claimed."""
-    if req.until is not None:
-        batch = int(req.chunk_size or until_batch(req.until, ctx.executor.batch_size))
-        plan = plan_chunks(out_dir, key, req.max_n, min(batch, req.max_n), req.resume)
-    else:
-        if req.chunk_size:
-            chunk = int(req.chunk_size)
-        elif ctx.runner is not None:
-            chunk = auto_chunk(ctx.runner)
-        else:
-            chunk = ctx.executor.batch_size
-        plan = plan_chunks(out_dir, key, len(picks_batch), chunk, req.resume)
+    store = ChunkStore(out_dir, key, req.resume) if out_dir is not None else None
+    chunk = _chunk_size(ctx, req, picks_batch, store)
+    config = _run_config(ctx, req, picks_batch, chunk, key)
+    if out_dir is not None:
+        write_json(out_dir / "config.json", config)
+        write_atomic(out_dir / "scene.xml", ctx.scene.xml)
 
-    config = {
+    t0 = time.perf_counter()
+    try:
+        if req.until is not None:
+            picks_batch, table = _optimize(ctx.chunks, chunk, store, req)
+            config["n"], config["mode"] = int(len(picks_batch)), picks_batch.mode
+            if out_dir is not None:
+                write_json(out_dir / "config.json", config)
+        else:
+            table = _simulate(ctx.chunks, picks_batch, chunk, store, req.progress, req.on_progress)
+        summary = _run_summary(ctx, req, picks_batch, table, time.perf_counter() - t0)
+        table = _extra_passes(ctx, req, picks_batch, table, summary)
+        traces = _traces(ctx.chunks, picks_batch, table, req.n_traces) if req.n_traces else None
+        interrupts.raise_if_requested()  # a Ctrl-C swallowed in the last chunk: not complete
+    except (KeyboardInterrupt, Cancelled) as stop:
+        _stopped(out_dir, stop, ctx.chunks, req.seed, config, time.perf_counter() - t0)
+        raise
+    t_write = time.perf_counter()
+    if out_dir is not None:
+        write_parquet(out_dir / "results.parquet", table)
+        if traces is not None:
+            write_parquet(out_dir / "traces.parquet", traces)
+    ctx.costs["write_s"] = time.perf_counter() - t_write
+    summary["time_s"] = _breakdown(ctx.costs, ctx.chunks.describe()["timing"])
+    if out_dir is not None:
+        write_json(out_dir / "summary.json", summary)
+        meta = ctx.chunks.describe(time.perf_counter() - t0)
+        meta["timing"]["breakdown_s"] = summary["time_s"]
+        finish(
+            out_dir, command="evaluate", config=config, seed=req.seed, release_lock=False, **meta
+        )
+        if not req.keep_chunks:  # every row is in results.parquet now
+            store.remove()
+        release(out_dir)
+    return Evaluation(table, summary, config, traces, out_dir)
+
+
+def _chunk_size(
+    ctx: _Context, req: _Request, picks_batch: pp.PickBatch | None, store: ChunkStore | None
+) -> int:
+    """Pick-points per chunk: the store's when resuming (chunk k on disk keeps its
+    meaning), else the user's, else Optimization mode's batch, free device memory's
+    (this process) or one actor batch (a cluster) -- saved in the store before the
+    first chunk is simulated."""
+    if req.until is not None:
+        batch = int(req.chunk_size or until_batch(req.until, ctx.chunks.batch_size))
+        proposed = min(batch, req.max_n)
+    elif req.chunk_size:
+        proposed = int(req.chunk_size)
+    elif ctx.runner.cluster is None:
+        proposed = auto_chunk(ctx.backend)
+    else:
+        proposed = ctx.chunks.batch_size
+    return store.chunk_size("evaluate", proposed) if store is not None else int(proposed)
+
+
+def _run_config(
+    ctx: _Context, req: _Request, picks_batch: pp.PickBatch | None, chunk: int, key: str
+) -> dict:
+    """The run's configuration as config.json holds it: settings, MuJoCo's contact
+    parameters, pick-points, backend, device, batch and chunk size, versions."""
+    return {
         "object": req.obj.summary(),
         "gripper": to_dict(req.gripper),
         "contact": to_dict(req.contact),
@@ -464,118 +502,83 @@ def _evaluate_claimed(
         "n": int(len(picks_batch)) if picks_batch is not None else None,
         "seed": int(req.seed),
         "mode": picks_batch.mode if picks_batch is not None else "optimization",
-        "backend": ctx.executor.name,
-        "device": ctx.executor.device,
-        "batch_size": int(ctx.executor.batch_size),
-        "chunk_size": int(plan.chunk_size),
-        "ray": getattr(ctx.executor, "address", None),
+        "backend": ctx.chunks.name,
+        "device": ctx.chunks.device,
+        "batch_size": int(ctx.chunks.batch_size),
+        "chunk_size": int(chunk),
+        "ray": getattr(ctx.chunks, "address", None),
         "config_key": key,
         "versions": versions(),
     }
-    if out_dir is not None:
-        write_json(out_dir / "config.json", config)
-        write_atomic(out_dir / "scene.xml", ctx.scene.xml)
 
-    t0 = time.perf_counter()
-    try:
-        if req.until is not None:
-            picks_batch, table = _optimize(
-                ctx.executor,
-                plan,
-                out_dir,
-                req.obj,
-                req.gripper,
-                req.grasp,
-                req.until,
-                req.min_score,
-                req.seed,
-                req.pick_config,
-            )
-            config["n"], config["mode"] = int(len(picks_batch)), picks_batch.mode
-            if out_dir is not None:
-                write_json(out_dir / "config.json", config)
-        else:
-            table = _simulate(
-                ctx.executor, picks_batch, plan, out_dir, req.progress, req.on_progress
-            )
-        wall = time.perf_counter() - t0
-        summary = summarize(table)
-        mu = req.contact.pad_friction
-        timing = ctx.executor.describe()["timing"]
-        summary.update(
-            {
-                "object": req.obj.name,
-                "gripper": req.gripper.name,
-                "backend": ctx.executor.name,
-                "device": ctx.executor.device,
-                "f_gmin_n": min_grasp_force_n(req.obj, mu, req.grasp.safety_factor),
-                "grip_force_n": req.grasp.grip_force_n,
-                "candidates_checked": int(picks_batch.n_candidates),
-                "rejected": dict(picks_batch.rejected),
-                "compile_s": timing["compile_s"],
-                "run_s": timing["run_s"],
-                "wall_s": round(wall, 3),
-                # per backend (per actor on a cluster): simulations over simulating time
-                "picks_per_s": round(timing["simulations"] / timing["run_s"], 2)
-                if timing["run_s"] > 0
-                else None,
-                "simulated_s_per_pick": round(req.grasp.duration_s, 3),
-                "physics_steps_per_pick": req.grasp.n_ticks() * req.grasp.substeps(req.solver),
-            }
+
+def _run_summary(
+    ctx: _Context, req: _Request, picks_batch: pp.PickBatch, table: pa.Table, wall_s: float
+) -> dict:
+    """summary.json of the main run: counts and rates (``metrics.summarize``), eq. (1)'s
+    F_Gmin (N), candidates, compile apart from run time (s), pick-points per second."""
+    summary = summarize(table)
+    mu = req.contact.pad_friction
+    timing = ctx.chunks.describe()["timing"]
+    summary.update(
+        {
+            "object": req.obj.name,
+            "gripper": req.gripper.name,
+            "backend": ctx.chunks.name,
+            "device": ctx.chunks.device,
+            "f_gmin_n": min_grasp_force_n(req.obj, mu, req.grasp.safety_factor),
+            "grip_force_n": req.grasp.grip_force_n,
+            "candidates_checked": int(picks_batch.n_candidates),
+            "rejected": dict(picks_batch.rejected),
+            "compile_s": timing["compile_s"],
+            "run_s": timing["run_s"],
+            "wall_s": round(wall_s, 3),
+            # per backend (per actor on a cluster): simulations over simulating time
+            "picks_per_s": round(timing["simulations"] / timing["run_s"], 2)
+            if timing["run_s"] > 0
+            else None,
+            "simulated_s_per_pick": round(req.grasp.duration_s, 3),
+            "physics_steps_per_pick": req.grasp.n_ticks() * req.grasp.substeps(req.solver),
+        }
+    )
+    if hasattr(ctx.chunks, "cluster_summary"):
+        summary["cluster"] = ctx.chunks.cluster_summary()
+    return summary
+
+
+def _extra_passes(
+    ctx: _Context, req: _Request, picks_batch: pp.PickBatch, table: pa.Table, summary: dict
+) -> pa.Table:
+    """table with the columns of the extra passes asked for (minimum grip force, label
+    stability), their figures added to summary. They run through the run's own runner
+    and backend (no new compile)."""
+    if not (req.min_force or req.stability_um):
+        return table
+    settings = Settings(req.gripper, req.contact, req.solver, req.grasp)
+    sim = Simulator(req.obj, runner=ctx.runner)
+    sim.adopt(settings, ctx.backend)
+    if req.min_force:
+        t1 = time.perf_counter()
+        with showing_progress(ctx.runner, "minimum grip force (bisection)", "sim", req.progress):
+            forces = min_grip_force(req.obj, picks_batch, settings, simulator=sim)
+        table = table.append_column("min_force_n", pa.array(forces))
+        # holding at the gripper's smallest force says only that the true minimum is at
+        # or below it: flagged, never presented as the minimum itself
+        at_floor = np.isfinite(forces) & (forces <= req.gripper.force_min_n + 1e-9)
+        table = table.append_column("min_force_at_floor", pa.array(at_floor))
+        summary["min_force_at_floor"] = int(at_floor.sum())
+        summary["min_force_s"] = round(time.perf_counter() - t1, 3)
+        summary["min_force_n_median"] = (
+            float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
         )
-        if hasattr(ctx.executor, "cluster_summary"):
-            summary["cluster"] = ctx.executor.cluster_summary()
-        settings = Settings(req.gripper, req.contact, req.solver, req.grasp)
-        if req.min_force or req.stability_um:
-            # the extra simulations below run through this run's engine and backend
-            sim = Simulator(req.obj, engine=ctx.engine)
-            sim.adopt(settings, ctx.runner)
-        if req.min_force:
-            t1 = time.perf_counter()
-            with showing_progress(
-                ctx.engine, "minimum grip force (bisection)", "sim", req.progress
-            ):
-                forces = min_grip_force(req.obj, picks_batch, settings, simulator=sim)
-            table = table.append_column("min_force_n", pa.array(forces))
-            # holding at the gripper's smallest force says only that the true minimum is at
-            # or below it: flagged, never presented as the minimum itself
-            at_floor = np.isfinite(forces) & (forces <= req.gripper.force_min_n + 1e-9)
-            table = table.append_column("min_force_at_floor", pa.array(at_floor))
-            summary["min_force_at_floor"] = int(at_floor.sum())
-            summary["min_force_s"] = round(time.perf_counter() - t1, 3)
-            summary["min_force_n_median"] = (
-                float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
-            )
-        if req.stability_um:
-            t1 = time.perf_counter()
-            table = _stability(table, picks_batch, sim, settings, req.stability_um, req.progress)
-            stable = table["label_stable"].to_numpy(zero_copy_only=False)
-            summary["stability_um"] = req.stability_um
-            summary["labels_unstable"] = int((~stable).sum())
-            summary["stability_s"] = round(time.perf_counter() - t1, 3)
-        traces = _traces(ctx.executor, picks_batch, table, req.n_traces) if req.n_traces else None
-        interrupts.raise_if_requested()  # a Ctrl-C swallowed in the last chunk: not complete
-    except (KeyboardInterrupt, Cancelled) as stop:
-        _stopped(out_dir, stop, ctx.executor, req.seed, config, time.perf_counter() - t0)
-        raise
-    t_write = time.perf_counter()
-    if out_dir is not None:
-        write_parquet(out_dir / "results.parquet", table)
-        if traces is not None:
-            write_parquet(out_dir / "traces.parquet", traces)
-    ctx.costs["write_s"] = time.perf_counter() - t_write
-    summary["time_s"] = _breakdown(ctx.costs, ctx.executor.describe()["timing"])
-    if out_dir is not None:
-        write_json(out_dir / "summary.json", summary)
-        meta = ctx.executor.describe(time.perf_counter() - t0)
-        meta["timing"]["breakdown_s"] = summary["time_s"]
-        finish(
-            out_dir, command="evaluate", config=config, seed=req.seed, release_lock=False, **meta
-        )
-        if not req.keep_chunks:  # every row is in results.parquet now
-            shutil.rmtree(out_dir / "chunks", ignore_errors=True)
-        release(out_dir)
-    return Evaluation(table, summary, config, traces, out_dir)
+    if req.stability_um:
+        t1 = time.perf_counter()
+        table = _stability(table, picks_batch, sim, settings, req.stability_um, req.progress)
+        stable = table["label_stable"].to_numpy(zero_copy_only=False)
+        summary["stability_um"] = req.stability_um
+        summary["labels_unstable"] = int((~stable).sum())
+        summary["stability_s"] = round(time.perf_counter() - t1, 3)
+    return table
 
 
 def _breakdown(costs: dict, timing: dict) -> dict:
@@ -607,14 +610,14 @@ def until_batch(until: int, batch_size: int) -> int:
 def _stability(table, picks_batch, sim: Simulator, settings, shift_um, progress):
     """table with success_shifted, score_shifted and label_stable: every simulated
     pick-point again with the object moved shift_um micrometres along x (one batch
-    through sim, which runs on the run's own engine and backend)."""
+    through sim, which runs on the run's own runner and backend)."""
     # the table's rows are the batch's pick-points in order (infeasible ones, if kept,
     # included: they are not simulated twice -- no simulation decides their label)
     ids = table["pick_id"].to_numpy()
     if len(ids) != len(picks_batch) or not np.array_equal(ids, picks_batch.pick_id):
         raise RuntimeError("evaluate: the results table does not follow its pick-points")
     shifted = dataclasses.replace(picks_batch, x_mm=picks_batch.x_mm + shift_um * 1e-3)
-    with showing_progress(sim.engine, "stability (pick-points moved)", "sim", progress):
+    with showing_progress(sim.runner, "stability (pick-points moved)", "sim", progress):
         (res,) = sim.run([(settings, shifted)])
     success = np.asarray(res["success"], bool)
     table = table.append_column("success_shifted", pa.array(success))
@@ -649,11 +652,11 @@ def _complete_run(out_dir: Path, key: str) -> Evaluation | None:
     )
 
 
-def _stopped(out_dir, stop: BaseException, executor, seed, config, wall_s=None) -> None:
+def _stopped(out_dir, stop: BaseException, chunks, seed, config, wall_s=None) -> None:
     """Mark a folder whose run stopped early; its finished chunks stay for --resume."""
     if out_dir is not None:
         status, message = interrupts.stop_status(stop)
-        meta = executor.describe(wall_s)
+        meta = chunks.describe(wall_s)
         finish(
             out_dir, status, command="evaluate", config=config, seed=seed, message=message, **meta
         )
@@ -689,7 +692,7 @@ def experiment_key(scene: Scene, settings: dict) -> str:
 
     Never where anything is installed (the same asset read from a checkout and from
     site-packages gives the same key) nor the chunk size (derived from free device
-    memory; a resumed run keeps the one on disk, ``engine.ChunkPlan``).
+    memory; a resumed run keeps the one on disk, ``engine.chunks.ChunkStore``).
     """
     return config_hash(experiment_settings(scene, settings))
 
@@ -707,20 +710,21 @@ def experiment_settings(scene: Scene, settings: dict) -> dict:
     return {"model": xml, "object": obj, **values}
 
 
-def _simulate(executor, picks, plan, out_dir, bar: bool, on_progress):
-    """The main run through the engine's chunked runner, with a progress bar if asked
+def _simulate(chunks, picks, chunk: int, store, bar: bool, on_progress):
+    """The main run, chunk by chunk (``runner.run_chunks``), with a progress bar if asked
     (``progress.ProgressBar``, on stderr): pick-points, chunks done and, on a cluster,
     pick-points/s per node and in all."""
     if not bar:
-        return run_chunks(executor, picks, plan, out_dir, on_progress)
+        return run_chunks(chunks, picks, chunk, store, on_progress)
     chunks_done = [0]
-    note = getattr(executor, "progress_note", None)
-    desc = f"simulating ({executor.name})"
+    n_chunks = max(1, -(-len(picks) // chunk))
+    note = getattr(chunks, "progress_note", None)
+    desc = f"simulating ({chunks.name})"
     with ProgressBar(desc, "pick", total=len(picks)) as pbar:
 
         def chunk_done(result) -> None:
             chunks_done[0] += 1
-            text = f"chunks {chunks_done[0]}/{plan.n_chunks} this run"
+            text = f"chunks {chunks_done[0]}/{n_chunks} this run"
             if note is not None:
                 text += f"; {note()}"
             pbar.note(text)
@@ -730,47 +734,48 @@ def _simulate(executor, picks, plan, out_dir, bar: bool, on_progress):
             if on_progress is not None:
                 on_progress(done, total)
 
-        return run_chunks(executor, picks, plan, out_dir, report, on_chunk=chunk_done)
+        return run_chunks(chunks, picks, chunk, store, report, on_chunk=chunk_done)
 
 
-def _optimize(executor, plan, out_dir, obj, gripper, grasp, k, min_score, seed, config):
-    """Optimization mode: batches of pick-points until k reach min_score or plan.n are
-    spent; (PickBatch, results table of every simulated pick).
+def _optimize(chunks, chunk: int, store: ChunkStore | None, req: _Request):
+    """Optimization mode: batches of chunk pick-points until req.until reach
+    req.min_score or req.max_n are spent; (PickBatch, results table of every simulated
+    pick).
 
-    Batch j is chunk j of the plan (the batches depend only on the seed and the batch
-    size, never on results): a resumed run reads the chunks on disk and simulates from
-    the first one missing, so it stops exactly where an uninterrupted run stops.
+    Batch j is chunk j of the run (the batches depend only on the seed and the batch
+    size, never on results): a resumed run reads the chunks in its store and simulates
+    from the first one missing, so it stops exactly where an uninterrupted run stops.
     """
     tables: list = []
 
     def score_fn(b: pp.PickBatch) -> np.ndarray:
         j = len(tables)
-        table = read_chunk(out_dir, j, b) if out_dir is not None else None
+        table = read_chunk(store, j, b)
         if table is None:
-            for result in executor.run({j: b}):
+            for result in chunks.run({j: b}):
                 table = result.table
-            if out_dir is not None:
-                write_parquet(chunk_path(out_dir, j), table)
+            if store is not None:
+                store.write(chunk_name(j), table)
         tables.append(table)
         score = np.asarray(table["score"], float)
         return np.where(np.asarray(table["success"]), np.nan_to_num(score, nan=-1.0), -1.0)
 
     res = pp.optimize(
-        obj,
-        gripper,
+        req.obj,
+        req.gripper,
         score_fn,
-        k=k,
-        min_score=min_score,
-        max_n=plan.n,
-        batch_size=plan.chunk_size,
-        seed=seed,
-        config=config,
-        grasp=grasp,
+        k=req.until,
+        min_score=req.min_score,
+        max_n=req.max_n,
+        batch_size=chunk,
+        seed=req.seed,
+        config=req.pick_config,
+        grasp=req.grasp,
     )
     return res.picks, pa.concat_tables(tables)
 
 
-def _traces(executor, picks: pp.PickBatch, table: pa.Table, n: int):
+def _traces(chunks, picks: pp.PickBatch, table: pa.Table, n: int):
     """Re-simulate the n best and n worst pick-points with recording on."""
     score = np.asarray(table["score"], float)
     order = np.argsort(np.where(np.isnan(score), -np.inf, score))
@@ -778,7 +783,7 @@ def _traces(executor, picks: pp.PickBatch, table: pa.Table, n: int):
     if len(chosen) == 0:
         return None
     sub = picks.take(chosen)
-    rows = executor.record(sub)
+    rows = chunks.record(sub)
     n_pick, n_tick, _ = rows.shape
     cols = {"pick_id": np.repeat(sub.pick_id, n_tick)}
     for j, name in enumerate(gk.TRACE_FIELDS):

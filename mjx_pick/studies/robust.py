@@ -33,8 +33,9 @@ from mjx_pick.core.config import ConfigError, check_range, to_dict, write_json, 
 from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.core.objects import ObjectModel, check_same_object
 from mjx_pick.engine.backend import Settings
-from mjx_pick.engine.simulator import Simulator, showing_progress, study_simulator
+from mjx_pick.engine.simulator import Simulator, showing_progress
 from mjx_pick.outputs.rundir import claim, config_hash, finish
+from mjx_pick.studies.options import RunOptions
 
 
 def perturb(picks: pp.PickBatch, m: int, sigma_xy_mm: float, sigma_yaw_deg: float, seed: int):
@@ -112,34 +113,34 @@ def robustness(
     obj: ObjectModel,
     picks: pp.PickBatch,
     base: Settings | None = None,
+    options: RunOptions | None = None,
     *,
     m: int = 32,
     sigma_xy_mm: float = 2.0,
     sigma_yaw_deg: float = 3.0,
-    seed: int = 0,
-    pick_config: pp.PickConfig | None = None,
-    backend: str = "auto",
-    batch_size: int | None = None,
     simulator: Simulator | None = None,
-    out: str | Path | None = None,
-    overwrite: bool = False,
-    ray: str | None = None,
-    progress: bool = False,
     _claimed: bool = False,
+    **run,
 ) -> pa.Table:
     """Robust success probability of each pick-point; rows ranked best first.
 
-    out: a new folder, or the evaluate folder the pick-points came from (its files
-    stay; robustness.parquet and robustness.json join them). ray: simulate the draws on
-    a Ray cluster ("auto" or "HOST:PORT"; mjx_pick.engine.cluster), this process writing out.
-    progress: a progress bar of the simulations on stderr.
+    m draws per pick-point, each moved by N(0, sigma_xy_mm) in x and y (mm) and
+    N(0, sigma_yaw_deg) in yaw (deg). options, or its fields as keywords
+    (``options.RunOptions``; n and resume are not used): out is a new folder, or the
+    evaluate folder the pick-points came from (its files stay; robustness.parquet and
+    robustness.json join them); ray simulates the draws on a Ray cluster ("auto" or
+    "HOST:PORT"; mjx_pick.engine.cluster), this process writing out; progress: a
+    progress bar of the simulations on stderr. simulator: as sweep's.
 
     Returns a table with pick_id, x_mm, y_mm, yaw_deg, robust_p, robust_ci_low,
     robust_ci_high, trials, successes, landed (draws where a finger lands on the
     object), missed (nothing between the fingers), robust_score_mean and rank.
     """
+    opts = RunOptions.of(options, **run)
+    opts.only("robustness", *_ROBUST_FIELDS)
+    seed, pick_config, out = opts.seed, opts.pick_config, opts.out
     check_draws(m, sigma_xy_mm, sigma_yaw_deg)
-    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+    with opts.simulator(obj, simulator) as sim:
         base = base or Settings()
         if out is not None and not _claimed:
             request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
@@ -148,50 +149,17 @@ def robustness(
                 out,
                 "robust",
                 config_hash(request),
-                overwrite=overwrite,
+                overwrite=opts.overwrite,
                 joins=("evaluate",),
                 settings=request,
             )
         t0 = time.perf_counter()
         k = len(picks)
         placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, seed, pick_config)
-        draws, ok, idx = placed.draws, placed.ok, placed.index
-        desc = f"robustness: {k} pick-points x {m} draws ({sim.engine.backend_name})"
-        with showing_progress(sim.engine, desc, "sim", progress):
-            (out_d,) = sim.run([(base, draws)])
-        success = np.zeros(len(idx), bool)
-        score = np.zeros(len(idx))
-        if len(draws):
-            success[ok] = out_d["success"]
-            score[ok] = np.nan_to_num(out_d["score"], nan=0.0)
-        successes = np.bincount(idx, weights=success, minlength=k).astype(int)
-        landed = np.bincount(idx, weights=placed.reason == pp.fk.CLEARANCE, minlength=k).astype(int)
-        off_object = placed.reason == pp.fk.OFF_OBJECT
-        missed = np.bincount(idx, weights=off_object, minlength=k).astype(int)
-        mean_score = np.bincount(idx, weights=score, minlength=k) / m
-        ci = np.array([wilson_interval(int(s), m) for s in successes]).reshape(k, 2)
-        p = successes / m
-        order = np.lexsort((-mean_score, -ci[:, 0], -p))
-        rank = np.empty(k, int)
-        rank[order] = np.arange(1, k + 1)
-        table = pa.table(
-            {
-                "pick_id": picks.pick_id,
-                "x_mm": picks.x_mm,
-                "y_mm": picks.y_mm,
-                "yaw_deg": picks.yaw_deg,
-                "opening_mm": picks.opening_mm,
-                "robust_p": p,
-                "robust_ci_low": ci[:, 0],
-                "robust_ci_high": ci[:, 1],
-                "trials": np.full(k, m),
-                "successes": successes,
-                "landed": landed,
-                "missed": missed,
-                "robust_score_mean": mean_score,
-                "rank": rank,
-            }
-        ).take(pa.array(order))
+        desc = f"robustness: {k} pick-points x {m} draws ({sim.runner.backend_name})"
+        with showing_progress(sim.runner, desc, "sim", opts.progress):
+            (out_d,) = sim.run([(base, placed.draws)])
+        table = _robust_table(picks, placed, out_d, m)
         if out is not None:
             out_dir = Path(out)
             write_parquet(out_dir / "robustness.parquet", table)
@@ -211,9 +179,62 @@ def robustness(
             config.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, seed=seed)
             config["picks"] = to_dict(pick_config)
             # in an evaluate folder: run-robust.json beside evaluate's own run.json
-            meta = sim.engine.describe(time.perf_counter() - t0)
+            meta = sim.runner.describe(time.perf_counter() - t0)
             finish(out_dir, command="robust", config=config, seed=seed, **meta)
         return table
+
+
+def _robust_table(picks: pp.PickBatch, placed: Placements, out_d: dict, m: int) -> pa.Table:
+    """One row per pick-point from its m draws' results (out_d: of the feasible draws):
+    success probability with its Wilson 95 % interval, draws that landed on the object
+    or missed it, mean score, rank; best first (probability, interval's low end, score)."""
+    idx, ok, k = placed.index, placed.ok, len(picks)
+    success = np.zeros(len(idx), bool)
+    score = np.zeros(len(idx))
+    if len(placed.draws):
+        success[ok] = out_d["success"]
+        score[ok] = np.nan_to_num(out_d["score"], nan=0.0)
+    successes = np.bincount(idx, weights=success, minlength=k).astype(int)
+    landed = np.bincount(idx, weights=placed.reason == pp.fk.CLEARANCE, minlength=k).astype(int)
+    off_object = placed.reason == pp.fk.OFF_OBJECT
+    missed = np.bincount(idx, weights=off_object, minlength=k).astype(int)
+    mean_score = np.bincount(idx, weights=score, minlength=k) / m
+    ci = np.array([wilson_interval(int(s), m) for s in successes]).reshape(k, 2)
+    p = successes / m
+    order = np.lexsort((-mean_score, -ci[:, 0], -p))
+    rank = np.empty(k, int)
+    rank[order] = np.arange(1, k + 1)
+    return pa.table(
+        {
+            "pick_id": picks.pick_id,
+            "x_mm": picks.x_mm,
+            "y_mm": picks.y_mm,
+            "yaw_deg": picks.yaw_deg,
+            "opening_mm": picks.opening_mm,
+            "robust_p": p,
+            "robust_ci_low": ci[:, 0],
+            "robust_ci_high": ci[:, 1],
+            "trials": np.full(k, m),
+            "successes": successes,
+            "landed": landed,
+            "missed": missed,
+            "robust_score_mean": mean_score,
+            "rank": rank,
+        }
+    ).take(pa.array(order))
+
+
+# the RunOptions fields robustness uses (it takes its pick-points: no n; no resume)
+_ROBUST_FIELDS = (
+    "seed",
+    "pick_config",
+    "backend",
+    "batch_size",
+    "out",
+    "overwrite",
+    "ray",
+    "progress",
+)
 
 
 def min_grip_force(
@@ -277,51 +298,48 @@ def min_grip_force(
 def robust_best(
     obj: ObjectModel,
     base: Settings,
+    options: RunOptions | None = None,
     *,
     results: str | Path | None = None,
-    n: int = 1000,
     top_k: int = 10,
-    seed: int = 0,
-    pick_config: pp.PickConfig | None = None,
-    backend: str = "auto",
-    batch_size: int | None = None,
-    ray: str | None = None,
-    simulator: Simulator | None = None,
-    progress: bool = False,
     m: int = 32,
     sigma_xy_mm: float = 2.0,
     sigma_yaw_deg: float = 3.0,
-    out: str | Path | None = None,
-    overwrite: bool = False,
+    simulator: Simulator | None = None,
+    **run,
 ) -> pa.Table:
     """The robustness of the ``top_k`` best successful pick-points (``mjx-pick robust``).
 
     results: an evaluate folder (or its results.parquet) of this object to take them
-    from; without it, ``n`` pick-points drawn with ``seed`` are simulated first.
-    m, sigma_xy_mm (mm), sigma_yaw_deg (deg), out, overwrite: as :func:`robustness`.
-    ray: every simulation on a Ray cluster ("auto" or "HOST:PORT"; mjx_pick.engine.cluster).
-    simulator: run through this one (e.g. a caller's on a cluster, kept open; backend,
-    batch_size and ray are then its own). Every input is checked, and out claimed,
-    before anything is simulated. progress: one progress bar on stderr over every
-    simulation (the n pick-points, then the draws).
+    from; without it, ``n`` (default 1000) pick-points drawn with ``seed`` are
+    simulated first. m, sigma_xy_mm (mm), sigma_yaw_deg (deg): as :func:`robustness`.
+    options, or its fields as keywords (``options.RunOptions``; resume is not used):
+    out, overwrite as :func:`robustness`; ray: every simulation on a Ray cluster ("auto"
+    or "HOST:PORT"; mjx_pick.engine.cluster). simulator: run through this one (e.g. a
+    caller's on a cluster, kept open; backend, batch_size and ray are then its own).
+    Every input is checked, and out claimed, before anything is simulated. progress:
+    one progress bar on stderr over every simulation (the n pick-points, then the draws).
     """
-    pick_config = pick_config or pp.PickConfig()
+    opts = RunOptions.of(options, **run)
+    opts.only("robust", "n", *_ROBUST_FIELDS)
+    n, seed, out = opts.n_or(1000), opts.seed, opts.out
+    pick_config = opts.picks
     check_draws(m, sigma_xy_mm, sigma_yaw_deg)
     check_range("robust", "top_k", top_k, 1, 100_000)
     if results is None:
         check_range("robust", "n", n, 1, 1e8)
     table = _read_results(Path(results), obj) if results is not None else None
-    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+    with opts.simulator(obj, simulator) as sim:
         if out is not None:
             request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
             request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, top_k=top_k)
             request.update(results=str(results) if results is not None else None, n=n)
             key = config_hash(request)
-            claim(out, "robust", key, overwrite=overwrite, joins=("evaluate",))
+            claim(out, "robust", key, overwrite=opts.overwrite, joins=("evaluate",))
         options = {"m": m, "sigma_xy_mm": sigma_xy_mm, "sigma_yaw_deg": sigma_yaw_deg}
         options.update(out=out, _claimed=True)
-        desc = f"robust ({sim.engine.backend_name})"
-        with showing_progress(sim.engine, desc, "sim", progress):
+        desc = f"robust ({sim.runner.backend_name})"
+        with showing_progress(sim.runner, desc, "sim", opts.progress):
             return _robust_best(obj, base, sim, table, n, top_k, seed, pick_config, options)
 
 

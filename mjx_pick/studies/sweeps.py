@@ -14,7 +14,7 @@ Contact, controller and phase settings are per-pick data of one compiled simulat
 and so are gripper variants that keep the model's structure (finger width, pad height,
 stroke, masses, force limit: their model fields are carried per pick-point,
 ``engine.variants``): every variant that shares the program runs in ONE batch of
-pick-points x variants (``engine.Simulator``), one compile on MJX and Warp. A value
+pick-points x variants (``simulator.Simulator``), one compile on MJX and Warp. A value
 that changes the model's structure (the object's collision pieces for a finger that
 fits a hole, a solver setting, the scan length) is a batch and a compile of its own.
 Pick-points are drawn per gripper geometry with the same seed, so variants that share
@@ -41,9 +41,10 @@ from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.physics import ContactParams, SolverParams
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine.backend import Settings
-from mjx_pick.engine.runner import open_study_store
-from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress, study_simulator
+from mjx_pick.engine.chunks import open_store
+from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
 from mjx_pick.outputs.rundir import finish, portable_object, release
+from mjx_pick.studies.options import RunOptions
 
 SECTIONS = {
     "contact": ContactParams,
@@ -232,41 +233,37 @@ def sweep(
     obj: ObjectModel,
     params: list[ParamSpec],
     base: Settings | None = None,
+    options: RunOptions | None = None,
     *,
-    n: int = 200,
-    seed: int = 0,
     random: int | None = None,
-    pick_config: pp.PickConfig | None = None,
-    backend: str = "auto",
-    batch_size: int | None = None,
     simulator: Simulator | None = None,
-    out: str | Path | None = None,
-    overwrite: bool = False,
-    resume: bool = False,
-    ray: str | None = None,
-    progress: bool = False,
+    **run,
 ) -> SweepResult:
-    """Simulate n pick-points under every parameter variant; see the module docstring.
+    """Simulate n pick-points (default 200) under every parameter variant; see the
+    module docstring.
 
-    out: folder for the results (refused before any simulation when another command
-    wrote it, unless overwrite); finished chunks are saved there as the sweep goes
-    (``engine.ChunkStore``) and removed once its outputs are written. resume: continue
-    an interrupted sweep of this configuration in out from its chunks (on a complete
-    one: read it back, simulate nothing). ray: run the variants on a Ray cluster
-    ("auto" or "HOST:PORT"; mjx_pick.engine.cluster), this process writing out. progress: a
-    progress bar of the simulations on stderr (``progress.ProgressBar``).
+    options (or its fields as keywords: n, seed, pick_config, backend, batch_size, out,
+    overwrite, resume, ray, progress; ``options.RunOptions``): out is the folder for the
+    results (refused before any simulation when another command wrote it, unless
+    overwrite); finished chunks are saved there as the sweep goes
+    (``engine.chunks.ChunkStore``) and removed once its outputs are written. resume:
+    continue an interrupted sweep of this configuration in out from its chunks (on a
+    complete one: read it back, simulate nothing). ray: run the variants on a Ray
+    cluster ("auto" or "HOST:PORT"; mjx_pick.engine.cluster), this process writing out.
+    progress: a progress bar of the simulations on stderr. simulator: run through this
+    one (kept open; backend, batch_size and ray are then its own).
     """
+    opts = RunOptions.of(options, **run)
     base = base or Settings()
-    pick_config = pick_config or pp.PickConfig()  # None and the defaults: one key
+    n, seed, pick_config, out = opts.n_or(200), opts.seed, opts.picks, opts.out
     pp.check_raster(obj, pick_config)  # before any allocation or folder
-    if resume and out is None:
-        raise ConfigError("--resume needs --out: the folder of the run to continue")
-    with study_simulator(obj, simulator, backend, batch_size, ray) as sim:
+    opts.check_resume()
+    with opts.simulator(obj, simulator) as sim:
         request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
         request.update(params=to_dict(params), n=n, seed=seed, random=random)
         request.update(picks=to_dict(pick_config))
-        store, complete = open_study_store(
-            out, "sweep", request, resume=resume, overwrite=overwrite
+        store, complete = open_store(
+            out, "sweep", request, resume=opts.resume, overwrite=opts.overwrite
         )
         if complete:
             return _read_sweep(Path(out))
@@ -284,13 +281,13 @@ def sweep(
                     obj, s.gripper, n, seed, pick_config, grasp=s.grasp
                 )
         jobs = [(s, picks_for[s.gripper]) for s in settings]
-        before = sim.engine.timing
+        before = sim.runner.timing
         t0 = time.perf_counter()
-        desc = f"sweep: {len(jobs)} variants ({sim.engine.backend_name})"
-        with marking_stops(out, "sweep"), showing_progress(sim.engine, desc, "sim", progress):
+        desc = f"sweep: {len(jobs)} variants ({sim.runner.backend_name})"
+        with marking_stops(out, "sweep"), showing_progress(sim.runner, desc, "sim", opts.progress):
             outs = sim.run(jobs, store)
         wall = time.perf_counter() - t0
-        spent = sim.engine.timing - before  # this sweep's compiles and runs alone
+        spent = sim.runner.timing - before  # this sweep's compiles and runs alone
         compile_s, run_s = spent.compile_s, spent.run_s
         n_sims = sum(len(p) for _, p in jobs)
         timing = {
@@ -304,20 +301,7 @@ def sweep(
         }
         if store is not None:
             timing["chunks_resumed"] = store.read_chunks  # read back, not simulated
-        tables, summaries = [], []
-        for v, ((variant, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
-            extra = {"variant": np.full(len(picks), v)}
-            extra.update({name: np.full(len(picks), value) for name, value in combo.items()})
-            tables.append(results_table(picks, out_v, variant.gripper, extra))
-            summaries.append(
-                {
-                    "variant": v,
-                    **combo,
-                    **rate_summary(out_v["success"], out_v["score"]),
-                    "diverged": int(np.sum(out_v["diverged"])),
-                }
-            )
-        table = pa.concat_tables(tables)
+        table, summaries = _variant_tables(jobs, outs, combos)
         out_dir = Path(out) if out is not None else None
         if out_dir is not None:
             config = {
@@ -330,7 +314,7 @@ def sweep(
                 "picks": to_dict(pick_config),
             }
             meta = {
-                "backend": sim.backends[0].name if sim.backends else backend,
+                "backend": sim.backends[0].name if sim.backends else opts.backend,
                 "device": sim.backends[0].device if sim.backends else None,
                 "timing": timing,
             }
@@ -342,6 +326,25 @@ def sweep(
             store.remove()  # every row is in results.parquet now
             release(out_dir)
         return SweepResult(table, summaries, timing, out_dir)
+
+
+def _variant_tables(jobs, outs, combos) -> tuple[pa.Table, list[dict]]:
+    """The sweep's table (one row per pick-point x variant, with the variant's index and
+    parameter values as columns) and one summary per variant (rates, diverged runs)."""
+    tables, summaries = [], []
+    for v, ((variant, picks), out_v, combo) in enumerate(zip(jobs, outs, combos, strict=True)):
+        extra = {"variant": np.full(len(picks), v)}
+        extra.update({name: np.full(len(picks), value) for name, value in combo.items()})
+        tables.append(results_table(picks, out_v, variant.gripper, extra))
+        summaries.append(
+            {
+                "variant": v,
+                **combo,
+                **rate_summary(out_v["success"], out_v["score"]),
+                "diverged": int(np.sum(out_v["diverged"])),
+            }
+        )
+    return pa.concat_tables(tables), summaries
 
 
 def _read_sweep(out_dir: Path) -> SweepResult:

@@ -3,7 +3,7 @@
 Used by ``benchmarks/throughput.py`` (CSV rows for RESULTS.md) and the throughput
 notebook; ``plot_throughput`` draws rows against the paper's figures. ``side_by_side``
 runs several backends (Warp, MJX's JAX physics, MuJoCo C) on the same pick-points and
-compares their labels with MuJoCo C's. Both run through ``mjx_pick.engine.runner.Engine``,
+compares their labels with MuJoCo C's. Both run through ``mjx_pick.engine.runner.Runner``,
 each timed run as ONE backend call (one chunk), so a refilled pool is measured whole.
 """
 
@@ -21,7 +21,7 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.objects import load_object
 from mjx_pick.core.scene import build_scene
 from mjx_pick.engine.backend import make_inputs
-from mjx_pick.engine.runner import Engine
+from mjx_pick.engine.runner import Runner
 
 # Bencak et al. 2023: ~53 s for one simulation; ~4.5 s per simulation with 12 parallel
 # MATLAB workers, i.e. about 0.22 pick-points per second
@@ -57,16 +57,16 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
     pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0, grasp=grasp)
     devices = jax.local_devices()[:n_devices] if n_devices else None
     # one chunk per call: each timed call is one backend call of `batch` pick-points
-    engine = Engine(backend_name, batch, chunk_size=batch, devices=devices)
-    backend = engine.make(scene, grasp)
+    runner = Runner(backend_name, batch, chunk_size=batch, devices=devices)
+    backend = runner.make(scene, grasp)
     steps = grasp.n_ticks() * grasp.substeps(scene.solver)
-    first = engine.run(backend, make_inputs(scene, grasp, tile_picks(pool, batch, 0)))
+    first = runner.run(backend, make_inputs(scene, grasp, tile_picks(pool, batch, 0)))
     out = first.results  # compiled, then ran once (warm-up)
     compile_s = first.timing.compile_s
     times = [] if repeats else [first.timing.run_s]
     for r in range(repeats):
         inputs = make_inputs(scene, grasp, tile_picks(pool, batch, (r + 1) * 7919))
-        timed = engine.run(backend, inputs)
+        timed = runner.run(backend, inputs)
         out = timed.results
         times.append(timed.timing.run_s)
     run_s = statistics.median(times)
@@ -206,18 +206,18 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
         full_steps = grasp.n_ticks() * n_sub
         n = min(spec.n, len(inputs))
         t_build = time.perf_counter()
-        engine = Engine(spec.backend, spec.batch, **spec.backend_options(scene, grasp))
-        backend = engine.make(scene, grasp)
+        runner = Runner(spec.backend, spec.batch, **spec.backend_options(scene, grasp))
+        backend = runner.make(scene, grasp)
         build_s = time.perf_counter() - t_build
         warm_s = 0.0
         if spec.warmup:
             warm = inputs.take(slice(0, min(spec.warmup, n)))
-            warm_s = engine.run(backend, warm, chunk_size=len(warm)).timing.wall_s
+            warm_s = runner.run(backend, warm, chunk_size=len(warm)).timing.wall_s
         pool = getattr(backend, "pool_stats", None)
         before = dataclasses.replace(pool) if pool is not None else None
         compile_before = backend.stats.compile_s
         # the timed run is one backend call (one chunk): a refilled pool runs it whole
-        timed = engine.run(backend, inputs.take(slice(0, n)), chunk_size=n)
+        timed = runner.run(backend, inputs.take(slice(0, n)), chunk_size=n)
         out, wall, run_s = timed.results, timed.timing.wall_s, timed.timing.run_s
         results[spec.label] = out
         refilled = pool is not None and pool.rounds > before.rounds

@@ -19,6 +19,7 @@ from mjx_pick.outputs.rundir import claim, config_hash, finish
 from mjx_pick.studies.calibration import estimators as E
 from mjx_pick.studies.calibration.identify import data_nll, identifiability, theta_of_z
 from mjx_pick.studies.calibration.parameters import fitted_contact
+from mjx_pick.studies.options import RunOptions
 
 
 @dataclasses.dataclass
@@ -65,6 +66,7 @@ class _Checkpoints:
 
 def calibrate(
     problem,
+    options: RunOptions | None = None,
     *,
     steps: int = 200,
     learning_rate: float = 0.1,
@@ -73,16 +75,13 @@ def calibrate(
     sigma: float = 0.2,
     batch: int | None = None,
     popsize: int | None = None,
-    seed: int = 0,
     budget: int | None = None,
     target: float | None = None,
     checkpoint_every: int = 10,
-    out: str | Path | None = None,
-    resume: bool = False,
     holdout=None,
     identify: bool = True,
     log=None,
-    progress: bool = False,
+    **run,
 ) -> CalibrationResult:
     """Fit problem's parameters; see ``estimators`` for the estimators.
 
@@ -100,9 +99,16 @@ def calibrate(
       identify: after the fit, intervals and identifiability (``identify.py``); the
         parameters not identified keep their starting values in the answer.
       log: called with each step's history entry (progress output).
-      progress: a progress bar of the steps on stderr (``progress.ProgressBar``; print
-        log lines with ``progress.echo`` so that they do not break it).
+      options, or its fields as keywords (``options.RunOptions``; the backend, batch
+        size and pick-points are the problem's): seed (random, CMA-ES, smoothed draws),
+        out (the results folder and its checkpoints), resume (continue from out's last
+        checkpoint: the optimiser's state, not simulated chunks), progress (a progress
+        bar of the steps on stderr, ``progress.ProgressBar``; print log lines with
+        ``progress.echo`` so that they do not break it).
     """
+    opts = RunOptions.of(options, **run)
+    opts.only("calibrate", "seed", "out", "resume", "progress")
+    seed, out, resume, progress = opts.seed, opts.out, opts.resume, opts.progress
     est = E.make(
         estimator,
         steps,
@@ -121,30 +127,12 @@ def calibrate(
     base = problem.settings.contact
     initial = dict(problem.start)
     state = est.init(problem.start_theta())
-    step, history, wall0 = 0, [], 0.0
-    # every vector simulated and its data -log likelihood: the empirical profile of
-    # the identifiability check (identify.py), at no simulation cost
-    visited: list[tuple[np.ndarray, np.ndarray]] = []
-    best = math.inf
     out_dir = Path(out) if out is not None else None
-    ckpt = request = None
-    if out_dir is not None:
-        if (out_dir / "checkpoint").is_dir() and not resume:
-            raise ConfigError(f"{out_dir} holds an earlier fit: pass --resume or another --out")
-        request = {"object": problem.object.summary(), "names": list(problem.names)}
-        request.update(settings=to_dict(problem.settings), steps=steps, estimator=estimator)
-        request.update(learning_rate=learning_rate, samples=samples, sigma=sigma, seed=seed)
-        request.update(noise=to_dict(problem.noise), bounds=[space.lo.tolist(), space.hi.tolist()])
-        claim(out_dir, "calibrate", config_hash(request), resume=resume, settings=request)
-        ckpt = _Checkpoints(out_dir / "checkpoint")
-        saved = ckpt.latest() if resume else None
-        if saved is not None:
-            state = E.loads(saved["state"])
-            history = E.loads(saved["history"])
-            step, wall0 = int(saved["step"]), float(saved["wall_s"])
-            if "visited" in saved:  # (checkpoints of earlier versions lack it)
-                visited = E.loads(saved["visited"])
-            best = min([h["best_loss"] for h in history], default=math.inf)
+    fit = {"learning_rate": learning_rate, "samples": samples, "sigma": sigma, "seed": seed}
+    ckpt, request, state, history, step, wall0, visited = _open_fit(
+        problem, out_dir, resume, state, steps=steps, estimator=estimator, **fit
+    )
+    best = min([h["best_loss"] for h in history], default=math.inf)
     acc_before = None
     if holdout is not None and step == 0:
         acc_before = holdout.accuracy(problem.start_theta())
@@ -158,24 +146,9 @@ def calibrate(
                 break
             if target is not None and best <= target:
                 break
-            thetas = est.ask(state)
-            grad, diverged = None, None
-            if estimator == "jvp":
-                loss, grad = problem.mjx_loss_and_grad(thetas[0])
-                losses = np.array([loss])
-            else:
-                ev = problem.evaluate(thetas)
-                losses, diverged = ev.loss, ev.diverged
-                visited.append((np.asarray(thetas, np.float32), data_nll(problem, ev)))
-            try:
-                state = est.tell(state, thetas, losses, grad)
-            except FloatingPointError:
-                # a zeroed NaN would be a silent "no change": stop and say where
-                raise ConfigError(
-                    f"calibration step {step}: the {estimator!r} gradient is not finite at "
-                    f"{space.as_dict(thetas[0])} (a simulation diverged or its derivative "
-                    "blew up); narrow the parameter ranges or use estimator 'smoothed'"
-                ) from None
+            state, thetas, losses, diverged = _fit_step(
+                problem, est, state, estimator, visited, step
+            )
             best = min(best, float(np.nanmin(losses)))
             centre = estimator in ("smoothed", "jvp")
             entry = {
@@ -229,20 +202,82 @@ def calibrate(
     result.rollouts = problem.rollouts - spent0
     result.wall_s = time.perf_counter() - t0
     if out_dir is not None:
-        from mjx_pick.studies.calibration.outputs import write_result
-
-        write_result(result, problem, out_dir)
-        meta = problem.engine.describe(time.perf_counter() - t0)
-        meta["timing"]["rollouts"] = result.rollouts
-        if estimator == "jvp":  # the gradients ran on MJX's JAX physics, beside the engine
-            import jax
-
-            d = jax.devices()[0]
-            meta.update(backend="mjx", device=f"{d.platform}:{d.device_kind}")
-        finish(out_dir, command="calibrate", config=request, **meta)
-        # the fit is complete and written: its checkpoints served only a resume
-        shutil.rmtree(out_dir / "checkpoint", ignore_errors=True)
+        _write_fit(result, problem, out_dir, request, estimator, time.perf_counter() - t0)
     return result
+
+
+def _open_fit(problem, out_dir: Path | None, resume: bool, state, **fit):
+    """A fit's folder and where it starts: (checkpoints, the folder's request, estimator
+    state, history, step, wall seconds spent, visited vectors) -- a new fit's (out_dir
+    claimed under its configuration), or with resume the last checkpoint's. fit: the
+    estimator's settings that decide the folder's configuration key."""
+    history, step, wall0 = [], 0, 0.0
+    # every vector simulated and its data -log likelihood: the empirical profile of
+    # the identifiability check (identify.py), at no simulation cost
+    visited: list[tuple[np.ndarray, np.ndarray]] = []
+    if out_dir is None:
+        return None, None, state, history, step, wall0, visited
+    if (out_dir / "checkpoint").is_dir() and not resume:
+        raise ConfigError(f"{out_dir} holds an earlier fit: pass --resume or another --out")
+    space = problem.space
+    request = {"object": problem.object.summary(), "names": list(problem.names)}
+    request.update(settings=to_dict(problem.settings), steps=fit["steps"])
+    request.update(estimator=fit["estimator"], learning_rate=fit["learning_rate"])
+    request.update(samples=fit["samples"], sigma=fit["sigma"], seed=fit["seed"])
+    request.update(noise=to_dict(problem.noise), bounds=[space.lo.tolist(), space.hi.tolist()])
+    claim(out_dir, "calibrate", config_hash(request), resume=resume, settings=request)
+    ckpt = _Checkpoints(out_dir / "checkpoint")
+    saved = ckpt.latest() if resume else None
+    if saved is not None:
+        state = E.loads(saved["state"])
+        history = E.loads(saved["history"])
+        step, wall0 = int(saved["step"]), float(saved["wall_s"])
+        if "visited" in saved:  # (checkpoints of earlier versions lack it)
+            visited = E.loads(saved["visited"])
+    return ckpt, request, state, history, step, wall0, visited
+
+
+def _fit_step(problem, est, state, estimator: str, visited: list, step: int):
+    """One estimator step (number step): ask for parameter vectors (S, P), simulate them (the data
+    -log likelihood of each joins visited), tell the losses (S,); (state, thetas,
+    losses, diverged rows per vector or None)."""
+    thetas = est.ask(state)
+    grad, diverged = None, None
+    if estimator == "jvp":
+        loss, grad = problem.mjx_loss_and_grad(thetas[0])
+        losses = np.array([loss])
+    else:
+        ev = problem.evaluate(thetas)
+        losses, diverged = ev.loss, ev.diverged
+        visited.append((np.asarray(thetas, np.float32), data_nll(problem, ev)))
+    try:
+        state = est.tell(state, thetas, losses, grad)
+    except FloatingPointError:
+        # a zeroed NaN would be a silent "no change": stop and say where
+        raise ConfigError(
+            f"calibration step {step}: the {estimator!r} gradient is not finite at "
+            f"{problem.space.as_dict(thetas[0])} (a simulation diverged or its derivative "
+            "blew up); narrow the parameter ranges or use estimator 'smoothed'"
+        ) from None
+    return state, thetas, losses, diverged
+
+
+def _write_fit(result, problem, out_dir: Path, request: dict, estimator: str, wall_s: float):
+    """A finished fit's folder: its results (``outputs.write_result``) and run.json; the
+    checkpoints, which served only a resume, removed."""
+    from mjx_pick.studies.calibration.outputs import write_result
+
+    write_result(result, problem, out_dir)
+    meta = problem.runner.describe(wall_s)
+    meta["timing"]["rollouts"] = result.rollouts
+    if estimator == "jvp":  # the gradients ran on MJX's JAX physics, beside the runner
+        import jax
+
+        d = jax.devices()[0]
+        meta.update(backend="mjx", device=f"{d.platform}:{d.device_kind}")
+    finish(out_dir, command="calibrate", config=request, **meta)
+    # the fit is complete and written: its checkpoints served only a resume
+    shutil.rmtree(out_dir / "checkpoint", ignore_errors=True)
 
 
 def _finish(
@@ -306,6 +341,7 @@ class _Budget(Exception):
 
 def least_squares(
     problem,
+    options: RunOptions | None = None,
     *,
     max_iters: int = 30,
     eps: float = 0.03,
@@ -313,8 +349,7 @@ def least_squares(
     identify: bool = True,
     holdout=None,
     log=None,
-    out: str | Path | None = None,
-    progress: bool = False,
+    **run,
 ) -> CalibrationResult:
     """Levenberg-Marquardt on the residuals with ``mujoco.sysid.optimize`` (MuJoCo's
     ``minimize.least_squares``; its finite-difference Jacobian runs all P shifted
@@ -326,8 +361,13 @@ def least_squares(
     smoothed over ``temperature_mm``: a local method stalls on their plateaus.
     With ``out``, writes the results folder as ``calibrate`` does (no checkpoints: a
     killed fit starts again). progress: a progress bar of the residual evaluations
-    (steps; their number is not known ahead) on stderr.
+    (steps; their number is not known ahead) on stderr. options, or its fields as
+    keywords (``options.RunOptions``): out and progress (a seed is allowed and unused:
+    the method draws nothing).
     """
+    opts = RunOptions.of(options, **run)
+    opts.only("least_squares", "seed", "out", "progress")
+    out, progress = opts.out, opts.progress
     from mujoco import sysid
 
     check_range("calibrate", "max_iters", max_iters, 1, 10_000)
@@ -421,7 +461,7 @@ def least_squares(
         from mjx_pick.studies.calibration.outputs import write_result
 
         write_result(result, problem, out_dir)
-        meta = problem.engine.describe(result.wall_s)
+        meta = problem.runner.describe(result.wall_s)
         meta["timing"]["rollouts"] = result.rollouts
         finish(out_dir, command="calibrate", config=request, **meta)
     return result

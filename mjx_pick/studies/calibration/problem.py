@@ -1,8 +1,8 @@
 """A calibration problem: measured rows, the parameter space and the simulations that
-compare them, all through the one engine (``engine.Engine``).
+compare them, all through the one runner (``engine.runner.Runner``).
 
 :class:`Problem` holds no fit state: every method is a function of the parameter
-vectors it is given (the engine counts the simulations run).
+vectors it is given (the runner counts the simulations run).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError, check_range
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.engine.backend import Settings, make_inputs
-from mjx_pick.engine.runner import Engine
+from mjx_pick.engine.runner import Runner
 from mjx_pick.engine.simulator import differentiable_rollout
 from mjx_pick.studies.calibration import loss as L
 from mjx_pick.studies.calibration.data import Outcomes
@@ -55,7 +55,7 @@ class Problem:
       noise: the spread of each measurement (``loss.Noise``).
       bounds, priors: per parameter (see ``parameters.param_space``).
       start: starting values (default: the settings' own).
-      backend: the engine's backend ('auto', 'mujoco', 'mjx', 'warp').
+      backend: the runner's backend ('auto', 'mujoco', 'mjx', 'warp').
       replicates: K, simulations of each row with a measured trace -- the pick-point
         and K - 1 copies moved by +-``replica_jitter_mm`` in x and y -- whose spread is
         the model's own uncertainty about the trace (``loss.py``). Outcomes and lift
@@ -190,14 +190,14 @@ class Problem:
         self.record = traces is not None
         self.backend_name = backend
         # a batch holds every row of at least one parameter vector
-        self.engine = Engine(backend, batch_size=max(256, len(self.row_of)))
+        self.runner = Runner(backend, batch_size=max(256, len(self.row_of)))
         self._backend = None
         self._jvp = None
 
     @property
     def rollouts(self) -> int:
-        """Pick-point simulations run so far (the engine's count)."""
-        return self.engine.rollouts + getattr(self, "_jvp_rollouts", 0)
+        """Pick-point simulations run so far (the runner's count)."""
+        return self.runner.rollouts + getattr(self, "_jvp_rollouts", 0)
 
     def start_theta(self) -> np.ndarray:
         return self.space.theta([self.start[n] for n in self.names])
@@ -205,11 +205,11 @@ class Problem:
     # --- simulations
     def _forward_backend(self):
         if self._backend is None:
-            self._backend = self.engine.make(self.scene, self.settings.grasp)
+            self._backend = self.runner.make(self.scene, self.settings.grasp)
         return self._backend
 
     def simulate(self, thetas: np.ndarray) -> dict:
-        """Simulate every row (and its replicas) for each theta (S, P) in ONE engine run;
+        """Simulate every row (and its replicas) for each theta (S, P) in ONE runner call;
         outputs (S, R) (and (S, R, T) per measured trace kind, with their replicas:
         :meth:`split`)."""
         thetas = np.atleast_2d(np.asarray(thetas, np.float32))
@@ -225,7 +225,7 @@ class Problem:
             for th in thetas
         ]
         inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
-        out, rows, _ = self.engine.run(self._forward_backend(), inputs, record=self.record)
+        out, rows, _ = self.runner.run(self._forward_backend(), inputs, record=self.record)
         out = {k: np.asarray(v).reshape(s_n, n) for k, v in out.items()}
         if rows is not None:
             rows = rows.reshape(s_n, n, *rows.shape[1:])
@@ -308,8 +308,8 @@ class Problem:
     def mjx_loss_and_grad(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
         """Loss and its forward-mode gradient through the MJX rollout.
 
-        The one simulation outside ``Engine.run``: ``jax.jacfwd`` needs the rollout in
-        its trace (``engine.differentiable_rollout`` says why)."""
+        The one simulation outside ``Runner.run``: ``jax.jacfwd`` needs the rollout in
+        its trace (``simulator.differentiable_rollout`` says why)."""
         if self._jvp is None:
             roll = differentiable_rollout(self.scene, self.settings.grasp, self.record)
             inp = self.inputs

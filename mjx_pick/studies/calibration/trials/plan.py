@@ -163,7 +163,7 @@ def plan_trials(
     write_sheet(out_dir / SHEET, header, [sheet_row(p) for p in rnd["picks"]])
     if write_templates is not None:
         write_templates(out_dir, plan, rnd)
-    meta = sims.engine.describe()
+    meta = sims.runner.describe()
     finish(out_dir, command=COMMAND, config=request, seed=seed, **meta)
     return plan
 

@@ -22,7 +22,7 @@ from mjx_pick.core.physics import ContactParams, SolverParams
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import build_scene
 from mjx_pick.engine.backend import Settings, make_inputs
-from mjx_pick.engine.runner import Engine
+from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.outputs.rundir import read_manifest
 from mjx_pick.studies.calibration.parameters import (
@@ -98,30 +98,30 @@ class Simulations:
         s = settings
         self.object, self.settings = obj, s
         self.scene = build_scene(obj, s.gripper, s.contact, s.solver, s.grasp)
-        self.engine = Engine(backend, batch_size)
-        self._runner = None
+        self.runner = Runner(backend, batch_size)
+        self._backend = None
 
     def run(self, picks: pp.PickBatch, values: list[dict]) -> dict[str, np.ndarray]:
         """Simulate every pick-point (N) under each parameter vector (V dicts, name ->
-        natural value; {} is the base settings) in ONE engine run.
+        natural value; {} is the base settings) in ONE runner call.
 
         Returns (V, N) arrays: success (bool), score, failure (code, ``gk.FAILURES``),
         diverged (bool), lift_height_mm."""
-        if self._runner is None:
-            self._runner = self.engine.make(self.scene, self.settings.grasp)
+        if self._backend is None:
+            self._backend = self.runner.make(self.scene, self.settings.grasp)
         n = len(picks)
         s = self.settings
         base = make_inputs(self.scene, s.grasp, picks, s.overrides(self.scene, n))
         force = np.full(n, s.grasp.grip_force_n)
         parts = [row_inputs(base, self.scene, s, force, v) for v in values]
         inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
-        out = self.engine.run(self._runner, inputs).results
+        out = self.runner.run(self._backend, inputs).results
         keys = ("success", "score", "failure", "diverged", "lift_height_mm")
         return {k: np.asarray(out[k]).reshape(len(values), n) for k in keys}
 
     @property
     def simulations(self) -> int:
-        return self.engine.rollouts
+        return self.runner.rollouts
 
 
 def entropy_bits(p) -> np.ndarray:
@@ -180,7 +180,7 @@ def information(
     """Simulate K candidates at `placements` placements each -- the template pose and
     placements - 1 Gaussian draws around it (jitter_mm on x and y, jitter_deg on yaw;
     the fingers open as planned for the template pose) -- under the nominal parameters
-    and each draw: one engine run of at most (1 + S) x K x placements simulations (a
+    and each draw: one runner call of at most (1 + S) x K x placements simulations (a
     placement where a finger lands on the object or nothing lies between the fingers
     fails unsimulated)."""
     from mjx_pick.studies.robust import placements as place

@@ -1,0 +1,95 @@
+"""RunOptions: how a study runs, the one value every study carries.
+
+evaluate, sweep, compare, design_search, robustness, robust_best and calibrate share the
+same handful of run settings -- how many pick-points and which seed, how they are
+sampled, which backend and batch size, where the results go and whether to resume or
+overwrite them, a Ray cluster, a progress bar. They travel as one :class:`RunOptions`
+from the public call (or the CLI, which builds it once) down to the study's steps. The
+public functions also take these fields as keywords, as they always did: a keyword
+given there overrides the same field of ``options``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+from collections.abc import Iterator
+from pathlib import Path
+
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.objects import ObjectModel
+from mjx_pick.engine.simulator import Simulator, study_simulator
+
+
+@dataclasses.dataclass(frozen=True)
+class RunOptions:
+    """How a study runs (the settings every study shares).
+
+    n: pick-points per variant, gripper or run (None: the study's default).
+    seed: pick-point (and perturbation) seed: same seed, same pick-points.
+    pick_config: how pick-points are sampled and checked (None: ``PickConfig()``).
+    backend: 'auto', 'warp', 'mjx' or 'mujoco'.
+    batch_size: simulations per backend call (None: the backend's default).
+    out: output folder (None: nothing is written).
+    overwrite: replace what another command (or configuration) wrote in out.
+    resume: continue an interrupted run of the same configuration in out.
+    ray: run on a Ray cluster, "auto" or the head's "HOST:PORT" (None: this process).
+    progress: show a progress bar on stderr.
+    """
+
+    n: int | None = None
+    seed: int = 0
+    pick_config: pp.PickConfig | None = None
+    backend: str = "auto"
+    batch_size: int | None = None
+    out: str | Path | None = None
+    overwrite: bool = False
+    resume: bool = False
+    ray: str | None = None
+    progress: bool = False
+
+    @classmethod
+    def of(cls, options: RunOptions | None = None, /, **fields) -> RunOptions:
+        """options (default: all defaults) with the fields given as keywords replaced;
+        a keyword that is not a field is a TypeError, as for any function."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(fields) - names)
+        if unknown:
+            raise TypeError(f"unexpected keyword argument(s): {', '.join(unknown)}")
+        base = options if options is not None else cls()
+        return dataclasses.replace(base, **fields) if fields else base
+
+    def n_or(self, default: int) -> int:
+        """n, or the study's default when none was given."""
+        return int(self.n) if self.n is not None else int(default)
+
+    @property
+    def picks(self) -> pp.PickConfig:
+        """The pick-point configuration (None and the defaults give one key)."""
+        return self.pick_config or pp.PickConfig()
+
+    def check_resume(self) -> None:
+        """resume needs an output folder to continue from."""
+        if self.resume and self.out is None:
+            raise ConfigError("--resume needs --out: the folder of the run to continue")
+
+    def only(self, study: str, *names: str) -> None:
+        """Refuse fields that study does not use (given a value other than the default)."""
+        default = RunOptions()
+        extra = [
+            f.name
+            for f in dataclasses.fields(self)
+            if f.name not in names and getattr(self, f.name) != getattr(default, f.name)
+        ]
+        if extra:
+            raise ConfigError(f"{study} does not use {', '.join(extra)}")
+
+    @contextlib.contextmanager
+    def simulator(
+        self, obj: ObjectModel, simulator: Simulator | None = None
+    ) -> Iterator[Simulator]:
+        """The simulator a study runs on: the caller's (left open), else a new one for
+        obj on this backend, batch size and cluster, closed when the study ends."""
+        with study_simulator(obj, simulator, self.backend, self.batch_size, self.ray) as sim:
+            yield sim
