@@ -30,14 +30,13 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+from real_objects import load_ycb  # benchmarks/ is on sys.path when run from there
 
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.engine.backend import addresses, make_inputs
-from mjx_pick.engine.runner import Engine
+from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
-
-from real_objects import load_ycb  # noqa: E402  (benchmarks/ on sys.path when run)
 
 F = {f: i for i, f in enumerate(gk.TRACE_FIELDS)}
 
@@ -56,7 +55,7 @@ def states(obj, n: int, seed: int):
     if ad.drive is not None:
         raise SystemExit("the state is rebuilt from a parallel jaw's coordinates only")
     inputs = make_inputs(scene, grasp, picks)
-    traces = Engine("mujoco", len(table)).simulate(scene, grasp, inputs, record=True).traces
+    traces = Runner("mujoco", len(table)).simulate(scene, grasp, inputs, record=True).traces
     qs, labels, moments = [], [], []
     for i in range(len(table)):
         phase = traces[i, :, F["phase"]]
@@ -118,7 +117,7 @@ def warp_contacts(model: mujoco.MjModel, qs: np.ndarray):
     dist = dw.contact.dist.numpy()[:nacon]
     pos = dw.contact.pos.numpy()[:nacon]
     out = [[] for _ in range(n)]
-    for w, g, dd, p in zip(world, geom, dist, pos):
+    for w, g, dd, p in zip(world, geom, dist, pos, strict=True):
         out[w].append((int(g[0]), int(g[1]), float(dd), np.array(p)))
     return out
 

@@ -1,13 +1,18 @@
 """Reproduce, in a process of its own, the Warp "unknown stream" failure of a program that
-carries model fields, with one candidate remedy applied (--remedy):
+carries model fields, and check its remedy (--remedy):
 
-  none          as shipped, with carried model fields switched on
-  keep_streams  Warp's external-stream wrappers never unregister the stream they wrap
-                (wp.Stream.__del__ of a non-owning wrapper unregisters the raw stream even
-                while a newer wrapper of the same stream is about to capture on it)
-  gc_off        Python's cyclic garbage collector off for the run
+  unfixed   without engine.warp_backend.keep_xla_stream_registrations: a wp.Stream
+            wrapper of XLA's stream, freed by Python's cyclic garbage collector while a
+            newer wrapper of the same stream begins a graph capture, unregisters the
+            stream under it (Warp's registry keeps no count)
+  shipped   as mjx_pick runs it (streams Warp does not own stay registered)
+  gc_off    unfixed, with the cyclic garbage collector off for the run
 
-  python benchmarks/warp_stream_repro.py --remedy none --out DIR -- sweep door_opener ...
+On a GPU machine, run it at least twice (the first process on a machine builds Warp's
+kernels and did not fail):
+
+  python benchmarks/warp_stream_repro.py --remedy unfixed -- sweep door_opener \\
+      --param gripper.finger_width_mm=12,22,30 --n 64 --backend warp --out DIR
 """
 
 import argparse
@@ -18,25 +23,15 @@ import traceback
 
 def main() -> int:
     p = argparse.ArgumentParser()
-    p.add_argument("--remedy", choices=("none", "keep_streams", "gc_off"), default="none")
-    p.add_argument("--no-carry", action="store_true")
+    p.add_argument("--remedy", choices=("unfixed", "shipped", "gc_off"), default="shipped")
     p.add_argument("cli", nargs=argparse.REMAINDER)
     a = p.parse_args()
-    from mjx_pick.engine import variants
+    from mjx_pick.engine import warp_backend
 
-    variants.WARP_CARRIES_MODEL_FIELDS = not a.no_carry
+    if a.remedy in ("unfixed", "gc_off"):
+        warp_backend.keep_xla_stream_registrations = lambda: None
     if a.remedy == "gc_off":
         gc.disable()
-    if a.remedy == "keep_streams":
-        import warp._src.context as wpc
-
-        orig_del = wpc.Stream.__del__
-
-        def _del(self):
-            if getattr(self, "owner", True):
-                orig_del(self)
-
-        wpc.Stream.__del__ = _del
     from mjx_pick.cli import main as cli
 
     argv = a.cli[1:] if a.cli[:1] == ["--"] else a.cli
