@@ -83,13 +83,6 @@ CONVERGED_TIMESTEP_S = 0.002
 # what a parametric pad collides through (ContactParams.pad_collision)
 PAD_COLLISIONS = ("pad", "mean_radius")
 
-# elliptic cones with the "mean_radius" box: the share sin(theta) of the rubber pad's
-# torsion that each contact point's soft-finger torsion carries; the box's corners sit
-# at r_mean cos(theta) (mjx_pick.core.scene.pad_collision_box_mm)
-import os as _os  # noqa: E402  (measurement knob, temporary)
-
-ELLIPTIC_TORSION_SHARE = float(_os.environ.get("MJXP_TORSION_SHARE", "0"))
-
 
 @dataclasses.dataclass(frozen=True)
 class ContactParams:
@@ -308,21 +301,6 @@ def pad_torsion_m(pad_friction, pad_torsion_mm, patch_mm: tuple[float, float]):
     return pad_friction * patch_mean_radius_mm(*patch_mm) * 1e-3
 
 
-def torsion_share(contact: ContactParams, solver: SolverParams, pad_box: bool = True) -> float:
-    """The factor on the pad contacts' derived torsion mu r_mean: ELLIPTIC_TORSION_SHARE
-    with elliptic cones and the "mean_radius" box on a parametric pad (its corners then
-    carry the rest of the rubber pad's torsion in quadrature), else 1. A pad_torsion_mm
-    the user set is kept as set."""
-    if (
-        pad_box
-        and contact.pad_torsion_mm is None
-        and contact.pad_collision == "mean_radius"
-        and solver.cone == "elliptic"
-    ):
-        return ELLIPTIC_TORSION_SHARE
-    return 1.0
-
-
 def patch_mean_radius_mm(width_mm: float, height_mm: float, n: int = 200) -> float:
     """Mean distance from the centre of a uniformly loaded width x height rectangle, mm.
 
@@ -338,13 +316,10 @@ def mujoco_contact(
     solver: SolverParams,
     mass_kg: float,
     patch_mm: tuple[float, float],
-    pad_box: bool = True,
 ) -> MujocoContact:
     """Map ContactParams to MuJoCo pair parameters for an object of mass_kg.
 
     patch_mm: (width, height) of the pads' contact patch on this object, mm.
-    pad_box: the pads are the parametric jaw's (ContactParams.pad_collision applies;
-    an MJCF gripper's pads keep their own geoms).
     """
     tc = solver.timeconst_s
     pad_ref, pad_c = spring_solref(
@@ -356,10 +331,7 @@ def mujoco_contact(
     mu = contact.pad_friction
     return MujocoContact(
         pad_friction=mu,
-        pad_torsion_m=float(
-            pad_torsion_m(mu, contact.pad_torsion_mm, patch_mm)
-            * torsion_share(contact, solver, pad_box)
-        ),
+        pad_torsion_m=float(pad_torsion_m(mu, contact.pad_torsion_mm, patch_mm)),
         table_friction=contact.table_friction,
         pad_solref=pad_ref,
         table_solref=tab_ref,
