@@ -313,7 +313,9 @@ def rubber(variants, loads, cases_wanted=None) -> None:
             weight = mass[label] * (G + grasp0.lift_accel_mm_s2 * 1e-3)
             force = weight / (2 * mu * x)
             grasp = dataclasses.replace(grasp0, grip_force_n=force)
-            contact = dataclasses.replace(CONTACT or mp.ContactParams(), pad_friction=mu, pad_collision="mean_radius")
+            contact = dataclasses.replace(
+                CONTACT or mp.ContactParams(), pad_friction=mu, pad_collision="mean_radius"
+            )
             base = mp.build_scene(part, FREE, contact, SOLVER, grasp)
             w, h = (v * 1e-3 for v in base.pad_patch_mm)
             d_r = holding.hold_limit_m(
@@ -419,7 +421,9 @@ def torsion(variants) -> None:
     for label, part in parts.items():
         for force in (10.0, 30.0, 100.0):
             grasp = mp.GraspConfig(grip_force_n=force)
-            contact = dataclasses.replace(CONTACT or mp.ContactParams(), pad_friction=mu, pad_collision="mean_radius")
+            contact = dataclasses.replace(
+                CONTACT or mp.ContactParams(), pad_friction=mu, pad_collision="mean_radius"
+            )
             w, h = mp.build_scene(part, FREE, contact, SOLVER, grasp).pad_patch_mm
             r_mean = physics.patch_mean_radius_mm(w, h) * 1e-3
             pad_h = FREE.pad_height_mm
@@ -491,7 +495,7 @@ def main() -> None:
     ap.add_argument("--loads", default="0.1,0.25,0.5", help="rubber: loads m (g + a) / (2 mu F)")
     ap.add_argument("--cases", default="", help="rubber: parts whose label contains one of these")
     ap.add_argument("--solver", help="rubber, torsion: SolverParams TOML (default: the defaults)")
-    ap.add_argument("--contact", help="rubber, torsion: ContactParams TOML the candidates start from")
+    ap.add_argument("--contact", help="rubber, torsion: ContactParams TOML to start from")
     args = ap.parse_args()
     if args.solver:
         from mjx_pick.core.config import load_toml

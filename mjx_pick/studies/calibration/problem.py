@@ -100,7 +100,15 @@ class Problem:
         if temperature_mm is not None:
             check_range("calibrate", "temperature_mm", temperature_mm, 0, lo_open=True)
         self.noise = noise
-        self.settings = s = settings or Settings()
+        s = settings or Settings()
+        if s.solver.cone != "pyramidal":
+            # MJX's forward-mode derivatives are finite with pyramidal cones only: the
+            # calibration keeps them (and impratio 1) whatever the evaluation's default
+            # (mjx_pick.core.physics.SolverParams)
+            s = dataclasses.replace(
+                s, solver=dataclasses.replace(s.solver, cone="pyramidal", impratio=1.0)
+            )
+        self.settings = s
         self.object, self.outcomes = obj, outcomes
         self.names = canonical_params(names)
         # outcomes of another mass, gripper or procedure fit confidently and wrongly
