@@ -38,7 +38,7 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   a line contact), their Coulomb friction also resists spin, at the corners: with
   pyramidal cones a corner at (a, b) from the patch centre resists with mu N max(|a|,
   |b|) of its normal force N. With the whole pad colliding (``pad_collision = "pad"``,
-  the default before issue 32) the grasp then holds 1.5-1.9x (pyramidal) or 2.2-2.7x
+  the default before issue 32) the grasp then holds 1.5-1.9x (pyramidal) or 1.5-2.8x
   (elliptic) the torque of a uniformly pressed pad,
   whose limit in pure torsion is mu N r_mean (the uniform-pressure result for a flat
   contact, a disc's 2/3 mu N R; Goyal, Ruina and Papadopoulos, "Planar sliding with dry
@@ -141,7 +141,7 @@ class ContactParams:
     pad_solimp: tuple[float, float, float, float, float] = (0.99, 0.99, 0.001, 0.5, 2.0)
     table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
     # what a parametric pad collides through (module docstring, "Pad contacts"): "pad",
-    # the whole pad (MuJoCo's corner contacts resist spin at the patch's edges: 1.5-2.7x
+    # the whole pad (MuJoCo's corner contacts resist spin at the patch's edges: 1.3-2.8x
     # a rubber pad's torque), or "mean_radius" (the default), a box cut so that the
     # corners and the points' own torsion hold a uniformly pressed rubber pad's torque
     # for the solver's cone (mjx_pick.core.scene.pad_collision_box_mm); a part is then
