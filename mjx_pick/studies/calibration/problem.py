@@ -100,15 +100,7 @@ class Problem:
         if temperature_mm is not None:
             check_range("calibrate", "temperature_mm", temperature_mm, 0, lo_open=True)
         self.noise = noise
-        s = settings or Settings()
-        if s.solver.cone != "pyramidal":
-            # MJX's forward-mode derivatives are finite with pyramidal cones only: the
-            # calibration keeps them (and impratio 1) whatever the evaluation's default
-            # (mjx_pick.core.physics.SolverParams)
-            s = dataclasses.replace(
-                s, solver=dataclasses.replace(s.solver, cone="pyramidal", impratio=1.0)
-            )
-        self.settings = s
+        self.settings = s = settings or Settings()
         self.object, self.outcomes = obj, outcomes
         self.names = canonical_params(names)
         # outcomes of another mass, gripper or procedure fit confidently and wrongly
@@ -319,6 +311,14 @@ class Problem:
         The one simulation outside ``Engine.run``: ``jax.jacfwd`` needs the rollout in
         its trace (``engine.differentiable_rollout`` says why)."""
         if self._jvp is None:
+            if self.settings.solver.cone != "pyramidal":
+                # MJX's forward-mode derivatives are finite with pyramidal cones only
+                raise ConfigError(
+                    "the jvp estimator differentiates MJX in forward mode, finite only "
+                    "with pyramidal cones; the default is elliptic since issue 32: pass a "
+                    "solver with cone = 'pyramidal' and impratio = 1 (a --solver TOML), "
+                    "or use another estimator"
+                )
             roll = differentiable_rollout(self.scene, self.settings.grasp, self.record)
             inp = self.inputs
 
