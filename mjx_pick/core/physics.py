@@ -182,10 +182,10 @@ class SolverParams:
     friction rows by R_0 mu_0^2 / (mu_i^2 impratio), so the smaller per-point torsion
     crept at impratio 1-3 (banana 46 / 70 %).
 
-    MJX-JAX: calibration differentiates MJX forward mode, finite only with pyramidal
-    cones; it runs pyramidal cones at impratio 1 whatever these settings say
-    (``mjx_pick.studies.calibration``). Forward simulation on MJX uses these settings
-    (not measured there at this default).
+    MJX-JAX: its forward-mode gradient (calibration's ``jvp`` estimator) is NaN with
+    elliptic cones (measured, issue 32): that estimator refuses them and asks for
+    ``cone = "pyramidal"``, ``impratio = 1``; the other estimators simulate with these
+    settings. Forward simulation on MJX uses them too (not measured there).
     """
 
     # 1 ms with 50 solver iterations (benchmarks/RESULTS.md, "Pad chatter"): at 10
