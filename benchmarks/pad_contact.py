@@ -32,6 +32,10 @@ from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 
 FREE = mp.GripperSpec(name="test-gripper", force_min_n=0.01)
+# rubber and torsion: the solver settings (--solver TOML; None: the defaults)
+SOLVER = None
+# rubber and torsion: contact settings the candidates start from (--contact TOML)
+CONTACT = None
 
 
 def _centred(obj, grasp, y_mm):
@@ -309,8 +313,10 @@ def rubber(variants, loads, cases_wanted=None) -> None:
             weight = mass[label] * (G + grasp0.lift_accel_mm_s2 * 1e-3)
             force = weight / (2 * mu * x)
             grasp = dataclasses.replace(grasp0, grip_force_n=force)
-            contact = mp.ContactParams(pad_friction=mu, pad_contact="mean_radius")
-            base = mp.build_scene(part, FREE, contact, None, grasp)
+            contact = dataclasses.replace(
+                CONTACT or mp.ContactParams(), pad_friction=mu, pad_collision="mean_radius"
+            )
+            base = mp.build_scene(part, FREE, contact, SOLVER, grasp)
             w, h = (v * 1e-3 for v in base.pad_patch_mm)
             d_r = holding.hold_limit_m(
                 holding.uniform_patch_points(w, h), force, weight, mu, 0.0, "elliptic"
@@ -328,7 +334,7 @@ def rubber(variants, loads, cases_wanted=None) -> None:
 
                 with mock.patch.object(scene_mod, "scene_xml", patched):
                     picks = _centred(part, grasp, factors * d_r * 1e3)
-                    out, scene = _run(part, picks, grasp, contact)
+                    out, scene = _run(part, picks, grasp, contact, SOLVER)
                 ok = out["success"]
                 first = factors[np.argmax(~ok)] if (~ok).any() else np.nan
                 last = factors[: np.argmax(~ok)][-1] if (~ok).any() and ok[0] else np.nan
@@ -415,8 +421,10 @@ def torsion(variants) -> None:
     for label, part in parts.items():
         for force in (10.0, 30.0, 100.0):
             grasp = mp.GraspConfig(grip_force_n=force)
-            contact = mp.ContactParams(pad_friction=mu, pad_contact="mean_radius")
-            w, h = mp.build_scene(part, FREE, contact, None, grasp).pad_patch_mm
+            contact = dataclasses.replace(
+                CONTACT or mp.ContactParams(), pad_friction=mu, pad_collision="mean_radius"
+            )
+            w, h = mp.build_scene(part, FREE, contact, SOLVER, grasp).pad_patch_mm
             r_mean = physics.patch_mean_radius_mm(w, h) * 1e-3
             pad_h = FREE.pad_height_mm
             mu_t_tile = mu * physics.patch_mean_radius_mm(w / 3, min(h, pad_h / 3)) * 1e-3
@@ -428,7 +436,7 @@ def torsion(variants) -> None:
                     return _xml_with(original(*a, **k), _v, _t, _r)
 
                 with mock.patch.object(scene_mod, "scene_xml", patched):
-                    scene = mp.build_scene(part, FREE, contact, None, grasp)
+                    scene = mp.build_scene(part, FREE, contact, SOLVER, grasp)
                 # the rubber pad's torque in 0.25 s
                 torque, normal = _torsion_capacity(scene, force, False, ref / 0.25)
                 ratio = torque / (2 * mu * normal * r_mean) if normal > 0 else float("nan")
@@ -486,7 +494,19 @@ def main() -> None:
     ap.add_argument("--variants", default="corners,centre", help="rubber: pad-contact candidates")
     ap.add_argument("--loads", default="0.1,0.25,0.5", help="rubber: loads m (g + a) / (2 mu F)")
     ap.add_argument("--cases", default="", help="rubber: parts whose label contains one of these")
+    ap.add_argument("--solver", help="rubber, torsion: SolverParams TOML (default: the defaults)")
+    ap.add_argument("--contact", help="rubber, torsion: ContactParams TOML to start from")
     args = ap.parse_args()
+    if args.solver:
+        from mjx_pick.core.config import load_toml
+
+        global SOLVER
+        SOLVER = load_toml(mp.SolverParams, args.solver)
+    if args.contact:
+        from mjx_pick.core.physics import load_contact
+
+        global CONTACT
+        CONTACT = load_contact(args.contact)[0]
     if args.what == "coulomb":
         coulomb(args.backend)
     elif args.what == "torsion":

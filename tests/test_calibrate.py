@@ -612,8 +612,15 @@ def test_forward_mode_gradient_through_mjx(heavy_block, synthetic):
 
     from mjx_pick.engine.mjx_backend import make_rollout
 
-    base = mp.Settings(LIGHT, mp.ContactParams(), grasp=SHORT)
     rows = synthetic.take([0, len(synthetic) - 1])
+    # with the default elliptic cones MJX's forward-mode gradient is NaN (measured,
+    # issue 32): the jvp path refuses them and says what to pass
+    default = mp.Settings(LIGHT, mp.ContactParams(), grasp=SHORT)
+    refused = cal.Problem(heavy_block, rows, ["pad_friction"], default, backend="mjx")
+    with pytest.raises(mp.ConfigError, match="pyramidal"):
+        refused.mjx_loss_and_grad(refused.space.theta([0.75]))
+    pyramid = mp.SolverParams(cone="pyramidal", impratio=1.0)
+    base = mp.Settings(LIGHT, mp.ContactParams(), pyramid, grasp=SHORT)
     problem = cal.Problem(heavy_block, rows, ["pad_friction"], base, backend="mjx")
     loss, grad = problem.mjx_loss_and_grad(problem.space.theta([0.75]))
     assert np.isfinite(loss) and np.all(np.isfinite(grad))

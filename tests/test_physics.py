@@ -349,22 +349,43 @@ def test_noslip_setting_reaches_the_model_and_is_refused_where_unsupported():
 def test_mean_radius_pad_box_reaches_the_model_and_is_checked():
     block = mp.object_from_polygon(box(-25, -15, 25, 15), thickness_mm=20, mass_g=300)
     contact = mp.ContactParams(pad_collision="mean_radius")
-    scene = mp.build_scene(block, FREE, contact, None, PROC)
-    m = scene.model
-    half_w, half_h, dz = scene_mod.pad_collision_box_mm(block, FREE, PROC)
-    # the collision box: its corners at the patch's mean radius, centred on the wall
-    r = physics.patch_mean_radius_mm(*scene.pad_patch_mm)
-    assert (half_w, half_h) == pytest.approx((r, r))
-    assert m.geom("pad_left").size[1:] * 1e3 == pytest.approx([half_w, half_h])
-    assert m.geom("pad_left").pos[2] * 1e3 == pytest.approx(dz)
-    # the pad as built keeps the gripper's size and the finger's mass, colliding with nothing
-    visual = m.geom("pad_left_visual")
-    assert visual.size[1:] * 1e3 == pytest.approx(
+    assert mp.ContactParams().pad_collision == "mean_radius"  # the default since issue 32
+    pyramid = mp.SolverParams(cone="pyramidal", impratio=1.0)
+    for solver in (pyramid, mp.SolverParams()):  # the default: elliptic cones
+        scene = mp.build_scene(block, FREE, contact, solver, PROC)
+        m = scene.model
+        half_w, half_h, dz = scene_mod.pad_collision_box_mm(block, FREE, PROC, solver.cone)
+        r = physics.patch_mean_radius_mm(*scene.pad_patch_mm)
+        mu_t = scene.contact.pad_friction * r * 1e-3
+        if solver.cone == "pyramidal":
+            # corners at the patch's mean radius in the pyramid's norm, max(|a|, |b|);
+            # each point keeps the rubber pad's torsion mu r_mean
+            assert (half_w, half_h) == pytest.approx((r, r))
+            assert scene.contact.pad_torsion_m == pytest.approx(mu_t, rel=1e-6)
+        else:
+            # elliptic cones: corners at Euclidean r_mean cos(theta), and each point keeps
+            # mu r_mean sin(theta): in pure torsion sqrt(cos^2 + sin^2) mu N r_mean
+            share = physics.ELLIPTIC_TORSION_SHARE
+            assert np.hypot(half_w, half_h) == pytest.approx(r * np.sqrt(1 - share**2))
+            assert scene.contact.pad_torsion_m == pytest.approx(share * mu_t, rel=1e-6)
+        assert m.geom("pad_left").size[1:] * 1e3 == pytest.approx([half_w, half_h])
+        assert m.geom("pad_left").pos[2] * 1e3 == pytest.approx(dz)
+        # the pad as built keeps the gripper's size and the finger's mass, colliding with
+        # nothing
+        visual = m.geom("pad_left_visual")
+        assert visual.size[1:] * 1e3 == pytest.approx(
+            [FREE.finger_width_mm / 2, FREE.pad_height_mm / 2]
+        )
+        assert visual.contype[0] == 0 and visual.conaffinity[0] == 0
+    # "pad": the whole pad collides, with the full torsion on every cone
+    whole_contact = mp.ContactParams(pad_collision="pad")
+    whole = mp.build_scene(block, FREE, whole_contact, None, PROC)
+    assert whole.model.geom("pad_left").size[1:] * 1e3 == pytest.approx(
         [FREE.finger_width_mm / 2, FREE.pad_height_mm / 2]
     )
-    assert visual.contype[0] == 0 and visual.conaffinity[0] == 0
-    # the default: the whole pad collides, as before
-    whole = mp.build_scene(block, FREE, None, None, PROC).model.geom("pad_left")
-    assert whole.size[1:] * 1e3 == pytest.approx([FREE.finger_width_mm / 2, FREE.pad_height_mm / 2])
+    r = physics.patch_mean_radius_mm(*whole.pad_patch_mm)
+    assert whole.contact.pad_torsion_m == pytest.approx(
+        whole.contact.pad_friction * r * 1e-3, rel=1e-6
+    )
     with pytest.raises(mp.ConfigError, match="pad_collision"):
         mp.ContactParams(pad_collision="disc")

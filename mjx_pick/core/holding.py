@@ -13,8 +13,8 @@ with the part: the whole pad, or with ``ContactParams.pad_collision = "mean_radi
 box cut so that its corners sit at the patch's mean radius
 (:func:`mjx_pick.core.scene.pad_collision_box_mm`). Each point is a soft-finger contact (condim 4,
 :mod:`mjx_pick.core.physics`): Coulomb friction mu in the pad plane and torsional friction
-mu_t about the normal. With pyramidal cones (the default) the three share one budget,
-|f_1| / mu + |f_2| / mu + |tau| / mu_t <= N; with elliptic cones their Euclidean norm
+mu_t about the normal. With pyramidal cones the three share one budget,
+|f_1| / mu + |f_2| / mu + |tau| / mu_t <= N; with elliptic cones (the default) their Euclidean norm
 is bounded instead. The holding limit is then a linear program over those points:
 the largest lever d of the centre of mass from the grip axis at which some friction
 forces within every point's cone carry the weight and its torque. Nothing in it is

@@ -38,21 +38,25 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   a line contact), their Coulomb friction also resists spin, at the corners: with
   pyramidal cones a corner at (a, b) from the patch centre resists with mu N max(|a|,
   |b|) of its normal force N. With the whole pad colliding (``pad_collision = "pad"``,
-  the default) the grasp then holds 1.5-1.9x the torque of a uniformly pressed pad,
+  the default before issue 32) the grasp then holds 1.5-1.9x (pyramidal) or 1.5-2.8x
+  (elliptic) the torque of a uniformly pressed pad,
   whose limit in pure torsion is mu N r_mean (the uniform-pressure result for a flat
   contact, a disc's 2/3 mu N R; Goyal, Ruina and Papadopoulos, "Planar sliding with dry
   friction", Wear 143, 1991). ``pad_collision = "mean_radius"`` makes a parametric pad
   collide through a box cut to the patch's mean radius
   (``mjx_pick.core.scene.pad_collision_box_mm``: its corners at most r_mean from the
   patch centre), which brings the torque close to a rubber pad's where the load is a
-  small part of the pads' friction capacity. Not the default: the pad touches a part
-  only within that box (2 r_mean wide, half the pad's width on a thin part), and a
-  face wider than the box, turned a few degrees in the grip, is met by the box's edge
-  with the face's tilted normal instead of the pad's face: at low pad friction that
-  pushes the part out, and slippery parts were lost more often. An MJCF gripper's pads
-  keep their own geoms. ``mjx_pick.core.holding`` states the model's capacity from the
-  contact points and a rubber pad's for comparison; benchmarks/RESULTS.md ("Torque",
-  "Torsion like rubber") gives the figures.
+  small part of the pads' friction capacity. With elliptic cones (the default) a corner
+  resists with mu N sqrt(a^2 + b^2) and its point torsion adds in quadrature, so the box
+  is cut so that the overlap's corners sit at r_mean cos(30 deg) and each point keeps
+  mu r_mean sin(30 deg) of torsion (``ELLIPTIC_TORSION_SHARE``). It is the default
+  since issue 32 (with elliptic cones at impratio 10). The pad touches a part only
+  within that box: a pick at a part's very end can miss it (no_contact), and with
+  pyramidal cones a face wider than the box, turned a few degrees in the grip, is met
+  by the box's edge and a slippery part pushed out (elliptic cones held those). An
+  MJCF gripper's pads keep their own geoms. ``mjx_pick.core.holding`` states the
+  model's capacity from the contact points and a rubber pad's for comparison;
+  benchmarks/RESULTS.md ("Torque", "Torsion like rubber") gives the figures.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
   the impedance instead), the penetration depth for full damping (solimp's width plays a
   similar role), the static/dynamic split and the stiction/friction transition
@@ -82,6 +86,13 @@ CONVERGED_TIMESTEP_S = 0.002
 
 # what a parametric pad collides through (ContactParams.pad_collision)
 PAD_COLLISIONS = ("pad", "mean_radius")
+
+# elliptic cones with the "mean_radius" box: the share sin(theta) of the rubber pad's
+# torsion that each contact point's soft-finger torsion carries; the box's corners sit
+# at r_mean cos(theta) (mjx_pick.core.scene.pad_collision_box_mm). 0.5 (theta 30 deg):
+# without point torsion a 2 kg, 3 mm plate on the RG2 turned out of a grip that must
+# hold (benchmarks/RESULTS.md, "Elliptic cones, impratio 10 and a rubber-like pad box")
+ELLIPTIC_TORSION_SHARE = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,11 +141,12 @@ class ContactParams:
     pad_solimp: tuple[float, float, float, float, float] = (0.99, 0.99, 0.001, 0.5, 2.0)
     table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
     # what a parametric pad collides through (module docstring, "Pad contacts"): "pad",
-    # the whole pad (MuJoCo's corner contacts resist spin at the patch's edges), or
-    # "mean_radius", a box cut so that its corners sit at the patch's mean radius
-    # (torsion like a uniformly pressed rubber pad; a part's face wider than the box and
-    # turned in the grip is met by the box's edge, which costs slippery grasps)
-    pad_collision: str = "pad"
+    # the whole pad (MuJoCo's corner contacts resist spin at the patch's edges: 1.3-2.8x
+    # a rubber pad's torque), or "mean_radius" (the default), a box cut so that the
+    # corners and the points' own torsion hold a uniformly pressed rubber pad's torque
+    # for the solver's cone (mjx_pick.core.scene.pad_collision_box_mm); a part is then
+    # touched only within the box (picks at a part's very end: no_contact)
+    pad_collision: str = "mean_radius"
 
     def __post_init__(self):
         o = "contact"
@@ -156,24 +168,24 @@ class ContactParams:
 class SolverParams:
     """MuJoCo solver settings shared by both backends.
 
-    Defaults were chosen by measurement on this scene (benchmarks/RESULTS.md, "solver
-    choice" and "Pad contact"): elliptic cones with impratio 10 -- the usual cure for
-    creep (MuJoCo issue #3328) -- blew up (NaN accelerations) in most random grasps of
-    the block, where an object pushed and spun by the first pad chatters between pads
-    and table; pyramidal cones were stable. Pyramidal cones are also the ones whose
-    forward-mode derivatives are finite in MJX (calibration) and the faster ones.
+    Defaults chosen by measurement on the shipped presets with the default procedure
+    (benchmarks/RESULTS.md, "Elliptic cones, impratio 10 and a rubber-like pad box",
+    issue 32): elliptic cones, impratio 10 (MuJoCo's documented choice for grasping)
+    and MuJoCo's own 50 line-search iterations. On the 288-pick preset grid that gives
+    0 wrong Coulomb labels and 0 diverged (pyramidal: 26 wrong), pad chatter on 8
+    must-hold picks instead of 71, and removes most soft-contact creep (YCB banana
+    76 -> 91 %, door opener's 16 "rotated" picks, whose gravity torque is under 1 % of
+    a rubber pad's capacity, held). The line search matters: at the old 8 line-search
+    iterations elliptic cones diverged (the earlier "elliptic + impratio 10 blows up"
+    entries of RESULTS were at 8 or fewer). impratio matters with the rubber-like pad
+    box (``ContactParams.pad_collision``): MuJoCo regularises an elliptic contact's
+    friction rows by R_0 mu_0^2 / (mu_i^2 impratio), so the smaller per-point torsion
+    crept at impratio 1-3 (banana 46 / 70 %).
 
-    Creep: MuJoCo's soft friction lets a held part slip at a steady speed of about
-    (1 - d) / d * a / (b * impratio) under a tangential load a (per unit mass) -- d the
-    pad impedance (solimp), b the contact's damping. A light part pushed sideways by a
-    tilted contact (a pad's edge on a rounded wall) creeps out of the grasp at 2-4 mm/s
-    though Coulomb's law holds it. impratio 2 halves that creep (YCB banana 71 -> 96 %
-    success on MuJoCo C) but is not the default: the engines then agree less (door
-    opener labels MuJoCo Warp = C 99.6 -> 98.9 %, YCB scissors 98.4 -> 90.6 %, MJX's
-    scores 0.09 apart from C's), C diverged on 4 of 4,096 door-opener picks, and
-    impratio 3 and 5 made a 10 g part at pad friction 0.05 blow up. ``noslip_iterations``
-    (MuJoCo's no-slip post-solver; C and Warp) stops creep on flat faces but made the
-    pads chatter on a line contact (a lying rod): off by default too.
+    MJX-JAX: its forward-mode gradient (calibration's ``jvp`` estimator) is NaN with
+    elliptic cones (measured, issue 32): that estimator refuses them and asks for
+    ``cone = "pyramidal"``, ``impratio = 1``; the other estimators simulate with these
+    settings. Forward simulation on MJX uses them too (not measured there).
     """
 
     # 1 ms with 50 solver iterations (benchmarks/RESULTS.md, "Pad chatter"): at 10
@@ -182,14 +194,14 @@ class SolverParams:
     # 50 removed that at the 1 ms step for little extra cost (a smaller step cuts the
     # wrong labels further but doubles the steps, and lets pad forces pass the limit)
     timestep_s: float = setting(0.001, "s", "physics time step", lo=1e-5, hi=0.01)
-    cone: str = "pyramidal"
+    cone: str = "elliptic"
     impratio: float = setting(
-        1.0, "-", "frictional-to-normal constraint impedance ratio (MuJoCo's impratio)",
+        10.0, "-", "frictional-to-normal constraint impedance ratio (MuJoCo's impratio)",
         lo=1, hi=100,
     )  # fmt: skip
     iterations: int = setting(50, "iterations", "constraint solver iterations", lo=1, hi=1000)
     ls_iterations: int = setting(
-        8, "iterations", "line-search iterations per solver iteration", lo=1, hi=1000
+        50, "iterations", "line-search iterations per solver iteration", lo=1, hi=1000
     )
     # the solver stops once its improvement or gradient falls below this (MuJoCo's
     # default; MuJoCo Warp keeps iterating every simulation of a call until the last
@@ -301,6 +313,21 @@ def pad_torsion_m(pad_friction, pad_torsion_mm, patch_mm: tuple[float, float]):
     return pad_friction * patch_mean_radius_mm(*patch_mm) * 1e-3
 
 
+def torsion_share(contact: ContactParams, solver: SolverParams, pad_box: bool = True) -> float:
+    """The factor on the pad contacts' derived torsion mu r_mean: ELLIPTIC_TORSION_SHARE
+    with elliptic cones and the "mean_radius" box on a parametric pad (its corners then
+    carry the rest of the rubber pad's torsion in quadrature), else 1. A pad_torsion_mm
+    the user set is kept as set."""
+    if (
+        pad_box
+        and contact.pad_torsion_mm is None
+        and contact.pad_collision == "mean_radius"
+        and solver.cone == "elliptic"
+    ):
+        return ELLIPTIC_TORSION_SHARE
+    return 1.0
+
+
 def patch_mean_radius_mm(width_mm: float, height_mm: float, n: int = 200) -> float:
     """Mean distance from the centre of a uniformly loaded width x height rectangle, mm.
 
@@ -316,10 +343,13 @@ def mujoco_contact(
     solver: SolverParams,
     mass_kg: float,
     patch_mm: tuple[float, float],
+    pad_box: bool = True,
 ) -> MujocoContact:
     """Map ContactParams to MuJoCo pair parameters for an object of mass_kg.
 
     patch_mm: (width, height) of the pads' contact patch on this object, mm.
+    pad_box: the pads are the parametric jaw's (ContactParams.pad_collision applies;
+    an MJCF gripper's pads keep their own geoms).
     """
     tc = solver.timeconst_s
     pad_ref, pad_c = spring_solref(
@@ -331,7 +361,10 @@ def mujoco_contact(
     mu = contact.pad_friction
     return MujocoContact(
         pad_friction=mu,
-        pad_torsion_m=float(pad_torsion_m(mu, contact.pad_torsion_mm, patch_mm)),
+        pad_torsion_m=float(
+            pad_torsion_m(mu, contact.pad_torsion_mm, patch_mm)
+            * torsion_share(contact, solver, pad_box)
+        ),
         table_friction=contact.table_friction,
         pad_solref=pad_ref,
         table_solref=tab_ref,

@@ -99,7 +99,9 @@ def pad_patch_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
     return width, obj.wall_height_mm(lo, hi)
 
 
-def pad_collision_box_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
+def pad_collision_box_mm(
+    obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig, cone: str = "pyramidal"
+):
     """(half width, half height, height offset) of a parametric pad's collision box, mm,
     with ``ContactParams.pad_collision = "mean_radius"`` (the default lets the whole pad
     collide).
@@ -119,6 +121,8 @@ def pad_collision_box_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspCon
     width, height = pad_patch_mm(obj, gripper, grasp)
     r = patch_mean_radius_mm(width, height)
     lo, hi = pad_band_mm(obj, gripper, grasp)
+    if cone == "elliptic":
+        return _elliptic_box_mm(obj, gripper, width, height, r, lo, hi)
     half_w = min(r, 0.5 * gripper.finger_width_mm)
     if height <= 2 * r:
         return half_w, 0.5 * gripper.pad_height_mm, 0.0
@@ -127,6 +131,29 @@ def pad_collision_box_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspCon
     dz = centre - 0.5 * (lo + hi)
     limit = 0.5 * gripper.pad_height_mm - r
     return half_w, r, float(np.clip(dz, -limit, limit))
+
+
+def _elliptic_box_mm(obj, gripper, width, height, r, lo, hi):
+    """The collision box for elliptic cones: a corner at (a, b) resists spin with
+    mu N sqrt(a^2 + b^2) (its Euclidean distance, not the pyramid's max(|a|, |b|)), and
+    each point's soft-finger torsion mu_t adds to it in quadrature. The overlap's
+    corners are put at r_c = r_mean cos(theta) and mu_t = mu r_mean sin(theta)
+    (``physics.ELLIPTIC_TORSION_SHARE`` = sin(theta)), so that pure torsion holds mu N
+    r_mean, the rubber pad's. A wall short enough keeps the pad's height (the overlap's
+    height is the wall's) and only the width is cut; a taller wall gets a box of the
+    patch's aspect, centred on the wall."""
+    from mjx_pick.core.physics import ELLIPTIC_TORSION_SHARE
+
+    rc = r * np.sqrt(1.0 - ELLIPTIC_TORSION_SHARE**2)
+    if 0.5 * height <= rc / np.sqrt(2.0):
+        half_w = min(np.sqrt(rc**2 - (0.5 * height) ** 2), 0.5 * gripper.finger_width_mm)
+        return float(half_w), 0.5 * gripper.pad_height_mm, 0.0
+    s = rc / np.hypot(0.5 * width, 0.5 * height)
+    half_w, half_h = s * 0.5 * width, s * 0.5 * height
+    _, centre = obj.wall_mm(lo, hi)
+    dz = centre - 0.5 * (lo + hi)
+    limit = 0.5 * gripper.pad_height_mm - half_h
+    return float(half_w), float(half_h), float(np.clip(dz, -limit, limit))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -430,11 +457,11 @@ def build_scene(
     solver = solver or SolverParams()
     grasp = grasp or GraspConfig()
     patch = pad_patch_mm(obj, gripper, grasp)
-    mjc = mujoco_contact(contact, solver, obj.mass_kg, patch)
-    tip_mm, _ = pad_band_mm(obj, gripper, grasp)
     kin = None if gripper.mjcf is None else mjcf_gripper.characterise(gripper.mjcf)
+    mjc = mujoco_contact(contact, solver, obj.mass_kg, patch, pad_box=gripper.mjcf is None)
+    tip_mm, _ = pad_band_mm(obj, gripper, grasp)
     mean_radius = kin is None and contact.pad_collision == "mean_radius"
-    box = pad_collision_box_mm(obj, gripper, grasp) if mean_radius else None
+    box = pad_collision_box_mm(obj, gripper, grasp, solver.cone) if mean_radius else None
     xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin, box)
     if kin is None:
         model = mujoco.MjModel.from_xml_string(xml)

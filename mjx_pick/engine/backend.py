@@ -328,7 +328,13 @@ class Settings:
         patch are these settings' too: the patch depends on gripper and grasp height).
         """
         obj = scene.object
-        mjc = mujoco_contact(self.contact, self.solver, obj.mass_kg, scene.pad_patch_mm)
+        mjc = mujoco_contact(
+            self.contact,
+            self.solver,
+            obj.mass_kg,
+            scene.pad_patch_mm,
+            pad_box=scene.gripper.mjcf is None,
+        )
         params = self.grasp.params(obj, self.gripper)._asdict()
         out = {name: np.full(n, v, np.float32) for name, v in params.items()}
         out["pad_friction"] = np.full(n, mjc.pad_friction, np.float32)

@@ -21,7 +21,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjx_pick.core.config import ConfigError
-from mjx_pick.core.physics import ContactParams, pad_torsion_m, solref_terms, stiffest_spring
+from mjx_pick.core.physics import (
+    ContactParams,
+    pad_torsion_m,
+    solref_terms,
+    stiffest_spring,
+    torsion_share,
+)
 from mjx_pick.engine.backend import set_contact
 
 
@@ -284,7 +290,12 @@ def contact_arrays_jnp(names, values, inputs, scene, settings, mass_kg):
     torsion_mm = v.get("pad_torsion_mm", base.pad_torsion_mm)
     contact = {
         "pad_friction": mu,
-        "pad_torsion": pad_torsion_m(mu, torsion_mm, scene.pad_patch_mm),
+        "pad_torsion": pad_torsion_m(mu, torsion_mm, scene.pad_patch_mm)
+        * (
+            1.0
+            if "pad_torsion_mm" in v
+            else torsion_share(base, settings.solver, scene.gripper.mjcf is None)
+        ),
         "table_friction": v.get("table_friction", base.table_friction),
     }
     for side in ("pad", "table"):

@@ -311,6 +311,14 @@ class Problem:
         The one simulation outside ``Runner.run``: ``jax.jacfwd`` needs the rollout in
         its trace (``simulator.differentiable_rollout`` says why)."""
         if self._jvp is None:
+            if self.settings.solver.cone != "pyramidal":
+                # MJX's forward-mode derivatives are finite with pyramidal cones only
+                raise ConfigError(
+                    "the jvp estimator differentiates MJX in forward mode, finite only "
+                    "with pyramidal cones; the default is elliptic since issue 32: pass a "
+                    "solver with cone = 'pyramidal' and impratio = 1 (a --solver TOML), "
+                    "or use another estimator"
+                )
             roll = differentiable_rollout(self.scene, self.settings.grasp, self.record)
             inp = self.inputs
 
