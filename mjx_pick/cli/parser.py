@@ -459,6 +459,7 @@ def _add_robust_parser(sub) -> None:
         default=3.0,
         help="vision error: standard deviation of yaw, deg",
     )
+    _add_resume(rb)
     _add_ray(rb)
     rb.set_defaults(func=cmd_robust, n=200)
 
