@@ -148,7 +148,7 @@ def robustness(
     base = base or Settings()
     draws = _Draws(m, sigma_xy_mm, sigma_yaw_deg)
     with opts.simulator(obj, simulator) as sim:
-        request = _request(obj, base, opts, draws, picks=_digest(picks))
+        request = _request(obj, base, opts, draws, pick_points=_digest(picks))
         store, complete = _open(opts, request)
         if complete:
             return _read_robust(Path(opts.out))
@@ -174,7 +174,7 @@ class _Draws(NamedTuple):
 def _request(obj: ObjectModel, base: Settings, opts: RunOptions, draws: _Draws, **more) -> dict:
     """What decides a robust run's table: its configuration key's settings."""
     request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
-    request.update(draws._asdict(), seed=opts.seed, picks_config=to_dict(opts.picks))
+    request.update(draws._asdict(), seed=opts.seed, picks=to_dict(opts.picks))
     return {**request, **more}
 
 
