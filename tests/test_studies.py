@@ -15,6 +15,7 @@ from mjx_pick.cli import main
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import to_toml
 from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
+from mjx_pick.studies.robust import robust_best
 from mjx_pick.studies.sweeps import ParamSpec, apply, variants
 
 # short procedure: 30 mm lift, 0.2 s hold
@@ -201,6 +202,71 @@ def test_robust_probability_of_centred_and_edge_grasps():
     assert by_id[1]["robust_p"] <= 0.5
     assert table[0]["pick_id"] == 0 and table[0]["rank"] == 1
     assert by_id[1]["robust_ci_low"] <= by_id[1]["robust_p"] <= by_id[1]["robust_ci_high"]
+
+
+def _ctrl_c_after_a_chunk(done: int, _total: int) -> None:
+    if done > 0:
+        raise KeyboardInterrupt
+
+
+def test_robust_stopped_resumes_from_its_chunks_to_the_uninterrupted_table(block, tmp_path):
+    # robust keeps its chunks as every command does: stopped after its first chunk (the
+    # n pick-points' simulation), --resume gives the uninterrupted table; a complete
+    # run reads back; another setting is refused, named
+    grasp = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
+    base = mp.Settings(grasp=grasp)
+    run = dict(n=6, top_k=2, m=4, seed=1, backend="mujoco", batch_size=4)
+    whole = robust_best(block, base, **run, out=tmp_path / "whole")
+    sim = mp.Simulator(block, "mujoco", 4)
+    sim.runner.on_progress = _ctrl_c_after_a_chunk
+    out = tmp_path / "cut"
+    with pytest.raises(KeyboardInterrupt):
+        robust_best(block, base, **run, out=out, simulator=sim)
+    assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
+    assert len(list((out / "chunks").glob("part-*.parquet"))) == 1
+    with pytest.raises(mp.ConfigError, match="pass --resume"):
+        robust_best(block, base, **run, out=out)
+    with pytest.raises(mp.ConfigError, match=r"changed: m: 4 -> 5"):
+        robust_best(block, base, **{**run, "m": 5}, out=out, resume=True)
+    resumed = robust_best(block, base, **run, out=out, resume=True)
+    assert resumed.equals(whole)
+    assert pq.read_table(out / "robustness.parquet").equals(whole)
+    assert not (out / "chunks").exists(), "a complete run's chunks are removed"
+    again = robust_best(block, base, **run, out=out, resume=True)
+    assert again.equals(whole)
+
+
+def test_robust_in_an_evaluate_folder_resumes_from_its_own_chunks(block, tmp_path):
+    # robust adds its ranking to the evaluate folder the pick-points came from: its
+    # chunks are its own (chunks/robust/), evaluate's manifest and files stay, and a
+    # stopped run resumes to the uninterrupted table
+    grasp = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
+    run = dict(n=8, seed=2, backend="mujoco", batch_size=4)
+    base = mp.Settings(grasp=grasp)
+    folders = {}
+    for name in ("whole", "cut"):
+        folders[name] = tmp_path / name
+        mp.evaluate(block, options=mp.RunOptions(**run, out=folders[name]), grasp=grasp)
+    manifest = json.loads((folders["cut"] / "mjx_pick_run.json").read_text())
+    draws = dict(top_k=2, m=4, seed=2, backend="mujoco", batch_size=4)
+    whole = robust_best(block, base, results=folders["whole"], **draws, out=folders["whole"])
+    out = folders["cut"]
+    sim = mp.Simulator(block, "mujoco", 4)
+    sim.runner.on_progress = _ctrl_c_after_a_chunk
+    with pytest.raises(KeyboardInterrupt):
+        robust_best(block, base, results=out, **draws, out=out, simulator=sim)
+    assert json.loads((out / "run-robust.json").read_text())["status"] == "interrupted"
+    assert len(list((out / "chunks" / "robust").glob("part-*.parquet"))) == 1
+    with pytest.raises(mp.ConfigError, match=r"changed: sigma_xy_mm: 2.0 -> 3.0"):
+        robust_best(block, base, results=out, **draws, sigma_xy_mm=3.0, out=out, resume=True)
+    resumed = robust_best(block, base, results=out, **draws, out=out, resume=True)
+    assert resumed.equals(whole)
+    assert not (out / "chunks").exists(), "a complete run's chunks are removed"
+    assert json.loads((out / "mjx_pick_run.json").read_text()) == manifest, "evaluate's"
+    record = json.loads((out / "run-robust.json").read_text())
+    assert record["status"] == "complete" and record["config_key"]
+    again = robust_best(block, base, results=out, **draws, out=out, resume=True)
+    assert again.equals(whole)
 
 
 def test_cli_studies(tmp_path, capsys):

@@ -19,6 +19,10 @@ from mjx_pick.cli.commands import (
     cmd_report,
     cmd_robust,
     cmd_sweep,
+    cmd_trials_agree,
+    cmd_trials_fit,
+    cmd_trials_plan,
+    cmd_trials_record,
     cmd_view,
 )
 
@@ -262,7 +266,28 @@ def build_parser() -> argparse.ArgumentParser:
         help="show mjx-pick's version and its physics engines' and exit",
     )
     sub = ap.add_subparsers(dest="command", required=True, parser_class=Parser)
+    # one function per subcommand, in the order `mjx-pick --help` lists them
+    for add in (
+        _add_evaluate_parser,
+        _add_sweep_parser,
+        _add_compare_parser,
+        _add_design_parser,
+        _add_robust_parser,
+        _add_picks_parser,
+        _add_calibrate_parser,
+        _add_report_parser,
+        _add_listing_parsers,
+        _add_cache_parser,
+        _add_gui_parser,
+        _add_trials_parser,
+        _add_view_parser,
+    ):
+        add(sub)
+    return ap
 
+
+def _add_evaluate_parser(sub) -> None:
+    """``mjx-pick evaluate``: simulate pick-points and write results."""
     ev = sub.add_parser("evaluate", help="simulate pick-points and write results")
     _add_object_args(ev)
     _add_gripper_args(ev)
@@ -329,18 +354,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.set_defaults(func=cmd_evaluate)
 
-    def study(name, help_text):
-        p = sub.add_parser(name, help=help_text)
-        _add_object_args(p)
-        _add_gripper_args(p)
-        _add_physics_args(p)
-        _add_pick_args(p)
-        p.add_argument("--out", help="output folder (default: none: nothing written)")
-        _add_overwrite(p)
-        _add_progress(p)
-        return p
 
-    sw = study("sweep", "sweep contact, controller, gripper or solver parameters")
+def _study_parser(sub, name: str, help_text: str) -> argparse.ArgumentParser:
+    """A study's parser (sweep, compare, design, robust) with the options they share:
+    object, gripper, physics, pick-points, --out, --overwrite, --no-progress."""
+    p = sub.add_parser(name, help=help_text)
+    _add_object_args(p)
+    _add_gripper_args(p)
+    _add_physics_args(p)
+    _add_pick_args(p)
+    p.add_argument("--out", help="output folder (default: none: nothing written)")
+    _add_overwrite(p)
+    _add_progress(p)
+    return p
+
+
+def _add_sweep_parser(sub) -> None:
+    """``mjx-pick sweep``."""
+    sw = _study_parser(sub, "sweep", "sweep contact, controller, gripper or solver parameters")
     sw.add_argument(
         "--param",
         action="append",
@@ -358,7 +389,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_ray(sw)
     sw.set_defaults(func=cmd_sweep, n=200)
 
-    cp = study("compare", "rank grippers on one shared pick-point set")
+
+def _add_compare_parser(sub) -> None:
+    """``mjx-pick compare``."""
+    cp = _study_parser(sub, "compare", "rank grippers on one shared pick-point set")
     cp.add_argument("--grippers", required=True, help="comma-separated presets or TOML files")
     cp.add_argument(
         "--rank-by",
@@ -370,7 +404,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_ray(cp)
     cp.set_defaults(func=cmd_compare, n=200)
 
-    ds = study("design", "search finger width, finger depth, stroke (any gripper field)")
+
+def _add_design_parser(sub) -> None:
+    """``mjx-pick design``."""
+    ds = _study_parser(
+        sub, "design", "search finger width, finger depth, stroke (any gripper field)"
+    )
     ds.add_argument(
         "--bound",
         action="append",
@@ -395,7 +434,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_ray(ds)
     ds.set_defaults(func=cmd_design, n=64)
 
-    rb = study("robust", "robust success probability of the top pick-points under vision error")
+
+def _add_robust_parser(sub) -> None:
+    """``mjx-pick robust``."""
+    rb = _study_parser(
+        sub, "robust", "robust success probability of the top pick-points under vision error"
+    )
     rb.add_argument(
         "--results",
         help="an evaluate output folder or results.parquet to rank (default: simulate --n "
@@ -415,9 +459,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=3.0,
         help="vision error: standard deviation of yaw, deg",
     )
+    _add_resume(rb)
     _add_ray(rb)
     rb.set_defaults(func=cmd_robust, n=200)
 
+
+def _add_picks_parser(sub) -> None:
+    """``mjx-pick picks``."""
     pk = sub.add_parser("picks", help="generate feasible pick-points and draw them")
     _add_object_args(pk)
     _add_gripper_args(pk)
@@ -426,6 +474,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_overwrite(pk)
     pk.set_defaults(func=cmd_picks)
 
+
+def _add_calibrate_parser(sub) -> None:
+    """``mjx-pick calibrate``: fit contact parameters to measured outcomes."""
     cb = sub.add_parser("calibrate", help="fit contact parameters to measured outcomes")
     cb.add_argument(
         "outcomes", help="measured outcomes CSV (format: mjx_pick/assets/outcomes/README.md)"
@@ -434,67 +485,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_gripper_args(cb)
     _add_physics_args(cb)
     _add_pick_args(cb)
-    cb.add_argument(
-        "--params",
-        default="pad_friction",
-        help="comma-separated, fitted jointly: pad_friction, pad_torsion_mm, table_friction, "
-        "pad_stiffness_n_per_mm, pad_damping_ns_per_mm, table_stiffness_n_per_mm, "
-        "table_damping_ns_per_mm, force_offset_n (aliases: friction, torsion, stiffness, "
-        "damping, force_offset)",
-    )
-    cb.add_argument(
-        "--bounds",
-        action="append",
-        metavar="NAME=LO:HI",
-        help="a parameter's bounds in its own unit (N/mm, N s/mm, mm, N; repeatable)",
-    )
-    cb.add_argument(
-        "--prior",
-        action="append",
-        metavar="NAME=MEAN:SD",
-        help="a parameter's Gaussian prior, its own unit (SD in natural-log units for "
-        "stiffness, damping and torsion; default: mean the start, SD half the bounds; "
-        "repeatable)",
-    )
-    cb.add_argument("--steps", type=int, default=100, help="estimator steps (lsq: iterations)")
-    cb.add_argument(
-        "--budget",
-        type=int,
-        help="stop after this many pick-point simulations (default: no limit)",
-    )
-    cb.add_argument(
-        "--lr",
-        type=float,
-        default=0.1,
-        help="Adam step, dimensionless: in the bounded space, whose range is 1 (smoothed, jvp)",
-    )
-    cb.add_argument(
-        "--estimator",
-        choices=("smoothed", "random", "cma", "lsq", "jvp"),
-        default="cma",
-        help="cma: CMA-ES (it reached the common target on 1, 3 and 5 hidden parameters, "
-        "benchmarks/RESULTS.md); smoothed: Gauss-Hermite smoothed gradient + Adam; "
-        "random: uniform search; lsq: Levenberg-Marquardt on the residuals "
-        "(mujoco.sysid); jvp: forward mode through MJX",
-    )
-    cb.add_argument(
-        "--samples",
-        type=int,
-        default=2,
-        help="quadrature node pairs per parameter and step (smoothed)",
-    )
-    cb.add_argument(
-        "--sigma",
-        type=float,
-        default=0.2,
-        help="smoothing spread, dimensionless: in the bounded space, whose range is 1",
-    )
-    cb.add_argument(
-        "--temperature-mm",
-        type=float,
-        default=2.0,
-        help="outcome smoothing, mm of final lift",
-    )
+    _add_fitted_args(cb)
+    _add_estimator_args(cb)
     cb.add_argument(
         "--replicates",
         type=int,
@@ -534,6 +526,78 @@ def build_parser() -> argparse.ArgumentParser:
     _add_progress(cb)
     cb.set_defaults(func=cmd_calibrate)
 
+
+def _add_fitted_args(p: argparse.ArgumentParser) -> None:
+    """calibrate's fitted parameters, their bounds and priors."""
+    p.add_argument(
+        "--params",
+        default="pad_friction",
+        help="comma-separated, fitted jointly: pad_friction, pad_torsion_mm, table_friction, "
+        "pad_stiffness_n_per_mm, pad_damping_ns_per_mm, table_stiffness_n_per_mm, "
+        "table_damping_ns_per_mm, force_offset_n (aliases: friction, torsion, stiffness, "
+        "damping, force_offset)",
+    )
+    p.add_argument(
+        "--bounds",
+        action="append",
+        metavar="NAME=LO:HI",
+        help="a parameter's bounds in its own unit (N/mm, N s/mm, mm, N; repeatable)",
+    )
+    p.add_argument(
+        "--prior",
+        action="append",
+        metavar="NAME=MEAN:SD",
+        help="a parameter's Gaussian prior, its own unit (SD in natural-log units for "
+        "stiffness, damping and torsion; default: mean the start, SD half the bounds; "
+        "repeatable)",
+    )
+
+
+def _add_estimator_args(p: argparse.ArgumentParser) -> None:
+    """calibrate's estimator and its steps, budget and smoothing."""
+    p.add_argument("--steps", type=int, default=100, help="estimator steps (lsq: iterations)")
+    p.add_argument(
+        "--budget",
+        type=int,
+        help="stop after this many pick-point simulations (default: no limit)",
+    )
+    p.add_argument(
+        "--lr",
+        type=float,
+        default=0.1,
+        help="Adam step, dimensionless: in the bounded space, whose range is 1 (smoothed, jvp)",
+    )
+    p.add_argument(
+        "--estimator",
+        choices=("smoothed", "random", "cma", "lsq", "jvp"),
+        default="cma",
+        help="cma: CMA-ES (it reached the common target on 1, 3 and 5 hidden parameters, "
+        "benchmarks/RESULTS.md); smoothed: Gauss-Hermite smoothed gradient + Adam; "
+        "random: uniform search; lsq: Levenberg-Marquardt on the residuals "
+        "(mujoco.sysid); jvp: forward mode through MJX",
+    )
+    p.add_argument(
+        "--samples",
+        type=int,
+        default=2,
+        help="quadrature node pairs per parameter and step (smoothed)",
+    )
+    p.add_argument(
+        "--sigma",
+        type=float,
+        default=0.2,
+        help="smoothing spread, dimensionless: in the bounded space, whose range is 1",
+    )
+    p.add_argument(
+        "--temperature-mm",
+        type=float,
+        default=2.0,
+        help="outcome smoothing, mm of final lift",
+    )
+
+
+def _add_report_parser(sub) -> None:
+    """``mjx-pick report``."""
     rp = sub.add_parser("report", help="plots, maps, animations, 1:1 template, robot export, HTML")
     rp.add_argument("run", help="an evaluate output folder")
     rp.add_argument("--out", help="write here (default: into the run folder)")
@@ -559,6 +623,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_progress(rp)
     rp.set_defaults(func=cmd_report)
 
+
+def _add_listing_parsers(sub) -> None:
+    """``mjx-pick presets``, ``params`` and ``assets``: what can be chosen."""
     sub.add_parser("presets", help="list gripper presets").set_defaults(func=cmd_presets)
     pa = sub.add_parser(
         "params", help="each sweepable parameter: meaning, unit, default and allowed range"
@@ -570,6 +637,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pa.set_defaults(func=cmd_params)
     sub.add_parser("assets", help="list shipped objects").set_defaults(func=cmd_assets)
+
+
+def _add_cache_parser(sub) -> None:
+    """``mjx-pick cache info | clear``."""
     ca = sub.add_parser(
         "cache",
         help="the cache of object preparation and compiled programs: where, how big, clear it",
@@ -581,10 +652,6 @@ def build_parser() -> argparse.ArgumentParser:
     steps.add_parser(
         "clear", help="delete every entry (object results and compiled programs)"
     ).set_defaults(func=cmd_cache_clear)
-    _add_gui_parser(sub)
-    _add_trials_parser(sub)
-    _add_view_parser(sub)
-    return ap
 
 
 def _add_gui_parser(sub) -> None:
@@ -602,40 +669,41 @@ def _add_gui_parser(sub) -> None:
 def _add_trials_parser(sub) -> None:
     """``mjx-pick trials plan | record | agree | fit``: the paper's template-and-trial
     loop (docs/calibration.md, "Trials on the real cell")."""
-    from mjx_pick.cli.commands import (
-        cmd_trials_agree,
-        cmd_trials_fit,
-        cmd_trials_plan,
-        cmd_trials_record,
-    )
-
     tp = sub.add_parser(
         "trials",
         help="the paper's loop on the real cell: plan pick-points and print their 1:1 "
         "templates, record outcomes, report agreement, fit and plan the next round",
     )
     steps = tp.add_subparsers(dest="step", required=True, parser_class=Parser)
+    _add_trials_plan_parser(steps)
+    _add_trials_record_agree_parsers(steps)
+    _add_trials_fit_parser(steps)
 
-    def backend(p) -> None:
-        p.add_argument(
-            "--backend",
-            choices=("auto", "warp", "mjx", "mujoco"),
-            default="auto",
-            help="simulation backend (as evaluate)",
-        )
 
-    def ranges(p) -> None:
-        p.add_argument(
-            "--bounds", action="append", metavar="NAME=LO:HI", help="a parameter's bounds"
-        )
-        p.add_argument(
-            "--prior",
-            action="append",
-            metavar="NAME=MEAN:SD",
-            help="a parameter's Gaussian prior (SD in log units for stiffness, damping, "
-            "torsion); what is known already: trials are then spent where doubt remains",
-        )
+def _add_trials_backend(p: argparse.ArgumentParser) -> None:
+    """A trials step's --backend (as evaluate's, without its other run options)."""
+    p.add_argument(
+        "--backend",
+        choices=("auto", "warp", "mjx", "mujoco"),
+        default="auto",
+        help="simulation backend (as evaluate)",
+    )
 
+
+def _add_trials_ranges(p: argparse.ArgumentParser) -> None:
+    """A trials step's --bounds and --prior of the uncertain parameters."""
+    p.add_argument("--bounds", action="append", metavar="NAME=LO:HI", help="a parameter's bounds")
+    p.add_argument(
+        "--prior",
+        action="append",
+        metavar="NAME=MEAN:SD",
+        help="a parameter's Gaussian prior (SD in log units for stiffness, damping, "
+        "torsion); what is known already: trials are then spent where doubt remains",
+    )
+
+
+def _add_trials_plan_parser(steps) -> None:
+    """``mjx-pick trials plan``."""
     pl = steps.add_parser(
         "plan", help="choose pick-points of an evaluate run to try; print their 1:1 templates"
     )
@@ -653,7 +721,7 @@ def _add_trials_parser(sub) -> None:
         default="pad_friction",
         help="the uncertain parameters that decide what is informative (as calibrate --params)",
     )
-    ranges(pl)
+    _add_trials_ranges(pl)
     pl.add_argument("--draws", type=int, default=6, help="parameter draws from the prior")
     pl.add_argument(
         "--placements",
@@ -686,12 +754,15 @@ def _add_trials_parser(sub) -> None:
         action="store_true",
         help="keep the predictions out of trials.csv (the person at the robot does not see them)",
     )
-    backend(pl)
+    _add_trials_backend(pl)
     pl.add_argument("--batch-size", type=int, help="simulations per backend call")
     pl.add_argument("--out", required=True, help="the trials folder")
     _add_overwrite(pl)
     pl.set_defaults(func=cmd_trials_plan)
 
+
+def _add_trials_record_agree_parsers(steps) -> None:
+    """``mjx-pick trials record`` and ``trials agree``: the trials folder's rows."""
     rc = steps.add_parser(
         "record", help="ask for each untried row's successes at the terminal (blind)"
     )
@@ -705,6 +776,9 @@ def _add_trials_parser(sub) -> None:
     ag.add_argument("--partial", action="store_true", help="use the tried rows, others blank")
     ag.set_defaults(func=cmd_trials_agree)
 
+
+def _add_trials_fit_parser(steps) -> None:
+    """``mjx-pick trials fit``."""
     ft = steps.add_parser(
         "fit",
         help="fit the outcomes, re-simulate, agreement before and after, plan the next round",
@@ -712,7 +786,7 @@ def _add_trials_parser(sub) -> None:
     ft.add_argument("trials", help="a trials folder")
     _add_object_args(ft)
     ft.add_argument("--params", help="parameters to fit (default: the plan's --params)")
-    ranges(ft)
+    _add_trials_ranges(ft)
     ft.add_argument("--steps", type=int, default=40, help="estimator steps")
     ft.add_argument(
         "--estimator",
@@ -740,7 +814,7 @@ def _add_trials_parser(sub) -> None:
         "--paper", choices=("a4", "letter"), default="a4", help="paper size of the templates"
     )
     ft.add_argument("--log-every", type=int, default=10, help="steps between printed loss lines")
-    backend(ft)
+    _add_trials_backend(ft)
     ft.add_argument("--resume", action="store_true", help="continue this round's fit")
     ft.add_argument("--overwrite", action="store_true", help="replace this round's earlier fit")
     ft.set_defaults(func=cmd_trials_fit)

@@ -444,33 +444,7 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
         mujoco.mj_forward(m, d)
         return _pad_box(m, d, left), _pad_box(m, d, right)
 
-    mujoco.mj_resetData(m, d)
-    end_lo = settle(lo)
-    mujoco.mj_resetData(m, d)
-    end_hi = settle(hi)
-    gap_lo = end_lo[1][0, 0] - end_lo[0][1, 0]
-    gap_hi = end_hi[1][0, 0] - end_hi[0][1, 0]
-    if abs(gap_hi - gap_lo) < 1e-3:
-        raise ConfigError(
-            f"gripper.mjcf.actuator = {mjcf.actuator!r} does not close the gripper: over its "
-            f"control range [{lo:g}, {hi:g}] the gap between the pads changes by "
-            f"{abs(gap_hi - gap_lo) * 1e3:.2f} mm along x (check the pad geoms and mount_quat: "
-            "the fingers must close along the gripper's x axis)"
-        )
-    c_open, c_closed = (lo, hi) if gap_lo > gap_hi else (hi, lo)
-    box_open = end_lo if gap_lo > gap_hi else end_hi
-    if not (box_open[0][1, 0] < 0 < box_open[1][0, 0]):
-        raise ConfigError(
-            "gripper.mjcf: the left pads must lie at -x and the right pads at +x of the "
-            f"gripper centre when open (left inner face at {box_open[0][1, 0] * 1e3:.1f} mm, "
-            f"right at {box_open[1][0, 0] * 1e3:.1f} mm): swap pad_left_geoms and "
-            "pad_right_geoms or turn mount_quat"
-        )
-    if box_open[0][0, 2] > 0 or box_open[1][0, 2] > 0:
-        raise ConfigError(
-            "gripper.mjcf.mount_quat: the pads must hang below the mount (the gripper "
-            "approaches along -z); turn the gripper over"
-        )
+    c_open, c_closed = _closing_direction(mjcf, m, d, settle, lo, hi)
     mujoco.mj_resetData(m, d)
     mujoco.mj_forward(m, d)
     driven = _drive_joints(m, a)
@@ -478,28 +452,7 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
     j_right = _finger_joint(m, d, driven, "right", mjcf.actuator)
     jids = list(range(m.njnt))
     names = tuple(m.joint(j).name[len(PREFIX) :] for j in jids)
-    rows = []
-    for ctrl in np.linspace(c_open, c_closed, N_SAMPLES):
-        bl, br = settle(ctrl)
-        rows.append(
-            (
-                bl[1, 0],  # left inner face x
-                br[0, 0],  # right inner face x
-                0.5 * (bl[0, 2] + bl[1, 2] + br[0, 2] + br[1, 2]) / 2,  # pad centre z
-                min(bl[0, 2], br[0, 2]),
-                d.qpos[m.jnt_qposadr[j_left]],
-                d.qpos[m.jnt_qposadr[j_right]],
-                d.actuator_length[a],
-                [d.qpos[m.jnt_qposadr[j]] for j in jids],
-                (bl[1] - bl[0], br[1] - br[0]),
-            )
-        )
-        if np.max(np.abs(d.qvel)) > 1e-2:
-            raise ConfigError(
-                f"gripper.mjcf: the gripper did not come to rest at ctrl = {ctrl:g} "
-                f"(|qvel| = {np.max(np.abs(d.qvel)):.3g}): its drive or loop constraints "
-                "are unstable"
-            )
+    rows = _stroke_samples(m, d, a, settle, (c_open, c_closed), (j_left, j_right), jids)
     xl = np.array([r[0] for r in rows])
     xr = np.array([r[1] for r in rows])
     opening = xr - xl
@@ -552,3 +505,69 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
         mass_kg=float(m.body_subtreemass[1]),
         finger_mass_kg=float(sum(m.body_mass[b] for b in finger_bodies)),
     )
+
+
+def _closing_direction(mjcf: MjcfGripper, m, d, settle, lo: float, hi: float):
+    """(control that opens, control that closes), from the pads at both ends of the
+    control range; ConfigError when the actuator does not close the gripper along x,
+    the pads are on the wrong sides, or they do not hang below the mount. settle(ctrl):
+    the pads' boxes at rest under ctrl."""
+    mujoco.mj_resetData(m, d)
+    end_lo = settle(lo)
+    mujoco.mj_resetData(m, d)
+    end_hi = settle(hi)
+    gap_lo = end_lo[1][0, 0] - end_lo[0][1, 0]
+    gap_hi = end_hi[1][0, 0] - end_hi[0][1, 0]
+    if abs(gap_hi - gap_lo) < 1e-3:
+        raise ConfigError(
+            f"gripper.mjcf.actuator = {mjcf.actuator!r} does not close the gripper: over its "
+            f"control range [{lo:g}, {hi:g}] the gap between the pads changes by "
+            f"{abs(gap_hi - gap_lo) * 1e3:.2f} mm along x (check the pad geoms and mount_quat: "
+            "the fingers must close along the gripper's x axis)"
+        )
+    c_open, c_closed = (lo, hi) if gap_lo > gap_hi else (hi, lo)
+    box_open = end_lo if gap_lo > gap_hi else end_hi
+    if not (box_open[0][1, 0] < 0 < box_open[1][0, 0]):
+        raise ConfigError(
+            "gripper.mjcf: the left pads must lie at -x and the right pads at +x of the "
+            f"gripper centre when open (left inner face at {box_open[0][1, 0] * 1e3:.1f} mm, "
+            f"right at {box_open[1][0, 0] * 1e3:.1f} mm): swap pad_left_geoms and "
+            "pad_right_geoms or turn mount_quat"
+        )
+    if box_open[0][0, 2] > 0 or box_open[1][0, 2] > 0:
+        raise ConfigError(
+            "gripper.mjcf.mount_quat: the pads must hang below the mount (the gripper "
+            "approaches along -z); turn the gripper over"
+        )
+    return c_open, c_closed
+
+
+def _stroke_samples(m, d, a: int, settle, ctrls, fingers, jids) -> list[tuple]:
+    """N_SAMPLES rows at rest from the open control to the closed one (ctrls): pads'
+    inner faces x, centre and bottom z, the finger joints' (fingers) and every joint's
+    (jids) positions, the actuator length and the pads' extents; ConfigError when the
+    gripper does not come to rest."""
+    j_left, j_right = fingers
+    rows = []
+    for ctrl in np.linspace(*ctrls, N_SAMPLES):
+        bl, br = settle(ctrl)
+        rows.append(
+            (
+                bl[1, 0],  # left inner face x
+                br[0, 0],  # right inner face x
+                0.5 * (bl[0, 2] + bl[1, 2] + br[0, 2] + br[1, 2]) / 2,  # pad centre z
+                min(bl[0, 2], br[0, 2]),
+                d.qpos[m.jnt_qposadr[j_left]],
+                d.qpos[m.jnt_qposadr[j_right]],
+                d.actuator_length[a],
+                [d.qpos[m.jnt_qposadr[j]] for j in jids],
+                (bl[1] - bl[0], br[1] - br[0]),
+            )
+        )
+        if np.max(np.abs(d.qvel)) > 1e-2:
+            raise ConfigError(
+                f"gripper.mjcf: the gripper did not come to rest at ctrl = {ctrl:g} "
+                f"(|qvel| = {np.max(np.abs(d.qvel)):.3g}): its drive or loop constraints "
+                "are unstable"
+            )
+    return rows

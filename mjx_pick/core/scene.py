@@ -259,78 +259,15 @@ def scene_xml(
     """
     pad_h = gripper.pad_height_mm * 1e-3
     z_grip = fingertip_height_mm * 1e-3 + 0.5 * pad_h  # pad centres
-
-    meshes = [
-        f'<mesh name="visual" vertex="{_fmt(obj.mesh.vertices)}" face="{_fmt(obj.mesh.faces)}"/>'
-    ]
     pad_pieces = obj.pad_pieces(gripper.finger_depth_mm, gripper.finger_width_mm)
-    meshes += [
-        f'<mesh name="piece{i}" vertex="{_fmt(v)}" maxhullvert="{MAX_HULL_VERTICES}"/>'
-        for i, v in enumerate(pad_pieces)
-    ]
-    # a rigid body on a plane touches it only on its convex hull: one table pair. The
-    # hull is capped at MAX_HULL_VERTICES (32) (MuJoCo/MJX want no face of more than 20); for a
-    # flat object that trims the support polygon's corners by well under a millimetre
-    hull = _fmt(np.vstack(obj.pieces))
-    meshes.append(f'<mesh name="hull" vertex="{hull}" maxhullvert="{MAX_HULL_VERTICES}"/>')
-    pieces = "\n".join(
-        f'      <geom name="piece{i}" type="mesh" mesh="piece{i}" group="3" rgba=".9 .5 .1 .5"/>'
-        for i in range(len(pad_pieces))
-    )
-    pieces += '\n      <geom name="hull" type="mesh" mesh="hull" group="4" rgba=".5 .5 .5 .3"/>'
+    meshes, pieces = _object_meshes_xml(obj, pad_pieces)
     inertia = obj.inertia_kg_m2
     full = _fmt(
         [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
     )
-    pad_fr = _fmt([mjc.pad_friction, mjc.pad_friction, mjc.pad_torsion_m, 0.0001, 0.0001])
-    tab_fr = _fmt([mjc.table_friction, mjc.table_friction, 0.005, 0.0001, 0.0001])
-    if gripper.mjcf is None:
-        pad_geoms = [("pad_left", "pad_left"), ("pad_right", "pad_right")]
-    else:
-        # pair names start with pad_left / pad_right (SceneIndex.pad_pairs finds them)
-        pad_geoms = [
-            (f"{side}{k}", mjcf_gripper.PREFIX + g)
-            for side, geoms in (
-                ("pad_left", gripper.mjcf.pad_left_geoms),
-                ("pad_right", gripper.mjcf.pad_right_geoms),
-            )
-            for k, g in enumerate(geoms)
-        ]
-    pairs = []
-    for i in range(len(pad_pieces)):
-        for pad, geom in pad_geoms:
-            pairs.append(
-                f'    <pair name="{pad}_piece{i}" geom1="{geom}" geom2="piece{i}" condim="4" '
-                f'friction="{pad_fr}" solref="{_fmt(mjc.pad_solref)}" '
-                f'solimp="{_fmt(mjc.pad_solimp)}"/>'
-            )
-    if gripper.mjcf is not None and gripper.mjcf.link_contacts:
-        for i in range(len(pad_pieces)):
-            for k, link in enumerate(mjcf_gripper.link_geoms(gripper.mjcf)):
-                pairs.append(
-                    f'    <pair name="link{k}_piece{i}" geom1="{mjcf_gripper.PREFIX + link}" '
-                    f'geom2="piece{i}" condim="3" friction="{pad_fr}" '
-                    f'solref="{_fmt(mjc.pad_solref)}" solimp="{_fmt(mjc.pad_solimp)}"/>'
-                )
-    pairs.append(
-        f'    <pair name="table_hull" geom1="table" geom2="hull" condim="3" '
-        f'friction="{tab_fr}" solref="{_fmt(mjc.table_solref)}" '
-        f'solimp="{_fmt(mjc.table_solimp)}"/>'
-    )
+    pairs = _contact_pairs_xml(gripper, mjc, len(pad_pieces))
     table_size = _fmt([TABLE_HALF_SIZE_M, TABLE_HALF_SIZE_M, 0.01])
-    lift_range = _fmt([-LIFT_FORCE_LIMIT_N, LIFT_FORCE_LIMIT_N])
-    actuators = f"""    <position name="lift" joint="lift" kp="{LIFT_STIFFNESS_N_PER_M:.9g}"
-              kv="{LIFT_DAMPING_NS_PER_M:.9g}" forcerange="{lift_range}"/>"""
-    if kinematics is None:
-        gripper_body = _parallel_jaw_body_xml(gripper, z_grip, pad_box_mm)
-        actuators += "\n" + _parallel_jaw_actuators_xml(gripper)
-    else:
-        # the pads' centre at the grasp height when fully open (lift 0)
-        z_mount = z_grip - float(kinematics.pad_centre_z[0])
-        gripper_body = f"""    <body name="gripper" pos="0 0 {z_mount:.9g}" gravcomp="1">
-      <joint name="lift" type="slide" axis="0 0 1"/>
-      <inertial pos="0 0 0" mass="{MJCF_CARRIAGE_MASS_KG:.9g}" diaginertia="1e-3 1e-3 1e-3"/>
-    </body>"""
+    gripper_body, actuators = _gripper_xml(gripper, kinematics, z_grip, pad_box_mm)
     return f"""<mujoco model="mjx_pick {obj.name} {gripper.name}">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{solver.timestep_s:.9g}" cone="{solver.cone}" impratio="{solver.impratio:.9g}"
@@ -372,6 +309,95 @@ def scene_xml(
   </sensor>
 </mujoco>
 """
+
+
+def _object_meshes_xml(obj: ObjectModel, pad_pieces: list) -> tuple[list[str], str]:
+    """The object's meshes (visual, the convex pieces the pads touch, the hull the table
+    touches) and its collision geoms: (asset lines, body lines)."""
+    meshes = [
+        f'<mesh name="visual" vertex="{_fmt(obj.mesh.vertices)}" face="{_fmt(obj.mesh.faces)}"/>'
+    ]
+    meshes += [
+        f'<mesh name="piece{i}" vertex="{_fmt(v)}" maxhullvert="{MAX_HULL_VERTICES}"/>'
+        for i, v in enumerate(pad_pieces)
+    ]
+    # a rigid body on a plane touches it only on its convex hull: one table pair. The
+    # hull is capped at MAX_HULL_VERTICES (32) (MuJoCo/MJX want no face of more than 20); for a
+    # flat object that trims the support polygon's corners by well under a millimetre
+    hull = _fmt(np.vstack(obj.pieces))
+    meshes.append(f'<mesh name="hull" vertex="{hull}" maxhullvert="{MAX_HULL_VERTICES}"/>')
+    pieces = "\n".join(
+        f'      <geom name="piece{i}" type="mesh" mesh="piece{i}" group="3" rgba=".9 .5 .1 .5"/>'
+        for i in range(len(pad_pieces))
+    )
+    pieces += '\n      <geom name="hull" type="mesh" mesh="hull" group="4" rgba=".5 .5 .5 .3"/>'
+    return meshes, pieces
+
+
+def _contact_pairs_xml(gripper: GripperSpec, mjc: MujocoContact, n_pieces: int) -> list[str]:
+    """The scene's only contacts, as explicit pairs: each pad (an MJCF gripper's pad
+    geoms, and its links where it asks for them) with each object piece, and the table
+    with the object's hull."""
+    pad_fr = _fmt([mjc.pad_friction, mjc.pad_friction, mjc.pad_torsion_m, 0.0001, 0.0001])
+    tab_fr = _fmt([mjc.table_friction, mjc.table_friction, 0.005, 0.0001, 0.0001])
+    if gripper.mjcf is None:
+        pad_geoms = [("pad_left", "pad_left"), ("pad_right", "pad_right")]
+    else:
+        # pair names start with pad_left / pad_right (SceneIndex.pad_pairs finds them)
+        pad_geoms = [
+            (f"{side}{k}", mjcf_gripper.PREFIX + g)
+            for side, geoms in (
+                ("pad_left", gripper.mjcf.pad_left_geoms),
+                ("pad_right", gripper.mjcf.pad_right_geoms),
+            )
+            for k, g in enumerate(geoms)
+        ]
+    pairs = []
+    for i in range(n_pieces):
+        for pad, geom in pad_geoms:
+            pairs.append(
+                f'    <pair name="{pad}_piece{i}" geom1="{geom}" geom2="piece{i}" condim="4" '
+                f'friction="{pad_fr}" solref="{_fmt(mjc.pad_solref)}" '
+                f'solimp="{_fmt(mjc.pad_solimp)}"/>'
+            )
+    if gripper.mjcf is not None and gripper.mjcf.link_contacts:
+        for i in range(n_pieces):
+            for k, link in enumerate(mjcf_gripper.link_geoms(gripper.mjcf)):
+                pairs.append(
+                    f'    <pair name="link{k}_piece{i}" geom1="{mjcf_gripper.PREFIX + link}" '
+                    f'geom2="piece{i}" condim="3" friction="{pad_fr}" '
+                    f'solref="{_fmt(mjc.pad_solref)}" solimp="{_fmt(mjc.pad_solimp)}"/>'
+                )
+    pairs.append(
+        f'    <pair name="table_hull" geom1="table" geom2="hull" condim="3" '
+        f'friction="{tab_fr}" solref="{_fmt(mjc.table_solref)}" '
+        f'solimp="{_fmt(mjc.table_solimp)}"/>'
+    )
+    return pairs
+
+
+def _gripper_xml(
+    gripper: GripperSpec,
+    kinematics: mjcf_gripper.Kinematics | None,
+    z_grip: float,
+    pad_box_mm: tuple[float, float, float] | None,
+) -> tuple[str, str]:
+    """The gripper's body and the actuators (the lift's and a parallel jaw's): (body,
+    actuators). An MJCF gripper's body here is its carriage only (see scene_xml)."""
+    lift_range = _fmt([-LIFT_FORCE_LIMIT_N, LIFT_FORCE_LIMIT_N])
+    actuators = f"""    <position name="lift" joint="lift" kp="{LIFT_STIFFNESS_N_PER_M:.9g}"
+              kv="{LIFT_DAMPING_NS_PER_M:.9g}" forcerange="{lift_range}"/>"""
+    if kinematics is None:
+        gripper_body = _parallel_jaw_body_xml(gripper, z_grip, pad_box_mm)
+        actuators += "\n" + _parallel_jaw_actuators_xml(gripper)
+    else:
+        # the pads' centre at the grasp height when fully open (lift 0)
+        z_mount = z_grip - float(kinematics.pad_centre_z[0])
+        gripper_body = f"""    <body name="gripper" pos="0 0 {z_mount:.9g}" gravcomp="1">
+      <joint name="lift" type="slide" axis="0 0 1"/>
+      <inertial pos="0 0 0" mass="{MJCF_CARRIAGE_MASS_KG:.9g}" diaginertia="1e-3 1e-3 1e-3"/>
+    </body>"""
+    return gripper_body, actuators
 
 
 def _parallel_jaw_body_xml(

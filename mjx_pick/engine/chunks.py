@@ -2,7 +2,9 @@
 
 ``evaluate``, ``sweep``, ``compare``, ``design``, ``robust`` and ``calibrate`` each
 claim their output folder (``rundir.claim``) under a configuration key; a
-:class:`ChunkStore` then keeps, under ``chunks/``,
+:class:`ChunkStore` then keeps, under ``chunks/`` (or ``chunks/<command>/`` for a
+command that adds its results to another command's folder: robust into an evaluate
+folder),
 
 * ``plan.json`` -- the folder's key and the chunk size of each kind of run in it,
   saved (atomically) before the first chunk of that kind is simulated. A resumed run
@@ -32,6 +34,7 @@ in the outputs); a run that stops early keeps them for ``resume``.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import shutil
@@ -45,7 +48,14 @@ import pyarrow.parquet as pq
 
 from mjx_pick.core.config import ConfigError, to_dict, write_json, write_parquet
 from mjx_pick.engine.backend import Backend, PickInputs
-from mjx_pick.outputs.rundir import claim, config_hash, is_complete
+from mjx_pick.outputs.rundir import (
+    claim,
+    config_hash,
+    flat_settings,
+    is_complete,
+    read_manifest,
+    what_changed,
+)
 
 
 class ChunkStore:
@@ -57,11 +67,25 @@ class ChunkStore:
       resume: continue from the chunks there; without it, a folder that holds chunks
         is refused (ConfigError) before anything is simulated, as is one whose chunks
         belong to another configuration.
+      command: a command that adds its results to another command's folder (robust
+        into an evaluate folder) keeps its chunks apart, under ``chunks/<command>/``:
+        the folder's own chunks and manifest are the other command's.
+      settings: the settings hashed into key (JSON-able), kept in ``plan.json`` so
+        that a refused resume names each setting that changed.
     """
 
-    def __init__(self, out_dir: str | Path, key: str, resume: bool = False):
-        self.dir = Path(out_dir) / "chunks"
+    def __init__(
+        self,
+        out_dir: str | Path,
+        key: str,
+        resume: bool = False,
+        *,
+        command: str | None = None,
+        settings: dict | None = None,
+    ):
+        self.dir = self.folder(out_dir, command)
         self.key = key
+        self.settings = flat_settings(settings) if settings is not None else None
         has_chunks = any(self.dir.glob("part-*.parquet"))
         saved = self._saved()
         if has_chunks and not resume:
@@ -75,13 +99,21 @@ class ChunkStore:
                 "they cannot be resumed: choose another --out or pass --overwrite"
             )
         if has_chunks and saved.get("key") != key:
+            changed = what_changed(saved, self.settings) if self.settings is not None else ""
             raise ConfigError(
-                f"{out_dir} holds a run with a different configuration; it cannot be resumed "
-                "with these settings (choose another --out)"
+                f"{out_dir} holds a run with a different configuration{changed}; it cannot be "
+                "resumed with these settings (choose another --out)"
             )
         # kind of run -> pick-points per chunk; kept from the folder's chunks when resuming
         self.sizes: dict[str, int] = dict(saved["chunk_sizes"]) if has_chunks else {}
         self.read_chunks = self.written_chunks = 0
+
+    @staticmethod
+    def folder(out_dir: str | Path, command: str | None = None) -> Path:
+        """Where a run's chunks are kept: ``chunks/``, or ``chunks/<command>/`` for a
+        command that joined another command's folder."""
+        base = Path(out_dir) / "chunks"
+        return base / command if command else base
 
     @property
     def plan_path(self) -> Path:
@@ -104,7 +136,10 @@ class ChunkStore:
             raise ConfigError(f"chunk_size = {proposed} is out of range: allowed >= 1")
         if kind not in self.sizes:
             self.sizes[kind] = int(proposed)
-            write_json(self.plan_path, {"key": self.key, "chunk_sizes": self.sizes})
+            plan = {"key": self.key, "chunk_sizes": self.sizes}
+            if self.settings is not None:
+                plan["settings"] = self.settings
+            write_json(self.plan_path, plan)
         return self.sizes[kind]
 
     def path(self, name: str) -> Path:
@@ -145,6 +180,9 @@ class ChunkStore:
     def remove(self) -> None:
         """Drop the chunks once the run's outputs are written (they hold every row)."""
         shutil.rmtree(self.dir, ignore_errors=True)
+        if self.dir.name != "chunks":  # a joined command's: chunks/ goes once it is empty
+            with contextlib.suppress(OSError):
+                self.dir.parent.rmdir()
 
 
 class BackendChunks:
@@ -193,19 +231,33 @@ def row_digests(settings: list, sizes: list[int]) -> np.ndarray:
 
 
 def open_store(
-    out: str | Path | None, command: str, request: dict, *, resume: bool, overwrite: bool
+    out: str | Path | None,
+    command: str,
+    request: dict,
+    *,
+    resume: bool,
+    overwrite: bool,
+    joins: tuple[str, ...] = (),
 ) -> tuple[ChunkStore | None, bool]:
     """A resumable study's output folder, before it simulates: the folder claimed for
     command under request's configuration key and its :class:`ChunkStore` -- or, on
     resume, whether the folder already holds this study complete (the caller reads it
-    back and simulates nothing). Returns (store, complete); (None, False) without out."""
+    back and simulates nothing). Returns (store, complete); (None, False) without out.
+
+    joins: commands whose folder this one may add its results to (``rundir.claim``);
+    in such a folder the study's chunks are its own (``chunks/<command>/``), and
+    overwrite drops them (not the other command's files)."""
     if out is None:
         return None, False
     key = config_hash(request)
     if resume and not overwrite and is_complete(out, command, key):
         return None, True
-    claim(out, command, key, resume=resume, overwrite=overwrite, settings=request)
-    return ChunkStore(out, key, resume), False
+    claim(out, command, key, resume=resume, overwrite=overwrite, joins=joins, settings=request)
+    joined = (read_manifest(out) or {}).get("command") != command
+    if joined and overwrite:
+        shutil.rmtree(ChunkStore.folder(out, command), ignore_errors=True)
+    own = command if joined else None
+    return ChunkStore(out, key, resume, command=own, settings=request), False
 
 
 def _unreadable(path: Path, err: BaseException) -> None:

@@ -69,8 +69,15 @@ def read_manifest(path: str | os.PathLike) -> dict | None:
 
 
 def is_complete(path: str | os.PathLike, command: str, key: str) -> bool:
-    """True when path holds a complete run of command with this configuration key."""
+    """True when path holds a complete run of command with this configuration key: in
+    its own folder (the manifest's), or added to another command's folder (its
+    ``run-<command>.json``, see :func:`finish`)."""
     m = read_manifest(path) or {}
+    if m.get("command") not in (None, command):
+        try:
+            m = json.loads((Path(path) / f"run-{command}.json").read_text())
+        except (OSError, ValueError):
+            return False
     return (m.get("command"), m.get("config_key"), m.get("status")) == (command, key, "complete")
 
 
@@ -272,7 +279,10 @@ def changed_settings(old: dict | None, new: dict | None) -> list[str]:
     ]
 
 
-def _what_changed(old: dict, settings: dict | None) -> str:
+def what_changed(old: dict, settings: dict | None) -> str:
+    """What a refusal appends to name the settings that changed, ' -- changed: a: 1 ->
+    2; ...', between a record's settings (old["settings"], flat) and settings (flat);
+    why it cannot say, or "" when nothing differs."""
     lines = changed_settings(old.get("settings"), settings)
     if not lines:
         if old.get("settings") is None:
@@ -397,7 +407,7 @@ def _decide(path, command, key, old, joined, taken, resume, overwrite, flat) -> 
     if old.get("config_key") != key:
         raise ConfigError(
             f"--out {path}: holds `mjx-pick {command}` results of another configuration{kept}"
-            f"{_what_changed(old, flat)}. Keep them and write elsewhere with --out NEW "
+            f"{what_changed(old, flat)}. Keep them and write elsewhere with --out NEW "
             f"(or run with the folder's settings and --resume); --overwrite deletes them"
         )
 
@@ -425,6 +435,7 @@ def finish(
     timing: dict | None = None,
     message: str | None = None,
     release_lock: bool = True,
+    key: str | None = None,
 ) -> Path:
     """Record that a command's run in `path` ended, and write its metadata.
 
@@ -438,6 +449,9 @@ def finish(
       config: the merged configuration of the run (JSON-able).
       seed, backend, device: what ran ('mujoco', 'cpu:2 threads', ...).
       timing: seconds, e.g. ``runner.Runner.describe()['timing']`` plus wall_s.
+      key: the configuration key of a command that joined another command's folder
+        (its own folder's key is the manifest's): recorded, so that
+        :func:`is_complete` knows the run again.
 
     Returns:
       the metadata file: ``run.json``, or ``run-<command>.json`` for a command that
@@ -459,7 +473,7 @@ def finish(
         "command": command,
         "status": status,
         "message": message,
-        "config_key": manifest.get("config_key") if own else None,
+        "config_key": manifest.get("config_key") if own else key,
         "started": manifest.get("started") if own else None,
         "finished": now,
         "seed": seed,

@@ -21,6 +21,7 @@ hurts); a pick-point that fails at hi gets NaN, one that succeeds at lo gets lo.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import time
 from pathlib import Path
 from typing import NamedTuple
@@ -33,8 +34,9 @@ from mjx_pick.core.config import ConfigError, check_range, to_dict, write_json, 
 from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.core.objects import ObjectModel, check_same_object
 from mjx_pick.engine.backend import Settings
-from mjx_pick.engine.simulator import Simulator, showing_progress
-from mjx_pick.outputs.rundir import claim, config_hash, finish
+from mjx_pick.engine.chunks import ChunkStore, open_store
+from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
+from mjx_pick.outputs.rundir import config_hash, finish, portable_object, release
 from mjx_pick.studies.options import RunOptions
 
 
@@ -119,17 +121,20 @@ def robustness(
     sigma_xy_mm: float = 2.0,
     sigma_yaw_deg: float = 3.0,
     simulator: Simulator | None = None,
-    _claimed: bool = False,
     **run,
 ) -> pa.Table:
     """Robust success probability of each pick-point; rows ranked best first.
 
     m draws per pick-point, each moved by N(0, sigma_xy_mm) in x and y (mm) and
     N(0, sigma_yaw_deg) in yaw (deg). options, or its fields as keywords
-    (``options.RunOptions``; n and resume are not used): out is a new folder, or the
-    evaluate folder the pick-points came from (its files stay; robustness.parquet and
-    robustness.json join them); ray simulates the draws on a Ray cluster ("auto" or
-    "HOST:PORT"; mjx_pick.engine.cluster), this process writing out; progress: a
+    (``options.RunOptions``; n is not used): out is a new folder, or the evaluate
+    folder the pick-points came from (its files stay; robustness.parquet and
+    robustness.json join them); finished chunks are kept there as the draws are
+    simulated (``engine.chunks.ChunkStore``; in an evaluate folder under
+    ``chunks/robust/``) and removed once the outputs are written. resume: continue an
+    interrupted run of this configuration in out from its chunks (on a complete one:
+    read it back, simulate nothing). ray simulates the draws on a Ray cluster ("auto"
+    or "HOST:PORT"; mjx_pick.engine.cluster), this process writing out; progress: a
     progress bar of the simulations on stderr. simulator: as sweep's.
 
     Returns a table with pick_id, x_mm, y_mm, yaw_deg, robust_p, robust_ci_low,
@@ -138,50 +143,106 @@ def robustness(
     """
     opts = RunOptions.of(options, **run)
     opts.only("robustness", *_ROBUST_FIELDS)
-    seed, pick_config, out = opts.seed, opts.pick_config, opts.out
     check_draws(m, sigma_xy_mm, sigma_yaw_deg)
+    opts.check_resume()
+    base = base or Settings()
+    draws = _Draws(m, sigma_xy_mm, sigma_yaw_deg)
     with opts.simulator(obj, simulator) as sim:
-        base = base or Settings()
-        if out is not None and not _claimed:
-            request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
-            request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, k=len(picks))
-            claim(
-                out,
-                "robust",
-                config_hash(request),
-                overwrite=opts.overwrite,
-                joins=("evaluate",),
-                settings=request,
-            )
+        request = _request(obj, base, opts, draws, pick_points=_digest(picks))
+        store, complete = _open(opts, request)
+        if complete:
+            return _read_robust(Path(opts.out))
         t0 = time.perf_counter()
-        k = len(picks)
-        placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, seed, pick_config)
-        desc = f"robustness: {k} pick-points x {m} draws ({sim.runner.backend_name})"
-        with showing_progress(sim.runner, desc, "sim", opts.progress):
-            (out_d,) = sim.run([(base, placed.draws)])
-        table = _robust_table(picks, placed, out_d, m)
-        if out is not None:
-            out_dir = Path(out)
-            write_parquet(out_dir / "robustness.parquet", table)
-            write_json(
-                out_dir / "robustness.json",
-                {
-                    "object": obj.summary(),
-                    "settings": to_dict(base),
-                    "m": m,
-                    "sigma_xy_mm": sigma_xy_mm,
-                    "sigma_yaw_deg": sigma_yaw_deg,
-                    "seed": seed,
-                    "ranking": table.slice(0, 50).to_pylist(),
-                },
-            )
-            config = {"object": obj.summary(), "settings": to_dict(base), "m": m, "k": k}
-            config.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, seed=seed)
-            config["picks"] = to_dict(pick_config)
-            # in an evaluate folder: run-robust.json beside evaluate's own run.json
-            meta = sim.runner.describe(time.perf_counter() - t0)
-            finish(out_dir, command="robust", config=config, seed=seed, **meta)
+        desc = f"robustness: {len(picks)} pick-points x {m} draws ({sim.runner.backend_name})"
+        with (
+            marking_stops(opts.out, "robust"),
+            showing_progress(sim.runner, desc, "sim", opts.progress),
+        ):
+            table = _robustness(obj, picks, base, sim, store, draws, opts)
+        _write(obj, base, opts, draws, table, sim, store, request, t0)
         return table
+
+
+class _Draws(NamedTuple):
+    """How the real poses are drawn around each reported one (see :func:`robustness`)."""
+
+    m: int
+    sigma_xy_mm: float
+    sigma_yaw_deg: float
+
+
+def _request(obj: ObjectModel, base: Settings, opts: RunOptions, draws: _Draws, **more) -> dict:
+    """What decides a robust run's table: its configuration key's settings."""
+    request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
+    request.update(draws._asdict(), seed=opts.seed, picks=to_dict(opts.picks))
+    return {**request, **more}
+
+
+def _digest(picks: pp.PickBatch) -> str:
+    """The reported pick-points as part of a configuration key: ids, poses, openings."""
+    h = hashlib.sha256()
+    for a in (picks.pick_id, picks.x_mm, picks.y_mm, picks.yaw_deg, picks.opening_mm):
+        h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    return h.hexdigest()[:16]
+
+
+def _open(opts: RunOptions, request: dict) -> tuple[ChunkStore | None, bool]:
+    """robust's output folder claimed (a new one, or added to an evaluate folder) and
+    its chunks, or whether it holds this run complete already (``chunks.open_store``)."""
+    return open_store(
+        opts.out,
+        "robust",
+        request,
+        resume=opts.resume,
+        overwrite=opts.overwrite,
+        joins=("evaluate",),
+    )
+
+
+def _robustness(obj, picks, base, sim, store, draws: _Draws, opts: RunOptions) -> pa.Table:
+    """robustness's draws simulated through sim (chunks read from and saved to store,
+    when given) and its table; nothing written."""
+    m, sigma_xy_mm, sigma_yaw_deg = draws
+    placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, opts.seed, opts.picks)
+    (out_d,) = sim.run([(base, placed.draws)], store)
+    return _robust_table(picks, placed, out_d, m)
+
+
+def _write(obj, base, opts: RunOptions, draws: _Draws, table, sim, store, request, t0) -> None:
+    """robust's outputs in opts.out (nothing without it): robustness.parquet and
+    robustness.json, the run's record, then its chunks are dropped."""
+    if opts.out is None:
+        return
+    out_dir = Path(opts.out)
+    write_parquet(out_dir / "robustness.parquet", table)
+    record = {"object": obj.summary(), "settings": to_dict(base), **draws._asdict()}
+    record["seed"] = opts.seed
+    write_json(out_dir / "robustness.json", {**record, "ranking": table.slice(0, 50).to_pylist()})
+    config = {"object": obj.summary(), "settings": to_dict(base), "m": draws.m, "k": len(table)}
+    config.update(sigma_xy_mm=draws.sigma_xy_mm, sigma_yaw_deg=draws.sigma_yaw_deg)
+    config.update(seed=opts.seed, picks=to_dict(opts.picks))
+    # in an evaluate folder: run-robust.json beside evaluate's own run.json, with this
+    # run's key (rundir.is_complete reads it)
+    meta = sim.runner.describe(time.perf_counter() - t0)
+    key = config_hash(request)
+    finish(
+        out_dir,
+        command="robust",
+        config=config,
+        seed=opts.seed,
+        key=key,
+        release_lock=False,
+        **meta,
+    )
+    store.remove()  # every row is in robustness.parquet now
+    release(out_dir)
+
+
+def _read_robust(out_dir: Path) -> pa.Table:
+    """A complete robust run's table, read back (nothing simulated)."""
+    import pyarrow.parquet as pq
+
+    return pq.read_table(out_dir / "robustness.parquet")
 
 
 def _robust_table(picks: pp.PickBatch, placed: Placements, out_d: dict, m: int) -> pa.Table:
@@ -224,7 +285,7 @@ def _robust_table(picks: pp.PickBatch, placed: Placements, out_d: dict, m: int) 
     ).take(pa.array(order))
 
 
-# the RunOptions fields robustness uses (it takes its pick-points: no n; no resume)
+# the RunOptions fields robustness uses (it takes its pick-points: no n)
 _ROBUST_FIELDS = (
     "seed",
     "pick_config",
@@ -232,6 +293,7 @@ _ROBUST_FIELDS = (
     "batch_size",
     "out",
     "overwrite",
+    "resume",
     "ray",
     "progress",
 )
@@ -313,39 +375,45 @@ def robust_best(
     results: an evaluate folder (or its results.parquet) of this object to take them
     from; without it, ``n`` (default 1000) pick-points drawn with ``seed`` are
     simulated first. m, sigma_xy_mm (mm), sigma_yaw_deg (deg): as :func:`robustness`.
-    options, or its fields as keywords (``options.RunOptions``; resume is not used):
-    out, overwrite as :func:`robustness`; ray: every simulation on a Ray cluster ("auto"
-    or "HOST:PORT"; mjx_pick.engine.cluster). simulator: run through this one (e.g. a
-    caller's on a cluster, kept open; backend, batch_size and ray are then its own).
-    Every input is checked, and out claimed, before anything is simulated. progress:
-    one progress bar on stderr over every simulation (the n pick-points, then the draws).
+    options, or its fields as keywords (``options.RunOptions``): out, overwrite and
+    resume as :func:`robustness` (the n pick-points' chunks are kept and resumed
+    too); ray: every simulation on a Ray cluster ("auto" or "HOST:PORT";
+    mjx_pick.engine.cluster). simulator: run through this one (e.g. a caller's on a
+    cluster, kept open; backend, batch_size and ray are then its own). Every input is
+    checked, and out claimed, before anything is simulated. progress: one progress bar
+    on stderr over every simulation (the n pick-points, then the draws).
     """
     opts = RunOptions.of(options, **run)
     opts.only("robust", "n", *_ROBUST_FIELDS)
-    n, seed, out = opts.n_or(1000), opts.seed, opts.out
-    pick_config = opts.picks
+    n = opts.n_or(1000)
     check_draws(m, sigma_xy_mm, sigma_yaw_deg)
     check_range("robust", "top_k", top_k, 1, 100_000)
     if results is None:
         check_range("robust", "n", n, 1, 1e8)
+    opts.check_resume()
     table = _read_results(Path(results), obj) if results is not None else None
+    draws = _Draws(m, sigma_xy_mm, sigma_yaw_deg)
     with opts.simulator(obj, simulator) as sim:
-        if out is not None:
-            request = {"object": obj.summary(), "base": to_dict(base), "m": m, "seed": seed}
-            request.update(sigma_xy_mm=sigma_xy_mm, sigma_yaw_deg=sigma_yaw_deg, top_k=top_k)
-            request.update(results=str(results) if results is not None else None, n=n)
-            key = config_hash(request)
-            claim(out, "robust", key, overwrite=opts.overwrite, joins=("evaluate",))
-        options = {"m": m, "sigma_xy_mm": sigma_xy_mm, "sigma_yaw_deg": sigma_yaw_deg}
-        options.update(out=out, _claimed=True)
+        source = str(results) if results is not None else None
+        request = _request(obj, base, opts, draws, top_k=top_k, results=source, n=n)
+        store, complete = _open(opts, request)
+        if complete:
+            return _read_robust(Path(opts.out))
+        t0 = time.perf_counter()
         desc = f"robust ({sim.runner.backend_name})"
-        with showing_progress(sim.runner, desc, "sim", opts.progress):
-            return _robust_best(obj, base, sim, table, n, top_k, seed, pick_config, options)
+        with (
+            marking_stops(opts.out, "robust"),
+            showing_progress(sim.runner, desc, "sim", opts.progress),
+        ):
+            picks = _best_picks(obj, base, sim, store, table, n, top_k, opts)
+            ranked = _robustness(obj, picks, base, sim, store, draws, opts)
+        _write(obj, base, opts, draws, ranked, sim, store, request, t0)
+        return ranked
 
 
-def _robust_best(obj, base, sim, results, n, top_k, seed, pick_config, options) -> pa.Table:
-    """robust_best once its simulator (and progress bar) is set up; results: the
-    evaluate table to take the best pick-points from, or None."""
+def _best_picks(obj, base, sim, store, results, n, top_k, opts: RunOptions) -> pp.PickBatch:
+    """The top_k best successful pick-points: of results (an evaluate table), or of n
+    pick-points simulated through sim (chunks read from and saved to store)."""
     from mjx_pick.core.metrics import best_successes
 
     if results is not None:
@@ -353,18 +421,15 @@ def _robust_best(obj, base, sim, results, n, top_k, seed, pick_config, options) 
         x, y, yaw, ids = (np.asarray(table[c]) for c in ("x_mm", "y_mm", "yaw_deg", "pick_id"))
         success, score = np.asarray(table["success"]), np.asarray(table["score"], float)
     else:
-        picks = pp.generate_normal(obj, base.gripper, n, seed, pick_config, base.grasp)
-        (out,) = sim.run([(base, picks)])
+        picks = pp.generate_normal(obj, base.gripper, n, opts.seed, opts.picks, base.grasp)
+        (out,) = sim.run([(base, picks)], store)
         x, y, yaw, ids = picks.x_mm, picks.y_mm, picks.yaw_deg, picks.pick_id
         success, score = out["success"], out["score"]
     top = best_successes(success, score, top_k)
     if len(top) == 0:
         raise ConfigError("no successful pick-point to test: evaluate more pick-points first")
-    checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
-    picks = checker.batch(ids[top], x[top], y[top], yaw[top], "robustness")
-    return robustness(
-        obj, picks, base, seed=seed, pick_config=pick_config, simulator=sim, **options
-    )
+    checker = pp.FeasibilityChecker(obj, base.gripper, opts.picks, base.grasp)
+    return checker.batch(ids[top], x[top], y[top], yaw[top], "robustness")
 
 
 def _read_results(path: Path, obj: ObjectModel) -> pa.Table:

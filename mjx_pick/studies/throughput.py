@@ -202,39 +202,9 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
     order = sorted(runs, key=lambda r: r.backend != "mujoco")
     for spec in order:
         scene, inputs = scene_for(spec)
-        n_sub = grasp.substeps(scene.solver)
-        full_steps = grasp.n_ticks() * n_sub
         n = min(spec.n, len(inputs))
-        t_build = time.perf_counter()
-        runner = Runner(spec.backend, spec.batch, **spec.backend_options(scene, grasp))
-        backend = runner.make(scene, grasp)
-        build_s = time.perf_counter() - t_build
-        warm_s = 0.0
-        if spec.warmup:
-            warm = inputs.take(slice(0, min(spec.warmup, n)))
-            warm_s = runner.run(backend, warm, chunk_size=len(warm)).timing.wall_s
-        pool = getattr(backend, "pool_stats", None)
-        before = dataclasses.replace(pool) if pool is not None else None
-        compile_before = backend.stats.compile_s
-        # the timed run is one backend call (one chunk): a refilled pool runs it whole
-        timed = runner.run(backend, inputs.take(slice(0, n)), chunk_size=n)
-        out, wall, run_s = timed.results, timed.timing.wall_s, timed.timing.run_s
+        timing, out, backend = _timed_run(spec, scene, inputs.take(slice(0, n)), grasp)
         results[spec.label] = out
-        refilled = pool is not None and pool.rounds > before.rounds
-        if refilled:
-            slot_ticks = pool.slot_ticks - before.slot_ticks
-            pick_ticks = pool.pick_ticks - before.pick_ticks
-            device_steps = slot_ticks * n_sub
-            steps_per_pick = pick_ticks * n_sub / n
-            occupancy = pick_ticks / slot_ticks
-        elif spec.backend == "mujoco":
-            device_steps = steps_per_pick = occupancy = None  # it stops finished picks
-        else:
-            padded = -(-n // backend.batch_size) * backend.batch_size
-            device_steps = padded * full_steps
-            steps_per_pick = full_steps
-            occupancy = n / padded
-        peak = peak_bytes() if spec.backend != "mujoco" else None
         row = {
             "object": obj_name,
             "run": spec.label,
@@ -242,52 +212,10 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
             "device": backend.device,
             "n": n,
             "distinct_picks": min(n, distinct),
-            "batch": backend.batch_size,
-            "setup_s": round(build_s, 2),
-            "compile_s": round(backend.stats.compile_s, 2),
-            "compile_in_run_s": round(backend.stats.compile_s - compile_before, 2),
-            "warmup_s": round(warm_s, 2),
-            "run_s": round(run_s, 3),
-            "wall_s": round(wall, 3),
-            "picks_per_s": round(n / run_s, 1),
-            "physics_steps_per_s": round(device_steps / run_s) if device_steps else None,
-            "steps_per_pick": round(steps_per_pick, 1) if steps_per_pick else None,
-            "full_steps_per_pick": full_steps,
-            "occupancy": round(occupancy, 4) if occupancy is not None else None,
-            "peak_mem_mb_per_pick": round(peak / backend.batch_size / 2**20, 3) if peak else None,
-            "success_rate": round(float(np.mean(out["success"])), 4),
-            "diverged": int(np.sum(out["diverged"])),
         }
-        buffers = getattr(backend, "buffers", None)
-        if buffers is not None:
-            diag = backend.last_diagnostics
-            row.update(
-                {
-                    "buffer_contacts": buffers.contacts,
-                    "buffer_rows": buffers.rows,
-                    "measured_contacts_c": buffers.measured_contacts,
-                    "measured_rows_c": buffers.measured_rows,
-                    "max_rows_used": int(diag.nefc_max.max()),
-                    "max_contacts_used_per_world": round(
-                        float(diag.nacon_max.max()) / backend.pool_size(n)
-                        if backend.refill
-                        else float(diag.nacon_max.max()) / backend.batch_size,
-                        2,
-                    ),
-                    "buffer_growths": backend.growths,
-                }
-            )
-        ref = next((k for k in results if k.startswith("mujoco")), None)
-        if ref is not None and ref != spec.label:
-            m = min(n, len(results[ref]["success"]))
-            c = results[ref]
-            row["labels_vs_c_n"] = m
-            row["labels_agree_vs_c"] = round(
-                float(np.mean(out["success"][:m] == c["success"][:m])), 4
-            )
-            row["failure_agree_vs_c"] = round(
-                float(np.mean(out["failure"][:m] == c["failure"][:m])), 4
-            )
+        row.update(_run_fields(backend, out, n, timing))
+        row.update(_buffer_fields(backend, n))
+        row.update(_agreement_with_c(results, spec.label, out, n))
         row.update(
             {
                 "timestep_s": scene.solver.timestep_s,
@@ -303,6 +231,115 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
         if on_row is not None:
             on_row(row)
     return rows
+
+
+def _timed_run(spec: RunSpec, scene, inputs, grasp) -> tuple[dict, dict, object]:
+    """One RunSpec on inputs: its backend built, warmed up and timed on one backend
+    call (one chunk: a refilled pool runs it whole). Returns (its timing and step
+    counts for :func:`_run_fields`, the results, the backend)."""
+    n_sub = grasp.substeps(scene.solver)
+    full_steps = grasp.n_ticks() * n_sub
+    n = len(inputs)
+    t_build = time.perf_counter()
+    runner = Runner(spec.backend, spec.batch, **spec.backend_options(scene, grasp))
+    backend = runner.make(scene, grasp)
+    build_s = time.perf_counter() - t_build
+    warm_s = 0.0
+    if spec.warmup:
+        warm = inputs.take(slice(0, min(spec.warmup, n)))
+        warm_s = runner.run(backend, warm, chunk_size=len(warm)).timing.wall_s
+    pool = getattr(backend, "pool_stats", None)
+    before = dataclasses.replace(pool) if pool is not None else None
+    compile_before = backend.stats.compile_s
+    timed = runner.run(backend, inputs, chunk_size=n)
+    refilled = pool is not None and pool.rounds > before.rounds
+    if refilled:
+        slot_ticks = pool.slot_ticks - before.slot_ticks
+        pick_ticks = pool.pick_ticks - before.pick_ticks
+        device_steps = slot_ticks * n_sub
+        steps_per_pick = pick_ticks * n_sub / n
+        occupancy = pick_ticks / slot_ticks
+    elif spec.backend == "mujoco":
+        device_steps = steps_per_pick = occupancy = None  # it stops finished picks
+    else:
+        padded = -(-n // backend.batch_size) * backend.batch_size
+        device_steps = padded * full_steps
+        steps_per_pick = full_steps
+        occupancy = n / padded
+    timing = {
+        "build_s": build_s,
+        "compile_before": compile_before,
+        "warm_s": warm_s,
+        "run_s": timed.timing.run_s,
+        "wall_s": timed.timing.wall_s,
+        "device_steps": device_steps,
+        "steps_per_pick": steps_per_pick,
+        "full_steps": full_steps,
+        "occupancy": occupancy,
+        "peak": peak_bytes() if spec.backend != "mujoco" else None,
+    }
+    return timing, timed.results, backend
+
+
+def _run_fields(backend, out: dict, n: int, t: dict) -> dict:
+    """A row's timing, step, memory and outcome fields (t: :func:`_timed_run`'s)."""
+    run_s, device_steps, steps_per_pick = t["run_s"], t["device_steps"], t["steps_per_pick"]
+    occupancy, peak = t["occupancy"], t["peak"]
+    return {
+        "batch": backend.batch_size,
+        "setup_s": round(t["build_s"], 2),
+        "compile_s": round(backend.stats.compile_s, 2),
+        "compile_in_run_s": round(backend.stats.compile_s - t["compile_before"], 2),
+        "warmup_s": round(t["warm_s"], 2),
+        "run_s": round(run_s, 3),
+        "wall_s": round(t["wall_s"], 3),
+        "picks_per_s": round(n / run_s, 1),
+        "physics_steps_per_s": round(device_steps / run_s) if device_steps else None,
+        "steps_per_pick": round(steps_per_pick, 1) if steps_per_pick else None,
+        "full_steps_per_pick": t["full_steps"],
+        "occupancy": round(occupancy, 4) if occupancy is not None else None,
+        "peak_mem_mb_per_pick": round(peak / backend.batch_size / 2**20, 3) if peak else None,
+        "success_rate": round(float(np.mean(out["success"])), 4),
+        "diverged": int(np.sum(out["diverged"])),
+    }
+
+
+def _buffer_fields(backend, n: int) -> dict:
+    """Warp's contact and constraint buffers and what the run used of them ({} for a
+    backend without them)."""
+    buffers = getattr(backend, "buffers", None)
+    if buffers is None:
+        return {}
+    diag = backend.last_diagnostics
+    return {
+        "buffer_contacts": buffers.contacts,
+        "buffer_rows": buffers.rows,
+        "measured_contacts_c": buffers.measured_contacts,
+        "measured_rows_c": buffers.measured_rows,
+        "max_rows_used": int(diag.nefc_max.max()),
+        "max_contacts_used_per_world": round(
+            float(diag.nacon_max.max()) / backend.pool_size(n)
+            if backend.refill
+            else float(diag.nacon_max.max()) / backend.batch_size,
+            2,
+        ),
+        "buffer_growths": backend.growths,
+    }
+
+
+def _agreement_with_c(results: dict, label: str, out: dict, n: int) -> dict:
+    """The run's labels (success, failure reason) against MuJoCo C's on the pick-points
+    both ran ({} without a C run, or for the C run itself)."""
+    ref = next((k for k in results if k.startswith("mujoco")), None)
+    if ref is None or ref == label:
+        return {}
+    m = min(n, len(results[ref]["success"]))
+    c = results[ref]
+    return {
+        "labels_vs_c_n": m,
+        "labels_agree_vs_c": round(float(np.mean(out["success"][:m] == c["success"][:m])), 4),
+        "failure_agree_vs_c": round(float(np.mean(out["failure"][:m] == c["failure"][:m])), 4),
+    }
 
 
 def plot_throughput(rows: list[dict], path) -> None:

@@ -167,7 +167,9 @@ class RobustStudy:
         argv += self.form.cli_flags(settings, self.state.workdir, out)
         argv += ["--results", str(out), "--top-k", str(k), "--m", str(m)]
         argv += ["--sigma-xy-mm", repr(float(sig[0])), "--sigma-yaw-deg", repr(float(sig[1]))]
-        argv += ["--out", str(out)]
+        # robust keeps its chunks in the run's folder: a cancelled one started again
+        # continues, and one complete with these settings is read back
+        argv += ["--out", str(out), "--resume"]
 
         job = jobs.Job(argv, self.state.log(f"{out.name}-robust"), out)
         self.panel.start(f"robust {out.name} (top {k} x {m} draws)", job)

@@ -61,91 +61,120 @@ def report(
     parts = len(traced) * (2 if animations else 1) + 1 + len(PAPERS_MM) + 2
     pool = render_pool() if animations and traced else contextlib.nullcontext()
     with ProgressBar("report", "part", enabled=progress, total=parts) as bar, pool as child:
-        forces, anims = [], []
-        for pid, rank in traced:
-            trace = run.trace(pid)
-            row = run.row(pid)
-            label = (
-                f"pick {pid} ({rank}): score {row['score']:.3f}, {row['failure']}"
-                if row["score"] is not None
-                else f"pick {pid} ({rank}): {row['failure']}"
-            )
-            p = out_dir / f"forces_{pid}.png"
-            force_plot(trace, f_d, p, title=label)
-            forces.append((p, label))
-            bar.advance()
-            if animations:
-                g = out_dir / f"anim_{pid}.gif"
-                frames = animate(
-                    run.path / "scene.xml", trace, g, anim_every, anim_size, run.gripper,
-                    pool=child,
-                )  # fmt: skip
-                anims.append((g, f"{label} ({frames} frames; video: {g.with_suffix('.mp4').name})"))
-                bar.advance()
+        anim = (anim_every, anim_size, child) if animations else None
+        forces, anims = _traced_parts(run, out_dir, traced, f_d, anim, bar)
         written["forces"] = [str(p) for p, _ in forces]
         written["animations"] = [str(p) for p, _ in anims]
         written["videos"] = [str(p.with_suffix(".mp4")) for p, _ in anims]
         written.update({key: str(p) for key, p in maps(run, out_dir).items()})
         bar.advance()
 
-        score = np.asarray(run.table["score"], float)
-        order = np.argsort(np.where(np.isnan(score), -np.inf, score))
-        best, worst = order[::-1][:n], order[:n]
-        chosen = []
-        for label, idx in (("best", best), ("worst", worst)):
-            for j, i in enumerate(idx, start=1):
-                r = {
-                    c: run.table[c][int(i)].as_py()
-                    for c in (
-                        "pick_id",
-                        "x_mm",
-                        "y_mm",
-                        "yaw_deg",
-                        "opening_mm",
-                        "score",
-                        "failure",
-                    )
-                }
-                s = "NaN" if r["score"] is None else f"{r['score']:.3f}"
-                r["label"] = f"{label} {j}: pick {r['pick_id']}, score {s}, {r['failure']}"
-                chosen.append(r)
-        templates = {}
-        for paper in PAPERS_MM:
-            p = out_dir / f"template_{paper}.pdf"
-            positioning_template(
-                run.outline,
-                run.gripper,
-                chosen,
-                p,
-                paper,
-                title=f"{name} / {run.gripper.name}: positioning template",
-            )
-            templates[paper] = p
-            bar.advance()
+        chosen = _template_picks(run, n)
+        templates = _templates(run, out_dir, chosen, name, bar)
         written["templates"] = {k_: str(v) for k_, v in templates.items()}
 
-        robust_path = run.path / "robustness.parquet"
-        robust = read_parquet(robust_path) if robust_path.is_file() else None
-        tip_mm = float(run.config["scene"]["fingertip_height_mm"])
-        picks = robot_picks(run.table, tip_mm, k, frame, robust)
-        write_json(
-            out_dir / "robot_picks.json",
-            {
-                "object": name,
-                "gripper": run.gripper.name,
-                "units": "mm, quaternion w x y z",
-                "frame": "user frame given as " + json.dumps(list(frame))
-                if frame is not None
-                else "object frame: origin at the centre of mass on the table, z up",
-                "picks": picks,
-            },
-        )
+        picks = _robot_export(run, out_dir, k, frame, name)
         written["robot_picks"] = str(out_dir / "robot_picks.json")
         bar.advance()
 
         written["html"] = str(_html(run, out_dir, forces, anims, templates, picks))
         bar.advance()
         return written
+
+
+def _traced_parts(run: Run, out_dir: Path, traced, f_d: float, anim, bar) -> tuple[list, list]:
+    """Per traced pick-point (traced: (pick_id, rank)) its force plot and, with anim =
+    (anim_every, anim_size, render pool), its animation. Returns ([(path, label)] of
+    the plots, of the animations)."""
+    forces, anims = [], []
+    for pid, rank in traced:
+        trace = run.trace(pid)
+        row = run.row(pid)
+        label = (
+            f"pick {pid} ({rank}): score {row['score']:.3f}, {row['failure']}"
+            if row["score"] is not None
+            else f"pick {pid} ({rank}): {row['failure']}"
+        )
+        p = out_dir / f"forces_{pid}.png"
+        force_plot(trace, f_d, p, title=label)
+        forces.append((p, label))
+        bar.advance()
+        if anim is not None:
+            anim_every, anim_size, child = anim
+            g = out_dir / f"anim_{pid}.gif"
+            frames = animate(
+                run.path / "scene.xml", trace, g, anim_every, anim_size, run.gripper,
+                pool=child,
+            )  # fmt: skip
+            anims.append((g, f"{label} ({frames} frames; video: {g.with_suffix('.mp4').name})"))
+            bar.advance()
+    return forces, anims
+
+
+def _template_picks(run: Run, n: int) -> list[dict]:
+    """The n best and n worst pick-points by score, labelled, for the templates."""
+    score = np.asarray(run.table["score"], float)
+    order = np.argsort(np.where(np.isnan(score), -np.inf, score))
+    best, worst = order[::-1][:n], order[:n]
+    chosen = []
+    for label, idx in (("best", best), ("worst", worst)):
+        for j, i in enumerate(idx, start=1):
+            r = {
+                c: run.table[c][int(i)].as_py()
+                for c in (
+                    "pick_id",
+                    "x_mm",
+                    "y_mm",
+                    "yaw_deg",
+                    "opening_mm",
+                    "score",
+                    "failure",
+                )
+            }
+            s = "NaN" if r["score"] is None else f"{r['score']:.3f}"
+            r["label"] = f"{label} {j}: pick {r['pick_id']}, score {s}, {r['failure']}"
+            chosen.append(r)
+    return chosen
+
+
+def _templates(run: Run, out_dir: Path, chosen: list, name: str, bar) -> dict:
+    """The 1:1 positioning template of chosen on each paper size: {paper: path}."""
+    templates = {}
+    for paper in PAPERS_MM:
+        p = out_dir / f"template_{paper}.pdf"
+        positioning_template(
+            run.outline,
+            run.gripper,
+            chosen,
+            p,
+            paper,
+            title=f"{name} / {run.gripper.name}: positioning template",
+        )
+        templates[paper] = p
+        bar.advance()
+    return templates
+
+
+def _robot_export(run: Run, out_dir: Path, k: int, frame, name: str) -> list[dict]:
+    """robot_picks.json: the k best pick-points (robust ones first when the folder holds
+    robustness.parquet) in the object's frame or frame; returns them."""
+    robust_path = run.path / "robustness.parquet"
+    robust = read_parquet(robust_path) if robust_path.is_file() else None
+    tip_mm = float(run.config["scene"]["fingertip_height_mm"])
+    picks = robot_picks(run.table, tip_mm, k, frame, robust)
+    write_json(
+        out_dir / "robot_picks.json",
+        {
+            "object": name,
+            "gripper": run.gripper.name,
+            "units": "mm, quaternion w x y z",
+            "frame": "user frame given as " + json.dumps(list(frame))
+            if frame is not None
+            else "object frame: origin at the centre of mass on the table, z up",
+            "picks": picks,
+        },
+    )
+    return picks
 
 
 def _html(run: Run, out_dir: Path, forces, anims, templates, picks) -> Path:

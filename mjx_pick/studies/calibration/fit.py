@@ -5,6 +5,7 @@ least-squares fit with MuJoCo's system-identification optimiser (``mujoco.sysid`
 from __future__ import annotations
 
 import dataclasses
+import io
 import math
 import shutil
 import time
@@ -372,66 +373,15 @@ def least_squares(
 
     check_range("calibrate", "max_iters", max_iters, 1, 10_000)
     out_dir = None if out is None else Path(out)
-    if out_dir is not None:
-        request = {
-            "object": problem.object.summary(),
-            "names": list(problem.names),
-            "estimator": "lsq",
-            "max_iters": max_iters,
-            "bounds": [problem.space.lo.tolist(), problem.space.hi.tolist()],
-            "priors": [problem.space.prior_mean.tolist(), problem.space.prior_sd.tolist()],
-        }
-        claim(out_dir, "calibrate", config_hash(request), resume=False, settings=request)
-    space = problem.space
+    request = _claim_lsq(problem, out_dir, max_iters)
     initial = dict(problem.start)
-    z0 = space.z([initial[n] for n in problem.names])
-    u0 = (z0 - space.z_lo) / (space.z_hi - space.z_lo)
-    params = sysid.ParameterDict()
-    for i, n in enumerate(problem.names):
-        params.add(sysid.Parameter(n, float(np.clip(u0[i], 0.01, 0.99)), 0.0, 1.0))
-    history: list[dict] = []
-    best = {"loss": math.inf, "theta": problem.start_theta()}
-    visited: list[tuple[np.ndarray, np.ndarray]] = []  # as in calibrate
-    t0 = time.perf_counter()
-    spent0 = problem.rollouts
-
-    def residual_fn(x, _params):
-        x = np.asarray(x, float)
-        cols = x[:, None] if x.ndim == 1 else x
-        if budget is not None and problem.rollouts - spent0 >= budget:
-            raise _Budget
-        z = space.z_lo[:, None] + cols * (space.z_hi - space.z_lo)[:, None]
-        thetas = theta_of_z(space, z.T)
-        ev = problem.evaluate(thetas)
-        visited.append((np.asarray(thetas, np.float32), data_nll(problem, ev)))
-        i = int(np.argmin(ev.loss))
-        if ev.loss[i] < best["loss"]:
-            best.update(loss=float(ev.loss[i]), theta=thetas[i])
-        entry = {
-            "step": len(history),
-            "loss": float(ev.loss[0]),
-            "best_loss": best["loss"],
-            "values": space.as_dict(best["theta"]),
-            "diverged": int(ev.diverged.min()),
-            "wall_s": round(time.perf_counter() - t0, 3),
-            "rollouts": problem.rollouts - spent0,
-        }
-        history.append(entry)
-        if log is not None:
-            log(entry)
-        bar.note(f"best loss {best['loss']:.4g}")
-        bar.advance()
-        r = ev.residuals.T  # (M, S)
-        return [r[:, 0] if x.ndim == 1 else r], None, None
-
-    import io
-
     bar = ProgressBar("calibrating (lsq)", "step", enabled=progress)
+    residuals = _Residuals(problem, budget, log, bar)
     try:
         # output: MuJoCo's optimiser prints every iteration unless given a stream
         sysid.optimize(
-            params,
-            residual_fn,
+            _unit_params(problem, initial),
+            residuals,
             optimizer="mujoco",
             verbose=False,
             max_iters=max_iters,
@@ -442,9 +392,10 @@ def least_squares(
         pass
     finally:
         bar.close()
+    t0, spent0, history = residuals.t0, residuals.spent0, residuals.history
     result = _finish(
         problem,
-        best["theta"],
+        residuals.best["theta"],
         initial,
         history,
         None,
@@ -453,7 +404,7 @@ def least_squares(
         "least_squares",
         out_dir,
         problem.settings.contact,
-        visited,
+        residuals.visited,
     )
     result.rollouts = problem.rollouts - spent0
     result.wall_s = time.perf_counter() - t0
@@ -465,3 +416,79 @@ def least_squares(
         meta["timing"]["rollouts"] = result.rollouts
         finish(out_dir, command="calibrate", config=request, **meta)
     return result
+
+
+def _claim_lsq(problem, out_dir: Path | None, max_iters: int) -> dict | None:
+    """least_squares' output folder claimed for calibrate under its request (what
+    decides the fit); the request, or None without out_dir."""
+    if out_dir is None:
+        return None
+    request = {
+        "object": problem.object.summary(),
+        "names": list(problem.names),
+        "estimator": "lsq",
+        "max_iters": max_iters,
+        "bounds": [problem.space.lo.tolist(), problem.space.hi.tolist()],
+        "priors": [problem.space.prior_mean.tolist(), problem.space.prior_sd.tolist()],
+    }
+    claim(out_dir, "calibrate", config_hash(request), resume=False, settings=request)
+    return request
+
+
+def _unit_params(problem, initial: dict):
+    """sysid's parameters: each one's position u in its bounds, in [0, 1] (see
+    least_squares), starting at initial (kept 1 % off the bounds)."""
+    from mujoco import sysid
+
+    space = problem.space
+    z0 = space.z([initial[n] for n in problem.names])
+    u0 = (z0 - space.z_lo) / (space.z_hi - space.z_lo)
+    params = sysid.ParameterDict()
+    for i, n in enumerate(problem.names):
+        params.add(sysid.Parameter(n, float(np.clip(u0[i], 0.01, 0.99)), 0.0, 1.0))
+    return params
+
+
+class _Residuals:
+    """least_squares' residual function for ``sysid.optimize``: every call's vectors
+    (positions u in the bounds) simulated in one batch, its residuals returned; keeps
+    the history, the best vector and every vector visited (as calibrate does), and
+    stops the fit (_Budget) once budget rollouts are spent."""
+
+    def __init__(self, problem, budget: int | None, log, bar: ProgressBar):
+        self.problem, self.budget, self.log, self.bar = problem, budget, log, bar
+        self.history: list[dict] = []
+        self.best = {"loss": math.inf, "theta": problem.start_theta()}
+        self.visited: list[tuple[np.ndarray, np.ndarray]] = []
+        self.t0 = time.perf_counter()
+        self.spent0 = problem.rollouts
+
+    def __call__(self, x, _params):
+        problem, space, best = self.problem, self.problem.space, self.best
+        x = np.asarray(x, float)
+        cols = x[:, None] if x.ndim == 1 else x
+        if self.budget is not None and problem.rollouts - self.spent0 >= self.budget:
+            raise _Budget
+        z = space.z_lo[:, None] + cols * (space.z_hi - space.z_lo)[:, None]
+        thetas = theta_of_z(space, z.T)
+        ev = problem.evaluate(thetas)
+        self.visited.append((np.asarray(thetas, np.float32), data_nll(problem, ev)))
+        i = int(np.argmin(ev.loss))
+        if ev.loss[i] < best["loss"]:
+            best.update(loss=float(ev.loss[i]), theta=thetas[i])
+        entry = {
+            "step": len(self.history),
+            "loss": float(ev.loss[0]),
+            "best_loss": best["loss"],
+            "values": space.as_dict(best["theta"]),
+            "diverged": int(ev.diverged.min()),
+            "wall_s": round(time.perf_counter() - self.t0, 3),
+            "rollouts": problem.rollouts - self.spent0,
+        }
+        self.history.append(entry)
+        if self.log is not None:
+            self.log(entry)
+        self.bar.note(f"best loss {best['loss']:.4g}")
+        self.bar.advance()
+        r = ev.residuals.T  # (M, S)
+        return [r[:, 0] if x.ndim == 1 else r], None, None

@@ -75,6 +75,7 @@ may well prefer a value beyond it.
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -132,6 +133,46 @@ def identifiability(
       'correlation' (P x P, data + prior), 'rollouts' spent (the refit's as
       'profile_rollouts'), 'rows', 'wall_s'.
     """
+    scales = _check_options(
+        step, ratio, profile_points, profile_steps, profile_popsize, profile_sigma, profile_scales
+    )
+    t_start = time.perf_counter()
+    space = problem.space
+    theta = np.asarray(theta, np.float32)
+    p = len(theta)
+    z0 = space.z(np.asarray(space.values(theta), float))
+    seen = _visited(visited, p)
+    zs, grid = _shifted(space, z0, step, profile_points)
+    spent0 = problem.rollouts
+    ev = problem.evaluate(theta_of_z(space, zs))
+    loc = _local_tests(problem, ev, zs, z0, step, profile_points)
+    out = {"rows": len(problem.outcomes), "residuals": ev.n_data}
+    limit = ratio * (Z95 * space.prior_sd)  # the local test's narrowness rule, per parameter
+    entries, thr, wide_z = _verdicts(space, loc, zs, z0, grid, limit, profile_points)
+    out.update(entries)
+    options = (profile_points, profile_steps, profile_popsize, profile_sigma, seed)
+    j_data = loc.jac[: ev.n_data]
+    _profile(out, problem, z0, loc.nll[0], thr, wide_z, limit, seen, scales, j_data, options)
+    for i, name in enumerate(space.names):  # an optimum pressed on a bound: not fitted
+        side = at_bound(space, z0, i, out[name]["half_width_z"])
+        out[name]["at_bound"] = side
+        if side is not None:
+            out[name]["identified"] = False
+    cov = _covariance(loc.jac)
+    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = cov / np.outer(sd, sd)
+    out["correlation"] = np.where(np.isfinite(corr), corr, 0.0).round(4).tolist()
+    out["rollouts"] = problem.rollouts - spent0
+    out.setdefault("profile_rollouts", 0)
+    out["wall_s"] = time.perf_counter() - t_start
+    return out
+
+
+def _check_options(
+    step, ratio, profile_points, profile_steps, profile_popsize, profile_sigma, profile_scales
+) -> tuple:
+    """identifiability's options checked (ConfigError naming the one out of range);
+    returns the profile's scales as a tuple."""
     check_range("calibrate", "identify step", step, 0, 0.5, lo_open=True)
     check_range("calibrate", "ratio", ratio, 0, lo_open=True)
     check_range("calibrate", "profile_points", profile_points, 0, 1000)
@@ -141,18 +182,28 @@ def identifiability(
     scales = tuple(profile_scales)
     for c in scales:
         check_range("calibrate", "profile_scales", c, 1, 100)
-    t_start = time.perf_counter()
-    space = problem.space
-    theta = np.asarray(theta, np.float32)
-    p = len(theta)
-    z0 = space.z(np.asarray(space.values(theta), float))
-    if visited is not None:
-        v_theta, v_nll = (np.asarray(a, float) for a in visited)
-        if v_theta.ndim != 2 or v_theta.shape[1] != p or v_nll.shape != v_theta.shape[:1]:
-            raise ConfigError(
-                f"identifiability: visited must be (thetas (N, {p}), nll (N,)); got "
-                f"{v_theta.shape} and {v_nll.shape}"
-            )
+    return scales
+
+
+def _visited(visited, p: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """The fit's own vectors (thetas (N, P), nll (N,)) as float arrays, checked; or None."""
+    if visited is None:
+        return None
+    v_theta, v_nll = (np.asarray(a, float) for a in visited)
+    if v_theta.ndim != 2 or v_theta.shape[1] != p or v_nll.shape != v_theta.shape[:1]:
+        raise ConfigError(
+            f"identifiability: visited must be (thetas (N, {p}), nll (N,)); got "
+            f"{v_theta.shape} and {v_nll.shape}"
+        )
+    return v_theta, v_nll
+
+
+def _shifted(space, z0, step: float, profile_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every vector of the local tests and the slices, for ONE engine batch: z0, then
+    the central steps (parameter i at +-h, for h = step and step / 4 of its bounds),
+    then each parameter's slice over its bounds (the others at z0). Returns (zs (S, P),
+    the slices' grid (P, G))."""
+    p = len(z0)
     zs = [z0]
     # central differences at two steps (h and h / 4), all in one batch: on a smooth loss
     # they agree; where the residuals jump (an outcome flips, a slipping part drops a
@@ -175,9 +226,33 @@ def identifiability(
             z = z0.copy()
             z[i] = g
             zs.append(z)
-    zs = np.asarray(zs)
-    spent0 = problem.rollouts
-    ev = problem.evaluate(theta_of_z(space, zs))
+    return np.asarray(zs), grid
+
+
+class _Local(NamedTuple):
+    """The local tests of every parameter (see the module docstring): the Jacobians'
+    intervals at the two steps and the likelihood's rises."""
+
+    jac: np.ndarray  # (M, P) at the coarse step, data and prior residuals
+    half_data: np.ndarray  # (P,) the data's 95 % half-widths, coarse step (z)
+    half_fine: np.ndarray  # (P,) the same at the fine step
+    half_all: np.ndarray  # (P,) data and prior, cut to the coarse step in a basin
+    agree: np.ndarray  # (P,) the two steps' intervals within 2x
+    curv: np.ndarray  # (P,) J^T J's diagonal, data only
+    nll: np.ndarray  # (S,) the data's -log likelihood of every shifted vector
+    rise: np.ndarray  # (2, P, 2): step, parameter, side; relative to theta
+    slice_rise: np.ndarray  # (P | 0, G)
+    coarse: np.ndarray  # (P,) the smaller rise at the coarse step
+    fine: np.ndarray  # (P,) the larger at the fine step
+    basin: np.ndarray  # (P,)
+    lo: np.ndarray  # (P,) the local interval, natural units
+    hi: np.ndarray
+
+
+def _local_tests(problem, ev, zs, z0, step: float, profile_points: int) -> _Local:
+    """The local tests from the batch of :func:`_shifted` (evaluated as ev)."""
+    space = problem.space
+    p = len(z0)
     n = ev.n_data
     jacs = []
     for k in range(2):
@@ -186,13 +261,9 @@ def identifiability(
         dz = np.diag(zk[0::2] - zk[1::2])  # (P,): the actual central steps
         jacs.append(((res[0::2] - res[1::2]) / dz[:, None]).T)  # (M, P)
     jac = jacs[0]
-    out = {"rows": len(problem.outcomes), "residuals": n}
-    j_data = jac[:n]
-    half_data = _intervals(j_data)
+    half_data = _intervals(jac[:n])
     half_fine = _intervals(jacs[1][:n])
     half_all = _intervals(jac)
-    prior_half = Z95 * space.prior_sd
-    curv = np.sum(j_data**2, axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         agree = np.abs(np.log(half_fine / half_data)) < np.log(2.0)
     # the data's negative log likelihood at every shifted vector, relative to theta's
@@ -207,28 +278,61 @@ def identifiability(
     half_all = np.where(~agree & basin, np.minimum(half_all, h), half_all)
     lo = space.natural(np.maximum(z0 - half_all, space.z_lo))
     hi = space.natural(np.minimum(z0 + half_all, space.z_hi))
+    curv = np.sum(jac[:n] ** 2, axis=0)
+    return _Local(
+        jac,
+        half_data,
+        half_fine,
+        half_all,
+        agree,
+        curv,
+        nll,
+        rise,
+        slice_rise,
+        coarse,
+        fine,
+        basin,
+        lo,
+        hi,
+    )
+
+
+def _slice(space, loc: _Local, zs, z0, grid, spacing, i: int, steps_rise) -> dict:
+    """Parameter i's global check (the slice over its bounds, joined by its four local
+    steps): the report's 'global' entry, natural values and interval included."""
+    p = len(z0)
+    steps_z = (
+        zs[1 + 2 * i : 3 + 2 * i, i].tolist() + zs[1 + 2 * (p + i) : 3 + 2 * (p + i), i].tolist()
+    )
+    glob = _global(
+        grid[i], loc.slice_rise[i], z0[i], loc.half_all[i], spacing[i], steps_z, steps_rise
+    )
+    glob["values"] = space.natural(_at(z0, i, grid[i]))[:, i].tolist()
+    ends = [max(glob.pop("lo_z"), space.z_lo[i]), min(glob.pop("hi_z"), space.z_hi[i])]
+    glob["interval"] = space.natural(_at(z0, i, np.array(ends)))[:, i].tolist()
+    return glob
+
+
+def _verdicts(space, loc: _Local, zs, z0, grid, narrow_z, profile_points: int):
+    """Every parameter's report after the local tests and its slice (the profile
+    updates its interval, half_width_z, profile and identified). narrow_z (P,): the
+    data's half-width under which a parameter is narrow. Returns (name -> report, the
+    likelihood-ratio thresholds (P,) relative to theta, the half-widths (P,) widened by
+    the slices, z)."""
+    p = len(z0)
     value = space.natural(z0)
     spacing = (space.z_hi - space.z_lo) * 0.98 / max(profile_points - 1, 1)
-    wide_z = half_all.copy()  # the local half-widths, widened by the slice
+    wide_z = loc.half_all.copy()  # the local half-widths, widened by the slice
     thr = np.zeros(p)  # the likelihood-ratio threshold per parameter, relative to theta
+    out = {}
     for i, name in enumerate(space.names):
-        narrow = bool(np.isfinite(half_data[i]) and half_data[i] < ratio * prior_half[i])
-        local = (narrow and bool(agree[i])) or bool(basin[i])
-        glob, interval = None, [float(lo[i]), float(hi[i])]
-        steps_rise = np.concatenate([rise[0, i], rise[1, i]])
+        narrow = bool(np.isfinite(loc.half_data[i]) and loc.half_data[i] < narrow_z[i])
+        local = (narrow and bool(loc.agree[i])) or bool(loc.basin[i])
+        glob, interval = None, [float(loc.lo[i]), float(loc.hi[i])]
+        steps_rise = np.concatenate([loc.rise[0, i], loc.rise[1, i]])
         thr[i] = _threshold(steps_rise)
         if profile_points:
-            # the four local steps of parameter i and their rises join the slice
-            steps_z = (
-                zs[1 + 2 * i : 3 + 2 * i, i].tolist()
-                + zs[1 + 2 * (p + i) : 3 + 2 * (p + i), i].tolist()
-            )
-            glob = _global(
-                grid[i], slice_rise[i], z0[i], half_all[i], spacing[i], steps_z, steps_rise
-            )
-            glob["values"] = space.natural(_at(z0, i, grid[i]))[:, i].tolist()
-            ends = [max(glob.pop("lo_z"), space.z_lo[i]), min(glob.pop("hi_z"), space.z_hi[i])]
-            glob["interval"] = space.natural(_at(z0, i, np.array(ends)))[:, i].tolist()
+            glob = _slice(space, loc, zs, z0, grid, spacing, i, steps_rise)
             wide = glob["half_width_z"]
             if wide is not None:  # the local interval, widened to what the slice keeps
                 wide_z[i] = wide
@@ -237,19 +341,19 @@ def identifiability(
         out[name] = {
             "value": float(value[i]),
             "interval": interval,
-            "local_interval": [float(lo[i]), float(hi[i])],
+            "local_interval": [float(loc.lo[i]), float(loc.hi[i])],
             "half_width_z": _num(wide_z[i]),
-            "data_half_width_z": _num(half_data[i]),
-            "data_half_width_z_fine_step": _num(half_fine[i]),
-            "prior_half_width_z": float(prior_half[i]),
-            "curvature": float(curv[i]),
+            "data_half_width_z": _num(loc.half_data[i]),
+            "data_half_width_z_fine_step": _num(loc.half_fine[i]),
+            "prior_half_width_z": float(Z95 * space.prior_sd[i]),
+            "curvature": float(loc.curv[i]),
             "log": bool(space.log[i]),
             # the two steps' intervals within 2x of each other
-            "locally_quadratic": bool(agree[i]),
+            "locally_quadratic": bool(loc.agree[i]),
             # the data's -log likelihood rise at the coarse step (the smaller side) and
             # at the fine one (the larger)
-            "nll_rise": [float(coarse[i]), float(fine[i])],
-            "basin": bool(basin[i]),
+            "nll_rise": [float(loc.coarse[i]), float(loc.fine[i])],
+            "basin": bool(loc.basin[i]),
             "local": local,
             "global": glob,
             # the verdict and interval of the local tests and the slice: given the
@@ -259,23 +363,7 @@ def identifiability(
             "profile": None,
             "identified": ok,
         }
-    limit = ratio * prior_half  # the local test's narrowness rule, per parameter
-    seen = (v_theta, v_nll) if visited is not None else None
-    options = (profile_points, profile_steps, profile_popsize, profile_sigma, seed)
-    _profile(out, problem, z0, nll[0], thr, wide_z, limit, seen, scales, j_data, options)
-    for i, name in enumerate(space.names):  # an optimum pressed on a bound: not fitted
-        side = at_bound(space, z0, i, out[name]["half_width_z"])
-        out[name]["at_bound"] = side
-        if side is not None:
-            out[name]["identified"] = False
-    cov = _covariance(jac)
-    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = cov / np.outer(sd, sd)
-    out["correlation"] = np.where(np.isfinite(corr), corr, 0.0).round(4).tolist()
-    out["rollouts"] = problem.rollouts - spent0
-    out.setdefault("profile_rollouts", 0)
-    out["wall_s"] = time.perf_counter() - t_start
-    return out
+    return out, thr, wide_z
 
 
 AT_BOUND = 0.02  # of a parameter's bounds (in z): theta's own margin (ParamSpace.theta)
@@ -307,100 +395,15 @@ def _profile(out, problem, z0, nll0, thr, wide_z, limit, seen, scales, j_data, o
     relative to theta; wide_z (P,): the half-widths after the slice (z); limit (P,):
     the largest half-width still narrow; j_data: the data's Jacobian at theta (M, P);
     options: (profile_points, profile_steps, profile_popsize, profile_sigma, seed)."""
-    profile_points, profile_steps, profile_popsize, profile_sigma, seed = options
     space = problem.space
-    p = len(z0)
     # the profile: only parameters the tests above identify, and only with an interval
     todo = [i for i, nm in enumerate(space.names) if out[nm]["identified"]]
     todo = [i for i in todo if np.isfinite(wide_z[i])] if scales else []
-
-    def verdict(i, reach, open_end=False) -> tuple[float, bool]:
-        # the half-width widened to the farthest value kept; still narrow (the local
-        # test's rule) and not open-ended?
-        half = max(wide_z[i], reach)
-        return half, bool((half <= wide_z[i] or half < limit[i]) and not open_end)
-
+    ctx = _ProfileContext(space, z0, nll0, thr, wide_z, limit)
     if seen is not None:
-        v_theta, v_nll = seen
-        v_z = space.z(np.asarray(space.values(v_theta.astype(np.float32)), float))
-        v_rise = np.where(np.isfinite(v_nll), v_nll - nll0, np.inf)
-        for i in todo:
-            emp = _empirical(space, z0, i, v_z, v_rise, thr[i], max(profile_points, 12))
-            half, emp["passed"] = verdict(i, emp["reach_z"])
-            emp["interval"] = _interval(space, z0, i, half)
-            prof = out[space.names[i]]["profile"] = {"threshold": float(thr[i])}
-            prof.update(empirical=emp, refit=None)
-        # a parameter the fit's own vectors already widen out of the ratio: no refit
-        todo = [i for i in todo if out[space.names[i]]["profile"]["empirical"]["passed"]]
+        todo = _empirical_profiles(out, ctx, todo, seen, max(options[0], 12))
     if todo:
-        specs = []  # (parameter, scale, side, z)
-        for i in todo:
-            for side in (-1.0, 1.0):
-                prev = z0[i]
-                for c in sorted(scales):
-                    zi = float(np.clip(z0[i] + side * c * wide_z[i], space.z_lo[i], space.z_hi[i]))
-                    if abs(zi - prev) > 1e-9:  # clipped to a bound once: once is enough
-                        specs.append((i, c, side, zi))
-                    prev = zi
-        spent = problem.rollouts
-        # the CMA-ES's unit per other parameter: its interval's half-width, within 2-25 %
-        # of its bounds (an unbounded or unidentified one: a quarter of them)
-        span = space.z_hi - space.z_lo
-        scale = np.clip(np.where(np.isfinite(wide_z), wide_z, span), 0.02 * span, 0.25 * span)
-        best_nll, best_z = _refit(
-            problem,
-            z0,
-            specs,
-            j_data,
-            scale,
-            profile_steps,
-            profile_popsize,
-            profile_sigma,
-            seed,
-        )
-        out["profile_rollouts"] = problem.rollouts - spent
-        for i in todo:
-            name = space.names[i]
-            ks = [k for k, s in enumerate(specs) if s[0] == i]
-            points, reach, open_end = [], 0.0, False
-            for side in (-1.0, 1.0):
-                on_side = [k for k in ks if specs[k][2] == side]
-                for k in on_side:
-                    _, c, _, zi = specs[k]
-                    r = float(best_nll[k] - nll0)
-                    kept = bool(r < thr[i])
-                    if kept:
-                        reach = max(reach, abs(zi - z0[i]))
-                    natural = space.natural(best_z[k])
-                    points.append(
-                        {
-                            "z": zi,
-                            "value": float(natural[i]),
-                            "scale": side * c,
-                            "nll_rise": r,
-                            "others": {
-                                space.names[j]: float(natural[j]) for j in range(p) if j != i
-                            },
-                            "kept": kept,
-                        }
-                    )
-                # the outermost point kept and not at a bound: the 95 % set goes on
-                if on_side:
-                    zi = specs[on_side[-1]][3]
-                    at_bound = zi <= space.z_lo[i] + 1e-9 or zi >= space.z_hi[i] - 1e-9
-                    open_end |= points[-1]["kept"] and not at_bound
-            half, passed = verdict(i, reach, open_end)
-            refit = {
-                "points": points,
-                "reach_z": reach,
-                "open": open_end,
-                "interval": _interval(space, z0, i, half),
-                "passed": passed,
-            }
-            prof = out[name]["profile"]
-            if prof is None:
-                prof = out[name]["profile"] = {"threshold": float(thr[i]), "empirical": None}
-            prof["refit"] = refit
+        _refit_profiles(out, problem, ctx, todo, scales, j_data, options[1:])
     for i, name in enumerate(space.names):
         prof = out[name]["profile"]
         if prof is None:
@@ -414,6 +417,112 @@ def _profile(out, problem, z0, nll0, thr, wide_z, limit, seen, scales, j_data, o
         out[name]["interval"] = prof["interval"]
         out[name]["half_width_z"] = _num(half)
         out[name]["identified"] = out[name]["slice_identified"] and prof["passed"]
+
+
+class _ProfileContext(NamedTuple):
+    """What every profile point is judged by (see :func:`_profile`'s arguments)."""
+
+    space: object
+    z0: np.ndarray
+    nll0: float
+    thr: np.ndarray
+    wide_z: np.ndarray
+    limit: np.ndarray
+
+    def verdict(self, i: int, reach: float, open_end: bool = False) -> tuple[float, bool]:
+        """Parameter i's half-width widened to the farthest value kept (reach, z), and
+        whether it is still narrow (the local test's rule) and not open-ended."""
+        half = max(self.wide_z[i], reach)
+        return half, bool((half <= self.wide_z[i] or half < self.limit[i]) and not open_end)
+
+
+def _empirical_profiles(out, ctx: _ProfileContext, todo: list, seen, bins: int) -> list:
+    """The empirical profile of each parameter in todo from the fit's own vectors seen
+    (thetas (N, P), nll (N,)), in place on out; returns the parameters still to refit
+    (those the fit's vectors do not already widen out of the ratio)."""
+    space, z0 = ctx.space, ctx.z0
+    v_theta, v_nll = seen
+    v_z = space.z(np.asarray(space.values(v_theta.astype(np.float32)), float))
+    v_rise = np.where(np.isfinite(v_nll), v_nll - ctx.nll0, np.inf)
+    for i in todo:
+        emp = _empirical(space, z0, i, v_z, v_rise, ctx.thr[i], bins)
+        half, emp["passed"] = ctx.verdict(i, emp["reach_z"])
+        emp["interval"] = _interval(space, z0, i, half)
+        prof = out[space.names[i]]["profile"] = {"threshold": float(ctx.thr[i])}
+        prof.update(empirical=emp, refit=None)
+    return [i for i in todo if out[space.names[i]]["profile"]["empirical"]["passed"]]
+
+
+def _refit_profiles(out, problem, ctx: _ProfileContext, todo, scales, j_data, cma) -> None:
+    """The refit profile of each parameter in todo, in place on out: its value fixed at
+    scales x its half-width on both sides, the others re-optimised (:func:`_refit`);
+    cma: (profile_steps, profile_popsize, profile_sigma, seed)."""
+    space, z0, wide_z = ctx.space, ctx.z0, ctx.wide_z
+    specs = []  # (parameter, scale, side, z)
+    for i in todo:
+        for side in (-1.0, 1.0):
+            prev = z0[i]
+            for c in sorted(scales):
+                zi = float(np.clip(z0[i] + side * c * wide_z[i], space.z_lo[i], space.z_hi[i]))
+                if abs(zi - prev) > 1e-9:  # clipped to a bound once: once is enough
+                    specs.append((i, c, side, zi))
+                prev = zi
+    spent = problem.rollouts
+    # the CMA-ES's unit per other parameter: its interval's half-width, within 2-25 %
+    # of its bounds (an unbounded or unidentified one: a quarter of them)
+    span = space.z_hi - space.z_lo
+    scale = np.clip(np.where(np.isfinite(wide_z), wide_z, span), 0.02 * span, 0.25 * span)
+    best_nll, best_z = _refit(problem, z0, specs, j_data, scale, *cma)
+    out["profile_rollouts"] = problem.rollouts - spent
+    for i in todo:
+        ks = [k for k, s in enumerate(specs) if s[0] == i]
+        refit = _refit_points(ctx, i, [(specs[k], best_nll[k], best_z[k]) for k in ks])
+        prof = out[space.names[i]]["profile"]
+        if prof is None:
+            prof = out[space.names[i]]["profile"] = {
+                "threshold": float(ctx.thr[i]),
+                "empirical": None,
+            }
+        prof["refit"] = refit
+
+
+def _refit_points(ctx: _ProfileContext, i: int, found: list) -> dict:
+    """Parameter i's refit profile from its points found: [((i, scale, side, z), best
+    data nll, best z (P,))], each side's in order of scale."""
+    space, z0 = ctx.space, ctx.z0
+    p = len(z0)
+    points, reach, open_end = [], 0.0, False
+    for side in (-1.0, 1.0):
+        on_side = [f for f in found if f[0][2] == side]
+        for (_, c, _, zi), nll, z in on_side:
+            r = float(nll - ctx.nll0)
+            kept = bool(r < ctx.thr[i])
+            if kept:
+                reach = max(reach, abs(zi - z0[i]))
+            natural = space.natural(z)
+            points.append(
+                {
+                    "z": zi,
+                    "value": float(natural[i]),
+                    "scale": side * c,
+                    "nll_rise": r,
+                    "others": {space.names[j]: float(natural[j]) for j in range(p) if j != i},
+                    "kept": kept,
+                }
+            )
+        # the outermost point kept and not at a bound: the 95 % set goes on
+        if on_side:
+            zi = on_side[-1][0][3]
+            at_bound = zi <= space.z_lo[i] + 1e-9 or zi >= space.z_hi[i] - 1e-9
+            open_end |= points[-1]["kept"] and not at_bound
+    half, passed = ctx.verdict(i, reach, open_end)
+    return {
+        "points": points,
+        "reach_z": reach,
+        "open": open_end,
+        "interval": _interval(space, z0, i, half),
+        "passed": passed,
+    }
 
 
 def data_nll(problem, ev) -> np.ndarray:

@@ -45,6 +45,31 @@ class Evaluation(NamedTuple):
     n_data: int  # the first n_data of the M residuals are data (the rest: prior)
 
 
+def _check_grip_forces(outcomes: Outcomes, g) -> None:
+    """A ConfigError naming the rows whose grip force is outside gripper g's range."""
+    bad_f = np.flatnonzero(
+        (outcomes.grip_force_n < g.force_min_n) | (outcomes.grip_force_n > g.force_max_n)
+    )
+    if len(bad_f):
+        shown = ", ".join(f"row {i + 2} ({outcomes.grip_force_n[i]:g} N)" for i in bad_f[:8])
+        raise ConfigError(
+            f"outcomes {shown}, column grip_force_n: outside {g.name}'s range "
+            f"{g.force_min_n:g}-{g.force_max_n:g} N"
+        )
+
+
+def _check_feasible(checker, outcomes: Outcomes, g) -> None:
+    """A ConfigError naming the measured pick-points gripper g cannot take."""
+    res = checker(outcomes.x_mm, outcomes.y_mm, outcomes.yaw_deg)
+    bad = np.flatnonzero(res["reason"] != pp.fk.FEASIBLE)
+    if len(bad):
+        shown = ", ".join(f"row {i + 2} ({pp.REASONS[res['reason'][i]]})" for i in bad[:8])
+        raise ConfigError(
+            f"{len(bad)} of {len(outcomes)} measured pick-points are infeasible for "
+            f"{g.name}: {shown}"
+        )
+
+
 class Problem:
     """The simulations and the loss for one outcomes set, object and settings.
 
@@ -112,43 +137,12 @@ class Problem:
                 stacklevel=2,
             )
         g = s.gripper
-        bad_f = np.flatnonzero(
-            (outcomes.grip_force_n < g.force_min_n) | (outcomes.grip_force_n > g.force_max_n)
-        )
-        if len(bad_f):
-            shown = ", ".join(f"row {i + 2} ({outcomes.grip_force_n[i]:g} N)" for i in bad_f[:8])
-            raise ConfigError(
-                f"outcomes {shown}, column grip_force_n: outside {g.name}'s range "
-                f"{g.force_min_n:g}-{g.force_max_n:g} N"
-            )
+        _check_grip_forces(outcomes, g)
         checker = pp.FeasibilityChecker(obj, g, pick_config, s.grasp)
-        res = checker(outcomes.x_mm, outcomes.y_mm, outcomes.yaw_deg)
-        bad = np.flatnonzero(res["reason"] != pp.fk.FEASIBLE)
-        if len(bad):
-            shown = ", ".join(f"row {i + 2} ({pp.REASONS[res['reason'][i]]})" for i in bad[:8])
-            raise ConfigError(
-                f"{len(bad)} of {len(outcomes)} measured pick-points are infeasible for "
-                f"{g.name}: {shown}"
-            )
+        _check_feasible(checker, outcomes, g)
         check_range("calibrate", "replicates", replicates, 1, 64)
         check_range("calibrate", "replica_jitter_mm", replica_jitter_mm, 0, 5)
-        # rows with a measured trace get K - 1 replicas: row_of maps every simulated row
-        # (R pick-points, then the replicas, replica-major) to its measured row
-        r_n = len(outcomes)
-        traced = np.flatnonzero([bool(tr) for tr in outcomes.traces])
-        self.replicates = int(replicates) if len(traced) else 1
-        self.traced_rows = traced if self.replicates > 1 else np.zeros(0, int)
-        offsets = replica_offsets(self.replicates - 1, replica_jitter_mm)  # (K - 1, 2)
-        self.row_of = np.concatenate([np.arange(r_n)] + [self.traced_rows] * len(offsets))
-        xs = np.concatenate([outcomes.x_mm] + [outcomes.x_mm[traced] + o[0] for o in offsets])
-        ys = np.concatenate([outcomes.y_mm] + [outcomes.y_mm[traced] + o[1] for o in offsets])
-        yaws = outcomes.yaw_deg[self.row_of]
-        # a replica whose offset makes it infeasible (a pick-point at a clearance edge)
-        # stays at the pick-point: it adds no spread
-        moved = checker(xs, ys, yaws)["reason"] != pp.fk.FEASIBLE
-        xs = np.where(moved, outcomes.x_mm[self.row_of], xs)
-        ys = np.where(moved, outcomes.y_mm[self.row_of], ys)
-        self.picks = checker.batch(np.arange(len(xs)), xs, ys, yaws, "calibration")
+        self._add_replicas(checker, replicates, replica_jitter_mm)
         self.grip_force_n = outcomes.grip_force_n[self.row_of]  # (R + replicas,)
         self.scene = build_scene(obj, g, s.contact, s.solver, s.grasp)
         self.start = start_values(self.names, s, self.scene)
@@ -172,7 +166,44 @@ class Problem:
         self.inputs = make_inputs(
             self.scene, s.grasp, self.picks, s.overrides(self.scene, len(self.row_of))
         ).replace(params=params)
-        gr = s.grasp
+        traces = self._set_loss_data(s.grasp)
+        self.record = traces is not None
+        self.backend_name = backend
+        # a batch holds every row of at least one parameter vector
+        self.runner = Runner(backend, batch_size=max(256, len(self.row_of)))
+        self._backend = None
+        self._jvp = None
+
+    def _add_replicas(self, checker, replicates: int, replica_jitter_mm: float) -> None:
+        """The simulated rows: every measured row, then K - 1 replicas of each row with
+        a measured trace, moved by replica_jitter_mm (row_of, traced_rows, replicates,
+        picks)."""
+        # rows with a measured trace get K - 1 replicas: row_of maps every simulated row
+        # (R pick-points, then the replicas, replica-major) to its measured row
+        r_n = len(self.outcomes)
+        traced = np.flatnonzero([bool(tr) for tr in self.outcomes.traces])
+        self.replicates = int(replicates) if len(traced) else 1
+        self.traced_rows = traced if self.replicates > 1 else np.zeros(0, int)
+        offsets = replica_offsets(self.replicates - 1, replica_jitter_mm)  # (K - 1, 2)
+        self.row_of = np.concatenate([np.arange(r_n)] + [self.traced_rows] * len(offsets))
+        xs = np.concatenate(
+            [self.outcomes.x_mm] + [self.outcomes.x_mm[traced] + o[0] for o in offsets]
+        )
+        ys = np.concatenate(
+            [self.outcomes.y_mm] + [self.outcomes.y_mm[traced] + o[1] for o in offsets]
+        )
+        yaws = self.outcomes.yaw_deg[self.row_of]
+        # a replica whose offset makes it infeasible (a pick-point at a clearance edge)
+        # stays at the pick-point: it adds no spread
+        moved = checker(xs, ys, yaws)["reason"] != pp.fk.FEASIBLE
+        xs = np.where(moved, self.outcomes.x_mm[self.row_of], xs)
+        ys = np.where(moved, self.outcomes.y_mm[self.row_of], ys)
+        self.picks = checker.batch(np.arange(len(xs)), xs, ys, yaws, "calibration")
+
+    def _set_loss_data(self, gr) -> dict | None:
+        """What the loss compares with (high_mm, t_ticks, data) under procedure gr;
+        returns the measured traces on the control ticks (None without traces)."""
+        outcomes = self.outcomes
         self.high_mm = gr.success_height_fraction * gr.lift_height_mm
         self.t_ticks = np.arange(gr.n_ticks()) * gr.control_period_s - gr.settle_s
         traces = L.trace_targets(outcomes, self.t_ticks) if outcomes.trace_kinds() else None
@@ -187,12 +218,7 @@ class Problem:
             close_timeout_s=gr.close_timeout_s,
             dt_s=gr.control_period_s,
         )
-        self.record = traces is not None
-        self.backend_name = backend
-        # a batch holds every row of at least one parameter vector
-        self.runner = Runner(backend, batch_size=max(256, len(self.row_of)))
-        self._backend = None
-        self._jvp = None
+        return traces
 
     @property
     def rollouts(self) -> int:

@@ -159,6 +159,31 @@ def new_round(
         success, score, failure = run_success, run_score, run_failure
     else:
         success, score, failure = info.success, info.score, info.failure
+    rows = _candidates(picks, info, success, score, failure, len(draws))
+    chosen, why = choose(rows, n, info_share)
+    grip_force_n = float(sims.settings.grasp.grip_force_n)
+    picks_out = _sheet_rows(rows, chosen, why, number, repeats, grip_force_n)
+    notes = _round_notes(rows, len(chosen), picks_out, n, names, number)
+    return {
+        "round": number,
+        "planned_with": {"source": planned_with, "values": dict(nominal)},
+        "parameters": list(names),
+        "draws": [[float(v) for v in d] for d in draws],
+        "candidates": len(rows),
+        "simulations": int(sims.simulations - spent),
+        "notes": notes,
+        "picks": picks_out,
+        # every candidate simulated, chosen or not: what the choice was made from
+        "candidates_info": [
+            {k: r[k] for k in ("pick_id", "success", "p_nominal", "bits")} for r in rows
+        ],
+    }
+
+
+def _candidates(picks, info, success, score, failure, n_draws: int) -> list[dict]:
+    """One row per candidate pick-point: its pose, the prediction under test (success,
+    score, failure), whether a re-run agrees, and its success probability at the
+    nominal parameters and per draw with the information it carries (bits)."""
     rows = []
     for j in range(len(picks)):
         rows.append(
@@ -175,12 +200,17 @@ def new_round(
                 "rerun_agrees": bool(info.success[j] == success[j]),
                 "p_nominal": float(info.p_nominal[j]),
                 "p_draws": [round(float(v), 4) for v in info.p_draws[:, j]],
-                "p_lo": float(info.p_draws[:, j].min()) if len(draws) else float("nan"),
-                "p_hi": float(info.p_draws[:, j].max()) if len(draws) else float("nan"),
+                "p_lo": float(info.p_draws[:, j].min()) if n_draws else float("nan"),
+                "p_hi": float(info.p_draws[:, j].max()) if n_draws else float("nan"),
                 "bits": float(info.bits[j]),
             }
         )
-    chosen, why = choose(rows, n, info_share)
+    return rows
+
+
+def _sheet_rows(rows, chosen, why, number: int, repeats: int, grip_force_n: float) -> list:
+    """The chosen candidates as the round's plan entries, one template page each, with
+    why each was chosen."""
     picks_out = []
     for page, (i, reason) in enumerate(zip(chosen, why, strict=True), start=1):
         r = rows[i]
@@ -195,7 +225,7 @@ def new_round(
                 "y_mm": round(r["y_mm"], 4),
                 "yaw_deg": round(r["yaw_deg"], 4),
                 "opening_mm": r["opening_mm"],
-                "grip_force_n": float(sims.settings.grasp.grip_force_n),
+                "grip_force_n": grip_force_n,
                 "trials": int(repeats),
                 "sim_success": r["success"],
                 "sim_score": round(r["score"], 4),
@@ -207,10 +237,16 @@ def new_round(
                 "why": reason,
             }
         )
+    return picks_out
+
+
+def _round_notes(rows, n_chosen: int, picks_out, n: int, names, number: int) -> list[str]:
+    """What the round cannot do: fewer pick-points than asked, no candidate informative
+    about the parameters, no predicted success (or failure) among those chosen."""
     notes = []
-    if len(chosen) < n:
+    if n_chosen < n:
         notes.append(
-            f"only {len(chosen)} distinct pick-points among the {len(rows)} candidates: "
+            f"only {n_chosen} distinct pick-points among the {len(rows)} candidates: "
             f"asked for {n} (evaluate more pick-points, or raise --pool)"
         )
     if not any(r["bits"] >= MIN_BITS for r in rows):
@@ -225,17 +261,4 @@ def new_round(
                 f"no chosen pick-point is predicted to be a {label}: the agreement will not "
                 f"test predicted {label}s"
             )
-    return {
-        "round": number,
-        "planned_with": {"source": planned_with, "values": dict(nominal)},
-        "parameters": list(names),
-        "draws": [[float(v) for v in d] for d in draws],
-        "candidates": len(rows),
-        "simulations": int(sims.simulations - spent),
-        "notes": notes,
-        "picks": picks_out,
-        # every candidate simulated, chosen or not: what the choice was made from
-        "candidates_info": [
-            {k: r[k] for k in ("pick_id", "success", "p_nominal", "bits")} for r in rows
-        ],
-    }
+    return notes

@@ -136,8 +136,23 @@ def plan_trials(
         pick_config=src.pick_config,
         predictions_from_table=True,
     )
+    plan = _plan_record(src, obj, names, options, rnd)
+    write_parquet(out_dir / CANDIDATES, src.table)
+    write_json(out_dir / PLAN, plan)
+    header = [c for c in SHEET_COLUMNS if not (blind and c in SIM_COLUMNS)]
+    write_sheet(out_dir / SHEET, header, [sheet_row(p) for p in rnd["picks"]])
+    if write_templates is not None:
+        write_templates(out_dir, plan, rnd)
+    meta = sims.runner.describe()
+    finish(out_dir, command=COMMAND, config=request, seed=seed, **meta)
+    return plan
+
+
+def _plan_record(src, obj: ObjectModel, names, options: dict, rnd: dict) -> dict:
+    """trials.json: the evaluate run planned from, the object, the settings every round
+    simulates with, the plan's options and its first round."""
     s = src.settings
-    plan = {
+    return {
         "format": 1,
         "run": {
             "path": str(src.path.resolve()),
@@ -157,15 +172,6 @@ def plan_trials(
         **options,
         "rounds": [rnd],
     }
-    write_parquet(out_dir / CANDIDATES, src.table)
-    write_json(out_dir / PLAN, plan)
-    header = [c for c in SHEET_COLUMNS if not (blind and c in SIM_COLUMNS)]
-    write_sheet(out_dir / SHEET, header, [sheet_row(p) for p in rnd["picks"]])
-    if write_templates is not None:
-        write_templates(out_dir, plan, rnd)
-    meta = sims.runner.describe()
-    finish(out_dir, command=COMMAND, config=request, seed=seed, **meta)
-    return plan
 
 
 def _space(obj, settings: Settings, sims: Simulations, names, bounds, priors) -> ParamSpace:

@@ -126,16 +126,7 @@ def fit_trials(
     bounds = {**_named(plan.get("bounds"), names), **(bounds or {})}
     priors = {**_named(plan.get("priors"), names), **(priors or {})}
     last = max(e["round"] for e in tried.entries)
-    out_dir = folder / f"fit-round{last}"
-    if out_dir.exists() and not resume:
-        if not overwrite:
-            raise ConfigError(
-                f"{out_dir} holds an earlier fit of round {last}: pass --overwrite to replace "
-                "it (or --resume to continue it)"
-            )
-        if (read_manifest(out_dir) or {}).get("command") != "calibrate":
-            raise ConfigError(f"{out_dir} was not written by a fit: move it away first")
-        shutil.rmtree(out_dir)
+    out_dir = _fit_folder(folder, last, overwrite, resume)
     problem = Problem(
         obj,
         tried.outcomes,
@@ -158,6 +149,46 @@ def fit_trials(
         log=log,
         **calibrate_options,
     )
+    before, after, optimum, rerun = _agreements(problem, res, names, tried)
+    report = _fit_report(names, res, tried, before, after, optimum, rerun)
+    notes, p_change, rerun_differs = report["notes"], report["mcnemar_p"], report["rerun_differs"]
+    write_json(out_dir / "agreement.json", report)
+    write_atomic(out_dir / "agreement.md", fit_md(report, plan))
+    next_round = None
+    if next_n:
+        next_round, note = _propose(
+            folder, obj, plan, problem, res, settings, pick_config, last + 1, next_n, backend
+        )
+        if note:
+            notes.append(note)
+        if next_round is not None:
+            _add_round(folder, plan, next_round)
+            if write_templates is not None:
+                write_templates(folder, plan, next_round)
+    return TrialFit(res, before, after, p_change, rerun_differs, out_dir, next_round, notes, report)
+
+
+def _fit_folder(folder: Path, last: int, overwrite: bool, resume: bool) -> Path:
+    """Where round last's fit is written, ``fit-round<last>/``: an earlier fit there is
+    continued (resume), replaced (overwrite: only a fit's folder) or refused."""
+    out_dir = folder / f"fit-round{last}"
+    if out_dir.exists() and not resume:
+        if not overwrite:
+            raise ConfigError(
+                f"{out_dir} holds an earlier fit of round {last}: pass --overwrite to replace "
+                "it (or --resume to continue it)"
+            )
+        if (read_manifest(out_dir) or {}).get("command") != "calibrate":
+            raise ConfigError(f"{out_dir} was not written by a fit: move it away first")
+        shutil.rmtree(out_dir)
+    return out_dir
+
+
+def _agreements(problem, res, names, tried) -> tuple[dict, dict, list, int]:
+    """The tried rows re-simulated at the start, at the fitted values and (when a
+    parameter was not identified) at the fit's optimum, each against the outcomes.
+    Returns (agreement before, after, [at the optimum] or [], how many re-simulated
+    predictions at the start differ from the planned ones)."""
     space = problem.space
     fitted = space.theta([res.values[n] for n in names])
     vectors = [problem.start_theta(), fitted]
@@ -179,11 +210,16 @@ def fit_trials(
         )
         for j in range(len(vectors))
     )
+    planned = np.array([e["sim_success"] for e in tried.entries])
+    return before, after, optimum, int(np.sum(planned != sim["success"][0]))
+
+
+def _fit_report(names, res, tried, before, after, optimum, rerun_differs) -> dict:
+    """agreement.json: the fit, the agreement before and after it, McNemar's p of the
+    change, and notes on how to read them."""
     right_before = np.array([r["agrees"] for r in before["rows"]])
     right_after = np.array([r["agrees"] for r in after["rows"]])
     p_change = mcnemar_p(right_after, right_before)
-    planned = np.array([e["sim_success"] for e in tried.entries])
-    rerun_differs = int(np.sum(planned != sim["success"][0]))
     notes = [
         "in-sample: the fit saw these outcomes, so the agreement after it is optimistic; "
         "the next round, predicted before its trials, is the honest test",
@@ -203,14 +239,14 @@ def fit_trials(
             "agree); the next round looks for pick-points that tell the values around "
             "the optimum apart"
         )
-    report = {
+    return {
         "parameters": list(names),
         "initial": res.initial,
         "fitted": res.values,
         "optimum": res.optimum,
         "intervals": {k: (res.identifiability or {}).get(k, {}).get("interval") for k in names},
         "not_identified": list(res.not_identified),
-        "rows": len(o),
+        "rows": len(tried.outcomes),
         "before": before,
         "after": after,
         "at_optimum": optimum[0] if optimum else None,
@@ -218,20 +254,6 @@ def fit_trials(
         "rerun_differs": rerun_differs,
         "notes": notes,
     }
-    write_json(out_dir / "agreement.json", report)
-    write_atomic(out_dir / "agreement.md", fit_md(report, plan))
-    next_round = None
-    if next_n:
-        next_round, note = _propose(
-            folder, obj, plan, problem, res, settings, pick_config, last + 1, next_n, backend
-        )
-        if note:
-            notes.append(note)
-        if next_round is not None:
-            _add_round(folder, plan, next_round)
-            if write_templates is not None:
-                write_templates(folder, plan, next_round)
-    return TrialFit(res, before, after, p_change, rerun_differs, out_dir, next_round, notes, report)
 
 
 def _named(table: dict | None, names) -> dict:
