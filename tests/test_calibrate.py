@@ -302,11 +302,13 @@ def test_identifiability_outcomes_against_traces(heavy_block):
 
 
 def test_trace_loss_is_smooth_around_the_hidden_friction(heavy_block):
-    # benchmarks/calibration.py's one-parameter problem: 16 rows whose traces chatter,
-    # slip and drop. Compared tick by tick with one simulation per row, a 0.1 % step of
-    # pad friction costs about as much as a 10 % one (the synthetic trace is one draw of
-    # a chaotic grasp: only the exact hidden value redraws it); the replicas' likelihood
-    # (loss.py) makes a basin: small steps cost little, 10 % steps a lot
+    # benchmarks/calibration.py's one-parameter problem: 16 rows whose traces slip and
+    # drop. Compared tick by tick with one simulation per row, a 0.1 % step of pad
+    # friction costs a large share of a 10 % one (the synthetic trace is one draw of a
+    # sensitive grasp: only the exact hidden value redraws it); the replicas' likelihood
+    # (loss.py) lowers that share. How much depends on the physics: with pyramidal cones
+    # (chattering pads) tick by tick > 0.4 and replicas < 0.15; with the elliptic default
+    # 0.32 and 0.20 (benchmarks/RESULTS.md)
     hidden = mp.Settings(LIGHT, mp.ContactParams(pad_friction=HIDDEN), grasp=GRASP)
     rng = np.random.default_rng(0)
     n = 16
@@ -329,13 +331,15 @@ def test_trace_loss_is_smooth_around_the_hidden_friction(heavy_block):
     ):
         blocks = L.residuals(out, problem.data, noise)
         loss[label] = np.asarray(L.loss_of(blocks, problem.data.total_trials)[0])
+    climb = {}
     for label, v in loss.items():
+        # both losses are lowest at the hidden value
+        assert v[2] < min(v[0], v[1], v[3], v[4]), (label, v)
         # how far a 0.1 % step climbs towards a 10 % step's loss
-        climb = (max(v[1], v[3]) - v[2]) / (min(v[0], v[4]) - v[2])
-        if label == "tick by tick":
-            assert climb > 0.4, (label, v)
-        else:
-            assert 0 < climb < 0.15, (label, v)
+        climb[label] = (max(v[1], v[3]) - v[2]) / (min(v[0], v[4]) - v[2])
+    # the replicas flatten the small steps' cost against the tick-by-tick comparison (a
+    # basin, not a spike at the one exact value that redraws the synthetic trace)
+    assert 0 < climb["replicas"] < 0.75 * climb["tick by tick"], (climb, loss)
 
 
 def test_replicas_only_for_traced_rows_and_alike_in_numpy_and_jax(heavy_block):
