@@ -290,7 +290,8 @@ def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
     assert shrink_sizes(6, 3) == (6, 3) and shrink_sizes(8, 0) == (8,)
     # never below the smallest pool worth its own program
     assert shrink_sizes(8192, 3, 4096) == (8192, 4096) and shrink_sizes(2048, 3, 4096) == (2048,)
-    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 1, seed=1, grasp=SHORT)
+    checker = pp.FeasibilityChecker(block_scene.object, mp.GripperSpec(), grasp=SHORT)
+    picks = checker.batch(np.arange(1), [0.0], [0.0], [0.0], "user")  # centred
     inputs = make_inputs(block_scene, SHORT, picks.take(np.zeros(12, int)), {"pad_friction": 0.9})
     air = np.array([1, 3, 4, 6, 7, 9])  # the long picks come last: a tail of 4+ live slots
     inputs.qpos0[air, block_scene.index.object_qpos] += 0.2

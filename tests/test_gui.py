@@ -169,7 +169,9 @@ def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
     from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
     try:
-        page.get_by_test_id("job-title").filter(has_text=title).wait_for()
+        # the title appears once the server has handled the click: under a loaded CI
+        # machine (the other test worker compiling) that took over a minute once
+        page.get_by_test_id("job-title").filter(has_text=title).wait_for(timeout=timeout_ms)
     except PlaywrightTimeout:  # the run never started: say what the page showed instead
         errors = [e for e in page.locator('[data-testid$="-error"]').all_inner_texts() if e]
         fields = [e for e in page.locator(".q-field__messages").all_inner_texts() if e.strip()]

@@ -29,7 +29,13 @@ def test_mjx_sharded_over_four_devices_matches_one_and_does_not_recompile(block,
     assert len(jax.local_devices()) == 4
     gripper = mp.GripperSpec()
     scene = mp.build_scene(block, gripper)
-    picks = pp.generate_normal(block, gripper, 16, seed=0)
+    # pick-points well inside the pads' collision box: no label hangs on rounding (the
+    # sharded program reduces in another order; a pad meeting the part at the box's edge
+    # can flip between no contact and force not reached)
+    x, y = np.meshgrid(np.linspace(-2, 2, 4), np.linspace(-2, 2, 4))
+    checker = pp.FeasibilityChecker(block, gripper)
+    picks = checker.batch(np.arange(16), x.ravel(), y.ravel(), np.zeros(16), "user")
+    assert len(picks) == 16
     sharded = make_backend("mjx", scene, FAST, batch_size=8)
     assert sharded.sharding.num_devices == 4 and sharded.batch_size == 8
     first, _ = sharded.run(make_inputs(scene, FAST, picks.take(slice(0, 8))))

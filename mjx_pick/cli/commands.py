@@ -200,26 +200,45 @@ def cmd_calibrate(args) -> int:
     from mjx_pick.studies import calibration as cal
 
     obj, base, picks_cfg = base_settings(args)
-    outcomes = cal.read_outcomes(args.outcomes)
     names = cal.canonical_params(args.params)
-    bounds = name_ranges(args.bounds, "--bounds")
-    priors = name_ranges(args.prior, "--prior")
-    backend = "mjx" if args.estimator == "jvp" else args.backend
+    problem, holdout = _calibration_problems(args, obj, base, picks_cfg, names)
+    res = _fit(args, problem, holdout)
+    _print_fit(res, names)
+    print(
+        f"results in {args.out}/ (contact.toml, calibration.json, loss.png, report.md); "
+        f"use: mjx-pick evaluate ... --contact {args.out}/contact.toml"
+    )
+    return 0
+
+
+def _calibration_problems(args, obj, base, picks_cfg, names):
+    """The fit's problem on --outcomes, and the held-out one on --holdout (or None)."""
+    from mjx_pick.studies import calibration as cal
+
     kw = dict(
         temperature_mm=args.temperature_mm,
         pick_config=picks_cfg,
-        bounds=bounds,
-        priors=priors,
+        bounds=name_ranges(args.bounds, "--bounds"),
+        priors=name_ranges(args.prior, "--prior"),
         replicates=args.replicates,
         noise=cal.Noise(trace_window_s=args.trace_window_s),
         force_mismatch=args.force_mismatch,
     )
-    problem = cal.Problem(obj, outcomes, names, base, backend=backend, **kw)
+    # the forward-mode estimator differentiates MJX's JAX physics
+    backend = "mjx" if args.estimator == "jvp" else args.backend
+    problem = cal.Problem(obj, cal.read_outcomes(args.outcomes), names, base, backend=backend, **kw)
     holdout = None
     if args.holdout:
         holdout = cal.Problem(
             obj, cal.read_outcomes(args.holdout), names, base, backend=args.backend, **kw
         )
+    return problem, holdout
+
+
+def _fit(args, problem, holdout):
+    """Run the estimator --estimator names, logging every --log-every steps."""
+    from mjx_pick.studies import calibration as cal
+    from mjx_pick.studies.options import RunOptions
 
     def log(entry):
         if entry["step"] % args.log_every == 0:
@@ -230,39 +249,31 @@ def cmd_calibrate(args) -> int:
                 f"  {values}{blown}"
             )
 
-    from mjx_pick.studies.options import RunOptions
-
     # the fit's run options: its backend and pick-points are the problem's
     run = RunOptions(
         seed=args.seed, out=args.out, resume=args.resume, progress=not args.no_progress
     )
+    common = dict(budget=args.budget, holdout=holdout, identify=not args.no_identify, log=log)
     if args.estimator == "lsq":
         if args.resume:
             raise ConfigError("--resume: estimator 'lsq' keeps no checkpoints; run it again")
-        res = cal.least_squares(
-            problem,
-            run,
-            max_iters=args.steps,
-            budget=args.budget,
-            holdout=holdout,
-            identify=not args.no_identify,
-            log=log,
-        )
-    else:
-        res = cal.calibrate(
-            problem,
-            run,
-            steps=args.steps,
-            learning_rate=args.lr,
-            estimator=args.estimator,
-            samples=args.samples,
-            sigma=args.sigma,
-            budget=args.budget,
-            checkpoint_every=args.checkpoint_every,
-            holdout=holdout,
-            identify=not args.no_identify,
-            log=log,
-        )
+        return cal.least_squares(problem, run, max_iters=args.steps, **common)
+    return cal.calibrate(
+        problem,
+        run,
+        steps=args.steps,
+        learning_rate=args.lr,
+        estimator=args.estimator,
+        samples=args.samples,
+        sigma=args.sigma,
+        checkpoint_every=args.checkpoint_every,
+        **common,
+    )
+
+
+def _print_fit(res, names) -> None:
+    """Each parameter's start -> fit with its interval and identifiability, and the
+    held-out accuracy before and after."""
     ident = res.identifiability or {}
     for name in names:
         info = ident.get(name)
@@ -283,11 +294,6 @@ def cmd_calibrate(args) -> int:
     for label, acc in (("before", res.accuracy_before), ("after", res.accuracy_after)):
         if acc:
             print(f"held-out accuracy {label}: {acc['correct']}/{acc['total']}")
-    print(
-        f"results in {args.out}/ (contact.toml, calibration.json, loss.png, report.md); "
-        f"use: mjx-pick evaluate ... --contact {args.out}/contact.toml"
-    )
-    return 0
 
 
 def cmd_report(args) -> int:
