@@ -186,6 +186,24 @@ def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
     return status.inner_text()
 
 
+def start_short_batch(page, url: str, name: str, n: int, chunk: int | None = None) -> None:
+    """Open the GUI at url, import the shipped part, set a short lift and hold, and start
+    an evaluate of n pick-points into the run folder name (chunk: pick-points per saved
+    part)."""
+    page.set_default_timeout(60_000)
+    page.goto(url)
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", n)
+    if chunk is not None:
+        number(page, "chunk (pick-points per saved part; empty: automatic)", chunk)
+    page.get_by_label("run folder name").fill(name)
+    page.get_by_test_id("start-batch").click()
+
+
 def choose(page, label: str, option: str) -> None:
     page.get_by_label(label, exact=True).click()
     page.get_by_role("option", name=option, exact=True).click()
@@ -652,17 +670,7 @@ def test_no_time_left_is_shown_once_the_server_is_gone(browser, tmp_path):
     context = browser.new_context(viewport={"width": 1500, "height": 1000})
     try:
         page = context.new_page()
-        page.set_default_timeout(60_000)
-        page.goto(url)
-        import_shipped(page)
-        page.get_by_text("2 Set gripper parameters").click()
-        number(page, "lift height (mm)", 20)
-        number(page, "hold (s)", 0.1)
-        page.get_by_text("3 Generate input data").click()
-        number(page, "pick-points", 40)
-        number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
-        page.get_by_label("run folder name").fill("orphan")
-        page.get_by_test_id("start-batch").click()
+        start_short_batch(page, url, "orphan", 40, chunk=2)
         status = page.get_by_test_id("job-status")
         status.filter(has_text=re.compile(r"s left")).wait_for(timeout=TIMEOUT_MS)
         stop_server(proc)
@@ -764,16 +772,7 @@ def test_runs_are_remembered_across_a_server_restart(browser, tmp_path):
     context = browser.new_context(viewport={"width": 1500, "height": 1000})
     try:
         page = context.new_page()
-        page.set_default_timeout(60_000)
-        page.goto(url)
-        import_shipped(page)
-        page.get_by_text("2 Set gripper parameters").click()
-        number(page, "lift height (mm)", 20)
-        number(page, "hold (s)", 0.1)
-        page.get_by_text("3 Generate input data").click()
-        number(page, "pick-points", 4)
-        page.get_by_label("run folder name").fill("before-restart")
-        page.get_by_test_id("start-batch").click()
+        start_short_batch(page, url, "before-restart", 4)
         assert wait_job(page, "evaluate before-restart").startswith("complete")
         stop_server(proc)
 

@@ -408,19 +408,25 @@ def test_a_second_job_reuses_the_warm_worker(tmp_path, monkeypatch):
         workers.close()
 
 
+def _long_job_with_a_chunk(workers, out, log):
+    """A 200-pick evaluate started on the warm workers, returned (with its argv without
+    --out) once its first chunk is saved: a job surely mid-run."""
+    argv = ["evaluate", "block", "--n", "200", "--seed", "1", *SHORT, "--chunk-size", "2"]
+    job = jobs.Job([*argv, "--out", str(out)], log, out, 200, 2)
+    job.start(workers)
+    deadline = time.monotonic() + 240
+    while not list((out / "chunks").glob("part-*.parquet")):
+        assert job.running and time.monotonic() < deadline, job.log.read_text()
+        time.sleep(0.2)
+    return job, argv
+
+
 def test_a_job_in_the_worker_is_cancelled_and_the_worker_serves_the_next(tmp_path):
     workers = warm_workers(tmp_path)
     try:
         out = tmp_path / "long"
-        argv = ["evaluate", "block", "--n", "200", "--seed", "1", *SHORT, "--chunk-size", "2"]
-        job = jobs.Job([*argv, "--out", str(out)], tmp_path / "logs" / "long.log", out, 200, 2)
-        job.start(workers)
+        job, argv = _long_job_with_a_chunk(workers, out, tmp_path / "logs" / "long.log")
         assert job.warm
-        deadline = time.monotonic() + 240
-        while not list((out / "chunks").glob("part-*.parquet")):
-            assert job.running, job.log.read_text()
-            assert time.monotonic() < deadline
-            time.sleep(0.2)
         # another browser tab's job while the worker is busy: a process of its own
         other = tmp_path / "other"
         beside = jobs.Job(
@@ -453,15 +459,8 @@ def test_a_job_in_the_worker_is_cancelled_and_the_worker_serves_the_next(tmp_pat
 def test_a_killed_worker_is_reported_and_a_later_job_succeeds(tmp_path):
     workers = warm_workers(tmp_path)
     try:
-        out = tmp_path / "killed"
-        argv = ["evaluate", "block", "--n", "200", "--seed", "1", *SHORT, "--chunk-size", "2"]
-        job = jobs.Job([*argv, "--out", str(out)], tmp_path / "logs" / "k.log", out, 200, 2)
-        job.start(workers)
+        job, _ = _long_job_with_a_chunk(workers, tmp_path / "killed", tmp_path / "logs" / "k.log")
         dead = workers.worker("mujoco").pid
-        deadline = time.monotonic() + 240
-        while not list((out / "chunks").glob("part-*.parquet")):
-            assert job.running and time.monotonic() < deadline, job.log.read_text()
-            time.sleep(0.2)
         os.kill(dead, 9)
         job.wait(60)
         p = job.poll()

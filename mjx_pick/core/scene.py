@@ -126,11 +126,16 @@ def pad_collision_box_mm(
     half_w = min(r, 0.5 * gripper.finger_width_mm)
     if height <= 2 * r:
         return half_w, 0.5 * gripper.pad_height_mm, 0.0
+    return half_w, r, _box_offset_mm(obj, gripper, r, lo, hi)
+
+
+def _box_offset_mm(obj, gripper, half_h: float, lo: float, hi: float) -> float:
+    """Height of a collision box's centre above the pad's centre, mm: on the centre of
+    the object's wall in the pad band lo..hi, the box (half height half_h) kept within
+    the pad's height."""
     _, centre = obj.wall_mm(lo, hi)
-    # the box stays within the pad's height
-    dz = centre - 0.5 * (lo + hi)
-    limit = 0.5 * gripper.pad_height_mm - r
-    return half_w, r, float(np.clip(dz, -limit, limit))
+    limit = 0.5 * gripper.pad_height_mm - half_h
+    return float(np.clip(centre - 0.5 * (lo + hi), -limit, limit))
 
 
 def _elliptic_box_mm(obj, gripper, width, height, r, lo, hi):
@@ -150,10 +155,7 @@ def _elliptic_box_mm(obj, gripper, width, height, r, lo, hi):
         return float(half_w), 0.5 * gripper.pad_height_mm, 0.0
     s = rc / np.hypot(0.5 * width, 0.5 * height)
     half_w, half_h = s * 0.5 * width, s * 0.5 * height
-    _, centre = obj.wall_mm(lo, hi)
-    dz = centre - 0.5 * (lo + hi)
-    limit = 0.5 * gripper.pad_height_mm - half_h
-    return float(half_w), float(half_h), float(np.clip(dz, -limit, limit))
+    return float(half_w), float(half_h), _box_offset_mm(obj, gripper, half_h, lo, hi)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
