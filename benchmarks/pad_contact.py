@@ -173,6 +173,14 @@ def torque() -> None:
 # one contact each (multiccd off).
 
 
+def _pad(contact, variant: str):
+    """The contact a candidate's scene is built with: the library's "rimmed" pad for the
+    "rimmed" candidate, else the "mean_radius" box the XML patches start from."""
+    return dataclasses.replace(
+        contact, pad_collision="rimmed" if variant == "rimmed" else "mean_radius"
+    )
+
+
 def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
     import re
 
@@ -183,7 +191,7 @@ def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
             text = text.replace("</option>", '<flag multiccd="disable"/></option>', 1)
         return text
 
-    if variant == "square":
+    if variant in ("square", "rimmed"):  # the library's own "mean_radius" / "rimmed"
         return xml
     if variant == "guarded":
         # the "mean_radius" box, and the whole pad recessed 0.1 mm behind its face as a
@@ -334,7 +342,7 @@ def rubber(variants, loads, cases_wanted=None) -> None:
 
                 with mock.patch.object(scene_mod, "scene_xml", patched):
                     picks = _centred(part, grasp, factors * d_r * 1e3)
-                    out, scene = _run(part, picks, grasp, contact, SOLVER)
+                    out, scene = _run(part, picks, grasp, _pad(contact, variant), SOLVER)
                 ok = out["success"]
                 first = factors[np.argmax(~ok)] if (~ok).any() else np.nan
                 last = factors[: np.argmax(~ok)][-1] if (~ok).any() and ok[0] else np.nan
@@ -366,8 +374,12 @@ def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tupl
         d.ctrl[act] = m.actuator_ctrlrange[act, 1]
     d.ctrl[ix.lift_actuator] = 0.005
     body = ix.object_body
-    pads = {m.geom("pad_left").id, m.geom("pad_right").id}
-    pads |= {g for g in range(m.ngeom) if m.geom(g).name.startswith(("pad_left_t", "pad_right_t"))}
+    pads = {
+        g
+        for g in range(m.ngeom)
+        if m.geom(g).name.startswith(("pad_left", "pad_right"))
+        and not m.geom(g).name.endswith(("_visual", "_guard"))
+    }
 
     def pad_normal_n() -> float:
         f6, total = np.zeros(6), 0.0
@@ -436,7 +448,7 @@ def torsion(variants) -> None:
                     return _xml_with(original(*a, **k), _v, _t, _r)
 
                 with mock.patch.object(scene_mod, "scene_xml", patched):
-                    scene = mp.build_scene(part, FREE, contact, SOLVER, grasp)
+                    scene = mp.build_scene(part, FREE, _pad(contact, variant), SOLVER, grasp)
                 # the rubber pad's torque in 0.25 s
                 torque, normal = _torsion_capacity(scene, force, False, ref / 0.25)
                 ratio = torque / (2 * mu * normal * r_mean) if normal > 0 else float("nan")

@@ -9,9 +9,10 @@ MuJoCo does not model a pad's pressure field. Its box-convex collider represents
 pad on a flat face by up to four contact points at the corners of their overlap (a
 line contact by its two ends, a point by one), each pressed with an equal share of the
 pad's force when neither body tilts. The overlap is that of the pad's collision geom
-with the part: the whole pad, or with ``ContactParams.pad_collision = "mean_radius"`` a
-box cut so that its corners sit at the patch's mean radius
-(:func:`mjx_pick.core.scene.pad_collision_box_mm`). Each point is a soft-finger contact (condim 4,
+with the part: the whole pad, or with ``ContactParams.pad_collision = "mean_radius"`` or
+``"rimmed"`` (the default) a box cut so that its corners sit at the patch's mean radius
+(:func:`mjx_pick.core.scene.pad_collision_box_mm`; the rim behind it touches only a part
+the box misses). Each point is a soft-finger contact (condim 4,
 :mod:`mjx_pick.core.physics`): Coulomb friction mu in the pad plane and torsional friction
 mu_t about the normal. With pyramidal cones the three share one budget,
 |f_1| / mu + |f_2| / mu + |tau| / mu_t <= N; with elliptic cones (the default) their Euclidean norm
@@ -52,12 +53,14 @@ class PadContacts:
     pad: np.ndarray  # (K,) 0: left pad, 1: right pad
 
 
-def pad_contacts(scene: Scene, squeeze_m: float = 1e-4) -> PadContacts:
+def pad_contacts(scene: Scene, squeeze_m: float = 2e-5) -> PadContacts:
     """The contact points the engine makes when both pads close on a centred part.
 
     The part sits as built (centred under the gripper, no yaw); each finger of the
     parallel jaw is moved in until it touches, then ``squeeze_m`` further, and the
-    collider's pad-part contacts are read.
+    collider's pad-part contacts are read. The default squeeze is a few times the depth
+    of a pad contact under load, and short of the rim behind the pad box
+    (``physics.PAD_RIM_RECESS_MM``), which a flat face does not reach.
 
     Raises:
       ConfigError: an MJCF gripper (its fingers swing on a linkage; not supported
@@ -70,7 +73,13 @@ def pad_contacts(scene: Scene, squeeze_m: float = 1e-4) -> PadContacts:
         )
     m, ix = scene.model, scene.index
     d = mujoco.MjData(m)
-    pads = {m.geom("pad_left").id: 0, m.geom("pad_right").id: 1}
+    # the pads' collision geoms: the whole pad, its box or its cells (scene.py)
+    pads = {
+        g: 0 if m.geom(g).name.startswith("pad_left") else 1
+        for g in range(m.ngeom)
+        if m.geom(g).name.startswith(("pad_left", "pad_right"))
+        and not m.geom(g).name.endswith("_visual")
+    }
     qadr = (ix.finger_left_qpos, ix.finger_right_qpos)
 
     def touching(side: int, travel: float) -> bool:

@@ -49,12 +49,21 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   small part of the pads' friction capacity. With elliptic cones (the default) a corner
   resists with mu N sqrt(a^2 + b^2) and its point torsion adds in quadrature, so the box
   is cut so that the overlap's corners sit at r_mean cos(30 deg) and each point keeps
-  mu r_mean sin(30 deg) of torsion (``ELLIPTIC_TORSION_SHARE``). It is the default
-  since issue 32 (with elliptic cones at impratio 10). The pad touches a part only
-  within that box: a pick at a part's very end can miss it (no_contact), and with
-  pyramidal cones a face wider than the box, turned a few degrees in the grip, is met
-  by the box's edge and a slippery part pushed out (elliptic cones held those). An
-  MJCF gripper's pads keep their own geoms. ``mjx_pick.core.holding`` states the
+  mu r_mean sin(30 deg) of torsion (``ELLIPTIC_TORSION_SHARE``). Why a narrower geom
+  and not more contact points: MuJoCo's solver shares a pad's normal force among its
+  coplanar contacts as the friction demand asks, not as a pressure field would, so
+  under torsion the force moves to the outermost points and the capacity follows the
+  largest lever (a 2 x 2 grid of pad cells held 1.6-2.3x a rubber pad). The box alone
+  touches a part only within it: a pick at a part's corner or end under the pad's
+  outer region is missed (no_contact, force_not_reached), and a part the pads turn into
+  line with them on closing turns less than under the real pad. ``pad_collision =
+  "rimmed"``, the default, keeps the box and adds the whole pad recessed
+  ``PAD_RIM_RECESS_MM`` behind it with the same friction: a flat face the box presses
+  stays clear of the rim, so its torque is the box's, and a part the box misses meets
+  the rim and is gripped and aligned as by the whole pad. Where the part's surface
+  reaches the rim beside the box (a curved or tapered part), the rim's contacts add
+  their own lever, as a real pad pressed harder at its edge would. An MJCF gripper's
+  pads keep their own geoms. ``mjx_pick.core.holding`` states the
   model's capacity from the contact points and a rubber pad's for comparison;
   benchmarks/RESULTS.md ("Torque", "Torsion like rubber") gives the figures.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
@@ -85,7 +94,17 @@ CONVERGED_TIMESTEP_S = 0.002
 
 
 # what a parametric pad collides through (ContactParams.pad_collision)
-PAD_COLLISIONS = ("pad", "mean_radius")
+PAD_COLLISIONS = ("pad", "mean_radius", "rimmed")
+
+# "rimmed": the "mean_radius" box and, behind it, the whole pad recessed by
+# PAD_RIM_RECESS_MM as a second collision geom with the same friction. A face the box
+# touches stays clear of the rim (the box's contacts sit a few micrometres deep), so
+# the torque is the box's; a part the box misses (a corner or end under the pad's outer
+# region) meets the rim after that much more travel and is gripped as by the whole pad.
+# 0.1 mm: well beyond the box's depth at the largest grip forces, and within a rubber
+# pad's compression; labels moved by 1-2 in 128 picks between 0.05 and 0.2 mm
+# (benchmarks/RESULTS.md, "A rim behind the pad box")
+PAD_RIM_RECESS_MM = 0.1
 
 # elliptic cones with the "mean_radius" box: the share sin(theta) of the rubber pad's
 # torsion that each contact point's soft-finger torsion carries; the box's corners sit
@@ -142,11 +161,12 @@ class ContactParams:
     table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
     # what a parametric pad collides through (module docstring, "Pad contacts"): "pad",
     # the whole pad (MuJoCo's corner contacts resist spin at the patch's edges: 1.3-2.8x
-    # a rubber pad's torque), or "mean_radius" (the default), a box cut so that the
-    # corners and the points' own torsion hold a uniformly pressed rubber pad's torque
-    # for the solver's cone (mjx_pick.core.scene.pad_collision_box_mm); a part is then
-    # touched only within the box (picks at a part's very end: no_contact)
-    pad_collision: str = "mean_radius"
+    # a rubber pad's torque); "mean_radius", a box cut so that the corners and the
+    # points' own torsion hold a uniformly pressed rubber pad's torque for the solver's
+    # cone (mjx_pick.core.scene.pad_collision_box_mm), touching a part only within the
+    # box; or "rimmed" (the default), that box with the whole pad recessed behind it,
+    # so that a part the box misses is still gripped (PAD_RIM_RECESS_MM)
+    pad_collision: str = "rimmed"
 
     def __post_init__(self):
         o = "contact"
@@ -316,14 +336,11 @@ def pad_torsion_m(pad_friction, pad_torsion_mm, patch_mm: tuple[float, float]):
 def torsion_share(contact: ContactParams, solver: SolverParams, pad_box: bool = True) -> float:
     """The factor on the pad contacts' derived torsion mu r_mean: ELLIPTIC_TORSION_SHARE
     with elliptic cones and the "mean_radius" box on a parametric pad (its corners then
-    carry the rest of the rubber pad's torsion in quadrature), else 1. A pad_torsion_mm
-    the user set is kept as set."""
-    if (
-        pad_box
-        and contact.pad_torsion_mm is None
-        and contact.pad_collision == "mean_radius"
-        and solver.cone == "elliptic"
-    ):
+    carry the rest of the rubber pad's torsion in quadrature; "rimmed" likewise), else 1.
+    A pad_torsion_mm the user set is kept as set."""
+    if not pad_box or contact.pad_torsion_mm is not None:
+        return 1.0
+    if contact.pad_collision in ("mean_radius", "rimmed") and solver.cone == "elliptic":
         return ELLIPTIC_TORSION_SHARE
     return 1.0
 

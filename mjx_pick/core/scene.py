@@ -30,6 +30,7 @@ import dataclasses
 import hashlib
 import re
 from pathlib import Path
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -127,6 +128,40 @@ def pad_collision_box_mm(
     if height <= 2 * r:
         return half_w, 0.5 * gripper.pad_height_mm, 0.0
     return half_w, r, _box_offset_mm(obj, gripper, r, lo, hi)
+
+
+class PadBox(NamedTuple):
+    """One collision box of a parametric pad, mm, in the finger's frame: its half width
+    and half height in the pad's plane, its centre's offsets across the pad (y) and in
+    height (z), and how far its face lies behind the pad's face (recess)."""
+
+    half_width_mm: float
+    half_height_mm: float
+    y_mm: float = 0.0
+    z_mm: float = 0.0
+    recess_mm: float = 0.0
+
+
+def pad_collision_geoms_mm(
+    obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig, contact, cone: str
+) -> list[PadBox] | None:
+    """A parametric pad's collision boxes for ``contact.pad_collision``; None where the
+    whole pad collides ("pad").
+
+    "mean_radius": the box of :func:`pad_collision_box_mm`. "rimmed": that box and the
+    whole pad recessed by ``physics.PAD_RIM_RECESS_MM`` behind it (the rim), which only
+    a part the box misses reaches.
+    """
+    from mjx_pick.core.physics import PAD_RIM_RECESS_MM
+
+    if contact.pad_collision == "pad":
+        return None
+    half_w, half_h, dz = pad_collision_box_mm(obj, gripper, grasp, cone)
+    boxes = [PadBox(half_w, half_h, 0.0, dz)]
+    whole = PadBox(0.5 * gripper.finger_width_mm, 0.5 * gripper.pad_height_mm)
+    if contact.pad_collision == "rimmed" and boxes[0][:2] != whole[:2]:
+        boxes.append(whole._replace(recess_mm=PAD_RIM_RECESS_MM))
+    return boxes
 
 
 def _box_offset_mm(obj, gripper, half_h: float, lo: float, hi: float) -> float:
@@ -232,7 +267,7 @@ class Scene:
 
 def _is_pad_geom(name: str, gripper: GripperSpec) -> bool:
     if gripper.mjcf is None:
-        return name in ("pad_left", "pad_right")
+        return name.startswith(("pad_left", "pad_right")) and not name.endswith("_visual")
     pads = gripper.mjcf.pad_left_geoms + gripper.mjcf.pad_right_geoms
     return name in {mjcf_gripper.PREFIX + g for g in pads}
 
@@ -248,11 +283,11 @@ def scene_xml(
     solver: SolverParams,
     fingertip_height_mm: float,
     kinematics: mjcf_gripper.Kinematics | None = None,
-    pad_box_mm: tuple[float, float, float] | None = None,
+    pad_boxes_mm: list[tuple[float, float, float, float]] | None = None,
 ) -> str:
     """MJCF text of the scene (deterministic: same inputs, same text).
 
-    pad_box_mm: the parallel jaw's pad collision box (:func:`pad_collision_box_mm`);
+    pad_boxes_mm: the parallel jaw's pad collision boxes (:func:`pad_collision_geoms_mm`);
     None: the whole pad collides.
 
     With an MJCF gripper (its measured ``kinematics``) the text holds the ``gripper``
@@ -267,9 +302,9 @@ def scene_xml(
     full = _fmt(
         [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
     )
-    pairs = _contact_pairs_xml(gripper, mjc, len(pad_pieces))
+    pairs = _contact_pairs_xml(gripper, mjc, len(pad_pieces), pad_boxes_mm)
     table_size = _fmt([TABLE_HALF_SIZE_M, TABLE_HALF_SIZE_M, 0.01])
-    gripper_body, actuators = _gripper_xml(gripper, kinematics, z_grip, pad_box_mm)
+    gripper_body, actuators = _gripper_xml(gripper, kinematics, z_grip, pad_boxes_mm)
     return f"""<mujoco model="mjx_pick {obj.name} {gripper.name}">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{solver.timestep_s:.9g}" cone="{solver.cone}" impratio="{solver.impratio:.9g}"
@@ -336,14 +371,19 @@ def _object_meshes_xml(obj: ObjectModel, pad_pieces: list) -> tuple[list[str], s
     return meshes, pieces
 
 
-def _contact_pairs_xml(gripper: GripperSpec, mjc: MujocoContact, n_pieces: int) -> list[str]:
+def _contact_pairs_xml(
+    gripper: GripperSpec, mjc: MujocoContact, n_pieces: int, pad_boxes_mm=None
+) -> list[str]:
     """The scene's only contacts, as explicit pairs: each pad (an MJCF gripper's pad
     geoms, and its links where it asks for them) with each object piece, and the table
     with the object's hull."""
     pad_fr = _fmt([mjc.pad_friction, mjc.pad_friction, mjc.pad_torsion_m, 0.0001, 0.0001])
     tab_fr = _fmt([mjc.table_friction, mjc.table_friction, 0.005, 0.0001, 0.0001])
     if gripper.mjcf is None:
-        pad_geoms = [("pad_left", "pad_left"), ("pad_right", "pad_right")]
+        names = _parallel_jaw_pad_names(pad_boxes_mm)
+        pad_geoms = [
+            (f"pad_{side}{k}", f"pad_{side}{k}") for side in ("left", "right") for k in names
+        ]
     else:
         # pair names start with pad_left / pad_right (SceneIndex.pad_pairs finds them)
         pad_geoms = [
@@ -382,7 +422,7 @@ def _gripper_xml(
     gripper: GripperSpec,
     kinematics: mjcf_gripper.Kinematics | None,
     z_grip: float,
-    pad_box_mm: tuple[float, float, float] | None,
+    pad_boxes_mm: list[tuple[float, float, float, float]] | None,
 ) -> tuple[str, str]:
     """The gripper's body and the actuators (the lift's and a parallel jaw's): (body,
     actuators). An MJCF gripper's body here is its carriage only (see scene_xml)."""
@@ -390,7 +430,7 @@ def _gripper_xml(
     actuators = f"""    <position name="lift" joint="lift" kp="{LIFT_STIFFNESS_N_PER_M:.9g}"
               kv="{LIFT_DAMPING_NS_PER_M:.9g}" forcerange="{lift_range}"/>"""
     if kinematics is None:
-        gripper_body = _parallel_jaw_body_xml(gripper, z_grip, pad_box_mm)
+        gripper_body = _parallel_jaw_body_xml(gripper, z_grip, pad_boxes_mm)
         actuators += "\n" + _parallel_jaw_actuators_xml(gripper)
     else:
         # the pads' centre at the grasp height when fully open (lift 0)
@@ -402,16 +442,26 @@ def _gripper_xml(
     return gripper_body, actuators
 
 
+def _parallel_jaw_pad_names(pad_boxes_mm) -> list[str]:
+    """Suffixes of a parallel jaw's pad collision geoms after ``pad_left`` / ``pad_right``:
+    "" for the whole pad or the box, ``_rim`` for the rim behind the box."""
+    if pad_boxes_mm is None:
+        return [""]
+    return ["", "_rim"][: len(pad_boxes_mm)]
+
+
 def _parallel_jaw_body_xml(
-    gripper: GripperSpec, z_grip: float, pad_box_mm: tuple[float, float, float] | None = None
+    gripper: GripperSpec,
+    z_grip: float,
+    pad_boxes_mm: list[tuple[float, float, float, float]] | None = None,
 ) -> str:
     """The parametric gripper: a body on the lift with two sliding pad fingers.
 
     Each finger's pad is ``pad_left`` / ``pad_right``, the geom the pad pairs name. With
-    ``pad_box_mm`` (half width, half height and height offset of a collision box, mm)
-    that geom is the box, and ``pad_left_visual`` / ``pad_right_visual``, the pad as
-    built, carries the finger's mass and collides with nothing; None: the whole pad
-    collides."""
+    ``pad_boxes_mm`` (:func:`pad_collision_geoms_mm`) that geom is the collision box, a
+    rim behind it ``pad_left_rim`` (:func:`_parallel_jaw_pad_names`), and
+    ``pad_left_visual`` / ``pad_right_visual``, the pad as built, carries the finger's
+    mass and collides with nothing; None: the whole pad collides."""
     stroke = gripper.stroke_mm * 1e-3
     depth = gripper.finger_depth_mm * 1e-3
     width = gripper.finger_width_mm * 1e-3
@@ -422,15 +472,23 @@ def _parallel_jaw_body_xml(
     pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
 
     def pad(side: str) -> str:
-        if pad_box_mm is None:  # the whole pad collides
+        if pad_boxes_mm is None:  # the whole pad collides
             return f"""<geom name="pad_{side}" type="box" size="{pad_size}"
               mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>"""
-        box_size = _fmt([0.5 * depth, pad_box_mm[0] * 1e-3, pad_box_mm[1] * 1e-3])
-        box_pos = _fmt([0.0, 0.0, pad_box_mm[2] * 1e-3])
-        return f"""<geom name="pad_{side}_visual" type="box" size="{pad_size}"
-              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>
-        <geom name="pad_{side}" type="box" size="{box_size}" pos="{box_pos}"
+        boxes = []
+        for name, (half_w, half_h, dy, dz, recess) in zip(
+            _parallel_jaw_pad_names(pad_boxes_mm), pad_boxes_mm, strict=True
+        ):
+            # the box is thinned on both faces: its face towards the part lies behind
+            box_size = _fmt([0.5 * depth - recess * 1e-3, half_w * 1e-3, half_h * 1e-3])
+            box_pos = _fmt([0.0, dy * 1e-3, dz * 1e-3])
+            boxes.append(
+                f"""
+        <geom name="pad_{side}{name}" type="box" size="{box_size}" pos="{box_pos}"
               mass="0" group="3" rgba=".9 .2 .2 .5"/>"""
+            )
+        return f"""<geom name="pad_{side}_visual" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>{"".join(boxes)}"""
 
     return f"""    <body name="gripper" pos="0 0 {z_grip:.9g}" gravcomp="1">
       <joint name="lift" type="slide" axis="0 0 1"/>
@@ -488,9 +546,8 @@ def build_scene(
     kin = None if gripper.mjcf is None else mjcf_gripper.characterise(gripper.mjcf)
     mjc = mujoco_contact(contact, solver, obj.mass_kg, patch, pad_box=gripper.mjcf is None)
     tip_mm, _ = pad_band_mm(obj, gripper, grasp)
-    mean_radius = kin is None and contact.pad_collision == "mean_radius"
-    box = pad_collision_box_mm(obj, gripper, grasp, solver.cone) if mean_radius else None
-    xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin, box)
+    boxes = None if kin else pad_collision_geoms_mm(obj, gripper, grasp, contact, solver.cone)
+    xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin, boxes)
     if kin is None:
         model = mujoco.MjModel.from_xml_string(xml)
     else:

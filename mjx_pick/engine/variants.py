@@ -51,8 +51,9 @@ OPT_FIELDS = ("opt.impratio", "opt.tolerance", "opt.ls_tolerance")
 PAIR_FIELDS = ("pair_friction", "pair_solref", "pair_solimp")
 # bookkeeping of names and paths: never read by the physics (a variant's name -- the
 # model is named after the gripper -- changes their lengths and addresses, not the
-# simulation)
-_NAME_FIELDS = ("names_map", "nnames", "nnames_map", "npaths")
+# simulation), and the model buffer's size, which holds the names (every array's size
+# is a field of its own)
+_NAME_FIELDS = ("names_map", "nnames", "nnames_map", "npaths", "nbuffer")
 # the smallest mass MuJoCo and Warp treat as a mass (a value crossing it changes what
 # Warp's model builder derives from it: see program_key)
 _MINVAL = 1e-15
