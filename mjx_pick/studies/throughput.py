@@ -19,6 +19,7 @@ import numpy as np
 
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.objects import load_object
+from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.scene import build_scene
 from mjx_pick.engine.backend import make_inputs
 from mjx_pick.engine.runner import Runner
@@ -108,11 +109,12 @@ class RunSpec:
     options: tuple = ()
     warmup: int = 0
     solver: tuple = ()  # SolverParams fields replaced for this run (iterations, ...)
+    contact: tuple = ()  # ContactParams fields replaced for this run (pad_collision)
     devices: int | None = None  # the first this many local devices (default: the backend's)
 
     @property
     def label(self) -> str:
-        opts = "".join(f",{k}={v}" for k, v in self.options + self.solver)
+        opts = "".join(f",{k}={v}" for k, v in self.options + self.solver + self.contact)
         gpus = f",devices={self.devices}" if self.devices else ""
         return f"{self.backend}{opts}{gpus}"
 
@@ -123,10 +125,10 @@ class RunSpec:
         Keys: n, batch, warmup, devices (ints); backend options refill, ticks_per_call,
         shrink_levels, graph_mode, rows (Warp's constraint rows per simulation; contacts
         sized as usual); solver settings iterations, ls_iterations, tolerance,
-        timestep_s."""
+        timestep_s; the contact setting pad_collision."""
         name, *parts = text.split(":")
         fields: dict = {}
-        options, solver = [], []
+        options, solver, contact = [], [], []
         for part in parts:
             key, sep, value = part.partition("=")
             if not sep:
@@ -143,12 +145,16 @@ class RunSpec:
                 solver.append((key, int(value)))
             elif key in ("tolerance", "timestep_s"):
                 solver.append((key, float(value)))
+            elif key in ("pad_collision",):
+                contact.append((key, value))
             else:
                 raise ValueError(f"run {text!r}: unknown key {key!r}")
         if "n" not in fields:
             raise ValueError(f"run {text!r} needs n=")
         fields.setdefault("batch", fields["n"])
-        return cls(name, options=tuple(options), solver=tuple(solver), **fields)
+        return cls(
+            name, options=tuple(options), solver=tuple(solver), contact=tuple(contact), **fields
+        )
 
     def backend_options(self, scene, grasp) -> dict:
         """make_backend options; 'rows' becomes Warp buffers sized on the C engine with
@@ -187,16 +193,18 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
         # the generator stops at its candidate limit: repeat the set (each pick-point is
         # simulated on its own, so a repeat costs what a new one would)
         picks = tile_picks(picks, n_max, 0)
-    scenes: dict = {}  # per solver variant: (scene, inputs)
+    scenes: dict = {}  # per solver and contact variant: (scene, inputs)
 
     def scene_for(spec: RunSpec):
-        if spec.solver not in scenes:
+        key = (spec.solver, spec.contact)
+        if key not in scenes:
             variant = dataclasses.replace(solver, **dict(spec.solver))
-            scene = build_scene(obj, gripper, solver=variant, grasp=grasp)
-            scenes[spec.solver] = (scene, make_inputs(scene, grasp, picks))
-        return scenes[spec.solver]
+            contact = ContactParams(**dict(spec.contact))
+            scene = build_scene(obj, gripper, contact, solver=variant, grasp=grasp)
+            scenes[key] = (scene, make_inputs(scene, grasp, picks))
+        return scenes[key]
 
-    results: dict[str, dict] = {}
+    c_results: dict[tuple, dict] = {}  # MuJoCo C's results per contact variant
     rows = []
     # MuJoCo C first: the reference the others' labels are compared with
     order = sorted(runs, key=lambda r: r.backend != "mujoco")
@@ -204,7 +212,11 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
         scene, inputs = scene_for(spec)
         n = min(spec.n, len(inputs))
         timing, out, backend = _timed_run(spec, scene, inputs.take(slice(0, n)), grasp)
-        results[spec.label] = out
+        if spec.backend == "mujoco":
+            c_results.setdefault(spec.contact, out)
+            reference = None
+        else:
+            reference = c_results.get(spec.contact)
         row = {
             "object": obj_name,
             "run": spec.label,
@@ -215,7 +227,7 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
         }
         row.update(_run_fields(backend, out, n, timing))
         row.update(_buffer_fields(backend, n))
-        row.update(_agreement_with_c(results, spec.label, out, n))
+        row.update(_agreement_with_c(reference, out, n))
         row.update(
             {
                 "timestep_s": scene.solver.timestep_s,
@@ -327,14 +339,13 @@ def _buffer_fields(backend, n: int) -> dict:
     }
 
 
-def _agreement_with_c(results: dict, label: str, out: dict, n: int) -> dict:
-    """The run's labels (success, failure reason) against MuJoCo C's on the pick-points
-    both ran ({} without a C run, or for the C run itself)."""
-    ref = next((k for k in results if k.startswith("mujoco")), None)
-    if ref is None or ref == label:
+def _agreement_with_c(c: dict | None, out: dict, n: int) -> dict:
+    """The run's labels (success, failure reason) against MuJoCo C's results c (the
+    first C run with the same contact settings) on the pick-points both ran ({} without
+    one, or for a C run)."""
+    if c is None:
         return {}
-    m = min(n, len(results[ref]["success"]))
-    c = results[ref]
+    m = min(n, len(c["success"]))
     return {
         "labels_vs_c_n": m,
         "labels_agree_vs_c": round(float(np.mean(out["success"][:m] == c["success"][:m])), 4),
