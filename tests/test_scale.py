@@ -28,7 +28,10 @@ def test_mjx_sharded_over_four_devices_matches_one_and_does_not_recompile(block,
     # conftest gives the CPU 4 devices (XLA_FLAGS=--xla_force_host_platform_device_count=4)
     assert len(jax.local_devices()) == 4
     gripper = mp.GripperSpec()
-    scene = mp.build_scene(block, gripper)
+    # the pad box without the rim behind it: MJX's JAX physics computes every pair's
+    # contacts every step, and the rim's pairs make it several times slower on a CPU;
+    # what is tested here is the sharding, not the pads
+    scene = mp.build_scene(block, gripper, mp.ContactParams(pad_collision="mean_radius"))
     # pick-points well inside the pads' collision box: no label hangs on rounding (the
     # sharded program reduces in another order; a pad meeting the part at the box's edge
     # can flip between no contact and force not reached)
@@ -48,12 +51,16 @@ def test_mjx_sharded_over_four_devices_matches_one_and_does_not_recompile(block,
         assert op not in hlo, f"{op} in the sharded rollout"
     single = make_backend("mjx", scene, FAST, batch_size=8, devices=jax.local_devices()[:1])
     alone, _ = single.run(make_inputs(scene, FAST, picks.take(slice(0, 8))))
-    for key in ("success", "failure", "t_reached_s"):
+    for key in ("success", "failure"):
         np.testing.assert_array_equal(first[key], alone[key], err_msg=key)
     # not bitwise: the sharded program reduces in another order (float32), and contact
-    # dynamics amplify that; labels and timings above are equal. Scores: 0.0166 apart at
-    # most on one 2-core machine, under 0.01 on another (XLA's CPU code differs by
+    # dynamics amplify that; labels above are equal. The time the force is reached is
+    # read once per control tick: one pick reached it a tick later sharded (0.315 s
+    # against 0.310 s with the rimmed pads), so within one tick. Scores: 0.0166 apart
+    # at most on one 2-core machine, under 0.01 on another (XLA's CPU code differs by
     # CPU): within 0.03, a tenth of one of eq. 2's three terms
+    tick_s = FAST.substeps(scene.solver) * scene.model.opt.timestep
+    np.testing.assert_allclose(first["t_reached_s"], alone["t_reached_s"], atol=tick_s * 1.01)
     np.testing.assert_allclose(first["score"], alone["score"], atol=0.03)
 
 
