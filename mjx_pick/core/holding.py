@@ -73,7 +73,7 @@ def pad_contacts(scene: Scene, squeeze_m: float = 2e-5) -> PadContacts:
         )
     m, ix = scene.model, scene.index
     d = mujoco.MjData(m)
-    # the pads' collision geoms: the whole pad, its box or its cells (scene.py)
+    # the pads' collision geoms: the whole pad, or its box and the rim behind it (scene.py)
     pads = {
         g: 0 if m.geom(g).name.startswith("pad_left") else 1
         for g in range(m.ngeom)

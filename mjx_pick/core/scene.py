@@ -39,6 +39,7 @@ from mjx_pick.core import mjcf_gripper
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import MAX_HULL_VERTICES, ObjectModel
 from mjx_pick.core.physics import (
+    PAD_RIM_RECESS_MM,
     ContactParams,
     MujocoContact,
     SolverParams,
@@ -143,25 +144,24 @@ class PadBox(NamedTuple):
 
 
 def pad_collision_geoms_mm(
-    obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig, contact, cone: str
+    obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig, contact: ContactParams, cone: str
 ) -> list[PadBox] | None:
     """A parametric pad's collision boxes for ``contact.pad_collision``; None where the
     whole pad collides ("pad").
 
     "mean_radius": the box of :func:`pad_collision_box_mm`. "rimmed": that box and the
     whole pad recessed by ``physics.PAD_RIM_RECESS_MM`` behind it (the rim), which only
-    a part the box misses reaches.
+    a part the box misses reaches (none where the box is the whole pad).
     """
-    from mjx_pick.core.physics import PAD_RIM_RECESS_MM
-
     if contact.pad_collision == "pad":
         return None
     half_w, half_h, dz = pad_collision_box_mm(obj, gripper, grasp, cone)
-    boxes = [PadBox(half_w, half_h, 0.0, dz)]
+    box = PadBox(half_w, half_h, 0.0, dz)
     whole = PadBox(0.5 * gripper.finger_width_mm, 0.5 * gripper.pad_height_mm)
-    if contact.pad_collision == "rimmed" and boxes[0][:2] != whole[:2]:
-        boxes.append(whole._replace(recess_mm=PAD_RIM_RECESS_MM))
-    return boxes
+    cut = (box.half_width_mm, box.half_height_mm) != (whole.half_width_mm, whole.half_height_mm)
+    if contact.pad_collision == "rimmed" and cut:
+        return [box, whole._replace(recess_mm=PAD_RIM_RECESS_MM)]
+    return [box]
 
 
 def _box_offset_mm(obj, gripper, half_h: float, lo: float, hi: float) -> float:
@@ -283,7 +283,7 @@ def scene_xml(
     solver: SolverParams,
     fingertip_height_mm: float,
     kinematics: mjcf_gripper.Kinematics | None = None,
-    pad_boxes_mm: list[tuple[float, float, float, float]] | None = None,
+    pad_boxes_mm: list[PadBox] | None = None,
 ) -> str:
     """MJCF text of the scene (deterministic: same inputs, same text).
 
@@ -372,7 +372,7 @@ def _object_meshes_xml(obj: ObjectModel, pad_pieces: list) -> tuple[list[str], s
 
 
 def _contact_pairs_xml(
-    gripper: GripperSpec, mjc: MujocoContact, n_pieces: int, pad_boxes_mm=None
+    gripper: GripperSpec, mjc: MujocoContact, n_pieces: int, pad_boxes_mm: list[PadBox] | None
 ) -> list[str]:
     """The scene's only contacts, as explicit pairs: each pad (an MJCF gripper's pad
     geoms, and its links where it asks for them) with each object piece, and the table
@@ -422,7 +422,7 @@ def _gripper_xml(
     gripper: GripperSpec,
     kinematics: mjcf_gripper.Kinematics | None,
     z_grip: float,
-    pad_boxes_mm: list[tuple[float, float, float, float]] | None,
+    pad_boxes_mm: list[PadBox] | None,
 ) -> tuple[str, str]:
     """The gripper's body and the actuators (the lift's and a parallel jaw's): (body,
     actuators). An MJCF gripper's body here is its carriage only (see scene_xml)."""
@@ -442,7 +442,7 @@ def _gripper_xml(
     return gripper_body, actuators
 
 
-def _parallel_jaw_pad_names(pad_boxes_mm) -> list[str]:
+def _parallel_jaw_pad_names(pad_boxes_mm: list[PadBox] | None) -> list[str]:
     """Suffixes of a parallel jaw's pad collision geoms after ``pad_left`` / ``pad_right``:
     "" for the whole pad or the box, ``_rim`` for the rim behind the box."""
     if pad_boxes_mm is None:
@@ -453,7 +453,7 @@ def _parallel_jaw_pad_names(pad_boxes_mm) -> list[str]:
 def _parallel_jaw_body_xml(
     gripper: GripperSpec,
     z_grip: float,
-    pad_boxes_mm: list[tuple[float, float, float, float]] | None = None,
+    pad_boxes_mm: list[PadBox] | None = None,
 ) -> str:
     """The parametric gripper: a body on the lift with two sliding pad fingers.
 
