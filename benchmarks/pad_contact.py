@@ -403,7 +403,7 @@ def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tupl
     return float("nan"), pad_normal_n()
 
 
-def torsion(variants) -> None:
+def torsion(variants, ramp_s: float = 0.25, forces=(10.0, 30.0, 100.0)) -> None:
     """The torque the pads transmit about the grip axis before the part turns, against a
     uniformly pressed rubber pad's 2 mu N r_mean (two pads, each pressed with N, read
     from the contacts; r_mean the patch's mean radius), with no gravity (pure torsion),
@@ -431,7 +431,7 @@ def torsion(variants) -> None:
     }
     original = scene_mod.scene_xml
     for label, part in parts.items():
-        for force in (10.0, 30.0, 100.0):
+        for force in forces:
             grasp = mp.GraspConfig(grip_force_n=force)
             contact = dataclasses.replace(
                 CONTACT or mp.ContactParams(), pad_friction=mu, pad_collision="mean_radius"
@@ -450,7 +450,7 @@ def torsion(variants) -> None:
                 with mock.patch.object(scene_mod, "scene_xml", patched):
                     scene = mp.build_scene(part, FREE, _pad(contact, variant), SOLVER, grasp)
                 # the rubber pad's torque in 0.25 s
-                torque, normal = _torsion_capacity(scene, force, False, ref / 0.25)
+                torque, normal = _torsion_capacity(scene, force, False, ref / ramp_s)
                 ratio = torque / (2 * mu * normal * r_mean) if normal > 0 else float("nan")
                 row.append(f"{variant} {ratio:.2f} (N {normal:.1f})")
             print(
@@ -507,6 +507,14 @@ def main() -> None:
     ap.add_argument("--loads", default="0.1,0.25,0.5", help="rubber: loads m (g + a) / (2 mu F)")
     ap.add_argument("--cases", default="", help="rubber: parts whose label contains one of these")
     ap.add_argument("--solver", help="rubber, torsion: SolverParams TOML (default: the defaults)")
+    ap.add_argument(
+        "--ramp-s",
+        type=float,
+        default=0.25,
+        help="torsion: seconds the torque takes to reach the rubber pad's (the slip is read "
+        "at 2 deg, so a fast ramp overshoots the static capacity)",
+    )
+    ap.add_argument("--forces", default="10,30,100", help="torsion: grip forces, N")
     ap.add_argument("--contact", help="rubber, torsion: ContactParams TOML to start from")
     args = ap.parse_args()
     if args.solver:
@@ -522,7 +530,8 @@ def main() -> None:
     if args.what == "coulomb":
         coulomb(args.backend)
     elif args.what == "torsion":
-        torsion(args.variants.split(","))
+        forces = tuple(float(f) for f in args.forces.split(","))
+        torsion(args.variants.split(","), args.ramp_s, forces)
     elif args.what == "rubber":
         rubber(
             args.variants.split(","),
