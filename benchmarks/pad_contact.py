@@ -363,6 +363,8 @@ def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tupl
     The pads' normal force is read from the contacts at that moment."""
     import mujoco
 
+    from mjx_pick.core.scene import parallel_jaw_pad_side
+
     m, ix = scene.model, scene.index
     d = mujoco.MjData(m)
     if not gravity:
@@ -377,8 +379,8 @@ def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tupl
     pads = {
         g
         for g in range(m.ngeom)
-        if m.geom(g).name.startswith(("pad_left", "pad_right"))
-        and not m.geom(g).name.endswith(("_visual", "_guard"))
+        if parallel_jaw_pad_side(m.geom(g).name) is not None
+        and not m.geom(g).name.endswith("_guard")  # the "guarded" candidate's own geom
     }
 
     def pad_normal_n() -> float:

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 from shapely.geometry import box
+from test_preset_physics import PAD_FORCE_MARGIN  # the margin stated for the presets
 
 import mjx_pick as mp
 from mjx_pick.core import holding, physics
@@ -35,10 +36,6 @@ def centred(obj, n, gripper=FREE, grasp=PROC, y_mm=None):
     assert len(picks) == n, picks.rejected
     return picks
 
-
-# pad force over a gripper's maximum that a part's own dynamics explain, as a fraction of
-# the maximum: the margin tests/test_preset_physics.py states for the presets
-PAD_FORCE_MARGIN = 1.0
 
 # the engine the C-engine tests run on; MJX_PICK_TEST_BACKEND=warp runs them on MuJoCo
 # Warp on a GPU machine (issue 16: the same properties on every backend)

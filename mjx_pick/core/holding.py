@@ -38,7 +38,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from mjx_pick.core.config import ConfigError
-from mjx_pick.core.scene import Scene
+from mjx_pick.core.scene import Scene, parallel_jaw_pad_side
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,13 +73,8 @@ def pad_contacts(scene: Scene, squeeze_m: float = 2e-5) -> PadContacts:
         )
     m, ix = scene.model, scene.index
     d = mujoco.MjData(m)
-    # the pads' collision geoms: the whole pad, or its box and the rim behind it (scene.py)
-    pads = {
-        g: 0 if m.geom(g).name.startswith("pad_left") else 1
-        for g in range(m.ngeom)
-        if m.geom(g).name.startswith(("pad_left", "pad_right"))
-        and not m.geom(g).name.endswith("_visual")
-    }
+    sides = {g: parallel_jaw_pad_side(m.geom(g).name) for g in range(m.ngeom)}
+    pads = {g: side for g, side in sides.items() if side is not None}
     qadr = (ix.finger_left_qpos, ix.finger_right_qpos)
 
     def touching(side: int, travel: float) -> bool:

@@ -265,9 +265,22 @@ class Scene:
         return float(np.mean(data.geom_xpos[pads, 2]))
 
 
+def parallel_jaw_pad_side(name: str) -> int | None:
+    """Which pad a parallel jaw's geom collides for: 0 (left), 1 (right), or None (not a
+    pad collision geom: the pad as built, ``*_visual``, or any other geom). The whole
+    pad, its box and the rim behind it are all named ``pad_left*`` / ``pad_right*``
+    (:func:`_parallel_jaw_pad_names`)."""
+    if name.endswith("_visual"):
+        return None
+    for side, prefix in enumerate(("pad_left", "pad_right")):
+        if name.startswith(prefix):
+            return side
+    return None
+
+
 def _is_pad_geom(name: str, gripper: GripperSpec) -> bool:
     if gripper.mjcf is None:
-        return name.startswith(("pad_left", "pad_right")) and not name.endswith("_visual")
+        return parallel_jaw_pad_side(name) is not None
     pads = gripper.mjcf.pad_left_geoms + gripper.mjcf.pad_right_geoms
     return name in {mjcf_gripper.PREFIX + g for g in pads}
 
