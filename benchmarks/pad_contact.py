@@ -360,7 +360,8 @@ def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tupl
     their range, limited to force_n; the part hangs clear of the table; a torque about
     the world x axis (the grip axis) ramps at rate N m/s until the part has turned 2 deg
     (fast enough that the soft contacts' creep turns it by much less before it slips).
-    The pads' normal force is read from the contacts at that moment."""
+    The pads' normal force is read from the contacts: the median over the last 0.1 s
+    in which the part had turned less than 1 deg."""
     import mujoco
 
     from mjx_pick.core.scene import parallel_jaw_pad_side
@@ -370,7 +371,11 @@ def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tupl
     if not gravity:
         m.opt.gravity[:] = 0.0
     d.qpos[:] = m.qpos0
-    d.qpos[ix.object_qpos + 2] = 0.005  # clear of the table
+    # the part and the gripper start 5 mm up together, the part clear of the table: a
+    # gripper still rising while its pads close would press a curved part's lower flank
+    # and wedge it up out of the pad box (onto the rim), which no pick does
+    d.qpos[ix.object_qpos + 2] = 0.005
+    d.qpos[ix.lift_qpos] = 0.005
     for act in (ix.finger_left_actuator, ix.finger_right_actuator):
         m.actuator_forcerange[act] = (-force_n, force_n)
         d.ctrl[act] = m.actuator_ctrlrange[act, 1]
@@ -396,13 +401,19 @@ def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tupl
     q0 = d.xquat[body].copy()
     q0_inv = np.array([q0[0], -q0[1], -q0[2], -q0[3]])
     dq = np.zeros(4)
+    # the normal force while the part still holds, the median over the last 0.1 s with
+    # less than 1 deg of turn: as it breaks loose the pads' forces jump for a few steps
+    holding_n = collections.deque([pad_normal_n()], maxlen=int(0.1 / m.opt.timestep))
     for k in range(int(20.0 / m.opt.timestep)):
         d.xfrc_applied[body, 3] = rate * k * m.opt.timestep
         mujoco.mj_step(m, d)
         mujoco.mju_mulQuat(dq, d.xquat[body], q0_inv)
-        if 2 * np.degrees(np.arccos(min(1.0, abs(dq[0])))) > 2.0:
-            return float(d.xfrc_applied[body, 3]), pad_normal_n()
-    return float("nan"), pad_normal_n()
+        turn_deg = 2 * np.degrees(np.arccos(min(1.0, abs(dq[0]))))
+        if turn_deg > 2.0:
+            return float(d.xfrc_applied[body, 3]), float(np.median(holding_n))
+        if turn_deg < 1.0:
+            holding_n.append(pad_normal_n())
+    return float("nan"), float(np.median(holding_n))
 
 
 def torsion(variants, ramp_s: float = 0.25, forces=(10.0, 30.0, 100.0)) -> None:
@@ -454,7 +465,10 @@ def torsion(variants, ramp_s: float = 0.25, forces=(10.0, 30.0, 100.0)) -> None:
                 # the rubber pad's torque in 0.25 s
                 torque, normal = _torsion_capacity(scene, force, False, ref / ramp_s)
                 ratio = torque / (2 * mu * normal * r_mean) if normal > 0 else float("nan")
-                row.append(f"{variant} {ratio:.2f} (N {normal:.1f})")
+                row.append(
+                    f"{variant} {ratio:.2f} (N {normal:.1f})" if normal > 0
+                    else f"{variant} not gripped (the closing pads shot the part out)"
+                )
             print(
                 f"{label}, F {force:g} N, patch {w:.1f}x{h:.1f} mm, rubber 2 mu F r_mean "
                 f"{ref:.3f} N m; engine / rubber: " + ", ".join(row),
