@@ -466,8 +466,9 @@ def torsion(variants, ramp_s: float = 0.25, forces=(10.0, 30.0, 100.0)) -> None:
                 torque, normal = _torsion_capacity(scene, force, False, ref / ramp_s)
                 ratio = torque / (2 * mu * normal * r_mean) if normal > 0 else float("nan")
                 row.append(
-                    f"{variant} {ratio:.2f} (N {normal:.1f})" if normal > 0
-                    else f"{variant} not gripped (the closing pads shot the part out)"
+                    f"{variant} {ratio:.2f} (N {normal:.1f})"
+                    if normal > 0
+                    else f"{variant} not gripped (no pad force)"
                 )
             print(
                 f"{label}, F {force:g} N, patch {w:.1f}x{h:.1f} mm, rubber 2 mu F r_mean "
