@@ -462,11 +462,10 @@ def torsion(variants, ramp_s: float = 0.25, forces=(10.0, 30.0, 100.0)) -> None:
 
                 with mock.patch.object(scene_mod, "scene_xml", patched):
                     scene = mp.build_scene(part, FREE, _pad(contact, variant), SOLVER, grasp)
-                # the rubber pad's torque in 0.25 s
+                # the rubber pad's torque in ramp_s
                 torque, normal = _torsion_capacity(scene, force, False, ref / ramp_s)
-                ratio = torque / (2 * mu * normal * r_mean) if normal > 0 else float("nan")
                 row.append(
-                    f"{variant} {ratio:.2f} (N {normal:.1f})"
+                    f"{variant} {torque / (2 * mu * normal * r_mean):.2f} (N {normal:.1f})"
                     if normal > 0
                     else f"{variant} not gripped (no pad force)"
                 )
