@@ -16,6 +16,12 @@ With --stability-um, every backend simulates each pick-point again with the obje
 that far (evaluate's ``label_stable``), and agreement is also reported on the pick-points
 whose label is stable on the reference backend (the first) and on both.
 
+With --certain-m M, every backend also runs `robustness` on the same pick-points (M
+placements each, the object moved by N(0, --certain-xy-mm) in x and y and N(0,
+--certain-yaw-deg) in yaw, as a robot's placement error moves it), and agreement is
+reported on the labels that all M placements reproduce: a label that a placement
+within the robot's precision flips is a coin toss, whichever engine computes it.
+
 With --pictures, one PNG per (object, failure class): the first pick-point of that
 class re-simulated on MuJoCo C with its trace -- the pick in the gripper frame, the pad
 forces, the object's lift against the gripper's (slip), and its rotation.
@@ -95,6 +101,41 @@ def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
     save_png(fig, path, dpi=90)
 
 
+def placement_certain(obj, table, grasp, contact, solver, backend, certain) -> np.ndarray:
+    """(n,) bool: the pick-point's label is what every one of m placements around it
+    gives (robustness with sigma_xy_mm, sigma_yaw_deg), in table's row order."""
+    from mjx_pick.core import pickpoints as pp
+    from mjx_pick.engine.backend import Settings
+
+    m, sigma_xy_mm, sigma_yaw_deg = certain
+    gripper = mp.load_gripper("robotiq-2f85")
+    checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
+    picks = checker.batch(
+        table["pick_id"].to_numpy(),
+        table["x_mm"].to_numpy(),
+        table["y_mm"].to_numpy(),
+        table["yaw_deg"].to_numpy(),
+        "user",
+    )
+    robust = mp.robustness(
+        obj,
+        picks,
+        Settings(
+            gripper=gripper,
+            grasp=grasp,
+            contact=contact or mp.ContactParams(),
+            solver=solver or mp.SolverParams(),
+        ),
+        m=m,
+        sigma_xy_mm=sigma_xy_mm,
+        sigma_yaw_deg=sigma_yaw_deg,
+        backend=backend,
+    ).to_pandas()
+    p = robust.set_index("pick_id").loc[table["pick_id"], "robust_p"].to_numpy()
+    success = table["success"].to_numpy(bool)
+    return np.where(success, p == 1.0, p == 0.0)
+
+
 def run_object(
     name: str,
     entry: dict,
@@ -106,6 +147,7 @@ def run_object(
     contact=None,
     solver=None,
     stability_um: float = 0.0,
+    certain: tuple[int, float, float] | None = None,
 ) -> dict:
     """One object on each backend (the first is the reference for label agreement)."""
     t0 = time.perf_counter()
@@ -117,7 +159,7 @@ def run_object(
         "mass_g": round(obj.mass_kg * 1e3, 2),
         "height_mm": round(obj.height_mm, 2),
     }
-    labels, stable = {}, {}
+    labels, stable, certain_on = {}, {}, {}
     for backend in backends:
         ev = mp.evaluate(
             obj,
@@ -136,6 +178,10 @@ def run_object(
         k, m = int(table["success"].sum()), len(table)
         lo, hi = wilson_interval(k, m)
         labels[backend] = table["success"].to_numpy()
+        if certain:
+            certain_on[backend] = placement_certain(
+                obj, table, grasp, contact, solver, backend, certain
+            )
         if pictures and backend == "mujoco":
             for failure in sorted(set(table["failure"]) - {"none"}):
                 png = Path(pictures) / f"{name}_{failure}.png"
@@ -166,6 +212,20 @@ def run_object(
                 "stable_on_both": float(np.mean(same[on_both])) if on_both.any() else None,
                 "n_stable_on_both": int(on_both.sum()),
             }
+    if certain:
+        row["certain_share"] = {b: float(np.mean(v)) for b, v in certain_on.items()}
+        for b in backends[1:]:
+            same = labels[ref] == labels[b]
+            on_ref, on_both = certain_on[ref], certain_on[ref] & certain_on[b]
+            row.setdefault("labels_agree_certain", {})[b] = {
+                "certain_on_reference": float(np.mean(same[on_ref])) if on_ref.any() else None,
+                "n_certain_on_reference": int(on_ref.sum()),
+                "certain_on_both": float(np.mean(same[on_both])) if on_both.any() else None,
+                "n_certain_on_both": int(on_both.sum()),
+                "differ_certain_on_reference": [
+                    int(i) for i in table["pick_id"].to_numpy()[on_ref & ~same]
+                ],
+            }
     row["load_s"] = round(t_load, 1)
     return row
 
@@ -188,6 +248,9 @@ def main() -> None:
     ap.add_argument(
         "--stability-um", type=float, default=0.0, help="label_stable's shift, um (0: off)"
     )
+    ap.add_argument("--certain-m", type=int, default=0, help="placements per pick-point (0: off)")
+    ap.add_argument("--certain-xy-mm", type=float, default=0.2, help="placement sigma, mm")
+    ap.add_argument("--certain-yaw-deg", type=float, default=1.0, help="placement sigma, deg")
     args = ap.parse_args()
     manifest = ycb_manifest()
     names = [s for s in args.objects.split(",") if s] or list(manifest)
@@ -208,6 +271,7 @@ def main() -> None:
             load_toml(mp.ContactParams, args.contact) if args.contact else None,
             load_toml(mp.SolverParams, args.solver) if args.solver else None,
             args.stability_um,
+            (args.certain_m, args.certain_xy_mm, args.certain_yaw_deg) if args.certain_m else None,
         )
         rows.append(row)
         c = row[backends[0]]
@@ -219,6 +283,11 @@ def main() -> None:
                 f" stable {b}={backends[0]} {v['stable_on_reference']}"
                 f" (n {v['n_stable_on_reference']})"
                 for b, v in row.get("labels_agree_stable", {}).items()
+            )
+            + "".join(
+                f" certain {b}={backends[0]} {v['certain_on_reference']}"
+                f" (n {v['n_certain_on_reference']})"
+                for b, v in row.get("labels_agree_certain", {}).items()
             ),
             flush=True,
         )

@@ -319,7 +319,7 @@ def test_paper_workflow(page, server):
     # plots above it can still be settling when the click lands on a busy machine
     slider = page.get_by_test_id("replay-time")
     slider.locator("[tabindex]").first.press("PageUp")
-    expect(slider).to_have_attribute("aria-valuenow", "10")
+    expect(slider).to_have_attribute("aria-valuenow", "10", timeout=TIMEOUT_MS)
     expect(frame).not_to_have_attribute("src", first, timeout=TIMEOUT_MS)
     # the score map on the outline: a click selects the pick-point drawn there
     from mjx_pick.gui import views
