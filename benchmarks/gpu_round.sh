@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|real|grid|variants|variants_sweep|design|contacts
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|certain|real|plate|grid|variants|variants_sweep|design|contacts
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -39,6 +39,11 @@ case "$1" in
     python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp --stability-um 1 \
       --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
       --out "$out/real_objects_stable_h100.json" ;;
+  certain)  # Warp against C on the labels that 8 placements (0.2 mm, 1 deg) all reproduce
+    for o in ${OBJECTS:-door_opener 040_large_marker 037_scissors 048_hammer 044_flat_screwdriver 011_banana 050_medium_clamp}; do
+      python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \
+        --certain-m 8 --objects "$o" --out "$out/certain_$o.json"
+    done ;;
   real)  # six YCB parts, Warp against C on the same pick-points
     python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp \
       --out "$out/real_objects_h100.json" ;;
@@ -64,6 +69,19 @@ case "$1" in
   contacts)  # C and Warp collision on the same states (pad contacts per pad, span)
     (cd benchmarks && python contact_sets.py --objects "${OBJECTS:-011_banana,050_medium_clamp,040_large_marker}" \
       --n "${N:-64}" --out "$out/contact_sets_h100.json") ;;
+  plate)  # the franka-hand's 0.5 kg, 3 mm plate at pad friction 0.3: six copies in one
+    # batch under each solver variant (Warp's chatter and drop: solver or time step?)
+    mkdir -p /tmp/plate
+    printf '' > /tmp/plate/default.toml
+    printf 'iterations = 200\n' > /tmp/plate/it200.toml
+    printf 'noslip_iterations = 10\n' > /tmp/plate/noslip10.toml
+    printf 'impratio = 3.0\n' > /tmp/plate/impratio3.toml
+    printf 'timestep_s = 0.0005\n' > /tmp/plate/dt05.toml
+    for v in default it200 noslip10 impratio3 dt05; do
+      python benchmarks/preset_coulomb.py --backend warp --presets franka-hand --masses 0.5 \
+        --heights 3 --frictions 0.3,0.3,0.3,0.3,0.3,0.3 --solver /tmp/plate/$v.toml \
+        --out "$out/plate_$v.json"
+    done ;;
   grid)  # the preset Coulomb grid on Warp
     python benchmarks/preset_coulomb.py --backend warp --out "$out/preset_coulomb_warp.json" ;;
 esac
