@@ -115,7 +115,7 @@ def placement_certain(obj, table, grasp, contact, solver, backend, certain) -> n
         table["x_mm"].to_numpy(),
         table["y_mm"].to_numpy(),
         table["yaw_deg"].to_numpy(),
-        "user",
+        "robustness",
     )
     robust = mp.robustness(
         obj,
@@ -134,6 +134,19 @@ def placement_certain(obj, table, grasp, contact, solver, backend, certain) -> n
     p = robust.set_index("pick_id").loc[table["pick_id"], "robust_p"].to_numpy()
     success = table["success"].to_numpy(bool)
     return np.where(success, p == 1.0, p == 0.0)
+
+
+def agreement_on(what: str, same, on_ref, on_other, ids) -> dict:
+    """Label agreement (same: (n,) bool) on the pick-points flagged `what` on the
+    reference backend and on both, with the ids of those that differ on the reference's."""
+    on_both = on_ref & on_other
+    return {
+        f"{what}_on_reference": float(np.mean(same[on_ref])) if on_ref.any() else None,
+        f"n_{what}_on_reference": int(on_ref.sum()),
+        f"{what}_on_both": float(np.mean(same[on_both])) if on_both.any() else None,
+        f"n_{what}_on_both": int(on_both.sum()),
+        f"differ_{what}_on_reference": [int(i) for i in ids[on_ref & ~same]],
+    }
 
 
 def run_object(
@@ -201,30 +214,13 @@ def run_object(
     row["labels_agree"] = {
         b: float(np.mean(labels[ref] == labels[b])) for b in backends[1:] if b in labels
     }
-    if stability_um:
-        row["stable_share"] = {b: float(np.mean(v)) for b, v in stable.items()}
-        for b in backends[1:]:
-            same = labels[ref] == labels[b]
-            on_ref, on_both = stable[ref], stable[ref] & stable[b]
-            row.setdefault("labels_agree_stable", {})[b] = {
-                "stable_on_reference": float(np.mean(same[on_ref])) if on_ref.any() else None,
-                "n_stable_on_reference": int(on_ref.sum()),
-                "stable_on_both": float(np.mean(same[on_both])) if on_both.any() else None,
-                "n_stable_on_both": int(on_both.sum()),
-            }
-    if certain:
-        row["certain_share"] = {b: float(np.mean(v)) for b, v in certain_on.items()}
-        for b in backends[1:]:
-            same = labels[ref] == labels[b]
-            on_ref, on_both = certain_on[ref], certain_on[ref] & certain_on[b]
-            row.setdefault("labels_agree_certain", {})[b] = {
-                "certain_on_reference": float(np.mean(same[on_ref])) if on_ref.any() else None,
-                "n_certain_on_reference": int(on_ref.sum()),
-                "certain_on_both": float(np.mean(same[on_both])) if on_both.any() else None,
-                "n_certain_on_both": int(on_both.sum()),
-                "differ_certain_on_reference": [
-                    int(i) for i in table["pick_id"].to_numpy()[on_ref & ~same]
-                ],
+    ids = table["pick_id"].to_numpy()
+    for what, flags in (("stable", stable), ("certain", certain_on)):
+        if flags:
+            row[f"{what}_share"] = {b: float(np.mean(v)) for b, v in flags.items()}
+            row[f"labels_agree_{what}"] = {
+                b: agreement_on(what, labels[ref] == labels[b], flags[ref], flags[b], ids)
+                for b in backends[1:]
             }
     row["load_s"] = round(t_load, 1)
     return row
