@@ -38,8 +38,8 @@ SOLVER = None
 CONTACT = None
 
 
-def _centred(obj, grasp, y_mm):
-    checker = pp.FeasibilityChecker(obj, FREE, grasp=grasp)
+def _centred(obj, grasp, y_mm, gripper=FREE):
+    checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
     n = len(y_mm)
     return checker.batch(np.arange(n), np.zeros(n), np.asarray(y_mm), np.zeros(n), "user")
 
@@ -354,38 +354,59 @@ def rubber(variants, loads, cases_wanted=None) -> None:
             )
 
 
-def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tuple[float, float]:
+def _torsion_capacity(
+    scene, picks, force_n: float, gravity: bool, rate: float
+) -> tuple[float, float]:
     """(torque N m, mean pad normal force N) at which a part squeezed by both pads
     starts to turn about the grip axis: the fingers' servos drive to the closed end of
-    their range, limited to force_n; the part hangs clear of the table; a torque about
-    the world x axis (the grip axis) ramps at rate N m/s until the part has turned 2 deg
-    (fast enough that the soft contacts' creep turns it by much less before it slips).
-    The pads' normal force is read from the contacts: the median over the last 0.1 s
-    in which the part had turned less than 1 deg."""
+    their range, limited to force_n at the pads; the part (at the one pick of picks)
+    hangs clear of the table; a torque about the world x axis (the grip axis) ramps at
+    rate N m/s until the part has turned 2 deg (fast enough that the soft contacts'
+    creep turns it by much less before it slips). The pads' normal force is read from
+    the contacts: the median over the last 0.1 s in which the part had turned less than
+    1 deg. An MJCF gripper's one actuator gets the force limit that gives force_n at
+    each pad at the part's width (its Kinematics.force_limit_n)."""
     import mujoco
 
-    from mjx_pick.core.scene import parallel_jaw_pad_side
-
-    m, ix = scene.model, scene.index
+    m, ix, kin = scene.model, scene.index, scene.kinematics
     d = mujoco.MjData(m)
     if not gravity:
         m.opt.gravity[:] = 0.0
-    d.qpos[:] = m.qpos0
+    gap_m = 1e-3 * (picks.opening_mm - picks.gap_left_mm - picks.gap_right_mm)
+    d.qpos[:] = scene.initial_qpos(
+        1e-3 * picks.x_mm,
+        1e-3 * picks.y_mm,
+        np.radians(picks.yaw_deg),
+        1e-3 * picks.opening_mm,
+        gap_m,
+    )[0]
     # the part and the gripper start 5 mm up together, the part clear of the table: a
     # gripper still rising while its pads close would press a curved part's lower flank
     # and wedge it up out of the pad box (onto the rim), which no pick does
-    d.qpos[ix.object_qpos + 2] = 0.005
-    d.qpos[ix.lift_qpos] = 0.005
-    for act in (ix.finger_left_actuator, ix.finger_right_actuator):
-        m.actuator_forcerange[act] = (-force_n, force_n)
-        d.ctrl[act] = m.actuator_ctrlrange[act, 1]
-    d.ctrl[ix.lift_actuator] = 0.005
+    d.qpos[ix.object_qpos + 2] += 0.005
+    d.qpos[ix.lift_qpos] += 0.005
+    for act in {ix.finger_left_actuator, ix.finger_right_actuator}:
+        lo, hi = m.actuator_ctrlrange[act]
+        if kin is None:
+            limit, closed = force_n, hi
+        else:
+            travel = kin.travel_at_opening(gap_m[0])
+            per_pad = np.interp(travel, kin.travel, kin.force_limit_n)
+            limit = force_n * np.max(np.abs(m.actuator_forcerange[act])) / per_pad
+            ctrl_closed = kin.ctrl_at_zero_length + kin.ctrl_per_length * kin.length[-1]
+            ctrl_open = kin.ctrl_at_zero_length + kin.ctrl_per_length * kin.length[0]
+            closed = hi if ctrl_closed > ctrl_open else lo
+        m.actuator_forcerange[act] = (-limit, limit)
+        d.ctrl[act] = closed
+    d.ctrl[ix.lift_actuator] = d.qpos[ix.lift_qpos]
     body = ix.object_body
     pads = {
-        g
-        for g in range(m.ngeom)
-        if parallel_jaw_pad_side(m.geom(g).name) is not None
-        and not m.geom(g).name.endswith("_guard")  # the "guarded" candidate's own geom
+        int(g)
+        for p in ix.pad_pairs
+        for g in (m.pair_geom1[p], m.pair_geom2[p])
+        if int(g) != -1
+        and m.geom(int(g)).name.startswith(("pad_", "gripper/"))
+        and not m.geom(int(g)).name.endswith("_guard")  # the "guarded" candidate's own geom
     }
 
     def pad_normal_n() -> float:
@@ -416,14 +437,14 @@ def _torsion_capacity(scene, force_n: float, gravity: bool, rate: float) -> tupl
     return float("nan"), float(np.median(holding_n))
 
 
-def torsion(variants, ramp_s: float = 0.25, forces=(10.0, 30.0, 100.0)) -> None:
+def torsion(
+    variants, ramp_s: float = 0.25, forces=(10.0, 30.0, 100.0), grippers=(FREE.name,)
+) -> None:
     """The torque the pads transmit about the grip axis before the part turns, against a
     uniformly pressed rubber pad's 2 mu N r_mean (two pads, each pressed with N, read
     from the contacts; r_mean the patch's mean radius), with no gravity (pure torsion),
-    per pad-contact candidate and force."""
-    from unittest import mock
-
-    from mjx_pick.core import physics
+    per gripper (the test gripper, or presets with their own pad sizes; forces outside
+    a preset's range are left out), pad-contact candidate and force."""
     from mjx_pick.core import scene as scene_mod
 
     mu = 0.5
@@ -443,37 +464,62 @@ def torsion(variants, ramp_s: float = 0.25, forces=(10.0, 30.0, 100.0)) -> None:
         "rod d20x200 lying": _rod_mesh_part(200, 20, 0.3),
     }
     original = scene_mod.scene_xml
-    for label, part in parts.items():
-        for force in forces:
-            grasp = mp.GraspConfig(grip_force_n=force)
-            contact = dataclasses.replace(
-                CONTACT or mp.ContactParams(), pad_friction=mu, pad_collision="mean_radius"
-            )
-            w, h = mp.build_scene(part, FREE, contact, SOLVER, grasp).pad_patch_mm
-            r_mean = physics.patch_mean_radius_mm(w, h) * 1e-3
-            pad_h = FREE.pad_height_mm
-            mu_t_tile = mu * physics.patch_mean_radius_mm(w / 3, min(h, pad_h / 3)) * 1e-3
-            ref = 2 * mu * force * r_mean
-            row = []
-            for variant in variants:
+    for name in grippers:
+        gripper = FREE if name == FREE.name else mp.load_gripper(name)
+        for label, part in parts.items():
+            for force in forces:
+                if not gripper.force_min_n <= force <= gripper.force_max_n:
+                    continue  # a force the gripper cannot be set to
+                _torsion_row(gripper, label, part, force, variants, ramp_s, mu, original)
 
-                def patched(*a, _v=variant, _t=mu_t_tile, _r=r_mean, **k):
-                    return _xml_with(original(*a, **k), _v, _t, _r)
 
-                with mock.patch.object(scene_mod, "scene_xml", patched):
-                    scene = mp.build_scene(part, FREE, _pad(contact, variant), SOLVER, grasp)
-                # the rubber pad's torque in ramp_s
-                torque, normal = _torsion_capacity(scene, force, False, ref / ramp_s)
-                row.append(
-                    f"{variant} {torque / (2 * mu * normal * r_mean):.2f} (N {normal:.1f})"
-                    if normal > 0
-                    else f"{variant} not gripped (no pad force)"
-                )
-            print(
-                f"{label}, F {force:g} N, patch {w:.1f}x{h:.1f} mm, rubber 2 mu F r_mean "
-                f"{ref:.3f} N m; engine / rubber: " + ", ".join(row),
-                flush=True,
-            )
+def _torsion_row(gripper, label, part, force, variants, ramp_s, mu, original) -> None:
+    """One line of :func:`torsion`: one gripper, part and grip force, every variant."""
+    from unittest import mock
+
+    from mjx_pick.core import physics
+    from mjx_pick.core import scene as scene_mod
+
+    grasp = mp.GraspConfig(grip_force_n=force)
+    picks = _centred(part, grasp, [0.0], gripper)
+    contact = dataclasses.replace(
+        CONTACT or mp.ContactParams(), pad_friction=mu, pad_collision="mean_radius"
+    )
+    w, h = mp.build_scene(part, gripper, contact, SOLVER, grasp).pad_patch_mm
+    r_mean = physics.patch_mean_radius_mm(w, h) * 1e-3
+    pad_h = gripper.pad_height_mm
+    mu_t_tile = mu * physics.patch_mean_radius_mm(w / 3, min(h, pad_h / 3)) * 1e-3
+    ref = 2 * mu * force * r_mean
+    row = []
+    for variant in variants:
+        if gripper.mjcf is not None:
+            # an MJCF gripper's pads are built in the scene, not patched in its XML: the
+            # library's own choices only ("corners": the gripper's own pad geoms)
+            mjcf_pads = {"corners": "pad", "square": "mean_radius", "rimmed": "rimmed"}
+            if variant not in mjcf_pads:
+                row.append(f"{variant} (not for an MJCF gripper)")
+                continue
+            own = dataclasses.replace(contact, pad_collision=mjcf_pads[variant])
+            scene = mp.build_scene(part, gripper, own, SOLVER, grasp)
+        else:
+
+            def patched(*a, _v=variant, _t=mu_t_tile, _r=r_mean, **k):
+                return _xml_with(original(*a, **k), _v, _t, _r)
+
+            with mock.patch.object(scene_mod, "scene_xml", patched):
+                scene = mp.build_scene(part, gripper, _pad(contact, variant), SOLVER, grasp)
+        # the rubber pad's torque in ramp_s
+        torque, normal = _torsion_capacity(scene, picks, force, False, ref / ramp_s)
+        row.append(
+            f"{variant} {torque / (2 * mu * normal * r_mean):.2f} (N {normal:.1f})"
+            if normal > 0
+            else f"{variant} not gripped (no pad force)"
+        )
+    print(
+        f"{gripper.name}, {label}, F {force:g} N, patch {w:.1f}x{h:.1f} mm, rubber 2 mu F "
+        f"r_mean {ref:.3f} N m; engine / rubber: " + ", ".join(row),
+        flush=True,
+    )
 
 
 def coulomb(backend: str) -> None:
@@ -531,6 +577,11 @@ def main() -> None:
         "at 2 deg, so a fast ramp overshoots the static capacity)",
     )
     ap.add_argument("--forces", default="10,30,100", help="torsion: grip forces, N")
+    ap.add_argument(
+        "--grippers",
+        default=FREE.name,
+        help=f"torsion: {FREE.name} (the 2F-85's pad on an unlimited drive) or presets",
+    )
     ap.add_argument("--contact", help="rubber, torsion: ContactParams TOML to start from")
     args = ap.parse_args()
     if args.solver:
@@ -547,7 +598,7 @@ def main() -> None:
         coulomb(args.backend)
     elif args.what == "torsion":
         forces = tuple(float(f) for f in args.forces.split(","))
-        torsion(args.variants.split(","), args.ramp_s, forces)
+        torsion(args.variants.split(","), args.ramp_s, forces, args.grippers.split(","))
     elif args.what == "rubber":
         rubber(
             args.variants.split(","),

@@ -21,10 +21,10 @@ import pytest
 from shapely.geometry import box
 
 import mjx_pick as mp
-from mjx_pick.core import mjcf_gripper
+from mjx_pick.core import holding, mjcf_gripper
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError
-from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.core.procedure import G, GraspConfig
 from mjx_pick.engine.backend import addresses, make_backend, make_inputs
 from mjx_pick.kernels import grasp as gk
 
@@ -212,11 +212,20 @@ def test_force_regulation_with_the_linkage(linkage, block):
         # 2 %: the force loop's integral action holds F_d; the rest is the pads'
         # soft-contact creep over the 0.3 s hold
         assert pad.mean() == pytest.approx(force, rel=0.02)
-        # never above the drive's limit (1.15 F_d, GraspConfig.force_limit_fraction, at
-        # most the gripper's 235 N) by more than 2 %: the pads' impact when they close
-        # (measured 0.9 % at 235 N: the actuator's limit gives 238 N or more)
+        # once the pads have met the part (20 ms after the first contact), never above
+        # the drive's limit (1.15 F_d, GraspConfig.force_limit_fraction, at most the
+        # gripper's 235 N) by more than 2 % (measured 0.9 % at 235 N: the actuator's
+        # limit gives 238 N or more)
         limit = min(1.15 * force, linkage.force_max_n)
-        assert max(out["max_force_left_n"][k], out["max_force_right_n"][k]) <= 1.02 * limit
+        both = np.maximum(f["force_left_n"][k], f["force_right_n"][k])
+        touch = int(np.argmax(both > 0.5))
+        settled = touch + int(np.ceil(0.02 / (f["t_s"][k, 1] - f["t_s"][k, 0])))
+        assert both[settled:].max() <= 1.02 * limit
+        # the impact itself: the linkage's momentum, not the drive, sets it (read at one
+        # control sample, its phase decides the value: 20-41 N at F_d 20 N for blocks 0.1 mm
+        # apart in width); it stays within 2 % of the gripper's maximum
+        peak = max(out["max_force_left_n"][k], out["max_force_right_n"][k])
+        assert peak <= 1.02 * linkage.force_max_n
 
 
 @pytest.mark.parametrize("width_mm", [12.0, 40.0, 72.0])
@@ -484,3 +493,54 @@ def test_an_mjcf_grippers_geometry_cannot_be_varied(linkage):
     assert dataclasses.replace(linkage, force_max_n=200.0).force_max_n == 200.0
     with pytest.raises(ConfigError, match="force_max_n = 300 is more than the actuator"):
         dataclasses.replace(linkage, force_max_n=300.0)
+
+
+def test_linkage_pads_collide_through_the_rubber_like_box(linkage, block):
+    # the default pad_collision gives the linkage's box pads the parallel jaw's cut box
+    # and recessed rim, in the pad's body; "pad" keeps Menagerie's own pad geoms
+    def pad_geoms(scene):
+        m = scene.model
+        geoms = {int(g) for p in scene.index.pad_pairs for g in (m.pair_geom1[p], m.pair_geom2[p])}
+        return sorted(n for n in (m.geom(g).name for g in geoms) if not n.startswith("piece"))
+
+    rimmed = mp.build_scene(block, linkage)
+    assert pad_geoms(rimmed) == ["pad_left", "pad_left_rim", "pad_right", "pad_right_rim"]
+    m = rimmed.model
+    for side in ("left", "right"):
+        geom = m.geom(f"pad_{side}")
+        assert m.body(int(geom.bodyid[0])).name == f"{mjcf_gripper.PREFIX}{side}_pad"
+        # the box is narrower than the 22 mm pad; the rim is the whole pad
+        assert 2e3 * geom.size[1] < linkage.finger_width_mm
+        rim = m.geom(f"pad_{side}_rim")
+        assert 2e3 * rim.size[1] == pytest.approx(linkage.finger_width_mm, abs=0.01)
+    own = mp.build_scene(block, linkage, mp.ContactParams(pad_collision="pad"))
+    pads = linkage.mjcf.pad_left_geoms + linkage.mjcf.pad_right_geoms
+    assert pad_geoms(own) == sorted(mjcf_gripper.PREFIX + g for g in pads)
+
+
+def test_linkage_torque_threshold_is_a_rubber_pads():
+    # tests/test_physics.py's rubber-pad lever test on the linkage, default procedure: a
+    # 200 mm bar gripped at d from its centre of mass turns with m (g + a) d. Against a
+    # rubber pad pressed uniformly over the patch it must hold at 0.8x that pad's lever
+    # and turn at 1.2x. Its own two pad boxes held to 1.5-2x (benchmarks/RESULTS.md,
+    # "The linkage's pads: the rubber-like box")
+    linkage = mp.load_gripper(LINKAGE)
+    mass, force, mu = 0.6, 30.0, 0.5
+    part = mp.object_from_polygon(box(-10, -100, 10, 100), thickness_mm=40, mass_g=mass * 1e3)
+    grasp = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.5, grip_force_n=force)
+    contact = mp.ContactParams(pad_friction=mu)
+    scene = mp.build_scene(part, linkage, contact, None, grasp)
+    w, h = (v * 1e-3 for v in scene.pad_patch_mm)
+    weight = mass * (G + grasp.lift_accel_mm_s2 * 1e-3)
+    rubber = holding.hold_limit_m(
+        holding.uniform_patch_points(w, h), force, weight, mu, 0.0, "elliptic"
+    )
+    assert 0 < rubber < 0.1  # within the part's half-length
+    d = np.array([0.8, 1.2]) * rubber * 1e3  # mm
+    picks = pp.FeasibilityChecker(part, linkage, grasp=grasp).batch(
+        np.arange(2), np.zeros(2), d, np.zeros(2), mode="user"
+    )
+    runner = make_backend("mujoco", scene, grasp, batch_size=2)
+    out, _ = runner.run(make_inputs(scene, grasp, picks, {}))
+    assert out["success"][0], (d, out["phi_max_deg"])
+    assert not out["success"][1], (d, out["phi_max_deg"])

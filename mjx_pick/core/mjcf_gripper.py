@@ -38,6 +38,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from pathlib import Path
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -111,6 +112,16 @@ class MjcfGripper:
             check_range(o, "actuator_kv", self.actuator_kv, 0)
 
 
+class PadFrame(NamedTuple):
+    """Where a pad's flat face lies in its own body, for collision boxes built over it:
+    the centre of its geoms' bounding box in the body's frame (m), and the rotation
+    (w, x, y, z) that takes the scene's gripper axes (x the closing axis, y across the
+    pad, z up) into the body's, measured with the gripper fully open."""
+
+    centre_m: tuple[float, float, float]
+    quat: tuple[float, float, float, float]
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Kinematics:
     """A quasi-static close of an MJCF gripper, K samples from fully open to closed.
@@ -143,6 +154,9 @@ class Kinematics:
     ctrl_at_zero_length: float
     mass_kg: float  # the whole gripper
     finger_mass_kg: float  # the bodies moving with one pad's finger joint
+    # (left, right); None where a pad geom is not a box (a curved or meshed pad has no
+    # flat face to cut the rubber-like collision box from)
+    pad_frames: tuple[PadFrame, PadFrame] | None = None
 
     @property
     def stroke_m(self) -> float:
@@ -405,6 +419,19 @@ def _pad_box(m: mujoco.MjModel, d: mujoco.MjData, geoms: list[int]) -> np.ndarra
     return np.stack([c.min(axis=0), c.max(axis=0)])
 
 
+def _pad_frame(m: mujoco.MjModel, d: mujoco.MjData, geoms: list[int], body: int):
+    """The PadFrame of a pad's geoms on their body at the current state; None unless
+    every geom is a box."""
+    if any(int(m.geom_type[g]) != int(mujoco.mjtGeom.mjGEOM_BOX) for g in geoms):
+        return None
+    lo, hi = _pad_box(m, d, geoms)
+    rot = d.xmat[body].reshape(3, 3)  # body -> gripper frame
+    centre = rot.T @ (0.5 * (lo + hi) - d.xpos[body])
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, rot.T.flatten())
+    return PadFrame(tuple(float(v) for v in centre), tuple(float(v) for v in quat))
+
+
 def _bench_model(mjcf: MjcfGripper) -> mujoco.MjModel:
     """The gripper alone, mounted like in a scene (gripper frame at the origin)."""
     bench = mujoco.MjSpec.from_string(
@@ -445,6 +472,9 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
         return _pad_box(m, d, left), _pad_box(m, d, right)
 
     c_open, c_closed = _closing_direction(mjcf, m, d, settle, lo, hi)
+    mujoco.mj_resetData(m, d)
+    settle(c_open)
+    frames = (_pad_frame(m, d, left, body_l), _pad_frame(m, d, right, body_r))
     mujoco.mj_resetData(m, d)
     mujoco.mj_forward(m, d)
     driven = _drive_joints(m, a)
@@ -504,6 +534,7 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
         ctrl_at_zero_length=float(-m.actuator_biasprm[a, 0] / gain),
         mass_kg=float(m.body_subtreemass[1]),
         finger_mass_kg=float(sum(m.body_mass[b] for b in finger_bodies)),
+        pad_frames=None if None in frames else frames,
     )
 
 

@@ -62,8 +62,10 @@ MuJoCo has a different, soft-constraint contact model, so the mapping is partial
   stays clear of the rim, so its torque is the box's, and a part the box misses meets
   the rim and is gripped and aligned as by the whole pad. Where the part's surface
   reaches the rim beside the box (a curved or tapered part), the rim's contacts add
-  their own lever, as a real pad pressed harder at its edge would. An MJCF gripper's
-  pads keep their own geoms. ``mjx_pick.core.holding`` states the
+  their own lever, as a real pad pressed harder at its edge would. An MJCF gripper
+  whose pads are boxes gets the same box and rim over its pad geoms' bounding box
+  (``mjx_pick.core.scene``); other MJCF pads, and ``"pad"``, keep the gripper's own
+  geoms. ``mjx_pick.core.holding`` states the
   model's capacity from the contact points and a rubber pad's for comparison;
   benchmarks/RESULTS.md ("Torque", "Torsion like rubber") gives the figures.
 * Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
@@ -159,8 +161,9 @@ class ContactParams:
     # with the time step (benchmarks/RESULTS.md, "creep").
     pad_solimp: tuple[float, float, float, float, float] = (0.99, 0.99, 0.001, 0.5, 2.0)
     table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
-    # what a parametric pad collides through (module docstring, "Pad contacts"): "pad",
-    # the whole pad (MuJoCo's corner contacts resist spin at the patch's edges: 1.3-2.8x
+    # what a pad collides through, on the parametric jaw and on an MJCF gripper's box
+    # pads (module docstring, "Pad contacts"): "pad", the whole pad (an MJCF gripper's
+    # own geoms; MuJoCo's corner contacts resist spin at the patch's edges: 1.3-2.8x
     # a rubber pad's torque); "mean_radius", a box cut so that the corners and the
     # points' own torsion hold a uniformly pressed rubber pad's torque for the solver's
     # cone (mjx_pick.core.scene.pad_collision_box_mm), touching a part only within the
@@ -335,7 +338,7 @@ def pad_torsion_m(pad_friction, pad_torsion_mm, patch_mm: tuple[float, float]):
 
 def torsion_share(contact: ContactParams, solver: SolverParams, pad_box: bool = True) -> float:
     """The factor on the pad contacts' derived torsion mu r_mean: ELLIPTIC_TORSION_SHARE
-    with elliptic cones and the "mean_radius" box on a parametric pad (its corners then
+    with elliptic cones and the "mean_radius" box on a pad it applies to (its corners then
     carry the rest of the rubber pad's torsion in quadrature; "rimmed" likewise), else 1.
     A pad_torsion_mm the user set is kept as set."""
     if not pad_box or contact.pad_torsion_mm is not None:
@@ -365,8 +368,8 @@ def mujoco_contact(
     """Map ContactParams to MuJoCo pair parameters for an object of mass_kg.
 
     patch_mm: (width, height) of the pads' contact patch on this object, mm.
-    pad_box: the pads are the parametric jaw's (ContactParams.pad_collision applies;
-    an MJCF gripper's pads keep their own geoms).
+    pad_box: ContactParams.pad_collision applies to the pads (the parametric jaw's, or
+    an MJCF gripper's box pads; other MJCF pads keep their own geoms).
     """
     tc = solver.timeconst_s
     pad_ref, pad_c = spring_solref(

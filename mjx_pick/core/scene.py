@@ -17,11 +17,14 @@ the finger bodies; an accelerometer on the object makes both engines compute it.
 
 A gripper from an MJCF file (``GripperSpec.mjcf``, ``mjx_pick.core.mjcf_gripper``) replaces
 the two finger bodies: its model is attached under ``gripper`` (names prefixed
-``gripper/``), its own actuator drives it, its pad geoms get the pad pairs and none of
-its other geoms collide. ``gripper`` then sits so that the pads' centre is at the grasp
-height when the fingers are fully open; each pick-point starts with the lift raised by
-the height compensation for the gap the pads will close to (the paper's section 3.5),
-so the pads meet the object at the grasp height despite their descent while closing.
+``gripper/``), its own actuator drives it and none of its other geoms collide. Its pads
+touch the object through the parallel jaw's collision boxes for
+``ContactParams.pad_collision`` (named ``pad_left``, ``pad_left_rim``, ..., added to
+its pad bodies) when its pad geoms are boxes, else through its own pad geoms.
+``gripper`` then sits so that the pads' centre is at the grasp height when the fingers
+are fully open; each pick-point starts with the lift raised by the height compensation
+for the gap the pads will close to (the paper's section 3.5), so the pads meet the
+object at the grasp height despite their descent while closing.
 """
 
 from __future__ import annotations
@@ -392,7 +395,7 @@ def _contact_pairs_xml(
     with the object's hull."""
     pad_fr = _fmt([mjc.pad_friction, mjc.pad_friction, mjc.pad_torsion_m, 0.0001, 0.0001])
     tab_fr = _fmt([mjc.table_friction, mjc.table_friction, 0.005, 0.0001, 0.0001])
-    if gripper.mjcf is None:
+    if gripper.mjcf is None or pad_boxes_mm is not None:
         names = _parallel_jaw_pad_names(pad_boxes_mm)
         pad_geoms = [
             (f"pad_{side}{k}", f"pad_{side}{k}") for side in ("left", "right") for k in names
@@ -557,15 +560,19 @@ def build_scene(
     grasp = grasp or GraspConfig()
     patch = pad_patch_mm(obj, gripper, grasp)
     kin = None if gripper.mjcf is None else mjcf_gripper.characterise(gripper.mjcf)
-    mjc = mujoco_contact(contact, solver, obj.mass_kg, patch, pad_box=gripper.mjcf is None)
+    # pad_collision applies to the parametric jaw and to an MJCF gripper with box pads
+    cut_pads = kin is None or kin.pad_frames is not None
+    mjc = mujoco_contact(contact, solver, obj.mass_kg, patch, pad_box=cut_pads)
     tip_mm, _ = pad_band_mm(obj, gripper, grasp)
-    boxes = None if kin else pad_collision_geoms_mm(obj, gripper, grasp, contact, solver.cone)
+    boxes = pad_collision_geoms_mm(obj, gripper, grasp, contact, solver.cone) if cut_pads else None
     xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin, boxes)
     if kin is None:
         model = mujoco.MjModel.from_xml_string(xml)
     else:
         spec = mujoco.MjSpec.from_string(xml)
         mjcf_gripper.attach(spec, gripper.mjcf, "gripper")
+        if boxes is not None:
+            _add_mjcf_pad_boxes(spec, gripper, kin, boxes)
         model = spec.compile()
         xml = spec.to_xml()
     model.qpos0[:] = 0.0
@@ -630,6 +637,41 @@ def build_scene(
         pad_patch_mm=tuple(float(v) for v in patch),
         kinematics=kin,
     )
+
+
+def _add_mjcf_pad_boxes(
+    spec: mujoco.MjSpec,
+    gripper: GripperSpec,
+    kin: mjcf_gripper.Kinematics,
+    pad_boxes_mm: list[PadBox],
+) -> None:
+    """Give an attached MJCF gripper's pads the parallel jaw's collision boxes
+    (:func:`pad_collision_geoms_mm`), named like the parallel jaw's (``pad_left``,
+    ``pad_left_rim``, ...): each a box in the pad's body, aligned with the gripper's
+    axes and centred on the pad geoms' bounding box (``Kinematics.pad_frames``), so that
+    the pad pairs name them instead of the gripper's own pad geoms."""
+    depth = gripper.finger_depth_mm * 1e-3
+    names = _parallel_jaw_pad_names(pad_boxes_mm)
+    for side, body, frame in zip(("left", "right"), kin.pad_bodies, kin.pad_frames, strict=True):
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, np.asarray(frame.quat))
+        to_body = rot.reshape(3, 3)  # gripper axes -> the body's
+        for name, (half_w, half_h, dy, dz, recess) in zip(names, pad_boxes_mm, strict=True):
+            offset = to_body @ (np.array([0.0, dy, dz]) * 1e-3)
+            spec.body(mjcf_gripper.PREFIX + body).add_geom(
+                name=f"pad_{side}{name}",
+                type=mujoco.mjtGeom.mjGEOM_BOX,
+                # thinned on both faces, like the parallel jaw's: its face towards the
+                # part lies recess behind the pad's
+                size=[0.5 * depth - recess * 1e-3, half_w * 1e-3, half_h * 1e-3],
+                pos=list(np.asarray(frame.centre_m) + offset),
+                quat=list(frame.quat),
+                contype=0,
+                conaffinity=0,
+                group=3,
+                density=0.0,
+                rgba=[0.9, 0.2, 0.2, 0.5],
+            )
 
 
 def height_compensation_mm(gripper: GripperSpec, picks) -> np.ndarray:
