@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|certain|real|plate|grid|variants|variants_sweep|design|contacts
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -82,6 +82,18 @@ case "$1" in
         --heights 3 --frictions 0.3,0.3,0.3,0.3,0.3,0.3 --solver /tmp/plate/$v.toml \
         --out "$out/plate_$v.json"
     done ;;
+  linkage)  # the 2F-85 linkage with its rubber-like box pads on Warp: the preset grid, and
+    # Warp against C on the door opener and YCB parts (the same pick-points)
+    python benchmarks/preset_coulomb.py --backend warp --presets robotiq-2f85-linkage \
+      --out "$out/preset_coulomb_warp_linkage.json"
+    python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \
+      --gripper robotiq-2f85-linkage --out "$out/real_objects_linkage_h100.json" \
+      --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" ;;
+  differ)  # the picks certain on C that Warp labelled otherwise, 8 copies each on both
+    (cd benchmarks
+     python differing_picks.py --object 048_hammer --pick-ids 6108 --out "$out/differ_hammer.json"
+     python differing_picks.py --object 050_medium_clamp --pick-ids 1084 --out "$out/differ_clamp.json"
+     python differing_picks.py --object 011_banana --pick-ids 1472 --out "$out/differ_banana.json") ;;
   grid)  # the preset Coulomb grid on Warp
     python benchmarks/preset_coulomb.py --backend warp --out "$out/preset_coulomb_warp.json" ;;
 esac

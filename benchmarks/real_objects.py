@@ -60,14 +60,14 @@ def load_ycb(name: str) -> mp.ObjectModel:
         return mp.load_object(path, unit=entry["unit"], mass_g=entry["mass_g"])
 
 
-def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
+def failure_picture(obj, table, failure: str, grasp, path: Path, gripper: str) -> None:
     """Re-simulate the first pick of a failure class with its trace and draw why."""
     from mjx_pick.core import pickpoints as pp
     from mjx_pick.engine.backend import make_inputs
     from mjx_pick.engine.runner import Runner
     from mjx_pick.outputs.plots import new_figure, pick_on_axes, save_png
 
-    gripper = mp.load_gripper("robotiq-2f85")
+    gripper = mp.load_gripper(gripper)
     r = table[table["failure"] == failure].iloc[0]
     checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
     picks = checker.batch(np.arange(1), [r.x_mm], [r.y_mm], [r.yaw_deg], "user")
@@ -101,14 +101,16 @@ def failure_picture(obj, table, failure: str, grasp, path: Path) -> None:
     save_png(fig, path, dpi=90)
 
 
-def placement_certain(obj, table, grasp, contact, solver, backend, certain) -> np.ndarray:
+def placement_certain(
+    obj, table, grasp, contact, solver, backend, certain, gripper: str
+) -> np.ndarray:
     """(n,) bool: the pick-point's label is what every one of m placements around it
     gives (robustness with sigma_xy_mm, sigma_yaw_deg), in table's row order."""
     from mjx_pick.core import pickpoints as pp
     from mjx_pick.engine.backend import Settings
 
     m, sigma_xy_mm, sigma_yaw_deg = certain
-    gripper = mp.load_gripper("robotiq-2f85")
+    gripper = mp.load_gripper(gripper)
     checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
     picks = checker.batch(
         table["pick_id"].to_numpy(),
@@ -161,6 +163,7 @@ def run_object(
     solver=None,
     stability_um: float = 0.0,
     certain: tuple[int, float, float] | None = None,
+    gripper: str = "robotiq-2f85",
 ) -> dict:
     """One object on each backend (the first is the reference for label agreement)."""
     t0 = time.perf_counter()
@@ -169,6 +172,7 @@ def run_object(
     grasp = mp.GraspConfig(grip_force_n=force_n)
     row = {
         "object": name,
+        "gripper": gripper,
         "mass_g": round(obj.mass_kg * 1e3, 2),
         "height_mm": round(obj.height_mm, 2),
     }
@@ -176,7 +180,7 @@ def run_object(
     for backend in backends:
         ev = mp.evaluate(
             obj,
-            "robotiq-2f85",
+            gripper,
             n=n,
             seed=seed,
             grasp=grasp,
@@ -193,12 +197,12 @@ def run_object(
         labels[backend] = table["success"].to_numpy()
         if certain:
             certain_on[backend] = placement_certain(
-                obj, table, grasp, contact, solver, backend, certain
+                obj, table, grasp, contact, solver, backend, certain, gripper
             )
         if pictures and backend == "mujoco":
             for failure in sorted(set(table["failure"]) - {"none"}):
                 png = Path(pictures) / f"{name}_{failure}.png"
-                failure_picture(obj, table, failure, grasp, png)
+                failure_picture(obj, table, failure, grasp, png, gripper)
         row[backend] = {
             "n": m,
             "success_rate": k / m,
@@ -230,6 +234,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=48, help="pick-points per object")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--gripper", default="robotiq-2f85", help="a preset or gripper TOML")
     ap.add_argument("--force-n", type=float, default=50.0, help="F_d, N")
     ap.add_argument("--objects", default="", help="comma-separated names (default: all)")
     ap.add_argument(
@@ -268,6 +273,7 @@ def main() -> None:
             load_toml(mp.SolverParams, args.solver) if args.solver else None,
             args.stability_um,
             (args.certain_m, args.certain_xy_mm, args.certain_yaw_deg) if args.certain_m else None,
+            args.gripper,
         )
         rows.append(row)
         c = row[backends[0]]

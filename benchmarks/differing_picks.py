@@ -1,0 +1,78 @@
+"""Pick-points on which two engines disagree, each simulated R times on every backend.
+
+    python benchmarks/differing_picks.py --object 048_hammer --pick-ids 6108 --repeats 8 \
+        --backends mujoco,warp
+
+The pick-points are those of ``real_objects.py`` (``mp.evaluate(..., n, seed)`` on
+MuJoCo C, robotiq-2f85 by default). Each is repeated R times in one batch: on MuJoCo C
+the copies are identical, on MuJoCo Warp they differ by its contact order (atomic
+counters), so the spread over the copies shows whether a label is Warp's coin toss or a
+systematic difference. Prints and writes (``--out``) each copy's label and the metrics
+that decide it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+from real_objects import load_ycb, ycb_manifest
+
+import mjx_pick as mp
+from mjx_pick.core import pickpoints as pp
+
+METRICS = ("failure", "phi_max_deg", "slip_mm", "tilt_max_deg", "chatter", "max_force_left_n")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--object", required=True, help="door_opener or a shipped YCB part")
+    ap.add_argument("--pick-ids", required=True, help="comma-separated pick_id values")
+    ap.add_argument("--n", type=int, default=256, help="real_objects.py's --n")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--gripper", default="robotiq-2f85")
+    ap.add_argument("--repeats", type=int, default=8)
+    ap.add_argument("--backends", default="mujoco,warp")
+    ap.add_argument("--out", default="")
+    args = ap.parse_args()
+    obj = load_ycb(args.object) if args.object in ycb_manifest() else mp.load_object(args.object)
+    ids = [int(i) for i in args.pick_ids.split(",")]
+    table = mp.evaluate(
+        obj, args.gripper, n=args.n, seed=args.seed, backend="mujoco"
+    ).table.to_pandas()
+    rows = table.set_index("pick_id").loc[ids]
+    result = {"args": vars(args), "picks": {}}
+    grasp = mp.GraspConfig()
+    gripper = mp.load_gripper(args.gripper)
+    copies = rows.loc[np.repeat(ids, args.repeats)]
+    picks = pp.FeasibilityChecker(obj, gripper, grasp=grasp).batch(
+        np.arange(len(copies)),
+        copies["x_mm"].to_numpy(),
+        copies["y_mm"].to_numpy(),
+        copies["yaw_deg"].to_numpy(),
+        "user",
+    )
+    for backend in args.backends.split(","):
+        out = mp.evaluate(obj, gripper, picks=picks, grasp=grasp, backend=backend).table
+        out = out.to_pandas().sort_values("pick_id")
+        for k, pid in enumerate(ids):
+            got = {
+                m: out[m].iloc[k * args.repeats : (k + 1) * args.repeats].tolist() for m in METRICS
+            }
+            result["picks"].setdefault(str(pid), {})[backend] = got
+            labels = dict(zip(*np.unique(got["failure"], return_counts=True), strict=True))
+            labels = {str(a): int(b) for a, b in labels.items()}
+            print(
+                f"{args.object} pick {pid} {backend}: {labels}; phi_max "
+                f"{np.round(got['phi_max_deg'], 1).tolist()}; slip "
+                f"{np.round(got['slip_mm'], 2).tolist()}",
+                flush=True,
+            )
+    if args.out:
+        Path(args.out).write_text(json.dumps(result, indent=1, default=str))
+
+
+if __name__ == "__main__":
+    main()
