@@ -273,6 +273,31 @@ def test_refill_reassembles_in_order_and_equals_a_run_without_refill(block_scene
 
 
 @pytest.mark.mjx
+def test_a_new_backend_on_the_same_scene_runs_the_program_the_process_compiled(
+    block_scene, count_compiles
+):
+    # the GUI's next job, a notebook's next evaluate: a new backend for the same scene,
+    # procedure and pool settings runs the program compiled before in the process (the
+    # same shapes as the refill test above, which in one process compiled it already)
+    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 10, seed=0, grasp=SHORT)
+    inputs = make_inputs(block_scene, SHORT, picks)
+
+    def backend(scene=block_scene):
+        return make_backend("mjx", scene, SHORT, batch_size=4, refill=True, ticks_per_call=9)
+
+    first, _ = backend().run(inputs)
+    again, second = backend(), {}
+    assert count_compiles(lambda: second.update(again.run(inputs)[0])) == 0
+    assert again.stats.compile_s == 0
+    for key in first:
+        np.testing.assert_array_equal(first[key], second[key], err_msg=key)
+    # another model is another program
+    contact = mp.ContactParams(pad_friction=0.3)
+    other = mp.build_scene(block_scene.object, mp.GripperSpec(), contact, grasp=SHORT)
+    assert backend(other).program_identity() != again.program_identity()
+
+
+@pytest.mark.mjx
 def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
     # one device, 8 slots, 12 picks: once the queue is empty and at most 4 slots are
     # live, they move to a pool of 4. The picks are chosen so that their outcome does

@@ -34,13 +34,16 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import os
+import threading
 import time
 from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from mujoco import mjx
@@ -75,6 +78,24 @@ DEFAULT_TICKS_PER_CALL = 20
 # halvings of a pool in a run's tail (make_pool): as picks run out, a half-empty pool
 # moves its live slots into a pool half its size, so the tail does not pay for idle slots
 DEFAULT_SHRINK_LEVELS = 3
+
+# the compiled programs of the latest backend identity (MjxBackend.program_identity),
+# kept by the process after their backend is gone: a later run on the same scene and
+# procedure -- the GUI's next job, a notebook's next evaluate -- starts simulating
+# without tracing and compiling again. One identity only: a program holds its model and
+# initial data on the device, so another scene's programs are dropped before its own
+# compile (no more device memory than one backend's programs, as before).
+_PROGRAMS: dict = {}
+_PROGRAMS_IDENTITY: list = [None]
+_PROGRAMS_LOCK = threading.Lock()
+
+
+def model_digest(model: mujoco.MjModel) -> str:
+    """SHA-256 of a model's binary (every field, so a model changed after its scene was
+    built is a different model)."""
+    buffer = np.empty(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, buffer)
+    return hashlib.sha256(buffer).hexdigest()
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -546,7 +567,7 @@ class MjxBackend:
         self.stats = RunStats()
         self.pool_stats = PoolStats()
         self.last_diagnostics: Diagnostics | None = None
-        self._compiled = {}
+        self._compiled = {}  # this backend's programs, by kind and input shapes
 
     # --- what an implementation changes
     def physics(self, n_worlds: int) -> Physics:
@@ -556,17 +577,52 @@ class MjxBackend:
     def check_diagnostics(self, diag: Diagnostics, inputs: PickInputs) -> None:
         """Called after each run with every pick's Diagnostics (numpy)."""
 
+    def program_identity(self) -> tuple:
+        """What this backend's compiled programs depend on besides their inputs' shapes:
+        the implementation, the model, the procedure, the devices and the pool's
+        settings (a subclass adds its own)."""
+        return (
+            type(self).__qualname__,
+            self.impl,
+            model_digest(self.scene.model),
+            repr(self.grasp),
+            tuple((d.platform, d.id) for d in self.devices),
+            self.ticks_per_call,
+            self.shrink_levels,
+            self.SHRINK_MIN_SLOTS,
+        )
+
+    def _program(self, key: tuple, build: Callable[[], Callable]) -> Callable:
+        """The compiled program for key (its kind and input shapes): this backend's own,
+        else the process's for the same identity, else built now (compile time)."""
+        fn = self._compiled.get(key)
+        if fn is not None:
+            return fn
+        identity = self.program_identity()
+        with _PROGRAMS_LOCK:
+            if _PROGRAMS_IDENTITY[0] != identity:  # free another scene's programs first
+                _PROGRAMS.clear()
+                _PROGRAMS_IDENTITY[0] = identity
+            fn = _PROGRAMS.get(key)
+        if fn is None:
+            t0 = time.perf_counter()
+            fn = build()
+            self.stats.compile_s += time.perf_counter() - t0
+            with _PROGRAMS_LOCK:
+                if _PROGRAMS_IDENTITY[0] == identity:
+                    _PROGRAMS[key] = fn
+        self._compiled[key] = fn
+        return fn
+
     # --- full-length batches
     def _compiled_for(self, args, record: bool):
-        key = ("rollout", len(args[0]), record, _fields_key(args))
-        if key not in self._compiled:
-            t0 = time.perf_counter()
+        def build():
             per_device = len(args[0]) // len(self.devices)
             phys = self.physics(per_device)
             fn = make_rollout(self.scene, self.grasp, record, self.mesh, phys, diagnostics=True)
-            self._compiled[key] = fn.lower(*args).compile()
-            self.stats.compile_s += time.perf_counter() - t0
-        return self._compiled[key]
+            return fn.lower(*args).compile()
+
+        return self._program(("rollout", len(args[0]), record, _fields_key(args)), build)
 
     def device_bytes_per_pick(self) -> int:
         """Rough device memory of one simulation: 4x its mjx.Data (measured peak on an H100
@@ -619,9 +675,8 @@ class MjxBackend:
 
     def _pool_fn(self, size: int, args):
         """The compiled pool program for `size` slots and these inputs' shapes."""
-        key = ("pool", size, len(args[0]), _fields_key(args[1:]))
-        if key not in self._compiled:
-            t0 = time.perf_counter()
+
+        def build():
             fn = make_pool(
                 self.scene,
                 self.grasp,
@@ -632,9 +687,9 @@ class MjxBackend:
                 self.shrink_levels,
                 self.SHRINK_MIN_SLOTS,
             )
-            self._compiled[key] = fn.lower(*args).compile()
-            self.stats.compile_s += time.perf_counter() - t0
-        return self._compiled[key]
+            return fn.lower(*args).compile()
+
+        return self._program(("pool", size, len(args[0]), _fields_key(args[1:])), build)
 
     def _run_pool(self, inputs: PickInputs):
         """Every pick through a pool of slots refilled as picks end, in one device call;

@@ -377,6 +377,10 @@ def _warp_backend_class():
             phys = self.physics(1)
             jax.block_until_ready(jax.jit(mjx.step)(phys.model, phys.data0))
 
+        def program_identity(self) -> tuple:
+            """As MjxBackend's, with the buffer sizes and the graph mode."""
+            return (*super().program_identity(), repr(self.buffers), self.graph_mode)
+
         def physics(self, n_worlds: int) -> Physics:
             from mujoco import mjx
             from mujoco.mjx.warp import types as mjxw_types
