@@ -519,7 +519,9 @@ class MjxBackend:
     module docstring); a run of fewer picks than the pool uses a smaller pool (rounded
     up to a multiple of ``POOL_QUANTUM`` so that small runs of different sizes share
     compiles). shrink_levels: halvings of the pool in a run's tail (see make_pool).
-    Traces (``record=True``) always use the full-length rollout.
+    Traces (``record=True``) always use the full-length rollout. A new backend whose
+    :meth:`program_identity` equals the last one's runs the programs the process
+    compiled for it (``_PROGRAMS``).
     """
 
     name = "mjx"
