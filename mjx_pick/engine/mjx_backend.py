@@ -580,15 +580,14 @@ class MjxBackend:
         """Called after each run with every pick's Diagnostics (numpy)."""
 
     def program_identity(self) -> tuple:
-        """What this backend's compiled programs depend on besides their inputs' shapes:
-        the implementation, the model, the procedure, the devices and the pool's
+        """What this backend's compiled programs depend on besides their inputs' shapes
+        and the devices: the implementation, the model, the procedure and the pool's
         settings (a subclass adds its own)."""
         return (
             type(self).__qualname__,
             self.impl,
             model_digest(self.scene.model),
             repr(self.grasp),
-            tuple((d.platform, d.id) for d in self.devices),
             self.ticks_per_call,
             self.shrink_levels,
             self.SHRINK_MIN_SLOTS,
@@ -601,18 +600,21 @@ class MjxBackend:
         if fn is not None:
             return fn
         identity = self.program_identity()
+        # several GPUs run one backend each, of one identity: their programs are kept
+        # side by side, by device
+        on_devices = (tuple((d.platform, d.id) for d in self.devices), *key)
         with _PROGRAMS_LOCK:
             if _PROGRAMS_IDENTITY[0] != identity:  # free another scene's programs first
                 _PROGRAMS.clear()
                 _PROGRAMS_IDENTITY[0] = identity
-            fn = _PROGRAMS.get(key)
+            fn = _PROGRAMS.get(on_devices)
         if fn is None:
             t0 = time.perf_counter()
             fn = build()
             self.stats.compile_s += time.perf_counter() - t0
             with _PROGRAMS_LOCK:
                 if _PROGRAMS_IDENTITY[0] == identity:
-                    _PROGRAMS[key] = fn
+                    _PROGRAMS[on_devices] = fn
         self._compiled[key] = fn
         return fn
 
