@@ -42,7 +42,7 @@ case "$1" in
   certain)  # Warp against C on the labels that 8 placements (0.2 mm, 1 deg) all reproduce
     for o in ${OBJECTS:-door_opener 040_large_marker 037_scissors 048_hammer 044_flat_screwdriver 011_banana 050_medium_clamp}; do
       python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \
-        --certain-m 8 --objects "$o" --out "$out/certain_$o.json"
+        --certain-m 8 --objects "$o" --gripper "${GRIPPER:-robotiq-2f85}" --out "$out/certain_$o.json"
     done ;;
   real)  # six YCB parts, Warp against C on the same pick-points
     python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp \
