@@ -18,10 +18,9 @@ import json
 from pathlib import Path
 
 import numpy as np
-from real_objects import load_ycb, ycb_manifest
+from real_objects import load_ycb, table_picks, ycb_manifest
 
 import mjx_pick as mp
-from mjx_pick.core import pickpoints as pp
 
 METRICS = ("failure", "phi_max_deg", "slip_mm", "tilt_max_deg", "chatter", "max_force_left_n")
 
@@ -42,18 +41,18 @@ def main() -> None:
     table = mp.evaluate(
         obj, args.gripper, n=args.n, seed=args.seed, backend="mujoco"
     ).table.to_pandas()
+    unknown = sorted(set(ids) - set(table["pick_id"]))
+    if unknown:
+        raise SystemExit(
+            f"--pick-ids: {unknown} are not among the {len(table)} pick-points of "
+            f"--n {args.n} --seed {args.seed} on {args.object}"
+        )
     rows = table.set_index("pick_id").loc[ids]
     result = {"args": vars(args), "picks": {}}
     grasp = mp.GraspConfig()
     gripper = mp.load_gripper(args.gripper)
     copies = rows.loc[np.repeat(ids, args.repeats)]
-    picks = pp.FeasibilityChecker(obj, gripper, grasp=grasp).batch(
-        np.arange(len(copies)),
-        copies["x_mm"].to_numpy(),
-        copies["y_mm"].to_numpy(),
-        copies["yaw_deg"].to_numpy(),
-        "user",
-    )
+    picks = table_picks(obj, gripper, grasp, copies, "user", np.arange(len(copies)))
     for backend in args.backends.split(","):
         out = mp.evaluate(obj, gripper, picks=picks, grasp=grasp, backend=backend).table
         out = out.to_pandas().sort_values("pick_id")

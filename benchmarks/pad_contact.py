@@ -400,13 +400,14 @@ def _torsion_capacity(
         d.ctrl[act] = closed
     d.ctrl[ix.lift_actuator] = d.qpos[ix.lift_qpos]
     body = ix.object_body
+    # the pad side of the pad pairs (the other side is an object piece), less the
+    # "guarded" candidate's own geom
     pads = {
         int(g)
         for p in ix.pad_pairs
         for g in (m.pair_geom1[p], m.pair_geom2[p])
-        if int(g) != -1
-        and m.geom(int(g)).name.startswith(("pad_", "gripper/"))
-        and not m.geom(int(g)).name.endswith("_guard")  # the "guarded" candidate's own geom
+        if not m.geom(int(g)).name.startswith("piece")
+        and not m.geom(int(g)).name.endswith("_guard")
     }
 
     def pad_normal_n() -> float:

@@ -101,24 +101,31 @@ def failure_picture(obj, table, failure: str, grasp, path: Path, gripper: str) -
     save_png(fig, path, dpi=90)
 
 
+def table_picks(obj, gripper, grasp, table, mode: str, pick_id=None):
+    """The PickBatch of a results table's rows (x_mm, y_mm, yaw_deg; pick_id: the
+    table's own unless given), through the public feasibility checker."""
+    from mjx_pick.core import pickpoints as pp
+
+    checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
+    return checker.batch(
+        table["pick_id"].to_numpy() if pick_id is None else pick_id,
+        table["x_mm"].to_numpy(),
+        table["y_mm"].to_numpy(),
+        table["yaw_deg"].to_numpy(),
+        mode,
+    )
+
+
 def placement_certain(
     obj, table, grasp, contact, solver, backend, certain, gripper: str
 ) -> np.ndarray:
     """(n,) bool: the pick-point's label is what every one of m placements around it
     gives (robustness with sigma_xy_mm, sigma_yaw_deg), in table's row order."""
-    from mjx_pick.core import pickpoints as pp
     from mjx_pick.engine.backend import Settings
 
     m, sigma_xy_mm, sigma_yaw_deg = certain
     gripper = mp.load_gripper(gripper)
-    checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
-    picks = checker.batch(
-        table["pick_id"].to_numpy(),
-        table["x_mm"].to_numpy(),
-        table["y_mm"].to_numpy(),
-        table["yaw_deg"].to_numpy(),
-        "robustness",
-    )
+    picks = table_picks(obj, gripper, grasp, table, "robustness")
     robust = mp.robustness(
         obj,
         picks,

@@ -6,7 +6,7 @@ The GUI's worker, a notebook or a script runs one evaluation after another in on
 process. Three evaluations of the same part and settings, each its own call of
 ``mp.evaluate`` (a new runner and backend): the first pays imports and compiles;
 before the second the process's compiled programs are dropped
-(``mjx_backend._PROGRAMS``), as every new backend had to compile before they were
+(``mjx_backend.KEPT_PROGRAMS.clear()``), as every new backend had to compile before they were
 kept; the third runs with them kept. Prints each job's wall time and the compile and
 run times of its summary; ``--out`` writes them as JSON.
 """
@@ -33,7 +33,7 @@ def main() -> None:
     rows = []
     for job, programs in ((1, "first"), (2, "dropped"), (3, "kept")):
         if programs == "dropped":
-            mjx_backend._PROGRAMS.clear()
+            mjx_backend.KEPT_PROGRAMS.clear()
         t0 = time.perf_counter()
         ev = mp.evaluate(obj, n=args.n, seed=job, backend=args.backend)
         wall = time.perf_counter() - t0

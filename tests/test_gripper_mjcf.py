@@ -518,13 +518,12 @@ def test_linkage_pads_collide_through_the_rubber_like_box(linkage, block):
     assert pad_geoms(own) == sorted(mjcf_gripper.PREFIX + g for g in pads)
 
 
-def test_linkage_torque_threshold_is_a_rubber_pads():
+def test_linkage_torque_threshold_is_a_rubber_pads(linkage):
     # tests/test_physics.py's rubber-pad lever test on the linkage, default procedure: a
     # 200 mm bar gripped at d from its centre of mass turns with m (g + a) d. Against a
     # rubber pad pressed uniformly over the patch it must hold at 0.8x that pad's lever
     # and turn at 1.2x. Its own two pad boxes held to 1.5-2x (benchmarks/RESULTS.md,
     # "The linkage's pads: the rubber-like box")
-    linkage = mp.load_gripper(LINKAGE)
     mass, force, mu = 0.6, 30.0, 0.5
     part = mp.object_from_polygon(box(-10, -100, 10, 100), thickness_mm=40, mass_g=mass * 1e3)
     grasp = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.5, grip_force_n=force)

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import hashlib
 import os
 import threading
 import time
@@ -48,6 +47,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from mujoco import mjx
 
+from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
@@ -79,15 +79,45 @@ DEFAULT_TICKS_PER_CALL = 20
 # moves its live slots into a pool half its size, so the tail does not pay for idle slots
 DEFAULT_SHRINK_LEVELS = 3
 
-# the compiled programs of the latest backend identity (MjxBackend.program_identity),
-# kept by the process after their backend is gone: a later run on the same scene and
-# procedure -- the GUI's next job, a notebook's next evaluate -- starts simulating
-# without tracing and compiling again. One identity only: a program holds its model and
-# initial data on the device, so another scene's programs are dropped before its own
-# compile (no more device memory than one backend's programs, as before).
-_PROGRAMS: dict = {}
-_PROGRAMS_IDENTITY: list = [None]
-_PROGRAMS_LOCK = threading.Lock()
+
+class KeptPrograms:
+    """The compiled programs of the latest backend identity
+    (:meth:`MjxBackend.program_identity`), kept by the process after their backend is
+    gone: a later run on the same scene and procedure -- the GUI's next job, a notebook's
+    next evaluate -- starts simulating without tracing and compiling again. One identity
+    only: a program holds its model and initial data on the device, so another scene's
+    programs are dropped before its own compile (no more device memory than one
+    backend's programs, as before). Keys: the devices and the program's kind and input
+    shapes (several GPUs run one backend each, of one identity)."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._identity = None
+        self._programs: dict = {}
+
+    def get(self, identity: tuple, key: tuple):
+        """The program kept for key under identity, or None; another identity's programs
+        are dropped."""
+        with self._lock:
+            if self._identity != identity:
+                self._programs.clear()
+                self._identity = identity
+            return self._programs.get(key)
+
+    def put(self, identity: tuple, key: tuple, program) -> None:
+        """Keep program, unless another identity took over while it compiled."""
+        with self._lock:
+            if self._identity == identity:
+                self._programs[key] = program
+
+    def clear(self) -> None:
+        """Drop every kept program (the next backend compiles its own)."""
+        with self._lock:
+            self._programs.clear()
+            self._identity = None
+
+
+KEPT_PROGRAMS = KeptPrograms()
 
 
 def model_digest(model: mujoco.MjModel) -> str:
@@ -95,7 +125,7 @@ def model_digest(model: mujoco.MjModel) -> str:
     built is a different model)."""
     buffer = np.empty(mujoco.mj_sizeModel(model), np.uint8)
     mujoco.mj_saveModel(model, None, buffer)
-    return hashlib.sha256(buffer).hexdigest()
+    return cache.digest(buffer)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -521,7 +551,7 @@ class MjxBackend:
     compiles). shrink_levels: halvings of the pool in a run's tail (see make_pool).
     Traces (``record=True``) always use the full-length rollout. A new backend whose
     :meth:`program_identity` equals the last one's runs the programs the process
-    compiled for it (``_PROGRAMS``).
+    compiled for it (:data:`KEPT_PROGRAMS`).
     """
 
     name = "mjx"
@@ -600,21 +630,13 @@ class MjxBackend:
         if fn is not None:
             return fn
         identity = self.program_identity()
-        # several GPUs run one backend each, of one identity: their programs are kept
-        # side by side, by device
         on_devices = (tuple((d.platform, d.id) for d in self.devices), *key)
-        with _PROGRAMS_LOCK:
-            if _PROGRAMS_IDENTITY[0] != identity:  # free another scene's programs first
-                _PROGRAMS.clear()
-                _PROGRAMS_IDENTITY[0] = identity
-            fn = _PROGRAMS.get(on_devices)
+        fn = KEPT_PROGRAMS.get(identity, on_devices)
         if fn is None:
             t0 = time.perf_counter()
             fn = build()
             self.stats.compile_s += time.perf_counter() - t0
-            with _PROGRAMS_LOCK:
-                if _PROGRAMS_IDENTITY[0] == identity:
-                    _PROGRAMS[on_devices] = fn
+            KEPT_PROGRAMS.put(identity, on_devices, fn)
         self._compiled[key] = fn
         return fn
 
