@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -39,6 +39,11 @@ case "$1" in
     python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp --stability-um 1 \
       --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
       --out "$out/real_objects_stable_h100.json" ;;
+  margin)  # Warp against C by label margin (and 1 um stability), tables kept per pick
+    python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \
+      --gripper "${GRIPPER:-robotiq-2f85}" --margin-bands 0.02,0.05,0.1,0.2 \
+      --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
+      --tables "$out/margin_tables" --out "$out/real_objects_margin_h100.json" ;;
   certain)  # Warp against C on the labels that 8 placements (0.2 mm, 1 deg) all reproduce
     for o in ${OBJECTS:-door_opener 040_large_marker 037_scissors 048_hammer 044_flat_screwdriver 011_banana 050_medium_clamp}; do
       python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \

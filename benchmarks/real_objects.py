@@ -22,6 +22,11 @@ placements each, the object moved by N(0, --certain-xy-mm) in x and y and N(0,
 reported on the labels that all M placements reproduce: a label that a placement
 within the robot's precision flips is a coin toss, whichever engine computes it.
 
+Agreement is also reported on the labels that are not decided by a hair on the
+reference backend (and on both): |label_margin| >= each of --margin-bands (a label with
+no margin -- never reached its force, diverged -- counts as clear). --tables DIR writes
+each backend's results table per object (parquet), for per-pick comparison.
+
 With --pictures, one PNG per (object, failure class): the first pick-point of that
 class re-simulated on MuJoCo C with its trace -- the pick in the gripper frame, the pad
 forces, the object's lift against the gripper's (slip), and its rotation.
@@ -171,6 +176,8 @@ def run_object(
     stability_um: float = 0.0,
     certain: tuple[int, float, float] | None = None,
     gripper: str = "robotiq-2f85",
+    margin_bands: tuple[float, ...] = (),
+    tables: str = "",
 ) -> dict:
     """One object on each backend (the first is the reference for label agreement)."""
     t0 = time.perf_counter()
@@ -184,6 +191,7 @@ def run_object(
         "height_mm": round(obj.height_mm, 2),
     }
     labels, stable, certain_on = {}, {}, {}
+    clear = {band: {} for band in margin_bands}
     for backend in backends:
         ev = mp.evaluate(
             obj,
@@ -196,7 +204,15 @@ def run_object(
             backend=backend,
             stability_um=stability_um,
         )
+        if tables:
+            from pyarrow import parquet
+
+            Path(tables).mkdir(parents=True, exist_ok=True)
+            parquet.write_table(ev.table, Path(tables) / f"{name}_{backend}.parquet")
         table = ev.table.to_pandas()
+        margin = np.abs(table["label_margin"].to_numpy(float))
+        for band in margin_bands:
+            clear[band][backend] = ~(margin < band)  # NaN (no margin) counts as clear
         if stability_um:
             stable[backend] = table["label_stable"].to_numpy(bool)
         k, m = int(table["success"].sum()), len(table)
@@ -226,7 +242,17 @@ def run_object(
         b: float(np.mean(labels[ref] == labels[b])) for b in backends[1:] if b in labels
     }
     ids = table["pick_id"].to_numpy()
-    for what, flags in (("stable", stable), ("certain", certain_on)):
+    both = {
+        f"stable_clear{band:g}": {b: stable[b] & clear[band][b] for b in stable}
+        for band in margin_bands
+        if stable
+    }
+    for what, flags in (
+        ("stable", stable),
+        ("certain", certain_on),
+        *((f"clear{band:g}", clear[band]) for band in margin_bands),
+        *both.items(),
+    ):
         if flags:
             row[f"{what}_share"] = {b: float(np.mean(v)) for b, v in flags.items()}
             row[f"labels_agree_{what}"] = {
@@ -259,6 +285,12 @@ def main() -> None:
     ap.add_argument("--certain-m", type=int, default=0, help="placements per pick-point (0: off)")
     ap.add_argument("--certain-xy-mm", type=float, default=0.2, help="placement sigma, mm")
     ap.add_argument("--certain-yaw-deg", type=float, default=1.0, help="placement sigma, deg")
+    ap.add_argument(
+        "--margin-bands",
+        default="0.05,0.1,0.2",
+        help="agreement on labels with |label_margin| >= each (comma-separated; '' off)",
+    )
+    ap.add_argument("--tables", default="", help="folder for each backend's results tables")
     args = ap.parse_args()
     manifest = ycb_manifest()
     names = [s for s in args.objects.split(",") if s] or list(manifest)
@@ -266,6 +298,7 @@ def main() -> None:
     if unknown:
         raise SystemExit(f"--objects: unknown {unknown}; known: door_opener, {', '.join(manifest)}")
     backends = [b for b in args.backends.split(",") if b]
+    bands = tuple(float(b) for b in args.margin_bands.split(",") if b)
     rows = []
     for name in names:
         row = run_object(
@@ -281,6 +314,8 @@ def main() -> None:
             args.stability_um,
             (args.certain_m, args.certain_xy_mm, args.certain_yaw_deg) if args.certain_m else None,
             args.gripper,
+            bands,
+            args.tables,
         )
         rows.append(row)
         c = row[backends[0]]
@@ -297,6 +332,12 @@ def main() -> None:
                 f" certain {b}={backends[0]} {v['certain_on_reference']}"
                 f" (n {v['n_certain_on_reference']})"
                 for b, v in row.get("labels_agree_certain", {}).items()
+            )
+            + "".join(
+                f" {key} {b}={backends[0]} {v[f'{key}_on_reference']}"
+                f" (n {v[f'n_{key}_on_reference']})"
+                for key in (f"clear{band:g}" for band in bands)
+                for b, v in row.get(f"labels_agree_{key}", {}).items()
             ),
             flush=True,
         )

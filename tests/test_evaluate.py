@@ -10,7 +10,7 @@ import pytest
 import mjx_pick as mp
 from mjx_pick import cli
 from mjx_pick.core.config import to_toml
-from mjx_pick.core.metrics import COLUMNS
+from mjx_pick.core.metrics import COLUMNS, MARGINAL_BAND
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.studies.evaluation import evaluate, experiment_key
 
@@ -52,6 +52,12 @@ def test_evaluate_writes_every_output(tmp_path, block):
     assert len(set(traces.column("pick_id").to_pylist())) == 4
     assert (out / "scene.xml").read_text().startswith("<mujoco")
     assert ev.summary["success_rate"] == pytest.approx(np.mean(table["success"]))
+    # each judged label's margin has its sign; the summary counts those decided by a hair
+    margin, success = np.asarray(table["label_margin"], float), np.asarray(table["success"])
+    judged = np.isfinite(margin)
+    assert judged.any() and np.array_equal(success[judged], margin[judged] >= 0)
+    assert not success[~judged].any()
+    assert summary["labels_marginal"] == int(np.sum(np.abs(margin[judged]) < MARGINAL_BAND))
     # a second run into the same folder must not mix results silently
     with pytest.raises(mp.ConfigError, match="--resume"):
         evaluate(block, n=12, seed=1, grasp=FAST, backend="mujoco", batch_size=8, out=out)

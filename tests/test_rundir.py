@@ -252,3 +252,25 @@ def test_resume_over_a_corrupt_chunk_simulates_it_again(tmp_path, capsys):
     again = mp.evaluate(block, resume=True, **kw)
     assert f"{bad}: unreadable chunk" in capsys.readouterr().err
     assert again.table.equals(first.table)
+
+
+def test_resume_over_a_chunk_of_another_versions_columns_is_refused(tmp_path):
+    import json
+
+    import pyarrow.parquet as pq
+
+    block = mp.load_asset("block")
+    grasp = mp.GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
+    out = tmp_path / "ev"
+    kw = dict(n=4, grasp=grasp, backend="mujoco", out=out, n_traces=0, chunk_size=2)
+    mp.evaluate(block, keep_chunks=True, **kw)
+    manifest = read_manifest(out)
+    manifest["status"] = "interrupted"
+    (out / MANIFEST).write_text(json.dumps(manifest))
+    (out / "results.parquet").unlink()
+    # as written by a version whose results did not have the last column yet
+    old = out / "chunks" / "part-000001.parquet"
+    table = pq.read_table(old)
+    pq.write_table(table.drop_columns([table.column_names[-1]]), old)
+    with pytest.raises(mp.ConfigError, match="another version of mjx-pick.*choose another --out"):
+        mp.evaluate(block, resume=True, **kw)

@@ -183,6 +183,49 @@ def test_metrics_on_a_hand_made_success():
     assert out["phi_max_deg"] == pytest.approx(10.0, abs=1e-3)
     assert out["score"] == pytest.approx((t_grasp + 170 / 180 + t_nc) / 3, abs=1e-4)
     assert bool(out["success"]) and gk.FAILURES[int(out["failure"])] == "success"
+    # lifted the whole 100 mm (height margin 1) and turned 10 of the 45 deg allowed
+    assert out["rotation_final_deg"] == pytest.approx(10.0, abs=1e-3)
+    assert out["label_margin"] == pytest.approx(35 / 45, abs=1e-4)
+
+
+def test_label_margin_has_the_labels_sign_and_measures_the_closer_threshold():
+    """Where a label is judged (force reached, hold ended, no blow-up), success is
+    exactly label_margin >= 0, the thresholds themselves included; each margin is its
+    quantity's distance from the threshold over the tolerance (10 mm of a 100 mm lift at
+    the 0.9 default, 45 deg)."""
+    p = _params()
+    high, max_rot = 0.09, float(p.max_rotation_rad)
+    a0 = gk.initial_accumulators(jnp.float32(0))._replace(
+        reached=jnp.bool_(True), finished=jnp.bool_(True), table_final=jnp.bool_(False)
+    )
+    cases = [  # (final lift m, final rotation rad, table at the end, margin)
+        (0.1, 0.0, False, 1.0),
+        (0.095, 0.0, False, 0.5),
+        (high, 0.0, False, 0.0),
+        (0.08, 0.0, False, -1.0),
+        (0.1, max_rot, False, 0.0),
+        (0.1, 0.5 * max_rot, False, 0.5),
+        (0.099, 0.5 * max_rot, False, 0.5),  # the rotation decides: 0.5 < 0.9
+        (0.1, 1.5 * max_rot, False, -0.5),
+        (0.1, 0.0, True, -9.0),  # still on the table: not lifted
+    ]
+    for lift, rot, table, want in cases:
+        a = a0._replace(
+            lift_final=jnp.float32(lift),
+            rot_final=jnp.float32(rot),
+            table_final=jnp.bool_(table),
+        )
+        out = gk.finalize(p, a)
+        margin = float(out["label_margin"])
+        assert margin == pytest.approx(want, abs=2e-3), (lift, rot, table)
+        assert bool(out["success"]) == (margin >= 0), (lift, rot, table, margin)
+    # no judgement where the force was never reached, the hold never ended, or it blew up
+    for unjudged in (
+        a0._replace(reached=jnp.bool_(False)),
+        a0._replace(finished=jnp.bool_(False)),
+        a0._replace(diverged=jnp.bool_(True)),
+    ):
+        assert np.isnan(float(gk.finalize(p, unjudged)["label_margin"]))
 
 
 def test_metrics_on_hand_made_failures():
@@ -213,6 +256,7 @@ def test_metrics_on_hand_made_failures():
     table = [0.1] * 5 + [0.0] * 160 + [0.1] * 41
     out = _replay(p, phases, forces, table, z, [[1, 0, 0, 0]] * 206)
     assert gk.FAILURES[int(out["failure"])] == "dropped_in_hold"
+    assert out["label_margin"] == pytest.approx(-9.0)  # back on the table: 90 mm short
     assert out["t_grasp"] == pytest.approx(160 * 0.005 / 1.0, abs=1e-4)  # held 160 ticks
     # a NaN state is flagged diverged and never scored
     a = gk.initial_accumulators(jnp.float32(0))

@@ -325,7 +325,7 @@ def cmd_report(args) -> int:
 
 def print_summary(s: dict, out, total_s: float | None = None) -> None:
     """The evaluate summary's lines; total_s: the process's time so far, when known."""
-    from mjx_pick.core.metrics import rate_text
+    from mjx_pick.core.metrics import MARGINAL_BAND, rate_text
     from mjx_pick.kernels.grasp import SUCCESS
 
     rows = [
@@ -352,6 +352,14 @@ def print_summary(s: dict, out, total_s: float | None = None) -> None:
     rows += [
         ("pick-points per s", f"{s['picks_per_s']}"),
     ]
+    if "labels_marginal" in s:
+        rows.append(
+            (
+                "labels by a hair",
+                f"{s['labels_marginal']} of {s['n']} (|label_margin| < {MARGINAL_BAND:g} "
+                "of a threshold's tolerance)",
+            )
+        )
     if s.get("stability_um"):
         rows.append(
             (

@@ -51,7 +51,28 @@ COLUMNS = {
         "times a pad's force fell below pad_contact_fraction x F_d and came back while "
         "the part was held (lift and hold)",
     ),
+    "rotation_final_deg": (
+        "float64",
+        "rotation of the object from its start pose at the end of the hold (the success "
+        "test's); null when the hold did not end",
+    ),
+    "label_margin": (
+        "float64",
+        "how clearly the label was decided: the smaller of the final lift above the success "
+        "height and the final rotation below max_rotation_deg, each as a fraction of its "
+        "tolerance (1: no slip, no turn; 0: on a threshold; < 0: past it, a failure; a "
+        "part on the table counts as not lifted); null when the force was never reached "
+        "or the simulation diverged",
+    ),
 }
+
+# columns with no value (null; NaN in NumPy and pandas) where a pick was not judged
+JUDGED_ONLY = ("rotation_final_deg", "label_margin")
+
+# labels whose |label_margin| is below this are counted as decided by a hair in the
+# summary: a tenth of the tolerance, 1 mm of slip in the default 100 mm lift's 10 mm,
+# 4.5 deg of the default 45 deg
+MARGINAL_BAND = 0.1
 
 
 def results_table(
@@ -75,7 +96,12 @@ def results_table(
             cols[name] = np.asarray(gk.FAILURES, dtype=object)[np.asarray(out["failure"])]
         else:
             cols[name] = np.asarray(out[name])
-    arrays = {name: pa.array(cols[name], type=_type(COLUMNS[name][0])) for name in COLUMNS}
+    arrays = {
+        name: pa.array(
+            cols[name], type=_type(COLUMNS[name][0]), from_pandas=name in JUDGED_ONLY
+        )
+        for name in COLUMNS
+    }
     for name, values in (extra or {}).items():
         arrays[name] = pa.array(np.asarray(values))
     return pa.table(arrays)
@@ -116,10 +142,20 @@ def summarize(table: pa.Table) -> dict:
         "chattered": int(np.sum(np.asarray(table["chatter"]) > 0))
         if "chatter" in table.column_names
         else 0,
+        "labels_marginal": marginal_count(table),
         "failures": {name: int(np.sum(failures == name)) for name in gk.FAILURES},
         "score_mean": float(valid.mean()) if len(valid) else float("nan"),
         "score_quantiles": q,
     }
+
+
+def marginal_count(table: pa.Table, band: float = MARGINAL_BAND) -> int:
+    """Pick-points whose label was decided within ``band`` of a threshold
+    (|label_margin| < band); 0 for tables written before the column existed."""
+    if "label_margin" not in table.column_names:
+        return 0
+    margin = np.asarray(table["label_margin"], float)
+    return int(np.sum(np.abs(margin[np.isfinite(margin)]) < band))
 
 
 def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:

@@ -49,7 +49,7 @@ import numpy as np
 import pyarrow as pa
 
 from mjx_pick.core.config import ConfigError
-from mjx_pick.core.metrics import results_table
+from mjx_pick.core.metrics import COLUMNS, results_table
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
@@ -385,6 +385,14 @@ def read_chunk(store: ChunkStore | None, k: int, picks: PickBatch) -> pa.Table |
         raise ConfigError(
             f"{store.path(chunk_name(k))} does not hold the pick-points of chunk {k}: "
             "choose another --out"
+        )
+    if table.column_names[: len(COLUMNS)] != list(COLUMNS):
+        # written by a version of mjx-pick whose results had other columns: the rows
+        # could not be joined with this run's
+        raise ConfigError(
+            f"{store.path(chunk_name(k))} was written by another version of mjx-pick "
+            f"(columns {table.column_names[: len(COLUMNS)]}, this version writes "
+            f"{list(COLUMNS)}): choose another --out"
         )
     return table
 

@@ -380,6 +380,15 @@ def finalize(p: GraspParams, a: Accumulators) -> dict:
     held_to_end = a.finished & (a.lift_final >= high) & ~a.table_final
     upright = a.rot_final <= p.max_rotation_rad
     success = a.reached & held_to_end & upright & ~a.diverged
+    # how far the deciding quantities lie from their thresholds, each as a fraction of
+    # its tolerance (1: no slip / no turn; 0: on the threshold; < 0: past it), so that a
+    # label decided by a hair can be told from a clear one; a part still touching the
+    # table at the end counts as not lifted. Where judged, success <=> margin >= 0.
+    judged = a.reached & a.finished & ~a.diverged
+    lift_end = jnp.where(a.table_final, 0.0, a.lift_final)
+    height_margin = (lift_end - high) / jnp.maximum(p.lift_height_m - high, 1e-9)
+    rotation_margin = (p.max_rotation_rad - a.rot_final) / p.max_rotation_rad
+    margin = jnp.minimum(height_margin, rotation_margin)
     # a failure reason only for picks that failed: a held pick whose part lagged below
     # the success height at the lift's end (or still touched the table there) was
     # labelled a success with the reason "slipped_in_lift"
@@ -413,6 +422,8 @@ def finalize(p: GraspParams, a: Accumulators) -> dict:
         "lift_height_mm": 1e3 * a.lift_final,
         "slip_mm": 1e3 * a.slip_max,
         "chatter": a.chatter.astype(jnp.int32),
+        "rotation_final_deg": jnp.where(a.finished & ~a.diverged, jnp.rad2deg(a.rot_final), nan),
+        "label_margin": jnp.where(judged, margin, nan),
     }
 
 

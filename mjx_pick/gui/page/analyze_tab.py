@@ -31,6 +31,7 @@ TABLE_COLUMNS = (
     ("score", "score"),
     ("success", "success"),
     ("failure", "outcome"),
+    ("label_margin", "margin"),
     ("t_grasp", "t_grasp"),
     ("phi_max_deg", "phi_max, deg"),
     ("t_grasp_nc", "t_grasp_nc"),
