@@ -39,11 +39,12 @@ case "$1" in
     python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco,warp --stability-um 1 \
       --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
       --out "$out/real_objects_stable_h100.json" ;;
-  margin)  # Warp against C by label margin (and 1 um stability), tables kept per pick
+  margin)  # Warp against C by label margin, 1 um stability and half-step convergence
     python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \
-      --gripper "${GRIPPER:-robotiq-2f85}" --margin-bands 0.02,0.05,0.1,0.2 \
+      --gripper "${GRIPPER:-robotiq-2f85}" --margin-bands 0.05,0.1,0.2 --step-check \
       --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
-      --tables "$out/margin_tables" --out "$out/real_objects_margin_h100.json" ;;
+      --tables /tmp/margin_tables --out "$out/real_objects_margin_h100.json"
+    tar czf "$out/margin_tables.tgz" -C /tmp margin_tables ;;
   certain)  # Warp against C on the labels that 8 placements (0.2 mm, 1 deg) all reproduce
     for o in ${OBJECTS:-door_opener 040_large_marker 037_scissors 048_hammer 044_flat_screwdriver 011_banana 050_medium_clamp}; do
       python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \

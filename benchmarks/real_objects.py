@@ -25,7 +25,9 @@ within the robot's precision flips is a coin toss, whichever engine computes it.
 Agreement is also reported on the labels that are not decided by a hair on the
 reference backend (and on both): |label_margin| >= each of --margin-bands (a label with
 no margin -- never reached its force, diverged -- counts as clear). --tables DIR writes
-each backend's results table per object (parquet), for per-pick comparison.
+each backend's results table per object (parquet), for per-pick comparison. With
+--step-check, every backend also simulates each pick-point at half the time step
+(evaluate's ``label_converged``), and agreement is reported on the converged labels.
 
 With --pictures, one PNG per (object, failure class): the first pick-point of that
 class re-simulated on MuJoCo C with its trace -- the pick in the gripper frame, the pad
@@ -178,6 +180,7 @@ def run_object(
     gripper: str = "robotiq-2f85",
     margin_bands: tuple[float, ...] = (),
     tables: str = "",
+    step_check: bool = False,
 ) -> dict:
     """One object on each backend (the first is the reference for label agreement)."""
     t0 = time.perf_counter()
@@ -190,7 +193,7 @@ def run_object(
         "mass_g": round(obj.mass_kg * 1e3, 2),
         "height_mm": round(obj.height_mm, 2),
     }
-    labels, stable, certain_on = {}, {}, {}
+    labels, stable, certain_on, converged = {}, {}, {}, {}
     clear = {band: {} for band in margin_bands}
     for backend in backends:
         ev = mp.evaluate(
@@ -203,6 +206,7 @@ def run_object(
             solver=solver,
             backend=backend,
             stability_um=stability_um,
+            step_check=step_check,
         )
         if tables:
             from pyarrow import parquet
@@ -215,6 +219,8 @@ def run_object(
             clear[band][backend] = ~(margin < band)  # NaN (no margin) counts as clear
         if stability_um:
             stable[backend] = table["label_stable"].to_numpy(bool)
+        if step_check:
+            converged[backend] = table["label_converged"].to_numpy(bool)
         k, m = int(table["success"].sum()), len(table)
         lo, hi = wilson_interval(k, m)
         labels[backend] = table["success"].to_numpy()
@@ -250,6 +256,7 @@ def run_object(
     for what, flags in (
         ("stable", stable),
         ("certain", certain_on),
+        ("converged", converged),
         *((f"clear{band:g}", clear[band]) for band in margin_bands),
         *both.items(),
     ):
@@ -291,6 +298,7 @@ def main() -> None:
         help="agreement on labels with |label_margin| >= each (comma-separated; '' off)",
     )
     ap.add_argument("--tables", default="", help="folder for each backend's results tables")
+    ap.add_argument("--step-check", action="store_true", help="label_converged (half step)")
     args = ap.parse_args()
     manifest = ycb_manifest()
     names = [s for s in args.objects.split(",") if s] or list(manifest)
@@ -316,6 +324,7 @@ def main() -> None:
             args.gripper,
             bands,
             args.tables,
+            args.step_check,
         )
         rows.append(row)
         c = row[backends[0]]
@@ -332,6 +341,11 @@ def main() -> None:
                 f" certain {b}={backends[0]} {v['certain_on_reference']}"
                 f" (n {v['n_certain_on_reference']})"
                 for b, v in row.get("labels_agree_certain", {}).items()
+            )
+            + "".join(
+                f" converged {b}={backends[0]} {v['converged_on_reference']}"
+                f" (n {v['n_converged_on_reference']})"
+                for b, v in row.get("labels_agree_converged", {}).items()
             )
             + "".join(
                 f" {key} {b}={backends[0]} {v[f'{key}_on_reference']}"

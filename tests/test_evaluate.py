@@ -345,6 +345,24 @@ def test_stability_check_moves_the_object_and_marks_the_labels_it_flips(block):
         evaluate(block, n=8, grasp=FAST, stability_um=1.0, ray="127.0.0.1:1")
 
 
+def test_step_check_is_the_same_pick_points_at_half_the_time_step(block, tmp_path, capsys):
+    run = dict(n=6, seed=3, grasp=FAST, backend="mujoco", n_traces=0)
+    ev = evaluate(block, step_check=True, **run)
+    t = ev.table.to_pandas()
+    # the check's labels are those of a run of its own at half the step
+    half = evaluate(block, solver=mp.SolverParams(timestep_s=0.0005), **run).table.to_pandas()
+    assert (t["success_half_step"] == half["success"]).all()
+    assert (t["label_converged"] == (t["success"] == t["success_half_step"])).all()
+    assert ev.summary["labels_unconverged"] == int((~t["label_converged"]).sum())
+    # a step that cannot be halved is refused before anything runs or is written
+    out = tmp_path / "refused"
+    with pytest.raises(mp.ConfigError, match="--step-check halves solver.timestep_s = 1e-05"):
+        evaluate(block, solver=mp.SolverParams(timestep_s=1e-5), step_check=True, out=out, **run)
+    assert not out.exists()
+    with pytest.raises(mp.ConfigError, match="Ray"):
+        evaluate(block, n=8, grasp=FAST, step_check=True, ray="127.0.0.1:1")
+
+
 def test_a_presets_force_range_gives_the_default_grip_force(tmp_path, capsys):
     # `--gripper onrobot-rg2` failed with the default 50 N (its range is 3-40 N)
     from mjx_pick.cli import inputs

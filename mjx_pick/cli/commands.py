@@ -51,6 +51,7 @@ def cmd_evaluate(args) -> int:
         chunk_size=args.chunk_size,
         min_force=args.min_force,
         stability_um=args.stability_um,
+        step_check=args.step_check,
         skip_infeasible=args.skip_infeasible,
         fixed_costs=costs,
     )
@@ -366,6 +367,14 @@ def print_summary(s: dict, out, total_s: float | None = None) -> None:
                 "labels a shift flips",
                 f"{s['labels_unstable']} of {s['n']} (object moved {s['stability_um']:g} um; "
                 "label_stable in the results)",
+            )
+        )
+    if "labels_unconverged" in s:
+        rows.append(
+            (
+                "labels the step changes",
+                f"{s['labels_unconverged']} of {s['n']} (half the time step; "
+                "label_converged in the results)",
             )
         )
     cluster = s.get("cluster")

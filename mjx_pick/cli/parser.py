@@ -352,6 +352,12 @@ def _add_evaluate_parser(sub) -> None:
         "(0-100; 0: off), and add label_stable: a label a micrometre flips rests on a "
         "threshold no engine reproduces reliably (default: 0.0)",
     )
+    ev.add_argument(
+        "--step-check",
+        action="store_true",
+        help="simulate every pick-point again at half the time step and add "
+        "label_converged: a label the step changes is decided by the numerics",
+    )
     ev.set_defaults(func=cmd_evaluate)
 
 

@@ -97,9 +97,7 @@ def results_table(
         else:
             cols[name] = np.asarray(out[name])
     arrays = {
-        name: pa.array(
-            cols[name], type=_type(COLUMNS[name][0]), from_pandas=name in JUDGED_ONLY
-        )
+        name: pa.array(cols[name], type=_type(COLUMNS[name][0]), from_pandas=name in JUDGED_ONLY)
         for name in COLUMNS
     }
     for name, values in (extra or {}).items():

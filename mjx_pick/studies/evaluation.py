@@ -159,6 +159,7 @@ def evaluate(
     chunk_size: int | None = None,
     min_force: bool = False,
     stability_um: float = 0.0,
+    step_check: bool = False,
     skip_infeasible: bool = False,
     keep_chunks: bool = False,
     on_progress: ProgressFn | None = None,
@@ -214,6 +215,12 @@ def evaluate(
         determinism"). One more simulation per pick-point. One probe finds about half
         of the labels that some micrometre move flips (RESULTS.md): a flag marks a coin
         toss; no flag promises less (robust() samples more moves).
+      step_check: simulate every pick-point again at half the solver's time step and add
+        success_half_step and label_converged (the two labels agree). A label the time
+        step changes is decided by the numerics, not by the part and the gripper: a
+        heavy part slipping near its torque limit, a turn ending near max_rotation_deg
+        (benchmarks/RESULTS.md, "Labels decided by a hair"). About two more simulations
+        per pick-point (twice the steps) and one more compile.
       ray: run the chunks on a Ray cluster: "auto" or the head's "HOST:PORT" (needs
         the cluster extra; see mjx_pick.engine.cluster). This process still writes out.
       on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` (an actor
@@ -247,6 +254,12 @@ def evaluate(
         raise ConfigError(
             "--stability-um does not run on a Ray cluster yet: leave out --ray or --stability-um"
         )
+    if ray is not None and step_check:
+        raise ConfigError(
+            "--step-check does not run on a Ray cluster yet: leave out --ray or --step-check"
+        )
+    if step_check:
+        half_step(solver)  # a step that cannot be halved is refused now, not after the run
     if chunk_size is not None and int(chunk_size) < 1:
         raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
     opts.check_resume()
@@ -295,6 +308,7 @@ def evaluate(
             chunk_size=chunk_size,
             min_force=min_force,
             stability_um=stability_um,
+            step_check=step_check,
             keep_chunks=keep_chunks,
             on_progress=on_progress,
         )
@@ -323,6 +337,7 @@ class _Request:
     chunk_size: int | None
     min_force: bool
     stability_um: float
+    step_check: bool
     keep_chunks: bool
     on_progress: ProgressFn | None
 
@@ -370,6 +385,7 @@ def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
             "max_n": req.max_n,
             "min_force": req.min_force,
             "stability_um": req.stability_um,
+            "step_check": req.step_check,
             "backend": ctx.chunks.name,
             # a batched program's float32 rounding depends on its batch shape, on the C
             # engine too (its per-tick kernel: engine module docstring)
@@ -550,9 +566,10 @@ def _extra_passes(
     ctx: _Context, req: _Request, picks_batch: pp.PickBatch, table: pa.Table, summary: dict
 ) -> pa.Table:
     """table with the columns of the extra passes asked for (minimum grip force, label
-    stability), their figures added to summary. They run through the run's own runner
-    and backend (no new compile)."""
-    if not (req.min_force or req.stability_um):
+    stability, label convergence), their figures added to summary. They run through the
+    run's own runner and backend (no new compile; the half time step's scene compiles
+    its own program)."""
+    if not (req.min_force or req.stability_um or req.step_check):
         return table
     settings = Settings(req.gripper, req.contact, req.solver, req.grasp)
     sim = Simulator(req.obj, runner=ctx.runner)
@@ -578,6 +595,16 @@ def _extra_passes(
         summary["stability_um"] = req.stability_um
         summary["labels_unstable"] = int((~stable).sum())
         summary["stability_s"] = round(time.perf_counter() - t1, 3)
+    if req.step_check:
+        t1 = time.perf_counter()
+        half = dataclasses.replace(settings, solver=half_step(req.solver))
+        with showing_progress(ctx.runner, "step check (half the time step)", "sim", req.progress):
+            success, _ = _labels_again(sim, half, picks_batch, table)
+        table = table.append_column("success_half_step", pa.array(success))
+        converged = success == table["success"].to_numpy(zero_copy_only=False).astype(bool)
+        table = table.append_column("label_converged", pa.array(converged))
+        summary["labels_unconverged"] = int((~converged).sum())
+        summary["step_check_s"] = round(time.perf_counter() - t1, 3)
     return table
 
 
@@ -607,21 +634,39 @@ def until_batch(until: int, batch_size: int) -> int:
     return int(min(want, batch_size))
 
 
+def half_step(solver: SolverParams) -> SolverParams:
+    """solver at half its time step (the step check's), or a ConfigError naming the
+    step that cannot be halved."""
+    try:
+        return dataclasses.replace(solver, timestep_s=solver.timestep_s / 2)
+    except ConfigError as e:
+        raise ConfigError(
+            f"--step-check halves solver.timestep_s = {solver.timestep_s:g} s: {e}"
+        ) from None
+
+
+def _labels_again(sim: Simulator, settings, picks_batch, table) -> tuple[np.ndarray, np.ndarray]:
+    """(success (n,) bool, score (n,)) of the table's pick-points simulated again as
+    picks_batch (the same pick-points, perhaps moved) with settings, one batch through
+    sim (the run's own runner)."""
+    # the table's rows are the batch's pick-points in order (infeasible ones, if kept,
+    # included)
+    ids = table["pick_id"].to_numpy()
+    if len(ids) != len(picks_batch) or not np.array_equal(ids, picks_batch.pick_id):
+        raise RuntimeError("evaluate: the results table does not follow its pick-points")
+    (res,) = sim.run([(settings, picks_batch)])
+    return np.asarray(res["success"], bool), np.asarray(res["score"], float)
+
+
 def _stability(table, picks_batch, sim: Simulator, settings, shift_um, progress):
     """table with success_shifted, score_shifted and label_stable: every simulated
     pick-point again with the object moved shift_um micrometres along x (one batch
     through sim, which runs on the run's own runner and backend)."""
-    # the table's rows are the batch's pick-points in order (infeasible ones, if kept,
-    # included: they are not simulated twice -- no simulation decides their label)
-    ids = table["pick_id"].to_numpy()
-    if len(ids) != len(picks_batch) or not np.array_equal(ids, picks_batch.pick_id):
-        raise RuntimeError("evaluate: the results table does not follow its pick-points")
     shifted = dataclasses.replace(picks_batch, x_mm=picks_batch.x_mm + shift_um * 1e-3)
     with showing_progress(sim.runner, "stability (pick-points moved)", "sim", progress):
-        (res,) = sim.run([(settings, shifted)])
-    success = np.asarray(res["success"], bool)
+        success, score = _labels_again(sim, settings, shifted, table)
     table = table.append_column("success_shifted", pa.array(success))
-    table = table.append_column("score_shifted", pa.array(np.asarray(res["score"], float)))
+    table = table.append_column("score_shifted", pa.array(score))
     same = success == table["success"].to_numpy(zero_copy_only=False).astype(bool)
     return table.append_column("label_stable", pa.array(same))
 
