@@ -271,3 +271,32 @@ def test_a_headless_report_renders_every_animation_in_one_child(run_dir, tmp_pat
     monkeypatch.setattr(multiprocessing, "get_context", lambda method: Context())
     out = report(run_dir, tmp_path / "r", n=2, k=4, anim_every=200, anim_size=(80, 60))
     assert len(out["animations"]) == 2 and pools == [1]
+
+
+def test_a_part_larger_than_the_page_skips_its_template_and_reports_the_rest(tmp_path, capsys):
+    from shapely.geometry import box
+
+    from mjx_pick.outputs.reporting.template import page_misfit, positioning_template
+
+    # a 230 mm bar: within the 2F-85's stroke across its 20 mm, longer than A4's 180 mm
+    # of room; letter's shorter side is 185.9 mm, so neither page holds it
+    bar = mp.object_from_polygon(box(-115, -10, 115, 10), thickness_mm=10, mass_g=60)
+    out = tmp_path / "bar"
+    mp.evaluate(bar, n=2, seed=0, grasp=FAST, backend="mujoco", out=out, n_traces=1)
+    (out / "template_a4.pdf").write_bytes(b"an earlier report's")
+    assert main(["report", str(out), "--no-animations"]) == 0
+    text = capsys.readouterr().out
+    assert "templates: none" in text
+    assert "template on a4 not written: the object (230 mm) does not fit a4 paper at 1:1" in text
+    assert not (out / "template_a4.pdf").exists()  # not left to be taken for this one's
+    assert (out / "report.html").is_file() and (out / "robot_picks.json").is_file()
+    assert "does not fit letter paper" in (out / "report.html").read_text()
+    # the function itself still refuses, naming the part's size and the room
+    run = Run.load(out)
+    pick = {"x_mm": 0.0, "y_mm": 0.0, "yaw_deg": 0.0, "opening_mm": 30.0, "label": "p"}
+    assert page_misfit(run.outline, [pick], "a4") == (
+        "the object (230 mm) does not fit a4 paper at 1:1 (at most 180 mm)"
+    )
+    assert page_misfit(run.outline, [{**pick, "yaw_deg": 90.0}], "a4") is not None
+    with pytest.raises(mp.ConfigError, match="does not fit a4 paper"):
+        positioning_template(run.outline, run.gripper, [pick], tmp_path / "t.pdf")

@@ -319,7 +319,9 @@ def cmd_report(args) -> int:
     print(f"report: {written['html']}")
     for key, what in (("forces", "force plots"), ("animations", "GIFs"), ("videos", "MP4s")):
         print(f"  {key}: {len(written[key])} {what}")
-    print(f"  templates: {', '.join(written['templates'].values())}")
+    print(f"  templates: {', '.join(written['templates'].values()) or 'none'}")
+    for paper, why in written["templates_skipped"].items():
+        print(f"  template on {paper} not written: {why}")
     print(f"  robot export: {written['robot_picks']}")
     return 0
 

@@ -12,13 +12,13 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core.config import ConfigError, write_atomic, write_json
-from mjx_pick.core.metrics import rate_text
+from mjx_pick.core.metrics import MARGINAL_BAND, rate_text
 from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.reporting.animation import animate, render_pool
 from mjx_pick.outputs.reporting.figures import force_plot, maps
 from mjx_pick.outputs.reporting.robot import robot_picks
 from mjx_pick.outputs.reporting.run import Run, read_parquet
-from mjx_pick.outputs.reporting.template import PAPERS_MM, positioning_template
+from mjx_pick.outputs.reporting.template import PAPERS_MM, page_misfit, positioning_template
 
 __all__ = ["report"]
 
@@ -70,14 +70,15 @@ def report(
         bar.advance()
 
         chosen = _template_picks(run, n)
-        templates = _templates(run, out_dir, chosen, name, bar)
+        templates, skipped = _templates(run, out_dir, chosen, name, bar)
         written["templates"] = {k_: str(v) for k_, v in templates.items()}
+        written["templates_skipped"] = skipped
 
         picks = _robot_export(run, out_dir, k, frame, name)
         written["robot_picks"] = str(out_dir / "robot_picks.json")
         bar.advance()
 
-        written["html"] = str(_html(run, out_dir, forces, anims, templates, picks))
+        written["html"] = str(_html(run, out_dir, forces, anims, templates, skipped, picks))
         bar.advance()
         return written
 
@@ -137,10 +138,18 @@ def _template_picks(run: Run, n: int) -> list[dict]:
     return chosen
 
 
-def _templates(run: Run, out_dir: Path, chosen: list, name: str, bar) -> dict:
-    """The 1:1 positioning template of chosen on each paper size: {paper: path}."""
-    templates = {}
+def _templates(run: Run, out_dir: Path, chosen: list, name: str, bar) -> tuple[dict, dict]:
+    """The 1:1 positioning template of chosen on each paper size the part fits:
+    ({paper: path}, {paper: why it was not written})."""
+    templates, skipped = {}, {}
     for paper in PAPERS_MM:
+        misfit = page_misfit(run.outline, chosen, paper)
+        if misfit:
+            # a part larger than the page: the rest of the report is still worth having
+            skipped[paper] = misfit
+            (out_dir / f"template_{paper}.pdf").unlink(missing_ok=True)  # an earlier report's
+            bar.advance()
+            continue
         p = out_dir / f"template_{paper}.pdf"
         positioning_template(
             run.outline,
@@ -152,7 +161,7 @@ def _templates(run: Run, out_dir: Path, chosen: list, name: str, bar) -> dict:
         )
         templates[paper] = p
         bar.advance()
-    return templates
+    return templates, skipped
 
 
 def _robot_export(run: Run, out_dir: Path, k: int, frame, name: str) -> list[dict]:
@@ -177,7 +186,26 @@ def _robot_export(run: Run, out_dir: Path, k: int, frame, name: str) -> list[dic
     return picks
 
 
-def _html(run: Run, out_dir: Path, forces, anims, templates, picks) -> Path:
+def _checks(s: dict) -> list[tuple[str, str]]:
+    """The summary's rows on how clearly the labels were decided, those it holds (runs
+    of older versions, or without the checks, hold fewer)."""
+    n = s.get("n")
+    rows = []
+    if "labels_marginal" in s:
+        rows.append(
+            ("labels by a hair", f"{s['labels_marginal']} of {n} (|margin| < {MARGINAL_BAND:g})")
+        )
+    if "labels_unstable" in s:
+        rows.append(
+            ("labels a shift flips", f"{s['labels_unstable']} of {n} ({s['stability_um']:g} um)")
+        )
+    if "labels_unconverged" in s:
+        rows.append(("labels the step changes", f"{s['labels_unconverged']} of {n} (half step)"))
+    return rows
+
+
+def _html(run: Run, out_dir: Path, forces, anims, templates, skipped, picks) -> Path:
+    """report.html; templates: {paper: path}, skipped: {paper: why it was not written}."""
     s = run.summary
     rows = "".join(
         f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>"
@@ -190,6 +218,7 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, picks) -> Path:
             ("score mean", f"{s.get('score_mean', float('nan')):.3f}"),
             ("F_Gmin, eq. (1)", f"{s.get('f_gmin_n', float('nan')):.3f} N"),
             ("outcomes", ", ".join(f"{k_} {v}" for k_, v in s.get("failures", {}).items() if v)),
+            *_checks(s),
         )
     )
     img = lambda p, cap: (  # noqa: E731
@@ -217,6 +246,10 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, picks) -> Path:
         *(
             f'<li><a download="{p.name}" href="{_embed(p, "application/pdf")}">{p.name}</a></li>'
             for p in templates.values()
+        ),
+        *(
+            f"<li>{html.escape(paper)}: not written, {html.escape(why)}</li>"
+            for paper, why in skipped.items()
         ),
         "</ul><h2>Robot export</h2>",
         f"<pre>{html.escape(json.dumps(picks, indent=1))}</pre>",

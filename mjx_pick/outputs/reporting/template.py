@@ -12,7 +12,7 @@ from mjx_pick.core.config import ConfigError, write_atomic
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.outputs.plots import add_polygon
 
-__all__ = ["PAPERS_MM", "SCALE_BAR_COLOUR", "positioning_template"]
+__all__ = ["PAPERS_MM", "SCALE_BAR_COLOUR", "page_misfit", "positioning_template"]
 
 PAPERS_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4)}
 
@@ -24,6 +24,29 @@ def _pose(x_mm: float, y_mm: float, yaw_deg: float, outline: shapely.Polygon):
     return shapely.affinity.translate(
         shapely.affinity.rotate(outline, yaw_deg, origin=(0, 0)), x_mm, y_mm
     )
+
+
+# mm of the page's shorter side kept free around the part (title lines, scale bar)
+MARGIN_MM = 30.0
+
+
+def page_misfit(outline: shapely.Polygon, picks: list[dict], paper: str) -> str | None:
+    """Why the part, posed as each of picks, does not fit a `paper` page at 1:1 (None:
+    every pose fits). The part is drawn about the page's centre, within its shorter
+    side less MARGIN_MM."""
+    if paper not in PAPERS_MM:
+        raise ConfigError(f"paper = {paper!r} is not allowed: choose {', '.join(PAPERS_MM)}")
+    room = min(PAPERS_MM[paper]) - MARGIN_MM
+    extent = max(
+        (
+            max(b[2] - b[0], b[3] - b[1])
+            for b in (_pose(p["x_mm"], p["y_mm"], p["yaw_deg"], outline).bounds for p in picks)
+        ),
+        default=0.0,
+    )
+    if extent <= room:
+        return None
+    return f"the object ({extent:.0f} mm) does not fit {paper} paper at 1:1 (at most {room:.0f} mm)"
 
 
 def positioning_template(
@@ -44,8 +67,9 @@ def positioning_template(
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle, Rectangle
 
-    if paper not in PAPERS_MM:
-        raise ConfigError(f"paper = {paper!r} is not allowed: choose {', '.join(PAPERS_MM)}")
+    misfit = page_misfit(outline, picks, paper)
+    if misfit:
+        raise ConfigError(misfit)
     pw, ph = PAPERS_MM[paper]
     cx, cy = pw / 2, ph / 2 + 15
     buf = io.BytesIO()
@@ -59,11 +83,6 @@ def positioning_template(
             posed = shapely.affinity.translate(
                 _pose(pick["x_mm"], pick["y_mm"], pick["yaw_deg"], outline), cx, cy
             )
-            extent = max(posed.bounds[2] - posed.bounds[0], posed.bounds[3] - posed.bounds[1])
-            if extent > min(pw, ph) - 30:
-                raise ConfigError(
-                    f"the object ({extent:.0f} mm) does not fit a {paper} page at 1:1"
-                )
             add_polygon(ax, posed, fc="#cfe0f5", ec="k", lw=1.2)
             half = 0.5 * pick["opening_mm"]
             d, w = gripper.finger_depth_mm, gripper.finger_width_mm
