@@ -276,6 +276,7 @@ def test_height_compensation_reaches_the_results_and_the_robot_export(linkage):
     out.update({k: np.zeros(n) for k in ("max_force_left_n", "max_force_right_n")})
     out.update({k: np.zeros(n) for k in ("lift_height_mm", "yaw_max_deg", "tilt_max_deg")})
     out.update(slip_mm=np.zeros(n), t_reached_s=np.zeros(n), chatter=np.zeros(n, int))
+    out.update(rotation_final_deg=np.zeros(n), label_margin=np.ones(n))
     table = results_table(picks, out, linkage)
     np.testing.assert_allclose(table["height_compensation_mm"].to_numpy(), comp)
     exported = robot_picks(table, pick_height_mm=5.0, k=n)

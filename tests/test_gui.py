@@ -258,6 +258,7 @@ def test_paper_workflow(page, server):
     number(page, "traced best and worst (force plots)", 2)
     number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
     page.get_by_label("run folder name").fill("gui-run")
+    page.get_by_test_id("label-checks").click()  # each label again: half step, 1 um
     page.get_by_test_id("generate").click()
     page.get_by_test_id("picks-info").filter(has_text="6 feasible pick-points").wait_for(
         timeout=60_000
@@ -267,13 +268,19 @@ def test_paper_workflow(page, server):
     assert status.startswith("complete") and "6/6 pick-points" in status, status
     # the warm worker started with the server runs it (its import done before the click)
     assert "in the warm mujoco worker" in page.get_by_test_id("job-where").inner_text()
-    page.get_by_test_id("run-summary").filter(has_text="success rate").wait_for()
+    summary_text = page.get_by_test_id("run-summary").filter(has_text="success rate")
+    summary_text.wait_for()
     shot(page, "3_generate")
     run = work / "gui-run"
+    summary = json.loads((run / "summary.json").read_text())
+    assert f"{summary['labels_unconverged']} of 6 labels change at half the time step" in (
+        summary_text.inner_text()
+    )
     manifest = json.loads((run / "mjx_pick_run.json").read_text())
     assert manifest["command"] == "evaluate" and manifest["status"] == "complete"
     table = pq.read_table(run / "results.parquet")
     assert table.num_rows == 6
+    assert {"label_margin", "label_converged", "label_stable"} <= set(table.column_names)
     assert not (run / "chunks").exists(), "a complete run's chunks are removed"
     config = json.loads((run / "config.json").read_text())
     assert config["grasp"]["grip_force_n"] == 40 and config["grasp"]["hold_s"] == 0.1
@@ -305,7 +312,7 @@ def test_paper_workflow(page, server):
     assert f"{np.nanmax(score):.3f}" in detail.inner_text()
     for name in ("t_grasp", "phi_max", "t_grasp_nc"):
         assert name in detail.inner_text()
-    page.get_by_test_id("force-plot").locator("img").wait_for(timeout=60_000)
+    page.get_by_test_id("force-plot").locator("img").last.wait_for(timeout=60_000)
     replay = page.get_by_test_id("replay").locator("img")
     replay.wait_for(timeout=TIMEOUT_MS)
     assert replay.get_attribute("src").startswith("data:image/gif;base64,")
@@ -344,7 +351,8 @@ def test_paper_workflow(page, server):
     detail.filter(has_text=f"pick {untraced} (rank {rank + 1})").wait_for()
     detail.filter(has_text="simulated now with the run's settings").wait_for(timeout=TIMEOUT_MS)
     expect(frame).to_be_visible(timeout=TIMEOUT_MS)
-    expect(page.get_by_test_id("force-plot").locator("img")).to_be_visible(timeout=TIMEOUT_MS)
+    # while the new plot fades in, the picture holds the old image and the new one
+    expect(page.get_by_test_id("force-plot").locator("img").last).to_be_visible(timeout=TIMEOUT_MS)
     # the export with animations counts the report's parts as they are written: per
     # traced pick-point a force plot and an animation, the maps, 2 templates, export, page
     number(page, "n best and n worst", 2)

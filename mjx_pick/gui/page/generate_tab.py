@@ -69,6 +69,10 @@ class GenerateTab:
                 )
                 self.run_name = ui.input("run folder name", value=f"evaluate-{stamp()}")
                 self.resume = ui.checkbox("resume an interrupted run of this folder")
+                self.checks = ui.checkbox(
+                    "check each label: again at half the time step and with the part moved "
+                    "1 um (about 3x the simulation)"
+                ).props('data-testid="label-checks"')
                 ui.button("Generate pick-points", on_click=self.generate).props(
                     'data-testid="generate"'
                 )
@@ -186,6 +190,8 @@ class GenerateTab:
         argv = ["evaluate", *self.state.obj_args, *flags]
         argv += ["--n", str(n), "--seed", str(seed), "--traces", str(max(traces, 0))]
         argv += ["--chunk-size", str(max(1, chunk)), "--no-progress", "--out", str(out)]
+        if self.checks.value:
+            argv += ["--step-check", "--stability-um", "1"]
         if self.resume.value:
             argv.append("--resume")
         self.run_summary.set_content("")
@@ -206,14 +212,23 @@ class GenerateTab:
             return
         if progress.state != "complete":
             return
-        from mjx_pick.core.metrics import rate_text
+        from mjx_pick.core.metrics import MARGINAL_BAND, rate_text
 
         self.resume.value = False
         self.run_name.value = f"evaluate-{stamp()}"  # this name is taken now
         s = json.loads((out / "summary.json").read_text())
+        checks = "".join(
+            f" {s[key]} of {s['n']} labels {what}."
+            for key, what in (
+                ("labels_marginal", f"decided within {MARGINAL_BAND:g} of a threshold"),
+                ("labels_unconverged", "change at half the time step"),
+                ("labels_unstable", "change with the part moved 1 um"),
+            )
+            if key in s
+        )
         self.run_summary.set_content(
             f"**{out.name}**: success rate {rate_text(s['successes'], s['n'])}, "
             f"mean score {fmt(s['score_mean'])}, "
-            f"{s['picks_per_s']} pick-points/s on {s['backend']}. Open tab 4."
+            f"{s['picks_per_s']} pick-points/s on {s['backend']}.{checks} Open tab 4."
         )
         self.on_complete(out)
