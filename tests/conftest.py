@@ -31,6 +31,48 @@ def pytest_configure(config):
     config.addinivalue_line("markers", "mjx: traces MJX (runs without strict rank promotion)")
 
 
+# Seconds each long file takes alone on one core (measured: pytest --durations=0, one
+# process, a 2-core machine); the rest take under 20 s each. `--dist loadfile` hands out
+# whole files; xdist orders them by number of tests, which put several of the longest
+# (few, slow MJX tests) last, where they left one worker running alone at the end. Longest
+# first, the files that end a run are short. Update a figure when a file's time changes much.
+FILE_SECONDS = {
+    "tests/test_backend_warp.py": 250,
+    "tests/test_calibrate.py": 175,
+    "tests/test_gui.py": 160,
+    "tests/test_backends.py": 140,
+    "tests/test_variants.py": 115,
+    "tests/test_physics.py": 85,
+    "tests/test_cluster.py": 75,
+    "tests/test_scale.py": 75,
+    "tests/test_gripper_mjcf.py": 65,
+    "tests/test_gui_parts.py": 65,
+    "tests/test_readme.py": 60,
+    "notebooks/throughput.ipynb": 40,
+    "notebooks/calibration.ipynb": 30,
+    "tests/test_trials.py": 25,
+    "tests/test_pinned.py": 25,
+    "tests/test_simulation.py": 20,
+}
+
+
+@pytest.hookimpl(tryfirst=True, optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """`--dist loadfile`, longest file first (FILE_SECONDS); other modes as xdist has them."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class LongestFileFirst(LoadFileScheduling):
+        def _assign_work_unit(self, node):
+            # a stable sort: files of equal (unlisted) length keep xdist's order
+            for scope in sorted(self.workqueue, key=lambda s: -FILE_SECONDS.get(s, 0)):
+                self.workqueue.move_to_end(scope)
+            super()._assign_work_unit(node)
+
+    return LongestFileFirst(config, log)
+
+
 @pytest.fixture(autouse=True)
 def strict_rank_promotion(request):
     if request.node.get_closest_marker("mjx"):
