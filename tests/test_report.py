@@ -110,8 +110,13 @@ def test_robot_export_poses_invert_the_pick_points(run_dir, written):
     data = json.loads(Path(written["robot_picks"]).read_text())
     picks = data["picks"]
     assert 1 <= len(picks) <= 4
-    scores = [p["score"] for p in picks]
-    assert scores == sorted(scores, reverse=True) and all(p["success"] for p in picks)
+    assert all(p["success"] for p in picks)
+    # the successes whose label is clear first, those in doubt after, each by score
+    doubt = [bool(p["label_in_doubt"]) for p in picks]
+    assert doubt == sorted(doubt)
+    for part in (False, True):
+        scores = [p["score"] for p, d in zip(picks, doubt, strict=True) if d == part]
+        assert scores == sorted(scores, reverse=True)
     for p in picks:
         t = np.asarray(p["gripper_pose"]["matrix"])
         o = p["object_in_gripper"]
@@ -300,3 +305,36 @@ def test_a_part_larger_than_the_page_skips_its_template_and_reports_the_rest(tmp
     assert page_misfit(run.outline, [{**pick, "yaw_deg": 90.0}], "a4") is not None
     with pytest.raises(mp.ConfigError, match="does not fit a4 paper"):
         positioning_template(run.outline, run.gripper, [pick], tmp_path / "t.pdf")
+
+
+def test_robot_export_tries_the_labels_in_doubt_last():
+    import pyarrow as pa
+
+    from mjx_pick.outputs.reporting.robot import robot_picks
+
+    def row(pid, score, margin, stable=True, converged=True):
+        return {
+            "pick_id": pid, "x_mm": 0.0, "y_mm": 0.0, "yaw_deg": 0.0, "opening_mm": 30.0,
+            "score": score, "success": True, "label_margin": margin,
+            "label_stable": stable, "label_converged": converged,
+        }  # fmt: skip
+
+    table = pa.Table.from_pylist(
+        [
+            row(1, 0.99, 0.05),  # the best score, decided within 0.1 of a threshold
+            row(2, 0.98, 0.6, converged=False),  # half the step changes it
+            row(3, 0.97, 0.6, stable=False),  # a small move changes it
+            row(4, 0.90, 0.5),
+            row(5, 0.80, 0.9),
+        ]
+    )
+    picks = robot_picks(table, pick_height_mm=5.0, k=5)
+    assert [p["pick_id"] for p in picks] == [4, 5, 1, 2, 3]
+    assert [p["label_in_doubt"] for p in picks] == [
+        [],
+        [],
+        ["by a hair"],
+        ["half the step changes it"],
+        ["a small move changes it"],
+    ]
+    assert [p["pick_id"] for p in robot_picks(table, pick_height_mm=5.0, k=2)] == [4, 5]

@@ -33,6 +33,24 @@ def frame_matrix(frame) -> np.ndarray:
     return t
 
 
+def in_doubt_reasons(row: dict) -> list[str]:
+    """Why a results row's label is in doubt: "by a hair" (|label_margin| < the
+    summary's band), "a small move changes it" (label_stable false: evaluate's
+    --stability-um), "half the step changes it" (label_converged false: --step-check);
+    [] when none applies or was checked."""
+    from mjx_pick.core.metrics import MARGINAL_BAND
+
+    margin = row.get("label_margin")
+    reasons = []
+    if margin is not None and np.isfinite(margin) and abs(margin) < MARGINAL_BAND:
+        reasons.append("by a hair")
+    if row.get("label_stable") is False:
+        reasons.append("a small move changes it")
+    if row.get("label_converged") is False:
+        reasons.append("half the step changes it")
+    return reasons
+
+
 def robot_picks(
     table: pa.Table,
     pick_height_mm: float,
@@ -41,7 +59,12 @@ def robot_picks(
     robust: pa.Table | None = None,
 ) -> list[dict]:
     """The top-k pick-points (by robust probability when given, else by score among
-    successes) as gripper poses.
+    successes, those whose label is in doubt last) as gripper poses.
+
+    A success's label is in doubt when it was decided within ``metrics.MARGINAL_BAND``
+    of a threshold (``label_margin``), or when a check the run made changed it (the
+    table's ``label_stable``, ``label_converged``): a robot should try it after the
+    successes that are clear. Each entry says which (``label_in_doubt``).
 
     A pick-point is the object's pose in the gripper frame; the robot needs the
     gripper's pose in the object frame (origin at the centre of mass, on the table; z
@@ -61,8 +84,11 @@ def robot_picks(
     else:
         from mjx_pick.core.metrics import best_successes
 
-        best = best_successes(np.asarray(table["success"]), np.asarray(table["score"], float), k)
-        order = [rows[i]["pick_id"] for i in best]
+        success = np.asarray(table["success"])
+        best = best_successes(success, np.asarray(table["score"], float), len(success))
+        doubt = [bool(in_doubt_reasons(r)) for r in rows]
+        order = [rows[i]["pick_id"] for i in best if not doubt[i]]
+        order += [rows[i]["pick_id"] for i in best if doubt[i]]  # each part by score
         prob = {}
     user = frame_matrix(frame) if frame is not None else None
     out = []
@@ -92,6 +118,8 @@ def robot_picks(
             "height_compensation_mm": raise_mm,
             "score": r["score"],
             "success": r["success"],
+            "label_margin": r.get("label_margin"),
+            "label_in_doubt": in_doubt_reasons(r),
             "success_probability": prob[pid]["robust_p"] if pid in prob else None,
             "success_probability_ci": [prob[pid]["robust_ci_low"], prob[pid]["robust_ci_high"]]
             if pid in prob
