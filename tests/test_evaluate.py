@@ -97,13 +97,20 @@ def test_cli_evaluate_with_user_picks(tmp_path, fast_toml, capsys):
             "--no-progress",
             "--traces",
             "1",
+            "--step-check",
         ]
     )
     assert code == 0
     table = pq.read_table(tmp_path / "o" / "results.parquet")
     np.testing.assert_allclose(table["x_mm"].to_numpy(), [0, 2])
     assert table["success"].to_numpy().all()
-    assert "success rate" in capsys.readouterr().out
+    text = " ".join(capsys.readouterr().out.split())
+    assert "success rate" in text
+    # the label checks' lines, with the counts of the table's own columns
+    margin = np.abs(np.asarray(table["label_margin"], float))
+    assert f"labels by a hair {int(np.sum(margin < 0.1))} of 2" in text
+    changed = int(np.sum(~np.asarray(table["label_converged"])))
+    assert f"labels the step changes {changed} of 2" in text
 
 
 @pytest.mark.parametrize(
