@@ -306,6 +306,10 @@ def test_paper_workflow(page, server):
     assert rows.count() == 6
     score = np.asarray(table["score"], float)
     best = int(np.asarray(table["pick_id"])[np.nanargmax(score)])
+    # each row shows how clearly its label was decided
+    assert "margin" in page.get_by_test_id("picks-table").locator("thead").inner_text()
+    margin = table["label_margin"][int(np.nanargmax(score))].as_py()
+    assert str(round(margin, 3)) in rows.first.inner_text().split()
     rows.first.locator(".q-checkbox").click()
     detail = page.get_by_test_id("pick-detail")
     detail.filter(has_text=f"pick {best} (rank 1)").wait_for()
@@ -313,11 +317,12 @@ def test_paper_workflow(page, server):
     for name in ("t_grasp", "phi_max", "t_grasp_nc"):
         assert name in detail.inner_text()
     page.get_by_test_id("force-plot").locator("img").last.wait_for(timeout=60_000)
-    replay = page.get_by_test_id("replay").locator("img")
+    replay = page.get_by_test_id("replay").locator("img").last
     replay.wait_for(timeout=TIMEOUT_MS)
     assert replay.get_attribute("src").startswith("data:image/gif;base64,")
     # the replay in the page: the 3-D frame and the forces follow one time slider
-    frame = page.get_by_test_id("replay-frame").locator("img")
+    # .last: while a new frame fades in, the picture holds the old image and the new one
+    frame = page.get_by_test_id("replay-frame").locator("img").last
     frame.wait_for(timeout=TIMEOUT_MS)
     first = frame.get_attribute("src")
     assert first.startswith("data:image/png;base64,")
@@ -334,7 +339,7 @@ def test_paper_workflow(page, server):
 
     _, pixels = views.score_map_png(Run.load(run))
     k = int(np.nanargmin(score))
-    img = page.get_by_test_id("score-map").locator("img")
+    img = page.get_by_test_id("score-map").locator("img").last
     scale = img.bounding_box()["width"] / img.evaluate("i => i.naturalWidth")
     img.click(position={"x": pixels[k, 0] * scale, "y": pixels[k, 1] * scale})
     worst = int(np.asarray(table["pick_id"])[k])
