@@ -328,7 +328,7 @@ def cmd_report(args) -> int:
 
 def print_summary(s: dict, out, total_s: float | None = None) -> None:
     """The evaluate summary's lines; total_s: the process's time so far, when known."""
-    from mjx_pick.core.metrics import MARGINAL_BAND, rate_text
+    from mjx_pick.core.metrics import label_check_rows, rate_text
     from mjx_pick.kernels.grasp import SUCCESS
 
     rows = [
@@ -355,30 +355,7 @@ def print_summary(s: dict, out, total_s: float | None = None) -> None:
     rows += [
         ("pick-points per s", f"{s['picks_per_s']}"),
     ]
-    if "labels_marginal" in s:
-        rows.append(
-            (
-                "labels by a hair",
-                f"{s['labels_marginal']} of {s['n']} (|label_margin| < {MARGINAL_BAND:g} "
-                "of a threshold's tolerance)",
-            )
-        )
-    if s.get("stability_um"):
-        rows.append(
-            (
-                "labels a shift flips",
-                f"{s['labels_unstable']} of {s['n']} (object moved {s['stability_um']:g} um; "
-                "label_stable in the results)",
-            )
-        )
-    if "labels_unconverged" in s:
-        rows.append(
-            (
-                "labels the step changes",
-                f"{s['labels_unconverged']} of {s['n']} (half the time step; "
-                "label_converged in the results)",
-            )
-        )
+    rows += label_check_rows(s)
     cluster = s.get("cluster")
     if cluster:
         nodes = ", ".join(f"{k} {v['picks_per_s']:g}/s" for k, v in cluster["nodes"].items())

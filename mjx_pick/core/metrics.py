@@ -156,6 +156,38 @@ def marginal_count(table: pa.Table, band: float = MARGINAL_BAND) -> int:
     return int(np.sum(np.abs(margin[np.isfinite(margin)]) < band))
 
 
+def label_check_rows(s: dict) -> list[tuple[str, str]]:
+    """A run summary's rows on how clearly its labels were decided -- by a hair, and
+    those the stability and step checks changed -- as (name, text), those it holds
+    (a run without the checks, or of an older version, holds fewer)."""
+    rows = []
+    if "labels_marginal" in s:
+        rows.append(
+            (
+                "labels by a hair",
+                f"{s['labels_marginal']} of {s['n']} (|label_margin| < {MARGINAL_BAND:g} "
+                "of a threshold's tolerance)",
+            )
+        )
+    if s.get("stability_um"):
+        rows.append(
+            (
+                "labels a shift flips",
+                f"{s['labels_unstable']} of {s['n']} (object moved {s['stability_um']:g} um; "
+                "label_stable in the results)",
+            )
+        )
+    if "labels_unconverged" in s:
+        rows.append(
+            (
+                "labels the step changes",
+                f"{s['labels_unconverged']} of {s['n']} (half the time step; "
+                "label_converged in the results)",
+            )
+        )
+    return rows
+
+
 def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
     """95% Wilson score interval of a binomial proportion k/n."""
     if n == 0:

@@ -597,12 +597,8 @@ def _extra_passes(
         summary["stability_s"] = round(time.perf_counter() - t1, 3)
     if req.step_check:
         t1 = time.perf_counter()
-        half = dataclasses.replace(settings, solver=half_step(req.solver))
-        with showing_progress(ctx.runner, "step check (half the time step)", "sim", req.progress):
-            success, _ = _labels_again(sim, half, picks_batch, table)
-        table = table.append_column("success_half_step", pa.array(success))
-        converged = success == table["success"].to_numpy(zero_copy_only=False).astype(bool)
-        table = table.append_column("label_converged", pa.array(converged))
+        table = _step_check(table, picks_batch, sim, settings, req.progress)
+        converged = table["label_converged"].to_numpy(zero_copy_only=False)
         summary["labels_unconverged"] = int((~converged).sum())
         summary["step_check_s"] = round(time.perf_counter() - t1, 3)
     return table
@@ -667,8 +663,22 @@ def _stability(table, picks_batch, sim: Simulator, settings, shift_um, progress)
         success, score = _labels_again(sim, settings, shifted, table)
     table = table.append_column("success_shifted", pa.array(success))
     table = table.append_column("score_shifted", pa.array(score))
-    same = success == table["success"].to_numpy(zero_copy_only=False).astype(bool)
-    return table.append_column("label_stable", pa.array(same))
+    return table.append_column("label_stable", pa.array(_same_labels(table, success)))
+
+
+def _step_check(table, picks_batch, sim: Simulator, settings, progress):
+    """table with success_half_step and label_converged: every simulated pick-point
+    again at half the time step (its own scene and program, through sim)."""
+    half = dataclasses.replace(settings, solver=half_step(settings.solver))
+    with showing_progress(sim.runner, "step check (half the time step)", "sim", progress):
+        success, _ = _labels_again(sim, half, picks_batch, table)
+    table = table.append_column("success_half_step", pa.array(success))
+    return table.append_column("label_converged", pa.array(_same_labels(table, success)))
+
+
+def _same_labels(table, success: np.ndarray) -> np.ndarray:
+    """(n,) bool: the table's labels equal success, the same pick-points' labels again."""
+    return success == table["success"].to_numpy(zero_copy_only=False).astype(bool)
 
 
 def _complete_run(out_dir: Path, key: str) -> Evaluation | None:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core.config import ConfigError, write_atomic, write_json
-from mjx_pick.core.metrics import MARGINAL_BAND, rate_text
+from mjx_pick.core.metrics import label_check_rows, rate_text
 from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.reporting.animation import animate, render_pool
 from mjx_pick.outputs.reporting.figures import force_plot, maps
@@ -186,24 +186,6 @@ def _robot_export(run: Run, out_dir: Path, k: int, frame, name: str) -> list[dic
     return picks
 
 
-def _checks(s: dict) -> list[tuple[str, str]]:
-    """The summary's rows on how clearly the labels were decided, those it holds (runs
-    of older versions, or without the checks, hold fewer)."""
-    n = s.get("n")
-    rows = []
-    if "labels_marginal" in s:
-        rows.append(
-            ("labels by a hair", f"{s['labels_marginal']} of {n} (|margin| < {MARGINAL_BAND:g})")
-        )
-    if "labels_unstable" in s:
-        rows.append(
-            ("labels a shift flips", f"{s['labels_unstable']} of {n} ({s['stability_um']:g} um)")
-        )
-    if "labels_unconverged" in s:
-        rows.append(("labels the step changes", f"{s['labels_unconverged']} of {n} (half step)"))
-    return rows
-
-
 def _html(run: Run, out_dir: Path, forces, anims, templates, skipped, picks) -> Path:
     """report.html; templates: {paper: path}, skipped: {paper: why it was not written}."""
     s = run.summary
@@ -218,7 +200,7 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, skipped, picks) -> 
             ("score mean", f"{s.get('score_mean', float('nan')):.3f}"),
             ("F_Gmin, eq. (1)", f"{s.get('f_gmin_n', float('nan')):.3f} N"),
             ("outcomes", ", ".join(f"{k_} {v}" for k_, v in s.get("failures", {}).items() if v)),
-            *_checks(s),
+            *label_check_rows(s),
         )
     )
     img = lambda p, cap: (  # noqa: E731

@@ -78,6 +78,7 @@ def robot_picks(
 
     rows = table.to_pylist()
     by_id = {r["pick_id"]: r for r in rows}
+    doubt = {r["pick_id"]: in_doubt_reasons(r) for r in rows}
     if robust is not None:
         order = [r["pick_id"] for r in robust.to_pylist() if r["pick_id"] in by_id]
         prob = {r["pick_id"]: r for r in robust.to_pylist()}
@@ -85,10 +86,9 @@ def robot_picks(
         from mjx_pick.core.metrics import best_successes
 
         success = np.asarray(table["success"])
-        best = best_successes(success, np.asarray(table["score"], float), len(success))
-        doubt = [bool(in_doubt_reasons(r)) for r in rows]
-        order = [rows[i]["pick_id"] for i in best if not doubt[i]]
-        order += [rows[i]["pick_id"] for i in best if doubt[i]]  # each part by score
+        best = [rows[i]["pick_id"] for i in best_successes(success, table["score"], len(success))]
+        order = [pid for pid in best if not doubt[pid]]
+        order += [pid for pid in best if doubt[pid]]  # each part by score
         prob = {}
     user = frame_matrix(frame) if frame is not None else None
     out = []
@@ -119,7 +119,7 @@ def robot_picks(
             "score": r["score"],
             "success": r["success"],
             "label_margin": r.get("label_margin"),
-            "label_in_doubt": in_doubt_reasons(r),
+            "label_in_doubt": doubt[pid],
             "success_probability": prob[pid]["robust_p"] if pid in prob else None,
             "success_probability_ci": [prob[pid]["robust_ci_low"], prob[pid]["robust_ci_high"]]
             if pid in prob
