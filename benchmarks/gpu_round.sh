@@ -100,6 +100,8 @@ case "$1" in
      python differing_picks.py --object 048_hammer --pick-ids 6108 --out "$out/differ_hammer.json"
      python differing_picks.py --object 050_medium_clamp --pick-ids 1084 --out "$out/differ_clamp.json"
      python differing_picks.py --object 011_banana --pick-ids 1472 --out "$out/differ_banana.json") ;;
-  grid)  # the preset Coulomb grid on Warp
-    python benchmarks/preset_coulomb.py --backend warp --out "$out/preset_coulomb_warp.json" ;;
+  grid)  # the preset Coulomb grid on Warp; STEP_CHECK=1 COPIES=3 PRESETS=... for the
+    # step check's flags on Warp's run-to-run spread (one JSON per call: PRESETS splits it)
+    python benchmarks/preset_coulomb.py --backend warp --presets "${PRESETS:-robotiq-2f85,robotiq-2f85-linkage,robotiq-2f140,onrobot-rg2,franka-hand}" \
+      --copies "${COPIES:-1}" ${STEP_CHECK:+--step-check} --out "$out/preset_coulomb_warp${TAG:-}.json" ;;
 esac

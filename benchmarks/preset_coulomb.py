@@ -10,6 +10,11 @@ part is held, counted on the per-tick trace).
     python benchmarks/preset_coulomb.py                     # all presets, MuJoCo C
     python benchmarks/preset_coulomb.py --presets robotiq-2f85 --solver s.toml
     python benchmarks/preset_coulomb.py --offset-um 0       # exactly centred
+    python benchmarks/preset_coulomb.py --backend warp --copies 3 --step-check
+
+--copies K runs every case K times in its batch (on MuJoCo Warp the copies differ: its
+contact order comes from atomic counters); --step-check runs every case again at half
+the time step, as `evaluate --step-check` does, and counts the wrong labels it flags.
 
 The blocks are "centred" to within a measurement: --offset-um (default 20 um along the
 grip axis, 0.5 mm along the pads and 0.2 deg of yaw), since an exactly symmetric pick
@@ -22,6 +27,7 @@ import argparse
 import dataclasses
 import itertools
 import json
+import os
 import time
 
 import numpy as np
@@ -34,6 +40,7 @@ from mjx_pick.core.physics import load_contact
 from mjx_pick.core.procedure import G, GraspConfig
 from mjx_pick.engine.backend import make_backend, make_inputs
 from mjx_pick.kernels import grasp as gk
+from mjx_pick.studies.evaluation import half_step
 
 PRESETS = ("robotiq-2f85", "robotiq-2f85-linkage", "robotiq-2f140", "onrobot-rg2", "franka-hand")
 MASSES = (0.01, 0.1, 0.5, 2.0)
@@ -76,7 +83,18 @@ def chatter_events(trace, force_n, fraction=0.02):
 
 
 def run_preset(
-    name, solver, contact_base, grasp, masses, heights, mus, offset_um, backend, overrides=None
+    name,
+    solver,
+    contact_base,
+    grasp,
+    masses,
+    heights,
+    mus,
+    offset_um,
+    backend,
+    overrides=None,
+    copies=1,
+    step_check=False,
 ):
     gripper = mp.load_gripper(name)
     if overrides and gripper.mjcf is None:  # parametric presets only
@@ -84,7 +102,7 @@ def run_preset(
     rows = []
     width = round(0.55 * gripper.stroke_mm)  # gripped across x
     for mass, height in itertools.product(masses, heights):
-        cs = cases(gripper, grasp, mass, mus)
+        cs = [c for c in cases(gripper, grasp, mass, mus) for _ in range(copies)]
         if not cs:
             continue
         block = mp.object_from_polygon(
@@ -108,6 +126,10 @@ def run_preset(
             grip_force_n=np.array([c[2] for c in cs], np.float32),
         )
         out, traces = runner.run(make_inputs(scene, grasp, picks, per_pick), record=True)
+        if step_check:
+            half = mp.build_scene(block, gripper, contact_base, half_step(solver), grasp)
+            half_runner = make_backend(backend, half, grasp, batch_size=n)
+            half_out, _ = half_runner.run(make_inputs(half, grasp, picks, per_pick))
         for i, (mu, factor, force, hold) in enumerate(cs):
             fmax = max(out["max_force_left_n"][i], out["max_force_right_n"][i])
             rows.append(
@@ -126,8 +148,11 @@ def run_preset(
                     over_max=float(fmax / gripper.force_max_n),
                     chatter=chatter_events(traces[i], force),
                     slip_mm=float(out["slip_mm"][i]),
+                    copy=i % copies,
                 )
             )
+            if step_check:
+                rows[-1]["success_half_step"] = bool(half_out["success"][i])
     return rows
 
 
@@ -155,12 +180,31 @@ def summarise(rows):
         total["div"] += div
         total["chat"] += sum(c > 0 for c in chat)
     print("total", total)
+    if all("success_half_step" in r for r in rows):
+        wrong = [r for r in rows if r["success"] != r["must_hold"]]
+        flagged = [r for r in wrong if r["success_half_step"] != r["success"]]
+        right = [r for r in rows if r["success"] == r["must_hold"]]
+        print(
+            f"step check: {len(flagged)} of {len(wrong)} wrong labels flagged; "
+            f"{sum(r['success_half_step'] != r['success'] for r in right)} of {len(right)} "
+            f"right labels flagged; {sum(r['success_half_step'] != r['must_hold'] for r in rows)}"
+            " wrong at half the step"
+        )
     for r in rows:
-        if r["success"] != r["must_hold"] or r["diverged"] or r["chatter"] or r["over_max"] > 1:
+        half = r.get("success_half_step", r["success"])
+        if (
+            r["success"] != r["must_hold"]
+            or half != r["success"]
+            or r["diverged"]
+            or r["chatter"]
+            or r["over_max"] > 1
+        ):
+            flag = "" if half == r["success"] else " step check: " + ("held" if half else "lost")
             print(
                 f"  {r['preset']:20s} m {r['mass_kg']:5.2f} h {r['height_mm']:4.0f} mu "
                 f"{r['mu']:4.2f} x{r['factor']} F {r['force_n']:7.2f}: {r['failure']:16s} "
                 f"chatter {r['chatter']:3d} maxF {r['max_pad_n']:6.1f} ({r['over_max']:.2f}x max)"
+                f" copy {r['copy']}{flag}"
             )
 
 
@@ -175,6 +219,10 @@ def main():
     ap.add_argument("--offset-um", type=float, default=20.0)
     ap.add_argument("--backend", default="mujoco")
     ap.add_argument("--out", help="write the rows as JSON here")
+    ap.add_argument("--copies", type=int, default=1, help="runs of every case in its batch")
+    ap.add_argument(
+        "--step-check", action="store_true", help="every case again at half the time step"
+    )
     ap.add_argument(
         "--gripper-set",
         action="append",
@@ -200,15 +248,18 @@ def main():
             args.offset_um,
             args.backend,
             {k: float(v) for k, v in (kv.split("=") for kv in args.gripper_set)},
+            args.copies,
+            args.step_check,
         )
+        if args.out:  # after each preset: a run cut short keeps what it finished
+            with open(args.out + ".part", "w") as fh:
+                json.dump(rows, fh, indent=1)
+            os.replace(args.out + ".part", args.out)
     summarise(rows)
     print(
         f"{len(rows)} picks in {time.perf_counter() - t0:.0f} s; "
         f"solver {dataclasses.asdict(solver)}"
     )
-    if args.out:
-        with open(args.out, "w") as fh:
-            json.dump(rows, fh, indent=1)
 
 
 if __name__ == "__main__":
