@@ -354,8 +354,36 @@ def rubber(variants, loads, cases_wanted=None) -> None:
             )
 
 
+def _level_pads(scene, d) -> float:
+    """Turn every pad box of an MJCF gripper's scene (the geoms named pad_left*,
+    pad_right*) about its side's main box centre so that it lies parallel to the
+    gripper's axes at the state d (the pads closed on the part): the linkage's pads
+    tilt as they close. Changes scene.model; returns the largest tilt removed, deg."""
+    import mujoco
+
+    m = scene.model
+    grip = d.xmat[scene.index.gripper_body].reshape(3, 3)
+    largest = 0.0
+    for side in ("pad_left", "pad_right"):
+        geoms = [g for g in range(m.ngeom) if m.geom(g).name.startswith(side)]
+        main = m.geom(side).id
+        body = int(m.geom_bodyid[main])
+        want = d.xmat[body].reshape(3, 3).T @ grip  # box axes = the gripper's, in the body
+        have = np.zeros(9)
+        mujoco.mju_quat2Mat(have, m.geom_quat[main])
+        turn = want @ have.reshape(3, 3).T  # body frame: have -> want
+        largest = max(largest, np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1))))
+        centre = m.geom_pos[main].copy()
+        for g in geoms:
+            rot = np.zeros(9)
+            mujoco.mju_quat2Mat(rot, m.geom_quat[g])
+            mujoco.mju_mat2Quat(m.geom_quat[g], (turn @ rot.reshape(3, 3)).flatten())
+            m.geom_pos[g] = centre + turn @ (m.geom_pos[g] - centre)
+    return largest
+
+
 def _torsion_capacity(
-    scene, picks, force_n: float, gravity: bool, rate: float
+    scene, picks, force_n: float, gravity: bool, rate: float, level: int = 0
 ) -> tuple[float, float]:
     """(torque N m, mean pad normal force N) at which a part squeezed by both pads
     starts to turn about the grip axis: the fingers' servos drive to the closed end of
@@ -365,7 +393,9 @@ def _torsion_capacity(
     creep turns it by much less before it slips). The pads' normal force is read from
     the contacts: the median over the last 0.1 s in which the part had turned less than
     1 deg. An MJCF gripper's one actuator gets the force limit that gives force_n at
-    each pad at the part's width (its Kinematics.force_limit_n)."""
+    each pad at the part's width (its Kinematics.force_limit_n). level: that many times
+    first close on the part, turn the pad boxes parallel to the gripper there
+    (:func:`_level_pads`; the pads tilt again under the new contact) and start again."""
     import mujoco
 
     m, ix, kin = scene.model, scene.index, scene.kinematics
@@ -385,6 +415,7 @@ def _torsion_capacity(
     # and wedge it up out of the pad box (onto the rim), which no pick does
     d.qpos[ix.object_qpos + 2] += 0.005
     d.qpos[ix.lift_qpos] += 0.005
+    ranges = m.actuator_forcerange.copy()
     for act in {ix.finger_left_actuator, ix.finger_right_actuator}:
         lo, hi = m.actuator_ctrlrange[act]
         if kin is None:
@@ -420,6 +451,10 @@ def _torsion_capacity(
 
     for _ in range(int(0.5 / m.opt.timestep)):  # close and settle
         mujoco.mj_step(m, d)
+    if level:
+        print(f"  levelled: pads turned by {_level_pads(scene, d):.2f} deg", flush=True)
+        m.actuator_forcerange[:] = ranges  # the limits are set again from the originals
+        return _torsion_capacity(scene, picks, force_n, gravity, rate, level - 1)
     q0 = d.xquat[body].copy()
     q0_inv = np.array([q0[0], -q0[1], -q0[2], -q0[3]])
     dq = np.zeros(4)
@@ -496,7 +531,14 @@ def _torsion_row(gripper, label, part, force, variants, ramp_s, mu, original) ->
         if gripper.mjcf is not None:
             # an MJCF gripper's pads are built in the scene, not patched in its XML: the
             # library's own choices only ("corners": the gripper's own pad geoms)
-            mjcf_pads = {"corners": "pad", "square": "mean_radius", "rimmed": "rimmed"}
+            # "levelled": rimmed, the pad boxes turned parallel to the gripper where they
+            # close on the part (four passes: the pads tilt again under the new contact)
+            mjcf_pads = {
+                "corners": "pad",
+                "square": "mean_radius",
+                "rimmed": "rimmed",
+                "levelled": "rimmed",
+            }
             if variant not in mjcf_pads:
                 row.append(f"{variant} (not for an MJCF gripper)")
                 continue
@@ -510,7 +552,9 @@ def _torsion_row(gripper, label, part, force, variants, ramp_s, mu, original) ->
             with mock.patch.object(scene_mod, "scene_xml", patched):
                 scene = mp.build_scene(part, gripper, _pad(contact, variant), SOLVER, grasp)
         # the rubber pad's torque in ramp_s
-        torque, normal = _torsion_capacity(scene, picks, force, False, ref / ramp_s)
+        torque, normal = _torsion_capacity(
+            scene, picks, force, False, ref / ramp_s, level=4 if variant == "levelled" else 0
+        )
         row.append(
             f"{variant} {torque / (2 * mu * normal * r_mean):.2f} (N {normal:.1f})"
             if normal > 0
