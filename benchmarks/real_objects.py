@@ -355,8 +355,8 @@ def main() -> None:
             ),
             flush=True,
         )
-    if args.out:
-        write_json(args.out, {"args": vars(args), "failure_codes": gk.FAILURES, "rows": rows})
+        if args.out:  # after each part: a run cut short keeps the parts it finished
+            write_json(args.out, {"args": vars(args), "failure_codes": gk.FAILURES, "rows": rows})
 
 
 if __name__ == "__main__":
