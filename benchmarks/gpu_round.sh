@@ -41,7 +41,7 @@ case "$1" in
       --out "$out/real_objects_stable_h100.json" ;;
   margin)  # Warp against C by label margin, 1 um stability and half-step convergence
     python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \
-      --gripper "${GRIPPER:-robotiq-2f85}" --margin-bands 0.05,0.1,0.2 --step-check \
+      --gripper "${GRIPPER:-robotiq-2f85}" --force-n "${FORCE:-50}" --margin-bands 0.05,0.1,0.2 --step-check \
       --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
       --tables /tmp/margin_tables --out "$out/real_objects_margin_h100.json"
     tar czf "$out/margin_tables.tgz" -C /tmp margin_tables ;;
