@@ -41,11 +41,13 @@ from mjx_pick.kernels import grasp as gk
 F = {f: i for i, f in enumerate(gk.TRACE_FIELDS)}
 
 
-def states(obj, n: int, seed: int):
+def states(obj, n: int, seed: int, gripper_name: str = "robotiq-2f85", force_n: float = 50.0):
     """(scene, qpos (S, nq), labels (S,) of the pick each state comes from, moments (S,))."""
-    gripper = mp.load_gripper("robotiq-2f85")
-    grasp = mp.GraspConfig()
-    table = mp.evaluate(obj, gripper, n=n, seed=seed, backend="mujoco").table.to_pandas()
+    gripper = mp.load_gripper(gripper_name)
+    grasp = mp.GraspConfig(grip_force_n=force_n)
+    table = mp.evaluate(
+        obj, gripper, n=n, seed=seed, backend="mujoco", grasp=grasp
+    ).table.to_pandas()
     checker = pp.FeasibilityChecker(obj, gripper, grasp=grasp)
     picks = checker.batch(
         np.arange(len(table)), table["x_mm"], table["y_mm"], table["yaw_deg"], "user"
@@ -161,12 +163,20 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=64)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--gripper", default="robotiq-2f85", help="a parallel-jaw preset")
+    ap.add_argument("--force-n", type=float, default=50.0, help="F_d, N")
     args = ap.parse_args()
     engines = args.engines.split(",")
-    report = {"date": time.strftime("%Y-%m-%d"), "n": args.n, "objects": {}}
+    report = {
+        "date": time.strftime("%Y-%m-%d"),
+        "n": args.n,
+        "gripper": args.gripper,
+        "force_n": args.force_n,
+        "objects": {},
+    }
     for name in args.objects.split(","):
         obj = load_ycb(name)
-        scene, qs, labels, moments = states(obj, args.n, args.seed)
+        scene, qs, labels, moments = states(obj, args.n, args.seed, args.gripper, args.force_n)
         ad = addresses(scene)
         found = {}
         for e in engines:

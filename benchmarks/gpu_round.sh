@@ -74,7 +74,8 @@ case "$1" in
     t python -c "import jax, warp as wp; from mujoco import mjx; from mujoco.mjx.third_party import mujoco_warp; jax.devices(); wp.init()" ;;
   contacts)  # C and Warp collision on the same states (pad contacts per pad, span)
     (cd benchmarks && python contact_sets.py --objects "${OBJECTS:-011_banana,050_medium_clamp,040_large_marker}" \
-      --n "${N:-64}" --out "$out/contact_sets_h100.json") ;;
+      --n "${N:-64}" --gripper "${GRIPPER:-robotiq-2f85}" --force-n "${FORCE:-50}" \
+      --out "$out/contact_sets_h100${TAG:-}.json") ;;
   plate)  # the franka-hand's 0.5 kg, 3 mm plate at pad friction 0.3: six copies in one
     # batch under each solver variant (Warp's chatter and drop: solver or time step?)
     mkdir -p /tmp/plate
