@@ -26,8 +26,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import itertools
-import json
-import os
 import time
 
 import numpy as np
@@ -35,7 +33,7 @@ from shapely.geometry import box
 
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
-from mjx_pick.core.config import load_toml
+from mjx_pick.core.config import load_toml, write_json
 from mjx_pick.core.physics import load_contact
 from mjx_pick.core.procedure import G, GraspConfig
 from mjx_pick.engine.backend import make_backend, make_inputs
@@ -252,9 +250,7 @@ def main():
             args.step_check,
         )
         if args.out:  # after each preset: a run cut short keeps what it finished
-            with open(args.out + ".part", "w") as fh:
-                json.dump(rows, fh, indent=1)
-            os.replace(args.out + ".part", args.out)
+            write_json(args.out, rows)
     summarise(rows)
     print(
         f"{len(rows)} picks in {time.perf_counter() - t0:.0f} s; "
