@@ -174,8 +174,9 @@ def test_worker_killed_mid_chunk_is_rerun_elsewhere(cluster, block, tmp_path):
 
 def test_node_joining_is_used_and_node_leaving_is_survived(cluster, block, tmp_path):
     """A third node joins while the run goes on and takes chunks; then it leaves (its
-    `ray start` session stopped) with a chunk in flight, which runs on another node. The
-    table is still the one of one uninterrupted process.
+    `ray start` session stopped) with a chunk in flight, which runs on another node
+    unless its result was already on the way. The table is still the one of one
+    uninterrupted process.
 
     Nothing here sleeps and hopes: the test acts on the driver's events
     (``cluster.ClusterEvent``), which the driver reports from its loop and waits for.
@@ -189,9 +190,14 @@ def test_node_joining_is_used_and_node_leaving_is_survived(cluster, block, tmp_p
     temps: list[Path] = []
     third: dict = {"proc": None, "id": None, "inflight": 0, "left": False}
     kinds: list[str] = []
+    # the third node's call events after it left: its actor can still be handed a call
+    # before the driver sees the node gone (that call is lost)
+    after_leaving: list[str] = []
 
     def act(ev) -> None:
         kinds.append(ev.kind)
+        if third["left"] and ev.node_id == third["id"] and ev.kind.startswith("call_"):
+            after_leaving.append(ev.kind)
         if ev.kind == "call_done" and third["proc"] is None:
             before = {n["NodeID"] for n in ray.nodes() if n["Alive"]}
 
@@ -227,8 +233,14 @@ def test_node_joining_is_used_and_node_leaving_is_survived(cluster, block, tmp_p
     joined = [label for label in nodes if label.endswith("/" + third["id"][:6])]
     assert len(nodes) == 3 and joined, nodes
     assert nodes[joined[0]]["picks"] >= CHUNK, "the joined node simulated a chunk"
-    assert ev.summary["cluster"]["chunks_rerun"] >= 1, "its chunk in flight ran elsewhere"
-    assert "call_lost" in kinds
+    # every chunk it held ended once: lost and run elsewhere, or back from it when its
+    # result was on the way before the kill (a chunk can end between its predecessor's
+    # result and the kill on a loaded machine; test_worker_killed_mid_chunk_is_rerun_
+    # elsewhere re-runs one for sure)
+    sent, lost = after_leaving.count("call_sent"), after_leaving.count("call_lost")
+    ended = len(after_leaving) - sent
+    assert ended == third["inflight"] + sent, (after_leaving, third["inflight"])
+    assert ev.summary["cluster"]["chunks_rerun"] == lost, (ev.summary["cluster"], kinds)
 
 
 def test_driver_killed_then_resumed_equals_one_process(cluster, block, tmp_path):
