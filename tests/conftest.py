@@ -94,6 +94,25 @@ def release_compiled_programs():
     gc.collect()
 
 
+@pytest.fixture()
+def hull_pieces(monkeypatch):
+    """A mesh's convex hull as its one collision piece instead of CoACD's pieces, for
+    tests that do not check the pieces: CoACD takes 5-40 s per mesh on a 2-core CPU.
+
+    The object cache is off meanwhile: its key does not know the stand-in, so it would
+    hand a later test of the same worker (a GUI upload of the same mesh, say) the hull,
+    or this test the pieces CoACD made for an earlier one."""
+    import numpy as np
+
+    from mjx_pick.core import cache, objects
+
+    def hull(mesh, threshold):
+        return (np.asarray(mesh.convex_hull.vertices, dtype=float),)
+
+    monkeypatch.setattr(objects, "_coacd_pieces", hull)
+    monkeypatch.setenv(cache.ENV_SWITCH, "0")
+
+
 @pytest.fixture(scope="session")
 def door_opener():
     import mjx_pick

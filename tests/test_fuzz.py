@@ -290,17 +290,6 @@ def test_gripper_toml_values_are_its_own_never_a_silent_default(data):
 # ------------------------------------------------------------------- meshes, made
 
 
-@pytest.fixture()
-def hull_pieces(monkeypatch):
-    """The convex hull instead of CoACD (seconds per mesh; the pieces are not checked)."""
-    from mjx_pick.core import cache, objects
-
-    monkeypatch.setattr(
-        objects, "_coacd_pieces", lambda mesh, t: (np.asarray(mesh.convex_hull.vertices),)
-    )
-    monkeypatch.setenv(cache.ENV_SWITCH, "0")  # its key does not know the stand-in
-
-
 @FUZZ
 @given(
     boxes=st.lists(

@@ -415,18 +415,10 @@ YCB = resources.files("mjx_pick.assets") / "objects" / "ycb"
 
 
 @pytest.mark.parametrize("name", sorted(tomllib.loads((YCB / "manifest.toml").read_text())))
-def test_every_ycb_mesh_compiles_with_the_linkage(name, linkage, monkeypatch):
+def test_every_ycb_mesh_compiles_with_the_linkage(name, linkage, hull_pieces):
     """The image assets x every preset: tests/test_objects.py. Here the meshes, with
     their convex hull as the one collision piece (CoACD takes 5-40 s per mesh here and
     does not change what this checks: the gripper attached over a mesh object)."""
-    from mjx_pick.core import cache, objects
-
-    monkeypatch.setattr(
-        objects, "_coacd_pieces", lambda mesh, threshold: (np.asarray(mesh.convex_hull.vertices),)
-    )
-    # the cache off: its key does not know the stand-in (other tests of this worker, a
-    # GUI upload of the same mesh, would be handed the hull, or this one their pieces)
-    monkeypatch.setenv(cache.ENV_SWITCH, "0")
     entry = tomllib.loads((YCB / "manifest.toml").read_text())[name]
     with resources.as_file(YCB / entry["file"]) as path:
         obj = mp.load_object(path, unit=entry["unit"], mass_g=entry["mass_g"])

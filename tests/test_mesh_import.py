@@ -26,25 +26,6 @@ def ycb_manifest() -> dict:
     return tomllib.loads((YCB / "manifest.toml").read_text())
 
 
-@pytest.fixture()
-def hull_pieces(monkeypatch):
-    """Replace the CoACD decomposition with the convex hull.
-
-    CoACD takes 5-40 s per mesh here on a 2-core CPU (a 256-face washer: 5.5 s) and
-    only sets the collision pieces; the tests using this check the outline and the
-    pose, which do not depend on it.
-    """
-    from mjx_pick.core import cache, objects
-
-    def hull(mesh, threshold):
-        return (np.asarray(mesh.convex_hull.vertices, dtype=float),)
-
-    monkeypatch.setattr(objects, "_coacd_pieces", hull)
-    # the cache off: its key does not know the stand-in (other tests of this worker
-    # would be handed the hull for the mesh, or this one their CoACD pieces)
-    monkeypatch.setenv(cache.ENV_SWITCH, "0")
-
-
 def shadow_from_sections(mesh: trimesh.Trimesh, n: int = 40) -> Polygon:
     """Top-down shadow (mm) of a mesh, as the union of n horizontal cross-sections.
 
