@@ -18,7 +18,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-from real_objects import load_ycb, table_picks, ycb_manifest
+from real_objects import load_ycb, multiccd_off, table_picks, ycb_manifest
 
 import mjx_pick as mp
 
@@ -32,14 +32,26 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=256, help="real_objects.py's --n")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--gripper", default="robotiq-2f85")
+    ap.add_argument("--force-n", type=float, default=50.0, help="real_objects.py's --force-n")
     ap.add_argument("--repeats", type=int, default=8)
     ap.add_argument("--backends", default="mujoco,warp")
     ap.add_argument("--out", default="")
+    ap.add_argument("--no-multiccd", action="store_true", help="as real_objects.py's")
     args = ap.parse_args()
+    if args.no_multiccd:
+        with multiccd_off():
+            run(args)
+    else:
+        run(args)
+
+
+def run(args) -> None:
+    """Each pick of args, R copies, on every backend (see the module's docstring)."""
     obj = load_ycb(args.object) if args.object in ycb_manifest() else mp.load_object(args.object)
     ids = [int(i) for i in args.pick_ids.split(",")]
+    grasp = mp.GraspConfig(grip_force_n=args.force_n)
     table = mp.evaluate(
-        obj, args.gripper, n=args.n, seed=args.seed, backend="mujoco"
+        obj, args.gripper, n=args.n, seed=args.seed, grasp=grasp, backend="mujoco"
     ).table.to_pandas()
     unknown = sorted(set(ids) - set(table["pick_id"]))
     if unknown:
@@ -49,7 +61,6 @@ def main() -> None:
         )
     rows = table.set_index("pick_id").loc[ids]
     result = {"args": vars(args), "picks": {}}
-    grasp = mp.GraspConfig()
     gripper = mp.load_gripper(args.gripper)
     copies = rows.loc[np.repeat(ids, args.repeats)]
     picks = table_picks(obj, gripper, grasp, copies, "user", np.arange(len(copies)))

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -104,5 +104,15 @@ case "$1" in
   grid)  # the preset Coulomb grid on Warp; STEP_CHECK=1 COPIES=3 PRESETS=... for the
     # step check's flags on Warp's run-to-run spread (one JSON per call: PRESETS splits it)
     python benchmarks/preset_coulomb.py --backend warp --presets "${PRESETS:-robotiq-2f85,robotiq-2f85-linkage,robotiq-2f140,onrobot-rg2,franka-hand}" \
-      --copies "${COPIES:-1}" ${STEP_CHECK:+--step-check} --out "$out/preset_coulomb_warp${TAG:-}.json" ;;
+      --copies "${COPIES:-1}" ${STEP_CHECK:+--step-check} ${SOLVER:+--solver "$SOLVER"} \
+      --out "$out/preset_coulomb_warp${TAG:-}.json" ;;
+  impratio)  # Warp against C at each impratio of IMPRATIOS, the same pick-points, labels
+    # and 1 um stability (soft friction's creep, which impratio divides, against labels)
+    for v in ${IMPRATIOS:-30 100}; do
+      printf 'impratio = %s\n' "$v" > "/tmp/impratio$v.toml"
+      python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \
+        --gripper "${GRIPPER:-robotiq-2f85}" --force-n "${FORCE:-50}" --solver "/tmp/impratio$v.toml" \
+        --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
+        --out "$out/real_objects_impratio${v}_${GRIPPER:-robotiq-2f85}_h100.json"
+    done ;;
 esac

@@ -29,6 +29,12 @@ each backend's results table per object (parquet), for per-pick comparison. With
 --step-check, every backend also simulates each pick-point at half the time step
 (evaluate's ``label_converged``), and agreement is reported on the converged labels.
 
+--no-multiccd turns MuJoCo's multi-contact convex collision off in every scene (the
+``multiccd`` disable flag, honoured by MuJoCo C and MuJoCo Warp alike): one contact per
+pad and object piece, where each engine otherwise clips its own set of up to four.
+A diagnostic of where the engines differ, not a setting to simulate with (a part
+held at one point per pad turns in the grip).
+
 With --pictures, one PNG per (object, failure class): the first pick-point of that
 class re-simulated on MuJoCo C with its trace -- the pick in the gripper frame, the pad
 forces, the object's lift against the gripper's (slip), and its rotation.
@@ -38,6 +44,8 @@ from __future__ import annotations
 
 import argparse
 import collections
+import contextlib
+import re
 import time
 import tomllib
 from importlib import resources
@@ -49,6 +57,27 @@ import mjx_pick as mp
 from mjx_pick.core.config import load_toml, write_json
 from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.kernels import grasp as gk
+
+
+@contextlib.contextmanager
+def multiccd_off():
+    """Every scene built inside has MuJoCo's ``multiccd`` disable flag set, in its
+    ``<option>`` element."""
+    from unittest import mock
+
+    from mjx_pick.core import scene as scene_mod
+
+    original = scene_mod.scene_xml
+
+    def patched(*a, **k):
+        xml, n = re.subn(
+            r"(<option [^>]*?)/>", r'\1><flag multiccd="disable"/></option>', original(*a, **k), 1
+        )
+        assert n == 1, "scene_xml's <option> element changed"
+        return xml
+
+    with mock.patch.object(scene_mod, "scene_xml", patched):
+        yield
 
 
 def ycb_manifest() -> dict:
@@ -299,7 +328,17 @@ def main() -> None:
     )
     ap.add_argument("--tables", default="", help="folder for each backend's results tables")
     ap.add_argument("--step-check", action="store_true", help="label_converged (half step)")
+    ap.add_argument("--no-multiccd", action="store_true", help="one contact per pair (diagnostic)")
     args = ap.parse_args()
+    if args.no_multiccd:
+        with multiccd_off():
+            run(args)
+    else:
+        run(args)
+
+
+def run(args) -> None:
+    """The objects of args, one after another (see the module's docstring)."""
     manifest = ycb_manifest()
     names = [s for s in args.objects.split(",") if s] or list(manifest)
     unknown = sorted(set(names) - set(manifest) - {"door_opener"})
