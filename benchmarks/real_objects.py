@@ -71,7 +71,10 @@ def multiccd_off():
 
     def patched(*a, **k):
         xml, n = re.subn(
-            r"(<option [^>]*?)/>", r'\1><flag multiccd="disable"/></option>', original(*a, **k), 1
+            r"(<option [^>]*?)/>",
+            r'\1><flag multiccd="disable"/></option>',
+            original(*a, **k),
+            count=1,
         )
         assert n == 1, "scene_xml's <option> element changed"
         return xml
