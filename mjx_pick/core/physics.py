@@ -192,18 +192,22 @@ class SolverParams:
     """MuJoCo solver settings shared by both backends.
 
     Defaults chosen by measurement on the shipped presets with the default procedure
-    (benchmarks/RESULTS.md, "Elliptic cones, impratio 10 and a rubber-like pad box",
-    issue 32): elliptic cones, impratio 10 (MuJoCo's documented choice for grasping)
-    and MuJoCo's own 50 line-search iterations. On the 288-pick preset grid that gives
-    0 wrong Coulomb labels and 0 diverged (pyramidal: 26 wrong), pad chatter on 8
-    must-hold picks instead of 71, and removes most soft-contact creep (YCB banana
-    76 -> 91 %, door opener's 16 "rotated" picks, whose gravity torque is under 1 % of
-    a rubber pad's capacity, held). The line search matters: at the old 8 line-search
-    iterations elliptic cones diverged (the earlier "elliptic + impratio 10 blows up"
-    entries of RESULTS were at 8 or fewer). impratio matters with the rubber-like pad
-    box (``ContactParams.pad_collision``): MuJoCo regularises an elliptic contact's
-    friction rows by R_0 mu_0^2 / (mu_i^2 impratio), so the smaller per-point torsion
-    crept at impratio 1-3 (banana 46 / 70 %).
+    (benchmarks/RESULTS.md, "Elliptic cones, impratio 10 and a rubber-like pad box" and
+    "impratio 100: less creep", issue 32): elliptic cones (pyramidal: 26 wrong labels on
+    the 288-pick preset grid, pad chatter on 71 must-hold picks), MuJoCo's own 50
+    line-search iterations (at 8, elliptic cones diverged) and impratio 100.
+
+    impratio sets how soft friction is against the normal direction: MuJoCo regularises
+    an elliptic contact's friction rows by R_0 mu_0^2 / (mu_i^2 impratio), and a part
+    held below its friction limit still creeps through the pads at a steady
+    (1 - d) / d * a / (b * impratio). Over a lift and a hold that creep decides labels
+    near the slip and rotation limits, and it divides among a pad's contact points, so
+    it made those labels depend on how many points the collider returns (MuJoCo C's
+    multi-contact against MuJoCo Warp's, which the engines do not share). At 1 the
+    rubber-like pad box crept out of grips (banana 46 %), at 10 parts gripped far from
+    their centre of mass still crept millimetres; 100 leaves the friction limit where
+    it is (Coulomb's law: the preset grid stays at 0 wrong labels and 0 diverged on
+    MuJoCo C and Warp) and cuts the creep about tenfold.
 
     MJX-JAX: its forward-mode gradient (calibration's ``jvp`` estimator) is NaN with
     elliptic cones (measured, issue 32): that estimator refuses them and asks for
@@ -219,8 +223,8 @@ class SolverParams:
     timestep_s: float = setting(0.001, "s", "physics time step", lo=1e-5, hi=0.01)
     cone: str = "elliptic"
     impratio: float = setting(
-        10.0, "-", "frictional-to-normal constraint impedance ratio (MuJoCo's impratio)",
-        lo=1, hi=100,
+        100.0, "-", "frictional-to-normal constraint impedance ratio (MuJoCo's impratio)",
+        lo=1, hi=1000,
     )  # fmt: skip
     iterations: int = setting(50, "iterations", "constraint solver iterations", lo=1, hi=1000)
     ls_iterations: int = setting(
