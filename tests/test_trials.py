@@ -36,13 +36,13 @@ def heavy():
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory, heavy):
     out = tmp_path_factory.mktemp("trials") / "run"
-    # at the solver and pads the loop's small fit budgets were designed at (10
-    # iterations and impratio 10, the earlier defaults; the pad box without the rim
-    # behind it, with which 0.70 and 0.86 give the same labels on all 8 planned picks):
-    # the run's settings are what the trials re-simulate and fit. 10 iterations do not
-    # converge the stiffer friction rows of impratio 100: a planned pick then came out
-    # otherwise when re-simulated through the fit's parameter path
-    solver = mp.SolverParams(iterations=10, impratio=10.0)
+    # the default solver, with the pads the loop's small fit budgets were designed at
+    # (the pad box without the rim behind it, with which 0.70 and 0.86 give the same
+    # labels on all 8 planned picks): the run's settings are what the trials
+    # re-simulate and fit. (The earlier 10 iterations do not converge impratio 100's
+    # friction rows: a planned pick then came out otherwise when re-simulated through
+    # the fit's parameter path.)
+    solver = mp.SolverParams()
     contact = mp.ContactParams(pad_collision="mean_radius")
     mp.evaluate(
         heavy,
