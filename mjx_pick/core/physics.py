@@ -193,7 +193,7 @@ class SolverParams:
 
     Defaults chosen by measurement on the shipped presets with the default procedure
     (benchmarks/RESULTS.md, "Elliptic cones, impratio 10 and a rubber-like pad box" and
-    "impratio 100: less creep", issue 32): elliptic cones (pyramidal: 26 wrong labels on
+    "impratio 100", issue 32): elliptic cones (pyramidal: 26 wrong labels on
     the 288-pick preset grid, pad chatter on 71 must-hold picks), MuJoCo's own 50
     line-search iterations (at 8, elliptic cones diverged) and impratio 100.
 
