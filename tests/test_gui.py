@@ -20,6 +20,7 @@ import subprocess
 import sys
 import time
 import urllib.request
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -184,6 +185,32 @@ def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
     status = page.get_by_test_id("job-status")
     status.filter(has_text=re.compile(r"^(complete|failed|cancelled)")).wait_for(timeout=timeout_ms)
     return status.inner_text()
+
+
+def click_start(page, button_test_id: str, title: str, lost_after_ms: int = 60_000) -> None:
+    """Click a start button and wait until the job panel names the run `title`.
+
+    A click was twice lost on the loaded 2-core CI machine (the robustness study after a
+    sweep): no run, no error on the page, no exception in the server's log, the
+    websocket open throughout. Cause not found. A user clicks again, so once the panel
+    has shown nothing for lost_after_ms and the page shows no error, the test clicks
+    again too and says so (a warning in the test report); a second lost click fails."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    page.get_by_test_id(button_test_id).click()
+    try:
+        page.get_by_test_id("job-title").filter(has_text=title).wait_for(timeout=lost_after_ms)
+        return
+    except PlaywrightTimeout:
+        errors = [e for e in page.locator('[data-testid$="-error"]').all_inner_texts() if e]
+        if errors:
+            pytest.fail(f"run {title!r} was refused: {errors}")
+    warnings.warn(
+        f"run {title!r} had not started {lost_after_ms / 1000:g} s after its click, with "
+        "no error shown: clicked again",
+        stacklevel=2,
+    )
+    page.get_by_test_id(button_test_id).click()
 
 
 def start_short_batch(page, url: str, name: str, n: int, chunk: int | None = None) -> None:
@@ -400,7 +427,7 @@ def test_paper_workflow(page, server):
     page.get_by_text("Robustness of the best pick-points").click()
     number(page, "top pick-points", 2)
     number(page, "perturbed draws each", 4)
-    page.get_by_test_id("start-robust").click()
+    click_start(page, "start-robust", "robust gui-run")
     assert wait_job(page, "robust gui-run").startswith("complete")
     robust_rows = page.get_by_test_id("robust-table").locator("tbody tr")
     robust_rows.first.wait_for()
