@@ -38,10 +38,7 @@ def main() -> None:
     ap.add_argument("--out", default="")
     ap.add_argument("--no-multiccd", action="store_true", help="as real_objects.py's")
     args = ap.parse_args()
-    if args.no_multiccd:
-        with multiccd_off():
-            run(args)
-    else:
+    with multiccd_off(args.no_multiccd):
         run(args)
 
 

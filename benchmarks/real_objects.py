@@ -59,27 +59,29 @@ from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.kernels import grasp as gk
 
 
+def without_multiccd(xml: str) -> str:
+    """A scene's MJCF text with MuJoCo's ``multiccd`` disable flag set in its
+    ``<option>`` element (one contact per convex pair, on MuJoCo C and Warp alike)."""
+    xml, n = re.subn(r"(<option [^>]*?)/>", r'\1><flag multiccd="disable"/></option>', xml, count=1)
+    assert n == 1, "scene_xml's <option> element changed"
+    return xml
+
+
 @contextlib.contextmanager
-def multiccd_off():
-    """Every scene built inside has MuJoCo's ``multiccd`` disable flag set, in its
-    ``<option>`` element."""
+def multiccd_off(off: bool = True):
+    """Every scene built inside has multi-contact off (:func:`without_multiccd`);
+    off=False: scenes as they are."""
+    if not off:
+        yield
+        return
     from unittest import mock
 
     from mjx_pick.core import scene as scene_mod
 
     original = scene_mod.scene_xml
-
-    def patched(*a, **k):
-        xml, n = re.subn(
-            r"(<option [^>]*?)/>",
-            r'\1><flag multiccd="disable"/></option>',
-            original(*a, **k),
-            count=1,
-        )
-        assert n == 1, "scene_xml's <option> element changed"
-        return xml
-
-    with mock.patch.object(scene_mod, "scene_xml", patched):
+    with mock.patch.object(
+        scene_mod, "scene_xml", lambda *a, **k: without_multiccd(original(*a, **k))
+    ):
         yield
 
 
@@ -333,10 +335,7 @@ def main() -> None:
     ap.add_argument("--step-check", action="store_true", help="label_converged (half step)")
     ap.add_argument("--no-multiccd", action="store_true", help="one contact per pair (diagnostic)")
     args = ap.parse_args()
-    if args.no_multiccd:
-        with multiccd_off():
-            run(args)
-    else:
+    with multiccd_off(args.no_multiccd):
         run(args)
 
 

@@ -165,6 +165,11 @@ def number(page, label: str, value) -> None:
     box.blur()
 
 
+def shown_errors(page) -> list[str]:
+    """The texts of the page's error labels that say something."""
+    return [e for e in page.locator('[data-testid$="-error"]').all_inner_texts() if e]
+
+
 def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
     """Wait until the job panel shows the run `title` ended; returns its status line."""
     from playwright.sync_api import TimeoutError as PlaywrightTimeout
@@ -174,7 +179,7 @@ def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
         # machine (the other test worker compiling) that took over a minute once
         page.get_by_test_id("job-title").filter(has_text=title).wait_for(timeout=timeout_ms)
     except PlaywrightTimeout:  # the run never started: say what the page showed instead
-        errors = [e for e in page.locator('[data-testid$="-error"]').all_inner_texts() if e]
+        errors = shown_errors(page)
         fields = [e for e in page.locator(".q-field__messages").all_inner_texts() if e.strip()]
         notes = page.locator(".q-notification").all_inner_texts()
         shown = page.get_by_test_id("job-title").all_inner_texts()
@@ -202,7 +207,7 @@ def click_start(page, button_test_id: str, title: str, lost_after_ms: int = 60_0
         page.get_by_test_id("job-title").filter(has_text=title).wait_for(timeout=lost_after_ms)
         return
     except PlaywrightTimeout:
-        errors = [e for e in page.locator('[data-testid$="-error"]').all_inner_texts() if e]
+        errors = shown_errors(page)
         if errors:
             pytest.fail(f"run {title!r} was refused: {errors}")
     warnings.warn(
