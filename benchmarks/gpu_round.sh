@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio|agree
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -114,5 +114,13 @@ case "$1" in
         --gripper "${GRIPPER:-robotiq-2f85}" --force-n "${FORCE:-50}" --solver "/tmp/impratio$v.toml" \
         --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
         --out "$out/real_objects_impratio${v}_${GRIPPER:-robotiq-2f85}_h100.json"
+    done ;;
+  agree)  # Warp against C at the default physics, labels and 1 um stability, for each
+    # GRIPPER:FORCE of GRIPPERS (e.g. "robotiq-2f140:50 onrobot-rg2:30"), N picks a part
+    for gf in ${GRIPPERS:-robotiq-2f85:50}; do
+      python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \
+        --gripper "${gf%%:*}" --force-n "${gf##*:}" \
+        --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
+        --out "$out/real_objects_agree_${gf%%:*}_n${N:-256}${TAG:-}.json"
     done ;;
 esac

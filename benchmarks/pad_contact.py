@@ -1,7 +1,7 @@
 """Pad-contact measurements behind the soft-finger model (issue 16), on MuJoCo C.
 
     python benchmarks/pad_contact.py creep        # slip over lift + hold vs pad solimp
-    python benchmarks/pad_contact.py convergence  # door-opener labels, dt 1 vs 0.5 ms
+    python benchmarks/pad_contact.py convergence  # door-opener labels, the step vs half of it
     python benchmarks/pad_contact.py torque       # off-centre bar and rod: where they turn
     python benchmarks/pad_contact.py coulomb --backend warp   # tests' Coulomb grid, any backend
     python benchmarks/pad_contact.py rubber --variants corners,square  # levers vs a rubber pad
@@ -30,6 +30,7 @@ from mjx_pick.core.procedure import G
 from mjx_pick.engine.backend import make_inputs
 from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
+from mjx_pick.studies.evaluation import half_step
 
 FREE = mp.GripperSpec(name="test-gripper", force_min_n=0.01)
 # rubber and torsion: the solver settings (--solver TOML; None: the defaults)
@@ -87,15 +88,17 @@ def convergence() -> None:
         ("pads and table 0.99", mp.ContactParams(table_solimp=(0.99, 0.99, 0.001, 0.5, 2))),
     ):
         outs = []
-        for dt in (0.001, 0.0005):
-            scene = mp.build_scene(obj, gripper, contact, mp.SolverParams(timestep_s=dt), grasp)
+        full = SOLVER or mp.SolverParams()
+        for solver in (full, half_step(full)):
+            scene = mp.build_scene(obj, gripper, contact, solver, grasp)
             inputs = make_inputs(scene, grasp, picks)
             outs.append(Runner("mujoco", len(picks)).simulate(scene, grasp, inputs).results)
         a, b = outs
         reasons = collections.Counter(gk.FAILURES[i] for i in a["failure"])
         print(
-            f"{label}: success {a['success'].mean():.3f} (dt 1 ms), {b['success'].mean():.3f} "
-            f"(0.5 ms); labels changed {np.mean(a['success'] != b['success']):.2%}; "
+            f"{label}: success {a['success'].mean():.3f} (dt {full.timestep_s * 1e3:g} ms), "
+            f"{b['success'].mean():.3f} (half); "
+            f"labels changed {np.mean(a['success'] != b['success']):.2%}; "
             f"diverged {int(a['diverged'].sum())}+{int(b['diverged'].sum())}; {dict(reasons)}",
             flush=True,
         )
@@ -608,7 +611,7 @@ def main() -> None:
     ap.add_argument("--variants", default="corners,centre", help="rubber: pad-contact candidates")
     ap.add_argument("--loads", default="0.1,0.25,0.5", help="rubber: loads m (g + a) / (2 mu F)")
     ap.add_argument("--cases", default="", help="rubber: parts whose label contains one of these")
-    ap.add_argument("--solver", help="rubber, torsion: SolverParams TOML (default: the defaults)")
+    ap.add_argument("--solver", help="rubber, torsion, convergence: SolverParams TOML")
     ap.add_argument(
         "--ramp-s",
         type=float,

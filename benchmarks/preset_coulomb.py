@@ -29,6 +29,7 @@ import itertools
 import time
 
 import numpy as np
+from real_objects import multiccd_off  # benchmarks/ is on sys.path when run
 from shapely.geometry import box
 
 import mjx_pick as mp
@@ -227,6 +228,7 @@ def main():
         default=[],
         help="FIELD=VALUE override of the parametric presets' GripperSpec (repeatable)",
     )
+    ap.add_argument("--no-multiccd", action="store_true", help="as real_objects.py's")
     args = ap.parse_args()
     solver = load_toml(mp.SolverParams, args.solver) if args.solver else mp.SolverParams()
     contact = load_contact(args.contact)[0] if args.contact else mp.ContactParams()
@@ -235,20 +237,21 @@ def main():
     t0 = time.perf_counter()
     rows = []
     for name in args.presets.split(","):
-        rows += run_preset(
-            name,
-            solver,
-            contact,
-            grasp,
-            floats(args.masses),
-            floats(args.heights),
-            floats(args.frictions),
-            args.offset_um,
-            args.backend,
-            {k: float(v) for k, v in (kv.split("=") for kv in args.gripper_set)},
-            args.copies,
-            args.step_check,
-        )
+        with multiccd_off(args.no_multiccd):
+            rows += run_preset(
+                name,
+                solver,
+                contact,
+                grasp,
+                floats(args.masses),
+                floats(args.heights),
+                floats(args.frictions),
+                args.offset_um,
+                args.backend,
+                {k: float(v) for k, v in (kv.split("=") for kv in args.gripper_set)},
+                args.copies,
+                args.step_check,
+            )
         if args.out:  # after each preset: a run cut short keeps what it finished
             write_json(args.out, rows)
     summarise(rows)

@@ -11,6 +11,7 @@ never drawn, its status line left at "running".
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 
 from nicegui import ui
@@ -18,6 +19,10 @@ from nicegui import ui
 from mjx_pick.gui import jobs
 
 POLL_S = 0.5  # how often the panel reads the run's progress
+
+# the server's log says which start clicks arrived and what became of them: a click the
+# page seemed to lose is then told apart from one the server refused or never received
+log = logging.getLogger(__name__)
 
 
 class JobPanel:
@@ -80,10 +85,17 @@ class JobPanel:
         self.handlers[command] = ended
 
     def busy(self, where: ui.label) -> bool:
-        """True (and says so in where) while a run is current: no second run starts."""
+        """True (and says so in where) while a run is current: no second run starts.
+        Every start handler asks this first, so it also logs that a start was asked for."""
         if self.job is not None:
+            log.info(
+                "a start was asked for (tab %s): refused, %r is current",
+                self.owner,
+                self.title.text,
+            )
             where.set_text("a run is in progress: wait for it or cancel it")
             return True
+        log.info("a start was asked for (tab %s)", self.owner)
         return False
 
     def start(
@@ -97,6 +109,7 @@ class JobPanel:
         if self.job is not None:  # callers check busy() first
             raise RuntimeError(f"a run is current ({self.title.text}): cannot start {title}")
         job.title = title
+        log.info("starting %r (tab %s): %s", title, self.owner, job.command_line)
         job.start(self.runs.workers)
         self.runs.add(job, self.owner)
         self._show(job, on_end)
