@@ -35,9 +35,21 @@ FUZZ = settings(
 text_lines = st.text(alphabet=string.printable, max_size=400)
 
 
+_FOLDER: list[Path] = []  # this module's temporary folder, set by _in_pytests_tmp
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _in_pytests_tmp(tmp_path_factory):
+    """The examples' files go under pytest's temporary folder, which pytest prunes (a
+    folder per example in the system's /tmp left 480 behind on every run)."""
+    _FOLDER[:] = [tmp_path_factory.mktemp("fuzz")]
+    yield
+    _FOLDER.clear()
+
+
 def _file(suffix: str, data: bytes | str) -> Path:
     """A fresh file (hypothesis reruns a test body many times: no pytest tmp_path)."""
-    folder = Path(tempfile.mkdtemp(prefix="mjx_pick_fuzz_"))
+    folder = Path(tempfile.mkdtemp(dir=_FOLDER[0]))
     path = folder / f"input{suffix}"
     if isinstance(data, str):
         path.write_text(data)
