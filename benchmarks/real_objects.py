@@ -67,11 +67,60 @@ def without_multiccd(xml: str) -> str:
     return xml
 
 
+def with_sphere_pads(xml: str, ny: int, nz: int, radius_m: float) -> str:
+    """A parametric jaw's scene with each pad's collision box and rim replaced by a
+    ny x nz grid of spheres over the whole pad face (a candidate, not the library's):
+    each sphere touches a part at one point wherever the collider is MuJoCo C's or
+    Warp's, so the points a pad holds a part with are the model's, not the collider's.
+
+    The spheres sit at the centres of ny x nz equal cells of the face; each one's crown
+    is in the face's plane (radius_m behind it: between two spheres the face dips
+    spacing^2 / (8 radius_m)). Pairs: condim 3, the pad pairs' friction, solref, solimp.
+    """
+    size = re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)
+    assert size, "scene_xml's parametric pad changed (or an MJCF gripper: not supported)"
+    hx, hy, hz = (float(v) for v in size[1].split())
+    centres = [
+        (-hy + (2 * j + 1) * hy / ny, -hz + (2 * k + 1) * hz / nz)
+        for j in range(ny)
+        for k in range(nz)
+    ]
+    for side, face in (("left", hx), ("right", -hx)):  # the face toward the part
+        x = face - np.sign(face) * radius_m
+        spheres = "\n".join(
+            f'        <geom name="pad_{side}_s{i}" type="sphere" size="{radius_m:.9g}" '
+            f'pos="{x:.9g} {y:.9g} {z:.9g}" mass="0" group="3"/>'
+            for i, (y, z) in enumerate(centres)
+        )
+        xml, n = re.subn(
+            rf'        <geom name="pad_{side}(_rim)?" type="box"[^>]*/>\n', "", xml, flags=re.S
+        )
+        assert n >= 1, f"pad_{side}'s collision box not found"
+        xml = xml.replace(
+            f'<geom name="pad_{side}_visual"', spheres + f'\n        <geom name="pad_{side}_visual"'
+        )
+    pair = re.compile(
+        r'    <pair name="(pad_left|pad_right)(_rim)?_piece(\d+)" geom1="\S+" (.*?)/>\n'
+    )
+
+    def per_sphere(m):
+        if m[2]:  # the rim's pair: gone with the rim
+            return ""
+        rest = m[4].replace('condim="4"', 'condim="3"')
+        return "".join(
+            f'    <pair name="{m[1]}_s{i}_piece{m[3]}" geom1="{m[1]}_s{i}" {rest}/>\n'
+            for i in range(len(centres))
+        )
+
+    xml, n = pair.subn(per_sphere, xml)
+    assert n >= 2, "scene_xml's pad pairs changed"
+    return xml
+
+
 @contextlib.contextmanager
-def multiccd_off(off: bool = True):
-    """Every scene built inside has multi-contact off (:func:`without_multiccd`);
-    off=False: scenes as they are."""
-    if not off:
+def rewriting_scenes(rewrite=None):
+    """Every scene built inside is rewrite(its MJCF text); None: scenes as they are."""
+    if rewrite is None:
         yield
         return
     from unittest import mock
@@ -79,10 +128,25 @@ def multiccd_off(off: bool = True):
     from mjx_pick.core import scene as scene_mod
 
     original = scene_mod.scene_xml
-    with mock.patch.object(
-        scene_mod, "scene_xml", lambda *a, **k: without_multiccd(original(*a, **k))
-    ):
+    with mock.patch.object(scene_mod, "scene_xml", lambda *a, **k: rewrite(original(*a, **k))):
         yield
+
+
+def multiccd_off(off: bool = True):
+    """Every scene built inside has multi-contact off (:func:`without_multiccd`);
+    off=False: scenes as they are."""
+    return rewriting_scenes(without_multiccd if off else None)
+
+
+def sphere_pads(spec: str):
+    """Every scene built inside has sphere pads (:func:`with_sphere_pads`) by spec
+    "NYxNZ:RADIUS_MM" (e.g. "4x6:20"); "": scenes as they are."""
+    if not spec:
+        return rewriting_scenes(None)
+    grid, _, radius = spec.partition(":")
+    ny, nz = (int(v) for v in grid.split("x"))
+    r = float(radius or 20.0) * 1e-3
+    return rewriting_scenes(lambda xml: with_sphere_pads(xml, ny, nz, r))
 
 
 def ycb_manifest() -> dict:
@@ -334,8 +398,13 @@ def main() -> None:
     ap.add_argument("--tables", default="", help="folder for each backend's results tables")
     ap.add_argument("--step-check", action="store_true", help="label_converged (half step)")
     ap.add_argument("--no-multiccd", action="store_true", help="one contact per pair (diagnostic)")
+    ap.add_argument(
+        "--sphere-pads",
+        default="",
+        help="NYxNZ:RADIUS_MM: parametric pads as a grid of spheres (a candidate pad model)",
+    )
     args = ap.parse_args()
-    with multiccd_off(args.no_multiccd):
+    with multiccd_off(args.no_multiccd), sphere_pads(args.sphere_pads):
         run(args)
 
 
