@@ -116,9 +116,11 @@ case "$1" in
         --out "$out/real_objects_impratio${v}_${GRIPPER:-robotiq-2f85}_h100.json"
     done ;;
   agree)  # Warp against C at the default physics, labels and 1 um stability, for each
-    # GRIPPER:FORCE of GRIPPERS (e.g. "robotiq-2f140:50 onrobot-rg2:30"), N picks a part
+    # GRIPPER:FORCE of GRIPPERS (e.g. "robotiq-2f140:50 onrobot-rg2:30"), N picks a part;
+    # FLAGS: more real_objects.py options (e.g. --no-multiccd), TAG: the files' suffix
     for gf in ${GRIPPERS:-robotiq-2f85:50}; do
-      python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 \
+      # shellcheck disable=SC2086
+      python benchmarks/real_objects.py --n "${N:-256}" --backends mujoco,warp --stability-um 1 ${FLAGS:-} \
         --gripper "${gf%%:*}" --force-n "${gf##*:}" \
         --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
         --out "$out/real_objects_agree_${gf%%:*}_n${N:-256}${TAG:-}.json"
