@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio|agree
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio|agree|plate16
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -88,6 +88,17 @@ case "$1" in
       python benchmarks/preset_coulomb.py --backend warp --presets franka-hand --masses 0.5 \
         --heights 3 --frictions 0.3,0.3,0.3,0.3,0.3,0.3 --solver /tmp/plate/$v.toml \
         --out "$out/plate_$v.json"
+    done ;;
+  plate16)  # that plate, 16 copies in one batch with the step check, once as built and
+    # once for each option set of VARIANTS ("|"-separated, e.g. "--no-multiccd")
+    python benchmarks/preset_coulomb.py --backend warp --presets franka-hand --masses 0.5 \
+      --heights 3 --frictions 0.3 --copies 16 --step-check --out "$out/plate16.json"
+    IFS='|' read -ra variants <<< "${VARIANTS:-}"
+    for k in "${!variants[@]}"; do
+      # shellcheck disable=SC2086
+      python benchmarks/preset_coulomb.py --backend warp --presets franka-hand --masses 0.5 \
+        --heights 3 --frictions 0.3 --copies 16 --step-check ${variants[$k]} \
+        --out "$out/plate16_variant$k.json"
     done ;;
   linkage)  # the 2F-85 linkage with its rubber-like box pads on Warp: the preset grid, and
     # Warp against C on the door opener and YCB parts (the same pick-points)
