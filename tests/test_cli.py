@@ -5,6 +5,8 @@ import argparse
 import dataclasses
 import io
 import re
+import subprocess
+import sys
 
 import pytest
 
@@ -226,3 +228,25 @@ def test_choosing_mjx_by_name_says_it_is_not_a_label_backend(tmp_path, capsys):
     assert "use --backend mujoco or warp" in err
     assert main(["evaluate", "block", "--pad-friction", "-1", "--out", str(tmp_path / "x")]) == 2
     assert "note:" not in capsys.readouterr().err  # auto: never said
+
+
+def test_the_import_time_counts_from_the_interpreter_not_a_shell_before_it():
+    # `bash -c "... && pip install . && mjx-pick ..."` execs mjx-pick in the shell's own
+    # process, which the kernel dates to the shell's start (before the install): that
+    # time is not the CLI's. A process that was the interpreter from its start keeps
+    # the kernel's count, which sees the imports before the CLI's own clock loaded.
+    age = "import mjx_pick.cli.clock as c; print(c.process_age_s())"
+    shell = subprocess.run(
+        ["bash", "-c", f'sleep 6; exec "{sys.executable}" -c "{age}"'],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert float(shell.stdout) < 3, shell.stdout
+    slow = subprocess.run(
+        [sys.executable, "-c", f"import time; time.sleep(2); {age}"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert 2 <= float(slow.stdout) < 5, slow.stdout
