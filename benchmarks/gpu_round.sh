@@ -89,16 +89,16 @@ case "$1" in
         --heights 3 --frictions 0.3,0.3,0.3,0.3,0.3,0.3 --solver /tmp/plate/$v.toml \
         --out "$out/plate_$v.json"
     done ;;
-  plate16)  # that plate, 16 copies in one batch with the step check, once as built and
-    # once for each option set of VARIANTS ("|"-separated, e.g. "--no-multiccd")
-    python benchmarks/preset_coulomb.py --backend warp --presets franka-hand --masses 0.5 \
-      --heights 3 --frictions 0.3 --copies 16 --step-check --out "$out/plate16.json"
-    IFS='|' read -ra variants <<< "${VARIANTS:-}"
+  plate16)  # that plate, 16 copies in one batch with the step check: as built
+    # (plate16.json), then with each option set of VARIANTS ("|"-separated, e.g.
+    # "--no-multiccd|--contact box.toml": plate16_variant1.json, ...)
+    IFS='|' read -ra variants <<< "|${VARIANTS:-}"
     for k in "${!variants[@]}"; do
+      name=plate16; [ "$k" -eq 0 ] || name+="_variant$k"
       # shellcheck disable=SC2086
       python benchmarks/preset_coulomb.py --backend warp --presets franka-hand --masses 0.5 \
         --heights 3 --frictions 0.3 --copies 16 --step-check ${variants[$k]} \
-        --out "$out/plate16_variant$k.json"
+        --out "$out/$name.json"
     done ;;
   linkage)  # the 2F-85 linkage with its rubber-like box pads on Warp: the preset grid, and
     # Warp against C on the door opener and YCB parts (the same pick-points)

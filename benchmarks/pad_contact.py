@@ -187,16 +187,14 @@ def _pad(contact, variant: str):
 def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
     import re
 
-    from real_objects import without_multiccd  # benchmarks/ is on sys.path when run
+    from real_objects import pad_visual_size, without_multiccd  # benchmarks/ is on sys.path
 
     if variant in ("square", "rimmed"):  # the library's own "mean_radius" / "rimmed"
         return xml
     if variant == "guarded":
         # the "mean_radius" box, and the whole pad recessed 0.1 mm behind its face as a
         # frictionless guard (condim 1): it meets only a part turned in the grip
-        import re as _re
-
-        visual = _re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)[1]
+        visual = pad_visual_size(xml)
         for side, dx in (("left", -1e-4), ("right", 1e-4)):
             xml = xml.replace(
                 f'<geom name="pad_{side}" type="box"',
@@ -204,7 +202,7 @@ def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
                 f'mass="0" group="3"/>\n        <geom name="pad_{side}" type="box"',
                 1,
             )
-        pair = _re.compile(r'<pair name="(pad_left|pad_right)_piece(\d+)" geom1="(\S+)" (.*?)/>')
+        pair = re.compile(r'<pair name="(pad_left|pad_right)_piece(\d+)" geom1="(\S+)" (.*?)/>')
 
         def guard(m):
             rest = m[4].replace('condim="4"', 'condim="1"')
@@ -213,7 +211,7 @@ def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
             )
 
         return pair.sub(guard, xml)
-    visual = re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)[1]
+    visual = pad_visual_size(xml)
     hx, hy, hz = (float(v) for v in visual.split())
     pad = re.compile(r'<geom name="(pad_left|pad_right)" type="box" size="([^"]+)" pos="([^"]+)"')
 

@@ -236,8 +236,8 @@ def main():
     floats = lambda s: tuple(float(v) for v in s.split(","))  # noqa: E731
     t0 = time.perf_counter()
     rows = []
-    for name in args.presets.split(","):
-        with multiccd_off(args.no_multiccd):
+    with multiccd_off(args.no_multiccd):
+        for name in args.presets.split(","):
             rows += run_preset(
                 name,
                 solver,
@@ -252,8 +252,8 @@ def main():
                 args.copies,
                 args.step_check,
             )
-        if args.out:  # after each preset: a run cut short keeps what it finished
-            write_json(args.out, rows)
+            if args.out:  # after each preset: a run cut short keeps what it finished
+                write_json(args.out, rows)
     summarise(rows)
     print(
         f"{len(rows)} picks in {time.perf_counter() - t0:.0f} s; "

@@ -67,6 +67,14 @@ def without_multiccd(xml: str) -> str:
     return xml
 
 
+def pad_visual_size(xml: str) -> str:
+    """A parametric jaw's pad as built (``pad_left_visual``): its box's MJCF ``size``
+    attribute, the half-sizes "x y z" in m (x across the pad, towards the part)."""
+    size = re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)
+    assert size, "scene_xml's parametric pad changed (or an MJCF gripper: not supported)"
+    return size[1]
+
+
 def with_sphere_pads(xml: str, ny: int, nz: int, radius_m: float) -> str:
     """A parametric jaw's scene with each pad's collision box and rim replaced by a
     ny x nz grid of spheres over the whole pad face (a candidate, not the library's):
@@ -77,9 +85,7 @@ def with_sphere_pads(xml: str, ny: int, nz: int, radius_m: float) -> str:
     is in the face's plane (radius_m behind it: between two spheres the face dips
     spacing^2 / (8 radius_m)). Pairs: condim 3, the pad pairs' friction, solref, solimp.
     """
-    size = re.search(r'<geom name="pad_left_visual" type="box" size="([^"]+)"', xml)
-    assert size, "scene_xml's parametric pad changed (or an MJCF gripper: not supported)"
-    hx, hy, hz = (float(v) for v in size[1].split())
+    hx, hy, hz = (float(v) for v in pad_visual_size(xml).split())
     centres = [
         (-hy + (2 * j + 1) * hy / ny, -hz + (2 * k + 1) * hz / nz)
         for j in range(ny)
@@ -92,9 +98,7 @@ def with_sphere_pads(xml: str, ny: int, nz: int, radius_m: float) -> str:
             f'pos="{x:.9g} {y:.9g} {z:.9g}" mass="0" group="3"/>'
             for i, (y, z) in enumerate(centres)
         )
-        xml, n = re.subn(
-            rf'        <geom name="pad_{side}(_rim)?" type="box"[^>]*/>\n', "", xml, flags=re.S
-        )
+        xml, n = re.subn(rf'        <geom name="pad_{side}(_rim)?" type="box"[^>]*/>\n', "", xml)
         assert n >= 1, f"pad_{side}'s collision box not found"
         xml = xml.replace(
             f'<geom name="pad_{side}_visual"', spheres + f'\n        <geom name="pad_{side}_visual"'

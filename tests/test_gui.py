@@ -173,6 +173,11 @@ def shown_errors(page) -> list[str]:
     return [e for e in page.locator('[data-testid$="-error"]').all_inner_texts() if e]
 
 
+def shown_field_messages(page) -> list[str]:
+    """The messages Quasar shows under the page's fields that say something."""
+    return [e for e in page.locator(".q-field__messages").all_inner_texts() if e.strip()]
+
+
 def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
     """Wait until the job panel shows the run `title` ended; returns its status line."""
     from playwright.sync_api import TimeoutError as PlaywrightTimeout
@@ -183,7 +188,7 @@ def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
         page.get_by_test_id("job-title").filter(has_text=title).wait_for(timeout=timeout_ms)
     except PlaywrightTimeout:  # the run never started: say what the page showed instead
         errors = shown_errors(page)
-        fields = [e for e in page.locator(".q-field__messages").all_inner_texts() if e.strip()]
+        fields = shown_field_messages(page)
         notes = page.locator(".q-notification").all_inner_texts()
         shown = page.get_by_test_id("job-title").all_inner_texts()
         pytest.fail(
@@ -217,7 +222,7 @@ def click_start(page, button_test_id: str, title: str, lost_after_ms: int = 60_0
         if errors:
             pytest.fail(f"run {title!r} was refused: {errors}")
     # a field's own message (a value the server read as out of range) is no error label
-    fields = page.locator(".q-field--error .q-field__messages").all_inner_texts()
+    fields = shown_field_messages(page)
     with warnings.catch_warnings():
         warnings.simplefilter("default")  # reported, not raised: the suite's filter is "error"
         warnings.warn(
