@@ -142,15 +142,29 @@ def multiccd_off(off: bool = True):
     return rewriting_scenes(without_multiccd if off else None)
 
 
-def sphere_pads(spec: str):
-    """Every scene built inside has sphere pads (:func:`with_sphere_pads`) by spec
-    "NYxNZ:RADIUS_MM" (e.g. "4x6:20"); "": scenes as they are."""
-    if not spec:
-        return rewriting_scenes(None)
+def sphere_grid(spec: str) -> tuple[int, int, float]:
+    """ "NYxNZ:RADIUS_MM" (e.g. "4x6:20"; radius 20 mm if left out) as (ny, nz, radius
+    in m); argparse.ArgumentTypeError naming what is allowed otherwise."""
     grid, _, radius = spec.partition(":")
-    ny, nz = (int(v) for v in grid.split("x"))
-    r = float(radius or 20.0) * 1e-3
-    return rewriting_scenes(lambda xml: with_sphere_pads(xml, ny, nz, r))
+    try:
+        ny, nz = (int(v) for v in grid.split("x"))
+        r_mm = float(radius or 20.0)
+    except ValueError:
+        ny = nz = r_mm = 0
+    if not (1 <= ny <= 64 and 1 <= nz <= 64 and 0.5 <= r_mm <= 500):
+        raise argparse.ArgumentTypeError(
+            f"--sphere-pads = {spec!r}: allowed NYxNZ:RADIUS_MM, 1 <= NY, NZ <= 64 and "
+            "0.5 <= RADIUS_MM <= 500 (e.g. 4x6:20)"
+        )
+    return ny, nz, r_mm * 1e-3
+
+
+def sphere_pads(grid: tuple[int, int, float] | None):
+    """Every scene built inside has sphere pads (:func:`with_sphere_pads`) by grid
+    (ny, nz, radius m; :func:`sphere_grid`); None: scenes as they are."""
+    if grid is None:
+        return rewriting_scenes(None)
+    return rewriting_scenes(lambda xml: with_sphere_pads(xml, *grid))
 
 
 def ycb_manifest() -> dict:
@@ -404,7 +418,7 @@ def main() -> None:
     ap.add_argument("--no-multiccd", action="store_true", help="one contact per pair (diagnostic)")
     ap.add_argument(
         "--sphere-pads",
-        default="",
+        type=sphere_grid,
         help="NYxNZ:RADIUS_MM: parametric pads as a grid of spheres (a candidate pad model)",
     )
     args = ap.parse_args()
