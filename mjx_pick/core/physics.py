@@ -170,6 +170,16 @@ class ContactParams:
     # box; or "rimmed" (the default), that box with the whole pad recessed behind it,
     # so that a part the box misses is still gripped (PAD_RIM_RECESS_MM)
     pad_collision: str = "rimmed"
+    # MuJoCo's pair margin on the pad contacts: the collider keeps every point of a
+    # pad's overlap with a part that lies within this distance of touching, and the
+    # solver pushes from there (the pad's face acts this much proud of its geom, as a
+    # rubber layer's surface does before it is compressed). 0: only penetrating points,
+    # which on a thin strip or a line contact come and go as the part rocks by
+    # micrometres
+    pad_margin_mm: float = setting(
+        0.0, "mm", "pad contacts: points within this distance of touching join the contact",
+        lo=0, hi=1,
+    )  # fmt: skip
 
     def __post_init__(self):
         o = "contact"
@@ -281,6 +291,7 @@ class MujocoContact:
     table_solref: tuple[float, float]
     pad_solimp: tuple[float, float, float, float, float]
     table_solimp: tuple[float, float, float, float, float]
+    pad_margin_m: float  # MuJoCo's pair margin on the pad contacts, m
     clamped: tuple[str, ...]  # which Table-1 values were limited by the time step
 
     @property
@@ -394,6 +405,7 @@ def mujoco_contact(
         table_solref=tab_ref,
         pad_solimp=tuple(contact.pad_solimp),
         table_solimp=tuple(contact.table_solimp),
+        pad_margin_m=contact.pad_margin_mm * 1e-3,
         clamped=tuple(f"pad_{c}" for c in pad_c) + tuple(f"table_{c}" for c in tab_c),
     )
 

@@ -410,13 +410,16 @@ def _contact_pairs_xml(
             )
             for k, g in enumerate(geoms)
         ]
+    # every pad geom, the rim too: the whole face stands proud by the margin, so a
+    # rim keeps its recess behind the box
+    margin = f' margin="{mjc.pad_margin_m:.9g}"' if mjc.pad_margin_m > 0 else ""
     pairs = []
     for i in range(n_pieces):
         for pad, geom in pad_geoms:
             pairs.append(
                 f'    <pair name="{pad}_piece{i}" geom1="{geom}" geom2="piece{i}" condim="4" '
                 f'friction="{pad_fr}" solref="{_fmt(mjc.pad_solref)}" '
-                f'solimp="{_fmt(mjc.pad_solimp)}"/>'
+                f'solimp="{_fmt(mjc.pad_solimp)}"{margin}/>'
             )
     if gripper.mjcf is not None and gripper.mjcf.link_contacts:
         for i in range(n_pieces):

@@ -308,13 +308,16 @@ class Settings:
     grasp: GraspConfig = dataclasses.field(default_factory=GraspConfig)
 
     def structure(self) -> tuple:
-        """What fixes the compiled scene: gripper, solver, scan length and grasp height.
-        Everything else (contact, controller, phases) is per-pick data; scenes of one
-        model structure also share a compiled program, their differing model fields
-        carried per pick (``engine.variants.program_key``)."""
+        """What fixes the compiled scene: gripper, solver, scan length, grasp height and
+        the contact settings that shape the model (the pads' collision geoms and
+        margin). Everything else (the other contact numbers, controller, phases) is
+        per-pick data; scenes of one model structure also share a compiled program,
+        their differing model fields carried per pick (``engine.variants.program_key``)."""
         return (
             self.gripper,
             self.solver,
+            self.contact.pad_collision,
+            self.contact.pad_margin_mm,
             self.grasp.n_ticks(),
             self.grasp.substeps(self.solver),
             self.grasp.grasp_height,
