@@ -173,11 +173,15 @@ class ContactParams:
     # MuJoCo's pair margin on the pad contacts: the collider keeps every point of a
     # pad's overlap with a part that lies within this distance of touching, and the
     # solver pushes from there (the pad's face acts this much proud of its geom, as a
-    # rubber layer's surface does before it is compressed). 0: only penetrating points,
-    # which on a thin strip or a line contact come and go as the part rocks by
-    # micrometres
+    # rubber layer's surface does before it is compressed). At 0 only penetrating points
+    # count; on a thin strip or a line contact (a plate's edge, a handle) they come and
+    # go as the part rocks by micrometres, each engine's collider picks them its own
+    # way, and the pads chattered and labels differed between MuJoCo C and Warp. 0.05 mm,
+    # within a rubber pad's compression, keeps them (benchmarks/RESULTS.md, "A contact
+    # margin on the pads"). MJX's JAX collider has none for boxes against meshes:
+    # mjx_backend.jax_physics leaves it out
     pad_margin_mm: float = setting(
-        0.0, "mm", "pad contacts: points within this distance of touching join the contact",
+        0.05, "mm", "pad contacts: points within this distance of touching join the contact",
         lo=0, hi=1,
     )  # fmt: skip
 

@@ -32,6 +32,7 @@ re-simulated: a trace of every pick of a large batch would not fit in memory).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import os
@@ -147,8 +148,19 @@ class Physics:
 
 
 def jax_physics(scene: Scene) -> Physics:
-    """MJX's JAX implementation on JAX's default device."""
-    mx = mjx.put_model(scene.model, impl="jax")
+    """MJX's JAX implementation on JAX's default device.
+
+    Its collider implements no margin between a box and a mesh (``put_model`` refuses
+    one), so the pads' contact margin (``ContactParams.pad_margin_mm``) is left out
+    here: MJX's pads touch only where they penetrate, as with a margin of 0. Under the
+    force servo that moves the pads' resting place by the margin, not the grip force.
+    """
+    model = scene.model
+    if model.pair_margin.any() or model.geom_margin.any():
+        model = copy.copy(model)
+        model.pair_margin[:] = 0.0
+        model.geom_margin[:] = 0.0
+    mx = mjx.put_model(model, impl="jax")
     return Physics(mx, mjx.make_data(mx), "jax")
 
 

@@ -49,6 +49,8 @@ from mjx_pick.engine.backend import PickInputs, addresses, resolve_backend
 OPT_FIELDS = ("opt.impratio", "opt.tolerance", "opt.ls_tolerance")
 # per-pick inputs of their own (PickInputs.pair_friction/solref/solimp)
 PAIR_FIELDS = ("pair_friction", "pair_solref", "pair_solimp")
+# collision margins: MJX's JAX implementation collides without them
+MARGIN_FIELDS = ("geom_margin", "pair_margin")
 # bookkeeping of names and paths: never read by the physics (a variant's name -- the
 # model is named after the gripper -- changes their lengths and addresses, not the
 # simulation), and the model buffer's size, which holds the names (every array's size
@@ -87,6 +89,10 @@ def carried_fields(backend: str) -> frozenset[str]:
     # a field MJX holds as numpy is static in its programs; one it lacks is unread
     hints = typing.get_type_hints(mjx.Model)
     out = {f for f in out if f.startswith("opt.") or (f in hints and hints[f] is not np.ndarray)}
+    if name == "mjx":
+        # MJX's JAX collider has no margin between a box and a mesh: its model is built
+        # with the margins at zero (mjx_backend.jax_physics), and none may come per pick
+        out -= set(MARGIN_FIELDS)
     if name == "warp":
         from mujoco.mjx.warp import types as mjxw_types
 
