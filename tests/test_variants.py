@@ -99,6 +99,33 @@ def test_structural_changes_get_a_program_of_their_own(block):
     assert va.varying_fields(base.model, [base.model], va.carried_fields("mjx")) == ()
 
 
+def test_contact_settings_that_shape_the_model_are_structure(block):
+    # the pads' collision geoms and their contact margin are compiled into the model:
+    # settings that differ in them get a scene each (a reused Simulator once gave the
+    # second the first's pads); a contact number that is per-pick data is no structure
+    from mjx_pick.engine.mjx_backend import jax_physics
+    from mjx_pick.engine.simulator import Simulator
+
+    sim = Simulator(block, backend="mujoco", batch_size=4)
+    base = mp.Settings()
+    whole = dataclasses.replace(base, contact=mp.ContactParams(pad_collision="pad"))
+    flush = dataclasses.replace(base, contact=mp.ContactParams(pad_margin_mm=0.0))
+    rimmed, whole_pad, no_margin = (sim.scene(s) for s in (base, whole, flush))
+    assert sim.scenes == 3
+    assert len(whole_pad.index.pad_pairs) < len(rimmed.index.pad_pairs)  # no box and rim
+    pads, table = list(rimmed.index.pad_pairs), list(rimmed.index.table_pairs)
+    np.testing.assert_allclose(rimmed.model.pair_margin[pads], 0.05e-3)  # the rim's too
+    assert not rimmed.model.pair_margin[table].any()
+    assert not no_margin.model.pair_margin.any()
+    slippery = dataclasses.replace(base, contact=mp.ContactParams(pad_friction=0.3))
+    assert slippery.structure() == base.structure()
+    # MJX's JAX collider has no box-mesh margin: its model leaves it out, and no
+    # variant carries one to it
+    assert not np.asarray(jax_physics(rimmed).model.pair_margin).any()
+    assert "pair_margin" in va.carried_fields("mujoco")
+    assert "pair_margin" not in va.carried_fields("mjx")
+
+
 def test_a_variants_name_is_no_structure(block):
     # design names its variants after their values ("robotiq-2f85~w23.4-..."), and the
     # model after the gripper: the names' lengths and addresses are no program
