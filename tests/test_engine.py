@@ -23,7 +23,8 @@ SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
 # tests pin the engine's plumbing, not the physics, whose defaults may move on (issue
 # 32 moved them to elliptic cones and the mean-radius pad box)
 PINNED_SOLVER = mp.SolverParams(cone="pyramidal", impratio=1.0, iterations=10, ls_iterations=8)
-PINNED_CONTACT = mp.ContactParams(pad_collision="pad")
+# the contact of those days: the whole pad, no contact margin
+PINNED_CONTACT = mp.ContactParams(pad_collision="pad", pad_margin_mm=0.0)
 
 # Results of the code BEFORE the engine refactor (commit 513b28d, MuJoCo 4.0.0, jax
 # 0.10, 2-core AMD EPYC), printed from evaluate(...).table / sweep(...).table with

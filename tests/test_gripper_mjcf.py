@@ -26,6 +26,7 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.procedure import G, GraspConfig
 from mjx_pick.engine.backend import addresses, make_backend, make_inputs
+from mjx_pick.engine.mjx_backend import jax_model
 from mjx_pick.kernels import grasp as gk
 
 LINKAGE = "robotiq-2f85-linkage"
@@ -389,7 +390,7 @@ def test_linkage_closes_alike_in_mjx_and_mujoco_c(linkage, block):
     # underactuated finger's slow passive swing, which the two engines resolve apart
     # by up to 2 mm mid-swing and then agree again)
     data.ctrl[act] = scene.kinematics.ctrl_per_length * data.actuator_length[act]
-    mx = mjx.put_model(model, impl="jax")
+    mx = jax_model(model)  # the MJX backend's model
     dx = mjx.put_data(model, data, impl="jax")
     step = jax.jit(mjx.step)
     pads = [model.geom(mjcf_gripper.PREFIX + g).id for g in linkage.mjcf.pad_left_geoms]

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import shapely
 import trimesh
-from mujoco import mjx
 from shapely.geometry import Point, box
 
 import mjx_pick as mp
 from mjx_pick.core.config import PlausibilityWarning
 from mjx_pick.core.objects import convex_partition, rasterize
+from mjx_pick.engine.mjx_backend import jax_model
 
 PX = 10.0  # px per mm of the drawn test images
 
@@ -126,7 +126,7 @@ def test_every_asset_and_preset_compiles_in_mujoco_and_mjx(asset, preset):
     data = mujoco.MjData(scene.model)
     mujoco.mj_forward(scene.model, data)
     assert data.warning.number.sum() == 0
-    mjx.put_model(scene.model)
+    jax_model(scene.model)  # the MJX backend's model
     assert scene.index.pad_pairs and scene.index.table_pairs
 
 
@@ -151,7 +151,7 @@ def test_mesh_import_with_notch_keeps_it(tmp_path):
     for piece in obj.pieces:
         assert not shapely.MultiPoint(piece[:, :2] * 1e3).convex_hull.contains(notch)
     scene = mp.build_scene(obj, mp.load_gripper("robotiq-2f85"))
-    mjx.put_model(scene.model)
+    jax_model(scene.model)  # the MJX backend's model
 
 
 # ----------------------------------------------------------------------- bad inputs

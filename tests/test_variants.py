@@ -15,6 +15,7 @@ import pytest
 import mjx_pick as mp
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine import variants as va
+from mjx_pick.engine.mjx_backend import jax_model
 from mjx_pick.studies.sweeps import ParamSpec
 
 FAST = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.2)
@@ -103,7 +104,6 @@ def test_contact_settings_that_shape_the_model_are_structure(block):
     # the pads' collision geoms and their contact margin are compiled into the model:
     # settings that differ in them get a scene each (a reused Simulator once gave the
     # second the first's pads); a contact number that is per-pick data is no structure
-    from mjx_pick.engine.mjx_backend import jax_physics
     from mjx_pick.engine.simulator import Simulator
 
     sim = Simulator(block, backend="mujoco", batch_size=4)
@@ -121,7 +121,7 @@ def test_contact_settings_that_shape_the_model_are_structure(block):
     assert slippery.structure() == base.structure()
     # MJX's JAX collider has no box-mesh margin: its model leaves it out, and no
     # variant carries one to it
-    assert not np.asarray(jax_physics(rimmed).model.pair_margin).any()
+    assert not np.asarray(jax_model(rimmed.model).pair_margin).any()
     assert "pair_margin" in va.carried_fields("mujoco")
     assert "pair_margin" not in va.carried_fields("mjx")
 
@@ -143,12 +143,11 @@ def test_a_variants_name_is_no_structure(block):
 def test_mjx_models_differ_only_in_carried_fields(block):
     # what MJX's put_model derives from a variant's model (its numpy-side fields,
     # static in a program) must not differ: only the carried, traced fields may
-    from mujoco import mjx
 
     a = mp.build_scene(block, _gripper())
     b = mp.build_scene(block, _gripper(finger_width_mm=30.0, pad_height_mm=30.0))
     carried = va.carried_fields("mjx")
-    ma, mb = mjx.put_model(a.model, impl="jax"), mjx.put_model(b.model, impl="jax")
+    ma, mb = jax_model(a.model), jax_model(b.model)
     pa_, pb = (
         jax.tree_util.tree_flatten_with_path(ma)[0],
         jax.tree_util.tree_flatten_with_path(mb)[0],

@@ -179,7 +179,7 @@ class ContactParams:
     # way, and the pads chattered and labels differed between MuJoCo C and Warp. 0.05 mm,
     # within a rubber pad's compression, keeps them (benchmarks/RESULTS.md, "A contact
     # margin on the pads"). MJX's JAX collider has none for boxes against meshes:
-    # mjx_backend.jax_physics leaves it out
+    # mjx_backend.jax_model leaves it out
     pad_margin_mm: float = setting(
         0.05, "mm", "pad contacts: points within this distance of touching join the contact",
         lo=0, hi=1,

@@ -147,20 +147,24 @@ class Physics:
     nacon: Callable = lambda d: jnp.int32(-1)
 
 
-def jax_physics(scene: Scene) -> Physics:
-    """MJX's JAX implementation on JAX's default device.
+def jax_model(model: mujoco.MjModel) -> mjx.Model:
+    """MJX's JAX implementation of a scene's model.
 
     Its collider implements no margin between a box and a mesh (``put_model`` refuses
     one), so the pads' contact margin (``ContactParams.pad_margin_mm``) is left out
     here: MJX's pads touch only where they penetrate, as with a margin of 0. Under the
     force servo that moves the pads' resting place by the margin, not the grip force.
     """
-    model = scene.model
     if model.pair_margin.any() or model.geom_margin.any():
         model = copy.copy(model)
         model.pair_margin[:] = 0.0
         model.geom_margin[:] = 0.0
-    mx = mjx.put_model(model, impl="jax")
+    return mjx.put_model(model, impl="jax")
+
+
+def jax_physics(scene: Scene) -> Physics:
+    """MJX's JAX implementation on JAX's default device (:func:`jax_model`)."""
+    mx = jax_model(scene.model)
     return Physics(mx, mjx.make_data(mx), "jax")
 
 

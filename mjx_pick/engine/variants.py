@@ -91,7 +91,7 @@ def carried_fields(backend: str) -> frozenset[str]:
     out = {f for f in out if f.startswith("opt.") or (f in hints and hints[f] is not np.ndarray)}
     if name == "mjx":
         # MJX's JAX collider has no margin between a box and a mesh: its model is built
-        # with the margins at zero (mjx_backend.jax_physics), and none may come per pick
+        # with the margins at zero (mjx_backend.jax_model), and none may come per pick
         out -= set(MARGIN_FIELDS)
     if name == "warp":
         from mujoco.mjx.warp import types as mjxw_types
