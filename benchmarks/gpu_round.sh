@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio|agree|plate16
+#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio|agree|plate16|repeat
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
 set -euo pipefail
@@ -136,4 +136,24 @@ case "$1" in
         --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
         --out "$out/real_objects_agree_${gf%%:*}_n${N:-256}${TAG:-}.json"
     done ;;
+  repeat)  # Warp's run-to-run against Warp = C: for each GRIPPER:FORCE of GRIPPERS, run A
+    # (C and Warp) and run B (Warp again, a new process) on the same N picks of OBJECTS,
+    # then Warp A = C, Warp B = C and Warp A = Warp B, each on the labels stable on C
+    # (label_trust.py --flags); tables and figures in repeat.tgz
+    mkdir -p /tmp/repeat
+    for gf in ${GRIPPERS:-robotiq-2f85:50}; do
+      g=${gf%%:*}; f=${gf##*:}
+      for run in A B; do
+        backends=mujoco,warp; [ "$run" = A ] || backends=warp
+        python benchmarks/real_objects.py --n "${N:-1024}" --backends "$backends" --stability-um 1 \
+          --gripper "$g" --force-n "$f" --objects "${OBJECTS:-048_hammer}" \
+          --tables "/tmp/repeat/${g}_$run" --out "/tmp/repeat/real_objects_${g}_$run.json"
+      done
+      t=/tmp/repeat/$g
+      python benchmarks/label_trust.py --a "${t}_A:mujoco" --b "${t}_A:warp" --out "${t}_c_warpA.json"
+      python benchmarks/label_trust.py --a "${t}_A:mujoco" --b "${t}_B:warp" --out "${t}_c_warpB.json"
+      python benchmarks/label_trust.py --a "${t}_A:warp" --b "${t}_B:warp" --flags "${t}_A:mujoco" \
+        --out "${t}_warpA_warpB.json"
+    done
+    tar czf "$out/repeat.tgz" -C /tmp repeat ;;
 esac

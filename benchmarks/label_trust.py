@@ -9,13 +9,17 @@ as not decided by a hair:
 * ``converged``: the label half the time step leaves as it is (``label_converged``);
 * ``sure``: both; ``clear``: |label_margin| >= --band (no margin counts as clear);
 
-each on side A's flags, on side B's, and on both. The pick-points of both sides are
+each on side A's flags, on side B's, and on both. With --flags FOLDER:BACKEND the rows are
+selected by a third run's flags instead (``ref``): two Warp runs compared on the labels
+MuJoCo C marks stable measure Warp's own run-to-run spread on the set that Warp against C
+is judged on. The pick-points of both sides are
 written to --save-picks (a gzipped CSV), from which the figures can be read again
 without the tables (``--picks FILE``).
 
     python benchmarks/label_trust.py --a OUT/margin_tables:mujoco --b OUT/margin_tables:warp
     python benchmarks/label_trust.py --picks benchmarks/results/label_trust_picks_h100_1024.csv.gz
     python benchmarks/label_trust.py --a dt1:mujoco --b dt05:mujoco   # the time step itself
+    python benchmarks/label_trust.py --a runA:warp --b runB:warp --flags runA:mujoco
 """
 
 from __future__ import annotations
@@ -59,20 +63,31 @@ def flags(side: pd.DataFrame, band: float) -> dict[str, np.ndarray]:
     return out
 
 
-def agreement(a: pd.DataFrame, b: pd.DataFrame, band: float) -> dict:
-    """Per part and criterion: share of equal labels, rows, and rows that differ."""
+def agreement(
+    a: pd.DataFrame, b: pd.DataFrame, band: float, ref: pd.DataFrame | None = None
+) -> dict:
+    """Per part and criterion: share of equal labels, rows, and rows that differ.
+
+    With ``ref`` (a third side on the same pick-points) the criteria are also taken on
+    its flags ("_ref"): the rows a third run marks stable, converged, clear.
+    """
     rows = {}
     for part in a["part"].unique():
         pa_, pb = a[a["part"] == part], b[b["part"] == part]
-        if not np.array_equal(pa_["pick_id"].to_numpy(), pb["pick_id"].to_numpy()):
-            raise SystemExit(f"{part}: the two sides hold different pick-points")
+        pr = None if ref is None else ref[ref["part"] == part]
+        for other in (pb,) if pr is None else (pb, pr):
+            if not np.array_equal(pa_["pick_id"].to_numpy(), other["pick_id"].to_numpy()):
+                raise SystemExit(f"{part}: the sides hold different pick-points")
         same = pa_["success"].to_numpy(bool) == pb["success"].to_numpy(bool)
         fa, fb = flags(pa_, band), flags(pb, band)
+        fr = {} if pr is None else flags(pr, band)
         row = {}
         for what in fa:
             masks = {"A": fa[what]}
             if what != "all" and what in fb:
                 masks |= {"B": fb[what], "both": fa[what] & fb[what]}
+            if what != "all" and what in fr:
+                masks["ref"] = fr[what]
             for side, mask in masks.items():
                 key = what if what == "all" else f"{what}_{side}"
                 n = int(mask.sum())
@@ -89,6 +104,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--a", help="side A: FOLDER:BACKEND (real_objects --tables)")
     ap.add_argument("--b", help="side B: FOLDER:BACKEND")
+    ap.add_argument("--flags", help="a third run, FOLDER:BACKEND, whose flags select rows too")
     ap.add_argument("--picks", help="instead of --a/--b: a CSV written by --save-picks")
     ap.add_argument("--band", type=float, default=0.1, help="clear: |label_margin| >= band")
     ap.add_argument("--save-picks", default="", help="write both sides' rows here (.csv.gz)")
@@ -104,7 +120,7 @@ def main() -> None:
         raise SystemExit("give --a and --b, or --picks")
     if args.save_picks:
         pd.concat([a.assign(side="A"), b.assign(side="B")]).to_csv(args.save_picks, index=False)
-    rows = agreement(a, b, args.band)
+    rows = agreement(a, b, args.band, read_side(args.flags) if args.flags else None)
     for part, row in rows.items():
         cells = "  ".join(
             f"{k} {v['agree']:.4f} ({v['differ']}/{v['n']})"
