@@ -82,9 +82,11 @@ def agreement(
         fa, fb = flags(pa_, band), flags(pb, band)
         fr = {} if pr is None else flags(pr, band)
         row = {}
-        for what in fa:
-            masks = {"A": fa[what]}
-            if what != "all" and what in fb:
+        # a criterion only the third run computed (two Warp runs without the stability
+        # copies, C's flags) is taken on its flags alone
+        for what in [*fa, *(w for w in fr if w not in fa)]:
+            masks = {"A": fa[what]} if what in fa else {}
+            if what != "all" and what in fa and what in fb:
                 masks |= {"B": fb[what], "both": fa[what] & fb[what]}
             if what != "all" and what in fr:
                 masks["ref"] = fr[what]

@@ -6,6 +6,8 @@
     python benchmarks/pad_contact.py coulomb --backend warp   # tests' Coulomb grid, any backend
     python benchmarks/pad_contact.py rubber --variants corners,square  # levers vs a rubber pad
     python benchmarks/pad_contact.py torsion --variants corners,square # pure torsion vs rubber
+    python benchmarks/pad_contact.py torsion --variants rimmed --grippers robotiq-2f85-linkage
+        # a tilting pad: also against rubber pads tilted as much (tilted_rubber_torque)
 
 rubber and torsion compare pad-contact candidates (the "--variants" below: corners,
 centre, shrunk, square, guarded, tiles; "corners" is the library's default pad_contact "pad",
@@ -350,38 +352,106 @@ def rubber(variants, loads, cases_wanted=None) -> None:
             )
 
 
-def _level_pads(scene, d) -> float:
-    """Turn every pad box of an MJCF gripper's scene (the geoms named pad_left*,
-    pad_right*) about its side's main box centre so that it lies parallel to the
-    gripper's axes at the state d (the pads closed on the part): the linkage's pads
-    tilt as they close. Changes scene.model; returns the largest tilt removed, deg."""
+def _pad_turns(scene, d) -> list[tuple[list[int], np.ndarray, np.ndarray, float]]:
+    """Per pad side (the geoms named pad_left*, pad_right*) at the state d: its geoms,
+    its main box's centre in its body, the turn (body frame) that would lay the box
+    parallel to the gripper's axes, and that turn's angle, deg. The linkage's pads tilt
+    as they close; a parametric jaw's stay parallel (0)."""
     import mujoco
 
     m = scene.model
     grip = d.xmat[scene.index.gripper_body].reshape(3, 3)
-    largest = 0.0
+    out = []
     for side in ("pad_left", "pad_right"):
         geoms = [g for g in range(m.ngeom) if m.geom(g).name.startswith(side)]
+        if side not in {m.geom(g).name for g in geoms}:
+            continue  # a pad built otherwise (no main box by that name)
         main = m.geom(side).id
         body = int(m.geom_bodyid[main])
         want = d.xmat[body].reshape(3, 3).T @ grip  # box axes = the gripper's, in the body
         have = np.zeros(9)
         mujoco.mju_quat2Mat(have, m.geom_quat[main])
         turn = want @ have.reshape(3, 3).T  # body frame: have -> want
-        largest = max(largest, np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1))))
-        centre = m.geom_pos[main].copy()
+        angle = np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1)))
+        out.append((geoms, m.geom_pos[main].copy(), turn, float(angle)))
+    return out
+
+
+def _level_pads(scene, d) -> float:
+    """Turn every pad box of an MJCF gripper's scene about its side's main box centre
+    so that it lies parallel to the gripper's axes at the state d (the pads closed on
+    the part). Changes scene.model; returns the largest tilt removed, deg."""
+    import mujoco
+
+    m = scene.model
+    turns = _pad_turns(scene, d)
+    for geoms, centre, turn, _ in turns:
         for g in geoms:
             rot = np.zeros(9)
             mujoco.mju_quat2Mat(rot, m.geom_quat[g])
             mujoco.mju_mat2Quat(m.geom_quat[g], (turn @ rot.reshape(3, 3)).flatten())
             m.geom_pos[g] = centre + turn @ (m.geom_pos[g] - centre)
-    return largest
+    return max((t[3] for t in turns), default=0.0)
+
+
+# rubber layers for the tilted reference: (Young's modulus Pa, thickness mm), soft to
+# hard NBR/silicone pads of 2-4 mm (the 2F-85's own pad is not specified)
+RUBBER_LAYERS = ((3e6, 4.0), (6e6, 3.0), (10e6, 2.0))
+
+
+def tilted_rubber_torque(
+    width_mm: float,
+    height_mm: float,
+    force_n: float,
+    tilt_deg: float,
+    modulus_pa: float,
+    thickness_mm: float,
+    mu: float,
+    cells: int = 200,
+) -> float:
+    """Torque (N m) one rubber pad holds about the grip axis when its face is tilted by
+    tilt_deg about its width axis against a flat patch of width_mm x height_mm, pressed
+    with force_n.
+
+    The layer is a Winkler foundation (the "simple elastic foundation" model of
+    non-Hertzian contact, Johnson, Contact Mechanics, 1985, ch. 5): pressure p = K
+    max(0, delta - theta s) with K = E / t and s the height above the leading edge;
+    delta so that the pressure sums to force_n. The tilt given is a pad's whole turn
+    from parallel (the linkage's is about the pad's width axis). The part turns about
+    the point c of the patch's centre line where the friction forces cancel, which is
+    where mu int p |r - c| dA is least (pure torsion, Coulomb friction sliding
+    everywhere). At tilt 0 this is the uniform pad's mu F r_mean. A bonded thin layer
+    is stiffer than E / t (Poisson confinement), which narrows the strip further: the
+    range of RUBBER_LAYERS spans that."""
+    from scipy.optimize import brentq, minimize_scalar
+
+    w, h = width_mm * 1e-3, height_mm * 1e-3
+    k = modulus_pa / (thickness_mm * 1e-3)
+    theta = np.radians(tilt_deg)
+    y = (np.arange(cells) + 0.5) / cells * w - w / 2
+    z = (np.arange(cells) + 0.5) / cells * h - h / 2
+    yy, zz = np.meshgrid(y, z)
+    cell = (w / cells) * (h / cells)
+    drop = theta * (zz + h / 2)
+
+    def pressure(delta: float) -> np.ndarray:
+        return k * np.clip(delta - drop, 0.0, None)
+
+    delta = brentq(lambda dl: pressure(dl).sum() * cell - force_n, 0.0, 1.0)
+    p = pressure(delta)
+    best = minimize_scalar(
+        lambda zc: (p * np.hypot(yy, zz - zc)).sum() * cell,
+        bounds=(-h / 2, h / 2),
+        method="bounded",
+    )
+    return float(mu * best.fun)
 
 
 def _torsion_capacity(
     scene, picks, force_n: float, gravity: bool, rate: float, level: int = 0
-) -> tuple[float, float]:
-    """(torque N m, mean pad normal force N) at which a part squeezed by both pads
+) -> tuple[float, float, list[float]]:
+    """(torque N m, mean pad normal force N, each pad's tilt deg before the torque) at
+    which a part squeezed by both pads
     starts to turn about the grip axis: the fingers' servos drive to the closed end of
     their range, limited to force_n at the pads; the part (at the one pick of picks)
     hangs clear of the table; a torque about the world x axis (the grip axis) ramps at
@@ -451,6 +521,7 @@ def _torsion_capacity(
         print(f"  levelled: pads turned by {_level_pads(scene, d):.2f} deg", flush=True)
         m.actuator_forcerange[:] = ranges  # the limits are set again from the originals
         return _torsion_capacity(scene, picks, force_n, gravity, rate, level - 1)
+    tilts = [t[3] for t in _pad_turns(scene, d)]
     q0 = d.xquat[body].copy()
     q0_inv = np.array([q0[0], -q0[1], -q0[2], -q0[3]])
     dq = np.zeros(4)
@@ -463,10 +534,10 @@ def _torsion_capacity(
         mujoco.mju_mulQuat(dq, d.xquat[body], q0_inv)
         turn_deg = 2 * np.degrees(np.arccos(min(1.0, abs(dq[0]))))
         if turn_deg > 2.0:
-            return float(d.xfrc_applied[body, 3]), float(np.median(holding_n))
+            return float(d.xfrc_applied[body, 3]), float(np.median(holding_n)), tilts
         if turn_deg < 1.0:
             holding_n.append(pad_normal_n())
-    return float("nan"), float(np.median(holding_n))
+    return float("nan"), float(np.median(holding_n)), tilts
 
 
 def torsion(
@@ -548,14 +619,24 @@ def _torsion_row(gripper, label, part, force, variants, ramp_s, mu, original) ->
             with mock.patch.object(scene_mod, "scene_xml", patched):
                 scene = mp.build_scene(part, gripper, _pad(contact, variant), SOLVER, grasp)
         # the rubber pad's torque in ramp_s
-        torque, normal = _torsion_capacity(
+        torque, normal, tilts = _torsion_capacity(
             scene, picks, force, False, ref / ramp_s, level=4 if variant == "levelled" else 0
         )
-        row.append(
-            f"{variant} {torque / (2 * mu * normal * r_mean):.2f} (N {normal:.1f})"
-            if normal > 0
-            else f"{variant} not gripped (no pad force)"
-        )
+        if normal <= 0:
+            row.append(f"{variant} not gripped (no pad force)")
+            continue
+        cell = f"{variant} {torque / (2 * mu * normal * r_mean):.2f} (N {normal:.1f})"
+        if max(tilts, default=0.0) >= 0.005:
+            # against rubber pads tilted as these pads are: each pad's torque summed
+            tilted = [
+                sum(tilted_rubber_torque(w, h, normal, t, e, th, mu) for t in tilts)
+                for e, th in RUBBER_LAYERS
+            ]
+            cell += (
+                f" [tilt {'/'.join(f'{t:.2f}' for t in tilts)} deg; against tilted rubber "
+                f"{torque / max(tilted):.2f}-{torque / min(tilted):.2f}]"
+            )
+        row.append(cell)
     print(
         f"{gripper.name}, {label}, F {force:g} N, patch {w:.1f}x{h:.1f} mm, rubber 2 mu F "
         f"r_mean {ref:.3f} N m; engine / rubber: " + ", ".join(row),
