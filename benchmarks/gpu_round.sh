@@ -140,13 +140,14 @@ case "$1" in
   repeat)  # Warp's run-to-run against Warp = C: for each GRIPPER:FORCE of GRIPPERS, run A
     # (C and Warp) and run B (Warp again, a new process) on the same N picks of OBJECTS,
     # then Warp A = C, Warp B = C and Warp A = Warp B, each on the labels stable on C
-    # (label_trust.py --flags); tables and figures in repeat.tgz
+    # (label_trust.py --flags: C's stability copies are the only ones the figures read,
+    # so run B has none); tables and figures in repeat.tgz
     mkdir -p /tmp/repeat
     for gf in ${GRIPPERS:-robotiq-2f85:50}; do
       g=${gf%%:*}; f=${gf##*:}
       for run in A B; do
-        backends=mujoco,warp; [ "$run" = A ] || backends=warp
-        python benchmarks/real_objects.py --n "${N:-1024}" --backends "$backends" --stability-um 1 \
+        opts=(--backends mujoco,warp --stability-um 1); [ "$run" = A ] || opts=(--backends warp)
+        python benchmarks/real_objects.py --n "${N:-1024}" "${opts[@]}" \
           --gripper "$g" --force-n "$f" --objects "${OBJECTS:-048_hammer}" \
           --tables "/tmp/repeat/${g}_$run" --out "/tmp/repeat/real_objects_${g}_$run.json"
       done
