@@ -6,15 +6,20 @@ from __future__ import annotations
 import os
 import sys
 import time
+from pathlib import Path
 
 from mjx_pick.cli.clock import process_age_s
 from mjx_pick.cli.inputs import (
+    PICK_FLAGS,
+    SETTINGS_FLAGS,
     base_settings,
     check_contact_file,
     design_bounds,
+    given,
     grippers,
     inputs_of,
     name_ranges,
+    object_of,
     objects,
     pick_config,
     run_options,
@@ -177,7 +182,16 @@ def cmd_design(args) -> int:
 def cmd_robust(args) -> int:
     from mjx_pick.studies.robust import robust_best
 
-    obj, base, picks_cfg = base_settings(args)
+    if args.results and not given(args, SETTINGS_FLAGS + PICK_FLAGS):
+        obj, base, picks_cfg = object_of(args), None, None  # the run's own settings
+    else:
+        obj, base, picks_cfg = base_settings(args)
+        if args.results and not given(args, PICK_FLAGS):
+            picks_cfg = None
+        if args.results and not given(args, SETTINGS_FLAGS):
+            base = None
+    if args.out and args.results and Path(args.out).resolve() == Path(args.results).resolve():
+        print(f"mjx-pick: robust adds robustness.parquet and robustness.json to {args.out}")
     table = robust_best(
         obj,
         base,

@@ -34,9 +34,35 @@ def objects(args):
     from mjx_pick.core.gripper import load_gripper
 
     obj, gripper = each_checked(
-        lambda: object_of(args), lambda: load_gripper(args.gripper_file or args.gripper)
+        lambda: object_of(args),
+        lambda: load_gripper(args.gripper_file or args.gripper or DEFAULT_GRIPPER),
     )
     return obj, gripper
+
+
+DEFAULT_GRIPPER = "robotiq-2f85"
+# the flags that set a gripper, physics or procedure setting, and a pick configuration's
+SETTINGS_FLAGS = (
+    "gripper",
+    "gripper_file",
+    "contact",
+    "solver",
+    "grasp",
+    "grip_force_n",
+    "pad_friction",
+    "table_friction",
+    "timestep_s",
+    "lift_height_mm",
+    "hold_s",
+    "grasp_height",
+    "fingertip_clearance_mm",
+)
+PICK_FLAGS = ("safety_zone_mm", "min_coverage", "resolution_mm")
+
+
+def given(args, names) -> bool:
+    """Whether the user set any of these options (argparse leaves the others None)."""
+    return any(getattr(args, n, None) is not None for n in names)
 
 
 def inputs_of(args):

@@ -114,7 +114,10 @@ def _add_object_args(p: argparse.ArgumentParser) -> None:
 
 def _add_gripper_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("gripper")
-    g.add_argument("--gripper", default="robotiq-2f85", help="preset name (mjx-pick presets)")
+    g.add_argument(
+        "--gripper",
+        help="preset name (mjx-pick presets) (default: robotiq-2f85; robust --results: the run's)",
+    )
     g.add_argument(
         "--gripper-file", help="a gripper TOML file (GripperSpec fields; overrides --gripper)"
     )

@@ -6,7 +6,9 @@ claim their output folder (``rundir.claim``) under a configuration key; a
 command that adds its results to another command's folder: robust into an evaluate
 folder),
 
-* ``plan.json`` -- the folder's key and the chunk size of each kind of run in it,
+* ``plan.json`` -- the folder's key, the versions of the packages that decide the
+  results (``rundir.result_versions``: a run is continued only under the same) and
+  the chunk size of each kind of run in it,
   saved (atomically) before the first chunk of that kind is simulated. A resumed run
   keeps the saved size: the size a new start would pick (from free device memory, a
   cluster's size, another ``--chunk-size``) may differ, and a saved chunk must mean the
@@ -54,6 +56,7 @@ from mjx_pick.outputs.rundir import (
     flat_settings,
     is_complete,
     read_manifest,
+    result_versions,
     what_changed,
 )
 
@@ -136,7 +139,7 @@ class ChunkStore:
             raise ConfigError(f"chunk_size = {proposed} is out of range: allowed >= 1")
         if kind not in self.sizes:
             self.sizes[kind] = int(proposed)
-            plan = {"key": self.key, "chunk_sizes": self.sizes}
+            plan = {"key": self.key, "chunk_sizes": self.sizes, "versions": result_versions()}
             if self.settings is not None:
                 plan["settings"] = self.settings
             write_json(self.plan_path, plan)

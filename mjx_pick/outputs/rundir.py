@@ -109,6 +109,8 @@ class _Held:
     fd: int | None  # the open lock file (None where the platform has no flock)
     command: str
     own: bool  # False: joined another command's folder (its manifest is not ours)
+    settings: dict | None = None  # a joined command's settings (flat), for its record
+    key: str | None = None  # a joined command's configuration key, for its record
 
 
 _held: dict[Path, _Held] = {}
@@ -349,6 +351,9 @@ def claim(
             release(path)
         raise
     if joined:
+        held = _held.get(path.resolve())
+        if held is not None:
+            held.settings, held.key = flat, key  # recorded in run-<command>.json by finish
         return path  # add to it; its own manifest stays
     write_json(
         path / MANIFEST,
@@ -360,55 +365,167 @@ def claim(
             "pid": os.getpid(),
             "host": socket.gethostname(),
             "settings": flat,
+            "versions": result_versions(),
         },
     )
     return path
 
 
 def _decide(path, command, key, old, joined, taken, resume, overwrite, flat) -> None:
-    """claim's checks, under the folder's lock; empties the folder where that is due."""
+    """claim's checks, under the folder's lock; empties the folder where that is due.
+
+    The one rule for what may replace a folder's files: ``overwrite``, or nothing
+    finished there -- a run that failed or died (says "running" under a free lock)
+    before it saved a chunk. Finished chunks and complete results are never deleted
+    without ``overwrite``: another configuration is refused, naming what changed."""
     others = [p for p in path.iterdir() if p.name != MANIFEST and not p.name.startswith(".")]
     if old is None and others:
         raise ConfigError(
             f"--out {path}: the folder holds files that mjx-pick did not write; choose an "
             "empty or new folder"
         )
-    if old is None or joined:
+    if old is None:
         return
+    if overwrite:
+        if not joined:  # a joined command's own files are replaced by that command
+            _remove_contents(path)
+        return
+    if joined:
+        old = _joined_record(path, command)
+        if old is None:
+            return
+        taken = True  # the folder's lock is ours: a joined run that says running is dead
     status = old.get("status")
+    same = (old.get("command"), old.get("config_key")) == (command, key)
+    n_chunks = finished_chunks(path, command if joined else None)
+    if same:
+        if resume or n_chunks:
+            check_versions(path, old, command if joined else None)
+        return
     # nothing finished to keep: a failed run, or a "running" one no process holds
     abandoned = status == "failed" or (status == "running" and taken)
-    same = (old.get("command"), old.get("config_key")) == (command, key)
-    if overwrite:
-        _remove_contents(path)
-        return
-    if abandoned and not same:
+    if abandoned and not n_chunks:
         why = old.get("message") or "it was stopped before it finished"
         print(
             f"mjx-pick: {path}: replacing the files of an unfinished `mjx-pick "
-            f"{old.get('command')}` run ({status}: {why})",
+            f"{old.get('command')}` run that saved no results ({status}: {why})",
             file=sys.stderr,
         )
-        _remove_contents(path)
+        if not joined:
+            _remove_contents(path)
         return
-    chunks = path / "chunks"
-    n_chunks = (
-        sum(1 for p in chunks.iterdir() if p.suffix in (".parquet", ".npz"))
-        if (chunks.is_dir())
-        else 0
-    )
-    kept = f" ({n_chunks} finished chunks)" if n_chunks else ""
+    if status == "complete":
+        kept = " (complete)"
+    else:
+        stopped = "a run that died" if status == "running" else f"a run that ended {status}"
+        kept = f" ({n_chunks} finished chunks of {stopped})"
     if old.get("command") != command:
         raise ConfigError(
             f"--out {path}: holds the results of `mjx-pick {old.get('command')}`{kept}; "
             "keep them and write elsewhere with --out NEW, or pass --overwrite to delete "
             "them and start again"
         )
-    if old.get("config_key") != key:
+    resume_hint = "continue it with its settings and --resume, or " if status != "complete" else ""
+    raise ConfigError(
+        f"--out {path}: holds `mjx-pick {command}` results of another configuration{kept}"
+        f"{what_changed(old, flat)}. Keep them: {resume_hint}write elsewhere with "
+        "--out NEW; --overwrite deletes them"
+    )
+
+
+def _joined_record(path: Path, command: str) -> dict | None:
+    """What a command that adds its files to another command's folder left there before:
+    its ``run-<command>.json``, else its chunk plan (a run that died), else None."""
+    for f in (path / f"run-{command}.json", path / "chunks" / command / "plan.json"):
+        try:
+            record = json.loads(f.read_text())
+        except (OSError, ValueError):
+            continue
+        if f.name == "plan.json":  # chunks without a record: the run died before its end
+            record = {
+                "command": command,
+                "config_key": record.get("key"),
+                "status": "running",
+                "settings": record.get("settings"),
+                "versions": record.get("versions"),
+            }
+        return record
+    return None
+
+
+def finished_chunks(path: str | os.PathLike, command: str | None = None) -> int:
+    """The chunks a run saved in its folder (``chunks/``, or ``chunks/<command>/`` for a
+    command that joined another command's folder): finished work, never deleted
+    without --overwrite."""
+    base = Path(path) / "chunks"
+    base = base / command if command else base
+    if not base.is_dir():
+        return 0
+    return sum(1 for p in base.rglob("part-*") if p.suffix in (".parquet", ".npz"))
+
+
+# the packages whose versions decide a run's numbers: a run is continued only under them
+RESULT_PACKAGES = (
+    "mjx-pick",
+    "mujoco",
+    "mujoco-mjx",
+    "mujoco-warp",
+    "jax",
+    "jaxlib",
+    "numpy",
+    "warp-lang",
+)
+
+
+def result_versions() -> dict:
+    """The installed versions of :data:`RESULT_PACKAGES` (None: not installed)."""
+    out = {}
+    for pkg in RESULT_PACKAGES:
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def recorded_versions(path: Path, record: dict | None = None) -> dict | None:
+    """The package versions a folder's run was made with: its record's (manifest, chunk
+    plan), else its ``config.json``'s or ``run.json``'s; None when none says."""
+    if record and record.get("versions"):
+        return record["versions"]
+    for name in ("config.json", RUN):
+        try:
+            v = json.loads((path / name).read_text()).get("versions")
+        except (OSError, ValueError, AttributeError):
+            continue
+        if v:
+            return v
+    return None
+
+
+def version_changes(recorded: dict | None) -> list[str]:
+    """Each result-deciding package whose version differs from the installed one, as
+    'mujoco 3.1.0 -> 3.3.0' (a package a record does not name is not compared)."""
+    if not recorded:
+        return []
+    now = result_versions()
+    return [
+        f"{pkg} {recorded[pkg] or 'not installed'} -> {now[pkg] or 'not installed'}"
+        for pkg in RESULT_PACKAGES
+        if pkg in recorded and recorded[pkg] != now[pkg]
+    ]
+
+
+def check_versions(path: Path, record: dict | None, command: str | None = None) -> None:
+    """Refuse to continue a run in path that was made with other package versions: its
+    saved results would be merged with results of another engine."""
+    changes = version_changes(recorded_versions(Path(path), record))
+    if changes:
         raise ConfigError(
-            f"--out {path}: holds `mjx-pick {command}` results of another configuration{kept}"
-            f"{what_changed(old, flat)}. Keep them and write elsewhere with --out NEW "
-            f"(or run with the folder's settings and --resume); --overwrite deletes them"
+            f"--out {path}: its run was made with other package versions ("
+            + "; ".join(changes)
+            + "): its saved results cannot be continued with these. Keep them and write "
+            "elsewhere with --out NEW, or pass --overwrite to delete them and start again"
         )
 
 
@@ -469,6 +586,9 @@ def finish(
         if message:
             manifest["message"] = message
         write_json(path / MANIFEST, manifest)
+    held = _held.get(path.resolve())
+    if not own and key is None and held is not None:
+        key = held.key  # a joined run stopped early: its claim's key
     record = {
         "command": command,
         "status": status,
@@ -483,6 +603,8 @@ def finish(
         "versions": versions(),
         "config": config,
     }
+    if not own and held is not None and held.settings is not None:
+        record["settings"] = held.settings  # what a later refusal names as changed
     try:
         return write_json(path / (RUN if own else f"run-{command}.json"), record)
     finally:

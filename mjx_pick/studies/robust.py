@@ -38,6 +38,7 @@ from mjx_pick.engine.chunks import ChunkStore, open_store
 from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
 from mjx_pick.outputs.rundir import config_hash, finish, portable_object, release
 from mjx_pick.studies.options import RunOptions
+from mjx_pick.studies.recorded import settings_changes, settings_of
 
 
 def perturb(picks: pp.PickBatch, m: int, sigma_xy_mm: float, sigma_yaw_deg: float, seed: int):
@@ -359,7 +360,7 @@ def min_grip_force(
 
 def robust_best(
     obj: ObjectModel,
-    base: Settings,
+    base: Settings | None = None,
     options: RunOptions | None = None,
     *,
     results: str | Path | None = None,
@@ -374,7 +375,11 @@ def robust_best(
 
     results: an evaluate folder (or its results.parquet) of this object to take them
     from; without it, ``n`` (default 1000) pick-points drawn with ``seed`` are
-    simulated first. m, sigma_xy_mm (mm), sigma_yaw_deg (deg): as :func:`robustness`.
+    simulated first. base: the settings the draws are simulated with (gripper,
+    physics, procedure); with results, None takes the run's own (its config.json),
+    and settings that differ from the run's are refused, naming each: its pick-points
+    were ranked under the run's. Without results, None is ``Settings()``.
+    m, sigma_xy_mm (mm), sigma_yaw_deg (deg): as :func:`robustness`.
     options, or its fields as keywords (``options.RunOptions``): out, overwrite and
     resume as :func:`robustness` (the n pick-points' chunks are kept and resumed
     too); ray: every simulation on a Ray cluster ("auto" or "HOST:PORT";
@@ -391,7 +396,10 @@ def robust_best(
     if results is None:
         check_range("robust", "n", n, 1, 1e8)
     opts.check_resume()
-    table = _read_results(Path(results), obj) if results is not None else None
+    table = None
+    if results is not None:
+        table, base, opts = _read_results(Path(results), obj, base, opts)
+    base = base or Settings()
     draws = _Draws(m, sigma_xy_mm, sigma_yaw_deg)
     with opts.simulator(obj, simulator) as sim:
         source = str(results) if results is not None else None
@@ -432,8 +440,13 @@ def _best_picks(obj, base, sim, store, results, n, top_k, opts: RunOptions) -> p
     return checker.batch(ids[top], x[top], y[top], yaw[top], "robustness")
 
 
-def _read_results(path: Path, obj: ObjectModel) -> pa.Table:
-    """An evaluate folder's results table, refused when it belongs to another object."""
+def _read_results(
+    path: Path, obj: ObjectModel, base: Settings | None, opts: RunOptions
+) -> tuple[pa.Table, Settings | None, RunOptions]:
+    """An evaluate folder's results table, refused when it belongs to another object;
+    with the settings its pick-points were ranked under (its config.json): base when
+    None, and opts' pick configuration when none was given. Settings that differ from
+    the run's are refused, naming each."""
     import json
 
     import pyarrow.parquet as pq
@@ -441,12 +454,29 @@ def _read_results(path: Path, obj: ObjectModel) -> pa.Table:
     table_path = path / "results.parquet" if path.is_dir() else path
     if not table_path.is_file():
         raise ConfigError(f"--results {path}: no results.parquet there")
-    config = table_path.parent / "config.json"
-    if config.is_file():
-        theirs = json.loads(config.read_text()).get("object") or {}
-        check_same_object(theirs, obj, f"--results {path}")
+    config_path = table_path.parent / "config.json"
+    if config_path.is_file():
+        config = json.loads(config_path.read_text())
+        check_same_object(config.get("object") or {}, obj, f"--results {path}")
+        if all(k in config for k in ("gripper", "contact", "solver", "grasp", "picks")):
+            theirs = settings_of(config, f"--results {path}")
+            given = (base or theirs[0], opts.pick_config or theirs[1])
+            changes = settings_changes(theirs, given)
+            if changes:
+                shown = "; ".join(changes[:6]) + (" ..." if len(changes) > 6 else "")
+                raise ConfigError(
+                    f"--results {path}: its pick-points were simulated with other settings "
+                    f"than these ({shown}): leave those settings out to use the run's, or "
+                    "evaluate anew with these"
+                )
+            base, opts = given[0], dataclasses.replace(opts, pick_config=given[1])
+    elif base is None:
+        raise ConfigError(
+            f"--results {path}: no config.json beside the table, so the settings its "
+            "pick-points were simulated with are unknown: give them (gripper, physics)"
+        )
     table = pq.read_table(table_path)
     for col in ("pick_id", "x_mm", "y_mm", "yaw_deg", "score", "success"):
         if col not in table.column_names:
             raise ConfigError(f"--results {path}: no column {col!r}")
-    return table
+    return table, base, opts

@@ -14,12 +14,8 @@ import pyarrow.parquet as pq
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import (
     ConfigError,
-    from_mapping,
 )
-from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import ObjectModel, check_same_object
-from mjx_pick.core.physics import ContactParams, SolverParams
-from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import build_scene
 from mjx_pick.engine.backend import Settings, make_inputs
 from mjx_pick.engine.runner import Runner
@@ -30,21 +26,7 @@ from mjx_pick.studies.calibration.parameters import (
     row_inputs,
 )
 from mjx_pick.studies.calibration.trials.sheet import PLAN
-
-
-def settings_of(config: dict, where: str) -> tuple[Settings, pp.PickConfig]:
-    """The Settings and PickConfig an evaluate run's config.json (or a plan) records."""
-    try:
-        s = Settings(
-            from_mapping(GripperSpec, config["gripper"], where=f"{where}: gripper"),
-            from_mapping(ContactParams, config["contact"], where=f"{where}: contact"),
-            from_mapping(SolverParams, config["solver"], where=f"{where}: solver"),
-            from_mapping(GraspConfig, config["grasp"], where=f"{where}: grasp"),
-        )
-        picks = from_mapping(pp.PickConfig, config["picks"], where=f"{where}: picks")
-    except KeyError as err:
-        raise ConfigError(f"{where} does not record the {err.args[0]} settings") from None
-    return s, picks
+from mjx_pick.studies.recorded import settings_of
 
 
 class RunSource(NamedTuple):

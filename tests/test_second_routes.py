@@ -1,0 +1,115 @@
+"""Second routes to a wrong answer, closed: each test drives the installed ``mjx-pick``
+command the way a user would and checks that nothing is lost, mismatched or silently
+wrong (folders replaced, reruns merged, inputs out of range)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+MJX_PICK = shutil.which("mjx-pick") or f"{sys.executable} -m mjx_pick.cli"
+FAST = ["--backend", "mujoco", "--no-progress", "--lift-height-mm", "5", "--hold-s", "0.05"]
+
+
+def cli(*argv, check: bool | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run the installed command; check=True: it must succeed, False: it must fail."""
+    cmd = MJX_PICK.split() + [str(a) for a in argv]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    if check is True:
+        assert res.returncode == 0, res.stderr[-3000:]
+    if check is False:
+        assert res.returncode != 0, res.stdout[-2000:]
+        assert "Traceback" not in res.stderr, res.stderr[-3000:]
+    return res
+
+
+def chunk_files(out: Path) -> list[Path]:
+    return sorted((out / "chunks").rglob("part-*.parquet"))
+
+
+def killed_mid_run(out: Path, *extra) -> int:
+    """An evaluate run killed outright (SIGKILL) once some of its chunks are saved; the
+    number of chunks it left."""
+    cmd = MJX_PICK.split() + ["evaluate", "block", "--n", "96", "--batch-size", "8"]
+    cmd += ["--chunk-size", "8", "--out", str(out), *FAST, *map(str, extra)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 240
+        while len(chunk_files(out)) < 2 and time.monotonic() < deadline:
+            assert proc.poll() is None, "the run ended before it could be killed"
+            time.sleep(0.05)
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait()
+    n = len(chunk_files(out))
+    assert n >= 2
+    return n
+
+
+def test_a_killed_run_keeps_its_chunks_from_a_rerun_with_other_settings(tmp_path):
+    out = tmp_path / "run"
+    n = killed_mid_run(out)
+    res = cli("evaluate", "block", "--n", "96", "--seed", "1", "--out", out, *FAST, check=False)
+    assert "finished chunk" in res.stderr and "seed: 0 -> 1" in res.stderr
+    assert "--resume" in res.stderr and "--overwrite" in res.stderr
+    assert len(chunk_files(out)) == n  # nothing deleted
+
+
+def test_a_resume_under_other_package_versions_is_refused(tmp_path):
+    out = tmp_path / "run"
+    n = killed_mid_run(out)
+    # the folder as another MuJoCo would have left it: its record names that version
+    config = json.loads((out / "config.json").read_text())
+    config["versions"]["mujoco"] = "3.1.0"
+    (out / "config.json").write_text(json.dumps(config))
+    manifest = json.loads((out / "mjx_pick_run.json").read_text())
+    manifest.pop("versions", None)  # as a folder written before versions were recorded
+    (out / "mjx_pick_run.json").write_text(json.dumps(manifest))
+    argv = ["evaluate", "block", "--n", "96", "--batch-size", "8", "--chunk-size", "8"]
+    res = cli(*argv, "--out", out, "--resume", *FAST, check=False)
+    assert "mujoco" in res.stderr and "3.1.0" in res.stderr
+    assert len(chunk_files(out)) == n
+    assert json.loads((out / "config.json").read_text())["versions"]["mujoco"] == "3.1.0"
+
+
+@pytest.fixture(scope="module")
+def rg2_run(tmp_path_factory) -> Path:
+    """A finished evaluate run on the RG2, hold 0.2 s (not the defaults)."""
+    out = tmp_path_factory.mktemp("rg2") / "run"
+    argv = ["evaluate", "block", "--gripper", "onrobot-rg2", "--n", "12", "--out", out]
+    cli(*argv, *FAST[:-1], "0.2", "--traces", "0", check=True)
+    return out
+
+
+def test_robust_on_a_run_simulates_with_the_runs_settings(rg2_run, tmp_path):
+    out = rg2_run
+    res = cli("robust", "block", "--results", out, "--out", out, "--top-k", "2", "--m", "2",
+              "--backend", "mujoco", "--no-progress", check=True)
+    record = json.loads((out / "run-robust.json").read_text())
+    assert record["config"]["settings"]["gripper"]["name"] == "onrobot-rg2"
+    assert record["config"]["settings"]["grasp"]["hold_s"] == 0.2
+    assert "robust" in res.stdout
+    # settings the user gives that differ from the run's: refused, naming them
+    res = cli("robust", "block", "--results", out, "--top-k", "2", "--m", "2",
+              "--gripper", "robotiq-2f85", "--backend", "mujoco", "--no-progress", check=False)
+    assert "onrobot-rg2" in res.stderr and "robotiq-2f85" in res.stderr
+
+
+def test_a_second_robust_with_other_settings_does_not_replace_the_first(rg2_run):
+    out = rg2_run
+    argv = ["robust", "block", "--results", out, "--out", out, "--top-k", "2"]
+    cli(*argv, "--m", "3", "--overwrite", "--backend", "mujoco", "--no-progress", check=True)
+    before = (out / "robustness.parquet").read_bytes()
+    res = cli(*argv, "--m", "4", "--backend", "mujoco", "--no-progress", check=False)
+    assert "m: 3 -> 4" in res.stderr and "--overwrite" in res.stderr
+    assert (out / "robustness.parquet").read_bytes() == before
+    cli(*argv, "--m", "4", "--overwrite", "--backend", "mujoco", "--no-progress", check=True)
+    assert (out / "results.parquet").is_file()  # evaluate's own files stay
