@@ -1,29 +1,48 @@
-"""Where a MuJoCo Warp physics step spends its time, per kernel group (issue 17).
+"""Where a MuJoCo Warp physics step spends its time: kernel groups, solver iterations,
+launches, and what JAX's bridge adds.
 
-The project's Warp rollout runs ~7 M slot-steps/s on an H100 (RESULTS.md); this splits
-one physics step of the same scene into its main parts (collision, position stage,
-constraint solver), for states taken from the two phases a pick spends its steps in:
+MuJoCo Warp (the ``mujoco-warp`` package) steps the project's scene on states from
+the two phases a pick spends its steps in:
 
 * ``open``: the gripper around the part, pads apart (only the part on the table
   touches anything) -- the approach;
 * ``held``: both pads pressed on the part, lifted 20 mm -- closing's end, lift, hold.
 
-The states come from a scripted close and lift of n feasible pick-points on MuJoCo C
-(servo targets, not the project's force controller: the contacts, not the control,
-set the physics step's cost), tiled over the worlds. Each part is timed on its own,
-ten calls captured in one CUDA graph (Warp's EventTracer launches kernel by kernel,
-and its launch overhead swamped the GPU time: 49 ms per traced step against 4.2 ms per
-graphed one at 32,768 worlds), for the scene as shipped and for variants of it.
+The states come from a scripted close and lift of ``--states`` feasible pick-points on
+MuJoCo C (servo targets, not the project's force controller: the contacts set the
+physics step's cost), tiled over the worlds. For each physics setting (``--physics``:
+``default`` is the project's; ``old`` the solver settings before elliptic cones,
+``cone=pyramidal,impratio=1,ls_iterations=8``; or ``key=value,...`` of MuJoCo options)
+and phase it reports:
 
-    python benchmarks/warp_profile.py --worlds 32768 --variant default \
-        --variant ccd_iterations=16 --variant ccd_tolerance=1e-4
+* ms per step and per kernel group, each group captured 10 times in one CUDA graph
+  (no launch overhead): collision, the rest of the position stage (kinematics, inertia,
+  constraint rows), velocity/actuation/smooth acceleration, the solver with and
+  without CUDA graph conditionals (``opt.graph_conditional``: the iteration loop stops
+  when every world has converged), the post-constraint RNE that gives cfrc_ext (the
+  pad forces), and the integrator;
+* the solver's cost per iteration (a slope: the solver at 1 and 8 iterations with the
+  tolerance at 0, so that every world runs them all) and its fixed cost;
+* solver iterations per world (median, 99th percentile, max, share at the cap), and
+  over ``--steps`` consecutive steps the share of steps in which every world converged
+  before the cap (where a graph conditional saves anything);
+* kernel launches per step (counted at ``wp.launch``), fixed and per solver iteration;
+* with ``--mjx-steps``: ms per step through MJX's JAX bridge (``impl='warp'``: vmap and
+  scan of ``mjx.step``; MJX runs every iteration, no graph conditionals).
 
-Needs a CUDA GPU and warp-lang (``pip install -e '.[gpu]'``).
+    python benchmarks/warp_profile.py --worlds 32768 --physics default --physics old \
+        --json benchmarks/out/warp_profile.json
+
+Needs a CUDA GPU, warp-lang and mujoco-warp.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import dataclasses
+import json
+import platform
 import time
 
 import mujoco
@@ -31,7 +50,11 @@ import numpy as np
 
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
-from mjx_pick.engine.warp_backend import size_buffers
+
+PHYSICS = {
+    "default": {},
+    "old": {"cone": "pyramidal", "impratio": "1", "ls_iterations": "8"},
+}
 
 
 def scripted_states(scene, grasp, n: int, seed: int) -> dict[str, tuple[np.ndarray, ...]]:
@@ -62,8 +85,8 @@ def scripted_states(scene, grasp, n: int, seed: int) -> dict[str, tuple[np.ndarr
         mujoco.mj_step(m, d, 20)
         out["open"].append((d.qpos.copy(), d.qvel.copy(), d.ctrl.copy()))
         # close at the procedure's speed: each servo's target moves in until it lies
-        # F_d / kp past the point where its pad meets the part (the pick's gap), so the
-        # pads press with about the grip force
+        # F_d / kp past the point where its pad meets the part, so the pads press with
+        # about the grip force
         fingers = (
             (ix.finger_left_actuator, ix.finger_left_qpos, picks.gap_left_mm[i]),
             (ix.finger_right_actuator, ix.finger_right_qpos, picks.gap_right_mm[i]),
@@ -86,43 +109,225 @@ def scripted_states(scene, grasp, n: int, seed: int) -> dict[str, tuple[np.ndarr
     return states
 
 
-def build(args, variant: dict):
-    """The scene for one variant: MuJoCo options (``ccd_iterations``, ...) set on the
-    model as built; keys ``warp.NAME`` are left for :func:`warp_options`."""
-    grasp = mp.GraspConfig()
-    scene = mp.build_scene(mp.load_object(args.object), mp.load_gripper(args.gripper), grasp=grasp)
-    for key, value in variant.items():
-        if not key.startswith("warp."):
-            setattr(scene.model.opt, key, type(getattr(scene.model.opt, key))(value))
-    return scene, grasp
-
-
-def warp_options(mw, variant: dict) -> None:
-    """MuJoCo Warp's own options on the put model: as the rollout sets them, then the
-    variant's ``warp.NAME=VALUE`` (e.g. ``warp.run_rne_postconstraint=0``: what the
-    post-constraint RNE pass that gives cfrc_ext -- the pad forces -- costs)."""
-    mw.opt.run_rne_postconstraint = True  # as the rollout (pad forces from cfrc_ext)
-    mw.opt.warn_overflow = 0  # overflow is read back below, not printed per step
-    for key, value in variant.items():
-        if key.startswith("warp."):
-            name = key[len("warp.") :]
-            setattr(mw.opt, name, type(getattr(mw.opt, name))(int(float(value))))
-
-
-def parse_variant(text: str) -> dict:
-    """'default' or 'key=value,key=value' (ccd_iterations=16,ccd_tolerance=1e-4)."""
-    if text == "default":
-        return {}
+def parse_physics(text: str) -> dict:
+    """'default', 'old' or 'key=value,key=value' (MuJoCo options)."""
+    if text in PHYSICS:
+        return dict(PHYSICS[text])
     return dict(kv.split("=", 1) for kv in text.split(","))
 
 
-def mjx_scan_ms(scene, buffers, states, worlds: int, steps: int, repeats: int) -> float:
-    """ms per physics step of ``worlds`` simulations stepped through MJX (``impl='warp'``,
-    graph mode WARP), as the rollout steps them -- ``vmap`` of ``mjx.step`` with per-world
-    contact-pair parameters, ``steps`` steps under ``lax.scan`` in one jitted call -- but
-    without the project's controller, metrics or pool. Set against the bare Warp step
-    (CUDA graphs, above), it is what MJX's JAX wrapper adds; set against the rollout's
-    rate (benchmarks/throughput.py), what the project's own per-step work adds."""
+def set_options(model: mujoco.MjModel, options: dict) -> mujoco.MjModel:
+    """A copy of model with MuJoCo options set (cone by name: 'pyramidal'/'elliptic')."""
+    import copy
+
+    model = copy.copy(model)
+    for key, value in options.items():
+        if key == "cone":
+            model.opt.cone = getattr(mujoco.mjtCone, f"mjCONE_{value.upper()}")
+        else:
+            setattr(model.opt, key, type(getattr(model.opt, key))(float(value)))
+    return model
+
+
+@contextlib.contextmanager
+def counting_launches():
+    """Counts wp.launch / wp.launch_tiled calls (MuJoCo Warp launches through them)."""
+    import warp as wp
+
+    counts = {"n": 0}
+    originals = {name: getattr(wp, name) for name in ("launch", "launch_tiled")}
+
+    def counted(fn):
+        def launch(*args, **kwargs):
+            counts["n"] += 1
+            return fn(*args, **kwargs)
+
+        return launch
+
+    for name, fn in originals.items():
+        setattr(wp, name, counted(fn))
+    try:
+        yield counts
+    finally:
+        for name, fn in originals.items():
+            setattr(wp, name, fn)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--object", default="door_opener")
+    ap.add_argument("--gripper", default="robotiq-2f85")
+    ap.add_argument("--worlds", type=int, default=32768)
+    ap.add_argument("--launches", type=int, default=5, help="timed launches of 10 captured calls")
+    ap.add_argument("--states", type=int, default=256, help="distinct pick-points tiled")
+    ap.add_argument("--steps", type=int, default=100, help="consecutive steps for convergence")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--physics", action="append", default=None, help="default | old | k=v,...")
+    ap.add_argument("--mjx-steps", type=int, default=0, help="also time MJX's bridge (steps)")
+    ap.add_argument("--json", default=None, help="write the rows here")
+    args = ap.parse_args()
+
+    import warp as wp
+
+    wp.config.quiet = True
+    import mujoco_warp as mjw
+    from mujoco_warp._src import constraint, smooth, solver
+
+    from mjx_pick.engine.warp_backend import size_buffers
+
+    def graph_ms(fn) -> float:
+        """ms per call of fn, captured 10 times in one CUDA graph (no launch overhead;
+        on the CPU, for checking this script: called 10 times)."""
+        if not wp.get_device().is_cuda:
+            t0 = time.perf_counter()
+            for _ in range(10):
+                fn()
+            wp.synchronize()
+            return (time.perf_counter() - t0) / 10 * 1e3
+        with wp.ScopedCapture() as capture:
+            for _ in range(10):
+                fn()
+        wp.capture_launch(capture.graph)
+        wp.synchronize()
+        t0 = time.perf_counter()
+        for _ in range(args.launches):
+            wp.capture_launch(capture.graph)
+        wp.synchronize()
+        return (time.perf_counter() - t0) / (10 * args.launches) * 1e3
+
+    grasp = mp.GraspConfig()
+    scene = mp.build_scene(mp.load_object(args.object), mp.load_gripper(args.gripper), grasp=grasp)
+    buffers = size_buffers(scene, grasp)
+    t0 = time.perf_counter()
+    states = scripted_states(scene, grasp, args.states, args.seed)
+    device = wp.get_device()
+    print(
+        f"{device.name}; warp {wp.__version__}, mujoco_warp {mjw.__version__}; buffers "
+        f"{buffers.contacts} contacts, {buffers.rows} rows per world; {args.states} picks "
+        f"scripted on MuJoCo C in {time.perf_counter() - t0:.1f} s",
+        flush=True,
+    )
+    rows = []
+    for text in args.physics or ["default", "old"]:
+        base = set_options(scene.model, parse_physics(text))
+
+        def put(mjm, conditional: bool, **opt):
+            mjm = set_options(mjm, opt)
+            mw = mjw.put_model(mjm)
+            mw.opt.run_rne_postconstraint = True  # as the rollouts: pad forces from cfrc_ext
+            mw.opt.warn_overflow = 0
+            mw.opt.graph_conditional = conditional
+            return mw
+
+        for phase, (qpos, qvel, ctrl) in states.items():
+            dw = mjw.make_data(
+                base, nworld=args.worlds, naconmax=buffers.naconmax(args.worlds), njmax=buffers.rows
+            )
+            reps = -(-args.worlds // len(qpos))
+
+            def load(dw=dw, qpos=qpos, qvel=qvel, ctrl=ctrl, reps=reps):
+                for field, value in (("qpos", qpos), ("qvel", qvel), ("ctrl", ctrl)):
+                    getattr(dw, field).assign(np.tile(value, (reps, 1))[: args.worlds])
+
+            load()
+            row = {"physics": text, "phase": phase, "worlds": args.worlds, "states": len(qpos)}
+            mw = put(base, conditional=True)
+            t0 = time.perf_counter()
+            mjw.step(mw, dw)  # builds the kernels (Warp caches them on disk)
+            wp.synchronize()
+            row["first_step_s"] = time.perf_counter() - t0
+            load()
+            mjw.forward(mw, dw)
+            niter = dw.solver_niter.numpy()
+            cap = base.opt.iterations
+            row |= {
+                "niter_median": float(np.median(niter)),
+                "niter_p99": float(np.percentile(niter, 99)),
+                "niter_max": int(niter.max()),
+                "at_cap_share": float(np.mean(niter >= cap)),
+                "contacts_per_world": float(dw.nacon.numpy()[0]) / args.worlds,
+                "rows_mean": float(dw.nefc.numpy().mean()),
+                "rows_max": int(dw.nefc.numpy().max()),
+            }
+            mw_nc = put(base, conditional=False)
+            row["step_ms"] = graph_ms(lambda mw=mw, dw=dw: mjw.step(mw, dw))
+            row["step_ms_no_conditional"] = graph_ms(lambda mw=mw_nc, dw=dw: mjw.step(mw, dw))
+            load()
+            row["forward_ms"] = graph_ms(lambda mw=mw, dw=dw: mjw.forward(mw, dw))
+            row["position_ms"] = graph_ms(lambda mw=mw, dw=dw: mjw.fwd_position(mw, dw, False))
+            row["collision_ms"] = graph_ms(lambda mw=mw, dw=dw: mjw.collision(mw, dw))
+            row["constraint_ms"] = graph_ms(
+                lambda mw=mw, dw=dw: constraint.make_constraint(mw, dw)
+            )
+
+            def smooth_stage(mw=mw, dw=dw):
+                mjw.fwd_velocity(mw, dw)
+                mjw.fwd_actuation(mw, dw)
+                mjw.fwd_acceleration(mw, dw, factorize=True)
+
+            row["smooth_ms"] = graph_ms(smooth_stage)
+            row["solve_ms"] = graph_ms(lambda mw=mw, dw=dw: solver.solve(mw, dw))
+            row["solve_ms_no_conditional"] = graph_ms(lambda mw=mw_nc, dw=dw: solver.solve(mw, dw))
+            row["rne_post_ms"] = graph_ms(lambda mw=mw, dw=dw: smooth.rne_postconstraint(mw, dw))
+            row["integrate_ms"] = row["step_ms"] - row["forward_ms"]
+            # the solver's cost per iteration: every world runs k iterations (tolerance 0)
+            per_k = {}
+            for k in (1, 8):
+                mk = put(base, conditional=False, iterations=k, tolerance=0)
+                per_k[k] = graph_ms(lambda mw=mk, dw=dw: solver.solve(mw, dw))
+            row["solve_iteration_ms"] = (per_k[8] - per_k[1]) / 7
+            row["solve_fixed_ms"] = per_k[1] - row["solve_iteration_ms"]
+            # launches: fixed and per solver iteration (no conditionals: each counted)
+            counted = {}
+            for k in (1, 2):
+                mk = put(base, conditional=False, iterations=k, tolerance=0)
+                with counting_launches() as c:
+                    mjw.step(mk, dw)
+                counted[k] = c["n"]
+            row["launches_per_iteration"] = counted[2] - counted[1]
+            row["launches_fixed"] = counted[1] - row["launches_per_iteration"]
+            row["launches_per_step_no_conditional"] = (
+                row["launches_fixed"] + cap * row["launches_per_iteration"]
+            )
+            # consecutive steps: is there a step where every world has converged?
+            load()
+            maxes, p99s = [], []
+            for _ in range(args.steps):
+                mjw.step(mw_nc, dw)
+                n = dw.solver_niter.numpy()
+                maxes.append(int(n.max()))
+                p99s.append(float(np.percentile(n, 99)))
+            maxes = np.asarray(maxes)
+            row["steps"] = args.steps
+            row["steps_all_converged_share"] = float(np.mean(maxes < cap))
+            row["steps_niter_max_median"] = float(np.median(maxes))
+            row["steps_niter_p99_median"] = float(np.median(p99s))
+            if args.mjx_steps:
+                row["mjx_bridge_step_ms"] = mjx_scan_ms(
+                    base, buffers, (qpos, qvel, ctrl), args.worlds, args.mjx_steps, 3
+                )
+            row["world_steps_per_s_m"] = args.worlds / row["step_ms"] / 1e3
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+            del dw
+    if args.json:
+        meta = {
+            "device": device.name,
+            "host": platform.node(),
+            "warp": wp.__version__,
+            "mujoco_warp": mjw.__version__,
+            "mujoco": mujoco.__version__,
+            "buffers": dataclasses.asdict(buffers),
+        }
+        with open(args.json, "w") as f:
+            json.dump({"meta": meta, "rows": rows}, f, indent=1)
+
+
+def mjx_scan_ms(model, buffers, states, worlds: int, steps: int, repeats: int) -> float:
+    """ms per physics step of ``worlds`` simulations stepped through MJX's bridge
+    (``impl='warp'``, graph mode WARP): ``vmap`` of ``mjx.step`` with per-world
+    contact-pair parameters, ``steps`` steps under ``lax.scan`` in one jitted call, as
+    the MJX-Warp rollout steps them, without the project's controller or pool."""
     import types
 
     import jax
@@ -131,16 +336,15 @@ def mjx_scan_ms(scene, buffers, states, worlds: int, steps: int, repeats: int) -
 
     from mjx_pick.engine.mjx_backend import _slot_axes
 
-    m = scene.model
-    mx = mjx.put_model(m, impl="warp", graph_mode=mjxw_types.GraphMode.WARP)
+    mx = mjx.put_model(model, impl="warp", graph_mode=mjxw_types.GraphMode.WARP)
     opt = mx.opt._impl.replace(run_rne_postconstraint=True, warn_overflow=0)
     mx = mx.replace(opt=mx.opt.replace(_impl=opt))
-    d0 = mjx.make_data(m, impl="warp", naconmax=buffers.naconmax(worlds), njmax=buffers.rows)
+    d0 = mjx.make_data(model, impl="warp", naconmax=buffers.naconmax(worlds), njmax=buffers.rows)
     axes = _slot_axes(types.SimpleNamespace(impl="warp", data0=d0)).d
     tree = jax.tree.structure(d0)
     qpos, qvel, ctrl = (np.tile(a, (-(-worlds // len(a)), 1))[:worlds] for a in states)
     pairs = tuple(
-        np.tile(a, (worlds, 1, 1)) for a in (m.pair_friction, m.pair_solref, m.pair_solimp)
+        np.tile(a, (worlds, 1, 1)) for a in (model.pair_friction, model.pair_solref, model.pair_solimp)
     )
 
     def start(q, v, c):
@@ -162,99 +366,6 @@ def mjx_scan_ms(scene, buffers, states, worlds: int, steps: int, repeats: int) -
     for _ in range(repeats):
         jax.block_until_ready(run(leaves, *pairs))
     return (time.perf_counter() - t0) / (repeats * steps) * 1e3
-
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--object", default="door_opener")
-    ap.add_argument("--gripper", default="robotiq-2f85")
-    ap.add_argument("--worlds", type=int, default=32768)
-    ap.add_argument("--launches", type=int, default=5, help="timed launches of 10 captured calls")
-    ap.add_argument("--states", type=int, default=256, help="distinct pick-points tiled")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument(
-        "--variant",
-        action="append",
-        default=None,
-        help="'default' or key=value[,key=value]: MuJoCo options (ccd_iterations, "
-        "ccd_tolerance, ...) or MuJoCo Warp's (warp.run_rne_postconstraint=0) (repeatable)",
-    )
-    ap.add_argument(
-        "--mjx-steps",
-        type=int,
-        default=0,
-        help="also time this many steps through MJX's wrapper (vmap + scan of mjx.step)",
-    )
-    args = ap.parse_args()
-
-    import warp as wp
-    from mujoco.mjx.third_party import mujoco_warp as mjw
-    from mujoco.mjx.third_party.mujoco_warp._src import solver
-
-    def graph_ms(fn) -> float:
-        """ms per call of fn, captured 10 times in one CUDA graph (no launch overhead)."""
-        with wp.ScopedCapture() as capture:
-            for _ in range(10):
-                fn()
-        wp.capture_launch(capture.graph)
-        wp.synchronize()
-        t0 = time.perf_counter()
-        for _ in range(args.launches):
-            wp.capture_launch(capture.graph)
-        wp.synchronize()
-        return (time.perf_counter() - t0) / (10 * args.launches) * 1e3
-
-    base, grasp = build(args, {})
-    buffers = size_buffers(base, grasp)
-    t0 = time.perf_counter()
-    states = scripted_states(base, grasp, args.states, args.seed)
-    print(
-        f"buffers {buffers.contacts} contacts, {buffers.rows} rows per world; states: "
-        f"{args.states} picks scripted on MuJoCo C in {time.perf_counter() - t0:.1f} s",
-        flush=True,
-    )
-    print(
-        "variant | phase | states | step ms | M world-steps/s | collision ms | "
-        "fwd_position ms | solve ms | contacts/world | rows mean / max"
-    )
-    for text in args.variant or ["default"]:
-        variant = parse_variant(text)
-        scene, _ = build(args, variant)
-        m = scene.model
-        mw = mjw.put_model(m)
-        warp_options(mw, variant)
-        for phase, (qpos, qvel, ctrl) in states.items():
-            dw = mjw.make_data(
-                m, nworld=args.worlds, naconmax=buffers.naconmax(args.worlds), njmax=buffers.rows
-            )
-            reps = -(-args.worlds // len(qpos))
-            for field, value in (("qpos", qpos), ("qvel", qvel), ("ctrl", ctrl)):
-                getattr(dw, field).assign(np.tile(value, (reps, 1))[: args.worlds])
-            t0 = time.perf_counter()
-            mjw.step(mw, dw)  # builds the kernels (cached by Warp)
-            wp.synchronize()
-            build_s = time.perf_counter() - t0
-            step = graph_ms(lambda mw=mw, dw=dw: mjw.step(mw, dw))
-            coll = graph_ms(lambda mw=mw, dw=dw: mjw.collision(mw, dw))
-            pos = graph_ms(lambda mw=mw, dw=dw: mjw.fwd_position(mw, dw))
-            mjw.forward(mw, dw)
-            solve = graph_ms(lambda mw=mw, dw=dw: solver.solve(mw, dw))
-            nacon = int(dw.nacon.numpy()[0])
-            nefc = dw.nefc.numpy()
-            print(
-                f"{text} | {phase} | {len(qpos)} | {step:.3f} | {args.worlds / step / 1e3:.2f} | "
-                f"{coll:.3f} | {pos:.3f} | {solve:.3f} | {nacon / args.worlds:.2f} | "
-                f"{nefc.mean():.1f} / {nefc.max()}  (first step {build_s:.1f} s)",
-                flush=True,
-            )
-            if args.mjx_steps:
-                del dw
-                ms = mjx_scan_ms(scene, buffers, (qpos, qvel, ctrl), args.worlds, args.mjx_steps, 3)
-                print(
-                    f"{text} | {phase} | through MJX (vmap + scan of mjx.step) | {ms:.3f} ms | "
-                    f"{args.worlds / ms / 1e3:.2f} M world-steps/s",
-                    flush=True,
-                )
 
 
 if __name__ == "__main__":
