@@ -343,7 +343,7 @@ def cmd_report(args) -> int:
 def print_summary(s: dict, out, total_s: float | None = None) -> None:
     """The evaluate summary's lines; total_s: the process's time so far, when known."""
     from mjx_pick.core.metrics import label_check_rows, rate_text
-    from mjx_pick.kernels.grasp import SUCCESS
+    from mjx_pick.kernels.types import SUCCESS
 
     rows = [
         ("object / gripper", f"{s['object']} / {s['gripper']}"),

@@ -13,7 +13,7 @@ import pyarrow as pa
 
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.pickpoints import PickBatch
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 
 # the results table's columns, in order (dtype, description)
 COLUMNS = {
@@ -93,7 +93,7 @@ def results_table(
         if name in cols:
             continue
         if name == "failure":
-            cols[name] = np.asarray(gk.FAILURES, dtype=object)[np.asarray(out["failure"])]
+            cols[name] = np.asarray(kt.FAILURES, dtype=object)[np.asarray(out["failure"])]
         else:
             cols[name] = np.asarray(out[name])
     arrays = {
@@ -141,7 +141,7 @@ def summarize(table: pa.Table) -> dict:
         if "chatter" in table.column_names
         else 0,
         "labels_marginal": marginal_count(table),
-        "failures": {name: int(np.sum(failures == name)) for name in gk.FAILURES},
+        "failures": {name: int(np.sum(failures == name)) for name in kt.FAILURES},
         "score_mean": float(valid.mean()) if len(valid) else float("nan"),
         "score_quantiles": q,
     }

@@ -44,7 +44,7 @@ import mujoco
 import numpy as np
 
 from mjx_pick.core.config import ConfigError, check_range
-from mjx_pick.kernels.grasp import DriveMap
+from mjx_pick.kernels.types import DriveMap
 
 PREFIX = "gripper/"  # names of the attached gripper's elements in the scene
 N_SAMPLES = 61  # stroke samples of the quasi-static close

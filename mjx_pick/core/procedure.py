@@ -17,7 +17,7 @@ from mjx_pick.core.config import ConfigError, check_choice, check_fields, settin
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.physics import SolverParams
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 
 G = 9.81
 
@@ -211,10 +211,10 @@ class GraspConfig:
                 f"<= {gripper.speed_max_mm_s:g}"
             )
 
-    def params(self, obj: ObjectModel, gripper: GripperSpec) -> gk.GraspParams:
+    def params(self, obj: ObjectModel, gripper: GripperSpec) -> kt.GraspParams:
         """The kernels' parameters (float32 scalars, SI)."""
         f32 = np.float32
-        return gk.GraspParams(
+        return kt.GraspParams(
             grip_force_n=f32(self.grip_force_n),
             force_limit_fraction=f32(self.force_limit_fraction),
             force_max_n=f32(gripper.force_max_n),
@@ -271,13 +271,13 @@ def min_grasp_force_n(obj: ObjectModel, pad_friction: float, safety_factor: floa
     return obj.mass_kg * G * safety_factor / (2.0 * pad_friction)
 
 
-def broadcast_params(p: gk.GraspParams, n: int, **per_pick) -> gk.GraspParams:
+def broadcast_params(p: kt.GraspParams, n: int, **per_pick) -> kt.GraspParams:
     """(N,) arrays of every parameter; per_pick names fields given per pick-point."""
-    unknown = set(per_pick) - set(gk.GraspParams._fields)
+    unknown = set(per_pick) - set(kt.GraspParams._fields)
     if unknown:
         raise ConfigError(f"unknown grasp parameter(s): {', '.join(sorted(unknown))}")
     fields = {}
-    for name in gk.GraspParams._fields:
+    for name in kt.GraspParams._fields:
         value = per_pick.get(name, getattr(p, name))
         fields[name] = np.broadcast_to(np.asarray(value, np.float32), (n,)).copy()
-    return gk.GraspParams(**fields)
+    return kt.GraspParams(**fields)

@@ -50,7 +50,7 @@ from mjx_pick.core.physics import (
     patch_mean_radius_mm,
 )
 from mjx_pick.core.procedure import GraspConfig, pad_band_mm
-from mjx_pick.kernels.grasp import DriveMap
+from mjx_pick.kernels.types import DriveMap
 
 # the robot arm carrying the gripper: a stiff, well-damped vertical servo
 LIFT_STIFFNESS_N_PER_M = 2e4

@@ -25,7 +25,7 @@ from mjx_pick.core.physics import ContactParams, SolverParams, mujoco_contact
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig, broadcast_params
 from mjx_pick.core.scene import Scene
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 
 # per-pick contact overrides accepted by make_inputs (besides GraspParams' fields)
 CONTACT_OVERRIDES = (
@@ -43,7 +43,7 @@ class PickInputs(NamedTuple):
     """Everything N simulations need, batched along the first axis."""
 
     qpos0: np.ndarray  # (N, nq)
-    params: gk.GraspParams  # fields (N,)
+    params: kt.GraspParams  # fields (N,)
     pair_friction: np.ndarray  # (N, npair, 5)
     pair_solref: np.ndarray  # (N, npair, 2)
     pair_solimp: np.ndarray  # (N, npair, 5)
@@ -71,9 +71,9 @@ class PickInputs(NamedTuple):
         return jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[:1], extra, axis=0)]), self)
 
 
-def addresses(scene: Scene) -> gk.Addresses:
+def addresses(scene: Scene) -> kt.Addresses:
     i = scene.index
-    return gk.Addresses(
+    return kt.Addresses(
         object_qpos=i.object_qpos,
         lift_qpos=i.lift_qpos,
         finger_left_qpos=i.finger_left_qpos,

@@ -32,117 +32,35 @@ from where it started.
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
-import jax
 import jax.numpy as jnp
 
-SETTLE, CLOSE, DWELL, LIFT, HOLD, DONE = range(6)
-PHASES = ("settle", "close", "dwell", "lift", "hold", "done")
-
-# outcome codes (stable: results and benchmarks store them) and their labels, the
-# results table's `failure` column; a successful pick's label is "success"
-OK, NO_CONTACT, FORCE_NOT_REACHED, SLIPPED_IN_LIFT, DROPPED_IN_HOLD, ROTATED, DIVERGED = range(7)
-FAILURES = (
-    "success",
-    "no_contact",
-    "force_not_reached",
-    "slipped_in_lift",
-    "dropped_in_hold",
-    "rotated",
-    "diverged",
+# the kernels' data (kernels.types, defined without JAX), re-exported for their callers
+from mjx_pick.kernels.types import (  # noqa: F401
+    CLOSE,
+    DIVERGED,
+    DONE,
+    DROPPED_IN_HOLD,
+    DWELL,
+    FAILURES,
+    FORCE_NOT_REACHED,
+    HOLD,
+    LIFT,
+    NO_CONTACT,
+    OK,
+    OLD_SUCCESS_LABEL,
+    PHASES,
+    ROTATED,
+    SETTLE,
+    SLIPPED_IN_LIFT,
+    SUCCESS,
+    TRACE_FIELDS,
+    Accumulators,
+    Addresses,
+    ControlState,
+    DriveMap,
+    GraspParams,
+    Measurement,
 )
-SUCCESS = FAILURES[OK]
-# the label of OK before it read "success" (results written by mjx-pick <= 0.1.0)
-OLD_SUCCESS_LABEL = "none"
-
-
-class GraspParams(NamedTuple):
-    """Per-pick controller and phase settings, SI units (each a traced scalar)."""
-
-    grip_force_n: jax.Array  # F_d, desired pad force
-    force_limit_fraction: jax.Array  # drive force limit / F_d while the force loop runs
-    force_max_n: jax.Array  # the gripper's largest force
-    drive_stiffness_n_per_m: jax.Array  # finger servo stiffness (force per m of lag)
-    kp: jax.Array  # (m/s)/N, finger speed per newton of force error
-    v_close: jax.Array  # m/s, each finger's largest closing speed
-    v_open: jax.Array  # m/s, each finger's largest opening speed
-    reach_fraction: jax.Array  # F >= reach_fraction * F_d counts as reached
-    reach_settle_s: jax.Array  # ...once F has stayed in [reach, limit] this long
-    dwell_s: jax.Array
-    settle_s: jax.Array
-    close_timeout_s: jax.Array
-    lift_height_m: jax.Array
-    lift_speed_m_s: jax.Array
-    lift_accel_m_s2: jax.Array  # trapezoidal lift: accelerate, cruise, decelerate
-    hold_s: jax.Array
-    # a pad touches when its force exceeds this fraction of F_d (a fraction, so that a
-    # per-pick F_d override moves the threshold with it)
-    pad_contact_fraction: jax.Array
-    table_contact_n: jax.Array  # the object touches the table when its force exceeds this
-    success_height_fraction: jax.Array
-    max_rotation_rad: jax.Array
-    divergence_speed: jax.Array  # |qvel| above this (m/s or rad/s) is a blow-up
-    dt: jax.Array  # control period, s
-
-
-class ControlState(NamedTuple):
-    phase: jax.Array  # int32
-    t_phase: jax.Array  # s in the current phase
-    finger_target: jax.Array  # m, each finger's closing-travel target
-    lift_target: jax.Array  # m, gripper lift target
-    lift_velocity: jax.Array  # m/s, of the lift target
-    t_steady: jax.Array  # s the force has stayed between reach and limit while closing
-    lift_start: jax.Array  # m, the gripper's starting lift (height compensation)
-
-
-class Measurement(NamedTuple):
-    """What the controller and metrics see at a control tick."""
-
-    force_left: jax.Array  # N, normal force on the left pad (its x component)
-    force_right: jax.Array  # N
-    force_table: jax.Array  # N, vertical table force on the object
-    finger_left: jax.Array  # m, the left finger's closing travel
-    finger_right: jax.Array  # m
-    object_pos: jax.Array  # (3,) m, object frame origin
-    object_quat: jax.Array  # (4,) w, x, y, z
-    lift: jax.Array  # m, gripper lift joint position
-    speed_max: jax.Array  # largest |qvel|
-    finite: jax.Array  # bool, state is finite
-    # N per m of target lead, the drive's stiffness at the pads at this travel (an MJCF
-    # linkage's lever changes along its stroke); None: GraspParams' constant
-    drive_stiffness_n_per_m: jax.Array | None = None
-
-
-class Accumulators(NamedTuple):
-    contact_seen: jax.Array  # bool
-    reached: jax.Array  # bool, F_d reached
-    t_reached: jax.Array  # s since start when reached
-    held: jax.Array  # bool, grip held uninterrupted since reaching F_d
-    held_time: jax.Array  # s
-    off_table_time: jax.Array  # s in the grasp window without table contact
-    phi_max: jax.Array  # rad, largest rotation from the initial orientation
-    yaw_max: jax.Array  # rad, largest |yaw change| (about the vertical)
-    tilt_max: jax.Array  # rad, largest tilt of the object's vertical axis
-    force_left_max: jax.Array
-    force_right_max: jax.Array
-    lift_after_lift: jax.Array  # m, object lift when the LIFT phase ended
-    table_after_lift: jax.Array  # bool, touching the table then
-    slip_max: jax.Array  # m, largest gripper lift minus object lift in the window
-    lift_final: jax.Array  # m, object lift at the end of the hold
-    table_final: jax.Array  # bool
-    rot_final: jax.Array  # rad
-    finished: jax.Array  # bool, the hold ended (success is only possible then)
-    diverged: jax.Array  # bool
-    t: jax.Array  # s since start
-    # chatter: a pad's force falling below the contact threshold and coming back
-    # while the part is held (the grasp window); per pad, whether it touched at the
-    # last tick and whether it has let go since it last touched
-    touch_left: jax.Array  # bool
-    touch_right: jax.Array  # bool
-    lost_left: jax.Array  # bool
-    lost_right: jax.Array  # bool
-    chatter: jax.Array  # count of returns
 
 
 def initial_state(finger_travel0, lift0=None) -> ControlState:
@@ -427,51 +345,9 @@ def finalize(p: GraspParams, a: Accumulators) -> dict:
     }
 
 
-class DriveMap(NamedTuple):
-    """How an MJCF gripper's joints and actuator relate to its pads' closing travel.
-
-    Static under jit (tuples of floats, hashable): tables sampled along the stroke by a
-    quasi-static close of the MuJoCo C model (``mjx_pick.core.mjcf_gripper``), each ascending
-    in its first column, interpolated linearly. Travel is each pad's closing distance
-    from fully open, m, in the free (parallel) mode of the linkage.
-    """
-
-    q_left: tuple[float, ...]  # (K,) left finger joint position (rad or m)
-    travel_left: tuple[float, ...]  # (K,) left pad travel there, m
-    q_right: tuple[float, ...]  # (K,) right finger joint position
-    travel_right: tuple[float, ...]  # (K,) m
-    travel: tuple[float, ...]  # (K,) mean pad travel, m
-    length: tuple[float, ...]  # (K,) actuator length there (tendon or joint units)
-    stiffness_n_per_m: tuple[float, ...]  # (K,) pad force per m of travel lead
-    ctrl_per_length: float  # ctrl = ctrl_at_zero_length + ctrl_per_length * length
-    ctrl_at_zero_length: float
-
-
 def _interp(x, xs: tuple, ys: tuple):
     """Piecewise-linear table lookup, clamped at the ends (jnp.interp on constants)."""
     return jnp.interp(x, jnp.asarray(xs, x.dtype), jnp.asarray(ys, x.dtype))
-
-
-class Addresses(NamedTuple):
-    """Where the kernels read and write in MuJoCo's arrays (ints: static under jit).
-
-    finger_*_qpos: the finger's slide joint (parallel jaw) or the joint whose angle
-    ``drive`` maps to the pad's travel (MJCF gripper); finger_*_body: the body holding
-    the pad; finger_*_actuator: the same actuator twice when one drives both fingers.
-    """
-
-    object_qpos: int
-    lift_qpos: int
-    finger_left_qpos: int
-    finger_right_qpos: int
-    object_body: int
-    finger_left_body: int
-    finger_right_body: int
-    lift_actuator: int
-    finger_left_actuator: int
-    finger_right_actuator: int
-    nu: int
-    drive: DriveMap | None = None  # None: the joints' coordinates are the travel
 
 
 def finger_travel(ad: Addresses, qpos):
@@ -562,30 +438,6 @@ def tick(p: GraspParams, ad: Addresses, s, a, qpos, qvel, cfrc_ext, pos0, quat0)
         ]
     )
     return s_next, a_next, command(ad, s_next, qpos), row
-
-
-# one row per control tick of a recorded pick, SI units, in tick()'s order; with the
-# object's quaternion, a row holds every joint of a parallel-jaw scene, so a trace can be
-# replayed (rendered) without simulating again. finger_*_m is each pad's closing travel
-# (for an MJCF gripper, through its DriveMap)
-TRACE_FIELDS = (
-    "t_s",
-    "force_left_n",
-    "force_right_n",
-    "force_table_n",
-    "object_x_m",
-    "object_y_m",
-    "object_z_m",
-    "object_yaw_rad",
-    "object_qw",
-    "object_qx",
-    "object_qy",
-    "object_qz",
-    "finger_left_m",
-    "finger_right_m",
-    "lift_m",
-    "phase",
-)
 
 
 def initial(ad: Addresses, qpos0) -> tuple[ControlState, Accumulators]:

@@ -68,7 +68,7 @@ from mjx_pick.engine.runner import (
     run_chunks,
 )
 from mjx_pick.engine.simulator import Simulator, showing_progress
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.rundir import (
     claim,
@@ -841,8 +841,8 @@ def _traces(chunks, picks: pp.PickBatch, table: pa.Table, n: int):
     rows = chunks.record(sub)
     n_pick, n_tick, _ = rows.shape
     cols = {"pick_id": np.repeat(sub.pick_id, n_tick)}
-    for j, name in enumerate(gk.TRACE_FIELDS):
+    for j, name in enumerate(kt.TRACE_FIELDS):
         cols[name] = rows[:, :, j].reshape(-1)
-    cols["phase"] = np.asarray(gk.PHASES, dtype=object)[cols["phase"].astype(int)]
+    cols["phase"] = np.asarray(kt.PHASES, dtype=object)[cols["phase"].astype(int)]
     cols["rank"] = np.repeat(np.where(np.isin(chosen, order[::-1][:n]), "best", "worst"), n_tick)
     return pa.table(cols)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 from mjx_pick.outputs.plots import draw_candidates, new_figure, save_png
 from mjx_pick.outputs.reporting.run import Run
 
@@ -137,14 +137,14 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
     save_png(fig, out_dir / "score_hist.png")
     out["score_hist"] = out_dir / "score_hist.png"
 
-    names = list(gk.FAILURES)
+    names = list(kt.FAILURES)
     failures = np.asarray(t["failure"].to_pylist(), dtype=object)
     counts = [int(np.sum(failures == name)) for name in names]
     fig, ax = new_figure(figsize=(6, 3.5))
     ax.barh(
         names[::-1],
         counts[::-1],
-        color=["#2ca02c" if n == gk.SUCCESS else "#d62728" for n in names[::-1]],
+        color=["#2ca02c" if n == kt.SUCCESS else "#d62728" for n in names[::-1]],
     )
     for i, c in enumerate(counts[::-1]):
         ax.text(c, i, f" {c}", va="center", fontsize=8)

@@ -16,7 +16,7 @@ import shapely.errors
 
 from mjx_pick.core.config import ConfigError, from_mapping
 from mjx_pick.core.gripper import GripperSpec
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 
 __all__ = ["Run"]
 
@@ -101,10 +101,10 @@ def _success_labelled(table: pa.Table) -> pa.Table:
     if "failure" not in table.column_names:
         return table
     labels = np.asarray(table["failure"].to_pylist(), dtype=object)
-    old = labels == gk.OLD_SUCCESS_LABEL
+    old = labels == kt.OLD_SUCCESS_LABEL
     if not old.any():
         return table
-    labels[old] = gk.SUCCESS
+    labels[old] = kt.SUCCESS
     k = table.column_names.index("failure")
     return table.set_column(k, "failure", pa.array(labels.tolist(), pa.string()))
 
@@ -112,9 +112,9 @@ def _success_labelled(table: pa.Table) -> pa.Table:
 def _success_counted(summary: dict) -> dict:
     """A summary whose outcome counts name success "success" (older runs: "none")."""
     failures = summary.get("failures")
-    if isinstance(failures, dict) and gk.OLD_SUCCESS_LABEL in failures:
+    if isinstance(failures, dict) and kt.OLD_SUCCESS_LABEL in failures:
         summary["failures"] = {
-            (gk.SUCCESS if k == gk.OLD_SUCCESS_LABEL else k): v for k, v in failures.items()
+            (kt.SUCCESS if k == kt.OLD_SUCCESS_LABEL else k): v for k, v in failures.items()
         }
     return summary
 

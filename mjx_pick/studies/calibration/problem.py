@@ -395,7 +395,7 @@ def trace_outputs(rows, xp=np) -> dict:
     """Traces (..., T, F) -> the measurable kinds (..., T): force_n (mean pad force),
     lift_mm (object rise above its start), rotation_deg (turn about the vertical since
     the start; counter-clockwise seen from above is positive)."""
-    from mjx_pick.kernels.grasp import TRACE_FIELDS
+    from mjx_pick.kernels.types import TRACE_FIELDS
 
     f = TRACE_FIELDS.index
     yaw = rows[..., f("object_yaw_rad")]

@@ -17,7 +17,7 @@ from mjx_pick.core.config import (
 )
 from mjx_pick.core.metrics import mcnemar_p
 from mjx_pick.core.objects import ObjectModel, check_same_object
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 from mjx_pick.outputs.rundir import read_manifest
 from mjx_pick.studies.calibration.identify import Z95
 from mjx_pick.studies.calibration.parameters import (
@@ -196,7 +196,7 @@ def _agreements(problem, res, names, tried) -> tuple[dict, dict, list, int]:
         vectors.append(space.theta([res.optimum[n] for n in names]))
     sim = problem.simulate(np.stack(vectors))
     o = tried.outcomes
-    names_of = np.asarray(gk.FAILURES, dtype=object)
+    names_of = np.asarray(kt.FAILURES, dtype=object)
     before, after, *optimum = (
         agreement(
             sim["success"][j],

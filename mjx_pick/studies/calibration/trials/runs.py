@@ -19,7 +19,7 @@ from mjx_pick.core.objects import ObjectModel, check_same_object
 from mjx_pick.core.scene import build_scene
 from mjx_pick.engine.backend import Settings, make_inputs
 from mjx_pick.engine.runner import Runner
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 from mjx_pick.outputs.rundir import read_manifest
 from mjx_pick.studies.calibration.parameters import (
     ParamSpace,
@@ -87,7 +87,7 @@ class Simulations:
         """Simulate every pick-point (N) under each parameter vector (V dicts, name ->
         natural value; {} is the base settings) in ONE runner call.
 
-        Returns (V, N) arrays: success (bool), score, failure (code, ``gk.FAILURES``),
+        Returns (V, N) arrays: success (bool), score, failure (code, ``kernels.types.FAILURES``),
         diverged (bool), lift_height_mm."""
         if self._backend is None:
             self._backend = self.runner.make(self.scene, self.settings.grasp)
@@ -193,7 +193,7 @@ def information(
     p = at.mean(axis=-1)
     p_draws = p[1:]
     bits = entropy_bits(p_draws.mean(axis=0)) - entropy_bits(p_draws).mean(axis=0)
-    failure = np.asarray(gk.FAILURES, dtype=object)[out["failure"][0, :k]]
+    failure = np.asarray(kt.FAILURES, dtype=object)[out["failure"][0, :k]]
     return Information(
         out["success"][0, :k].astype(bool),
         np.asarray(out["score"][0, :k], float),
