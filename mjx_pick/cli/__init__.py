@@ -27,18 +27,11 @@ from mjx_pick.cli.clock import process_age_s
 from mjx_pick.cli.parser import build_parser
 from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError
-from mjx_pick.engine import interrupts
+from mjx_pick.engine import interrupts, registry
 from mjx_pick.outputs.display import use_offscreen_rendering
 from mjx_pick.outputs.rundir import end_claims, error_message
 
 __all__ = ["build_parser", "main"]
-
-# said whenever a user picks MJX's JAX physics by name (README "Known limits")
-MJX_NOTE = (
-    "mjx-pick: note: --backend mjx is MJX's JAX physics, kept for derivatives: at low pad "
-    "friction (0.1-0.2) its pads chatter where MuJoCo C and Warp hold the part; for labels "
-    "use --backend mujoco or warp (auto)"
-)
 
 
 class _StderrHandler(logging.StreamHandler):
@@ -74,8 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "no_cache", False):
         # the one switch the cache reads; child processes (GUI jobs, local Ray) inherit it
         os.environ[cache.ENV_SWITCH] = "0"
-    if getattr(args, "backend", None) == "mjx":
-        print(MJX_NOTE, file=sys.stderr)
+    note = registry.ENTRIES.get(getattr(args, "backend", None))
+    if note is not None and note.note:  # a limit of a backend chosen by name
+        print(f"mjx-pick: note: --backend {note.name} is {note.note}", file=sys.stderr)
     try:
         # a Ctrl-C is never swallowed, and SIGTERM stops a run as it does (see interrupts)
         with interrupts.catching_sigint():

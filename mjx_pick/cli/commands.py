@@ -25,6 +25,7 @@ from mjx_pick.cli.inputs import (
     run_options,
 )
 from mjx_pick.core.config import ConfigError
+from mjx_pick.engine import registry
 from mjx_pick.outputs.progress import echo
 
 
@@ -239,8 +240,8 @@ def _calibration_problems(args, obj, base, picks_cfg, names):
         noise=cal.Noise(trace_window_s=args.trace_window_s),
         force_mismatch=args.force_mismatch,
     )
-    # the forward-mode estimator differentiates MJX's JAX physics
-    backend = "mjx" if args.estimator == "jvp" else args.backend
+    # the forward-mode estimator differentiates the differentiable backend's physics
+    backend = registry.differentiable() if args.estimator == "jvp" else args.backend
     problem = cal.Problem(obj, cal.read_outcomes(args.outcomes), names, base, backend=backend, **kw)
     holdout = None
     if args.holdout:

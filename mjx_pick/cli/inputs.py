@@ -8,6 +8,7 @@ import dataclasses
 import sys
 
 from mjx_pick.core.config import ConfigError, load_toml
+from mjx_pick.engine import registry
 
 
 def each_checked(*makers):
@@ -181,7 +182,7 @@ def run_options(args, picks_cfg=None):
         "n": getattr(args, "n", None),
         "seed": getattr(args, "seed", 0),
         "pick_config": picks_cfg,
-        "backend": getattr(args, "backend", "auto"),
+        "backend": getattr(args, "backend", registry.AUTO),
         "batch_size": getattr(args, "batch_size", None),
         "out": getattr(args, "out", None),
         "overwrite": getattr(args, "overwrite", False),

@@ -25,6 +25,7 @@ from mjx_pick.cli.commands import (
     cmd_trials_record,
     cmd_view,
 )
+from mjx_pick.engine import registry
 
 
 class DefaultsHelp(argparse.HelpFormatter):
@@ -178,16 +179,14 @@ def _add_physics_args(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--backend",
-        choices=("auto", "warp", "mjx", "mujoco"),
-        default="auto",
-        help="warp: MuJoCo Warp on an NVIDIA GPU (pip install '.[gpu]'); mjx: MJX's JAX "
-        "physics; mujoco: the C engine on CPU threads; auto: warp where it can run, else mujoco",
+        choices=registry.choices(),
+        default=registry.AUTO,
+        help=registry.backend_help(),
     )
     g.add_argument(
         "--batch-size",
         type=int,
-        help="simulations per backend call (default: per backend: mujoco 1024, warp 32768 "
-        "per GPU, mjx 8192 on an accelerator, else 64)",
+        help=f"simulations per backend call (default: {registry.batch_size_help()})",
     )
 
 
@@ -693,8 +692,8 @@ def _add_trials_backend(p: argparse.ArgumentParser) -> None:
     """A trials step's --backend (as evaluate's, without its other run options)."""
     p.add_argument(
         "--backend",
-        choices=("auto", "warp", "mjx", "mujoco"),
-        default="auto",
+        choices=registry.choices(),
+        default=registry.AUTO,
         help="simulation backend (as evaluate)",
     )
 

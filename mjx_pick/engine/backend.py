@@ -12,8 +12,6 @@ cancellation, timing).
 from __future__ import annotations
 
 import dataclasses
-import importlib
-import inspect
 from typing import NamedTuple, Protocol
 
 import jax
@@ -25,6 +23,7 @@ from mjx_pick.core.physics import ContactParams, SolverParams, mujoco_contact
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig, broadcast_params
 from mjx_pick.core.scene import Scene
+from mjx_pick.engine import registry
 from mjx_pick.kernels import types as kt
 
 # per-pick contact overrides accepted by make_inputs (besides GraspParams' fields)
@@ -191,7 +190,7 @@ class RunStats:
 
 
 class Backend(Protocol):
-    """What the engine needs of a backend (one module implements it; see FACTORIES).
+    """What the engine needs of a backend (one module implements it; ``engine.registry``).
 
     A backend simulates every pick-point on its own: a pick's result must not depend on
     which other pick-points share its call, so the engine may split a run into chunks
@@ -200,7 +199,7 @@ class Backend(Protocol):
     ``device_bytes_per_pick()``: the engine then sizes chunks from free device memory.
     """
 
-    name: str  # as in FACTORIES
+    name: str  # its registry name
     device: str  # what it runs on, in words ("cpu:2 threads", "gpu:NVIDIA H100 x2")
     stats: RunStats  # compile time apart from run time, summed over calls
     scene: Scene
@@ -212,23 +211,6 @@ class Backend(Protocol):
         ...
 
 
-def has_accelerator() -> bool:
-    """Whether JAX sees a GPU or TPU (device batches are sized for it)."""
-    return any(d.platform in ("gpu", "tpu", "cuda", "rocm") for d in jax.devices())
-
-
-# The backends: name -> "module:factory", imported only when chosen. A factory is called
-# as factory(scene, grasp, batch_size, **options) and returns a Backend; its keyword
-# parameters are the options it takes. A new backend is one module with such a factory
-# (a class implementing Backend is one), added here.
-FACTORIES = {
-    "warp": "mjx_pick.engine.warp_backend:make_warp_backend",
-    "mjx": "mjx_pick.engine.mjx_backend:MjxBackend",
-    "mujoco": "mjx_pick.engine.c_backend:MujocoBackend",
-}
-BACKENDS = ("auto", *FACTORIES)
-
-
 def make_backend(
     name: str,
     scene: Scene,
@@ -238,60 +220,23 @@ def make_backend(
     devices=None,
     **options,
 ) -> Backend:
-    """A backend by name: 'warp', 'mjx', 'mujoco' or 'auto'.
+    """A backend by name: 'auto' or one of ``registry.ENTRIES`` (its factory).
 
-    'warp': MJX with MuJoCo Warp physics on an NVIDIA GPU (needs warp-lang, the gpu
-    extra; a ConfigError says what is missing). 'mjx': MJX's JAX physics on JAX's
-    devices (forward-mode derivatives). 'mujoco': the C engine on CPU threads. 'auto':
-    'warp' where it can run (an NVIDIA GPU and warp-lang), else 'mujoco' -- on a GPU
-    without warp-lang the C engine's threads beat MJX's JAX physics.
-
-    devices: MJX/Warp shard each batch over these (default: every local device; Warp:
-    every CUDA device). nthread: the C engine's threads. options: passed to the MJX or
-    Warp backend (refill, ticks_per_call, shrink_levels; Warp: buffers, graph_mode).
+    devices: the devices a device backend shards each batch over (default: its own
+    choice); nthread: a CPU backend's threads. options: the entry's options.
     """
-    name = resolve_backend(name)
+    entry = registry.entry(name)
     grasp.substeps(scene.solver)  # validates the control period against the time step
-    module, _, attr = FACTORIES[name].partition(":")
-    factory = getattr(importlib.import_module(module), attr)
-    takes = inspect.signature(factory).parameters
-    # a factory with **options checks them itself (Warp passes them on per device)
-    open_ended = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in takes.values())
-    unknown = [] if open_ended else sorted(k for k in options if k not in takes)
+    allowed = {o.name for o in entry.options}
+    unknown = sorted(k for k in options if k not in allowed)
     if unknown:
-        raise ConfigError(f"backend {name!r} takes no options {unknown}")
-    # devices and nthread are hints for the backends that have them (MJX/Warp shard over
-    # devices, the C engine runs threads); another backend ignores them
-    for key, value in (("devices", devices), ("nthread", nthread)):
-        if value is not None and key in takes:
-            options[key] = value
-    return factory(scene, grasp, batch_size, **options)
-
-
-def resolve_backend(name: str) -> str:
-    """The backend a name runs: 'auto' becomes 'warp' where it can run, else 'mujoco'."""
-    if name not in BACKENDS:
-        allowed = ", ".join(repr(b) for b in BACKENDS)
-        raise ConfigError(f"backend = {name!r} is not allowed: choose one of {allowed}")
-    if name == "auto":
-        from mjx_pick.engine.devices import warp_problem
-
-        return "mujoco" if warp_problem() else "warp"
-    return name
-
-
-def default_batch_size(backend_name: str) -> int:
-    """Simulations per backend call (slots of Warp's refilled pool): measured best."""
-    name = resolve_backend(backend_name)
-    if name == "mujoco":
-        return 1024  # a batch per call amortises the per-tick kernel's dispatch
-    if name == "warp":
-        # slots per GPU (every GPU runs its own pool): the largest pool that fits an
-        # H100 with room for the contact buffers; the throughput benchmark chose it
-        from mjx_pick.engine.devices import nvidia_gpus
-
-        return 32768 * max(len(nvidia_gpus()), 1)
-    return 8192 if has_accelerator() else 64
+        raise ConfigError(f"backend {entry.name!r} takes no options {unknown}")
+    # devices and nthread are hints: a CPU backend runs threads, a device backend
+    # shards over devices; neither is given the other's
+    hint = ("nthread", nthread) if entry.device is registry.Device.CPU else ("devices", devices)
+    if hint[1] is not None:
+        options[hint[0]] = hint[1]
+    return registry.load(entry.factory)(scene, grasp, batch_size, **options)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -48,8 +48,8 @@ from mjx_pick.core.config import ConfigError
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
-from mjx_pick.engine import interrupts
-from mjx_pick.engine.backend import BACKENDS, RunStats, default_batch_size
+from mjx_pick.engine import interrupts, registry
+from mjx_pick.engine.backend import RunStats
 from mjx_pick.engine.runner import Cancelled, ChunkDone, Runner
 from mjx_pick.outputs.rundir import versions
 
@@ -153,9 +153,9 @@ class _Worker:
     keeps its backend (and so its compiled programs) for the calls that follow.
 
     Args:
-      backend: 'mujoco', 'warp' or 'mjx' (already resolved by the driver).
+      backend: a backend's name (resolved by the driver).
       batch_size: simulations per backend call.
-      nthread: the C engine's threads (a CPU node's CPUs).
+      nthread: a CPU backend's threads (a CPU node's CPUs).
     """
 
     KEEP = 4  # backends kept (a sweep over gripper geometry has one scene per value)
@@ -201,7 +201,7 @@ class _Worker:
         return self._local(key, box, grasp).record(picks)
 
     def simulate(self, key: str, box: list, grasp: GraspConfig, inputs, record: bool):
-        """A backend call on prepared inputs (``simulate.PickInputs``): :class:`Simulated`."""
+        """A backend call on prepared inputs (``backend.PickInputs``): :class:`Simulated`."""
         t0 = time.perf_counter()
         out = self._local(key, box, grasp).simulate(inputs, record)
         t = out.timing
@@ -253,43 +253,32 @@ class _Slot:
 
 
 def cluster_backend(name: str, nodes: list[dict]) -> str:
-    """The backend a cluster runs: 'auto' is 'warp' when the cluster has GPUs, else
-    'mujoco' (the C engine); 'warp' needs GPUs."""
-    if name not in BACKENDS:
-        allowed = ", ".join(repr(b) for b in BACKENDS)
-        raise ConfigError(f"backend = {name!r} is not allowed: choose one of {allowed}")
-    gpus = sum(n["Resources"].get("GPU", 0) for n in nodes)
-    if name == "auto":
-        return "warp" if gpus else "mujoco"
-    if name == "warp" and not gpus:
+    """The backend a cluster runs: 'auto' resolved for the cluster's GPUs
+    (``registry.resolve``); a backend that needs an NVIDIA GPU needs one there."""
+    gpus = int(sum(n["Resources"].get("GPU", 0) for n in nodes))
+    name = registry.resolve(name, gpus=gpus)
+    if registry.ENTRIES[name].device is registry.Device.NVIDIA_GPU and not gpus:
+        cpu = [e.name for e in registry.auto_order() if e.device is registry.Device.CPU]
         raise ConfigError(
-            "--backend warp --ray: the cluster has no GPU; use --backend mujoco (or auto)"
+            f"--backend {name} --ray: the cluster has no GPU; use --backend "
+            f"{' or '.join(cpu)} (or {registry.AUTO})"
         )
     return name
 
 
 def plan_slots(backend: str, node: dict) -> list[_Slot]:
-    """The actors a node gets: one per GPU for the GPU backends (where it has GPUs), else
-    one for the whole node (the C engine's threads on all its CPUs)."""
+    """The actors a node gets: one per GPU for a device backend (where it has GPUs),
+    none for a GPU backend where it has none, else one for the whole node (a CPU
+    backend's threads on all its CPUs)."""
     res = node["Resources"]
     cpus, gpus = int(res.get("CPU", 0)), int(res.get("GPU", 0))
     nid = node["NodeID"]
-    if backend in ("warp", "mjx") and gpus:
+    device = registry.ENTRIES[backend].device
+    if device is not registry.Device.CPU and gpus:
         return [_Slot(nid, cpus // gpus, 1, max(cpus // gpus, 1)) for _ in range(gpus)]
-    if backend == "warp" or cpus < 1:
-        return []  # no GPU for Warp here; or a node with nothing to run on
+    if device is registry.Device.NVIDIA_GPU or cpus < 1:
+        return []  # no GPU for a GPU backend here; or a node with nothing to run on
     return [_Slot(nid, cpus, 0, cpus)]
-
-
-def _batch_size(backend: str, batch_size: int | None, gpus: bool) -> int:
-    """Simulations per backend call on one actor (one GPU, or one node's CPUs)."""
-    if batch_size:
-        return int(batch_size)
-    if backend == "mujoco":
-        return default_batch_size("mujoco")
-    if backend == "warp":
-        return 32768  # one GPU's pool (simulate.default_batch_size, per GPU)
-    return 8192 if gpus else 64
 
 
 class _ActorPool:
@@ -302,7 +291,7 @@ class _ActorPool:
 
     Args:
       address: 'auto' or 'HOST:PORT' / 'ray://HOST:PORT' of the cluster's head.
-      backend: 'auto', 'mujoco', 'warp' or 'mjx' (:func:`cluster_backend`).
+      backend: 'auto' or a backend's name (:func:`cluster_backend`).
       batch_size: simulations per backend call on each actor.
       cancel: once set, :meth:`map` stops with ``runner.Cancelled``.
       depth: calls queued on each actor (2: the next one is there while the driver
@@ -319,7 +308,7 @@ class _ActorPool:
         self,
         address: str,
         *,
-        backend: str = "auto",
+        backend: str = registry.AUTO,
         batch_size: int | None = None,
         cancel: threading.Event | None = None,
         depth: int = 2,
@@ -336,7 +325,12 @@ class _ActorPool:
             nodes = self._alive_nodes()
             self.name = cluster_backend(backend, nodes)
             gpus = any(n["Resources"].get("GPU", 0) for n in nodes)
-            self.batch_size = _batch_size(self.name, batch_size, gpus)
+            # per actor: one GPU each, or one node's CPUs
+            self.batch_size = (
+                int(batch_size)
+                if batch_size
+                else registry.default_batch_size(self.name, gpus=int(gpus), accelerator=gpus)
+            )
             self.planned = sum(len(plan_slots(self.name, n)) for n in nodes)
             if not self.planned:
                 raise ConfigError(f"--ray {self.address}: no node can run backend {self.name!r}")
@@ -365,7 +359,8 @@ class _ActorPool:
         nodes = len({s.node_id for s in ready})
         kind = (
             "gpu: 1 GPU each"
-            if self.name in ("warp", "mjx") and any(s.num_gpus for s in ready)
+            if registry.ENTRIES[self.name].device is not registry.Device.CPU
+            and any(s.num_gpus for s in ready)
             else "cpu: threads = the node's CPUs"
         )
         return f"ray: {nodes} nodes, {len(ready)} actors ({kind})"
@@ -715,7 +710,7 @@ class _RayBackend:
 
 def ray_runner(
     address: str,
-    backend: str = "auto",
+    backend: str = registry.AUTO,
     batch_size: int | None = None,
     *,
     chunk_size: int | None = None,

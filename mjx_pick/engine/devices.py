@@ -25,6 +25,11 @@ def nvidia_gpus() -> list:
         return []
 
 
+def has_accelerator() -> bool:
+    """Whether JAX sees a GPU or TPU (device batches are sized for it)."""
+    return any(d.platform in ("gpu", "tpu", "cuda", "rocm") for d in jax.devices())
+
+
 def warp_pin() -> str | None:
     """mujoco-mjx's own requirement on warp-lang (its 'warp' extra), e.g. '==1.18.0'."""
     try:

@@ -5,8 +5,9 @@ resumable: :func:`run_chunks`), the studies through ``simulator.Simulator`` (swe
 design search, robustness, minimum grip force), calibration (``calibration.Problem``) and
 the throughput benchmarks (``throughput.measure``, ``side_by_side``). It owns
 
-* backend choice: ``backend.make_backend`` ('auto', 'warp', 'mjx', 'mujoco'); a new
-  backend is one module implementing the small ``backend.Backend`` protocol;
+* backend choice: ``backend.make_backend`` by a name of ``engine.registry``; a new
+  backend is one module implementing the small ``backend.Backend`` protocol and one
+  registry entry;
 * batching: inputs reach the backend in chunks, which the backend splits into its own
   batches -- MJX/Warp run fixed-size padded batches or a pool of slots refilled as
   picks end (the refill stays inside those backends: it is part of the device program);
@@ -53,14 +54,8 @@ from mjx_pick.core.metrics import COLUMNS, results_table
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
-from mjx_pick.engine import compiled, interrupts
-from mjx_pick.engine.backend import (
-    Backend,
-    PickInputs,
-    default_batch_size,
-    make_backend,
-    make_inputs,
-)
+from mjx_pick.engine import compiled, interrupts, registry
+from mjx_pick.engine.backend import Backend, PickInputs, make_backend, make_inputs
 from mjx_pick.engine.chunks import BackendChunks, ChunkStore
 
 ProgressFn = Callable[[int, int], None]  # (pick-points done, pick-points in the run)
@@ -127,8 +122,8 @@ class Runner:
     process, or on a Ray cluster (a runner made by ``cluster.ray_runner``).
 
     Args:
-      backend: 'auto', 'warp', 'mjx' or 'mujoco' (``backend.make_backend``).
-      batch_size: simulations per backend call (default: ``default_batch_size``).
+      backend: 'auto' or a backend's name (``engine.registry``).
+      batch_size: simulations per backend call (default: ``registry.default_batch_size``).
       chunk_size: pick-points per chunk, the unit of progress and cancellation
         (default: :func:`auto_chunk` of each backend).
       on_progress: default progress callback of :meth:`run`, ``(done, total)``.
@@ -142,7 +137,7 @@ class Runner:
 
     def __init__(
         self,
-        backend: str = "auto",
+        backend: str = registry.AUTO,
         batch_size: int | None = None,
         *,
         chunk_size: int | None = None,
@@ -178,7 +173,7 @@ class Runner:
             grasp.substeps(scene.solver)  # validates the control period, as make_backend does
             backend = self.cluster.backend(scene, grasp)
         else:
-            size = self.batch_size or default_batch_size(self.backend_name)
+            size = self.batch_size or registry.default_batch_size(self.backend_name)
             backend = make_backend(
                 self.backend_name,
                 scene,

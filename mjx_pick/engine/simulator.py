@@ -27,6 +27,7 @@ from mjx_pick.core.scene import Scene, build_scene
 from mjx_pick.engine import interrupts
 from mjx_pick.engine.backend import Backend, Settings, make_inputs
 from mjx_pick.engine.chunks import ChunkStore, row_digests
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import Cancelled, ProgressFn, Runner
 from mjx_pick.engine.variants import (
     carried_fields,
@@ -98,7 +99,7 @@ class Simulator:
     def __init__(
         self,
         obj: ObjectModel,
-        backend: str = "auto",
+        backend: str = AUTO,
         batch_size: int | None = None,
         *,
         runner: Runner | None = None,
@@ -237,7 +238,7 @@ class Simulator:
 def study_simulator(
     obj: ObjectModel,
     simulator: Simulator | None = None,
-    backend: str = "auto",
+    backend: str = AUTO,
     batch_size: int | None = None,
     ray: str | None = None,
 ) -> Iterator[Simulator]:
@@ -267,7 +268,7 @@ def differentiable_rollout(scene: Scene, grasp: GraspConfig, record: bool):
     splits the work into chunks and batches on the host, may refill slots (Warp, which
     has no derivatives at all) and records timing as it goes. It is the very program
     ``MjxBackend`` compiles for full-length batches (``mjx_backend.make_rollout``), so
-    its values are those of backend 'mjx'.
+    its values are ``MjxBackend``'s.
     """
     from mjx_pick.engine.mjx_backend import make_rollout
 

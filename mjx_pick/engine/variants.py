@@ -42,7 +42,8 @@ import numpy as np
 
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
-from mjx_pick.engine.backend import PickInputs, addresses, resolve_backend
+from mjx_pick.engine import registry
+from mjx_pick.engine.backend import PickInputs, addresses
 
 # solver options a backend may take per simulation (MjOption fields, as mujoco.batch
 # names them): traced arrays in MJX's Option, expandable in a batch
@@ -63,14 +64,14 @@ _MINVAL = 1e-15
 
 @functools.cache
 def carried_fields(backend: str) -> frozenset[str]:
-    """The model fields a backend can apply per simulation, by backend name.
-
-    'mujoco', 'mjx', 'warp' (or 'auto', resolved here). The intersection of what the
-    C engine's batch can expand, what MJX traces, and (Warp) what Warp keeps per world.
-    """
+    """The model fields a backend can apply per simulation, by backend name ('auto'
+    resolved here): its entry's ``model_fields`` of those ``mujoco.batch`` can expand
+    (float arrays and :data:`OPT_FIELDS`, the contact pairs apart)."""
     import mujoco.batch
 
-    name = resolve_backend(backend)
+    entry = registry.entry(backend)
+    if entry.model_fields is None:
+        return frozenset()
     probe = mujoco.MjModel.from_xml_string("<mujoco/>")
     out = set()
     for field in mujoco.batch.MODEL_FIELDS:
@@ -80,38 +81,52 @@ def carried_fields(backend: str) -> frozenset[str]:
         if isinstance(template, np.ndarray) and template.dtype.kind == "f":
             out.add(field)
     out.update(f for f in OPT_FIELDS if f in mujoco.batch.MODEL_FIELDS)
-    if name == "mujoco":
-        # the C engine takes any of them; MJX is not imported for it (seconds of a
-        # C run's start)
-        return frozenset(out)
+    return frozenset(registry.load(entry.model_fields)(frozenset(out)))
+
+
+def batch_fields(fields: frozenset[str]) -> frozenset[str]:
+    """The C engine's: all of them (MJX is not imported for it: seconds of a C run's
+    start)."""
+    return fields
+
+
+def mjx_fields(fields: frozenset[str]) -> frozenset[str]:
+    """MJX's JAX physics': those MJX traces (one it holds as numpy is static in its
+    programs; one it lacks is unread), without the collision margins (its JAX collider
+    has none between a box and a mesh: ``mjx_backend.jax_model`` zeroes them)."""
+    return _mjx_traced(fields) - set(MARGIN_FIELDS)
+
+
+def mjx_warp_fields(fields: frozenset[str]) -> frozenset[str]:
+    """MuJoCo Warp's (through MJX): those MJX traces that Warp holds per world or does
+    not hold at all (one it holds once for all worlds would be read from the first
+    variant only)."""
+    from mujoco.mjx.warp import types as mjxw_types
+
+    per_world = mjxw_types._BATCH_DIM["Model"]
+    options = mjxw_types._BATCH_DIM["Option"]
+    return frozenset(
+        f
+        for f in _mjx_traced(fields)
+        if (options.get(f[4:], False) if f.startswith("opt.") else per_world.get(f, True))
+    )
+
+
+def _mjx_traced(fields: frozenset[str]) -> frozenset[str]:
     from mujoco import mjx
 
-    # a field MJX holds as numpy is static in its programs; one it lacks is unread
     hints = typing.get_type_hints(mjx.Model)
-    out = {f for f in out if f.startswith("opt.") or (f in hints and hints[f] is not np.ndarray)}
-    if name == "mjx":
-        # MJX's JAX collider has no margin between a box and a mesh: its model is built
-        # with the margins at zero (mjx_backend.jax_model), and none may come per pick
-        out -= set(MARGIN_FIELDS)
-    if name == "warp":
-        from mujoco.mjx.warp import types as mjxw_types
-
-        # fields Warp's model holds once for all worlds would be read from the first
-        # variant only; fields it does not hold at all are not read by Warp
-        per_world = mjxw_types._BATCH_DIM["Model"]
-        options = mjxw_types._BATCH_DIM["Option"]
-        out = {
-            f
-            for f in out
-            if (options.get(f[4:], False) if f.startswith("opt.") else per_world.get(f, True))
-        }
-    return frozenset(out)
+    return frozenset(
+        f for f in fields if f.startswith("opt.") or (f in hints and hints[f] is not np.ndarray)
+    )
 
 
 def model_value(model: mujoco.MjModel, name: str) -> np.ndarray:
-    """A model field's values by its batch name: an MjModel array, or ``opt.<field>``."""
-    if name.startswith("opt."):
-        return np.asarray(getattr(model.opt, name[4:]))
+    """A model field's values by its batch name: an MjModel array, ``opt.<field>`` or
+    ``stat.<field>``."""
+    if name.startswith(("opt.", "stat.")):
+        group, _, field = name.partition(".")
+        return np.asarray(getattr(getattr(model, group), field))
     return getattr(model, name)
 
 
@@ -129,12 +144,13 @@ def program_key(scene: Scene, grasp: GraspConfig, backend: str) -> tuple:
     physics steps per control period). The key holds every size, a digest of every other
     array and option of the model, the zero pattern of the carried fields (a field
     that becomes zero or non-zero changes what Warp's model builder derives: an affine
-    gain, a massless body), and on the C engine the mean inertia, which its solver
-    scales by and which a batch cannot give per simulation.
+    gain, a massless body), and the values the backend's program reads that no
+    simulation carries (its entry's ``program_reads``: the C engine's solver scales by
+    the mean inertia, which a batch cannot give per simulation).
     """
     m = scene.model
-    name = resolve_backend(backend)
-    carried = carried_fields(name)
+    entry = registry.entry(backend)
+    carried = carried_fields(entry.name)
     h = hashlib.sha256()
     sizes = []
     for field in sorted(dir(m)):
@@ -156,8 +172,8 @@ def program_key(scene: Scene, grasp: GraspConfig, backend: str) -> tuple:
             h.update(field.encode())
             value = np.asarray(value)
             _digest(h, value != 0 if f"opt.{field}" in carried else value)
-    if name == "mujoco":
-        _digest(h, np.float64(m.stat.meaninertia))
+    for name in entry.program_reads:
+        _digest(h, np.float64(model_value(m, name)))
     return (
         tuple(sizes),
         h.hexdigest(),

@@ -19,6 +19,7 @@ from mjx_pick.core.gripper import GripperSpec, gripper_from_data
 from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.pickpoints import PickConfig
 from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.engine import registry
 
 SECTIONS = {
     "gripper": GripperSpec,
@@ -281,3 +282,8 @@ def sweep_problem(settings: Settings, name: str, values) -> str:
         except ConfigError as err:
             return f"{label} = {value:g} cannot be simulated: {user_words(str(err))}"
     return ""
+
+
+def backend_choices() -> list[str]:
+    """The backend select's options: 'auto' and every backend of the registry."""
+    return list(registry.choices())

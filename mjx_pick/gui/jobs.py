@@ -37,6 +37,8 @@ import threading
 import time
 from pathlib import Path
 
+from mjx_pick.engine.registry import AUTO, Impl
+
 CANCEL_GRACE_S = 15.0  # after a SIGINT, how long a run may take to write and stop
 # The child runs the very package this server runs, and nothing else from where it or the
 # server was started. Python's isolated mode leaves the working directory (-P) and
@@ -95,7 +97,7 @@ assert _WORKER_FROM_PACKAGE != _CLI_FROM_PACKAGE
 # `report` (its cost is rendering, not compiling; its GL contexts are better ended with
 # a process) nor `calibrate` (its derivative programs are large and used once).
 WARM_COMMANDS = ("evaluate", "sweep", "compare", "robust")
-DEFAULT_BACKEND = "mujoco"  # the settings form's; its worker is started with the server
+DEFAULT_BACKEND = Impl.MUJOCO.value  # the settings form's; its worker is started with the server
 # a worker whose resident memory grew by more than this since its first job is replaced
 # before its next job (a leak in a library must not grow the machine's memory job after
 # job)
@@ -109,7 +111,7 @@ def warm_backend(argv: list[str]) -> str | None:
         return None
     if "--backend" in argv[:-1]:
         return argv[argv.index("--backend") + 1]
-    return "auto"
+    return AUTO
 
 
 class Worker:

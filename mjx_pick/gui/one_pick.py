@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.gui import views
 from mjx_pick.gui.formatting import fmt
 from mjx_pick.gui.forms import Settings
@@ -105,7 +106,7 @@ def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict]:
         solver=settings.solver,
         grasp=settings.grasp,
         pick_config=pick_config,
-        backend=config.get("backend") or "auto",
+        backend=config.get("backend") or AUTO,
         n_traces=1,
     )
     again = {k: ev.table[k][0].as_py() for k in ev.table.column_names}

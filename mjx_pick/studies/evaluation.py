@@ -180,7 +180,7 @@ def evaluate(
       seed: generator seed (same seed, same pick-points).
       picks: a PickBatch or a CSV path (x_mm, y_mm, yaw_deg) instead of generating.
       contact, solver, grasp, pick_config: settings (defaults: the paper's).
-      backend: "auto", "warp", "mjx" or "mujoco".
+      backend: 'auto' or a backend's name (``engine.registry``).
       batch_size: simulations per backend call (default: per backend).
       out: output folder (nothing is written without one).
       n_traces: traces kept for the n best and n worst pick-points.

@@ -19,6 +19,7 @@ from pathlib import Path
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.objects import ObjectModel
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.simulator import Simulator, study_simulator
 
 
@@ -29,7 +30,7 @@ class RunOptions:
     n: pick-points per variant, gripper or run (None: the study's default).
     seed: pick-point (and perturbation) seed: same seed, same pick-points.
     pick_config: how pick-points are sampled and checked (None: ``PickConfig()``).
-    backend: 'auto', 'warp', 'mjx' or 'mujoco'.
+    backend: 'auto' or a backend's name (``engine.registry``).
     batch_size: simulations per backend call (None: the backend's default).
     out: output folder (None: nothing is written).
     overwrite: replace what another command (or configuration) wrote in out.
@@ -41,7 +42,7 @@ class RunOptions:
     n: int | None = None
     seed: int = 0
     pick_config: pp.PickConfig | None = None
-    backend: str = "auto"
+    backend: str = AUTO
     batch_size: int | None = None
     out: str | Path | None = None
     overwrite: bool = False

@@ -35,6 +35,7 @@ from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.core.objects import ObjectModel, check_same_object
 from mjx_pick.engine.backend import Settings
 from mjx_pick.engine.chunks import ChunkStore, open_store
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
 from mjx_pick.outputs.rundir import config_hash, finish, portable_object, release
 from mjx_pick.studies.options import RunOptions
@@ -308,7 +309,7 @@ def min_grip_force(
     lo_n: float | None = None,
     hi_n: float | None = None,
     tolerance_n: float = 0.5,
-    backend: str = "auto",
+    backend: str = AUTO,
     batch_size: int | None = None,
     simulator: Simulator | None = None,
 ) -> np.ndarray:

@@ -18,7 +18,6 @@ from mjx_pick.gui.page.widgets import error_label, upload
 from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload
 
 PRESET = "robotiq-2f85"  # the gripper the page starts with
-BACKENDS = ["auto", "mujoco", "warp", "mjx"]
 
 
 class SettingsForm:
@@ -38,7 +37,9 @@ class SettingsForm:
                 label="gripper preset",
                 on_change=self.on_preset,
             ).classes("w-56")
-            self.backend = ui.select(BACKENDS, value=jobs.DEFAULT_BACKEND, label="backend")
+            self.backend = ui.select(
+                forms.backend_choices(), value=jobs.DEFAULT_BACKEND, label="backend"
+            )
             self.backend.classes("w-40")
         with ui.row().classes("items-center"):
             self.toml_upload = upload(

@@ -15,6 +15,7 @@ import numpy as np
 
 from mjx_pick.core.config import ConfigError, check_range, to_dict
 from mjx_pick.core.physics import ContactParams
+from mjx_pick.engine import registry
 from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.rundir import claim, config_hash, finish
 from mjx_pick.studies.calibration import estimators as E
@@ -271,11 +272,11 @@ def _write_fit(result, problem, out_dir: Path, request: dict, estimator: str, wa
     write_result(result, problem, out_dir)
     meta = problem.runner.describe(wall_s)
     meta["timing"]["rollouts"] = result.rollouts
-    if estimator == "jvp":  # the gradients ran on MJX's JAX physics, beside the runner
+    if estimator == "jvp":  # the gradients ran on the differentiable backend's physics
         import jax
 
         d = jax.devices()[0]
-        meta.update(backend="mjx", device=f"{d.platform}:{d.device_kind}")
+        meta.update(backend=registry.differentiable(), device=f"{d.platform}:{d.device_kind}")
     finish(out_dir, command="calibrate", config=request, **meta)
     # the fit is complete and written: its checkpoints served only a resume
     shutil.rmtree(out_dir / "checkpoint", ignore_errors=True)

@@ -19,6 +19,7 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError, check_range
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.engine.backend import Settings, make_inputs
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import Runner
 from mjx_pick.engine.simulator import differentiable_rollout
 from mjx_pick.studies.calibration import loss as L
@@ -107,7 +108,7 @@ class Problem:
         priors: dict | None = None,
         start: dict | None = None,
         pick_config: pp.PickConfig | None = None,
-        backend: str = "auto",
+        backend: str = AUTO,
         replicates: int = 3,
         replica_jitter_mm: float = 0.05,
         force_mismatch: bool = False,

@@ -8,6 +8,7 @@ import numpy as np
 
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.engine.backend import Settings
+from mjx_pick.engine.registry import Impl
 from mjx_pick.studies.calibration.data import Outcomes, make_outcomes
 
 
@@ -24,7 +25,7 @@ def synthetic_outcomes(
     force_offset_n: float = 0.0,
     trace_noise: dict | None = None,
     seed: int = 0,
-    backend: str = "mujoco",
+    backend: str = Impl.MUJOCO,
 ) -> Outcomes:
     """Outcomes as a real cell would report them, simulated with hidden settings.
 

@@ -10,6 +10,7 @@ from mjx_pick.core.config import (
 )
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.engine.backend import Settings
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.outputs.rundir import claim, config_hash, finish
 from mjx_pick.studies.calibration.parameters import (
     ParamSpace,
@@ -54,7 +55,7 @@ def plan_trials(
     blind: bool = False,
     bounds: dict | None = None,
     priors: dict | None = None,
-    backend: str = "auto",
+    backend: str = AUTO,
     batch_size: int | None = None,
     overwrite: bool = False,
     write_templates: TemplateWriter | None = None,

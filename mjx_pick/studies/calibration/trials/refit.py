@@ -17,6 +17,7 @@ from mjx_pick.core.config import (
 )
 from mjx_pick.core.metrics import mcnemar_p
 from mjx_pick.core.objects import ObjectModel, check_same_object
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.kernels import types as kt
 from mjx_pick.outputs.rundir import read_manifest
 from mjx_pick.studies.calibration.identify import Z95
@@ -86,7 +87,7 @@ def fit_trials(
     priors: dict | None = None,
     temperature_mm: float | None = None,
     next_n: int = 6,
-    backend: str = "auto",
+    backend: str = AUTO,
     overwrite: bool = False,
     resume: bool = False,
     log=None,

@@ -18,6 +18,7 @@ from mjx_pick.core.config import (
 from mjx_pick.core.objects import ObjectModel, check_same_object
 from mjx_pick.core.scene import build_scene
 from mjx_pick.engine.backend import Settings, make_inputs
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import types as kt
 from mjx_pick.outputs.rundir import read_manifest
@@ -74,9 +75,7 @@ class Simulations:
     mapped as a fit maps it (``parameters.row_inputs``: contact through
     ``physics.mujoco_contact``, F_d + force offset), so draws and fits simulate alike."""
 
-    def __init__(
-        self, obj: ObjectModel, settings: Settings, backend: str = "auto", batch_size=None
-    ):
+    def __init__(self, obj: ObjectModel, settings: Settings, backend: str = AUTO, batch_size=None):
         s = settings
         self.object, self.settings = obj, s
         self.scene = build_scene(obj, s.gripper, s.contact, s.solver, s.grasp)

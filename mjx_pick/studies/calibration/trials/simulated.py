@@ -11,6 +11,7 @@ from mjx_pick.core.config import (
     ConfigError,
 )
 from mjx_pick.core.objects import ObjectModel, check_same_object
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.studies.calibration.parameters import (
     canonical_params,
 )
@@ -32,7 +33,7 @@ def synthetic_trials(
     jitter_mm: float | None = None,
     jitter_deg: float | None = None,
     seed: int = 1,
-    backend: str = "auto",
+    backend: str = AUTO,
 ) -> int:
     """SYNTHETIC outcomes for validation: fill every untried row of the sheet as a real
     cell whose contact parameters are `hidden` ({name: value}, ``parameters.PARAMS``)
