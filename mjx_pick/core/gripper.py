@@ -8,7 +8,8 @@ largest distance between the pads' inner faces.
 A gripper TOML with an ``[mjcf]`` table is a real gripper's MJCF model instead
 (``mjx_pick.core.mjcf_gripper``): its stroke and pad geometry are measured from the model,
 and the TOML gives its name, force and speed ranges and which geoms and actuator are
-its pads and drive.
+its pads and drive. A ``[urdf]`` table names a URDF instead (``mjx_pick.core.urdf_gripper``:
+its pad links, the joint to drive and the servo's gains), which then takes the same path.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pick.core import mjcf_gripper
+from mjx_pick.core import mjcf_gripper, urdf_gripper
 from mjx_pick.core.config import ConfigError, check_fields, from_mapping, setting
 
 
@@ -202,7 +203,7 @@ def gripper_from_data(data: dict, where: str, folder: Path) -> GripperSpec:
     """
     data = dict(data)
     base = data.pop("base", None)
-    known = {f.name for f in dataclasses.fields(GripperSpec)}
+    known = {f.name for f in dataclasses.fields(GripperSpec)} | {"urdf"}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ConfigError(
@@ -225,11 +226,17 @@ def gripper_from_data(data: dict, where: str, folder: Path) -> GripperSpec:
         with resources.as_file(res) as p:
             base_data = tomllib.loads(p.read_text())
             base_folder = p.parent
-        if "mjcf" in base_data and "mjcf" not in data:
+        models = ("mjcf", "urdf")
+        if any(k in base_data for k in models) and not any(k in data for k in models):
             folder = base_folder
+        elif any(k in data for k in models):  # the file's model replaces the base's
+            base_data = {k: v for k, v in base_data.items() if k not in models}
         source = data.get("source", f"{where}, based on {base}: {base_data.get('source', '')}")
         data = {**base_data, **data, "source": source}
-    need = REQUIRED_MJCF if "mjcf" in data else REQUIRED
+    if "mjcf" in data and "urdf" in data:
+        raise ConfigError(f"{where}: give an [mjcf] or a [urdf] table, not both")
+    model = "mjcf" in data or "urdf" in data
+    need = REQUIRED_MJCF if model else REQUIRED
     missing = [k for k in need if k not in data]
     if missing:
         presets = ", ".join(preset_names())
@@ -238,27 +245,34 @@ def gripper_from_data(data: dict, where: str, folder: Path) -> GripperSpec:
             f'{", ".join(need)}, or names the preset it changes (base = "robotiq-2f85"; '
             f"presets: {presets})"
         )
-    if "mjcf" in data:
+    if model:
         return mjcf_gripper_spec(data, folder / where, folder=folder)
     return from_mapping(GripperSpec, data, where=where)
 
 
 def mjcf_gripper_spec(data: dict, path: Path, folder: Path | None = None) -> GripperSpec:
-    """A GripperSpec for an MJCF gripper TOML (already parsed): the [mjcf] table checked
-    against the model, geometry and masses measured from it (a quasi-static close)."""
+    """A GripperSpec for an MJCF or URDF gripper TOML (already parsed): the [mjcf] or
+    [urdf] table checked against the model, geometry and masses measured from it (a
+    quasi-static close)."""
     data = dict(data)
-    table = data.pop("mjcf")
+    kind = "urdf" if "urdf" in data else "mjcf"
+    table = data.pop(kind)
     if not isinstance(table, dict):
-        raise ConfigError(f"{path.name}: mjcf must be a table ([mjcf])")
+        raise ConfigError(f"{path.name}: {kind} must be a table ([{kind}])")
     given = sorted(set(data) & set(mjcf_gripper.GEOMETRY_FIELDS + MJCF_MEASURED))
     if given:
         raise ConfigError(
-            f"{path.name}: {', '.join(given)} are measured from the MJCF model; remove them"
+            f"{path.name}: {', '.join(given)} are measured from the {kind.upper()} model; "
+            "remove them"
         )
-    mjcf = mjcf_gripper.resolve(
-        from_mapping(mjcf_gripper.MjcfGripper, table, where=f"{path.name} [mjcf]"),
-        folder if folder is not None else path.parent,
-    )
+    folder = folder if folder is not None else path.parent
+    where = f"{path.name} [{kind}]"
+    if kind == "urdf":
+        urdf = from_mapping(urdf_gripper.UrdfGripper, table, where=where)
+        mjcf = mjcf_gripper.from_urdf(urdf, folder)
+    else:
+        mjcf = from_mapping(mjcf_gripper.MjcfGripper, table, where=where)
+        mjcf = mjcf_gripper.resolve(mjcf, folder)
     kin = mjcf_gripper.characterise(mjcf)
     spec = from_mapping(GripperSpec, data, where=path.name)
     return dataclasses.replace(spec, mjcf=mjcf, **measured_fields(kin))

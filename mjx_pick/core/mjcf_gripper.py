@@ -17,6 +17,9 @@ along the stroke (:class:`Kinematics`). From these come
   the start so the pad centre meets the object at the grasp height after the pads
   have descended along their path (:meth:`Kinematics.height_compensation_m`).
 
+A ``[urdf]`` table (``mjx_pick.core.urdf_gripper``) makes the same spec from a URDF: the
+model is MuJoCo's URDF import plus the servo a URDF lacks (``MjcfGripper.urdf``).
+
 Frames: the gripper's mount body is attached under the scene's ``gripper`` body with
 ``mount_quat``; the scene's gripper frame has the fingers closing along x (left pad at
 -x) and the pads below it (approach along -z). Gripper geoms never collide: the pads
@@ -43,7 +46,8 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
-from mjx_pick.core.config import ConfigError, check_range
+from mjx_pick.core import urdf_gripper
+from mjx_pick.core.config import ConfigError, check_range, from_mapping
 from mjx_pick.kernels.types import DriveMap
 
 PREFIX = "gripper/"  # names of the attached gripper's elements in the scene
@@ -85,9 +89,15 @@ class MjcfGripper:
     # pair's mesh-mesh collision (benchmarks/linkage.py links measures the cost), and
     # the table force is then the object's external force less the pads' AND the links'
     link_contacts: bool = False
+    # the URDF this model is made from (``mjx_pick.core.urdf_gripper``): file is then the
+    # URDF, and the names above are those the URDF import gives (see from_urdf)
+    urdf: urdf_gripper.UrdfGripper | None = None
 
     def __post_init__(self):
         o = "gripper.mjcf"
+        if isinstance(self.urdf, dict):  # from a saved config (JSON)
+            urdf = from_mapping(urdf_gripper.UrdfGripper, self.urdf, where=f"{o}.urdf")
+            object.__setattr__(self, "urdf", urdf)
         for side in ("pad_left_geoms", "pad_right_geoms"):
             value = getattr(self, side)
             if isinstance(value, str):
@@ -217,6 +227,23 @@ def _ascending(x, y):
     return np.asarray(x)[order], np.asarray(y)[order]
 
 
+def from_urdf(urdf: urdf_gripper.UrdfGripper, base_dir: Path) -> MjcfGripper:
+    """The MJCF-path spec of a URDF gripper (its file resolved relative to base_dir and
+    checked against the URDF): its mount body, pad geoms and servo as the import names
+    them."""
+    urdf = urdf_gripper.resolve(urdf, base_dir)
+    return MjcfGripper(
+        file=urdf.file,
+        mount_body=urdf_gripper.root_link(urdf),
+        pad_left_geoms=urdf_gripper.pad_geoms(urdf, "left"),
+        pad_right_geoms=urdf_gripper.pad_geoms(urdf, "right"),
+        actuator=urdf_gripper.SERVO,
+        mount_quat=urdf.mount_quat,
+        link_contacts=urdf.link_contacts,
+        urdf=urdf,
+    )
+
+
 def resolve(mjcf: MjcfGripper, base_dir: Path) -> MjcfGripper:
     """The spec with its file made absolute (relative to base_dir) and checked."""
     path = Path(mjcf.file)
@@ -243,10 +270,7 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
     """The gripper's MjSpec, ready to attach: its geoms never collide, bodies are held
     against gravity (the arm carries the gripper; the linkage is measured without it),
     the actuator overrides applied, and its options replaced by the scene's."""
-    try:
-        spec = mujoco.MjSpec.from_file(mjcf.file)
-    except Exception as err:  # noqa: BLE001 - MuJoCo's parse errors are ValueErrors
-        raise ConfigError(f"gripper.mjcf.file = {mjcf.file!r} does not load: {err}") from err
+    spec = _load(mjcf)
     if spec.body(mjcf.mount_body) is None:
         raise _missing("body", "mount_body", mjcf.mount_body, _names(spec.bodies))
     for field in ("pad_left_geoms", "pad_right_geoms"):
@@ -282,6 +306,14 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
     if mjcf.actuator_forcerange is not None:
         act.forcerange = [-mjcf.actuator_forcerange, mjcf.actuator_forcerange]
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+    if mjcf.urdf is not None:
+        # a URDF's <mimic> is a rigid coupling; MuJoCo's default equality (a 20 ms time
+        # constant) lets the mimicking finger lag and overshoot the driven one by
+        # millimetres as the drive starts: make it the stiffest MuJoCo integrates
+        # stably, two time steps
+        step = option.timestep if option is not None else spec.option.timestep
+        for eq in spec.equalities:
+            eq.solref = [2.0 * step, 1.0]
     # the scene's solver options win: copy them so attaching raises no conflict
     if option is not None:
         for name in (
@@ -299,6 +331,16 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
     return spec
 
 
+def _load(mjcf: MjcfGripper) -> mujoco.MjSpec:
+    """The gripper's file as MuJoCo reads it (a URDF through ``urdf_gripper``)."""
+    if mjcf.urdf is not None:
+        return urdf_gripper.model_spec(mjcf.urdf)
+    try:
+        return mujoco.MjSpec.from_file(mjcf.file)
+    except Exception as err:  # noqa: BLE001 - MuJoCo's parse errors are ValueErrors
+        raise ConfigError(f"gripper.mjcf.file = {mjcf.file!r} does not load: {err}") from err
+
+
 def _link_geoms(spec: mujoco.MjSpec, mjcf: MjcfGripper) -> list:
     """The file's collision geoms (contype or conaffinity set) other than the pads."""
     pads = set(mjcf.pad_left_geoms) | set(mjcf.pad_right_geoms)
@@ -313,7 +355,7 @@ def _link_names(spec: mujoco.MjSpec, mjcf: MjcfGripper) -> list[str]:
 def link_geoms(mjcf: MjcfGripper) -> tuple[str, ...]:
     """Names (unprefixed) of the gripper's link collision geoms, as attached (unnamed
     ones are named link0, link1, ...)."""
-    spec = mujoco.MjSpec.from_file(mjcf.file)
+    spec = _load(mjcf)
     return tuple(_link_names(spec, mjcf))
 
 

@@ -759,9 +759,11 @@ def experiment_settings(scene: Scene, settings: dict) -> dict:
     obj = {k: v for k, v in scene.object.summary().items() if k != "source"}
     values = {k: to_dict(v) for k, v in settings.items()}
     mjcf = (values.get("gripper") or {}).get("mjcf")
-    if mjcf and mjcf.get("file"):
-        file = Path(mjcf["file"])
-        mjcf["file"] = f"sha256:{_file_digest(file)}" if file.is_file() else file.name
+    # a model file by its content, wherever it is installed (a URDF: also its table's)
+    for table in (mjcf, (mjcf or {}).get("urdf")):
+        if table and table.get("file"):
+            file = Path(table["file"])
+            table["file"] = f"sha256:{_file_digest(file)}" if file.is_file() else file.name
     return {"model": xml, "object": obj, **values}
 
 
