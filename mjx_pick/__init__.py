@@ -60,6 +60,8 @@ _PUBLIC = {
     "calibrate": "studies.calibration",
     # outputs
     "report": "outputs.reporting",
+    "export_labels": "outputs.exchange",
+    "read_labels": "outputs.exchange",
     "use_offscreen_rendering": "outputs.display",
     "RunOptions": "studies.options",
 }
@@ -92,6 +94,7 @@ __all__ = [
     "compare",
     "design_search",
     "evaluate",
+    "export_labels",
     "generate_grid",
     "generate_normal",
     "load_asset",
@@ -104,6 +107,7 @@ __all__ = [
     "object_from_polygon",
     "optimize",
     "preset_names",
+    "read_labels",
     "report",
     "robustness",
     "sweep",
@@ -138,6 +142,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load lazily
     from mjx_pick.engine.runner import Runner as Engine
     from mjx_pick.engine.simulator import Simulator
     from mjx_pick.outputs.display import use_offscreen_rendering
+    from mjx_pick.outputs.exchange import export_labels, read_labels
     from mjx_pick.outputs.reporting import report
     from mjx_pick.studies.calibration import calibrate
     from mjx_pick.studies.comparison import compare, design_search

@@ -8,6 +8,7 @@
   mjx-pick design OBJECT --bound finger_width_mm=10:40 --bound stroke_mm=60:140 --out DIR
   mjx-pick robust OBJECT [--results DIR] --top-k 10 --m 32 --out DIR
   mjx-pick report DIR                               (plots, maps, animations, template, HTML)
+  mjx-pick export DIR --format acronym|graspgen|isaac-grasp   (the labels as grasp files)
   mjx-pick calibrate OUTCOMES.csv OBJECT --params pad_friction,stiffness --out DIR
   mjx-pick presets | assets                          (what is shipped)
   mjx-pick cache info | clear                        (object results, compiled programs)

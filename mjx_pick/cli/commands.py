@@ -341,6 +341,16 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_export(args) -> int:
+    from mjx_pick.outputs.exchange import export_labels
+
+    written = export_labels(
+        args.run, args.format, args.out, depth_mm=args.depth_mm, overwrite=args.overwrite
+    )
+    print(f"{args.format}: {written['labels']} (object mesh: {written['mesh']})")
+    return 0
+
+
 def print_summary(s: dict, out, total_s: float | None = None) -> None:
     """The evaluate summary's lines; total_s: the process's time so far, when known."""
     from mjx_pick.core.metrics import label_check_rows, rate_text

@@ -12,6 +12,7 @@ from mjx_pick.cli.commands import (
     cmd_compare,
     cmd_design,
     cmd_evaluate,
+    cmd_export,
     cmd_gui,
     cmd_params,
     cmd_picks,
@@ -278,6 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
         _add_picks_parser,
         _add_calibrate_parser,
         _add_report_parser,
+        _add_export_parser,
         _add_listing_parsers,
         _add_cache_parser,
         _add_gui_parser,
@@ -630,6 +632,30 @@ def _add_report_parser(sub) -> None:
     )
     _add_progress(rp)
     rp.set_defaults(func=cmd_report)
+
+
+def _add_export_parser(sub) -> None:
+    """``mjx-pick export``."""
+    from mjx_pick.outputs.exchange import FORMATS
+
+    ep = sub.add_parser(
+        "export", help="the run's labels as ACRONYM, GraspGen or isaac_grasp grasp files"
+    )
+    ep.add_argument("run", help="an evaluate output folder")
+    ep.add_argument("--format", required=True, choices=list(FORMATS), help="the grasp file format")
+    ep.add_argument(
+        "--out",
+        help="the file to write (default: RUN/grasps_<format>.h5|.json|.yaml); the object's "
+        "mesh goes beside it as <stem>_object.obj",
+    )
+    ep.add_argument(
+        "--depth-mm",
+        type=float,
+        help="the gripper base's distance behind the grasp centre along the approach "
+        "(GraspGen's depth; default: the simulated gripper's own)",
+    )
+    ep.add_argument("--overwrite", action="store_true", help="replace existing files")
+    ep.set_defaults(func=cmd_export)
 
 
 def _add_listing_parsers(sub) -> None:

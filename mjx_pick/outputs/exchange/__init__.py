@@ -1,0 +1,139 @@
+"""A run's labels in the field's grasp formats: ACRONYM HDF5, GraspGen JSON, isaac_grasp YAML.
+
+Each pick-point becomes the gripper's pose in the object's frame (``poses``: the axes
+and the base the formats use), with its success and score; the object's mesh as
+simulated is written beside the file, which names it (scale 1: metres). docs/formats.md
+gives the frames and every field.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from mjx_pick.core.config import ConfigError
+
+if TYPE_CHECKING:
+    from mjx_pick.outputs.exchange.poses import GraspLabels
+
+__all__ = ["FORMATS", "export_labels", "read_labels"]
+
+# format name -> its module (SUFFIX, write, read); imported on use, so that the CLI's
+# parser lists the names without loading MuJoCo, h5py or YAML
+FORMATS = {"acronym": "acronym", "graspgen": "graspgen", "isaac-grasp": "isaac_grasp"}
+FRAME = (
+    "approach along +z, fingers close along x, origin at the gripper's base, the grasp "
+    "centre depth_m along +z from it"
+)
+
+
+def _format(name: str):
+    if name not in FORMATS:
+        raise ConfigError(
+            f"format = {name!r} is not a grasp format: choose one of {', '.join(FORMATS)}"
+        )
+    return importlib.import_module(f"mjx_pick.outputs.exchange.{FORMATS[name]}")
+
+
+def default_path(run_dir: str | os.PathLike, fmt: str) -> Path:
+    """Where ``export_labels`` writes a format by default: grasps_<format>.<suffix> in the
+    run folder."""
+    return Path(run_dir) / f"grasps_{fmt.replace('-', '_')}{_format(fmt).SUFFIX}"
+
+
+def export_labels(
+    run_dir: str | os.PathLike,
+    fmt: str,
+    out: str | os.PathLike | None = None,
+    *,
+    depth_mm: float | None = None,
+    overwrite: bool = False,
+) -> dict[str, Path]:
+    """Write an evaluate run's pick-points in a grasp format, and the object's mesh.
+
+    Args:
+      run_dir: an evaluate output folder.
+      fmt: "acronym" (HDF5), "graspgen" (JSON) or "isaac-grasp" (YAML).
+      out: the file to write; default ``default_path(run_dir, fmt)``. The object's mesh
+        goes beside it as ``<out's stem>_object.obj`` (m).
+      depth_mm: the gripper base's distance behind the grasp centre along the approach
+        (GraspGen's ``depth`` of the gripper the labels are for); None: the simulated
+        gripper's own (``poses``).
+      overwrite: replace an existing file (otherwise refused).
+
+    Returns:
+      {"labels": the file, "mesh": the object's mesh}.
+    """
+    from mjx_pick.outputs.exchange.poses import GraspLabels, object_mesh, pick_poses
+    from mjx_pick.outputs.reporting.run import Run
+
+    module = _format(fmt)
+    if depth_mm is not None and not (depth_mm == depth_mm and abs(depth_mm) < 1e4):
+        raise ConfigError(f"depth_mm = {depth_mm!r} must be a finite distance below 10 m")
+    path = Path(out) if out is not None else default_path(run_dir, fmt)
+    if path.suffix.lower() != module.SUFFIX:
+        raise ConfigError(f"out = {str(path)!r}: a file of format {fmt} ends in {module.SUFFIX}")
+    mesh_path = path.with_name(f"{path.stem}_object.obj")
+    run = Run.load(run_dir)
+    for p in (path, mesh_path):
+        if p.exists() and not overwrite:
+            raise ConfigError(f"{p} exists: choose another --out, or --overwrite to replace it")
+    transforms, depth = pick_poses(run, depth_mm)
+    table = run.table
+    labels = GraspLabels(
+        transforms=transforms,
+        success=table["success"].to_numpy(zero_copy_only=False).astype(bool),
+        score=table["score"].to_numpy(zero_copy_only=False).astype(float),
+        object_file=mesh_path.name,
+        object_scale=1.0,
+        depth_m=depth,
+        pick_id=table["pick_id"].to_numpy(),
+    )
+    obj = run.config.get("object") or {}
+    extra = {
+        "gripper": run.gripper.name,
+        "object": obj.get("name", ""),
+        "object_frame": "origin at the centre of mass on the table, z up",
+        "frame": FRAME,
+        "run": str(run.path.resolve()),
+        "mass_kg": None if obj.get("mass_g") is None else float(obj["mass_g"]) * 1e-3,
+        "failure": table["failure"].to_pylist()
+        if "failure" in table.column_names
+        else [""] * table.num_rows,
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mesh = object_mesh(run)
+    _atomic(mesh_path, lambda p: mesh.export(p, file_type="obj"))
+    _atomic(path, lambda p: module.write(labels, p, extra))
+    return {"labels": path, "mesh": mesh_path}
+
+
+def read_labels(path: str | os.PathLike, fmt: str | None = None) -> GraspLabels:
+    """A grasp file read by its format's published fields (fmt: by the file's suffix
+    when None)."""
+    path = Path(path)
+    if fmt is None:
+        by_suffix = {_format(name).SUFFIX: name for name in FORMATS}
+        if path.suffix.lower() not in by_suffix:
+            raise ConfigError(
+                f"{path}: say its format ({', '.join(FORMATS)}); its suffix names none"
+            )
+        fmt = by_suffix[path.suffix.lower()]
+    module = _format(fmt)
+    if not path.is_file():
+        raise ConfigError(f"{path} does not exist")
+    return module.read(path)
+
+
+def _atomic(path: Path, write) -> None:
+    """write(temporary path) beside path, then rename it to path."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)

@@ -1,0 +1,118 @@
+"""A run's pick-points as gripper poses in the object's frame, in the exchange formats' axes.
+
+mjx_pick's gripper frame G (``docs/formats.md``): z up, the gripper approaches along
+-z, its fingers close along x; a pick-point (x, y, yaw) is the object's planar pose in
+G. The exchange formats (ACRONYM, GraspGen, isaac_grasp as GraspGen uses it) put a
+gripper's frame E at its base with the approach along +z and the closing along x, the
+grasp centre (TCP) ``depth`` along +z from the base. So E is G turned half a turn about
+its x axis (x stays, y and z flip), at the gripper's base:
+
+    R_OE = Rz(-yaw) diag(1, -1, -1)
+    p_OE = -Rz(-yaw) (x, y, 0) + (0, 0, z_tcp + depth)
+
+with z_tcp the grasp centre's height above the table (the fingertips' height plus half
+the pad height) and depth the base's height above it: a model gripper's (MJCF or
+URDF) mount at the pick's start (its height above the pads' centre when fully open,
+plus the pick's height compensation), 0 for a parametric gripper (whose frame is its
+pads' centre), or a depth the caller gives (GraspGen's ``depth`` of a real gripper).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import trimesh
+
+from mjx_pick.core.config import ConfigError
+from mjx_pick.outputs.reporting.run import Run
+
+# the results table's columns a pose needs
+NEEDED = ("pick_id", "x_mm", "y_mm", "yaw_deg", "success", "score")
+# E = G turned half a turn about x
+G_TO_E = np.diag([1.0, -1.0, -1.0])
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class GraspLabels:
+    """Grasps of one object as an exchange file holds them.
+
+    transforms: (N, 4, 4) gripper base poses in the object's frame, m, the exchange
+      axes (approach +z, closing x). success: (N,) bool. score: (N,) eq. (2)'s grasp
+      quality, NaN where a simulation diverged (or where the file has none). object_file:
+      the object's mesh as the file names it; object_scale: the factor that takes the
+      mesh's units to metres. depth_m: (N,) the grasp centre's distance from the base
+      along +z. pick_id: (N,) mjx_pick's pick-point ids (None where the file has none).
+    """
+
+    transforms: np.ndarray
+    success: np.ndarray
+    score: np.ndarray
+    object_file: str
+    object_scale: float
+    depth_m: np.ndarray | None = None
+    pick_id: np.ndarray | None = None
+
+
+def pick_poses(run: Run, depth_mm: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """((N, 4, 4) poses, (N,) depths in m) of a run's pick-points; see the module
+    docstring. depth_mm: the base's distance behind the grasp centre, None for the
+    gripper's own."""
+    table = run.table
+    missing = [c for c in NEEDED if c not in table.column_names]
+    if depth_mm is None and run.gripper.mjcf is not None:
+        missing += [c for c in ("height_compensation_mm",) if c not in table.column_names]
+    if missing:
+        raise ConfigError(
+            f"{run.path}/results.parquet has no column(s) {', '.join(missing)}: it is not "
+            "an evaluate run's table (written by an old version, or by another command); "
+            "evaluate again"
+        )
+    scene = run.config.get("scene") or {}
+    if "fingertip_height_mm" not in scene:
+        raise ConfigError(
+            f"{run.path}/config.json has no scene.fingertip_height_mm (made by an old "
+            "version, or damaged): evaluate again"
+        )
+    x, y, yaw = (np.asarray(table[c], float) for c in ("x_mm", "y_mm", "yaw_deg"))
+    z_tcp_mm = float(scene["fingertip_height_mm"]) + 0.5 * run.gripper.pad_height_mm
+    if depth_mm is not None:
+        depth = np.full(len(x), float(depth_mm))
+    elif run.gripper.mjcf is not None:
+        from mjx_pick.core.mjcf_gripper import characterise
+
+        mount = -1e3 * float(characterise(run.gripper.mjcf).pad_centre_z[0])
+        comp = np.nan_to_num(np.asarray(table["height_compensation_mm"], float))
+        depth = mount + comp
+    else:
+        depth = np.zeros(len(x))
+    c, s = np.cos(np.radians(-yaw)), np.sin(np.radians(-yaw))
+    rot = np.zeros((len(x), 3, 3))
+    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
+    rot[:, 2, 2] = 1.0  # Rz(-yaw): G's axes in the object's frame
+    offset = np.stack([x, y, np.zeros_like(x)], axis=1)
+    pos = -np.einsum("nij,nj->ni", rot, offset)
+    pos[:, 2] = z_tcp_mm + depth
+    out = np.tile(np.eye(4), (len(x), 1, 1))
+    out[:, :3, :3] = rot @ G_TO_E
+    out[:, :3, 3] = pos * 1e-3
+    return out, depth * 1e-3
+
+
+def object_mesh(run: Run) -> trimesh.Trimesh:
+    """The object's mesh as simulated, in its frame (m): the ``visual`` mesh of the run's
+    scene.xml (a photo part's extruded silhouette, a mesh part as posed and centred)."""
+    path = run.path / "scene.xml"
+    if not path.is_file():
+        raise ConfigError(f"{run.path} has no scene.xml (made by an old version): evaluate again")
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as err:
+        raise ConfigError(f"{path} is damaged (not XML: {err})") from err
+    mesh = root.find("asset/mesh[@name='visual']")
+    if mesh is None or not mesh.get("vertex") or not mesh.get("face"):
+        raise ConfigError(f"{path} holds no object mesh named 'visual' with vertices and faces")
+    vertices = np.array(mesh.get("vertex").split(), float).reshape(-1, 3)
+    faces = np.array(mesh.get("face").split(), int).reshape(-1, 3)
+    return trimesh.Trimesh(vertices, faces, process=False)
