@@ -77,11 +77,13 @@ def picks_png(obj: ObjectModel, picks: PickBatch) -> tuple[bytes, np.ndarray]:
 
 
 def score_map_png(run) -> tuple[bytes, np.ndarray]:
-    """A run's pick-points on its outline coloured by score (gripper centres, object
-    frame), and each pick-point's pixel in the PNG (rows in the run table's order)."""
+    """A run's pick-points on its outline by outcome, the successes coloured by score
+    (gripper centres, object frame), and each pick-point's pixel in the PNG (rows in
+    the run table's order)."""
     t = run.table
     x, y, yaw = (np.asarray(t[c], float) for c in ("x_mm", "y_mm", "yaw_deg"))
     score = np.nan_to_num(np.asarray(t["score"], float), nan=0.0)
+    success = np.asarray(t["success"], bool)
     drawn = {}
 
     def draw(path):
@@ -92,7 +94,8 @@ def score_map_png(run) -> tuple[bytes, np.ndarray]:
             yaw,
             path,
             values=score,
-            title=f"{len(x)} pick-points by score (gripper centres on the part, object frame)",
+            success=success,
+            title=plots.outcome_title(len(x)),
         )
 
     return _render(draw), drawn["pixels"]

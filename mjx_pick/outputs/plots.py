@@ -4,7 +4,8 @@
 at its pose, both finger footprints at the starting opening, the coverage region
 between the fingertips and the object's bounding box. ``draw_candidates`` shows many
 candidates in the object frame, each as the gripper centre with its closing axis,
-coloured by feasibility reason or by a score.
+coloured by feasibility reason or by a score, or by outcome (successes by score,
+failures as crosses).
 """
 
 from __future__ import annotations
@@ -149,6 +150,48 @@ def gripper_in_object_frame(x_mm, y_mm, yaw_deg):
     return np.column_stack([gx, gy]), np.column_stack([ax, ay])
 
 
+FAILURE_COLOUR = "#d62728"
+
+
+def outcome_title(n: int) -> str:
+    """The title of a map of n simulated pick-points by outcome (tab 4's, the report's)."""
+    return f"{n} pick-points: successes by score, failures x (gripper centres, object frame)"
+
+
+def outcome_scatter(ax, centre: np.ndarray, values: np.ndarray, success: np.ndarray, label: str):
+    """Pick-points by outcome on ax: successes as dots coloured by value (viridis, the
+    colour bar spanning the successes' values), failures as red crosses over them.
+    centre: (N, 2) mm; values, success: (N,). Returns (successes, failures): the two
+    PathCollections, None where there are none."""
+    fig = ax.get_figure()
+    ok = np.asarray(success, bool)
+    dots = crosses = None
+    if ok.any():
+        dots = ax.scatter(
+            centre[ok, 0],
+            centre[ok, 1],
+            c=values[ok],
+            cmap="viridis",
+            s=12,
+            zorder=3,
+            label=f"success ({int(ok.sum())})",
+        )
+        fig.colorbar(dots, ax=ax, label=f"{label} (successes)")
+    if (~ok).any():
+        crosses = ax.scatter(
+            centre[~ok, 0],
+            centre[~ok, 1],
+            marker="x",
+            color=FAILURE_COLOUR,
+            s=22,
+            linewidths=1.2,
+            zorder=4,
+            label=f"failure ({int((~ok).sum())})",
+        )
+    ax.legend(loc="upper right", fontsize=7, markerscale=1.5)
+    return dots, crosses
+
+
 def draw_candidates(
     obj: ObjectModel | shapely.Polygon,
     x_mm,
@@ -160,6 +203,7 @@ def draw_candidates(
     value_label: str = "score",
     title: str | None = None,
     max_points: int = 4000,
+    success=None,
 ) -> np.ndarray:
     """Many pick-points on the silhouette (object frame): by reason label or by value.
 
@@ -167,6 +211,8 @@ def draw_candidates(
     drawn where the gripper's centre lies on the part, with its closing axis.
 
     obj: the object, or just its silhouette polygon (mm, object frame).
+    success: (N,) bool with values: the successes are dots coloured by value (the
+      colour bar spans theirs), the failures red crosses (:func:`outcome_scatter`).
     Returns: (N, 2) pixel positions (column, row from the top left) of the drawn gripper
     centres in the PNG written, NaN for those left out (beyond max_points); a viewer
     finds the pick-point under a click with them.
@@ -178,7 +224,10 @@ def draw_candidates(
     fig, ax = new_figure(figsize=(7, 5.5))
     add_polygon(ax, outline, fc="#dddddd", ec="k", lw=1)
     seg = 3.0
-    if values is not None:
+    if values is not None and success is not None:
+        v = np.asarray(values, float)[keep]
+        outcome_scatter(ax, centre[keep], v, np.asarray(success, bool)[keep], value_label)
+    elif values is not None:
         v = np.asarray(values, float)[keep]
         sc = ax.scatter(centre[keep, 0], centre[keep, 1], c=v, cmap="viridis", s=10, zorder=3)
         fig.colorbar(sc, ax=ax, label=value_label)

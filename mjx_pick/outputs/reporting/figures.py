@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.kernels import types as kt
-from mjx_pick.outputs.plots import draw_candidates, new_figure, save_png
+from mjx_pick.outputs.plots import draw_candidates, new_figure, outcome_title, save_png
 from mjx_pick.outputs.reporting.run import Run
 
 __all__ = ["PHASE_COLOURS", "phase_events", "force_plot", "maps"]
@@ -94,7 +94,8 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
         yaw,
         out_dir / "score_map.png",
         values=score,
-        title=f"{len(x)} pick-points by score (gripper centre, object frame)",
+        success=success,
+        title=outcome_title(len(x)),
     )
     out["score_map"] = out_dir / "score_map.png"
 
