@@ -173,7 +173,7 @@ def main() -> None:
     import mujoco_warp as mjw
     from mujoco_warp._src import constraint, smooth, solver
 
-    from mjx_pick.engine.warp_backend import size_buffers
+    from mjx_pick.engine.warp_buffers import size_buffers
 
     def graph_ms(fn) -> float:
         """ms per call of fn, captured 10 times in one CUDA graph (no launch overhead;
@@ -256,9 +256,7 @@ def main() -> None:
             row["forward_ms"] = graph_ms(lambda mw=mw, dw=dw: mjw.forward(mw, dw))
             row["position_ms"] = graph_ms(lambda mw=mw, dw=dw: mjw.fwd_position(mw, dw, False))
             row["collision_ms"] = graph_ms(lambda mw=mw, dw=dw: mjw.collision(mw, dw))
-            row["constraint_ms"] = graph_ms(
-                lambda mw=mw, dw=dw: constraint.make_constraint(mw, dw)
-            )
+            row["constraint_ms"] = graph_ms(lambda mw=mw, dw=dw: constraint.make_constraint(mw, dw))
 
             def smooth_stage(mw=mw, dw=dw):
                 mjw.fwd_velocity(mw, dw)
@@ -343,9 +341,8 @@ def mjx_scan_ms(model, buffers, states, worlds: int, steps: int, repeats: int) -
     axes = _slot_axes(types.SimpleNamespace(impl="warp", data0=d0)).d
     tree = jax.tree.structure(d0)
     qpos, qvel, ctrl = (np.tile(a, (-(-worlds // len(a)), 1))[:worlds] for a in states)
-    pairs = tuple(
-        np.tile(a, (worlds, 1, 1)) for a in (model.pair_friction, model.pair_solref, model.pair_solimp)
-    )
+    pair_fields = (model.pair_friction, model.pair_solref, model.pair_solimp)
+    pairs = tuple(np.tile(a, (worlds, 1, 1)) for a in pair_fields)
 
     def start(q, v, c):
         return tuple(tree.flatten_up_to(d0.replace(qpos=q, qvel=v, ctrl=c)))

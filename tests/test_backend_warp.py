@@ -19,7 +19,7 @@ import pytest
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine import devices
+from mjx_pick.engine import devices, warp_buffers
 from mjx_pick.engine import warp_backend as bw
 from mjx_pick.engine.backend import make_backend, make_inputs
 from mjx_pick.kernels import grasp as gk
@@ -162,7 +162,7 @@ def test_counting_batch_sees_every_step():
       <body pos=".3 0 .5"><freejoint/><geom type="sphere" size=".02"/></body>
     </worldbody></mujoco>"""
     model = mujoco.MjModel.from_xml_string(xml)
-    b = bw._CountingBatch(mujoco.batch.Batch(model, nsim=2, nthread=1))
+    b = warp_buffers._CountingBatch(mujoco.batch.Batch(model, nsim=2, nthread=1))
     qpos = b.bind("qpos")
     qpos[1, 2] = 0.3  # the second simulation's box starts higher
     for _ in range(60):

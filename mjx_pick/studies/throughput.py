@@ -161,7 +161,7 @@ class RunSpec:
         that many constraint rows."""
         opts = dict(self.options)
         if "rows" in opts:
-            from mjx_pick.engine.warp_backend import size_buffers
+            from mjx_pick.engine.warp_buffers import size_buffers
 
             sized = size_buffers(scene, grasp)
             opts["buffers"] = dataclasses.replace(sized, rows=opts.pop("rows"))

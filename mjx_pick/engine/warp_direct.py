@@ -1,0 +1,861 @@
+"""MuJoCo Warp backend: the whole rollout on NVIDIA GPUs as Warp kernels and CUDA graphs.
+
+The ``mujoco-warp`` package is the engine; no JAX is in this path. A pool of
+``batch_size`` simulation slots (MuJoCo Warp "worlds") steps together. One control
+period -- the controller tick of every slot (``kernels.grasp_warp``: measure, P force
+controller, phase machine, metrics) and ``n_substeps`` physics steps -- is captured once
+as a CUDA graph, with MuJoCo Warp's graph conditionals on, so the constraint solver stops
+iterating as soon as every world has converged. The host replays that graph for a round
+of ``ticks_per_call`` periods, then reads which slots' picks have ended (one small
+transfer), stores their accumulators in the pick's row and gives those slots the next
+pick-points in order (a reset, the pick's inputs written into its slot's data and
+model rows, one forward pass). A slot's results depend on its pick-point alone, never on
+which slot ran it or what ran beside it; results come back in pick-point order.
+
+Per-pick contact-pair parameters and gripper-variant fields (``PickInputs.model``) are
+rows of batched model arrays, written at a slot's refill: one model, one graph, for
+every chunk and every variant that is data. Buffers are sized as for the MJX-Warp path
+(``engine.warp_buffers``); picks whose buffers overflowed are re-simulated with doubled
+buffers. With ``MJX_PICK_WARP_CPU=1`` the same code runs on Warp's CPU device
+(kernels launched one by one: slow; for tests).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import threading
+import time
+import typing
+
+import mujoco
+import numpy as np
+
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.core.scene import Scene
+from mjx_pick.engine.backend import PickInputs, RunStats, addresses
+from mjx_pick.engine.warp_buffers import (
+    MAX_GROWTH,
+    BufferOverflowError,
+    BufferSizes,
+    size_buffers,
+)
+from mjx_pick.kernels import grasp as gk
+
+log = logging.getLogger(__name__)
+
+ALLOW_CPU_ENV = "MJX_PICK_WARP_CPU"
+INSTALL_HINT = 'pip install ".[gpu]" (warp-lang and mujoco-warp, CUDA 13)'
+# control periods per refill round: a finished slot idles up to this many periods before
+# it takes the next pick, against one host synchronisation per round
+DEFAULT_TICKS_PER_CALL = 10
+# small runs use a smaller pool, a multiple of this many slots
+POOL_QUANTUM = 256
+# result fields of kernels.grasp.finalize, in its order
+RESULT_FIELDS = (
+    "success",
+    "failure",
+    "diverged",
+    "score",
+    "t_grasp",
+    "phi_max_deg",
+    "t_grasp_nc",
+    "yaw_max_deg",
+    "tilt_max_deg",
+    "t_reached_s",
+    "max_force_left_n",
+    "max_force_right_n",
+    "lift_height_mm",
+    "slip_mm",
+    "chatter",
+    "rotation_final_deg",
+    "label_margin",
+)
+
+
+def warp_problem(allow_cpu: bool | None = None) -> str | None:
+    """Why this backend cannot run here, or None. Imports warp only where an NVIDIA
+    driver is installed (or the CPU is allowed), so asking on a CPU machine is quiet."""
+    import importlib.util
+
+    if allow_cpu is None:
+        allow_cpu = os.environ.get(ALLOW_CPU_ENV, "") == "1"
+    if not allow_cpu and not _nvidia_driver_present():
+        return "no NVIDIA driver found"
+    for module, package in (("warp", "warp-lang"), ("mujoco_warp", "mujoco-warp")):
+        if importlib.util.find_spec(module) is None:
+            return f"{package} is not installed"
+    try:
+        wp = _warp()
+        if not allow_cpu and wp.get_cuda_device_count() < 1:
+            return "warp-lang sees no CUDA device (driver too old for its CUDA build?)"
+    except Exception as err:  # any failure to load warp's native library
+        return f"warp-lang does not load: {type(err).__name__}: {err}"
+    return None
+
+
+def _nvidia_driver_present() -> bool:
+    return os.path.exists("/proc/driver/nvidia/version") or os.path.exists("/dev/nvidiactl")
+
+
+def check_warp() -> None:
+    """Raise a ConfigError naming what to install when this backend cannot run here."""
+    problem = warp_problem()
+    if problem:
+        raise ConfigError(
+            f"backend = 'warp' needs an NVIDIA GPU, warp-lang and mujoco-warp: {problem}. "
+            f"Install the GPU extra: {INSTALL_HINT}; or choose backend 'mujoco' (the C "
+            "engine on CPU threads)"
+        )
+
+
+def _warp():
+    import warp as wp
+
+    wp.config.quiet = True  # no banner on stdout
+    wp.init()
+    return wp
+
+
+def cuda_devices() -> list[str]:
+    """Warp's CUDA devices ('cuda:0', ...)."""
+    wp = _warp()
+    return [f"cuda:{i}" for i in range(wp.get_cuda_device_count())]
+
+
+def default_devices() -> list[str]:
+    """Every CUDA device, or the CPU when allowed and there is none."""
+    devices = cuda_devices()
+    if not devices and os.environ.get(ALLOW_CPU_ENV, "") == "1":
+        devices = ["cpu"]
+    return devices
+
+
+def batched_model_fields() -> frozenset[str]:
+    """MjModel fields that MuJoCo Warp's model can hold per world (its '*' arrays), as
+    MuJoCo names them; options as ``opt.<name>`` (impratio via impratio_invsqrt)."""
+    from mujoco_warp._src import types as mjw_types
+
+    def batched(cls) -> set[str]:
+        out = set()
+        for f in dataclasses.fields(cls):
+            shape = getattr(f.type, "shape", None)
+            if shape and shape[0] == "*":
+                out.add(f.name)
+        return out
+
+    fields = batched(mjw_types.Model)
+    options = {f"opt.{name}" for name in batched(mjw_types.Option)}
+    if "opt.impratio_invsqrt" in options:
+        options.add("opt.impratio")
+    return frozenset(fields | options)
+
+
+def carried_fields() -> frozenset[str]:
+    """The float MjModel fields this backend takes per simulation: those the C engine's
+    batch can expand that Warp holds per world or does not read at all."""
+    import mujoco.batch
+    from mujoco_warp._src import types as mjw_types
+
+    probe = mujoco.MjModel.from_xml_string("<mujoco/>")
+    held = {f.name for f in dataclasses.fields(mjw_types.Model)}
+    per_world = batched_model_fields()
+    out = set()
+    for field in mujoco.batch.MODEL_FIELDS:
+        if field in ("pair_friction", "pair_solref", "pair_solimp"):
+            continue
+        if field.startswith("opt."):
+            if field in per_world:
+                out.add(field)
+            continue
+        template = getattr(probe, field, None)
+        if not (isinstance(template, np.ndarray) and template.dtype.kind == "f"):
+            continue
+        if field in per_world or field not in held:
+            out.add(field)
+    return frozenset(out)
+
+
+# ------------------------------------------------------------------- the device program
+def _kernels():
+    """The backend's Warp kernels (``engine.warp_kernels``, imported on first use:
+    importing this module imports neither warp nor mujoco_warp)."""
+    _warp()
+    from mjx_pick.engine import warp_kernels
+
+    return warp_kernels
+
+
+@dataclasses.dataclass
+class PoolStats:
+    """Work of refilled runs: how much of the pool's stepping simulated live picks, and
+    how the solver converged (over live world-steps)."""
+
+    rounds: int = 0  # refill rounds (summed over runs)
+    slot_ticks: int = 0  # slots x ticks per round, summed over rounds
+    pick_ticks: int = 0  # ticks run by picks up to their end, summed over picks
+    picks: int = 0
+    steps: int = 0  # physics steps of the pool
+    steps_converged: int = 0  # ... in which every live world converged before the cap
+    solver_iterations: np.ndarray = dataclasses.field(
+        default_factory=lambda: np.zeros(0, np.int64)
+    )  # histogram over live world-steps: [i] = world-steps that took i iterations
+
+    @property
+    def occupancy(self) -> float:
+        """Fraction of slot-ticks that simulated a pick that had not ended."""
+        return self.pick_ticks / self.slot_ticks if self.slot_ticks else float("nan")
+
+    def iteration_quantile(self, q: float) -> float:
+        """The q-quantile (0..1) of solver iterations per live world-step."""
+        h = self.solver_iterations
+        if not h.size or not h.sum():
+            return float("nan")
+        cum = np.cumsum(h) / h.sum()
+        return float(np.searchsorted(cum, q))
+
+
+class Diagnostics(typing.NamedTuple):
+    """Per-pick buffer use (int32 each), as the MJX backends report it."""
+
+    overflow: np.ndarray  # Warp's overflow bits raised during the pick
+    nefc_max: np.ndarray  # most constraint rows in use at any step
+    nacon_max: np.ndarray  # most contacts of the whole pool in use at any step
+
+
+class _Pool:
+    """One pool of slots on one device: the model with its batched rows, the data, the
+    slots' controller state and the captured control period."""
+
+    def __init__(self, backend: WarpBackend, slots: int, record_ticks: int):
+        import mujoco_warp as mjw
+
+        wp = _warp()
+        from mjx_pick.kernels import grasp_warp as gw
+
+        self.slots = slots
+        self.record_ticks = record_ticks
+        dev = backend.device_name
+        scene = backend.scene
+        mjm = scene.model
+        self.fields = backend.fields  # per-pick model fields this pool carries
+        with wp.ScopedDevice(dev):
+            batch = {name: slots for name in ("pair_friction", "pair_solref", "pair_solimp")}
+            for name in self.fields:
+                if not name.startswith("opt."):
+                    batch[name] = slots
+            m = mjw.put_model(mjm, batch_sizes=batch)
+            for name in self.fields:
+                if name.startswith("opt."):
+                    attr = "impratio_invsqrt" if name == "opt.impratio" else name[4:]
+                    one = getattr(m.opt, attr).numpy()
+                    setattr(m.opt, attr, wp.array(np.repeat(one[:1], slots), dtype=float))
+            m.opt.run_rne_postconstraint = True  # cfrc_ext: the pad forces
+            m.opt.warn_overflow = 0  # read back per pick instead
+            m.opt.graph_conditional = wp.get_device().is_cuda
+            if backend.deterministic:
+                from mujoco_warp._src.types import DeterminismType
+
+                m.opt.deterministic = DeterminismType.ALL
+            self.m = m
+            self.buffers = backend.buffers
+            self.d = mjw.make_data(
+                mjm,
+                nworld=slots,
+                naconmax=backend.buffers.naconmax(slots),
+                njmax=int(backend.buffers.rows),
+            )
+            S = slots
+            self.params = wp.zeros(S, dtype=gw.Params)
+            self.ctl = wp.zeros(S, dtype=gw.Control)
+            self.acc = wp.zeros(S, dtype=gw.Acc)
+            self.pos0 = wp.zeros(S, dtype=wp.vec3)
+            self.quat0 = wp.zeros(S, dtype=wp.vec4)
+            self.k = wp.full(S, backend.n_ticks, dtype=int)  # empty slots count as ended
+            self.live = wp.zeros(S, dtype=int)
+            self.nefc_max = wp.zeros(S, dtype=int)
+            self.nacon_max = wp.zeros(S, dtype=int)
+            self.slot_pick = wp.full(S, -1, dtype=int)
+            self.fresh = wp.zeros(S, dtype=int)
+            self.ended = wp.zeros(S, dtype=int)
+            self.saved_cfrc = wp.zeros_like(self.d.cfrc_ext)
+            self.niter_hist = wp.zeros(int(mjm.opt.iterations) + 1, dtype=int)
+            self.niter_step_max = wp.zeros(1, dtype=int)
+            self.steps = wp.zeros(2, dtype=int)
+            shape = (S, max(record_ticks, 1), gw.NTRACE) if record_ticks else (1, 1, gw.NTRACE)
+            self.trace = wp.zeros(shape, dtype=float)
+            self.ad = gw.addresses(backend.ad)
+            self.drive = gw.drive(backend.ad, dev)
+            self.graph = None
+
+    def field_view(self, name: str):
+        """The model's (slots, K) float rows of a carried field."""
+        if name.startswith("opt."):
+            attr = "impratio_invsqrt" if name == "opt.impratio" else name[4:]
+            arr = getattr(self.m.opt, attr)
+        else:
+            arr = getattr(self.m, name)
+        return arr.view(float).reshape((self.slots, -1))
+
+    def period(self, backend: WarpBackend) -> None:
+        """One control period: the tick, then n_substeps physics steps."""
+        import mujoco_warp as mjw
+
+        wp = _warp()
+        kern = _kernels()
+        d = self.d
+        wp.launch(
+            kern.tick,
+            dim=self.slots,
+            inputs=[
+                self.ad,
+                self.drive,
+                backend.n_ticks,
+                int(self.record_ticks > 0),
+                self.params,
+                self.ctl,
+                self.acc,
+                self.pos0,
+                self.quat0,
+                self.k,
+                self.live,
+                d.qpos,
+                d.qvel,
+                d.cfrc_ext,
+                d.ctrl,
+                self.trace,
+            ],
+        )
+        for _ in range(backend.n_sub):
+            mjw.step(self.m, d)
+            wp.launch(
+                kern.buffer_use,
+                dim=self.slots,
+                inputs=[
+                    self.live,
+                    d.nefc,
+                    d.nacon,
+                    d.solver_niter,
+                    self.nefc_max,
+                    self.nacon_max,
+                    self.niter_hist,
+                    self.niter_step_max,
+                ],
+            )
+            wp.launch(
+                kern.step_done,
+                dim=1,
+                inputs=[int(self.m.opt.iterations), self.niter_step_max, self.steps],
+            )
+
+    def capture(self, backend: WarpBackend) -> None:
+        """The control period as one CUDA graph (on a GPU; the CPU runs it eagerly)."""
+        wp = _warp()
+        if self.graph is not None or not wp.get_device(backend.device_name).is_cuda:
+            return
+        with wp.ScopedDevice(backend.device_name):
+            # one eager period first: Warp builds (or loads) every kernel outside the capture
+            self.period(backend)
+            wp.synchronize_device()
+            with wp.ScopedCapture() as capture:
+                self.period(backend)
+            self.graph = capture.graph
+
+    def run_period(self, backend: WarpBackend) -> None:
+        wp = _warp()
+        if self.graph is not None:
+            wp.capture_launch(self.graph)
+        else:
+            self.period(backend)
+
+
+class WarpBackend:
+    """The MuJoCo Warp backend on one device (see the module docstring).
+
+    Args:
+      scene, grasp: what to simulate.
+      batch_size: slots of the refilled pool (a run of fewer picks uses a smaller one).
+      device: a Warp device name ('cuda:0'; default: the first CUDA device, or the CPU
+        with MJX_PICK_WARP_CPU=1).
+      ticks_per_call: control periods per refill round.
+      buffers: Warp's buffer sizes (default: ``warp_buffers.size_buffers`` of the scene).
+      deterministic: MuJoCo Warp's deterministic mode (stable contact and constraint
+        order, order-invariant sums): the same results on every run on one device.
+    """
+
+    name = "warp"
+
+    def __init__(
+        self,
+        scene: Scene,
+        grasp: GraspConfig,
+        batch_size: int,
+        device: str | None = None,
+        ticks_per_call: int = DEFAULT_TICKS_PER_CALL,
+        buffers: BufferSizes | None = None,
+        deterministic: bool = False,
+    ):
+        check_warp()
+        if int(ticks_per_call) < 1:
+            raise ConfigError(f"ticks_per_call = {ticks_per_call} must be >= 1")
+        if int(batch_size) < 1:
+            raise ConfigError(f"batch_size = {batch_size} must be >= 1")
+        self.scene, self.grasp = scene, grasp
+        self.n_sub = grasp.substeps(scene.solver)  # validates the control period
+        self.n_ticks = grasp.n_ticks()
+        self.ad = addresses(scene)
+        wp = _warp()
+        self.device_name = device or default_devices()[0]
+        dev = wp.get_device(self.device_name)
+        self.device = f"{'gpu' if dev.is_cuda else 'cpu'}:{dev.name}"
+        self.batch_size = int(batch_size)
+        self.ticks_per_call = int(ticks_per_call)
+        self.deterministic = bool(deterministic)
+        self.stats = RunStats()
+        self.pool_stats = PoolStats()
+        self.last_diagnostics: Diagnostics | None = None
+        self.growths = 0
+        t0 = time.perf_counter()
+        self.buffers = buffers or size_buffers(scene, grasp)
+        self.fields: tuple[str, ...] = ()
+        self._pools: dict[tuple, _Pool] = {}
+        self._masks = _overflow_masks()
+        self.stats.compile_s += time.perf_counter() - t0
+
+    # --- sizes
+    def pool_size(self, n: int) -> int:
+        """Slots for a run of n picks: the batch size, or fewer for a small run."""
+        q = POOL_QUANTUM
+        return max(1, min(self.batch_size, -(-max(n, 1) // q) * q))
+
+    def _pool(self, slots: int, record_ticks: int) -> _Pool:
+        key = (slots, record_ticks, self.fields, repr(self.buffers))
+        pool = self._pools.get(key)
+        if pool is None:
+            t0 = time.perf_counter()
+            # one pool of each kind at a time: a pool holds its data on the device
+            for old in [k for k in self._pools if k[1] == record_ticks]:
+                del self._pools[old]
+            pool = _Pool(self, slots, record_ticks)
+            pool.capture(self)
+            self._pools[key] = pool
+            self.stats.compile_s += time.perf_counter() - t0
+        return pool
+
+    # --- running
+    def run(self, inputs: PickInputs, record: bool = False):
+        """Simulate all inputs; returns (results dict of (N,) arrays, traces (N, T, F) or
+        None). Picks whose buffers overflowed are re-simulated with doubled buffers,
+        MAX_GROWTH times at most over the backend's life, then BufferOverflowError."""
+        n = len(inputs)
+        if n == 0:
+            empty = _typed({name: np.zeros(0) for name in RESULT_FIELDS})
+            self.last_diagnostics = Diagnostics(*(np.zeros(0, np.int32) for _ in range(3)))
+            return empty, (np.zeros((0, self.n_ticks, len(gk.TRACE_FIELDS))) if record else None)
+        merged, traces, diag = self._run_once(inputs, record)
+        todo = np.flatnonzero(diag.overflow & (self._masks[0] | self._masks[1]))
+        while len(todo):
+            seen = int(np.bitwise_or.reduce(diag.overflow[todo]))
+            if self.growths >= MAX_GROWTH:
+                raise BufferOverflowError(
+                    f"Warp's buffers overflowed ({_describe_overflow(seen)}) in {len(todo)} "
+                    f"of {n} pick-points even at {self.buffers.contacts} contacts and "
+                    f"{self.buffers.rows} constraint rows per simulation; pass larger "
+                    "BufferSizes (buffers=...) or use backend 'mujoco'"
+                )
+            self.buffers = self.buffers.grown(
+                contacts=bool(seen & self._masks[0]), rows=bool(seen & self._masks[1])
+            )
+            self.growths += 1
+            log.warning(
+                "Warp buffer overflow (%s) in %d pick-points: re-simulating them with %d "
+                "contacts and %d constraint rows per simulation",
+                _describe_overflow(seen),
+                len(todo),
+                self.buffers.contacts,
+                self.buffers.rows,
+            )
+            self.stats.n -= len(todo)  # counted again by the re-run
+            out, rows, sub = self._run_once(inputs.take(todo), record)
+            for key in merged:
+                merged[key][todo] = out[key]
+            if record:
+                traces[todo] = rows
+            for f, g in zip(diag, sub, strict=True):
+                f[todo] = g
+            todo = todo[(sub.overflow & (self._masks[0] | self._masks[1])) != 0]
+        self.last_diagnostics = diag
+        return merged, traces
+
+    def _fields_for(self, inputs: PickInputs) -> tuple[str, ...]:
+        fields = tuple(sorted(inputs.model))
+        unknown = sorted(set(fields) - carried_fields())
+        if unknown:
+            raise ConfigError(
+                f"backend 'warp' cannot take the model fields {unknown} per simulation"
+            )
+        return fields
+
+    def _run_once(self, inputs: PickInputs, record: bool):
+
+        wp = _warp()
+        from mjx_pick.kernels import grasp_warp as gw
+
+        kern = _kernels()
+        n = len(inputs)
+        self.fields = self._fields_for(inputs)
+        slots = n if record else self.pool_size(n)
+        pool = self._pool(slots, self.n_ticks if record else 0)
+        dev = self.device_name
+        t0 = time.perf_counter()
+        with wp.ScopedDevice(dev):
+            src = _device_inputs(inputs, self.fields, gw)
+            out_acc = wp.zeros(n, dtype=gw.Acc)
+            out_k = wp.zeros(n, dtype=int)
+            out_phase = wp.zeros(n, dtype=int)
+            out_overflow = wp.zeros(n, dtype=int)
+            out_nefc = wp.zeros(n, dtype=int)
+            out_nacon = wp.zeros(n, dtype=int)
+            pool.trace.zero_()
+            hist0 = pool.niter_hist.numpy().copy()
+            steps0 = pool.steps.numpy().copy()
+            slot_pick = np.full(slots, -1, np.int32)
+            first = min(slots, n)
+            slot_pick[:first] = np.arange(first)
+            fresh = slot_pick >= 0
+            next_pick = first
+            rounds = 0
+            self._refill(pool, src, slot_pick, fresh)
+            while True:
+                for _ in range(self.ticks_per_call):
+                    pool.run_period(self)
+                rounds += 1
+                wp.launch(
+                    kern.save,
+                    dim=slots,
+                    inputs=[
+                        self.n_ticks,
+                        pool.slot_pick,
+                        pool.ctl,
+                        pool.acc,
+                        pool.k,
+                        pool.d.overflow,
+                        pool.nefc_max,
+                        pool.nacon_max,
+                        pool.ended,
+                        out_acc,
+                        out_k,
+                        out_phase,
+                        out_overflow,
+                        out_nefc,
+                        out_nacon,
+                    ],
+                )
+                ended = pool.ended.numpy().astype(bool)
+                slot_pick, fresh, next_pick = refill_order(slot_pick, ended, next_pick, n)
+                if not (slot_pick >= 0).any():
+                    break
+                if fresh.any():
+                    self._refill(pool, src, slot_pick, fresh)
+                else:
+                    pool.slot_pick.assign(slot_pick)
+            wp.synchronize_device()
+            hist = pool.niter_hist.numpy() - hist0
+            steps = pool.steps.numpy() - steps0
+            picks = _finalize_device(kern, src, out_acc, gw)
+            k = out_k.numpy().copy()
+            traces = None
+            if record:
+                traces = pad_traces(pool.trace.numpy()[:n], k, out_phase.numpy().copy(), self.grasp)
+            diag = Diagnostics(*(a.numpy().copy() for a in (out_overflow, out_nefc, out_nacon)))
+        self.stats.run_s += time.perf_counter() - t0
+        self.stats.n += n
+        st = self.pool_stats
+        st.rounds += rounds
+        st.slot_ticks += rounds * slots * self.ticks_per_call
+        st.pick_ticks += int(k.sum())
+        st.picks += n
+        st.steps += int(steps[0])
+        st.steps_converged += int(steps[1])
+        if st.solver_iterations.size != hist.size:
+            st.solver_iterations = np.zeros(hist.size, np.int64)
+        st.solver_iterations += hist
+        return picks, traces, diag
+
+    def _refill(self, pool: _Pool, src: dict, slot_pick: np.ndarray, fresh: np.ndarray) -> None:
+        """Fresh slots take their picks: reset, inputs written, one forward pass."""
+        import mujoco_warp as mjw
+
+        wp = _warp()
+        kern = _kernels()
+        d, m = pool.d, pool.m
+        pool.slot_pick.assign(slot_pick)
+        pool.fresh.assign(fresh.astype(np.int32))
+        mjw.reset_data(m, d, reset=pool.fresh)
+        wp.launch(
+            kern.start,
+            dim=pool.slots,
+            inputs=[
+                pool.ad,
+                pool.drive,
+                pool.fresh,
+                pool.slot_pick,
+                src["qpos0"],
+                src["params"],
+                src["pair_friction"],
+                src["pair_solref"],
+                src["pair_solimp"],
+                pool.params,
+                pool.ctl,
+                pool.acc,
+                pool.pos0,
+                pool.quat0,
+                pool.k,
+                pool.nefc_max,
+                pool.nacon_max,
+                d.qpos,
+                d.qvel,
+                d.ctrl,
+                m.pair_friction,
+                m.pair_solref,
+                m.pair_solimp,
+            ],
+        )
+        for name in pool.fields:
+            rows = src["model"][name]
+            wp.launch(
+                kern.copy_rows,
+                dim=(pool.slots, rows.shape[1]),
+                inputs=[pool.fresh, pool.slot_pick, rows, pool.field_view(name)],
+            )
+        wp.copy(pool.saved_cfrc, d.cfrc_ext)
+        mjw.forward(m, d)
+        wp.launch(
+            kern.after_forward,
+            dim=(pool.slots, d.cfrc_ext.shape[1]),
+            inputs=[
+                pool.fresh,
+                pool.saved_cfrc,
+                d.cfrc_ext,
+                d.nefc,
+                d.nacon,
+                pool.nefc_max,
+                pool.nacon_max,
+            ],
+        )
+
+
+def refill_order(
+    slot_pick: np.ndarray, ended: np.ndarray, next_pick: int, n: int
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """The pool's bookkeeping after a round: slots whose pick ended take the next picks
+    in slot order; the rest of them go idle once the queue is empty.
+
+    Args:
+      slot_pick: (S,) int, each slot's pick-point (-1: idle).
+      ended: (S,) bool, slots whose pick ended this round (only slots with a pick).
+      next_pick: the first pick-point not yet handed out; n: pick-points in all.
+
+    Returns:
+      (slot_pick, fresh, next_pick): the new assignment, (S,) bool of slots that start a
+      pick, and the next pick-point to hand out.
+    """
+    slot_pick = np.asarray(slot_pick, np.int32).copy()
+    ended = np.asarray(ended, bool) & (slot_pick >= 0)
+    take = np.flatnonzero(ended)
+    new = next_pick + np.arange(len(take))
+    ok = new < n
+    slot_pick[take] = np.where(ok, new, -1)
+    fresh = np.zeros(len(slot_pick), bool)
+    fresh[take[ok]] = True
+    return slot_pick, fresh, next_pick + int(ok.sum())
+
+
+def pad_traces(rows: np.ndarray, ticks: np.ndarray, phase: np.ndarray, grasp: GraspConfig):
+    """Traces (N, T, F) with each pick's rows after its end held at its last row, time
+    running on and the phase it ended in, as the C backend leaves a finished pick."""
+    out = np.array(rows, np.float32, copy=True)
+    dt = float(grasp.control_period_s)
+    t_col = gk.TRACE_FIELDS.index("t_s")
+    phase_col = gk.TRACE_FIELDS.index("phase")
+    for i, k in enumerate(np.asarray(ticks)):
+        k = int(k)
+        if 0 < k < out.shape[1]:
+            last = out[i, k - 1]
+            out[i, k:] = last
+            out[i, k:, t_col] = last[t_col] + dt * np.arange(1, out.shape[1] - k + 1)
+            out[i, k:, phase_col] = phase[i]
+    return out
+
+
+def _device_inputs(inputs: PickInputs, fields: tuple[str, ...], gw) -> dict:
+    """The picks' inputs as Warp arrays on the current device."""
+    wp = _warp()
+    n = len(inputs)
+    return {
+        "qpos0": wp.array(np.asarray(inputs.qpos0, np.float32), dtype=float),
+        "params": gw.to_struct_array(inputs.params, gw.Params, None),
+        "pair_friction": wp.array(np.asarray(inputs.pair_friction, np.float32), dtype=gw.vec5),
+        "pair_solref": wp.array(np.asarray(inputs.pair_solref, np.float32), dtype=wp.vec2),
+        "pair_solimp": wp.array(np.asarray(inputs.pair_solimp, np.float32), dtype=gw.vec5),
+        "model": {
+            name: wp.array(
+                _warp_values(name, np.asarray(inputs.model[name], np.float64)).reshape(n, -1),
+                dtype=float,
+            )
+            for name in fields
+        },
+    }
+
+
+def _warp_values(name: str, values: np.ndarray) -> np.ndarray:
+    """A carried field's values as Warp's model holds them (float32; impratio as
+    Warp's impratio_invsqrt)."""
+    if name == "opt.impratio":
+        values = 1.0 / np.sqrt(np.maximum(values, mujoco.mjMINVAL))
+    return values.astype(np.float32)
+
+
+def _finalize_device(kern, src: dict, out_acc, gw) -> dict:
+    """Per-pick results (kernels.grasp.finalize's fields) from their accumulators."""
+    wp = _warp()
+    n = out_acc.shape[0]
+    res = wp.zeros(n, dtype=gw.Result)
+    wp.launch(kern.finalize, dim=n, inputs=[src["params"], out_acc, res])
+    host = gw.from_struct_array(res)
+    return _typed(host)
+
+
+def _typed(host: dict) -> dict:
+    """Result columns in the dtypes of kernels.grasp.finalize."""
+    out = {}
+    for name in RESULT_FIELDS:
+        v = host[name]
+        if name in ("success", "diverged"):
+            out[name] = v.astype(bool)
+        elif name in ("failure", "chatter"):
+            out[name] = v.astype(np.int32)
+        else:
+            out[name] = v.astype(np.float32)
+    return out
+
+
+def _overflow_masks() -> tuple[int, int]:
+    """(contact bits, row bits) of MuJoCo Warp's OverflowType that mean a dropped contact
+    or constraint row (the solver's iteration cap is not a buffer overflow)."""
+    from mujoco_warp._src.types import OverflowType as t
+
+    contacts = t.BROADPHASE | t.NARROWPHASE | t.CCD | t.EPA_HORIZON
+    rows = t.NEFC | t.NJMAX_NNZ
+    return int(contacts), int(rows)
+
+
+def _describe_overflow(bits: int) -> str:
+    from mujoco_warp._src.types import OverflowType as t
+
+    return "|".join(f.name for f in t if f.value and f.value & bits and f != t.ALL) or "none"
+
+
+class MultiDevice:
+    """Several single-device backends as one: each runs a contiguous share of the
+    pick-points on its own GPU from its own host thread (Warp releases the GIL while a
+    graph runs); nothing passes between devices. Results come back in pick-point order."""
+
+    def __init__(self, parts: list[WarpBackend]):
+        if len(parts) < 2:
+            raise ValueError(f"MultiDevice needs >= 2 backends, got {len(parts)}")
+        self.parts = parts
+        p0 = parts[0]
+        self.name, self.scene, self.grasp = p0.name, p0.scene, p0.grasp
+        self.batch_size = sum(p.batch_size for p in parts)
+        self.device = f"{p0.device} x{len(parts)}"
+        self.stats = RunStats()
+        self.pool_stats = PoolStats()
+        self.last_diagnostics: Diagnostics | None = None
+
+    @property
+    def growths(self) -> int:
+        return sum(p.growths for p in self.parts)
+
+    @property
+    def buffers(self) -> BufferSizes:
+        return self.parts[0].buffers
+
+    def shares(self, n: int) -> list[slice]:
+        bounds = np.linspace(0, n, len(self.parts) + 1).round().astype(int)
+        return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+    def pool_size(self, n: int) -> int:
+        return sum(
+            p.pool_size(s.stop - s.start) for p, s in zip(self.parts, self.shares(n), strict=True)
+        )
+
+    def run(self, inputs: PickInputs, record: bool = False):
+        from concurrent.futures import ThreadPoolExecutor
+
+        shares = self.shares(len(inputs))
+        compile0 = [p.stats.compile_s for p in self.parts]
+        before = [dataclasses.replace(p.pool_stats) for p in self.parts]
+        t0 = time.perf_counter()
+        with ThreadPoolExecutor(len(self.parts)) as ex:
+            futures = [
+                ex.submit(p.run, inputs.take(s), record)
+                for p, s in zip(self.parts, shares, strict=True)
+            ]
+            outs = [f.result() for f in futures]
+        wall = time.perf_counter() - t0
+        compiled = [p.stats.compile_s - c for p, c in zip(self.parts, compile0, strict=True)]
+        self.stats.compile_s += max(compiled)
+        self.stats.run_s += max(wall - max(compiled), 0.0)
+        self.stats.n += len(inputs)
+        for p, b in zip(self.parts, before, strict=True):
+            for f in dataclasses.fields(PoolStats):
+                now = getattr(p.pool_stats, f.name) - getattr(b, f.name)
+                old = getattr(self.pool_stats, f.name)
+                if isinstance(now, np.ndarray) and old.size != now.size:
+                    old = np.zeros(now.size, np.int64)
+                setattr(self.pool_stats, f.name, old + now)
+        merged = {k: np.concatenate([o[0][k] for o in outs]) for k in outs[0][0]}
+        traces = np.concatenate([o[1] for o in outs]) if record else None
+        diags = [p.last_diagnostics for p in self.parts]
+        self.last_diagnostics = Diagnostics(*(np.concatenate(x) for x in zip(*diags, strict=True)))
+        return merged, traces
+
+
+def make_backend(
+    scene: Scene,
+    grasp: GraspConfig,
+    batch_size: int,
+    devices=None,
+    ticks_per_call: int = DEFAULT_TICKS_PER_CALL,
+    buffers: BufferSizes | None = None,
+    deterministic: bool = False,
+):
+    """The Warp backend on `devices` (Warp device names; default: every CUDA GPU, or the
+    CPU with MJX_PICK_WARP_CPU=1). Several devices: one backend per device with
+    batch_size / n slots each, run side by side, their buffers sized once for all; the
+    devices build their models and capture their graphs in parallel."""
+    check_warp()
+    devices = [str(d) for d in (devices or default_devices())]
+    if not devices:
+        raise ConfigError("backend 'warp': no device to run on")
+    options = {"ticks_per_call": ticks_per_call, "deterministic": deterministic}
+    if len(devices) == 1:
+        return WarpBackend(scene, grasp, batch_size, device=devices[0], buffers=buffers, **options)
+    buffers = buffers or size_buffers(scene, grasp)
+    per_device = -(-int(batch_size) // len(devices))
+    parts: list = [None] * len(devices)
+
+    def build(i: int) -> None:
+        parts[i] = WarpBackend(scene, grasp, per_device, devices[i], buffers=buffers, **options)
+
+    threads = [threading.Thread(target=build, args=(i,)) for i in range(len(devices))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    if any(p is None for p in parts):
+        raise RuntimeError("backend 'warp': a device failed to start (see the log)")
+    return MultiDevice(parts)
