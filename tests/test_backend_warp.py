@@ -1,4 +1,4 @@
-"""The Warp backend's CPU-testable parts: backend choice and its errors, buffer sizing,
+"""The MJX-Warp backend's CPU-testable parts: backend choice and its errors, buffer sizing,
 and slot refill (run with MJX's JAX implementation, the program Warp runs too).
 
 CI has no GPU and no warp-lang; the GPU figures come from benchmarks/throughput.py.
@@ -43,7 +43,7 @@ def fresh_probe():
 
 # --------------------------------------------------------------------------- choice
 def test_backend_names_and_options(block_scene):
-    with pytest.raises(mp.ConfigError, match="'auto', 'warp', 'mjx', 'mujoco'"):
+    with pytest.raises(mp.ConfigError, match="'auto', 'warp', 'mjx-warp', 'mjx', 'mujoco'"):
         make_backend("gpu", block_scene, SHORT, batch_size=4)
     with pytest.raises(mp.ConfigError, match="takes no options"):
         make_backend("mujoco", block_scene, SHORT, batch_size=4, refill=True)
@@ -54,7 +54,7 @@ def test_warp_without_gpu_is_a_clear_error(block_scene, fresh_probe, monkeypatch
     if devices.nvidia_gpus():
         pytest.skip("this machine has a CUDA GPU")
     with pytest.raises(mp.ConfigError, match=r'no NVIDIA \(CUDA\) GPU.*pip install "\.\[gpu\]"'):
-        make_backend("warp", block_scene, SHORT, batch_size=4)
+        make_backend("mjx-warp", block_scene, SHORT, batch_size=4)
     # auto falls back to the C engine, quietly: warp is not even imported
     assert make_backend("auto", block_scene, SHORT, batch_size=4).name == "mujoco"
 
@@ -81,7 +81,7 @@ def test_gpu_without_warp_lang_names_the_extra(block_scene, fresh_probe, monkeyp
     with pytest.raises(
         mp.ConfigError, match=r'warp-lang is not installed.*pip install "\.\[gpu\]"'
     ):
-        make_backend("warp", block_scene, SHORT, batch_size=4)
+        make_backend("mjx-warp", block_scene, SHORT, batch_size=4)
     # auto on a GPU without warp-lang: the C engine (faster there than MJX's JAX physics)
     devices.warp_problem.cache_clear()
     assert make_backend("auto", block_scene, SHORT, batch_size=4).name == "mujoco"
@@ -93,7 +93,7 @@ def test_wrong_warp_version_is_named(block_scene, fresh_probe, monkeypatch):
         pytest.skip("mujoco-mjx declares no warp-lang pin")
     _fake_gpu(monkeypatch, warp_spec=object(), version="0.1.0")
     with pytest.raises(mp.ConfigError, match=rf"warp-lang 0\.1\.0 is installed.*warp-lang{pin}"):
-        make_backend("warp", block_scene, SHORT, batch_size=4)
+        make_backend("mjx-warp", block_scene, SHORT, batch_size=4)
 
 
 def test_gpu_extra_pins_warp_like_mujoco_mjx():
@@ -428,15 +428,15 @@ def test_warp_on_cpu_agrees_with_c_and_grows_overflowing_buffers(
     picks = pp.generate_normal(door_opener, gripper, 6, seed=3, grasp=SHORT)
     inputs = make_inputs(scene, SHORT, picks)
     c, _ = make_backend("mujoco", scene, SHORT, batch_size=6).run(inputs)
-    warp = make_backend("warp", scene, SHORT, batch_size=4, ticks_per_call=20)
+    warp = make_backend("mjx-warp", scene, SHORT, batch_size=4, ticks_per_call=20)
     w, _ = warp.run(inputs)
-    assert warp.name == "warp" and warp.growths == 0
+    assert warp.name == "mjx-warp" and warp.growths == 0
     assert (warp.last_diagnostics.overflow == 0).all()
     assert (warp.last_diagnostics.nefc_max <= warp.buffers.rows).all()
     assert np.mean(w["success"] == c["success"]) >= 0.8
     # buffers too small: detected, grown, re-simulated -- the same labels
     small = make_backend(
-        "warp", scene, SHORT, batch_size=4, ticks_per_call=20, buffers=bw.BufferSizes(4, 24)
+        "mjx-warp", scene, SHORT, batch_size=4, ticks_per_call=20, buffers=bw.BufferSizes(4, 24)
     )
     t, _ = small.run(inputs)
     assert small.growths >= 1 and (small.last_diagnostics.overflow == 0).all()
@@ -444,7 +444,7 @@ def test_warp_on_cpu_agrees_with_c_and_grows_overflowing_buffers(
     # and when growing is not allowed, a clear error instead of a result
     monkeypatch.setattr(bw, "MAX_GROWTH", 0)
     tiny = make_backend(
-        "warp", scene, SHORT, batch_size=4, ticks_per_call=20, buffers=bw.BufferSizes(1, 8)
+        "mjx-warp", scene, SHORT, batch_size=4, ticks_per_call=20, buffers=bw.BufferSizes(1, 8)
     )
     with pytest.raises(bw.BufferOverflowError, match="NEFC"):
         tiny.run(inputs.take(slice(0, 2)))

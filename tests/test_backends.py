@@ -51,8 +51,9 @@ def test_backends_agree_on_door_opener(door_opener):
 def test_auto_backend_choice(block):
     scene = mp.build_scene(block, mp.GripperSpec())
     backend = make_backend("auto", scene, SHORT, batch_size=4)
-    # warp where it can run (an NVIDIA GPU with warp-lang), else the C engine
-    from mjx_pick.engine.devices import warp_problem
+    # warp where it can run (an NVIDIA GPU with warp-lang and mujoco-warp), else the C
+    # engine
+    from mjx_pick.engine.warp_direct import warp_problem
 
     assert backend.name == ("warp" if warp_problem() is None else "mujoco")
     with pytest.raises(mp.ConfigError, match="backend = 'gpu'"):

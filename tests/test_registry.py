@@ -107,7 +107,7 @@ def test_auto_takes_the_first_backend_that_can_run(monkeypatch):
         registry.Device.NVIDIA_GPU,
         registry.BatchRule(cpu=8, per_gpu=True),
         "a GPU backend tried before all others",
-        auto_rank=0,
+        auto_rank=-1,
         problem=f"{__name__}:no_gpu_here",
     )
     monkeypatch.setitem(registry.ENTRIES, gpu.name, gpu)
@@ -142,6 +142,8 @@ NOT_A_CHOICE = {
     ("outputs/rundir.py", "mujoco"): "the versions a run folder records",
     ("outputs/display.py", "mujoco"): "whether the mujoco module is imported",
     ("engine/devices.py", "warp"): "the warp module (warp-lang)",
+    ("engine/warp_buffers.py", "mujoco"): "the MuJoCo version in the buffer sizes' cache key",
+    ("core/urdf_gripper.py", "mujoco"): "a URDF's <mujoco> compiler extension",
     ("studies/calibration/fit.py", "mujoco"): "mujoco's sysid optimiser",
     ("studies/throughput.py", "mujoco"): "the reference run (to read the registry next)",
 }

@@ -50,7 +50,7 @@ def _differing(a, b) -> set[str]:
         {"finger_mass_g": 30.0, "force_max_n": 200.0, "drive_stiffness_n_per_mm": 5.0},
     ],
 )
-@pytest.mark.parametrize("backend", ["mujoco", "mjx", "warp"])
+@pytest.mark.parametrize("backend", ["mujoco", "mjx", "mjx-warp", "warp"])
 def test_geometry_variants_keep_the_structure(door_opener, fields, backend):
     a = mp.build_scene(door_opener, _gripper())
     b = mp.build_scene(door_opener, _gripper(**fields))
@@ -75,10 +75,13 @@ def test_solver_tolerances_and_impedance_ratio_are_data(block):
         assert va.program_key(base, FAST, backend) == va.program_key(other, FAST, backend)
         fields = va.varying_fields(base.model, [other.model], va.carried_fields(backend))
         assert fields == ("opt.impratio", "opt.tolerance")
-    # Warp holds the ratio as a derived 1/sqrt: a program per ratio there
-    assert va.program_key(base, FAST, "warp") != va.program_key(other, FAST, "warp")
-    assert "opt.impratio" not in va.carried_fields("warp")
-    assert "opt.tolerance" in va.carried_fields("warp")
+    # Warp holds the ratio as a derived 1/sqrt that MJX's bridge does not reach: a
+    # program per ratio there; the direct backend writes 1/sqrt of each pick's ratio
+    assert va.program_key(base, FAST, "mjx-warp") != va.program_key(other, FAST, "mjx-warp")
+    assert "opt.impratio" not in va.carried_fields("mjx-warp")
+    assert "opt.tolerance" in va.carried_fields("mjx-warp")
+    assert va.program_key(base, FAST, "warp") == va.program_key(other, FAST, "warp")
+    assert {"opt.impratio", "opt.tolerance"} <= va.carried_fields("warp")
 
 
 def test_structural_changes_get_a_program_of_their_own(block):
@@ -96,7 +99,8 @@ def test_structural_changes_get_a_program_of_their_own(block):
     model = copy.copy(base.model)
     model.body_mass[base.index.finger_left_body] = 0.0
     massless = dataclasses.replace(base, model=model)
-    assert va.program_key(massless, FAST, "warp") != va.program_key(base, FAST, "warp")
+    for warp in ("warp", "mjx-warp"):
+        assert va.program_key(massless, FAST, warp) != va.program_key(base, FAST, warp)
     assert va.varying_fields(base.model, [base.model], va.carried_fields("mjx")) == ()
 
 
@@ -134,10 +138,11 @@ def test_a_variants_name_is_no_structure(block):
     assert a.model.nnames != b.model.nnames
     for backend in ("mujoco", "mjx"):
         assert va.program_key(a, FAST, backend) == va.program_key(b, FAST, backend)
-    # Warp (no carried fields for now): the name alone is still no structure
+    # Warp: the name alone is still no structure
     c = mp.build_scene(block, _gripper(name="robotiq-2f85~w22"))
     assert a.model.nnames != c.model.nnames
-    assert va.program_key(a, FAST, "warp") == va.program_key(c, FAST, "warp")
+    for warp in ("warp", "mjx-warp"):
+        assert va.program_key(a, FAST, warp) == va.program_key(c, FAST, warp)
 
 
 def test_mjx_models_differ_only_in_carried_fields(block):
@@ -174,7 +179,7 @@ def test_warp_models_differ_only_in_carried_fields(block):
         pytest.skip(warp_problem())
     a = mp.build_scene(block, _gripper())
     b = mp.build_scene(block, _gripper(finger_width_mm=30.0, pad_height_mm=30.0, stroke_mm=100.0))
-    carried = va.carried_fields("warp")
+    carried = va.carried_fields("mjx-warp")
     ma, mb = mjx.put_model(a.model, impl="warp"), mjx.put_model(b.model, impl="warp")
     la, lb = (
         jax.tree_util.tree_flatten_with_path(ma)[0],
@@ -349,11 +354,11 @@ def test_mjx_steps_of_a_carried_variant_equal_its_own_scene(block):
 
 @pytest.mark.mjx
 def test_warp_sweep_of_finger_widths_compiles_once_and_agrees_per_scene(door_opener):
-    # GPU machine: JAX_PLATFORMS=cuda,cpu (benchmarks/gpu_round.sh variants)
-    from mjx_pick.engine.devices import warp_problem
+    # GPU machine (benchmarks/gpu_round.sh variants)
+    from mjx_pick.engine.warp_direct import warp_problem
 
-    if warp_problem():
-        pytest.skip(f"MuJoCo Warp cannot run here: {warp_problem()}")
+    if warp_problem(allow_cpu=False):
+        pytest.skip(f"MuJoCo Warp cannot run here: {warp_problem(allow_cpu=False)}")
     n = 256
     sim = mp.Simulator(door_opener, "warp")
     spec = ParamSpec.parse("gripper.finger_width_mm=" + ",".join(f"{w:g}" for w in WIDTHS))
@@ -363,7 +368,7 @@ def test_warp_sweep_of_finger_widths_compiles_once_and_agrees_per_scene(door_ope
     assert len(sim.backends) == programs
     for backend in sim.backends:
         for part in getattr(backend, "parts", [backend]):
-            assert len(part._compiled) == 1, list(part._compiled)
+            assert len(part._pools) == 1, list(part._pools)
     assert res.timing["programs"] == programs and res.timing["scenes"] == 3
     c = mp.sweep(door_opener, [spec], mp.Settings(grasp=FAST), n=n, backend="mujoco")
     for v, w in enumerate(WIDTHS):

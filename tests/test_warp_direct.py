@@ -251,7 +251,7 @@ def test_carried_fields_are_what_warp_holds_per_world():
 
 def test_without_a_gpu_warp_says_what_is_missing(block_scene, monkeypatch):
     monkeypatch.delenv(wd.ALLOW_CPU_ENV)
-    monkeypatch.setattr(wd, "_nvidia_driver_present", lambda: False)
+    monkeypatch.setattr(wd.devices, "nvidia_driver_present", lambda: False)
     with pytest.raises(mp.ConfigError, match=r"NVIDIA GPU.*no NVIDIA driver.*\.\[gpu\]"):
         wd.WarpBackend(block_scene, SHORT, 4)
 

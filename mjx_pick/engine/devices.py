@@ -11,22 +11,47 @@ import importlib.metadata
 import importlib.util
 import os
 
-import jax
-
 # set to 1: let the Warp backend run on the CPU (warp-lang's CPU device; tests only)
 ALLOW_CPU_ENV = "MJX_PICK_WARP_CPU"
 
 
 def nvidia_gpus() -> list:
     """JAX's CUDA devices (empty when JAX has no CUDA backend)."""
+    import jax
+
     try:
         return list(jax.devices("cuda"))
     except RuntimeError:
         return []
 
 
+def nvidia_driver_present() -> bool:
+    """Whether an NVIDIA driver is loaded (Linux), asked without importing anything."""
+    return os.path.exists("/proc/driver/nvidia/version") or os.path.exists("/dev/nvidiactl")
+
+
+def nvidia_gpu_count() -> int:
+    """NVIDIA GPUs on this machine, asked without starting JAX's CUDA backend (which
+    would take most of their memory): none without an NVIDIA driver; else as Warp sees
+    them, or JAX where warp-lang is not installed."""
+    if not nvidia_driver_present():
+        return 0
+    if importlib.util.find_spec("warp") is not None:
+        try:
+            import warp as wp
+
+            wp.config.quiet = True
+            wp.init()
+            return int(wp.get_cuda_device_count())
+        except Exception:  # warp's native library does not load: ask JAX
+            pass
+    return len(nvidia_gpus())
+
+
 def has_accelerator() -> bool:
     """Whether JAX sees a GPU or TPU (device batches are sized for it)."""
+    import jax
+
     return any(d.platform in ("gpu", "tpu", "cuda", "rocm") for d in jax.devices())
 
 

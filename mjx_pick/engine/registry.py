@@ -21,6 +21,7 @@ class Impl(enum.StrEnum):
     """The shipped backends, by the name a user chooses."""
 
     WARP = "warp"
+    MJX_WARP = "mjx-warp"
     MJX = "mjx"
     MUJOCO = "mujoco"
 
@@ -135,18 +136,33 @@ ENTRIES: dict[str, BackendEntry] = {
     for e in (
         BackendEntry(
             Impl.WARP,
-            "mjx_pick.engine.warp_backend:make_warp_backend",
+            "mjx_pick.engine.warp_direct:make_backend",
             Device.NVIDIA_GPU,
             # slots per GPU: the largest pool that fits one with room for the contact
             # buffers (benchmarks/throughput.py)
             BatchRule(cpu=32768, per_gpu=True),
-            "MuJoCo Warp on an NVIDIA GPU (pip install '.[gpu]')",
+            "MuJoCo Warp on NVIDIA GPUs, driven directly (pip install '.[gpu]')",
+            options=(
+                Option("ticks_per_call", int, "control ticks between refills of the pool"),
+                Option("buffers", None, "contact and constraint buffer sizes (BufferSizes)"),
+                Option("deterministic", _flag, "MuJoCo Warp's deterministic mode"),
+            ),
+            auto_rank=0,
+            problem="mjx_pick.engine.warp_direct:warp_problem",
+            model_fields="mjx_pick.engine.warp_direct:model_fields",
+        ),
+        BackendEntry(
+            Impl.MJX_WARP,
+            "mjx_pick.engine.warp_backend:make_warp_backend",
+            Device.NVIDIA_GPU,
+            BatchRule(cpu=32768, per_gpu=True),
+            "MuJoCo Warp through MJX's JAX bridge (the MJX program on Warp's kernels)",
             options=(
                 *_POOL_OPTIONS,
                 Option("buffers", None, "contact and constraint buffer sizes (BufferSizes)"),
                 Option("graph_mode", str, "how Warp captures its CUDA graphs"),
             ),
-            auto_rank=1,
+            # not for 'auto': the same physics as 'warp' with JAX's costs on top
             problem="mjx_pick.engine.devices:warp_problem",
             model_fields="mjx_pick.engine.variants:mjx_warp_fields",
         ),
@@ -238,9 +254,9 @@ def default_batch_size(name: str, gpus: int | None = None, accelerator: bool | N
     or on `gpus` NVIDIA GPUs with or without an accelerator (a cluster's actor)."""
     rule = entry(name).batch
     if rule.per_gpu and gpus is None:
-        from mjx_pick.engine.devices import nvidia_gpus
+        from mjx_pick.engine.devices import nvidia_gpu_count
 
-        gpus = len(nvidia_gpus())
+        gpus = nvidia_gpu_count()
     if rule.accelerator and accelerator is None:
         from mjx_pick.engine.devices import has_accelerator
 

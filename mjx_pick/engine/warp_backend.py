@@ -70,7 +70,7 @@ def check_warp() -> None:
     problem = warp_problem()
     if problem:
         raise ConfigError(
-            f"backend = 'warp' needs an NVIDIA GPU and warp-lang: {problem}. Install the GPU "
+            f"backend = 'mjx-warp' needs an NVIDIA GPU and warp-lang: {problem}. Install the GPU "
             f"extra: {INSTALL_HINT}; or choose backend 'mjx' (MJX's JAX physics) or "
             "'mujoco' (the C engine on CPU threads)"
         )
@@ -142,7 +142,7 @@ def _warp_backend_class():
         'WARP' on a GPU, 'JAX' on the CPU, MJX's own defaults).
         """
 
-        name = "warp"
+        name = "mjx-warp"
         impl = "warp"
 
         def __init__(
@@ -290,7 +290,7 @@ def make_warp_backend(scene: Scene, grasp: GraspConfig, batch_size: int, devices
         devices = nvidia_gpus() or jax.devices("cpu")[:1]
     devices = list(devices)
     if not devices:
-        raise ConfigError("backend 'warp': no device given")
+        raise ConfigError("backend 'mjx-warp': no device given")
     WarpBackend = _warp_backend_class()
     if len(devices) == 1:
         return WarpBackend(scene, grasp, batch_size, devices=devices, **options)

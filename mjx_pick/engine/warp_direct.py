@@ -35,7 +35,9 @@ import numpy as np
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
+from mjx_pick.engine import devices
 from mjx_pick.engine.backend import PickInputs, RunStats, addresses
+from mjx_pick.engine.registry import Impl
 from mjx_pick.engine.warp_buffers import (
     MAX_GROWTH,
     BufferOverflowError,
@@ -46,7 +48,7 @@ from mjx_pick.kernels import grasp as gk
 
 log = logging.getLogger(__name__)
 
-ALLOW_CPU_ENV = "MJX_PICK_WARP_CPU"
+ALLOW_CPU_ENV = devices.ALLOW_CPU_ENV
 INSTALL_HINT = 'pip install ".[gpu]" (warp-lang and mujoco-warp, CUDA 13)'
 # control periods per refill round: a finished slot idles up to this many periods before
 # it takes the next pick, against one host synchronisation per round
@@ -82,7 +84,7 @@ def warp_problem(allow_cpu: bool | None = None) -> str | None:
 
     if allow_cpu is None:
         allow_cpu = os.environ.get(ALLOW_CPU_ENV, "") == "1"
-    if not allow_cpu and not _nvidia_driver_present():
+    if not allow_cpu and not devices.nvidia_driver_present():
         return "no NVIDIA driver found"
     for module, package in (("warp", "warp-lang"), ("mujoco_warp", "mujoco-warp")):
         if importlib.util.find_spec(module) is None:
@@ -94,10 +96,6 @@ def warp_problem(allow_cpu: bool | None = None) -> str | None:
     except Exception as err:  # any failure to load warp's native library
         return f"warp-lang does not load: {type(err).__name__}: {err}"
     return None
-
-
-def _nvidia_driver_present() -> bool:
-    return os.path.exists("/proc/driver/nvidia/version") or os.path.exists("/dev/nvidiactl")
 
 
 def check_warp() -> None:
@@ -153,29 +151,23 @@ def batched_model_fields() -> frozenset[str]:
     return frozenset(fields | options)
 
 
-def carried_fields() -> frozenset[str]:
-    """The float MjModel fields this backend takes per simulation: those the C engine's
-    batch can expand that Warp holds per world or does not read at all."""
-    import mujoco.batch
+def model_fields(fields: frozenset[str]) -> frozenset[str]:
+    """Of the MjModel fields ``fields`` (``engine.variants``), those this backend takes
+    per simulation: Warp holds them per world, or does not read them at all."""
     from mujoco_warp._src import types as mjw_types
 
-    probe = mujoco.MjModel.from_xml_string("<mujoco/>")
     held = {f.name for f in dataclasses.fields(mjw_types.Model)}
     per_world = batched_model_fields()
-    out = set()
-    for field in mujoco.batch.MODEL_FIELDS:
-        if field in ("pair_friction", "pair_solref", "pair_solimp"):
-            continue
-        if field.startswith("opt."):
-            if field in per_world:
-                out.add(field)
-            continue
-        template = getattr(probe, field, None)
-        if not (isinstance(template, np.ndarray) and template.dtype.kind == "f"):
-            continue
-        if field in per_world or field not in held:
-            out.add(field)
-    return frozenset(out)
+    return frozenset(
+        f for f in fields if f in per_world or (not f.startswith("opt.") and f not in held)
+    )
+
+
+def carried_fields() -> frozenset[str]:
+    """The model fields this backend takes per simulation (``engine.variants``)."""
+    from mjx_pick.engine import variants
+
+    return variants.carried_fields(Impl.WARP)
 
 
 # ------------------------------------------------------------------- the device program
@@ -357,11 +349,15 @@ class _Pool:
             return
         with wp.ScopedDevice(backend.device_name):
             # one eager period first: Warp builds (or loads) every kernel outside the capture
+            t0 = time.perf_counter()
             self.period(backend)
             wp.synchronize_device()
+            backend._setup("kernels", t0)
+            t0 = time.perf_counter()
             with wp.ScopedCapture() as capture:
                 self.period(backend)
             self.graph = capture.graph
+            backend._setup("graph", t0)
 
     def run_period(self, backend: WarpBackend) -> None:
         wp = _warp()
@@ -385,7 +381,7 @@ class WarpBackend:
         order, order-invariant sums): the same results on every run on one device.
     """
 
-    name = "warp"
+    name = str(Impl.WARP)
 
     def __init__(
         self,
@@ -417,12 +413,20 @@ class WarpBackend:
         self.pool_stats = PoolStats()
         self.last_diagnostics: Diagnostics | None = None
         self.growths = 0
+        # setup seconds by stage (buffers, model and data, kernels, graph): compile time
+        self.setup_s: dict[str, float] = {}
         t0 = time.perf_counter()
         self.buffers = buffers or size_buffers(scene, grasp)
+        self._setup("buffers", t0)
         self.fields: tuple[str, ...] = ()
         self._pools: dict[tuple, _Pool] = {}
         self._masks = _overflow_masks()
-        self.stats.compile_s += time.perf_counter() - t0
+
+    def _setup(self, stage: str, t0: float) -> None:
+        """Counts the time since t0 as setup (compile time) of the stage."""
+        dt = time.perf_counter() - t0
+        self.setup_s[stage] = self.setup_s.get(stage, 0.0) + dt
+        self.stats.compile_s += dt
 
     # --- sizes
     def pool_size(self, n: int) -> int:
@@ -439,9 +443,9 @@ class WarpBackend:
             for old in [k for k in self._pools if k[1] == record_ticks]:
                 del self._pools[old]
             pool = _Pool(self, slots, record_ticks)
+            self._setup("model_and_data", t0)
             pool.capture(self)
             self._pools[key] = pool
-            self.stats.compile_s += time.perf_counter() - t0
         return pool
 
     # --- running
