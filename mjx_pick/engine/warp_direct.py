@@ -382,6 +382,7 @@ class WarpBackend:
     """
 
     name = str(Impl.WARP)
+    refill = True  # a pool of slots refilled as picks end (what reports call it)
 
     def __init__(
         self,
@@ -427,6 +428,15 @@ class WarpBackend:
         dt = time.perf_counter() - t0
         self.setup_s[stage] = self.setup_s.get(stage, 0.0) + dt
         self.stats.compile_s += dt
+
+    def peak_device_bytes(self) -> int | None:
+        """The most device memory Warp's memory pool has held on this device (None on
+        the CPU)."""
+        wp = _warp()
+        dev = wp.get_device(self.device_name)
+        if not dev.is_cuda or not wp.is_mempool_enabled(dev):
+            return None
+        return int(wp.get_mempool_used_mem_high(dev))
 
     # --- sizes
     def pool_size(self, n: int) -> int:
@@ -778,6 +788,11 @@ class MultiDevice:
         self.stats = RunStats()
         self.pool_stats = PoolStats()
         self.last_diagnostics: Diagnostics | None = None
+        self.refill = True
+
+    def peak_device_bytes(self) -> int | None:
+        peaks = [p.peak_device_bytes() for p in self.parts]
+        return None if None in peaks else sum(peaks)
 
     @property
     def growths(self) -> int:

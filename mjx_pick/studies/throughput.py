@@ -36,7 +36,11 @@ def device_name(n: int | None = None) -> str:
     return f"{n}x {d.device_kind}" if d.platform != "cpu" else "cpu"
 
 
-def peak_bytes() -> int | None:
+def peak_bytes(backend=None) -> int | None:
+    """Peak device memory: the backend's own report (Warp's memory pool), else JAX's
+    allocator (MJX programs); None on the CPU."""
+    if backend is not None and hasattr(backend, "peak_device_bytes"):
+        return backend.peak_device_bytes()
     stats = jax.devices()[0].memory_stats() if jax.devices()[0].platform != "cpu" else None
     return None if not stats else int(stats.get("peak_bytes_in_use", 0))
 
@@ -122,9 +126,9 @@ class RunSpec:
     def parse(cls, text: str) -> RunSpec:
         """'warp:n=65536:batch=16384:refill=1:ticks_per_call=20:warmup=16384'.
 
-        Keys: n, batch, warmup, devices (ints); backend options refill, ticks_per_call,
-        shrink_levels, graph_mode, rows (Warp's constraint rows per simulation; contacts
-        sized as usual); solver settings iterations, ls_iterations, tolerance,
+        Keys: n, batch, warmup, devices (ints); backend options refill, deterministic,
+        ticks_per_call, shrink_levels, graph_mode, rows (Warp's constraint rows per
+        simulation; contacts sized as usual); solver settings iterations, ls_iterations, tolerance,
         timestep_s; the contact setting pad_collision."""
         name, *parts = text.split(":")
         fields: dict = {}
@@ -135,7 +139,7 @@ class RunSpec:
                 raise ValueError(f"run {text!r}: {part!r} is not key=value")
             if key in ("n", "batch", "warmup", "devices"):
                 fields[key] = int(value)
-            elif key in ("refill",):
+            elif key in ("refill", "deterministic"):
                 options.append((key, value.lower() in ("1", "true", "yes")))
             elif key in ("ticks_per_call", "shrink_levels", "rows"):
                 options.append((key, int(value)))
@@ -166,7 +170,10 @@ class RunSpec:
             sized = size_buffers(scene, grasp)
             opts["buffers"] = dataclasses.replace(sized, rows=opts.pop("rows"))
         if self.devices:
-            opts["devices"] = jax.local_devices()[: self.devices]
+            if self.backend == "warp":  # Warp's own device names: JAX is not involved
+                opts["devices"] = [f"cuda:{i}" for i in range(self.devices)]
+            else:
+                opts["devices"] = jax.local_devices()[: self.devices]
         return opts
 
 
@@ -288,8 +295,18 @@ def _timed_run(spec: RunSpec, scene, inputs, grasp) -> tuple[dict, dict, object]
         "steps_per_pick": steps_per_pick,
         "full_steps": full_steps,
         "occupancy": occupancy,
-        "peak": peak_bytes() if spec.backend != "mujoco" else None,
+        "peak": peak_bytes(backend) if spec.backend != "mujoco" else None,
     }
+    if pool is not None and hasattr(pool, "steps_converged"):
+        steps = pool.steps - before.steps
+        timing["solver"] = {
+            "steps_all_converged": round((pool.steps_converged - before.steps_converged) / steps, 4)
+            if steps
+            else None,
+            "solver_iterations_median": pool.iteration_quantile(0.5),
+            "solver_iterations_p99": pool.iteration_quantile(0.99),
+            "solver_iterations_max": int(np.flatnonzero(pool.solver_iterations).max(initial=0)),
+        }
     return timing, timed.results, backend
 
 
@@ -313,6 +330,7 @@ def _run_fields(backend, out: dict, n: int, t: dict) -> dict:
         "peak_mem_mb_per_pick": round(peak / backend.batch_size / 2**20, 3) if peak else None,
         "success_rate": round(float(np.mean(out["success"])), 4),
         "diverged": int(np.sum(out["diverged"])),
+        **t.get("solver", {}),
     }
 
 
@@ -331,7 +349,7 @@ def _buffer_fields(backend, n: int) -> dict:
         "max_rows_used": int(diag.nefc_max.max()),
         "max_contacts_used_per_world": round(
             float(diag.nacon_max.max()) / backend.pool_size(n)
-            if backend.refill
+            if getattr(backend, "refill", True)
             else float(diag.nacon_max.max()) / backend.batch_size,
             2,
         ),
