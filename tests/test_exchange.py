@@ -150,6 +150,8 @@ def test_clear_errors(runs, tmp_path):
         mp.export_labels(run, "hdf5")
     with pytest.raises(ConfigError, match="is not an evaluate output folder"):
         mp.export_labels(tmp_path, "acronym")
+    with pytest.raises(ConfigError, match=r"export.depth_mm = -5.0 is out of range"):
+        mp.export_labels(run, "acronym", tmp_path / "d.h5", depth_mm=-5.0)
     with pytest.raises(ConfigError, match=r"format acronym ends in \.h5"):
         mp.export_labels(run, "acronym", tmp_path / "x.json")
     broken = tmp_path / "broken"

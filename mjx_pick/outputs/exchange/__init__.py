@@ -10,11 +10,10 @@ from __future__ import annotations
 
 import importlib
 import os
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mjx_pick.core.config import ConfigError
+from mjx_pick.core.config import ConfigError, check_range, write_atomic
 
 if TYPE_CHECKING:
     from mjx_pick.outputs.exchange.poses import GraspLabels
@@ -71,8 +70,8 @@ def export_labels(
     from mjx_pick.outputs.reporting.run import Run
 
     module = _format(fmt)
-    if depth_mm is not None and not (depth_mm == depth_mm and abs(depth_mm) < 1e4):
-        raise ConfigError(f"depth_mm = {depth_mm!r} must be a finite distance below 10 m")
+    if depth_mm is not None:
+        check_range("export", "depth_mm", depth_mm, 0, 2000)
     path = Path(out) if out is not None else default_path(run_dir, fmt)
     if path.suffix.lower() != module.SUFFIX:
         raise ConfigError(f"out = {str(path)!r}: a file of format {fmt} ends in {module.SUFFIX}")
@@ -104,10 +103,8 @@ def export_labels(
         if "failure" in table.column_names
         else [""] * table.num_rows,
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    mesh = object_mesh(run)
-    _atomic(mesh_path, lambda p: mesh.export(p, file_type="obj"))
-    _atomic(path, lambda p: module.write(labels, p, extra))
+    write_atomic(mesh_path, object_mesh(run).export(file_type="obj"))
+    write_atomic(path, module.write(labels, extra))
     return {"labels": path, "mesh": mesh_path}
 
 
@@ -126,14 +123,3 @@ def read_labels(path: str | os.PathLike, fmt: str | None = None) -> GraspLabels:
     if not path.is_file():
         raise ConfigError(f"{path} does not exist")
     return module.read(path)
-
-
-def _atomic(path: Path, write) -> None:
-    """write(temporary path) beside path, then rename it to path."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    finally:
-        Path(tmp).unlink(missing_ok=True)

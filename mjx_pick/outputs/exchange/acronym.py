@@ -3,6 +3,7 @@ object_in_gripper`` (N,), ``object/file``, ``object/scale`` (acronym_tools' fiel
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import h5py
@@ -14,10 +15,11 @@ from mjx_pick.outputs.exchange.poses import GraspLabels
 SUFFIX = ".h5"
 
 
-def write(labels: GraspLabels, path: Path, extra: dict) -> None:
-    """The file at path (a temporary name the caller renames); extra: mjx_pick's own
-    values (an ``mjx_pick`` group and attributes that ACRONYM's readers ignore)."""
-    with h5py.File(path, "w") as f:
+def write(labels: GraspLabels, extra: dict) -> bytes:
+    """The file's bytes; extra: mjx_pick's own values (an ``mjx_pick`` group and
+    attributes that ACRONYM's readers ignore)."""
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
         f["grasps/transforms"] = np.asarray(labels.transforms, np.float64)
         # ACRONYM's labels are 0/1 numbers (its tools select success == 1)
         f["grasps/qualities/flex/object_in_gripper"] = labels.success.astype(np.int64)
@@ -31,6 +33,7 @@ def write(labels: GraspLabels, path: Path, extra: dict) -> None:
         f["mjx_pick/failure"] = np.asarray(extra["failure"], dtype=h5py.string_dtype())
         for key in ("gripper", "object", "frame", "run"):
             f.attrs[f"mjx_pick_{key}"] = str(extra[key])
+    return buffer.getvalue()
 
 
 def read(path: Path) -> GraspLabels:

@@ -14,8 +14,8 @@ from mjx_pick.outputs.exchange.poses import GraspLabels
 SUFFIX = ".json"
 
 
-def write(labels: GraspLabels, path: Path, extra: dict) -> None:
-    """The file at path; extra: mjx_pick's own values (an ``mjx_pick`` object that
+def write(labels: GraspLabels, extra: dict) -> str:
+    """The file's text; extra: mjx_pick's own values (an ``mjx_pick`` object that
     GraspGen's loader ignores)."""
     score = [None if not np.isfinite(s) else float(s) for s in labels.score]
     doc = {
@@ -32,7 +32,7 @@ def write(labels: GraspLabels, path: Path, extra: dict) -> None:
             "depth_m": [float(d) for d in labels.depth_m],
         },
     }
-    path.write_text(json.dumps(doc))
+    return json.dumps(doc)
 
 
 def read(path: Path) -> GraspLabels:

@@ -15,8 +15,8 @@ from mjx_pick.outputs.exchange.poses import GraspLabels
 SUFFIX = ".yaml"
 
 
-def write(labels: GraspLabels, path: Path, extra: dict) -> None:
-    """The file at path. confidence: the grasp's score where it succeeded, 0 where it
+def write(labels: GraspLabels, extra: dict) -> str:
+    """The file's text. confidence: the grasp's score where it succeeded, 0 where it
     failed (the format's grasps are ones to try); each grasp's ``success``, ``score``,
     ``failure`` and ``depth_m`` are mjx_pick's extras, and so are ``object_file`` and
     ``object_scale`` (the names GraspDataGen's isaac_grasp files use)."""
@@ -47,7 +47,7 @@ def write(labels: GraspLabels, path: Path, extra: dict) -> None:
         "mjx_pick_run": str(extra["run"]),
         "grasps": grasps,
     }
-    path.write_text(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
+    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
 
 
 def read(path: Path) -> GraspLabels:
