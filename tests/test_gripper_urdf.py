@@ -204,3 +204,70 @@ def test_a_preset_based_file_may_swap_the_model(tmp_path):
     g = mp.load_gripper(tmp_path / "g.toml")
     assert g.mjcf.urdf is not None and g.force_min_n == 20.0
     assert dataclasses.replace(g.mjcf, urdf=None).file.endswith(".urdf")
+
+
+JAW = """<?xml version="1.0"?>
+<robot name="jaw">
+  <link name="base">
+    <inertial><mass value="0.5"/>
+      <inertia ixx="1e-3" iyy="1e-3" izz="1e-3" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 -0.01"/><geometry><box size="0.12 0.03 0.02"/></geometry>
+    </collision>
+  </link>
+  {fingers}
+</robot>
+"""
+FINGER = """<link name="{side}">
+    <inertial><mass value="0.05"/>
+      <inertia ixx="1e-5" iyy="1e-5" izz="1e-5" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.03"/><geometry><box size="0.008 0.02 0.03"/></geometry>
+    </collision>
+  </link>
+  <joint name="j_{side}" type="prismatic">
+    <parent link="base"/><child link="{side}"/><origin xyz="{x} 0 0"/><axis xyz="{axis} 0 0"/>
+    <limit lower="0" upper="0.04" effort="200" velocity="0.2"/>
+  </joint>"""
+
+
+def test_a_prismatic_jaw_coupled_in_the_toml_measures_and_picks(tmp_path):
+    """Two prismatic fingers (pads 8 x 20 x 30 mm, inner faces 80 mm apart), the right
+    one mimicking the left in the TOML: the stroke and pads are the URDF's, and it holds
+    the block."""
+    fingers = FINGER.format(side="left", x=-0.044, axis=1) + FINGER.format(
+        side="right", x=0.044, axis=-1
+    )
+    (tmp_path / "jaw.urdf").write_text(JAW.format(fingers=fingers))
+    text = """
+name = "jaw"
+force_min_n = 5.0
+force_max_n = 100.0
+speed_min_mm_s = 5.0
+speed_max_mm_s = 150.0
+
+[urdf]
+file = "jaw.urdf"
+mount_quat = [0.0, 1.0, 0.0, 0.0]
+pad_left_links = ["left"]
+pad_right_links = ["right"]
+joint = "j_left"
+servo_kp = 20000.0    # N/m: 10 N/mm at each pad (the drive moves both: F = tau / 2)
+servo_kv = 40.0
+servo_forcerange = 250.0
+drive_armature = 0.5
+linkage_armature = 0.5
+{extra}
+"""
+    path = tmp_path / "jaw.toml"
+    path.write_text(text.replace("{extra}", ""))
+    with pytest.raises(ConfigError, match="does not drive the right finger"):
+        mp.load_gripper(path)
+    path.write_text(text.replace("{extra}", "[urdf.mimic]\nj_right = 1.0"))
+    jaw = mp.load_gripper(path)
+    assert jaw.stroke_mm == pytest.approx(80.0, abs=0.05)
+    assert (jaw.finger_depth_mm, jaw.finger_width_mm, jaw.pad_height_mm) == pytest.approx(
+        (8.0, 20.0, 30.0), abs=0.01
+    )
+    assert jaw.mjcf.urdf.mimic == (("j_right", 1.0),)
+    ev = mp.evaluate("block", jaw, n=3, seed=0, grasp=PROC, out=tmp_path / "run")
+    assert ev.table["success"].to_pylist() == [True] * 3
+    assert np.asarray(ev.table["max_force_left_n"]).min() > 0.9 * 50.0
