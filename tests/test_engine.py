@@ -367,3 +367,30 @@ def test_a_study_resumes_from_chunks_that_a_simulator_with_another_history_wrote
     assert resumed.timing["chunks_resumed"] == 1 and resumed.table.num_rows == 8
     whole = sweep(block, params, settings, **run)
     assert resumed.table.equals(whole.table)
+
+
+# drawing pick-points and building a scene, in a fresh interpreter: which of JAX's
+# modules did it load (none may be)
+HOST_SIDE = """
+import json, sys
+import mjx_pick as mp
+from mjx_pick.core import pickpoints as pp
+obj, gripper = mp.load_object("door_opener"), mp.load_gripper("robotiq-2f85")
+picks = pp.generate_normal(obj, gripper, 16, seed=0)
+scene = mp.build_scene(obj, gripper)
+jax = sorted(m for m in sys.modules if m.split(".")[0] in ("jax", "jaxlib"))
+print(json.dumps({"picks": len(picks), "jax": jax}))
+"""
+
+
+def test_host_side_needs_no_jax():
+    import os
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [sys.executable, "-c", HOST_SIDE], env=dict(os.environ), capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    got = json.loads(run.stdout.splitlines()[-1])
+    assert got == {"picks": 16, "jax": []}

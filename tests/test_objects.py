@@ -119,6 +119,26 @@ def test_rasterize_matches_area():
     assert mask.sum() * 0.25**2 == pytest.approx(800.0, rel=0.01)
 
 
+@pytest.mark.parametrize("asset", ["door_opener", "ring", "l_bracket"])
+def test_rasterize_is_shapely_point_in_polygon_on_every_centre(asset):
+    # scan lines give exactly the centres shapely finds inside, for the shipped outlines
+    # (a hook, a hole, a corner) and a two-piece outline whose axis-aligned edges lie on
+    # centre lines at 0 and 90 degrees (on the outline: outside), and at yaws between
+    poly = mp.load_asset(asset).polygon
+    two = shapely.MultiPolygon(
+        [box(-30, -5, -10, 5), Point(20, 3).buffer(8).difference(box(18, 0, 30, 2))]
+    )
+    for shape in (poly, two):
+        radius = float(np.hypot(*shapely.get_coordinates(shape).T).max())
+        for yaw in (0.0, 0.3, 0.5 * math.pi, 2.5):
+            mask, (x0, _) = rasterize(shape, 0.4, yaw, radius_mm=radius)
+            rot = shapely.affinity.rotate(shape, yaw, origin=(0, 0), use_radians=True)
+            centres = x0 + (np.arange(mask.shape[0]) + 0.5) * 0.4
+            xs, ys = np.meshgrid(centres, centres)
+            inside = shapely.contains_xy(rot, xs.ravel(), ys.ravel()).reshape(xs.shape)
+            np.testing.assert_array_equal(mask, inside.astype(np.uint8))
+
+
 @pytest.mark.parametrize("asset", mp.asset_names())
 @pytest.mark.parametrize("preset", mp.preset_names())
 def test_every_asset_and_preset_compiles_in_mujoco_and_mjx(asset, preset):

@@ -148,6 +148,22 @@ def test_yaw_symmetry(door_opener):
     np.testing.assert_allclose(a["gap_left_mm"][both], turned["gap_right_mm"][both], atol=1e-4)
 
 
+def test_a_candidates_result_does_not_depend_on_its_batch(door_opener):
+    # candidates are checked in blocks of fk.BLOCK: one across block boundaries, fixed
+    # openings mixed in, gets the result it gets alone
+    checker = pp.FeasibilityChecker(door_opener, GRIPPER)
+    rng = np.random.default_rng(4)
+    n = 2 * fk.BLOCK + 5
+    x, y, yaw = rng.uniform(-45, 45, n), rng.uniform(-45, 45, n), rng.uniform(0, 360, n)
+    opening = np.where(rng.random(n) < 0.3, rng.uniform(20, 85, n), np.nan)
+    whole = checker(x, y, yaw, opening)
+    for i in (0, fk.BLOCK - 1, fk.BLOCK, n - 1):
+        one = checker(x[i : i + 1], y[i : i + 1], yaw[i : i + 1], opening[i : i + 1])
+        for k, v in whole.items():
+            np.testing.assert_array_equal(one[k], v[i : i + 1], err_msg=k)
+    assert len(np.unique(whole["reason"])) >= 4  # the checks were all exercised
+
+
 def test_same_seed_same_picks(door_opener):
     a = pp.generate_normal(door_opener, GRIPPER, 50, seed=7)
     b = pp.generate_normal(door_opener, GRIPPER, 50, seed=7)

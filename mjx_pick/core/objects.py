@@ -891,7 +891,10 @@ def rasterize(
     corners' distances differ in the last bits, and ceil() can turn that into a pixel.
 
     Pixel (i, j) covers x in [x0 + j*s, x0 + (j+1)*s), y in [y0 + i*s, ...) (row = +y);
-    a pixel is object when its centre is inside.
+    a pixel is object when its centre is inside. Scan lines: along each row's centre
+    line, the crossings of the outline's edges (every ring, holes too) toggle
+    inside/outside (the even-odd rule: shapely's ``contains_xy`` on every centre, bar a
+    centre lying on an edge to the last bit, at a fraction of its cost).
 
     Returns:
       mask (H, W) uint8 and (x0, y0) of the grid's lower-left corner, mm.
@@ -901,10 +904,38 @@ def rasterize(
         radius_mm = float(np.hypot(*shapely.get_coordinates(rot).T).max())
     half = int(math.ceil(radius_mm / mm_per_px)) + pad_px
     x0 = y0 = -half * mm_per_px
-    centres = x0 + (np.arange(2 * half) + 0.5) * mm_per_px
-    xs, ys = np.meshgrid(centres, centres)
-    shapely.prepare(rot)
-    mask = shapely.contains_xy(rot, xs.ravel(), ys.ravel()).reshape(xs.shape).astype(np.uint8)
+    n = 2 * half
+    centres = x0 + (np.arange(n) + 0.5) * mm_per_px
+    rings = [r for p in shapely.get_parts(rot) for r in (p.exterior, *p.interiors)]
+    ends = [shapely.get_coordinates(r) for r in rings]
+    if not ends:
+        return np.zeros((n, n), np.uint8), (x0, y0)
+    a = np.concatenate([e[:-1] for e in ends])  # each edge from a to b
+    b = np.concatenate([e[1:] for e in ends])
+    # rows whose centre line an edge crosses: min(ya, yb) <= yc < max(ya, yb), so that a
+    # vertex on a centre line counts once and a horizontal edge not at all
+    first = np.searchsorted(centres, np.minimum(a[:, 1], b[:, 1]), "left")
+    rows_of = np.searchsorted(centres, np.maximum(a[:, 1], b[:, 1]), "left") - first
+    edge = np.repeat(np.arange(len(a)), rows_of)
+    row = np.arange(len(edge)) + np.repeat(first - (np.cumsum(rows_of) - rows_of), rows_of)
+    (xa, ya), (xb, yb) = a[edge].T, b[edge].T
+    x = xa + (centres[row] - ya) * (xb - xa) / (yb - ya)
+    # a crossing toggles every pixel whose centre lies right of it
+    col = np.searchsorted(centres, x, "right")
+    toggles = np.bincount(row * (n + 1) + col, minlength=n * (n + 1)).astype(np.uint8)
+    mask = np.cumsum(toggles.reshape(n, n + 1)[:, :n], axis=1, dtype=np.uint8)
+    mask &= 1  # the parity of the crossings to the left (a uint8 sum wraps: parity kept)
+    # a centre on the outline is outside (as shapely says): on a crossing, or on a
+    # horizontal edge lying on its row's centre line (axis-aligned edges at yaw 0 and
+    # 90 degrees meet centres exactly)
+    on = col - 1
+    hit = (on >= 0) & (centres[np.maximum(on, 0)] == x)
+    mask[row[hit], on[hit]] = 0
+    flat = (a[:, 1] == b[:, 1]) & np.isin(a[:, 1], centres)
+    for (xa, y), (xb, _) in zip(a[flat], b[flat], strict=True):
+        lo = np.searchsorted(centres, min(xa, xb), "left")
+        hi = np.searchsorted(centres, max(xa, xb), "right")
+        mask[np.searchsorted(centres, y), lo:hi] = 0
     return mask, (x0, y0)
 
 

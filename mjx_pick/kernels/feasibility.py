@@ -1,7 +1,4 @@
-"""Batched geometric feasibility of pick-points (the paper's three checks), in JAX.
-
-Everything here is pure and jit-able; the candidate axis is added with ``vmap`` at the
-single entry point :func:`check_candidates`.
+"""Geometric feasibility of pick-points (the paper's three checks), batched in numpy.
 
 Method. For a pick-point (x, y, yaw) only the *band* under the fingers matters: the strip
 |y_g| <= finger_width / 2 of the gripper frame, from one fully-open finger's outer face
@@ -18,29 +15,30 @@ From that column profile:
   finger width) is at least ``min_coverage``.
 
 A plain reference (:func:`reference_check`) samples the exact polygon point by point
-for one candidate; tests pin the kernel to it. The raster costs at most half a pixel of
-position and half a yaw bin of angle (bins are chosen so that this is also at most half
-a pixel at the object's rim).
+for one candidate; tests pin the batched check to it. The raster costs at most half a
+pixel of position and half a yaw bin of angle (bins are chosen so that this is also at
+most half a pixel at the object's rim). It runs on the host in float32 (the arithmetic of
+the JAX kernel it replaced: see docs/architecture.md), so no process needs JAX to draw
+pick-points.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from typing import NamedTuple
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 FEASIBLE, OFF_OBJECT, TOO_WIDE, CLEARANCE, COVERAGE, PAD_PATH = range(6)
 # pad_path: a linkage's near pad rides over the part (mjx_pick.core.pickpoints; not checked
-# in these kernels, which see the gripper's footprint only)
+# here, where only the gripper's footprint is seen)
 REASONS = ("feasible", "off_object", "too_wide", "clearance", "coverage", "pad_path")
+# candidates checked at once: bounds the (candidates x columns) temporaries
+BLOCK = 4096
 
 
 class GripperBand(NamedTuple):
-    """Gripper geometry and check thresholds, mm (floats: hashable, static under jit)."""
+    """Gripper geometry and check thresholds, mm (floats)."""
 
     stroke_mm: float
     finger_width_mm: float
@@ -52,14 +50,15 @@ class GripperBand(NamedTuple):
 class SilhouetteStack(NamedTuple):
     """Row-cumulated rotated silhouettes.
 
-    cum_rows: (K, H + 1, W) uint16; cum_rows[k, i, j] = object pixels in rows < i of
+    cum_rows: (H + 1, K, W) uint16; cum_rows[i, k, j] = object pixels in rows < i of
       column j of the silhouette rotated by yaw k * pi / K (at most H, which the raster's
-      cell limit keeps far below 2**16).
-    res_mm: pixel size, mm (a Python float: static).
-    x0_mm: lower-left corner of every grid (x and y), mm (static).
+      cell limit keeps far below 2**16). Rows outermost: the stack is built a row at a
+      time over contiguous (K, W) slabs.
+    res_mm: pixel size, mm.
+    x0_mm: lower-left corner of every grid (x and y), mm.
     """
 
-    cum_rows: jax.Array
+    cum_rows: np.ndarray
     res_mm: float
     x0_mm: float
 
@@ -70,8 +69,8 @@ def build_stack(rasterize, polygon, res_mm: float, radius_mm: float) -> Silhouet
     Yaw and yaw + pi give the same checks with (x, y) negated (the gripper is symmetric),
     so half a turn suffices.
     """
-    masks, x0 = rasterize_bins(rasterize, polygon, res_mm, radius_mm)
-    return stack_from_masks(masks, res_mm, x0)
+    bits, width, x0 = packed_bins(rasterize, polygon, res_mm, radius_mm)
+    return stack_from_bits(bits, width, res_mm, x0)
 
 
 def yaw_bins(res_mm: float, radius_mm: float) -> int:
@@ -80,33 +79,40 @@ def yaw_bins(res_mm: float, radius_mm: float) -> int:
     return max(8, int(math.ceil(math.pi * radius_mm / res_mm)))
 
 
-def rasterize_bins(rasterize, polygon, res_mm: float, radius_mm: float):
-    """(K, H, W) uint8 masks of the silhouette rotated by yaw k * pi / K, and the grids'
-    lower-left corner x0 (mm; the same for x and y and every bin)."""
+def packed_bins(rasterize, polygon, res_mm: float, radius_mm: float):
+    """The silhouette rotated by yaw k * pi / K for each of the K yaw bins, rasterised
+    by ``rasterize`` (``mjx_pick.core.objects.rasterize``) and packed a bit per pixel.
+
+    Returns:
+      bits (H, K, ceil(W / 8)) uint8: row i of bin k, ``np.packbits`` along the row;
+      W, the grids' width; x0, the grids' lower-left corner (mm; the same for x and y
+      and every bin).
+    """
     n_bins = yaw_bins(res_mm, radius_mm)
-    masks = []
-    x0 = None
+    bits = None
+    x0 = width = None
     for k in range(n_bins):
-        mask, (gx0, _) = rasterize(polygon, res_mm, k * math.pi / n_bins, radius_mm=radius_mm)
-        masks.append(mask)
-        x0 = gx0
-    return np.stack(masks).astype(np.uint8), float(x0)
+        mask, (x0, _) = rasterize(polygon, res_mm, k * math.pi / n_bins, radius_mm=radius_mm)
+        if bits is None:
+            width = mask.shape[1]
+            bits = np.empty((mask.shape[0], n_bins, -(-width // 8)), np.uint8)
+        bits[:, k] = np.packbits(mask.astype(bool), axis=-1)
+    return bits, int(width), float(x0)
 
 
-def stack_from_masks(masks: np.ndarray, res_mm: float, x0_mm: float) -> SilhouetteStack:
-    """The row-cumulated stack of (K, H, W) 0/1 masks (:func:`rasterize_bins`)."""
-    masks = np.asarray(masks)
-    n_bins, n_rows, n_cols = masks.shape
+def stack_from_bits(bits: np.ndarray, width: int, res_mm: float, x0_mm: float) -> SilhouetteStack:
+    """The row-cumulated stack of :func:`packed_bins`' bits (H, K, ceil(W / 8))."""
+    n_rows, n_bins, _ = bits.shape
     if n_rows >= 2**16:
         raise ValueError(f"a raster of {n_rows} rows does not fit the uint16 stack")
-    cum = np.empty((n_bins, n_rows + 1, n_cols), np.uint16)
-    cum[:, 0] = 0
-    # one row at a time: each add runs over K rows of W contiguous cells, where numpy's
-    # cumsum along the middle axis steps through memory a row at a time (slow on a large
-    # stack); uint16 halves the memory the stack and its copy move
+    cum = np.empty((n_rows + 1, n_bins, width), np.uint16)
+    cum[0] = 0
+    # a row at a time: each add runs over one contiguous (K, W) slab, and no unpacked
+    # copy of the whole raster is ever held
     for i in range(n_rows):
-        np.add(cum[:, i], masks[:, i], out=cum[:, i + 1], casting="unsafe")
-    return SilhouetteStack(jnp.asarray(cum), float(res_mm), float(x0_mm))
+        row = np.unpackbits(bits[i], axis=-1, count=width)
+        np.add(cum[i], row, out=cum[i + 1], casting="unsafe")
+    return SilhouetteStack(cum, float(res_mm), float(x0_mm))
 
 
 def _columns(band: GripperBand, res_mm: float) -> np.ndarray:
@@ -117,88 +123,99 @@ def _columns(band: GripperBand, res_mm: float) -> np.ndarray:
     return (np.arange(-n_half, n_half) + 0.5) * res_mm
 
 
-def _check_one(stack: SilhouetteStack, band: GripperBand, x_mm, y_mm, yaw_rad, opening_mm):
-    """Checks for one candidate. Returns (reason, opening_mm, coverage, gap_l, gap_r).
+def _span(prefix: np.ndarray, start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """(N,) sums of columns [start, stop) of each row, from row-wise prefix sums
+    (N, C + 1); an empty or reversed span sums to 0."""
+    stop = np.maximum(start, stop)
+    take = np.take_along_axis
+    return take(prefix, stop[:, None], 1)[:, 0] - take(prefix, start[:, None], 1)[:, 0]
 
-    opening_mm: NaN to choose the opening (``safety_zone`` outside the object); else the
-    fingers are at this opening (a plan made for another pose), and an object reaching
-    to or past a finger's inner face fails clearance: the finger would land on it.
+
+def _check_block(stack: SilhouetteStack, band: GripperBand, x, y, yaw, opening_mm):
+    """Checks for (N,) float32 candidates; see :func:`check_candidates`.
+
+    Float32 throughout, operation for operation as the per-candidate definition: the
+    column profile is gathered, and the finger footprints and the region between them,
+    contiguous runs of the (ascending) columns, are summed from prefix sums.
     """
+    f32 = np.float32
     cum = stack.cum_rows
-    n_bins, n_rows1, n_cols = cum.shape
+    n_rows1, n_bins, n_cols = cum.shape
     res, g0 = stack.res_mm, stack.x0_mm
     # fold yaw into [0, pi): (x, y, yaw + pi) is (-x, -y, yaw) for a symmetric gripper
-    turns = yaw_rad / jnp.pi
-    k_float = (turns - jnp.floor(turns / 2.0) * 2.0) * n_bins  # in [0, 2K)
-    k = jnp.round(k_float).astype(jnp.int32) % (2 * n_bins)
+    turns = yaw / np.pi
+    k_float = (turns - np.floor(turns / 2.0) * 2.0) * n_bins  # in [0, 2K)
+    k = np.round(k_float).astype(np.int32) % (2 * n_bins)
     flip = k >= n_bins
-    k = jnp.where(flip, k - n_bins, k)
-    sign = jnp.where(flip, -1.0, 1.0)
-    x, y = sign * x_mm, sign * y_mm
+    k = np.where(flip, k - n_bins, k)
+    sign = np.where(flip, f32(-1.0), f32(1.0))
+    x, y = sign * x, sign * y
     # band rows (object grid, gripper-aligned): centres in [-w/2 - y, w/2 - y]
     half_w = 0.5 * band.finger_width_mm
-    i_lo = jnp.ceil((-half_w - y - g0) / res - 0.5).astype(jnp.int32)
-    i_hi = jnp.floor((half_w - y - g0) / res - 0.5).astype(jnp.int32) + 1
-    i_lo = jnp.clip(i_lo, 0, n_rows1 - 1)
-    i_hi = jnp.clip(i_hi, 0, n_rows1 - 1)
-    px = jnp.asarray(_columns(band, res), dtype=jnp.float32)
-    j = jnp.floor((px - x - g0) / res).astype(jnp.int32)
+    i_lo = np.ceil((-half_w - y - g0) / res - 0.5).astype(np.int32)
+    i_hi = np.floor((half_w - y - g0) / res - 0.5).astype(np.int32) + 1
+    i_lo = np.clip(i_lo, 0, n_rows1 - 1)
+    i_hi = np.clip(i_hi, 0, n_rows1 - 1)
+    px = np.asarray(_columns(band, res), dtype=f32)
+    j = np.floor((px - x[:, None] - g0) / res).astype(np.int32)
     valid = (j >= 0) & (j < n_cols)
-    jc = jnp.clip(j, 0, n_cols - 1)
-    counts = jnp.where(
-        valid, cum[k, i_hi, jc].astype(jnp.int32) - cum[k, i_lo, jc].astype(jnp.int32), 0
-    )
+    j = np.clip(j, 0, n_cols - 1)
+    flat = cum.reshape(-1)
+    hi = flat[((i_hi * n_bins + k) * n_cols)[:, None] + j].astype(np.int32)
+    counts = np.where(valid, hi - flat[((i_lo * n_bins + k) * n_cols)[:, None] + j], 0)
     occupied = counts > 0
 
-    half_stroke = 0.5 * band.stroke_mm
-    in_stroke = jnp.abs(px) <= half_stroke
-    inner = occupied & in_stroke
-    any_inner = jnp.any(inner)
+    # the columns between the open fingers, a contiguous run
+    half_stroke = f32(0.5 * band.stroke_mm)
+    s0 = int(np.searchsorted(px, -half_stroke, "left"))  # |px| <= half the stroke
+    s1 = int(np.searchsorted(px, half_stroke, "right"))
+    inner = occupied[:, s0:s1]
+    any_inner = inner.any(axis=1)
     # outer edges of the outermost occupied columns between the open fingers
-    x_right = jnp.max(jnp.where(inner, px + 0.5 * res, -jnp.inf))
-    x_left = jnp.min(jnp.where(inner, px - 0.5 * res, jnp.inf))
-    fixed = jnp.isfinite(opening_mm)
-    half_open = jnp.where(
-        fixed, 0.5 * opening_mm, jnp.maximum(x_right, -x_left) + band.safety_zone_mm
+    last = s1 - 1 - inner[:, ::-1].argmax(axis=1)
+    first = s0 + inner.argmax(axis=1)
+    x_right = np.where(any_inner, (px + 0.5 * res)[last], f32(-np.inf))
+    x_left = np.where(any_inner, (px - 0.5 * res)[first], f32(np.inf))
+    fixed = np.isfinite(opening_mm)
+    half_open = np.where(
+        fixed, 0.5 * opening_mm, np.maximum(x_right, -x_left) + band.safety_zone_mm
     )
     opening = 2.0 * half_open
     too_wide = opening > band.stroke_mm + 1e-6
-    landed = fixed & (jnp.maximum(x_right, -x_left) >= half_open)
+    landed = fixed & (np.maximum(x_right, -x_left) >= half_open)
+    # finger footprints: px in [h, h + depth] and [-h - depth, -h]; between: |px| < h
     depth = band.finger_depth_mm
-    under_right = (px >= half_open) & (px <= half_open + depth)
-    under_left = (px <= -half_open) & (px >= -half_open - depth)
-    blocked = jnp.any(occupied & (under_right | under_left)) | landed
-    between = jnp.abs(px) < half_open
-    area = jnp.sum(jnp.where(between, counts, 0)) * res * res
-    coverage = area / jnp.maximum(opening * band.finger_width_mm, 1e-9)
-    reason = jnp.select(
+    n = len(x)
+    occ = np.zeros((n, px.size + 1), np.int32)
+    np.cumsum(occupied, axis=1, out=occ[:, 1:])
+    cnt = np.zeros((n, px.size + 1), np.int32)
+    np.cumsum(counts, axis=1, out=cnt[:, 1:])
+
+    def col(v, side):  # the first column with px > v ("right") or px >= v ("left")
+        return np.searchsorted(px, v, side).astype(np.intp)
+
+    under_right = _span(occ, col(half_open, "left"), col(half_open + depth, "right"))
+    under_left = _span(occ, col(-half_open - depth, "left"), col(-half_open, "right"))
+    blocked = (under_right > 0) | (under_left > 0) | landed
+    area = _span(cnt, col(-half_open, "right"), col(half_open, "left")).astype(f32) * res * res
+    coverage = area / np.maximum(opening * band.finger_width_mm, 1e-9)
+    reason = np.select(
         [~any_inner, too_wide, blocked, coverage < band.min_coverage],
         [OFF_OBJECT, TOO_WIDE, CLEARANCE, COVERAGE],
         FEASIBLE,
     )
-    nan = jnp.float32(jnp.nan)
-    opening = jnp.where(any_inner, opening, nan)
-    gap_right = jnp.where(any_inner, half_open - x_right, nan)
-    gap_left = jnp.where(any_inner, half_open + x_left, nan)
+    nan = f32(np.nan)
+    opening = np.where(any_inner, opening, nan)
+    gap_right = np.where(any_inner, half_open - x_right, nan)
+    gap_left = np.where(any_inner, half_open + x_left, nan)
     # report gaps in the unflipped frame: a flip swaps the fingers
-    gap_left, gap_right = (
-        jnp.where(flip, gap_right, gap_left),
-        jnp.where(flip, gap_left, gap_right),
-    )
+    gap_left, gap_right = np.where(flip, gap_right, gap_left), np.where(flip, gap_left, gap_right)
     return (
-        reason.astype(jnp.int32),
+        reason.astype(np.int32),
         opening,
-        jnp.where(any_inner, coverage, 0.0),
+        np.where(any_inner, coverage, f32(0.0)),
         gap_left,
         gap_right,
-    )
-
-
-@functools.partial(jax.jit, static_argnames=("band", "res_mm", "x0_mm"))
-def _check_batch(cum_rows, x_mm, y_mm, yaw_rad, opening_mm, band, res_mm, x0_mm):
-    stack = SilhouetteStack(cum_rows, res_mm, x0_mm)
-    return jax.vmap(lambda a, b, c, d: _check_one(stack, band, a, b, c, d))(
-        x_mm, y_mm, yaw_rad, opening_mm
     )
 
 
@@ -212,25 +229,34 @@ def check_candidates(
       band: gripper geometry and thresholds.
       x_mm, y_mm, yaw_rad: (N,) pick-point poses (object frame relative to the gripper).
       opening_mm: (N,) fixed starting openings (NaN: choose), or None to choose all.
+        With a fixed opening, an object reaching to or past a finger's inner face fails
+        clearance: the finger would land on it (a plan made for another pose).
 
     Returns:
       reason (N,) int32 in REASONS order, opening_mm (N,), coverage (N,), and the gaps
-      between each finger's start and the object, gap_left_mm / gap_right_mm (N,).
+      between each finger's start and the object, gap_left_mm / gap_right_mm (N,), all
+      float32.
     """
-    x = jnp.asarray(x_mm, jnp.float32)
-    y = jnp.asarray(y_mm, jnp.float32)
-    yaw = jnp.asarray(yaw_rad, jnp.float32)
+    x = np.atleast_1d(np.asarray(x_mm, np.float32))
+    y = np.broadcast_to(np.asarray(y_mm, np.float32), x.shape)
+    yaw = np.broadcast_to(np.asarray(yaw_rad, np.float32), x.shape)
     if opening_mm is None:
-        opening = jnp.full(x.shape, jnp.nan, jnp.float32)
+        opening = np.full(x.shape, np.nan, np.float32)
     else:
-        opening = jnp.broadcast_to(jnp.asarray(opening_mm, jnp.float32), x.shape)
-    return _check_batch(stack.cum_rows, x, y, yaw, opening, band, stack.res_mm, stack.x0_mm)
+        opening = np.broadcast_to(np.asarray(opening_mm, np.float32), x.shape)
+    parts = []
+    # NaN openings and gaps of candidates off the object are expected, not warned of
+    with np.errstate(invalid="ignore"):
+        for s in range(0, max(len(x), 1), BLOCK):
+            b = slice(s, s + BLOCK)
+            parts.append(_check_block(stack, band, x[b], y[b], yaw[b], opening[b]))
+    return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
 
 
 def reference_check(polygon, band: GripperBand, x_mm, y_mm, yaw_rad, res_mm=0.1, opening_mm=None):
     """Plain per-candidate reference: exact polygon, fine point sampling, no yaw bins.
 
-    opening_mm: a fixed starting opening (see _check_one), or None to choose it.
+    opening_mm: a fixed starting opening (see check_candidates), or None to choose it.
     """
     import shapely
 
