@@ -315,7 +315,7 @@ def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
     # held pick with an empty one.
     import jax
 
-    from mjx_pick.engine.mjx_backend import shrink_sizes
+    from mjx_pick.engine.pool_sizes import shrink_sizes
 
     assert shrink_sizes(8, 2) == (8, 4, 2) and shrink_sizes(8, 5) == (8, 4, 2, 1)
     assert shrink_sizes(6, 3) == (6, 3) and shrink_sizes(8, 0) == (8,)

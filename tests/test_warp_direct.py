@@ -317,3 +317,23 @@ def test_variant_models_differ_only_in_fields_warp_takes_per_world(block):
         leaf = getattr(mb, name).numpy()
         mine = np.asarray(getattr(b.model, name), np.float32).reshape(leaf.shape)
         np.testing.assert_array_equal(leaf, mine, err_msg=name)
+
+
+def test_a_shrinking_pool_keeps_each_picks_state(block_scene):
+    """Six picks in a pool of 4 slots that halves twice in the tail (to 2, then 1):
+    the picks moved into the smaller pools run on as if they had stayed -- bitwise the
+    results of a pool that never shrinks (Warp's CPU device runs worlds one by one)."""
+    picks = pp.generate_normal(block_scene.object, block_scene.gripper, 6, seed=1, grasp=SHORT)
+    inputs = make_inputs(block_scene, SHORT, picks)
+    common = dict(batch_size=4, ticks_per_call=5, shrink_min_slots=1)
+    fixed = wd.WarpBackend(block_scene, SHORT, shrink_levels=0, **common)
+    ref, _ = fixed.run(inputs)
+    shrinking = wd.WarpBackend(block_scene, SHORT, shrink_levels=2, **common)
+    out, _ = shrinking.run(inputs)
+    assert sorted(k[0] for k in shrinking._pools) == [1, 2, 4]
+    assert shrinking.pool_stats.slot_ticks < fixed.pool_stats.slot_ticks
+    for name in wd.RESULT_FIELDS:
+        np.testing.assert_array_equal(out[name], ref[name], err_msg=name)
+    np.testing.assert_array_equal(
+        shrinking.last_diagnostics.overflow, fixed.last_diagnostics.overflow
+    )

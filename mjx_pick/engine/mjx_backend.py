@@ -53,6 +53,7 @@ from mjx_pick.core.config import ConfigError
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine.backend import PickInputs, RunStats, addresses
+from mjx_pick.engine.pool_sizes import DEFAULT_SHRINK_LEVELS, SHRINK_MIN_SLOTS, shrink_sizes
 from mjx_pick.kernels import grasp as gk
 
 # TF32 matrix products would change contact solutions on GPUs: the rollouts are traced
@@ -76,9 +77,6 @@ def _precise(fn):
 # round's fixed work (a restart forward, merges, gathers) stays small next to its ~100
 # physics steps per slot (benchmarks/throughput.py compares the choices)
 DEFAULT_TICKS_PER_CALL = 20
-# halvings of a pool in a run's tail (make_pool): as picks run out, a half-empty pool
-# moves its live slots into a pool half its size, so the tail does not pay for idle slots
-DEFAULT_SHRINK_LEVELS = 3
 
 
 class KeptPrograms:
@@ -327,15 +325,6 @@ def _slot_axes(phys: Physics):
     return Slot(d_axes, *([0] * (len(Slot._fields) - 1)))
 
 
-def shrink_sizes(slots: int, levels: int, min_slots: int = 1) -> tuple[int, ...]:
-    """Pool sizes of a run's tail: slots, halved up to `levels` times while the halves
-    stay whole numbers of at least min_slots (slots per device)."""
-    sizes = [int(slots)]
-    while len(sizes) <= levels and sizes[-1] % 2 == 0 and sizes[-1] // 2 >= max(min_slots, 1):
-        sizes.append(sizes[-1] // 2)
-    return tuple(sizes)
-
-
 def make_pool(
     scene: Scene,
     grasp: GraspConfig,
@@ -573,11 +562,7 @@ class MjxBackend:
     name = "mjx"
     impl = "jax"
     POOL_QUANTUM = 256
-    # the tail never shrinks a pool below this many slots per device: a small pool's GPU
-    # step is bound by kernel launches more than by its slot count, so a halving saves
-    # little, while every pool size is one more trace and compile of the physics step,
-    # which a short run pays and a long one amortises
-    SHRINK_MIN_SLOTS = 4096
+    SHRINK_MIN_SLOTS = SHRINK_MIN_SLOTS  # pool_sizes: a class attribute tests may lower
 
     def __init__(
         self,

@@ -146,6 +146,7 @@ ENTRIES: dict[str, BackendEntry] = {
                 Option("ticks_per_call", int, "control ticks between refills of the pool"),
                 Option("buffers", None, "contact and constraint buffer sizes (BufferSizes)"),
                 Option("deterministic", _flag, "MuJoCo Warp's deterministic mode"),
+                Option("shrink_levels", int, "how often a draining pool may halve its slots"),
             ),
             auto_rank=0,
             problem="mjx_pick.engine.warp_direct:warp_problem",

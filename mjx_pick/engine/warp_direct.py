@@ -37,6 +37,7 @@ from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine import devices
 from mjx_pick.engine.backend import PickInputs, RunStats, addresses
+from mjx_pick.engine.pool_sizes import DEFAULT_SHRINK_LEVELS, SHRINK_MIN_SLOTS, shrink_sizes
 from mjx_pick.engine.registry import Impl
 from mjx_pick.engine.warp_buffers import (
     MAX_GROWTH,
@@ -200,6 +201,20 @@ class PoolStats:
         """Fraction of slot-ticks that simulated a pick that had not ended."""
         return self.pick_ticks / self.slot_ticks if self.slot_ticks else float("nan")
 
+    def add(self, rounds: int, slot_ticks: int, pick_ticks: int, picks: int, counters) -> None:
+        """Count one run: its rounds, slot-ticks, pick-ticks, picks and the pools'
+        counters (``_Pool.counters``: steps, steps converged, iteration histogram)."""
+        self.rounds += rounds
+        self.slot_ticks += slot_ticks
+        self.pick_ticks += pick_ticks
+        self.picks += picks
+        self.steps += int(counters[0])
+        self.steps_converged += int(counters[1])
+        hist = np.asarray(counters[2:], np.int64)
+        if self.solver_iterations.size != hist.size:
+            self.solver_iterations = np.zeros(hist.size, np.int64)
+        self.solver_iterations += hist
+
     def iteration_quantile(self, q: float) -> float:
         """The q-quantile (0..1) of solver iterations per live world-step."""
         h = self.solver_iterations
@@ -281,6 +296,43 @@ class _Pool:
             self.ad = gw.addresses(backend.ad)
             self.drive = gw.drive(backend.ad, dev)
             self.graph = None
+
+    def counters(self) -> np.ndarray:
+        """(steps, steps in which every live world converged, iteration histogram...)
+        so far, int64 (differences of two readings count a run)."""
+        return np.concatenate([self.steps.numpy(), self.niter_hist.numpy()]).astype(np.int64)
+
+    # the data a world carries from one physics step to the next (MuJoCo's integration
+    # state) and the external forces its next tick measures; everything else a step
+    # recomputes
+    STATE = (
+        "time",
+        "qpos",
+        "qvel",
+        "act",
+        "history",
+        "plastic",
+        "qacc_warmstart",
+        "ctrl",
+        "qfrc_applied",
+        "xfrc_applied",
+        "eq_active",
+        "mocap_pos",
+        "mocap_quat",
+        "userdata",
+        "cfrc_ext",
+        "overflow",
+    )
+    SLOT = ("params", "ctl", "acc", "pos0", "quat0", "k", "nefc_max", "nacon_max")
+
+    def state_arrays(self) -> list:
+        """Every per-world array a pick needs to run on in another pool: its data's
+        state, its model rows and its controller's state, in a fixed order."""
+        arrays = [getattr(self.d, name) for name in self.STATE if hasattr(self.d, name)]
+        arrays += [self.m.pair_friction, self.m.pair_solref, self.m.pair_solimp]
+        arrays += [self.field_view(name) for name in self.fields]
+        arrays += [getattr(self, name) for name in self.SLOT]
+        return [a for a in arrays if a.size > 0]
 
     def field_view(self, name: str):
         """The model's (slots, K) float rows of a carried field."""
@@ -367,6 +419,21 @@ class _Pool:
             self.period(backend)
 
 
+class _Outputs:
+    """Per-pick rows a run fills as its picks end (on the current device)."""
+
+    def __init__(self, n: int):
+        wp = _warp()
+        from mjx_pick.kernels import grasp_warp as gw
+
+        self.acc = wp.zeros(n, dtype=gw.Acc)
+        self.k = wp.zeros(n, dtype=int)
+        self.phase = wp.zeros(n, dtype=int)
+        self.overflow = wp.zeros(n, dtype=int)
+        self.nefc = wp.zeros(n, dtype=int)
+        self.nacon = wp.zeros(n, dtype=int)
+
+
 class WarpBackend:
     """The MuJoCo Warp backend on one device (see the module docstring).
 
@@ -376,6 +443,8 @@ class WarpBackend:
       device: a Warp device name ('cuda:0'; default: the first CUDA device, or the CPU
         with MJX_PICK_WARP_CPU=1).
       ticks_per_call: control periods per refill round.
+      shrink_levels: halvings of the pool in a run's tail (``pool_sizes``), never below
+        ``shrink_min_slots`` slots.
       buffers: Warp's buffer sizes (default: ``warp_buffers.size_buffers`` of the scene).
       deterministic: MuJoCo Warp's deterministic mode (stable contact and constraint
         order, order-invariant sums): the same results on every run on one device.
@@ -393,8 +462,15 @@ class WarpBackend:
         ticks_per_call: int = DEFAULT_TICKS_PER_CALL,
         buffers: BufferSizes | None = None,
         deterministic: bool = False,
+        shrink_levels: int = DEFAULT_SHRINK_LEVELS,
+        shrink_min_slots: int = SHRINK_MIN_SLOTS,
     ):
         check_warp()
+        if int(shrink_levels) < 0 or int(shrink_min_slots) < 1:
+            raise ConfigError(
+                f"shrink_levels = {shrink_levels} must be >= 0 and shrink_min_slots = "
+                f"{shrink_min_slots} >= 1"
+            )
         if int(ticks_per_call) < 1:
             raise ConfigError(f"ticks_per_call = {ticks_per_call} must be >= 1")
         if int(batch_size) < 1:
@@ -409,6 +485,8 @@ class WarpBackend:
         self.device = f"{'gpu' if dev.is_cuda else 'cpu'}:{dev.name}"
         self.batch_size = int(batch_size)
         self.ticks_per_call = int(ticks_per_call)
+        self.shrink_levels = int(shrink_levels)
+        self.shrink_min_slots = int(shrink_min_slots)
         self.deterministic = bool(deterministic)
         self.stats = RunStats()
         self.pool_stats = PoolStats()
@@ -444,14 +522,17 @@ class WarpBackend:
         q = POOL_QUANTUM
         return max(1, min(self.batch_size, -(-max(n, 1) // q) * q))
 
-    def _pool(self, slots: int, record_ticks: int) -> _Pool:
+    def _pool(self, slots: int, record_ticks: int, family: tuple[int, ...] = ()) -> _Pool:
+        """The pool of `slots` slots (built and captured on first use). The backend keeps
+        the pools of one run's sizes (family: the tail's sizes) and of its last record
+        run: a pool holds its data on the device."""
         key = (slots, record_ticks, self.fields, repr(self.buffers))
         pool = self._pools.get(key)
         if pool is None:
-            t0 = time.perf_counter()
-            # one pool of each kind at a time: a pool holds its data on the device
-            for old in [k for k in self._pools if k[1] == record_ticks]:
+            keep = set(family) | {slots}
+            for old in [k for k in self._pools if k[1] == record_ticks and k[0] not in keep]:
                 del self._pools[old]
+            t0 = time.perf_counter()
             pool = _Pool(self, slots, record_ticks)
             self._setup("model_and_data", t0)
             pool.capture(self)
@@ -513,90 +594,112 @@ class WarpBackend:
         return fields
 
     def _run_once(self, inputs: PickInputs, record: bool):
-
+        """Every pick of inputs through the pool (record: one slot per pick, every
+        tick's row kept); (results, traces, Diagnostics) in pick-point order."""
         wp = _warp()
         from mjx_pick.kernels import grasp_warp as gw
 
-        kern = _kernels()
         n = len(inputs)
         self.fields = self._fields_for(inputs)
-        slots = n if record else self.pool_size(n)
-        pool = self._pool(slots, self.n_ticks if record else 0)
-        dev = self.device_name
+        if record:
+            sizes = (n,)
+        else:
+            sizes = shrink_sizes(self.pool_size(n), self.shrink_levels, self.shrink_min_slots)
+        pools = [self._pool(sizes[0], self.n_ticks if record else 0, sizes)]
         t0 = time.perf_counter()
-        with wp.ScopedDevice(dev):
+        with wp.ScopedDevice(self.device_name):
             src = _device_inputs(inputs, self.fields, gw)
-            out_acc = wp.zeros(n, dtype=gw.Acc)
-            out_k = wp.zeros(n, dtype=int)
-            out_phase = wp.zeros(n, dtype=int)
-            out_overflow = wp.zeros(n, dtype=int)
-            out_nefc = wp.zeros(n, dtype=int)
-            out_nacon = wp.zeros(n, dtype=int)
+            out = _Outputs(n)
+            pool = pools[0]
             pool.trace.zero_()
-            hist0 = pool.niter_hist.numpy().copy()
-            steps0 = pool.steps.numpy().copy()
-            slot_pick = np.full(slots, -1, np.int32)
-            first = min(slots, n)
+            counters0 = [pool.counters()]
+            slot_pick = np.full(pool.slots, -1, np.int32)
+            first = min(pool.slots, n)
             slot_pick[:first] = np.arange(first)
-            fresh = slot_pick >= 0
             next_pick = first
+            slot_ticks = 0
             rounds = 0
-            self._refill(pool, src, slot_pick, fresh)
+            self._refill(pool, src, slot_pick, slot_pick >= 0)
             while True:
                 for _ in range(self.ticks_per_call):
                     pool.run_period(self)
                 rounds += 1
-                wp.launch(
-                    kern.save,
-                    dim=slots,
-                    inputs=[
-                        self.n_ticks,
-                        pool.slot_pick,
-                        pool.ctl,
-                        pool.acc,
-                        pool.k,
-                        pool.d.overflow,
-                        pool.nefc_max,
-                        pool.nacon_max,
-                        pool.ended,
-                        out_acc,
-                        out_k,
-                        out_phase,
-                        out_overflow,
-                        out_nefc,
-                        out_nacon,
-                    ],
-                )
-                ended = pool.ended.numpy().astype(bool)
+                slot_ticks += pool.slots * self.ticks_per_call
+                ended = self._save_ended(pool, out)
                 slot_pick, fresh, next_pick = refill_order(slot_pick, ended, next_pick, n)
-                if not (slot_pick >= 0).any():
+                live = slot_pick >= 0
+                if not live.any():
                     break
+                level = len(pools) - 1
                 if fresh.any():
                     self._refill(pool, src, slot_pick, fresh)
+                elif next_pick >= n and level + 1 < len(sizes) and live.sum() <= sizes[level + 1]:
+                    # the queue is empty and half the pool idles: the live slots move
+                    # into a pool half the size
+                    small = self._pool(sizes[level + 1], 0, sizes)
+                    slot_pick = self._compact(pool, small, slot_pick)
+                    pools.append(small)
+                    counters0.append(small.counters())
+                    pool = small
                 else:
                     pool.slot_pick.assign(slot_pick)
             wp.synchronize_device()
-            hist = pool.niter_hist.numpy() - hist0
-            steps = pool.steps.numpy() - steps0
-            picks = _finalize_device(kern, src, out_acc, gw)
-            k = out_k.numpy().copy()
+            counters = [p.counters() - c0 for p, c0 in zip(pools, counters0, strict=True)]
+            picks = _finalize_device(_kernels(), src, out.acc, gw)
+            k = out.k.numpy().copy()
             traces = None
             if record:
-                traces = pad_traces(pool.trace.numpy()[:n], k, out_phase.numpy().copy(), self.grasp)
-            diag = Diagnostics(*(a.numpy().copy() for a in (out_overflow, out_nefc, out_nacon)))
+                traces = pad_traces(pool.trace.numpy()[:n], k, out.phase.numpy().copy(), self.grasp)
+            diag = Diagnostics(*(a.numpy().copy() for a in (out.overflow, out.nefc, out.nacon)))
         self.stats.run_s += time.perf_counter() - t0
         self.stats.n += n
-        st = self.pool_stats
-        st.rounds += rounds
-        st.slot_ticks += rounds * slots * self.ticks_per_call
-        st.pick_ticks += int(k.sum())
-        st.picks += n
-        st.steps += int(steps[0])
-        st.steps_converged += int(steps[1])
-        if st.solver_iterations.size != hist.size:
-            st.solver_iterations = np.zeros(hist.size, np.int64)
-        st.solver_iterations += hist
+        self.pool_stats.add(rounds, slot_ticks, int(k.sum()), n, sum(counters))
         return picks, traces, diag
+
+    def _save_ended(self, pool: _Pool, out: _Outputs) -> np.ndarray:
+        """Slots whose pick has ended write it to its row of out; (S,) bool of them."""
+        wp = _warp()
+        wp.launch(
+            _kernels().save,
+            dim=pool.slots,
+            inputs=[
+                self.n_ticks,
+                pool.slot_pick,
+                pool.ctl,
+                pool.acc,
+                pool.k,
+                pool.d.overflow,
+                pool.nefc_max,
+                pool.nacon_max,
+                pool.ended,
+                out.acc,
+                out.k,
+                out.phase,
+                out.overflow,
+                out.nefc,
+                out.nacon,
+            ],
+        )
+        return pool.ended.numpy().astype(bool)
+
+    def _compact(self, big: _Pool, small: _Pool, slot_pick: np.ndarray) -> np.ndarray:
+        """The live slots of big (slot order) into the first slots of small: their
+        simulation state, model rows and controller state; small's other slots idle.
+        Returns small's slot_pick. Every step recomputes the rest of a world's data from
+        what is copied, so a pick runs on as if it had stayed where it was."""
+        wp = _warp()
+        live = np.flatnonzero(slot_pick >= 0)
+        order = np.full(small.slots, -1, np.int32)
+        order[: len(live)] = live
+        order_dev = wp.array(order, dtype=int)
+        kern = _kernels()
+        for src, dst in zip(big.state_arrays(), small.state_arrays(), strict=True):
+            gather = kern.gather_slots if dst.ndim == 1 else kern.gather_rows
+            wp.launch(gather, dim=dst.shape, inputs=[order_dev, src, dst])
+        wp.launch(_kernels().idle_slots, dim=small.slots, inputs=[order_dev, self.n_ticks, small.k])
+        slot_pick = np.where(order >= 0, slot_pick[np.maximum(order, 0)], -1).astype(np.int32)
+        small.slot_pick.assign(slot_pick)
+        return slot_pick
 
     def _refill(self, pool: _Pool, src: dict, slot_pick: np.ndarray, fresh: np.ndarray) -> None:
         """Fresh slots take their picks: reset, inputs written, one forward pass."""
@@ -851,6 +954,7 @@ def make_backend(
     ticks_per_call: int = DEFAULT_TICKS_PER_CALL,
     buffers: BufferSizes | None = None,
     deterministic: bool = False,
+    shrink_levels: int = DEFAULT_SHRINK_LEVELS,
 ):
     """The Warp backend on `devices` (Warp device names; default: every CUDA GPU, or the
     CPU with MJX_PICK_WARP_CPU=1). Several devices: one backend per device with
@@ -860,7 +964,11 @@ def make_backend(
     devices = [str(d) for d in (devices or default_devices())]
     if not devices:
         raise ConfigError("backend 'warp': no device to run on")
-    options = {"ticks_per_call": ticks_per_call, "deterministic": deterministic}
+    options = {
+        "ticks_per_call": ticks_per_call,
+        "deterministic": deterministic,
+        "shrink_levels": shrink_levels,
+    }
     if len(devices) == 1:
         return WarpBackend(scene, grasp, batch_size, device=devices[0], buffers=buffers, **options)
     buffers = buffers or size_buffers(scene, grasp)

@@ -5,6 +5,8 @@ Each launches one thread per slot (``engine.warp_direct`` launches them); a slot
 the one-pick functions of ``kernels.grasp_warp``.
 """
 
+from typing import Any
+
 import warp as wp
 
 from mjx_pick.kernels import grasp_warp as gw
@@ -213,3 +215,29 @@ def finalize(
 ):
     i = wp.tid()
     out[i] = gw.finalize(params[i], acc[i])
+
+
+@wp.kernel(enable_backward=False)
+def gather_rows(order: wp.array(dtype=int), src: wp.array2d(dtype=Any), dst: wp.array2d(dtype=Any)):
+    """dst[j] = src[order[j]] where order[j] >= 0 (rows of one world's values)."""
+    j, c = wp.tid()
+    i = order[j]
+    if i >= 0:
+        dst[j, c] = src[i, c]
+
+
+@wp.kernel(enable_backward=False)
+def gather_slots(order: wp.array(dtype=int), src: wp.array(dtype=Any), dst: wp.array(dtype=Any)):
+    """dst[j] = src[order[j]] where order[j] >= 0 (one value per world)."""
+    j = wp.tid()
+    i = order[j]
+    if i >= 0:
+        dst[j] = src[i]
+
+
+@wp.kernel(enable_backward=False)
+def idle_slots(order: wp.array(dtype=int), n_ticks: int, k: wp.array(dtype=int)):
+    """Slots that took no pick in a compaction count as ended."""
+    j = wp.tid()
+    if order[j] < 0:
+        k[j] = n_ticks
