@@ -15,6 +15,7 @@ from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine import cluster, registry, variants
 from mjx_pick.engine.c_backend import MujocoBackend
 from mjx_pick.gui import forms
+from mjx_pick.studies.throughput import RunSpec
 
 SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=5.0, hold_s=0.05)
 PACKAGE = Path(mp.__file__).parent
@@ -79,6 +80,11 @@ def test_every_backend_choice_is_the_registrys(serial):
     assert registry.default_batch_size("serial", gpus=1, accelerator=True) == 2
     # variants: a backend without model_fields carries none (a program per variant)
     assert variants.carried_fields("serial") == frozenset()
+    # throughput: the backend's options read from text
+    spec = RunSpec.parse("serial:n=4:serial=1")
+    assert spec.options == (("serial", 1),)
+    with pytest.raises(ValueError, match="unknown key 'refill'"):
+        RunSpec.parse("serial:n=4:refill=1")
 
 
 def test_adding_a_backend_is_one_module_and_one_entry(serial, block, tmp_path, capsys):
@@ -145,7 +151,6 @@ NOT_A_CHOICE = {
     ("engine/warp_buffers.py", "mujoco"): "the MuJoCo version in the buffer sizes' cache key",
     ("core/urdf_gripper.py", "mujoco"): "a URDF's <mujoco> compiler extension",
     ("studies/calibration/fit.py", "mujoco"): "mujoco's sysid optimiser",
-    ("studies/throughput.py", "mujoco"): "the reference run (to read the registry next)",
 }
 
 

@@ -21,6 +21,7 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.objects import load_object
 from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.scene import build_scene
+from mjx_pick.engine import registry
 from mjx_pick.engine.backend import make_inputs
 from mjx_pick.engine.runner import Runner
 
@@ -79,7 +80,7 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
     return {
         "object": obj_name,
         "backend": backend.name,
-        "device": backend.device if backend.name == "mujoco" else device_name(n_devices),
+        "device": backend.device if _on_cpu(backend.name) else device_name(n_devices),
         "batch": batch,
         "compile_s": round(compile_s, 2),
         "first_call_s": round(first.timing.wall_s, 2),
@@ -126,11 +127,13 @@ class RunSpec:
     def parse(cls, text: str) -> RunSpec:
         """'warp:n=65536:batch=16384:refill=1:ticks_per_call=20:warmup=16384'.
 
-        Keys: n, batch, warmup, devices (ints); backend options refill, deterministic,
-        ticks_per_call, shrink_levels, graph_mode, rows (Warp's constraint rows per
-        simulation; contacts sized as usual); solver settings iterations, ls_iterations, tolerance,
-        timestep_s; the contact setting pad_collision."""
+        Keys: n, batch, warmup, devices (ints); the backend's options that read from
+        text (``registry.BackendEntry.options``), and rows (Warp's constraint rows per
+        simulation; contacts sized as usual); solver settings iterations,
+        ls_iterations, tolerance, timestep_s; the contact setting pad_collision."""
         name, *parts = text.split(":")
+        parsers = {o.name: o.parse for o in registry.entry(name).options if o.parse}
+        parsers["rows"] = int  # becomes Warp's buffers (backend_options)
         fields: dict = {}
         options, solver, contact = [], [], []
         for part in parts:
@@ -139,12 +142,8 @@ class RunSpec:
                 raise ValueError(f"run {text!r}: {part!r} is not key=value")
             if key in ("n", "batch", "warmup", "devices"):
                 fields[key] = int(value)
-            elif key in ("refill", "deterministic"):
-                options.append((key, value.lower() in ("1", "true", "yes")))
-            elif key in ("ticks_per_call", "shrink_levels", "rows"):
-                options.append((key, int(value)))
-            elif key in ("graph_mode",):
-                options.append((key, value))
+            elif key in parsers:
+                options.append((key, parsers[key](value)))
             elif key in ("iterations", "ls_iterations"):
                 solver.append((key, int(value)))
             elif key in ("tolerance", "timestep_s"):
@@ -186,9 +185,10 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
     full-length rollout simulates n_ticks x substeps for every pick), slot occupancy
     (refill: the fraction of slot-steps spent on picks that had not ended), peak device
     memory per pick (JAX's allocator; Warp's own scratch is not in it), success rate,
-    and labels (success, failure reason) agreeing with MuJoCo C's on the pick-points
-    both ran (when a 'mujoco' run is among the runs). on_row(row) is called as each
-    row is done (a long benchmark keeps what it measured if it is cut short).
+    and labels (success, failure reason) agreeing with the reference backend's (MuJoCo
+    C, ``registry.reference``) on the pick-points both ran, when it is among the runs.
+    on_row(row) is called as each row is done (a long benchmark keeps what it measured
+    if it is cut short).
     """
     obj = load_object(obj_name)
     n_max = max(r.n for r in runs)
@@ -213,13 +213,14 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
 
     c_results: dict[tuple, dict] = {}  # MuJoCo C's results per contact variant
     rows = []
-    # MuJoCo C first: the reference the others' labels are compared with
-    order = sorted(runs, key=lambda r: r.backend != "mujoco")
+    # the reference first (MuJoCo C): the others' labels are compared with its
+    first = registry.reference()
+    order = sorted(runs, key=lambda r: r.backend != first)
     for spec in order:
         scene, inputs = scene_for(spec)
         n = min(spec.n, len(inputs))
         timing, out, backend = _timed_run(spec, scene, inputs.take(slice(0, n)), grasp)
-        if spec.backend == "mujoco":
+        if spec.backend == first:
             c_results.setdefault(spec.contact, out)
             reference = None
         else:
@@ -278,8 +279,8 @@ def _timed_run(spec: RunSpec, scene, inputs, grasp) -> tuple[dict, dict, object]
         device_steps = slot_ticks * n_sub
         steps_per_pick = pick_ticks * n_sub / n
         occupancy = pick_ticks / slot_ticks
-    elif spec.backend == "mujoco":
-        device_steps = steps_per_pick = occupancy = None  # it stops finished picks
+    elif registry.entry(spec.backend).stops_finished:
+        device_steps = steps_per_pick = occupancy = None
     else:
         padded = -(-n // backend.batch_size) * backend.batch_size
         device_steps = padded * full_steps
@@ -295,7 +296,7 @@ def _timed_run(spec: RunSpec, scene, inputs, grasp) -> tuple[dict, dict, object]
         "steps_per_pick": steps_per_pick,
         "full_steps": full_steps,
         "occupancy": occupancy,
-        "peak": peak_bytes(backend) if spec.backend != "mujoco" else None,
+        "peak": None if _on_cpu(spec.backend) else peak_bytes(backend),
     }
     if pool is not None and hasattr(pool, "steps_converged"):
         steps = pool.steps - before.steps
@@ -308,6 +309,11 @@ def _timed_run(spec: RunSpec, scene, inputs, grasp) -> tuple[dict, dict, object]
             "solver_iterations_max": int(np.flatnonzero(pool.solver_iterations).max(initial=0)),
         }
     return timing, timed.results, backend
+
+
+def _on_cpu(backend: str) -> bool:
+    """Whether a backend runs on CPU threads (no device name, no device memory)."""
+    return registry.entry(backend).device is registry.Device.CPU
 
 
 def _run_fields(backend, out: dict, n: int, t: dict) -> dict:
