@@ -25,7 +25,7 @@ from scipy.stats import spearmanr
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 

@@ -34,7 +34,7 @@ from real_objects import load_ycb  # benchmarks/ is on sys.path when run from th
 
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
-from mjx_pick.engine.backend import addresses, make_inputs
+from mjx_pick.engine.inputs import addresses, make_inputs
 from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 

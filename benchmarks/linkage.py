@@ -36,7 +36,7 @@ import mjx_pick as mp
 from mjx_pick.core import mjcf_gripper
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import write_json
-from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.studies.comparison import compare

@@ -29,7 +29,7 @@ from shapely.geometry import box
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import G
-from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.studies.evaluation import half_step

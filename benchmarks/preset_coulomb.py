@@ -37,7 +37,8 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import load_toml, write_json
 from mjx_pick.core.physics import load_contact
 from mjx_pick.core.procedure import G, GraspConfig
-from mjx_pick.engine.backend import make_backend, make_inputs
+from mjx_pick.engine.backend import make_backend
+from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.studies.evaluation import half_step
 

@@ -186,7 +186,7 @@ def load_ycb(name: str) -> mp.ObjectModel:
 def failure_picture(obj, table, failure: str, grasp, path: Path, gripper: str) -> None:
     """Re-simulate the first pick of a failure class with its trace and draw why."""
     from mjx_pick.core import pickpoints as pp
-    from mjx_pick.engine.backend import make_inputs
+    from mjx_pick.engine.inputs import make_inputs
     from mjx_pick.engine.runner import Runner
     from mjx_pick.outputs.plots import new_figure, pick_on_axes, save_png
 
@@ -244,7 +244,7 @@ def placement_certain(
 ) -> np.ndarray:
     """(n,) bool: the pick-point's label is what every one of m placements around it
     gives (robustness with sigma_xy_mm, sigma_yaw_deg), in table's row order."""
-    from mjx_pick.engine.backend import Settings
+    from mjx_pick.core.settings import Settings
 
     m, sigma_xy_mm, sigma_yaw_deg = certain
     gripper = mp.load_gripper(gripper)

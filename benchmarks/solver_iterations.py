@@ -16,7 +16,7 @@ import numpy as np
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.engine.runner import Runner
 
 VARIANTS = {

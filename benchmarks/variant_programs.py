@@ -18,7 +18,7 @@ import json
 import mjx_pick as mp
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine.variants import carried_fields, program_key, varying_fields
-from mjx_pick.studies.comparison import fit_to, sample_variants
+from mjx_pick.studies.comparison import sample_variants
 
 WIDTHS = (10, 14, 18, 22, 26, 30, 34, 38)  # mm, as benchmarks/time_to_answer.py
 BOUNDS = {
@@ -57,7 +57,7 @@ def main() -> None:
         for w in WIDTHS
     ]
     pool = sample_variants(base.gripper, BOUNDS, 12, seed=0) + [base.gripper]
-    design = [fit_to(base, g) for g in pool]
+    design = [base.on_gripper(g)[0] for g in pool]
     report = {
         "object": args.object,
         "sweep_8_widths": count(obj, sweep),

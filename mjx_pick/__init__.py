@@ -47,7 +47,7 @@ _PUBLIC = {
     "Runner": "engine.runner",
     "Engine": "engine.runner",  # deprecated: Runner's old name (_RENAMED)
     "Simulator": "engine.simulator",
-    "Settings": "engine.backend",
+    "Settings": "core.settings",
     # studies
     "Evaluation": "studies.evaluation",
     "evaluate": "studies.evaluation",
@@ -137,7 +137,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load lazily
     )
     from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
     from mjx_pick.core.scene import Scene, build_scene
-    from mjx_pick.engine.backend import Settings
+    from mjx_pick.core.settings import Settings
     from mjx_pick.engine.runner import Cancelled, Runner
     from mjx_pick.engine.runner import Runner as Engine
     from mjx_pick.engine.simulator import Simulator

@@ -21,7 +21,8 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine import devices, warp_buffers
 from mjx_pick.engine import warp_backend as bw
-from mjx_pick.engine.backend import make_backend, make_inputs
+from mjx_pick.engine.backend import make_backend
+from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.kernels import grasp as gk
 
 SHORT = GraspConfig(close_timeout_s=0.6, lift_height_mm=10.0, hold_s=0.1)

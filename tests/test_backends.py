@@ -10,7 +10,8 @@ import pytest
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.backend import make_backend, make_inputs
+from mjx_pick.engine.backend import make_backend
+from mjx_pick.engine.inputs import make_inputs
 
 SHORT = GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.3)
 
@@ -76,7 +77,7 @@ def test_c_backend_flags_a_blow_up(block):
 def test_set_contact_is_one_mapping_in_numpy_and_jax(block):
     import jax.numpy as jnp
 
-    from mjx_pick.engine.backend import set_contact
+    from mjx_pick.engine.inputs import set_contact
 
     scene = mp.build_scene(block, mp.GripperSpec())
     m, n = scene.model, 3

@@ -16,7 +16,7 @@ from mjx_pick.cli import main
 from mjx_pick.core.config import to_toml
 from mjx_pick.core.physics import load_contact
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.inputs import pick_inputs
 from mjx_pick.studies import calibration as cal
 from mjx_pick.studies.calibration import estimators as E
 from mjx_pick.studies.calibration import loss as L
@@ -163,7 +163,7 @@ def test_parameters_map_through_physics_as_settings_do(heavy_block, synthetic):
         base.contact, **{k: v for k, v in values.items() if k != "force_offset_n"}
     )
     s2 = dataclasses.replace(base, contact=contact)
-    want = make_inputs(problem.scene, GRASP, problem.picks, s2.overrides(problem.scene, 4))
+    want = pick_inputs(problem.scene, s2, problem.picks)
     np.testing.assert_allclose(got.pair_friction, want.pair_friction, rtol=1e-6)
     np.testing.assert_allclose(got.pair_solref, want.pair_solref, rtol=1e-6)
     np.testing.assert_allclose(got.params.grip_force_n, rows.grip_force_n + 1.25, rtol=1e-6)

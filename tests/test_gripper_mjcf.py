@@ -25,7 +25,8 @@ from mjx_pick.core import holding, mjcf_gripper
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.procedure import G, GraspConfig
-from mjx_pick.engine.backend import addresses, make_backend, make_inputs
+from mjx_pick.engine.backend import make_backend
+from mjx_pick.engine.inputs import addresses, make_inputs
 from mjx_pick.engine.mjx_backend import jax_model
 from mjx_pick.kernels import grasp as gk
 

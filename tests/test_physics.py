@@ -19,7 +19,8 @@ from mjx_pick.core import holding, physics
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core import scene as scene_mod
 from mjx_pick.core.procedure import G, GraspConfig, fingertip_height_mm
-from mjx_pick.engine.backend import make_backend, make_inputs
+from mjx_pick.engine.backend import make_backend
+from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.kernels import grasp as gk
 
 # lift 30 mm at the default 2 m/s^2, hold 0.3 s

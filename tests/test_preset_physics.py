@@ -18,7 +18,8 @@ from shapely.geometry import box
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import G, GraspConfig
-from mjx_pick.engine.backend import make_backend, make_inputs
+from mjx_pick.engine.backend import make_backend
+from mjx_pick.engine.inputs import make_inputs
 
 # MJX_PICK_TEST_BACKEND=warp runs them on MuJoCo Warp on a GPU machine, as test_physics
 BACKEND = os.environ.get("MJX_PICK_TEST_BACKEND", "mujoco")

@@ -17,7 +17,8 @@ import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import to_toml
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.backend import make_backend, make_inputs
+from mjx_pick.engine.backend import make_backend
+from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.studies.evaluation import evaluate
 
 FAST = GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)

@@ -11,7 +11,8 @@ from shapely.geometry import box
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.backend import make_backend, make_inputs
+from mjx_pick.engine.backend import make_backend
+from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.kernels import grasp as gk
 
 # a short procedure for tests: lift 30 mm, hold 0.3 s

@@ -266,7 +266,8 @@ def test_c_backend_restores_fields_a_later_chunk_does_not_carry(block):
     # a batch that expanded a variant's fields for one run gives the next run, which
     # carries none, the scene's own values
     from mjx_pick.core import pickpoints as pp
-    from mjx_pick.engine.backend import make_backend, make_inputs
+    from mjx_pick.engine.backend import make_backend
+    from mjx_pick.engine.inputs import make_inputs
 
     base, wide = (
         mp.build_scene(block, _gripper()),
@@ -286,7 +287,8 @@ def test_c_backend_restores_fields_a_later_chunk_does_not_carry(block):
 @pytest.mark.mjx
 def test_mjx_sweep_of_finger_widths_compiles_once_and_agrees_per_scene(block):
     from mjx_pick.core import pickpoints as pp
-    from mjx_pick.engine.backend import make_backend, make_inputs
+    from mjx_pick.engine.backend import make_backend
+    from mjx_pick.engine.inputs import make_inputs
 
     sim = mp.Simulator(block, "mjx", batch_size=8)
     spec = ParamSpec.parse("gripper.finger_width_mm=" + ",".join(f"{w:g}" for w in WIDTHS))
@@ -322,7 +324,7 @@ def test_mjx_steps_of_a_carried_variant_equal_its_own_scene(block):
     from mujoco import mjx
 
     from mjx_pick.core import pickpoints as pp
-    from mjx_pick.engine.backend import make_inputs
+    from mjx_pick.engine.inputs import make_inputs
     from mjx_pick.engine.mjx_backend import _pick_model, jax_physics
 
     narrow = mp.build_scene(block, _gripper(finger_width_mm=12.0))

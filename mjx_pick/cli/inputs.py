@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import dataclasses
 import sys
+from pathlib import Path
 
-from mjx_pick.core.config import ConfigError, load_toml
+from mjx_pick.core.config import ConfigError, from_mapping, load_toml, read_toml
 from mjx_pick.engine import registry
 
 
@@ -68,30 +69,15 @@ def given(args, names) -> bool:
 
 def inputs_of(args):
     """(object, gripper, contact, solver, grasp, pick config): every one checked, every
-    problem reported together. A grip force set by neither --grip-force-n nor --grasp
-    is fitted into the gripper's range, with a note on stderr."""
+    problem reported together. A procedure value set by neither a flag nor --grasp
+    (the grip force, the closing speed) is fitted into the gripper's range
+    (``GraspConfig.fitted_to``), with a note on stderr."""
     both, four = each_checked(lambda: objects(args), lambda: settings(args))
-    contact, solver, grasp, picks = four
-    if not _force_given(args):
-        grasp, note = grasp.fitted_to(both[1])
-        if note:
-            print(f"mjx-pick: note: {note}", file=sys.stderr)
+    contact, solver, (grasp, given), picks = four
+    grasp, note = grasp.fitted_to(both[1], keep=given)
+    if note:
+        print(f"mjx-pick: note: {note}", file=sys.stderr)
     return (*both, contact, solver, grasp, picks)
-
-
-def _force_given(args) -> bool:
-    """Whether the user set the grip force (the flag, or a key of the --grasp file)."""
-    if getattr(args, "grip_force_n", None) is not None:
-        return True
-    if getattr(args, "grasp", None):
-        import tomllib
-        from pathlib import Path
-
-        try:
-            return "grip_force_n" in tomllib.loads(Path(args.grasp).read_text())
-        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
-            return True  # load_toml has reported it already
-    return False
 
 
 def object_of(args):
@@ -126,15 +112,18 @@ def settings(args):
         return override(s, timestep_s=args.timestep_s)
 
     def grasp():
-        g = load_toml(GraspConfig, args.grasp) if args.grasp else GraspConfig()
-        return override(
-            g,
-            grip_force_n=args.grip_force_n,
-            lift_height_mm=args.lift_height_mm,
-            hold_s=args.hold_s,
-            grasp_height=args.grasp_height,
-            fingertip_clearance_mm=args.fingertip_clearance_mm,
-        )
+        """The procedure, and the names of the fields the user set (file or flag)."""
+        data = read_toml(args.grasp, "GraspConfig") if args.grasp else {}
+        flags = {
+            "grip_force_n": args.grip_force_n,
+            "lift_height_mm": args.lift_height_mm,
+            "hold_s": args.hold_s,
+            "grasp_height": args.grasp_height,
+            "fingertip_clearance_mm": args.fingertip_clearance_mm,
+        }
+        g = from_mapping(GraspConfig, data, where=Path(args.grasp or "").name)
+        given = set(data) | {k for k, v in flags.items() if v is not None}
+        return override(g, **flags), given
 
     return tuple(each_checked(contact, solver, grasp, lambda: pick_config(args)))
 
@@ -166,7 +155,7 @@ def override(obj, **values):
 
 def base_settings(args):
     """Object, Settings (gripper + physics flags) and PickConfig from the shared options."""
-    from mjx_pick.engine.backend import Settings
+    from mjx_pick.core.settings import Settings
 
     obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
     check_contact_file(args, obj, gripper, grasp, solver)

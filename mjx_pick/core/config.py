@@ -231,18 +231,24 @@ def _dataclass_type(cls: type, key: str, ftype: Any) -> type | None:
     return resolved if dataclasses.is_dataclass(resolved) else None
 
 
-def load_toml(cls: type[T], path: str | os.PathLike, *, table: str | None = None) -> T:
-    """Load dataclass cls from a TOML file (optionally from one [table] of it)."""
+def read_toml(path: str | os.PathLike, what: str) -> dict:
+    """A TOML file's tables and keys; what names the file's kind in the error of a file
+    that is missing or not TOML."""
     path = Path(path)
     if not path.is_file():
-        raise ConfigError(f"{cls.__name__} file {str(path)!r} does not exist")
+        raise ConfigError(f"{what} file {str(path)!r} does not exist")
     try:
-        data = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
+
+
+def load_toml(cls: type[T], path: str | os.PathLike, *, table: str | None = None) -> T:
+    """Load dataclass cls from a TOML file (optionally from one [table] of it)."""
+    data = read_toml(path, cls.__name__)
     if table is not None:
         data = data.get(table, {})
-    return from_mapping(cls, data, where=f"{path.name}")
+    return from_mapping(cls, data, where=f"{Path(path).name}")
 
 
 class _CsvText:

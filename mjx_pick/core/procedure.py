@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Collection
 
 import numpy as np
 
@@ -182,20 +183,37 @@ class GraspConfig:
             )
         return int(round(n))
 
-    def fitted_to(self, gripper: GripperSpec) -> tuple[GraspConfig, str | None]:
-        """For a grip force the user did not set: this procedure with grip_force_n moved
-        into the gripper's force range (the nearest end of it) where the default lies
-        outside, and a note saying so (None where nothing changed). A force the user
-        set is never moved: check_gripper refuses it."""
-        f = min(max(self.grip_force_n, gripper.force_min_n), gripper.force_max_n)
-        if f == self.grip_force_n:
+    def fitted_to(
+        self, gripper: GripperSpec, keep: Collection[str] = ()
+    ) -> tuple[GraspConfig, str | None]:
+        """The one rule fitting a procedure to a gripper: grip_force_n and
+        closing_speed_mm_s moved to the nearest end of the gripper's range where they
+        lie outside it, and a note saying so (None where nothing moved). keep: fields
+        the user set, never moved (check_gripper refuses them out of range)."""
+        ranges = {
+            "grip_force_n": (gripper.force_min_n, gripper.force_max_n, "N", "grip force"),
+            "closing_speed_mm_s": (
+                gripper.speed_min_mm_s,
+                gripper.speed_max_mm_s,
+                "mm/s",
+                "closing speed",
+            ),
+        }
+        moved, notes = {}, []
+        for name, (lo, hi, unit, what) in ranges.items():
+            value = getattr(self, name)
+            fitted = min(max(value, lo), hi)
+            if name in keep or fitted == value:
+                continue
+            moved[name] = fitted
+            default = "the default " if value == _DEFAULTS[name] else ""
+            notes.append(
+                f"{what}: {default}{value:g} {unit} is outside {gripper.name}'s "
+                f"{lo:g}-{hi:g} {unit}: using {fitted:g} {unit} (set grasp.{name} to choose)"
+            )
+        if not moved:
             return self, None
-        note = (
-            f"grip force: the default {self.grip_force_n:g} N is outside {gripper.name}'s "
-            f"{gripper.force_min_n:g}-{gripper.force_max_n:g} N: using {f:g} N "
-            "(set --grip-force-n to choose)"
-        )
-        return dataclasses.replace(self, grip_force_n=f), note
+        return dataclasses.replace(self, **moved), "; ".join(notes)
 
     def check_gripper(self, gripper: GripperSpec) -> None:
         """Settings the gripper cannot do are errors naming the field and the range."""
@@ -238,6 +256,9 @@ class GraspConfig:
             divergence_speed=f32(self.divergence_speed),
             dt=f32(self.control_period_s),
         )
+
+
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(GraspConfig)}
 
 
 def fingertip_height_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig) -> float:

@@ -83,6 +83,9 @@ class SceneIndex:
     # MJCF gripper: finger joints -> pad travel -> control tables; None: parallel jaw
     drive: DriveMap | None = None
     gripper_qpos: tuple[int, ...] = ()  # qpos addresses of the MJCF gripper's joints
+    # pair ids of an MJCF gripper's link-object contacts (its link_contacts): the pads'
+    # contact values
+    link_pairs: tuple[int, ...] = ()
 
 
 def pad_patch_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):
@@ -223,6 +226,12 @@ class Scene:
             return f'file="sha256:{hashlib.sha256(path.read_bytes()).hexdigest()}"'
 
         return re.sub(r'file="([^"]+)"', digest, self.xml)
+
+    @property
+    def box_pads(self) -> bool:
+        """Whether ContactParams.pad_collision applies to its pads (the parametric jaw's,
+        or an MJCF gripper's box pads; other MJCF pads keep their own geoms)."""
+        return self.kinematics is None or self.kinematics.pad_frames is not None
 
     def initial_qpos(self, x_m, y_m, yaw_rad, opening_m, grasp_gap_m=None) -> np.ndarray:
         """Initial joint positions for picks (N,) arrays -> (N, nq).
@@ -625,6 +634,7 @@ def build_scene(
         finger_right_actuator=model.actuator(names["finger_right_actuator"]).id,
         pad_pairs=pairs(("pad_left", "pad_right")),
         table_pairs=pairs(("table",)),
+        link_pairs=pairs(("link",)),
         pad_bottom_z0_m=tip_mm * 1e-3,
         stroke_m=gripper.stroke_mm * 1e-3,
         **mjcf_fields,

@@ -49,7 +49,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from mjx_pick.core.config import ConfigError, to_dict, write_json, write_parquet
-from mjx_pick.engine.backend import Backend, PickInputs
+from mjx_pick.engine.backend import Backend
+from mjx_pick.engine.inputs import PickInputs
 from mjx_pick.outputs.rundir import (
     claim,
     config_hash,

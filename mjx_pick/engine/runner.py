@@ -55,8 +55,9 @@ from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine import compiled, interrupts, registry
-from mjx_pick.engine.backend import Backend, PickInputs, make_backend, make_inputs
+from mjx_pick.engine.backend import Backend, make_backend
 from mjx_pick.engine.chunks import BackendChunks, ChunkStore
+from mjx_pick.engine.inputs import PickInputs, make_inputs
 
 ProgressFn = Callable[[int, int], None]  # (pick-points done, pick-points in the run)
 
@@ -170,7 +171,6 @@ class Runner:
     def make(self, scene: Scene, grasp: GraspConfig) -> Backend:
         """A new backend for scene and grasp (on MJX/Warp: one compile per batch shape)."""
         if self.cluster is not None:
-            grasp.substeps(scene.solver)  # validates the control period, as make_backend does
             backend = self.cluster.backend(scene, grasp)
         else:
             size = self.batch_size or registry.default_batch_size(self.backend_name)

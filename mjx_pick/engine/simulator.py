@@ -23,10 +23,12 @@ import numpy as np
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.core.scene import Scene, build_scene
+from mjx_pick.core.scene import Scene
+from mjx_pick.core.settings import Settings
 from mjx_pick.engine import interrupts
-from mjx_pick.engine.backend import Backend, Settings, make_inputs
+from mjx_pick.engine.backend import Backend
 from mjx_pick.engine.chunks import ChunkStore, row_digests
+from mjx_pick.engine.inputs import pick_inputs, scene_of
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import Cancelled, ProgressFn, Runner
 from mjx_pick.engine.variants import (
@@ -146,9 +148,7 @@ class Simulator:
         """settings' own compiled scene (cached by ``Settings.structure``)."""
         key = settings.structure()
         if key not in self._scenes:
-            self._scenes[key] = build_scene(
-                self.object, settings.gripper, settings.contact, settings.solver, settings.grasp
-            )
+            self._scenes[key] = scene_of(self.object, settings)
         return self._scenes[key]
 
     def _program(self, settings: Settings) -> tuple:
@@ -207,9 +207,7 @@ class Simulator:
                 settings, picks = jobs[j]
                 # every variant's own scene: its pick-points' start, contact and
                 # controller parameters and model fields are its own
-                part = make_inputs(
-                    scene, settings.grasp, picks, settings.overrides(scene, len(picks))
-                )
+                part = pick_inputs(scene, settings, picks)
                 parts.append(with_model_fields(part, scene.model, names) if names else part)
             inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
             offset = done

@@ -43,7 +43,7 @@ import numpy as np
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine import registry
-from mjx_pick.engine.backend import PickInputs, addresses
+from mjx_pick.engine.inputs import PickInputs, addresses
 
 # solver options a backend may take per simulation (MjOption fields, as mujoco.batch
 # names them): traced arrays in MJX's Option, expandable in a batch

@@ -266,7 +266,7 @@ def sweep_problem(settings: Settings, name: str, values) -> str:
     """Why a sweep of parameter name over values cannot run with these settings ('' if
     it can): each value is checked as the sweep will set it (the parameter's range, the
     rules between fields and against the gripper), before anything starts."""
-    from mjx_pick.engine.backend import Settings as RunSettings
+    from mjx_pick.core.settings import Settings as RunSettings
     from mjx_pick.studies.sweeps import apply, canonical
 
     try:

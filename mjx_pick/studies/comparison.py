@@ -34,7 +34,7 @@ from mjx_pick.core.config import ConfigError, check_range, to_dict, write_json, 
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.core.objects import ObjectModel
-from mjx_pick.engine.backend import Settings
+from mjx_pick.core.settings import Settings
 from mjx_pick.engine.chunks import ChunkStore, open_store
 from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
 from mjx_pick.outputs.rundir import finish, portable_object, release
@@ -106,20 +106,6 @@ def shared_candidates(
         [np.concatenate([p[4][g]["reason"] for p in parts]) for g in range(len(grippers))]
     )
     return cand, batches, reasons
-
-
-def fit_to(base: Settings, gripper: GripperSpec) -> Settings:
-    """base with gripper, its grip force and closing speed clipped to the gripper's
-    ranges: a gripper that cannot squeeze F_d is compared at its strongest."""
-    g = base.grasp
-    grasp = dataclasses.replace(
-        g,
-        grip_force_n=float(np.clip(g.grip_force_n, gripper.force_min_n, gripper.force_max_n)),
-        closing_speed_mm_s=float(
-            np.clip(g.closing_speed_mm_s, gripper.speed_min_mm_s, gripper.speed_max_mm_s)
-        ),
-    )
-    return dataclasses.replace(base, gripper=gripper, grasp=grasp)
 
 
 def compare(
@@ -194,7 +180,9 @@ def _compare(
     names = [g.name for g in grippers]
     cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
     n_cand = len(cand["pick_id"])
-    jobs = [(fit_to(base, g), b) for g, b in zip(grippers, batches, strict=True)]
+    # each gripper's procedure fitted to its ranges: one that cannot squeeze F_d is
+    # compared at its strongest
+    jobs = [(base.on_gripper(g)[0], b) for g, b in zip(grippers, batches, strict=True)]
     desc = f"compare: {len(jobs)} grippers ({sim.runner.backend_name})"
     with showing_progress(sim.runner, desc, "sim", opts is not None and opts.progress):
         outs = sim.run(jobs, store)

@@ -54,10 +54,11 @@ from mjx_pick.core.metrics import summarize
 from mjx_pick.core.objects import ObjectModel, load_object
 from mjx_pick.core.physics import ContactParams, SolverParams
 from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
-from mjx_pick.core.scene import Scene, build_scene
+from mjx_pick.core.scene import Scene
+from mjx_pick.core.settings import Settings
 from mjx_pick.engine import interrupts
-from mjx_pick.engine.backend import Settings
 from mjx_pick.engine.chunks import ChunkStore
+from mjx_pick.engine.inputs import scene_of
 from mjx_pick.engine.runner import (
     Cancelled,
     ProgressFn,
@@ -232,12 +233,16 @@ def evaluate(
     opts = dataclasses.replace(opts, n=opts.n_or(1000), pick_config=opts.picks)
     backend, batch_size, ray = opts.backend, opts.batch_size, opts.ray
     obj, gripper = _resolve(obj, gripper)
-    contact = contact or ContactParams()
-    solver = solver or SolverParams()
-    if grasp is None:  # the default procedure, its grip force within the gripper's range
-        grasp, note = GraspConfig().fitted_to(gripper)
-        if note:
-            warnings.warn(note, stacklevel=2)
+    # the default procedure is fitted to the gripper's ranges; one given is the user's
+    keep = () if grasp is None else [f.name for f in dataclasses.fields(GraspConfig)]
+    settings, note = Settings(
+        contact=contact or ContactParams(),
+        solver=solver or SolverParams(),
+        grasp=grasp or GraspConfig(),
+    ).on_gripper(gripper, keep)
+    if note:
+        warnings.warn(note, stacklevel=2)
+    contact, solver, grasp = settings.contact, settings.solver, settings.grasp
     pick_config = opts.pick_config
     grasp.check_gripper(gripper)
     pp.check_raster(obj, pick_config)  # before any allocation or folder
@@ -280,7 +285,7 @@ def evaluate(
             line=rows.line,
         )
     t_scene = time.perf_counter()
-    scene = build_scene(obj, gripper, contact, solver, grasp)
+    scene = scene_of(obj, settings)
     if ray is None:
         runner = Runner(backend, batch_size, chunk_size=chunk_size or None, cancel=cancel)
     else:

@@ -7,7 +7,7 @@ from mjx_pick.core.config import ConfigError, from_mapping
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.physics import ContactParams, SolverParams
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.backend import Settings
+from mjx_pick.core.settings import Settings
 from mjx_pick.outputs.rundir import changed_settings, flat_settings
 
 

@@ -33,7 +33,7 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError, check_range, to_dict, write_json, write_parquet
 from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.core.objects import ObjectModel, check_same_object
-from mjx_pick.engine.backend import Settings
+from mjx_pick.core.settings import Settings
 from mjx_pick.engine.chunks import ChunkStore, open_store
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress

@@ -40,7 +40,7 @@ from mjx_pick.core.metrics import rate_summary, results_table
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.physics import ContactParams, SolverParams
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.backend import Settings
+from mjx_pick.core.settings import Settings
 from mjx_pick.engine.chunks import open_store
 from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
 from mjx_pick.outputs.rundir import finish, portable_object, release

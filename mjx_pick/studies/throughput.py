@@ -20,9 +20,9 @@ import numpy as np
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.objects import load_object
 from mjx_pick.core.physics import ContactParams
-from mjx_pick.core.scene import build_scene
+from mjx_pick.core.settings import Settings
 from mjx_pick.engine import registry
-from mjx_pick.engine.backend import make_inputs
+from mjx_pick.engine.inputs import make_inputs, scene_of
 from mjx_pick.engine.runner import Runner
 
 # Bencak et al. 2023: ~53 s for one simulation; ~4.5 s per simulation with 12 parallel
@@ -59,7 +59,7 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
     repeats = 0 times the first run itself (its compile is already apart: MJX compiles
     ahead of time), for runs where device time is short."""
     obj = load_object(obj_name)
-    scene = build_scene(obj, gripper, solver=solver, grasp=grasp)
+    scene = scene_of(obj, Settings(gripper, solver=solver, grasp=grasp))
     pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0, grasp=grasp)
     devices = jax.local_devices()[:n_devices] if n_devices else None
     # one chunk per call: each timed call is one backend call of `batch` pick-points
@@ -207,7 +207,7 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
         if key not in scenes:
             variant = dataclasses.replace(solver, **dict(spec.solver))
             contact = ContactParams(**dict(spec.contact))
-            scene = build_scene(obj, gripper, contact, solver=variant, grasp=grasp)
+            scene = scene_of(obj, Settings(gripper, contact, variant, grasp))
             scenes[key] = (scene, make_inputs(scene, grasp, picks))
         return scenes[key]
 

@@ -28,7 +28,7 @@ from mjx_pick.core.physics import (
     stiffest_spring,
     torsion_share,
 )
-from mjx_pick.engine.backend import set_contact
+from mjx_pick.engine.inputs import contact_values, scene_contact, set_contact
 
 
 class ParamInfo(NamedTuple):
@@ -258,11 +258,11 @@ FITTED_PAIR_VALUES = ("pad_friction", "pad_torsion", "table_friction", "pad_solr
 
 def row_inputs(problem_inputs, scene, settings, grip_force_n, values: dict[str, float]):
     """Per-row simulation inputs for one parameter vector: the contact through
-    ``Settings.overrides`` (``physics.mujoco_contact``: solref clamping, torsion from
-    the patch) and F_d + force offset per row."""
-    s = dataclasses.replace(settings, contact=fitted_contact(settings.contact, values))
-    n = len(grip_force_n)
-    over = s.overrides(scene, n)
+    ``engine.inputs.scene_contact`` (``physics.mujoco_contact``: solref clamping,
+    torsion from the patch) and F_d + force offset per row."""
+    over = contact_values(
+        scene_contact(scene, fitted_contact(settings.contact, values), settings.solver)
+    )
     f = np.asarray(grip_force_n, np.float32) + np.float32(values.get("force_offset_n", 0.0))
     friction, solref, _ = set_contact(
         scene,
@@ -291,11 +291,7 @@ def contact_arrays_jnp(names, values, inputs, scene, settings, mass_kg):
     contact = {
         "pad_friction": mu,
         "pad_torsion": pad_torsion_m(mu, torsion_mm, scene.pad_patch_mm)
-        * (
-            1.0
-            if "pad_torsion_mm" in v
-            else torsion_share(base, settings.solver, scene.gripper.mjcf is None)
-        ),
+        * (1.0 if "pad_torsion_mm" in v else torsion_share(base, settings.solver, scene.box_pads)),
         "table_friction": v.get("table_friction", base.table_friction),
     }
     for side in ("pad", "table"):

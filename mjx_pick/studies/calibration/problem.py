@@ -18,7 +18,8 @@ import numpy as np
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError, check_range
 from mjx_pick.core.objects import ObjectModel
-from mjx_pick.engine.backend import Settings, make_inputs
+from mjx_pick.core.settings import Settings
+from mjx_pick.engine.inputs import pick_inputs, scene_of
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import Runner
 from mjx_pick.engine.simulator import differentiable_rollout
@@ -114,7 +115,6 @@ class Problem:
         force_mismatch: bool = False,
     ) -> None:
         from mjx_pick.core.procedure import broadcast_params
-        from mjx_pick.core.scene import build_scene
 
         noise = noise or L.Noise()
         extra = {
@@ -145,7 +145,7 @@ class Problem:
         check_range("calibrate", "replica_jitter_mm", replica_jitter_mm, 0, 5)
         self._add_replicas(checker, replicates, replica_jitter_mm)
         self.grip_force_n = outcomes.grip_force_n[self.row_of]  # (R + replicas,)
-        self.scene = build_scene(obj, g, s.contact, s.solver, s.grasp)
+        self.scene = scene_of(obj, s)
         self.start = start_values(self.names, s, self.scene)
         self.start.update({canonical_params([k])[0]: float(v) for k, v in (start or {}).items()})
         self.space: ParamSpace = param_space(
@@ -164,9 +164,7 @@ class Problem:
         ]
         stacked = {k: np.array([getattr(p, k) for p in per_row]) for k in per_row[0]._fields}
         params = broadcast_params(per_row[0], len(self.row_of), **stacked)
-        self.inputs = make_inputs(
-            self.scene, s.grasp, self.picks, s.overrides(self.scene, len(self.row_of))
-        ).replace(params=params)
+        self.inputs = pick_inputs(self.scene, s, self.picks).replace(params=params)
         traces = self._set_loss_data(s.grasp)
         self.record = traces is not None
         self.backend_name = backend

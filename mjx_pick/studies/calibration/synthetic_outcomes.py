@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 
 from mjx_pick.core.objects import ObjectModel
-from mjx_pick.engine.backend import Settings
+from mjx_pick.core.settings import Settings
 from mjx_pick.engine.registry import Impl
 from mjx_pick.studies.calibration.data import Outcomes, make_outcomes
 

@@ -9,7 +9,7 @@ from mjx_pick.core.config import (
     write_parquet,
 )
 from mjx_pick.core.objects import ObjectModel
-from mjx_pick.engine.backend import Settings
+from mjx_pick.core.settings import Settings
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.outputs.rundir import claim, config_hash, finish
 from mjx_pick.studies.calibration.parameters import (

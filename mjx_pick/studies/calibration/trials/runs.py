@@ -16,8 +16,8 @@ from mjx_pick.core.config import (
     ConfigError,
 )
 from mjx_pick.core.objects import ObjectModel, check_same_object
-from mjx_pick.core.scene import build_scene
-from mjx_pick.engine.backend import Settings, make_inputs
+from mjx_pick.core.settings import Settings
+from mjx_pick.engine.inputs import pick_inputs, scene_of
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import types as kt
@@ -78,7 +78,7 @@ class Simulations:
     def __init__(self, obj: ObjectModel, settings: Settings, backend: str = AUTO, batch_size=None):
         s = settings
         self.object, self.settings = obj, s
-        self.scene = build_scene(obj, s.gripper, s.contact, s.solver, s.grasp)
+        self.scene = scene_of(obj, s)
         self.runner = Runner(backend, batch_size)
         self._backend = None
 
@@ -92,7 +92,7 @@ class Simulations:
             self._backend = self.runner.make(self.scene, self.settings.grasp)
         n = len(picks)
         s = self.settings
-        base = make_inputs(self.scene, s.grasp, picks, s.overrides(self.scene, n))
+        base = pick_inputs(self.scene, s, picks)
         force = np.full(n, s.grasp.grip_force_n)
         parts = [row_inputs(base, self.scene, s, force, v) for v in values]
         inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
