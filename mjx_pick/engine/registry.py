@@ -103,6 +103,7 @@ class BackendEntry:
       reference: the engine whose labels the others' are compared with (throughput).
       stops_finished: a call simulates each pick only until it ends (its physics steps
         are not counted from the batch).
+      cuda_devices: its devices are CUDA ordinals ('cuda:0', ...), not JAX devices.
       note: said when a user chooses it by name (a limit to know).
     """
 
@@ -119,6 +120,7 @@ class BackendEntry:
     differentiable: bool = False
     reference: bool = False
     stops_finished: bool = False
+    cuda_devices: bool = False
     note: str = ""
 
     def __post_init__(self):
@@ -151,6 +153,7 @@ ENTRIES: dict[str, BackendEntry] = {
             auto_rank=0,
             problem="mjx_pick.engine.warp_direct:warp_problem",
             model_fields="mjx_pick.engine.warp_direct:model_fields",
+            cuda_devices=True,
         ),
         BackendEntry(
             Impl.MJX_WARP,

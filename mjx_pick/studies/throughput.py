@@ -169,7 +169,7 @@ class RunSpec:
             sized = size_buffers(scene, grasp)
             opts["buffers"] = dataclasses.replace(sized, rows=opts.pop("rows"))
         if self.devices:
-            if self.backend == "warp":  # Warp's own device names: JAX is not involved
+            if registry.entry(self.backend).cuda_devices:  # JAX is not involved
                 opts["devices"] = [f"cuda:{i}" for i in range(self.devices)]
             else:
                 opts["devices"] = jax.local_devices()[: self.devices]
