@@ -36,7 +36,7 @@ def no_work(monkeypatch):
     def refuse(*args, **kwargs):
         raise Reached("work started")
 
-    monkeypatch.setattr(pp.fk, "rasterize_bins", refuse)
+    monkeypatch.setattr(pp.fk, "packed_bins", refuse)
     monkeypatch.setattr(evaluation, "build_scene", refuse)
 
 
