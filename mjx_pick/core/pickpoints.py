@@ -345,21 +345,46 @@ def stroke_fit(
     config = config or PickConfig()
     lo, hi = pad_band_mm(obj, gripper, grasp or GraspConfig())
     outline = obj.band_outline(lo, max(hi, obj.height_mm))
+    yaws = np.arange(STROKE_YAWS) * (180.0 / STROKE_YAWS)
     if outline.is_empty:  # nothing between the pads (FeasibilityChecker refuses it)
-        yaws = np.arange(STROKE_YAWS) * (180.0 / STROKE_YAWS)
         return StrokeFit(yaws, np.full(STROKE_YAWS, np.inf), math.inf, 0.0)
+    xr, yr = offset_ranges(obj, config)
+    # a pure function of the outline and five numbers: kept on disk across runs
+    # (mjx_pick.core.cache), as the feasibility raster is
+    key = {
+        "outline_sha256": cache.digest(outline.wkb),
+        "finger_width_mm": float(gripper.finger_width_mm),
+        "min_coverage": float(config.min_coverage),
+        "x_range_mm": float(xr),
+        "y_range_mm": float(yr),
+        "resolution_mm": float(config.resolution_mm),
+        "yaws": STROKE_YAWS,
+        "band_steps": STROKE_BAND_STEPS,
+    }
+    args = (outline, key["finger_width_mm"], key["min_coverage"], xr, yr, config.resolution_mm)
+    openings = cache.memo("stroke_fit", key, lambda: {"openings": _openings(*args)})["openings"]
+    lo_yaw, hi_yaw = config.yaw_min_deg, config.yaw_max_deg
+    wanted = np.mod(yaws - lo_yaw, 360.0) <= hi_yaw - lo_yaw  # in the configured range
+    wanted |= np.mod(yaws + 180.0 - lo_yaw, 360.0) <= hi_yaw - lo_yaw
+    room = gripper.stroke_mm - 2.0 * config.safety_zone_mm
+    fits = float(np.mean(openings[wanted] <= room)) if wanted.any() else 0.0
+    return StrokeFit(yaws, openings, float(openings.min()), fits)
+
+
+def _openings(outline, w: float, c_min: float, xr: float, yr: float, res_mm: float) -> np.ndarray:
+    """stroke_fit's (STROKE_YAWS,) bounds on the narrowest opening, mm (inf: none), for
+    an outline, finger width w (mm), min_coverage c_min, offset ranges +-xr, +-yr (mm)
+    and the raster's cell (mm)."""
     # a tenth of a millimetre moves no edge further than the raster's rounding and keeps
     # a mesh's outline (thousands of vertices) cheap to cut; taken off the bound below
     simplify_mm = 0.1
     outline = shapely.simplify(outline, simplify_mm, preserve_topology=True)
     radius = float(np.hypot(*shapely.get_coordinates(outline).T).max())
-    w, c_min = float(gripper.finger_width_mm), float(config.min_coverage)
     step = w / STROKE_BAND_STEPS
     slack = radius * math.sin(0.5 * math.pi / STROKE_YAWS) + simplify_mm  # half a yaw step
     width = w - step - 2.0 * slack  # the band every band in reach contains
     fill = c_min * w - step - 2.0 * slack  # least area per mm of opening in that band
-    slop = 2.0 * slack + config.resolution_mm
-    xr, yr = offset_ranges(obj, config)
+    slop = 2.0 * slack + res_mm
     yaws = np.arange(STROKE_YAWS) * (180.0 / STROKE_YAWS)
     openings = np.full(STROKE_YAWS, np.inf)
     for k, yaw in enumerate(yaws):
@@ -385,12 +410,7 @@ def stroke_fit(
             sel = band_of == b
             run = _narrowest_run(bounds[sel], areas[sel], fill, xr + slack)
             openings[k] = min(openings[k], max(run - slop, 0.0))
-    lo_yaw, hi_yaw = config.yaw_min_deg, config.yaw_max_deg
-    wanted = np.mod(yaws - lo_yaw, 360.0) <= hi_yaw - lo_yaw  # in the configured range
-    wanted |= np.mod(yaws + 180.0 - lo_yaw, 360.0) <= hi_yaw - lo_yaw
-    room = gripper.stroke_mm - 2.0 * config.safety_zone_mm
-    fits = float(np.mean(openings[wanted] <= room)) if wanted.any() else 0.0
-    return StrokeFit(yaws, openings, float(openings.min()), fits)
+    return openings
 
 
 def _whole_width_fits(obj, gripper, config, grasp) -> bool:
