@@ -165,6 +165,16 @@ def main() -> None:
     ap.add_argument("--physics", action="append", default=None, help="default | old | k=v,...")
     ap.add_argument("--mjx-steps", type=int, default=0, help="also time MJX's bridge (steps)")
     ap.add_argument("--json", default=None, help="write the rows here")
+    ap.add_argument(
+        "--kernels", type=int, default=0, help="also list the N costliest kernels of a step"
+    )
+    ap.add_argument(
+        "--rollout",
+        type=int,
+        default=0,
+        help="instead: the Warp backend's own rollout of this many picks (one pool): ms per "
+        "physics step over the picks' time, and the costliest kernels at a few ticks",
+    )
     args = ap.parse_args()
 
     import warp as wp
@@ -197,6 +207,12 @@ def main() -> None:
 
     grasp = mp.GraspConfig()
     scene = mp.build_scene(mp.load_object(args.object), mp.load_gripper(args.gripper), grasp=grasp)
+    if args.rollout:
+        rows = rollout_profile(scene, grasp, args.rollout, args.kernels or 25, args.seed)
+        if args.json:
+            with open(args.json, "w") as f:
+                json.dump({"meta": {"device": wp.get_device().name}, "rows": rows}, f, indent=1)
+        return
     buffers = size_buffers(scene, grasp)
     t0 = time.perf_counter()
     states = scripted_states(scene, grasp, args.states, args.seed)
@@ -300,6 +316,10 @@ def main() -> None:
             row["steps_all_converged_share"] = float(np.mean(maxes < cap))
             row["steps_niter_max_median"] = float(np.median(maxes))
             row["steps_niter_p99_median"] = float(np.median(p99s))
+            if args.kernels:
+                row["kernels"] = kernel_times(lambda mw=mw, dw=dw: mjw.step(mw, dw), args.kernels)
+                for name, ms, calls in row["kernels"]:
+                    print(f"  {text} {phase}: {ms:8.3f} ms  x{calls:<4d} {name}", flush=True)
             if args.mjx_steps:
                 row["mjx_bridge_step_ms"] = mjx_scan_ms(
                     base, buffers, (qpos, qvel, ctrl), args.worlds, args.mjx_steps, 3
@@ -319,6 +339,76 @@ def main() -> None:
         }
         with open(args.json, "w") as f:
             json.dump({"meta": meta, "rows": rows}, f, indent=1)
+
+
+def rollout_profile(scene, grasp, n: int, top: int, seed: int) -> list[dict]:
+    """The Warp backend's pool of n slots on n picks, from the start until every pick
+    has ended: for each round of the backend's ticks, ms per physics step (graph
+    launches, synchronised) and the picks still running, by phase; at the first round
+    in which most live picks are closing, lifting and holding, the costliest kernels of
+    one control period (eager launches, CUDA activity records)."""
+    import warp as wp
+
+    from mjx_pick.engine import warp_direct as wd
+    from mjx_pick.engine.backend import make_inputs
+    from mjx_pick.kernels import grasp as gk
+    from mjx_pick.kernels import grasp_warp as gw
+
+    picks = pp.generate_normal(scene.object, scene.gripper, n, seed=seed, grasp=grasp)
+    inputs = make_inputs(scene, grasp, picks)
+    backend = wd.WarpBackend(scene, grasp, len(inputs), shrink_levels=0)
+    backend.fields = ()
+    pool = backend._pool(len(inputs), 0)
+    src = wd._device_inputs(inputs, (), gw)
+    slot_pick = np.arange(len(inputs), dtype=np.int32)
+    backend._refill(pool, src, slot_pick, slot_pick >= 0)
+    n_sub, rows, profiled = backend.n_sub, [], set()
+    for r in range(-(-grasp.n_ticks() // backend.ticks_per_call)):
+        host = pool.ctl.numpy()["phase"]
+        live = pool.live.numpy().astype(bool) if r else np.ones(len(inputs), bool)
+        counts = {gk.PHASES[p]: int(np.sum((host == p) & live)) for p in range(len(gk.PHASES))}
+        main = max(("close", "lift", "hold"), key=lambda k: counts[k])
+        if counts[main] > len(inputs) // 2 and main not in profiled:
+            profiled.add(main)
+            listed = kernel_times(lambda: pool.period(backend), top, steps=2)
+            for name, ms, calls in listed:
+                print(
+                    f"  rollout {main}: {ms / n_sub:8.3f} ms/step x{calls:<4d} {name}", flush=True
+                )
+            rows.append({"kind": "kernels", "phase": main, "per_period": listed})
+        wp.synchronize()
+        t0 = time.perf_counter()
+        for _ in range(backend.ticks_per_call):
+            pool.run_period(backend)
+        wp.synchronize()
+        ms = (time.perf_counter() - t0) / (backend.ticks_per_call * n_sub) * 1e3
+        row = {"kind": "round", "round": r, "ms_per_step": ms, **counts}
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    return rows
+
+
+def kernel_times(step, top: int, steps: int = 5) -> list[tuple[str, float, int]]:
+    """GPU time per kernel of ``steps`` eager steps (CUDA activity records), summed by
+    kernel name over the steps and divided by them: (name, ms per step, launches per
+    step), the costliest ``top``."""
+    import collections
+
+    import warp as wp
+
+    step()  # warm
+    wp.synchronize()
+    wp.timing_begin(cuda_filter=wp.TIMING_KERNEL | wp.TIMING_KERNEL_BUILTIN, synchronize=True)
+    for _ in range(steps):
+        step()
+    results = wp.timing_end()
+    total = collections.defaultdict(float)
+    calls = collections.Counter()
+    for r in results:
+        total[r.name] += r.elapsed
+        calls[r.name] += 1
+    rows = sorted(total.items(), key=lambda kv: -kv[1])[:top]
+    return [(name, ms / steps, calls[name] // steps) for name, ms in rows]
 
 
 def mjx_scan_ms(model, buffers, states, worlds: int, steps: int, repeats: int) -> float:
