@@ -253,9 +253,11 @@ def test_cli_no_cache_reads_and_writes_nothing(cache_dir, monkeypatch, tmp_path,
 COMPILED = textwrap.dedent(
     """
     import jax
+    import mjx_pick as mp
     from mjx_pick.engine import compiled, runner
     print(jax.config.jax_compilation_cache_dir)  # importing sets nothing
-    runner.Runner("mujoco")
+    scene = mp.build_scene(mp.load_object("block"), mp.load_gripper("robotiq-2f85"))
+    runner.Runner("mujoco").make(scene, mp.GraspConfig())  # a backend running JAX programs
     print(jax.config.jax_compilation_cache_dir)
     print(jax.config.jax_persistent_cache_min_compile_time_secs == compiled.MIN_COMPILE_S)
     """

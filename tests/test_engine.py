@@ -369,11 +369,13 @@ def test_a_study_resumes_from_chunks_that_a_simulator_with_another_history_wrote
     assert resumed.table.equals(whole.table)
 
 
-# drawing pick-points and building a scene, in a fresh interpreter: which of JAX's
-# modules did it load (none may be)
+# the studies and the engine's shared modules imported, pick-points drawn and a scene
+# built, in a fresh interpreter: which of JAX's modules did it load (none may be)
 HOST_SIDE = """
 import json, sys
 import mjx_pick as mp
+import mjx_pick.cli.commands, mjx_pick.engine.runner, mjx_pick.engine.simulator
+import mjx_pick.studies.evaluation, mjx_pick.studies.sweeps, mjx_pick.studies.comparison
 from mjx_pick.core import pickpoints as pp
 obj, gripper = mp.load_object("door_opener"), mp.load_gripper("robotiq-2f85")
 picks = pp.generate_normal(obj, gripper, 16, seed=0)
@@ -394,3 +396,68 @@ def test_host_side_needs_no_jax():
     assert run.returncode == 0, run.stderr
     got = json.loads(run.stdout.splitlines()[-1])
     assert got == {"picks": 16, "jax": []}
+
+
+# a process with a backend that runs no JAX program (as the direct Warp backend): making
+# it imports no JAX, and the C engine's host programs after it start JAX's CPU only
+JAX_ON_CPU = """
+import dataclasses, json, sys
+import mjx_pick as mp
+from mjx_pick.engine import backend, registry
+
+class NoJax:
+    def __init__(self, scene, grasp, batch_size, **options):
+        self.scene = scene
+
+registry.ENTRIES["no-jax"] = dataclasses.replace(
+    registry.ENTRIES["warp"], name="no-jax", factory="__main__:NoJax", problem=None
+)
+scene = mp.build_scene(mp.load_object("block"), mp.load_gripper("robotiq-2f85"))
+grasp = mp.GraspConfig()
+backend.make_backend("no-jax", scene, grasp, 8)
+imported = "jax" in sys.modules
+backend.make_backend("mujoco", scene, grasp, 8)  # as Warp's buffers are sized
+import jax
+import jax.extend.backend
+print(json.dumps({"imported": imported, "platforms": jax.config.jax_platforms,
+                  "started": sorted(jax.extend.backend.backends())}))
+"""
+
+
+def test_jax_kept_on_the_cpu_beside_a_backend_without_jax():
+    import os
+    import subprocess
+    import sys
+
+    from mjx_pick.engine import registry
+
+    Jax = registry.Jax
+    assert {n: e.jax for n, e in registry.ENTRIES.items()} == {
+        "warp": Jax.NONE,
+        "mjx-warp": Jax.DEVICES,
+        "mjx": Jax.DEVICES,
+        "mujoco": Jax.CPU,
+    }
+    env = {k: v for k, v in os.environ.items() if k != "JAX_PLATFORMS"}
+    run = subprocess.run(
+        [sys.executable, "-c", JAX_ON_CPU], env=env, capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    got = json.loads(run.stdout.splitlines()[-1])
+    assert got == {"imported": False, "platforms": "cpu", "started": ["cpu"]}
+
+
+def test_jax_on_the_cpu_refuses_what_would_need_a_gpu(monkeypatch):
+    from jax._src import xla_bridge
+
+    from mjx_pick.engine import devices
+
+    monkeypatch.setattr(devices, "_jax_on_cpu", True)
+    monkeypatch.setattr(devices, "nvidia_driver_present", lambda: True)
+    with pytest.raises(mp.ConfigError, match="keeps JAX on the CPU"):
+        devices.check_jax_devices()  # an MJX backend after the direct Warp one
+    # JAX started a GPU platform before the direct Warp backend was made
+    monkeypatch.setattr(xla_bridge, "backends_are_initialized", lambda: True)
+    monkeypatch.setattr(xla_bridge, "backends", lambda: {"cpu": None, "cuda": None})
+    with pytest.raises(mp.ConfigError, match="JAX has started cuda"):
+        devices.keep_jax_on_cpu()

@@ -14,7 +14,8 @@ import numpy as np
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
-from mjx_pick.engine import registry
+from mjx_pick.engine import compiled, registry
+from mjx_pick.engine.devices import check_jax_devices, keep_jax_on_cpu
 
 # what every backend takes (their home: engine.inputs)
 from mjx_pick.engine.inputs import PickInputs, addresses, make_inputs  # noqa: F401
@@ -75,4 +76,11 @@ def make_backend(
     hint = ("nthread", nthread) if entry.device is registry.Device.CPU else ("devices", devices)
     if hint[1] is not None:
         options[hint[0]] = hint[1]
+    if entry.jax is registry.Jax.NONE:  # its host side's JAX (the C engine's sizing) on the CPU
+        keep_jax_on_cpu()
+    elif entry.jax is registry.Jax.DEVICES:
+        check_jax_devices()
+        # simulating starts here: JAX's compiled programs kept on disk (not at import);
+        # host programs turn it on where they start (devices.jax_cpu_device)
+        compiled.use_persistent_cache()
     return registry.load(entry.factory)(scene, grasp, batch_size, **options)

@@ -26,6 +26,7 @@ import numpy as np
 
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
+from mjx_pick.engine import devices
 from mjx_pick.engine.backend import PickInputs, RunStats, addresses
 from mjx_pick.engine.variants import model_value
 from mjx_pick.kernels import grasp as gk
@@ -88,7 +89,7 @@ class MujocoBackend:
         self.device = f"cpu:{self.nthread} threads"
         self.stats = RunStats()
         self.ad = addresses(scene)
-        self._cpu = jax.devices("cpu")[0]
+        self._cpu = devices.jax_cpu_device()
         self._batches: dict[int, mujoco.batch.Batch] = {}
         self._expanded: dict[int, set[str]] = {}  # id(batch) -> model fields it expanded
 

@@ -43,7 +43,6 @@ import shutil
 import sys
 from pathlib import Path
 
-import jax
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -206,7 +205,7 @@ class BackendChunks:
         # the model fields carried per pick-point are left out: which ones a program
         # carries depends on the variants it ran before, while the row's values of them
         # follow from its settings (hashed above)
-        for leaf in jax.tree.leaves(inputs.replace(model={})):
+        for leaf in inputs.replace(model={}).leaves():
             a = np.ascontiguousarray(leaf)
             h.update(f"{a.dtype.str}{a.shape}".encode())
             h.update(a.tobytes())

@@ -4,8 +4,8 @@ Every new process compiles its device programs again (the MJX/Warp rollouts, the
 engine's per-tick controller), which on a short run costs more than the simulation.
 JAX can keep compiled executables on disk; :func:`use_persistent_cache` points it at the
 ``jax/`` subfolder of mjx-pick's cache folder (``mjx_pick.core.cache``). The engine calls
-it when it is built -- the point where a command or a study starts simulating -- never at
-import time.
+it when it builds a backend that runs JAX programs -- the point where a command or a
+study starts simulating -- never at import time (nor in a process that never uses JAX).
 
 * Programs that compiled in less than :data:`MIN_COMPILE_S` are not stored: reading an
   entry costs about as much as compiling the smallest programs (single operations run
@@ -26,8 +26,6 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-import jax
-
 from mjx_pick.core import cache
 
 MIN_COMPILE_S = 0.1  # seconds: programs that compile faster are not stored
@@ -40,6 +38,8 @@ def use_persistent_cache() -> Path | None:
       the folder JAX keeps compiled programs in (this one, or one the user set), or
       None when the cache is bypassed or its folder cannot be written (one warning).
     """
+    import jax
+
     current = jax.config.jax_compilation_cache_dir
     if current:
         return Path(current)

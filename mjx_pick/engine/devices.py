@@ -1,4 +1,5 @@
-"""Which engines this machine can run: JAX's CUDA devices and whether MuJoCo Warp loads.
+"""Which engines this machine can run (GPUs, whether MuJoCo Warp loads) and which JAX
+platforms this process may start.
 
 Kept apart from the Warp backend so that choosing a backend (``backend.make_backend``
 with 'auto') asks these questions without importing the backend that needs the answer.
@@ -10,9 +11,79 @@ import functools
 import importlib.metadata
 import importlib.util
 import os
+import sys
+
+from mjx_pick.core.config import ConfigError
+from mjx_pick.engine import compiled
 
 # set to 1: let the Warp backend run on the CPU (warp-lang's CPU device; tests only)
 ALLOW_CPU_ENV = "MJX_PICK_WARP_CPU"
+
+
+_jax_on_cpu = False  # keep_jax_on_cpu() was called in this process
+
+
+def keep_jax_on_cpu() -> None:
+    """Let JAX start its CPU platform only, in this process, from now on.
+
+    A backend that drives the GPU without JAX (the direct MuJoCo Warp backend) calls it:
+    JAX may still run host programs in its process (the C engine's per-tick controller
+    when Warp's buffers are sized on it), but starting JAX's CUDA platform would take
+    three quarters of every GPU's memory (XLA preallocates it) from Warp. Sets
+    ``jax_platforms = "cpu"`` now if JAX is imported, else when :func:`jax_cpu_device`
+    first imports it (nothing is imported here); JAX starts every platform at once at
+    its first device query, so this must come before. A JAX program on a device is
+    refused from then on (:func:`check_jax_devices`).
+
+    Raises:
+      ConfigError: JAX already started a platform other than the CPU in this process.
+    """
+    global _jax_on_cpu
+    _jax_on_cpu = True
+    if "jax" in sys.modules:
+        _confine_jax()
+
+
+def _confine_jax() -> None:
+    import jax
+
+    # whether a platform started, asked without starting one (JAX's public API has no
+    # such question); once started, backends() starts nothing more
+    from jax._src import xla_bridge
+
+    if not xla_bridge.backends_are_initialized():
+        jax.config.update("jax_platforms", "cpu")
+        return
+    started = sorted(set(xla_bridge.backends()) - {"cpu"})
+    if started:
+        raise ConfigError(
+            f"JAX has started {', '.join(started)} in this process, whose memory the direct "
+            "MuJoCo Warp backend needs: run it in a process of its own (the MJX backends in "
+            "another)"
+        )
+
+
+def check_jax_devices() -> None:
+    """Refuse a backend that runs JAX programs on JAX's devices in a process whose JAX
+    is kept on the CPU (:func:`keep_jax_on_cpu`) on a machine with an NVIDIA GPU (where
+    they would run on the CPU instead; without one, the CPU is their device anyway)."""
+    if _jax_on_cpu and nvidia_driver_present():
+        raise ConfigError(
+            "this process keeps JAX on the CPU for the direct MuJoCo Warp backend: run the "
+            "MJX backends in a process of their own"
+        )
+
+
+def jax_cpu_device():
+    """JAX's CPU device, for host programs (the C engine's per-tick controller), with
+    JAX's compiled programs kept on disk (``engine.compiled``); starts JAX's CPU
+    platform only once :func:`keep_jax_on_cpu` was called."""
+    if _jax_on_cpu:
+        _confine_jax()
+    import jax
+
+    compiled.use_persistent_cache()
+    return jax.devices("cpu")[0]
 
 
 def nvidia_gpus() -> list:

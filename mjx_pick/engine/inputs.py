@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import jax
 import numpy as np
 
 from mjx_pick.core.config import ConfigError
@@ -56,14 +55,44 @@ class PickInputs(NamedTuple):
         return PickInputs(**{**self._asdict(), **fields})
 
     def take(self, index) -> PickInputs:
-        return jax.tree.map(lambda a: a[index], self)
+        return tree_map(lambda a: a[index], self)
 
     def pad_to(self, n: int) -> PickInputs:
         """Pad to n entries with copies of the first (results of the copies are dropped)."""
         extra = n - len(self)
         if extra <= 0:
             return self
-        return jax.tree.map(lambda a: np.concatenate([a, np.repeat(a[:1], extra, axis=0)]), self)
+        return tree_map(lambda a: np.concatenate([a, np.repeat(a[:1], extra, axis=0)]), self)
+
+    @staticmethod
+    def concat(parts: list[PickInputs]) -> PickInputs:
+        """One batch of several, in order (every part with the same model fields)."""
+        return tree_map(lambda *a: np.concatenate(a), *parts)
+
+    def leaves(self) -> list[np.ndarray]:
+        """Every array, in ``jax.tree.leaves``' order (fields in order, dict keys sorted)."""
+        return tree_leaves(self)
+
+
+def tree_map(fn, *trees):
+    """fn over the arrays of trees of one structure (NamedTuples, tuples and dicts of
+    arrays), as ``jax.tree.map``: a backend's host side needs no JAX."""
+    first = trees[0]
+    if isinstance(first, dict):
+        return {k: tree_map(fn, *(t[k] for t in trees)) for k in first}
+    if isinstance(first, tuple):
+        items = [tree_map(fn, *parts) for parts in zip(*trees, strict=True)]
+        return type(first)(*items) if hasattr(first, "_fields") else tuple(items)
+    return fn(*trees)
+
+
+def tree_leaves(tree) -> list:
+    """The arrays of a tree (as :func:`tree_map` sees it), in ``jax.tree.leaves``' order."""
+    if isinstance(tree, dict):
+        return [leaf for k in sorted(tree) for leaf in tree_leaves(tree[k])]
+    if isinstance(tree, tuple):
+        return [leaf for item in tree for leaf in tree_leaves(item)]
+    return [tree]
 
 
 def addresses(scene: Scene) -> kt.Addresses:

@@ -34,6 +34,14 @@ class Device(enum.Enum):
     CPU = "CPU threads"
 
 
+class Jax(enum.Enum):
+    """Where a backend runs JAX programs (``devices.keep_jax_on_cpu`` says why it matters)."""
+
+    NONE = "no JAX program"  # JAX's host-side users in its process are kept on the CPU
+    CPU = "JAX programs on the CPU"  # the C engine's per-tick controller
+    DEVICES = "JAX programs on JAX's devices"
+
+
 @dataclasses.dataclass(frozen=True)
 class BatchRule:
     """A backend's default simulations per call.
@@ -99,6 +107,8 @@ class BackendEntry:
         None: it takes none, and each gripper variant gets a program of its own.
       program_reads: model values its compiled program reads that no simulation can
         carry ('stat.meaninertia'): scenes share its program only where they are equal.
+      jax: where it runs JAX programs (:class:`Jax`); JAX's compiled programs are kept on
+        disk (``engine.compiled``) for those that run any.
       differentiable: its rollouts have forward-mode derivatives (calibration's jvp).
       reference: the engine whose labels the others' are compared with (throughput).
       stops_finished: a call simulates each pick only until it ends (its physics steps
@@ -117,6 +127,7 @@ class BackendEntry:
     problem: str | None = None
     model_fields: str | None = None
     program_reads: tuple[str, ...] = ()
+    jax: Jax = Jax.NONE
     differentiable: bool = False
     reference: bool = False
     stops_finished: bool = False
@@ -169,6 +180,7 @@ ENTRIES: dict[str, BackendEntry] = {
             # not for 'auto': the same physics as 'warp' with JAX's costs on top
             problem="mjx_pick.engine.devices:warp_problem",
             model_fields="mjx_pick.engine.variants:mjx_warp_fields",
+            jax=Jax.DEVICES,
         ),
         BackendEntry(
             Impl.MJX,
@@ -179,6 +191,7 @@ ENTRIES: dict[str, BackendEntry] = {
             options=_POOL_OPTIONS,
             # not for 'auto': where Warp cannot run, the C engine's threads beat it
             model_fields="mjx_pick.engine.variants:mjx_fields",
+            jax=Jax.DEVICES,
             differentiable=True,
             note="MJX's JAX physics, kept for derivatives: at low pad friction (0.1-0.2) "
             "its pads chatter where MuJoCo C and Warp hold the part; for labels use "
@@ -193,6 +206,7 @@ ENTRIES: dict[str, BackendEntry] = {
             auto_rank=2,
             model_fields="mjx_pick.engine.variants:batch_fields",
             program_reads=("stat.meaninertia",),
+            jax=Jax.CPU,
             reference=True,
             stops_finished=True,
         ),

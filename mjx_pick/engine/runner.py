@@ -40,12 +40,12 @@ gradient: ``simulator.differentiable_rollout`` says why.
 from __future__ import annotations
 
 import dataclasses
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import NamedTuple
 
-import jax
 import numpy as np
 import pyarrow as pa
 
@@ -54,7 +54,7 @@ from mjx_pick.core.metrics import COLUMNS, results_table
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
-from mjx_pick.engine import compiled, interrupts, registry
+from mjx_pick.engine import interrupts, registry
 from mjx_pick.engine.backend import Backend, make_backend
 from mjx_pick.engine.chunks import BackendChunks, ChunkStore
 from mjx_pick.engine.inputs import PickInputs, make_inputs
@@ -160,8 +160,6 @@ class Runner:
         self.cluster = cluster
         self.backends: list[Backend] = []  # every backend this runner ran, in order built
         self.rollouts = 0  # pick-point simulations run so far
-        # simulating starts here: compiled programs kept on disk from now on (not at import)
-        compiled.use_persistent_cache()
 
     def close(self) -> None:
         """Release what the runner holds: a cluster's actors (nothing in this process)."""
@@ -392,6 +390,16 @@ def read_chunk(store: ChunkStore | None, k: int, picks: PickBatch) -> pa.Table |
     return table
 
 
+def _distributed() -> bool:
+    """Whether this process is one of several of a ``jax.distributed`` job (asked
+    without starting JAX: a process that never imported it is not)."""
+    if "jax" not in sys.modules:
+        return False
+    import jax
+
+    return jax.distributed.is_initialized()
+
+
 def run_chunks(
     chunks_of,
     picks: PickBatch,
@@ -412,7 +420,7 @@ def run_chunks(
     once before the first chunk and after each one. on_chunk: each simulated chunk.
     """
     n = len(picks)
-    if jax.process_count() > 1:
+    if _distributed():
         raise ConfigError(
             "evaluate runs one driver process: spread a run over machines with --ray "
             "(docs/cluster.md), not jax.distributed"

@@ -17,9 +17,6 @@ import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 
-import jax
-import numpy as np
-
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
@@ -28,7 +25,7 @@ from mjx_pick.core.settings import Settings
 from mjx_pick.engine import interrupts
 from mjx_pick.engine.backend import Backend
 from mjx_pick.engine.chunks import ChunkStore, row_digests
-from mjx_pick.engine.inputs import pick_inputs, scene_of
+from mjx_pick.engine.inputs import PickInputs, pick_inputs, scene_of
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import Cancelled, ProgressFn, Runner
 from mjx_pick.engine.variants import (
@@ -209,7 +206,7 @@ class Simulator:
                 # controller parameters and model fields are its own
                 part = pick_inputs(scene, settings, picks)
                 parts.append(with_model_fields(part, scene.model, names) if names else part)
-            inputs = jax.tree.map(lambda *a: np.concatenate(a), *parts)
+            inputs = PickInputs.concat(parts)
             offset = done
 
             def progress(k: int, _n: int, offset=offset) -> None:

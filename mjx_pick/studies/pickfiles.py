@@ -18,7 +18,6 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError, open_csv, to_dict, write_atomic
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import ObjectModel
-from mjx_pick.outputs import plots
 from mjx_pick.outputs.rundir import claim, config_hash, finish
 
 __all__ = ["UserPicks", "read_picks_csv", "write_picks"]
@@ -66,6 +65,9 @@ def write_picks(
         )
     ]
     write_atomic(folder / "picks.csv", "\n".join(lines) + "\n")
+    # here: its figures load matplotlib, which an evaluate that reads a picks file needs not
+    from mjx_pick.outputs import plots
+
     plots.draw_pick(
         obj,
         gripper,
