@@ -434,6 +434,9 @@ def run(args) -> None:
     if unknown:
         raise SystemExit(f"--objects: unknown {unknown}; known: door_opener, {', '.join(manifest)}")
     backends = [b for b in args.backends.split(",") if b]
+    from mjx_pick.engine.backend import plan_jax
+
+    plan_jax(backends)  # before any backend: the C engine's JAX off the GPU beside Warp
     bands = tuple(float(b) for b in args.margin_bands.split(",") if b)
     rows = []
     for name in names:

@@ -337,3 +337,16 @@ def test_a_shrinking_pool_keeps_each_picks_state(block_scene):
     np.testing.assert_array_equal(
         shrinking.last_diagnostics.overflow, fixed.last_diagnostics.overflow
     )
+
+
+def test_a_process_plans_its_jax_for_the_backends_it_will_build(monkeypatch):
+    from mjx_pick.engine import backend, devices
+
+    monkeypatch.setattr(devices, "_jax_on_cpu", False)
+    with pytest.raises(mp.ConfigError, match=r"\['warp'\] and \['mjx-warp'\] cannot share"):
+        backend.plan_jax(["mujoco", "warp", "mjx-warp"])
+    assert not devices._jax_on_cpu
+    backend.plan_jax(["mujoco", "mjx"])  # the C engine beside MJX: JAX as it is
+    assert not devices._jax_on_cpu
+    backend.plan_jax(["mujoco", "warp"])  # beside Warp: JAX's CPU platform only
+    assert devices._jax_on_cpu

@@ -52,6 +52,25 @@ class Backend(Protocol):
         ...
 
 
+def plan_jax(names) -> None:
+    """Before one process builds backends of several names (a benchmark's runs): where
+    one of them drives the GPU without JAX, JAX is kept on the CPU from the start (the C
+    engine's host programs then never start JAX's CUDA platform, whose memory Warp
+    needs), and one that runs JAX programs on devices is refused now, not after the
+    others ran."""
+    entries = [registry.entry(n) for n in names]
+    without = [e.name for e in entries if e.jax is registry.Jax.NONE]
+    on_devices = [e.name for e in entries if e.jax is registry.Jax.DEVICES]
+    if without and on_devices:
+        raise ConfigError(
+            f"backends {sorted(set(without))} and {sorted(set(on_devices))} cannot share a "
+            "process (the first keep JAX off the GPU, the second run JAX on it): run them "
+            "in separate processes"
+        )
+    if without:
+        keep_jax_on_cpu()
+
+
 def make_backend(
     name: str,
     scene: Scene,

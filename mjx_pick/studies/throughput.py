@@ -22,6 +22,7 @@ from mjx_pick.core.objects import load_object
 from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.settings import Settings
 from mjx_pick.engine import registry
+from mjx_pick.engine.backend import plan_jax
 from mjx_pick.engine.inputs import make_inputs, scene_of
 from mjx_pick.engine.runner import Runner
 
@@ -190,6 +191,7 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
     on_row(row) is called as each row is done (a long benchmark keeps what it measured
     if it is cut short).
     """
+    plan_jax([r.backend for r in runs])
     obj = load_object(obj_name)
     n_max = max(r.n for r in runs)
     with warnings.catch_warnings():  # fewer feasible than asked: repeated below
