@@ -2,17 +2,15 @@
 
 Data flow: object -> gripper -> scene -> pick-points -> batched simulation -> metrics.
 
-The public API is the names in ``__all__``; each is imported from its module on first
-use (PEP 562), so ``import mjx_pick`` loads neither MuJoCo nor JAX and changes nothing
-in the process (no environment variables, no global JAX or matplotlib settings).
-Everything else is internal and may change between versions.
+The public API is the table ``_PUBLIC`` (``__all__`` is its names); each name is
+imported from its module on first use (PEP 562), so ``import mjx_pick`` loads neither
+MuJoCo nor JAX and changes nothing in the process. Everything else is internal.
 """
 
 from __future__ import annotations
 
 import importlib
 import warnings
-from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
@@ -69,87 +67,7 @@ _PUBLIC = {
 # old public name -> its new name: kept, with a DeprecationWarning, for one release
 _RENAMED = {"Engine": "Runner"}
 
-__all__ = [
-    "Cancelled",
-    "ConfigError",
-    "ContactParams",
-    "Engine",
-    "Evaluation",
-    "FeasibilityChecker",
-    "GraspConfig",
-    "GripperSpec",
-    "ObjectModel",
-    "ParamSpec",
-    "PickBatch",
-    "PickConfig",
-    "RunOptions",
-    "Runner",
-    "Scene",
-    "Settings",
-    "Simulator",
-    "SolverParams",
-    "asset_names",
-    "build_scene",
-    "calibrate",
-    "compare",
-    "design_search",
-    "evaluate",
-    "export_labels",
-    "generate_grid",
-    "generate_normal",
-    "load_asset",
-    "load_gripper",
-    "load_object",
-    "min_grasp_force_n",
-    "min_grip_force",
-    "object_from_image",
-    "object_from_mesh",
-    "object_from_polygon",
-    "optimize",
-    "preset_names",
-    "read_labels",
-    "report",
-    "robustness",
-    "sweep",
-    "use_offscreen_rendering",
-]
-
-if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load lazily
-    from mjx_pick.core.config import ConfigError
-    from mjx_pick.core.gripper import GripperSpec, load_gripper, preset_names
-    from mjx_pick.core.objects import (
-        ObjectModel,
-        asset_names,
-        load_asset,
-        load_object,
-        object_from_image,
-        object_from_mesh,
-        object_from_polygon,
-    )
-    from mjx_pick.core.physics import ContactParams, SolverParams
-    from mjx_pick.core.pickpoints import (
-        FeasibilityChecker,
-        PickBatch,
-        PickConfig,
-        generate_grid,
-        generate_normal,
-        optimize,
-    )
-    from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
-    from mjx_pick.core.scene import Scene, build_scene
-    from mjx_pick.core.settings import Settings
-    from mjx_pick.engine.runner import Cancelled, Runner
-    from mjx_pick.engine.runner import Runner as Engine
-    from mjx_pick.engine.simulator import Simulator
-    from mjx_pick.outputs.display import use_offscreen_rendering
-    from mjx_pick.outputs.exchange import export_labels, read_labels
-    from mjx_pick.outputs.reporting import report
-    from mjx_pick.studies.calibration import calibrate
-    from mjx_pick.studies.comparison import compare, design_search
-    from mjx_pick.studies.evaluation import Evaluation, evaluate
-    from mjx_pick.studies.options import RunOptions
-    from mjx_pick.studies.robust import min_grip_force, robustness
-    from mjx_pick.studies.sweeps import ParamSpec, sweep
+__all__ = sorted(_PUBLIC)
 
 
 def __getattr__(name: str):

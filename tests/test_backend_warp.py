@@ -352,7 +352,7 @@ def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
     queue = np.concatenate([np.arange(12), held[:4]])
     full = backend.run(inputs.take(queue))[0]
     full = {key: value[:12] for key, value in full.items()}
-    assert full["success"][held].all() and (full["failure"][air] == gk.NO_CONTACT).all()
+    assert full["success"][held].all() and (full["failure"][air] == gk.Outcome.NO_CONTACT).all()
     for key in ("success", "failure", "diverged"):
         np.testing.assert_array_equal(shrunk[key], full[key], err_msg=key)
     for key in ("score", "t_reached_s"):

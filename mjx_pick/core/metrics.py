@@ -30,8 +30,7 @@ COLUMNS = {
     "t_grasp_nc": ("float64", "fraction of the grasp window the object was off the table"),
     "failure": (
         "string",
-        "the outcome: success, or why it failed: no_contact, force_not_reached, "
-        "slipped_in_lift, dropped_in_hold, rotated, diverged",
+        f"the outcome: {kt.SUCCESS}, or why it failed: {', '.join(kt.FAILURES[1:])}",
     ),
     "diverged": ("bool", "the simulation blew up (NaN/Inf, MuJoCo reset, absurd speed)"),
     "max_force_left_n": ("float64", "largest left pad force"),

@@ -37,21 +37,14 @@ import jax.numpy as jnp
 # the kernels' data (kernels.types, defined without JAX), re-exported for their callers
 from mjx_pick.kernels.types import (  # noqa: F401
     CLOSE,
-    DIVERGED,
     DONE,
-    DROPPED_IN_HOLD,
     DWELL,
     FAILURES,
-    FORCE_NOT_REACHED,
     HOLD,
     LIFT,
-    NO_CONTACT,
-    OK,
     OLD_SUCCESS_LABEL,
     PHASES,
-    ROTATED,
     SETTLE,
-    SLIPPED_IN_LIFT,
     SUCCESS,
     TRACE_FIELDS,
     Accumulators,
@@ -60,6 +53,7 @@ from mjx_pick.kernels.types import (  # noqa: F401
     DriveMap,
     GraspParams,
     Measurement,
+    Outcome,
 )
 
 
@@ -307,22 +301,19 @@ def finalize(p: GraspParams, a: Accumulators) -> dict:
     height_margin = (lift_end - high) / jnp.maximum(p.lift_height_m - high, 1e-9)
     rotation_margin = (p.max_rotation_rad - a.rot_final) / p.max_rotation_rad
     margin = jnp.minimum(height_margin, rotation_margin)
-    # a failure reason only for picks that failed: a held pick whose part lagged below
-    # the success height at the lift's end (or still touched the table there) was
-    # labelled a success with the reason "slipped_in_lift"
-    failure = jnp.select(
-        [
-            success,
-            a.diverged,
-            ~a.reached & ~a.contact_seen,
-            ~a.reached,
-            ~lifted_after_lift,
-            ~held_to_end,
-            ~upright,
-        ],
-        [OK, DIVERGED, NO_CONTACT, FORCE_NOT_REACHED, SLIPPED_IN_LIFT, DROPPED_IN_HOLD, ROTATED],
-        OK,
-    )
+    # each outcome's condition, the first that holds decides (a reason only for picks
+    # that failed: a held pick whose part lagged below the success height at the lift's
+    # end, or still touched the table there, is a success)
+    conditions = {
+        Outcome.OK: success,
+        Outcome.DIVERGED: a.diverged,
+        Outcome.NO_CONTACT: ~a.reached & ~a.contact_seen,
+        Outcome.FORCE_NOT_REACHED: ~a.reached,
+        Outcome.SLIPPED_IN_LIFT: ~lifted_after_lift,
+        Outcome.DROPPED_IN_HOLD: ~held_to_end,
+        Outcome.ROTATED: ~upright,
+    }
+    failure = jnp.select(list(conditions.values()), list(conditions), Outcome.OK)
     nan = jnp.full_like(score, jnp.nan)
     return {
         "success": success,

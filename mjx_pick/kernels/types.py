@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 from typing import TYPE_CHECKING, NamedTuple
 
 if TYPE_CHECKING:
@@ -10,19 +11,37 @@ if TYPE_CHECKING:
 SETTLE, CLOSE, DWELL, LIFT, HOLD, DONE = range(6)
 PHASES = ("settle", "close", "dwell", "lift", "hold", "done")
 
-# outcome codes (stable: results and benchmarks store them) and their labels, the
-# results table's `failure` column; a successful pick's label is "success"
-OK, NO_CONTACT, FORCE_NOT_REACHED, SLIPPED_IN_LIFT, DROPPED_IN_HOLD, ROTATED, DIVERGED = range(7)
-FAILURES = (
-    "success",
-    "no_contact",
-    "force_not_reached",
-    "slipped_in_lift",
-    "dropped_in_hold",
-    "rotated",
-    "diverged",
-)
-SUCCESS = FAILURES[OK]
+
+class Outcome(enum.IntEnum):
+    """How a pick ended: its code (stable: results and benchmarks store it), its
+    ``label`` (the results table's ``failure`` column) and what it ``means``.
+
+    A new reason: a member here and its condition in ``kernels.grasp.finalize``
+    (docs/architecture.md).
+    """
+
+    def __new__(cls, code: int, means: str):
+        member = int.__new__(cls, code)
+        member._value_ = code
+        member.means = means
+        return member
+
+    OK = 0, "held: at the hold's end lifted to the success height, off the table, upright"
+    NO_CONTACT = 1, "the pads never touched the part"
+    FORCE_NOT_REACHED = 2, "the pads touched the part but never reached F_d"
+    SLIPPED_IN_LIFT = 3, "the part lagged below the success height at the lift's end"
+    DROPPED_IN_HOLD = 4, "the part fell below the success height during the hold"
+    ROTATED = 5, "the part turned more than max_rotation_deg"
+    DIVERGED = 6, "the simulation blew up (NaN/Inf, a MuJoCo reset, an absurd speed): unscored"
+
+    @property
+    def label(self) -> str:
+        """The results table's word for it ("success" for OK)."""
+        return "success" if self is Outcome.OK else self.name.lower()
+
+
+FAILURES = tuple(o.label for o in Outcome)  # labels by code
+SUCCESS = Outcome.OK.label
 # the label of OK before it read "success" (results written by mjx-pick <= 0.1.0)
 OLD_SUCCESS_LABEL = "none"
 
