@@ -11,7 +11,7 @@ import sys
 import pytest
 
 import mjx_pick as mp
-from mjx_pick.cli import build_parser, main
+from mjx_pick.cli import build_parser, main, setting_flags
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.pickpoints import PickConfig
 from mjx_pick.outputs.progress import ProgressBar
@@ -24,17 +24,8 @@ UNITS = re.compile(
 )
 # flags that override one settings field, and the field: their help states its default
 OVERRIDES = {
-    "--grip-force-n": ("grasp", "grip_force_n"),
-    "--pad-friction": ("contact", "pad_friction"),
-    "--table-friction": ("contact", "table_friction"),
-    "--timestep-s": ("solver", "timestep_s"),
-    "--lift-height-mm": ("grasp", "lift_height_mm"),
-    "--hold-s": ("grasp", "hold_s"),
-    "--grasp-height": ("grasp", "grasp_height"),
-    "--fingertip-clearance-mm": ("grasp", "fingertip_clearance_mm"),
-    "--safety-zone-mm": ("picks", "safety_zone_mm"),
-    "--min-coverage": ("picks", "min_coverage"),
-    "--resolution-mm": ("picks", "resolution_mm"),
+    setting_flags.flag(name): (section, name)
+    for section, name in (*setting_flags.PHYSICS_FLAGS, *setting_flags.PICK_FLAGS)
 }
 
 
@@ -62,9 +53,10 @@ def test_every_flag_has_help_with_its_unit_and_default():
             if not (action.help or "").strip():
                 missing.append(where)
                 continue
-            if action.type is float and not UNITS.search(action.help):
+            kind = getattr(action.type, "__name__", None)  # a setting flag's: its field's type
+            if kind == "float" and not UNITS.search(str(action.help)):
                 unitless.append(where)
-            shown = action.help.replace("%(default)s", str(action.default))
+            shown = str(action.help).replace("%(default)s", str(action.default))
             if action.option_strings and action.default not in (None, False, argparse.SUPPRESS):
                 if f"(default: {action.default})" not in " ".join(text.split()):
                     no_default.append(where)
@@ -87,7 +79,7 @@ def test_help_shows_defaults_and_units(capsys):
         main(["sweep", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "pick-points to generate (Normal mode) (default: 200)" in text
-    assert "desired pad force F_d, N (default: 50, or --grasp's)" in text
+    assert "desired pad force (within the gripper's force range), N; x > 0 (default: 50," in text
     assert "(default: None)" not in text
 
 

@@ -91,15 +91,43 @@ def rg2_run(tmp_path_factory) -> Path:
 
 def test_robust_on_a_run_simulates_with_the_runs_settings(rg2_run, tmp_path):
     out = rg2_run
-    res = cli("robust", "block", "--results", out, "--out", out, "--top-k", "2", "--m", "2",
-              "--backend", "mujoco", "--no-progress", check=True)
+    res = cli(
+        "robust",
+        "block",
+        "--results",
+        out,
+        "--out",
+        out,
+        "--top-k",
+        "2",
+        "--m",
+        "2",
+        "--backend",
+        "mujoco",
+        "--no-progress",
+        check=True,
+    )
     record = json.loads((out / "run-robust.json").read_text())
     assert record["config"]["settings"]["gripper"]["name"] == "onrobot-rg2"
     assert record["config"]["settings"]["grasp"]["hold_s"] == 0.2
     assert "robust" in res.stdout
     # settings the user gives that differ from the run's: refused, naming them
-    res = cli("robust", "block", "--results", out, "--top-k", "2", "--m", "2",
-              "--gripper", "robotiq-2f85", "--backend", "mujoco", "--no-progress", check=False)
+    res = cli(
+        "robust",
+        "block",
+        "--results",
+        out,
+        "--top-k",
+        "2",
+        "--m",
+        "2",
+        "--gripper",
+        "robotiq-2f85",
+        "--backend",
+        "mujoco",
+        "--no-progress",
+        check=False,
+    )
     assert "onrobot-rg2" in res.stderr and "robotiq-2f85" in res.stderr
 
 

@@ -8,6 +8,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from mjx_pick.cli import setting_flags
 from mjx_pick.core.config import ConfigError, from_mapping, load_toml, read_toml
 from mjx_pick.engine import registry
 
@@ -43,23 +44,14 @@ def objects(args):
 
 
 DEFAULT_GRIPPER = "robotiq-2f85"
-# the flags that set a gripper, physics or procedure setting, and a pick configuration's
+# the options that set a gripper, physics or procedure setting, and a pick configuration's
 SETTINGS_FLAGS = (
     "gripper",
     "gripper_file",
-    "contact",
-    "solver",
-    "grasp",
-    "grip_force_n",
-    "pad_friction",
-    "table_friction",
-    "timestep_s",
-    "lift_height_mm",
-    "hold_s",
-    "grasp_height",
-    "fingertip_clearance_mm",
+    *(s for s, (_, file_flag) in setting_flags.SECTIONS.items() if file_flag),
+    *(name for _, name in setting_flags.PHYSICS_FLAGS),
 )
-PICK_FLAGS = ("safety_zone_mm", "min_coverage", "resolution_mm")
+PICK_FLAGS = tuple(name for _, name in setting_flags.PICK_FLAGS)
 
 
 def given(args, names) -> bool:
@@ -105,25 +97,18 @@ def settings(args):
 
     def contact():
         c = load_contact(args.contact)[0] if args.contact else ContactParams()
-        return override(c, pad_friction=args.pad_friction, table_friction=args.table_friction)
+        return override(c, **setting_flags.given(args, "contact"))
 
     def solver():
         s = load_toml(SolverParams, args.solver) if args.solver else SolverParams()
-        return override(s, timestep_s=args.timestep_s)
+        return override(s, **setting_flags.given(args, "solver"))
 
     def grasp():
         """The procedure, and the names of the fields the user set (file or flag)."""
         data = read_toml(args.grasp, "GraspConfig") if args.grasp else {}
-        flags = {
-            "grip_force_n": args.grip_force_n,
-            "lift_height_mm": args.lift_height_mm,
-            "hold_s": args.hold_s,
-            "grasp_height": args.grasp_height,
-            "fingertip_clearance_mm": args.fingertip_clearance_mm,
-        }
+        flags = setting_flags.given(args, "grasp")
         g = from_mapping(GraspConfig, data, where=Path(args.grasp or "").name)
-        given = set(data) | {k for k, v in flags.items() if v is not None}
-        return override(g, **flags), given
+        return override(g, **flags), set(data) | set(flags)
 
     return tuple(each_checked(contact, solver, grasp, lambda: pick_config(args)))
 
@@ -140,12 +125,7 @@ def check_contact_file(args, obj, gripper, grasp, solver) -> None:
 def pick_config(args):
     from mjx_pick.core.pickpoints import PickConfig
 
-    return override(
-        PickConfig(),
-        safety_zone_mm=args.safety_zone_mm,
-        min_coverage=args.min_coverage,
-        resolution_mm=getattr(args, "resolution_mm", None),
-    )
+    return override(PickConfig(), **setting_flags.given(args, "picks"))
 
 
 def override(obj, **values):

@@ -26,6 +26,7 @@ from mjx_pick.cli.commands import (
     cmd_trials_record,
     cmd_view,
 )
+from mjx_pick.cli.setting_flags import PHYSICS_FLAGS, PICK_FLAGS, add_setting_flags
 from mjx_pick.engine import registry
 
 
@@ -34,7 +35,7 @@ class DefaultsHelp(argparse.HelpFormatter):
     option has one (not for None, a bare switch, or help that already names it)."""
 
     def _get_help_string(self, action: argparse.Action) -> str:
-        text = action.help or ""
+        text = str(action.help or "")  # a setting flag's help is made when first read
         if "%(default)" in text or "(default" in text:
             return text
         default = action.default
@@ -125,8 +126,6 @@ def _add_gripper_args(p: argparse.ArgumentParser) -> None:
     )
 
 
-# Flags that override one settings field: their help states the field's default (a test
-# checks each against the dataclass: tests/test_cli.py)
 def _add_physics_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("physics (mjx-pick params: every setting, its unit and range)")
     g.add_argument(
@@ -140,44 +139,7 @@ def _add_physics_args(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--grasp", help="grasp procedure TOML (GraspConfig fields; default: mjx-pick params)"
     )
-    g.add_argument(
-        "--grip-force-n",
-        type=float,
-        help="desired pad force F_d, N (default: 50, or --grasp's)",
-    )
-    g.add_argument(
-        "--pad-friction",
-        type=float,
-        help="pad-object friction coefficient (default: 0.86, or --contact's)",
-    )
-    g.add_argument(
-        "--table-friction",
-        type=float,
-        help="object-table friction coefficient (default: 0.2, or --contact's)",
-    )
-    g.add_argument(
-        "--timestep-s", type=float, help="physics time step, s (default: 0.001, or --solver's)"
-    )
-    g.add_argument(
-        "--lift-height-mm", type=float, help="lift height, mm (default: 100, or --grasp's)"
-    )
-    g.add_argument(
-        "--hold-s",
-        type=float,
-        help="hold at the top of the lift, s (default: 0.5, or --grasp's)",
-    )
-    g.add_argument(
-        "--grasp-height",
-        choices=("mid_band", "fingertip_mid"),
-        help="mid_band: pads centred on the object's mid-height; fingertip_mid: "
-        "fingertips at half height (the paper's literal rule) (default: mid_band, or "
-        "--grasp's)",
-    )
-    g.add_argument(
-        "--fingertip-clearance-mm",
-        type=float,
-        help="lowest fingertip height above the table (mid_band), mm (default: 2, or --grasp's)",
-    )
+    add_setting_flags(g, PHYSICS_FLAGS)
     g.add_argument(
         "--backend",
         choices=registry.choices(),
@@ -195,22 +157,7 @@ def _add_pick_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("pick-points")
     g.add_argument("--n", type=int, default=1000, help="pick-points to generate (Normal mode)")
     g.add_argument("--seed", type=int, default=0, help="seed: same seed, same pick-points")
-    g.add_argument(
-        "--safety-zone-mm",
-        type=float,
-        help="clearance between a descending finger and the object, mm (default: 5)",
-    )
-    g.add_argument(
-        "--min-coverage",
-        type=float,
-        help="least fraction of the region between the fingertips the object must fill "
-        "(default: 0.35)",
-    )
-    g.add_argument(
-        "--resolution-mm",
-        type=float,
-        help="silhouette raster of the feasibility checks, mm (default: 0.5)",
-    )
+    add_setting_flags(g, PICK_FLAGS)
 
 
 def _add_progress(p: argparse.ArgumentParser) -> None:

@@ -68,6 +68,7 @@ def setting(
     hi: Bound = None,
     lo_open: bool = False,
     hi_open: bool = False,
+    choices: tuple | None = None,
 ) -> Any:
     """A settings-dataclass field that says what it is: its unit, its meaning and the
     range it must lie in. The one definition: :func:`check_fields` (called by the
@@ -81,8 +82,10 @@ def setting(
         None (unbounded), or another field of the same settings by name, with an
         optional offset ("yaw_min_deg + 360"), read from the instance being checked.
         A field whose value is None (where None is allowed) is not checked.
+      choices: the values a text field may take (instead of a range).
     """
-    meta = {"unit": unit, "doc": doc, "range": (lo, hi, lo_open, hi_open)}
+    rng = None if choices else (lo, hi, lo_open, hi_open)
+    meta = {"unit": unit, "doc": doc, "range": rng, "choices": choices}
     return dataclasses.field(default=default, metadata=meta)
 
 
@@ -104,6 +107,9 @@ def check_fields(obj: Any, owner: str) -> None:
     """Check every field of a settings dataclass declared with :func:`setting` against
     its range (``check_range``: the first bad value is a ConfigError naming it): in the
     order of the fields, those bounded by another field last."""
+    for f in dataclasses.fields(obj):
+        if f.metadata.get("choices"):
+            check_choice(owner, f.name, getattr(obj, f.name), f.metadata["choices"])
     declared = [f for f in dataclasses.fields(obj) if f.metadata.get("range") is not None]
     # fields bounded by numbers first: a bound read from another field is then valid
     relative = [f for f in declared if any(isinstance(b, str) for b in f.metadata["range"][:2])]
@@ -149,7 +155,11 @@ def describe_fields(cls: type) -> list[dict]:
                 "unit": f.metadata.get("unit"),
                 "meaning": f.metadata.get("doc"),
                 "default": default,
-                "range": range_text(f.metadata.get("range")),
+                "range": (
+                    " | ".join(f.metadata["choices"])
+                    if f.metadata.get("choices")
+                    else range_text(f.metadata.get("range"))
+                ),
             }
         )
     return out

@@ -11,14 +11,17 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Collection
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mjx_pick.core.config import ConfigError, check_choice, check_fields, setting
-from mjx_pick.core.gripper import GripperSpec
-from mjx_pick.core.objects import ObjectModel
+from mjx_pick.core.config import ConfigError, check_fields, setting
 from mjx_pick.core.physics import SolverParams
 from mjx_pick.kernels import types as kt
+
+if TYPE_CHECKING:  # annotations only: the procedure's module stays light to import
+    from mjx_pick.core.gripper import GripperSpec
+    from mjx_pick.core.objects import ObjectModel
 
 G = 9.81
 
@@ -134,7 +137,13 @@ class GraspConfig:
     # fingertip_clearance_mm above the table; "fingertip_mid" puts the fingertips at
     # half height (the paper's literal rule: the pads then cover the upper half only).
     # An object's own pick_height_mm (the CLI's --pick-height-mm) overrides both.
-    grasp_height: str = "mid_band"
+    grasp_height: str = setting(
+        "mid_band",
+        "-",
+        "mid_band: pads centred on the object's mid-height; fingertip_mid: fingertips at "
+        "half height (the paper's literal rule)",
+        choices=("mid_band", "fingertip_mid"),
+    )
     fingertip_clearance_mm: float = setting(
         2.0,
         "mm",
@@ -156,7 +165,6 @@ class GraspConfig:
     def __post_init__(self):
         o = "grasp"
         check_fields(self, o)
-        check_choice(o, "grasp_height", self.grasp_height, ("mid_band", "fingertip_mid"))
 
     @property
     def duration_s(self) -> float:

@@ -14,7 +14,7 @@ import re
 import tomllib
 from pathlib import Path
 
-from mjx_pick.core.config import ConfigError, to_toml, write_atomic
+from mjx_pick.core.config import ConfigError, describe_fields, to_toml, write_atomic
 from mjx_pick.core.gripper import GripperSpec, gripper_from_data
 from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.pickpoints import PickConfig
@@ -31,11 +31,11 @@ SECTIONS = {
 
 @dataclasses.dataclass(frozen=True)
 class Field:
-    """One number on a form: the dataclass field it sets, its label and its unit."""
+    """One number on a form: the dataclass field it sets, its label and the step of its
+    arrows; its unit, meaning and range are the field's declaration (``config.setting``)."""
 
     key: str  # section.field
     label: str
-    unit: str = ""
     step: float = 1.0
 
     @property
@@ -46,33 +46,49 @@ class Field:
     def name(self) -> str:
         return self.key.split(".", 1)[1]
 
+    @property
+    def declared(self) -> dict:
+        """The field's declaration: unit, meaning, default, range."""
+        return next(f for f in describe_fields(SECTIONS[self.section]) if f["name"] == self.name)
+
+    @property
+    def unit(self) -> str:
+        """Its unit ("" for a plain number)."""
+        unit = self.declared["unit"]
+        return "" if unit in (None, "-") else unit
+
+    @property
+    def hint(self) -> str:
+        """What it means and the range it must lie in, in a line."""
+        return f"{self.declared['meaning']} ({self.declared['range']})"
+
 
 # the paper's "Set gripper parameters" tab (Fig. 10), in its order
 GRIPPER_FIELDS = (
-    Field("gripper.stroke_mm", "stroke width", "mm"),
-    Field("gripper.finger_width_mm", "finger width", "mm"),
-    Field("gripper.finger_depth_mm", "finger depth", "mm"),
-    Field("gripper.pad_height_mm", "pad height", "mm"),
-    Field("gripper.force_min_n", "smallest force", "N"),
-    Field("gripper.force_max_n", "largest force", "N"),
-    Field("gripper.speed_min_mm_s", "slowest closing", "mm/s"),
-    Field("gripper.speed_max_mm_s", "fastest closing", "mm/s"),
+    Field("gripper.stroke_mm", "stroke width"),
+    Field("gripper.finger_width_mm", "finger width"),
+    Field("gripper.finger_depth_mm", "finger depth"),
+    Field("gripper.pad_height_mm", "pad height"),
+    Field("gripper.force_min_n", "smallest force"),
+    Field("gripper.force_max_n", "largest force"),
+    Field("gripper.speed_min_mm_s", "slowest closing"),
+    Field("gripper.speed_max_mm_s", "fastest closing"),
 )
 PICK_FIELDS = (
-    Field("picks.safety_zone_mm", "safety zone", "mm", 0.5),
-    Field("picks.min_coverage", "minimum coverage", "", 0.05),
+    Field("picks.safety_zone_mm", "safety zone", 0.5),
+    Field("picks.min_coverage", "minimum coverage", 0.05),
 )
 PROCEDURE_FIELDS = (
-    Field("grasp.grip_force_n", "grip force F_d", "N"),
-    Field("grasp.kp_mm_s_per_n", "P gain", "mm/s per N", 0.1),
-    Field("grasp.closing_speed_mm_s", "closing speed", "mm/s"),
-    Field("grasp.safety_factor", "safety margin S_f", "", 0.05),
-    Field("grasp.lift_height_mm", "lift height", "mm"),
-    Field("grasp.hold_s", "hold", "s", 0.05),
+    Field("grasp.grip_force_n", "grip force F_d"),
+    Field("grasp.kp_mm_s_per_n", "P gain", 0.1),
+    Field("grasp.closing_speed_mm_s", "closing speed"),
+    Field("grasp.safety_factor", "safety margin S_f", 0.05),
+    Field("grasp.lift_height_mm", "lift height"),
+    Field("grasp.hold_s", "hold", 0.05),
 )
 CONTACT_FIELDS = (
-    Field("contact.pad_friction", "pad friction", "", 0.01),
-    Field("contact.table_friction", "table friction", "", 0.01),
+    Field("contact.pad_friction", "pad friction", 0.01),
+    Field("contact.table_friction", "table friction", 0.01),
 )
 SETTINGS_FIELDS = GRIPPER_FIELDS + PICK_FIELDS + PROCEDURE_FIELDS + CONTACT_FIELDS
 

@@ -67,6 +67,7 @@ class SettingsForm:
                     self.inputs[f.key] = ui.number(label, step=f.step).props(
                         f'data-testid="{f.key}"'
                     )
+                    self.inputs[f.key].tooltip(f.hint)
         self.base_gripper = load_gripper(PRESET)
         self.fill(self.base_gripper)
 
