@@ -48,6 +48,7 @@ FILE_SECONDS = {
     "tests/test_gripper_mjcf.py": 65,
     "tests/test_gui_parts.py": 65,
     "tests/test_readme.py": 60,
+    "tests/test_gui_replay.py": 50,
     "notebooks/throughput.ipynb": 40,
     "notebooks/calibration.ipynb": 30,
     "tests/test_trials.py": 25,

@@ -366,22 +366,21 @@ def test_paper_workflow(page, server):
     for name in ("t_grasp", "phi_max", "t_grasp_nc"):
         assert name in detail.inner_text()
     page.get_by_test_id("force-plot").locator("img").last.wait_for(timeout=60_000)
-    replay = page.get_by_test_id("replay").locator("img").last
-    replay.wait_for(timeout=TIMEOUT_MS)
-    assert replay.get_attribute("src").startswith("data:image/gif;base64,")
-    # the replay in the page: the 3-D frame and the forces follow one time slider
-    # .last: while a new frame fades in, the picture holds the old image and the new one
-    frame = page.get_by_test_id("replay-frame").locator("img").last
-    frame.wait_for(timeout=TIMEOUT_MS)
-    first = frame.get_attribute("src")
-    assert first.startswith("data:image/png;base64,")
+    # the replay in the page: the bodies in 3-D and the forces follow one time slider
+    # (tests/test_gui_replay.py checks where the bodies go)
+    clock = page.get_by_test_id("replay-clock")
+    clock.filter(has_text="t = 0.000 s").wait_for(timeout=TIMEOUT_MS)
     assert page.locator(".nicegui-echart").filter(visible=True).count() == 1
+    page.wait_for_function(
+        "(id) => window['scene_' + id]?.getObjectByName('pick-replay')?.children.length === 5",
+        arg=page.get_by_test_id("replay-scene").get_attribute("id"),
+    )
     # the slider moved from the keyboard (10 rows a page), not by a click at a pixel: the
     # plots above it can still be settling when the click lands on a busy machine
     slider = page.get_by_test_id("replay-time")
     slider.locator("[tabindex]").first.press("PageUp")
-    expect(slider).to_have_attribute("aria-valuenow", "10", timeout=TIMEOUT_MS)
-    expect(frame).not_to_have_attribute("src", first, timeout=TIMEOUT_MS)
+    expect(slider).to_have_attribute("aria-valuenow", "0.05", timeout=TIMEOUT_MS)
+    clock.filter(has_text="t = 0.050 s").wait_for(timeout=TIMEOUT_MS)
     # the score map on the outline: a click selects the pick-point drawn there
     from mjx_pick.gui import views
     from mjx_pick.outputs.reporting import Run
@@ -404,7 +403,8 @@ def test_paper_workflow(page, server):
     rows.nth(rank).locator(".q-checkbox").click()
     detail.filter(has_text=f"pick {untraced} (rank {rank + 1})").wait_for()
     detail.filter(has_text="simulated now with the run's settings").wait_for(timeout=TIMEOUT_MS)
-    expect(frame).to_be_visible(timeout=TIMEOUT_MS)
+    expect(page.get_by_test_id("replay-scene")).to_be_visible(timeout=TIMEOUT_MS)
+    clock.filter(has_text="t = 0.000 s").wait_for(timeout=TIMEOUT_MS)
     # while the new plot fades in, the picture holds the old image and the new one
     expect(page.get_by_test_id("force-plot").locator("img").last).to_be_visible(timeout=TIMEOUT_MS)
     # the export with animations counts the report's parts as they are written: per

@@ -203,8 +203,15 @@ GUI_LEVELS = {
         "state",
         "one_pick",
         "worker",
+        "replay3d",
     ),
-    "page parts": ("page", "page.widgets", "page.settings_form", "page.job_panel"),
+    "page parts": (
+        "page",
+        "page.widgets",
+        "page.settings_form",
+        "page.job_panel",
+        "page.replay_view",
+    ),
     "tabs": (
         "page.import_tab",
         "page.gripper_tab",

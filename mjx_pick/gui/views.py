@@ -1,15 +1,13 @@
 """Pictures the GUI shows, as PNG/GIF bytes: drawn by the project's own plotting code.
 
 Nothing here simulates: the outline is the ObjectModel's, the pick-point map is
-``plots.draw_candidates``, the force plot ``report.force_plot`` and the 3-D replay
-``report.animate`` (MuJoCo's offscreen renderer replaying a recorded trace in the very
-``scene.xml`` that was simulated).
+``plots.draw_candidates``, the force plot ``report.force_plot`` and, for the 3-D
+replay, the forces as ECharts options.
 """
 
 from __future__ import annotations
 
 import base64
-import io
 import tempfile
 from pathlib import Path
 
@@ -129,18 +127,6 @@ def force_png(trace: dict, grip_force_n: float, title: str) -> bytes:
     return _render(lambda path: force_plot(trace, grip_force_n, path, title=title))
 
 
-def replay_frame(scene_xml: Path, trace: dict, k: int) -> bytes:
-    """Row k of a recorded pick in 3-D (top and side cameras, the replay's), a PNG."""
-    from PIL import Image
-
-    from mjx_pick.outputs.reporting.animation import render_rows
-
-    (frame,) = render_rows(scene_xml, trace, [k])
-    buf = io.BytesIO()
-    Image.fromarray(frame).save(buf, format="PNG")
-    return buf.getvalue()
-
-
 def force_chart(trace: dict, grip_force_n: float) -> dict:
     """The pad and table forces over time as ECharts options (the replay's plot; its
     markLine is the replay's time)."""
@@ -165,10 +151,3 @@ def force_chart(trace: dict, grip_force_n: float) -> dict:
         "yAxis": {"type": "value", "name": f"force, N (F_d = {grip_force_n:g} N)"},
         "series": lines,
     }
-
-
-def replay_gif(scene_xml: Path, trace: dict, every: int = 12) -> bytes:
-    """The recorded pick replayed in 3-D (top and side cameras), an animated GIF."""
-    from mjx_pick.outputs.reporting import animate
-
-    return _render(lambda path: animate(scene_xml, trace, path, every=every), ".gif")

@@ -2,8 +2,8 @@
 
 Sets the page's open run (:attr:`PageState.obj` is tab 1's; :attr:`PageState.run` is
 this tab's), which the robustness study reads. A selected pick-point shows its force
-plot and a 3-D replay (one the run did not trace is simulated for them); Export runs
-``mjx-pick report`` (templates, report).
+plot and its 3-D replay (``page.replay_view``; one the run did not trace is simulated
+for them); Export runs ``mjx-pick report`` (templates, report).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from mjx_pick.gui import jobs, views
 from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS, fmt
 from mjx_pick.gui.one_pick import simulate_untraced
 from mjx_pick.gui.page.job_panel import JobPanel
+from mjx_pick.gui.page.replay_view import ReplayView
 from mjx_pick.gui.page.widgets import error_label, show_picture, whole
 from mjx_pick.gui.state import PageState
 
@@ -108,33 +109,10 @@ class AnalyzeTab:
                         .classes("w-full max-w-2xl")
                         .props('data-testid="force-plot"')
                     )
-                    self.replay_image = (
-                        ui.image()
-                        .props("no-transition no-spinner")
-                        .classes("w-full max-w-2xl")
-                        .props('data-testid="replay"')
-                    )
                 self.force_image.set_visibility(False)
-                self.replay_image.set_visibility(False)
-                with ui.card().classes("w-full max-w-2xl") as self.replay_box:
-                    ui.label(
-                        "Replay in 3-D (the simulated model; top and side cameras) with the "
-                        "forces: move the time slider"
-                    ).classes("font-bold text-sm")
-                    self.frame = (
-                        ui.image()
-                        .props("no-transition no-spinner")
-                        .classes("w-full")
-                        .props('data-testid="replay-frame"')
-                    )
-                    self.time = ui.slider(min=0, max=1, step=1, value=0, on_change=self.on_time)
-                    self.time.props('label data-testid="replay-time"')
-                    self.chart = ui.echart({}).classes("w-full h-64")
-                self.replay_box.set_visibility(False)
-        self.replayed = None  # (scene.xml, trace) of the pick in the replay
+                self.replay = ReplayView()
         self.simulated: dict = {}  # (run folder, pick id): trace of an untraced pick
         self.shown = None  # (run, pick id) the details show now
-        self.rendering = False
         self.refresh_runs()
 
     def refresh_runs(self) -> None:
@@ -195,9 +173,7 @@ class AnalyzeTab:
         self.score_map.set_visibility(True)
         self.detail.set_content("Select a pick-point (the table is ranked by score).")
         self.force_image.set_visibility(False)
-        self.replay_image.set_visibility(False)
-        self.replay_box.set_visibility(False)
-        self.replayed = None
+        self.replay.hide()
         self.show_downloads()
         self.refresh_runs()
 
@@ -271,20 +247,23 @@ class AnalyzeTab:
             trace = await self.simulate_untraced(opened, pid, lines)
             if trace is None or self.shown != (opened, pid):  # another pick chosen meanwhile
                 return
-        await self.show_replay(opened.path / "scene.xml", trace, f_d)
-        title = f"pick {pid}: score {fmt(full['score'])}, {full['failure']}"
-        png = await run.io_bound(views.force_png, trace, f_d, title)
+        try:
+            await self.replay.show(
+                opened.path / "scene.xml",
+                opened.gripper,
+                trace,
+                f_d,
+                full["failure"],
+                not full["success"],
+            )
+        except (OSError, ValueError) as err:  # scene.xml missing or damaged: keep the plot
+            self.error.set_text(f"{opened.path.name}: no 3-D replay ({err})")
         if self.shown != (opened, pid):
             return
-        show_picture(self.force_image, png)
-        self.replay_image.set_visibility(False)
-        try:
-            gif = await run.io_bound(views.replay_gif, opened.path / "scene.xml", trace)
-        except RuntimeError as err:  # no offscreen GL here: say so, keep the plot
-            self.error.set_text(str(err))
-            return
+        title = f"pick {pid}: score {fmt(full['score'])}, {full['failure']}"
+        png = await run.io_bound(views.force_png, trace, f_d, title)
         if self.shown == (opened, pid):
-            show_picture(self.replay_image, gif, "image/gif")
+            show_picture(self.force_image, png)
 
     async def simulate_untraced(self, opened, pid: int, lines: list[str]) -> dict | None:
         """The trace of a pick-point the run did not trace: simulated now (in a worker
@@ -294,9 +273,7 @@ class AnalyzeTab:
         if key in self.simulated:
             return self.simulated[key]
         self.force_image.set_visibility(False)
-        self.replay_image.set_visibility(False)
-        self.replay_box.set_visibility(False)
-        self.replayed = None
+        self.replay.hide()
         note = (
             "\n\nNot traced by the run (it records the forces of its best and worst "
             "pick-points, tab 3's 'traced best and worst'): "
@@ -324,50 +301,6 @@ class AnalyzeTab:
             f"{again['failure']})."
         )
         return trace
-
-    async def show_replay(self, scene_xml: Path, trace: dict, f_d: float) -> None:
-        """The replay of a traced pick: its first frame, the slider over its rows and
-        the forces, the slider's time marked on them."""
-        self.replayed = (scene_xml, trace)
-        self.chart.options.clear()
-        self.chart.options.update(views.force_chart(trace, f_d))
-        self.chart.update()
-        self.time.value = 0
-        self.time._props["max"] = len(trace["t_s"]) - 1  # noqa: SLF001 - no setter for it
-        self.time.update()
-        self.replay_box.set_visibility(True)
-        await self.draw_frame(0)
-
-    async def on_time(self, e) -> None:
-        if self.replayed is not None:
-            await self.draw_frame(int(e.value or 0))
-
-    async def draw_frame(self, k: int) -> None:
-        """Row k of the replayed trace: the 3-D frame and the time on the force plot; a
-        frame asked for while one renders is drawn after it (the latest wins)."""
-        scene_xml, trace = self.replayed
-        k = min(max(k, 0), len(trace["t_s"]) - 1)
-        self.chart.options["series"][0]["markLine"]["data"] = [
-            {"xAxis": round(float(trace["t_s"][k]), 4)}
-        ]
-        self.chart.update()
-        if self.rendering:
-            return
-        self.rendering = True
-        try:
-            while True:
-                try:
-                    png = await run.io_bound(views.replay_frame, scene_xml, trace, k)
-                except RuntimeError as err:  # no offscreen GL here: say so
-                    self.error.set_text(str(err))
-                    return
-                show_picture(self.frame, png)
-                latest = int(self.time.value or 0)
-                if latest == k or self.replayed is None or self.replayed[1] is not trace:
-                    return
-                k = min(max(latest, 0), len(trace["t_s"]) - 1)
-        finally:
-            self.rendering = False
 
     def export(self) -> None:
         """``mjx-pick report`` of the open run: templates, report, robot pick-points."""

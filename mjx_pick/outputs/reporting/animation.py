@@ -1,8 +1,7 @@
 """Traced pick-points replayed in MuJoCo's offscreen renderer (GIF and MP4, top and side).
 
 Every trace row holds the whole joint state (``kernels.grasp.TRACE_FIELDS``), so a
-replay simulates nothing: :class:`TracePose` sets the model's joints from one row, for
-the animations here and for ``mjx-pick view`` (``reporting.viewer``).
+replay simulates nothing: ``body_poses.TracePose`` sets the model's joints from one row.
 """
 
 from __future__ import annotations
@@ -17,56 +16,9 @@ import numpy as np
 
 from mjx_pick.core.config import write_atomic
 from mjx_pick.core.gripper import GripperSpec
-from mjx_pick.core.mjcf_gripper import PREFIX, characterise
+from mjx_pick.outputs.reporting.body_poses import TracePose
 
-__all__ = ["TracePose", "animate", "render_pool", "render_rows", "write_mp4"]
-
-
-class TracePose:
-    """Sets a scene model's joints from a trace's rows (a trace as ``Run.trace`` gives).
-
-    An MJCF gripper (gripper.mjcf) is posed from the traced pad travel through its
-    measured close (``mjx_pick.core.mjcf_gripper``); a parametric gripper from its two
-    finger slides.
-    """
-
-    def __init__(self, model, trace: dict, gripper: GripperSpec | None = None):
-        self.trace = trace
-        self.linkage = (
-            None if gripper is None or gripper.mjcf is None else characterise(gripper.mjcf)
-        )
-        fingers = () if self.linkage else ("finger_left", "finger_right")
-        self.adr = {
-            j: int(model.jnt_qposadr[model.joint(j).id]) for j in ("object", "lift", *fingers)
-        }
-        self.links = []
-        if self.linkage:
-            self.links = [
-                int(model.jnt_qposadr[model.joint(PREFIX + j).id]) for j in self.linkage.joint_names
-            ]
-
-    def __len__(self) -> int:
-        return len(self.trace["t_s"])
-
-    @property
-    def dt(self) -> float:
-        """The trace's time step (the control period), s."""
-        t = self.trace["t_s"]
-        return float(t[1] - t[0]) if len(t) > 1 else 0.005
-
-    def apply(self, data, k: int) -> None:
-        """Row k's joint positions into data.qpos (call mj_forward after)."""
-        tr, adr = self.trace, self.adr
-        o = adr["object"]
-        data.qpos[o : o + 3] = [tr[f"object_{c}_m"][k] for c in "xyz"]
-        data.qpos[o + 3 : o + 7] = [tr[f"object_q{c}"][k] for c in "wxyz"]
-        data.qpos[adr["lift"]] = tr["lift_m"][k]
-        if self.linkage:
-            travel = 0.5 * (tr["finger_left_m"][k] + tr["finger_right_m"][k])
-            data.qpos[self.links] = self.linkage.joint_positions(travel)[0]
-        else:
-            data.qpos[adr["finger_left"]] = tr["finger_left_m"][k]
-            data.qpos[adr["finger_right"]] = tr["finger_right_m"][k]
+__all__ = ["animate", "render_pool", "render_rows", "write_mp4"]
 
 
 def _render_in_child() -> bool:

@@ -2,7 +2,7 @@
 interactive viewer (``mujoco.viewer.launch_passive``), where a display exists.
 
 The replay simulates nothing: every trace row holds the whole joint state, which
-:class:`~mjx_pick.outputs.reporting.animation.TracePose` puts into the run's own model
+:class:`~mjx_pick.outputs.reporting.body_poses.TracePose` puts into the run's own model
 (``scene.xml``), row after row at the trace's pace. Every input is checked first (the
 run folder, the pick-point, the speed), then the display: without one the command ends
 with one line saying what it needs.
@@ -16,7 +16,7 @@ import time
 
 from mjx_pick.core.config import ConfigError, check_range
 from mjx_pick.outputs.display import display_problem
-from mjx_pick.outputs.reporting.animation import TracePose
+from mjx_pick.outputs.reporting.body_poses import TracePose
 from mjx_pick.outputs.reporting.run import Run
 
 __all__ = ["view"]

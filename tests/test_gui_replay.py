@@ -1,0 +1,190 @@
+"""Tab 4's 3-D replay in Chromium: the simulated bodies in three.js, moved by the time
+slider (their positions in the page are the trace's), the force plot's marker under
+it, play and pause, a failure drawn in the failure colour. The harness (server,
+browser, page) is tests/test_gui.py's."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import test_gui
+
+import mjx_pick as mp
+from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.outputs.plots import FAILURE_COLOUR
+from mjx_pick.outputs.reporting import Run
+
+# test_gui's fixtures: one GUI server for this module, one browser, a page per test
+server, browser, page = test_gui.server, test_gui.browser, test_gui.page
+
+FAST = GraspConfig(close_timeout_s=1.0, lift_height_mm=20.0, hold_s=0.1)
+# the page holds poses and times as float32
+PAGE_TOL_M = 1e-6
+
+
+@pytest.fixture(scope="module")
+def replay_run(server, door_opener):
+    """An evaluate folder in the server's work folder with two traced pick-points: the
+    door opener centred across the pads (it holds) and the same part 80 mm beside
+    them (the pads close on nothing: no_contact)."""
+    _, work = server
+    gripper = mp.load_gripper("robotiq-2f85")
+    checker = pp.FeasibilityChecker(door_opener, gripper, pp.PickConfig(), FAST)
+    held = checker(np.array([0.0]), np.array([0.0]), np.array([90.0]))
+    assert pp.REASONS[int(held["reason"][0])] == "feasible"
+    picks = pp.PickBatch(
+        pick_id=np.array([0, 1]),
+        x_mm=np.array([0.0, 0.0]),
+        y_mm=np.array([0.0, 80.0]),
+        yaw_deg=np.array([90.0, 0.0]),
+        opening_mm=np.repeat(held["opening_mm"], 2),
+        coverage=np.array([float(held["coverage"][0]), 0.0]),
+        gap_left_mm=np.repeat(held["gap_left_mm"], 2),
+        gap_right_mm=np.repeat(held["gap_right_mm"], 2),
+        rejected={},
+        n_candidates=2,
+        mode="user",
+    )
+    out = work / "replay-run"
+    mp.evaluate(
+        door_opener, gripper, picks=picks, grasp=FAST, backend="mujoco", out=out, n_traces=1
+    )
+    run = Run.load(out)
+    assert run.row(0)["success"] and run.row(1)["failure"] == "no_contact"
+    return run
+
+
+def bodies(pg) -> dict:
+    """{body name: (position [x, y, z] m, colour '#rrggbb')} of the replay in the page."""
+    scene = pg.get_by_test_id("replay-scene").get_attribute("id")
+    return pg.evaluate(
+        """(id) => {
+            const root = window['scene_' + id].getObjectByName('pick-replay');
+            return Object.fromEntries(root.children.map((b) => [b.name, [
+                b.position.toArray(), '#' + b.children[0].material.color.getHexString()]]));
+        }""",
+        scene,
+    )
+
+
+def marker_s(pg) -> float:
+    """The time the force chart's marker line shows, s."""
+    chart = pg.locator(".nicegui-echart").filter(visible=True).get_attribute("id")
+    return pg.evaluate(
+        "(id) => getElement(id.slice(1)).chart.getOption().series[0].markLine.data[0].xAxis",
+        chart,
+    )
+
+
+def open_and_select(pg, run: Run, rank: int) -> None:
+    pg.get_by_text("4 Analyze results").click()
+    if pg.get_by_test_id("run-dir").input_value() != str(run.path):
+        pg.get_by_test_id("run-dir").fill(str(run.path))
+        pg.get_by_test_id("open-run").click()
+    rows = pg.get_by_test_id("picks-table").locator("tbody tr")
+    rows.nth(rank - 1).locator(".q-checkbox").click()
+    pg.get_by_test_id("pick-detail").filter(has_text=f"(rank {rank})").wait_for()
+
+
+def test_the_replay_shows_the_bodies_and_the_slider_moves_them(page, replay_run):
+    from playwright.sync_api import expect
+
+    run = replay_run
+    trace = run.trace(0)
+    t = trace["t_s"]
+    open_and_select(page, run, 1)
+    page.get_by_test_id("replay-clock").filter(has_text="t = 0.000 s").wait_for()
+    page.wait_for_function(
+        "(id) => window['scene_' + id]?.getObjectByName('pick-replay')?.children.length === 5",
+        arg=page.get_by_test_id("replay-scene").get_attribute("id"),
+    )
+    shown = bodies(page)
+    assert set(shown) == {"world", "object", "gripper", "finger_left", "finger_right"}
+    start = {name: np.array(p) for name, (p, _) in shown.items()}
+    np.testing.assert_allclose(
+        start["object"], [trace[f"object_{c}_m"][0] for c in "xyz"], atol=PAGE_TOL_M
+    )
+    assert shown["object"][1] == "#3373cc"  # its own colour (rgba .2 .45 .8): a success
+    assert "outcome: success" in page.get_by_test_id("replay-outcome").inner_text()
+    box = page.get_by_test_id("replay-scene").locator("canvas").bounding_box()
+    assert box["width"] > 300 and box["height"] > 300  # drawn at its size, not hidden
+
+    # the slider to its end from the keyboard (10 rows a PageUp; not a click at a pixel,
+    # which the force plot above can move as it appears): every body at the last row
+    slider = page.get_by_test_id("replay-time")
+    handle = slider.locator("[tabindex]").first
+    for _ in range(-(-len(t) // 10)):
+        handle.press("PageUp")
+    expect(slider).to_have_attribute("aria-valuenow", f"{round(float(t[-1]), 6)}")
+    page.get_by_test_id("replay-clock").filter(has_text=f"t = {t[-1]:.3f} s").wait_for()
+    end = {name: np.array(p) for name, (p, _) in bodies(page).items()}
+    np.testing.assert_allclose(
+        end["object"], [trace[f"object_{c}_m"][-1] for c in "xyz"], atol=PAGE_TOL_M
+    )
+    lifted = trace["lift_m"][-1] - trace["lift_m"][0]
+    assert lifted == pytest.approx(FAST.lift_height_mm * 1e-3, abs=1e-3)
+    np.testing.assert_allclose(end["gripper"] - start["gripper"], [0, 0, lifted], atol=PAGE_TOL_M)
+    closed = trace["finger_left_m"][-1] - trace["finger_left_m"][0]
+    assert closed > 1e-3  # the pads closed on the part
+    moved = end["finger_left"] - start["finger_left"]
+    np.testing.assert_allclose(moved, [closed, 0, lifted], atol=PAGE_TOL_M)
+    np.testing.assert_allclose(end["world"], 0.0)
+    assert marker_s(page) == pytest.approx(t[-1], abs=1e-6)  # the plot's marker followed
+
+    # a step back: the row before the last, and the marker with it
+    handle.press("ArrowLeft")
+    page.get_by_test_id("replay-clock").filter(has_text=f"t = {t[-2]:.3f} s").wait_for()
+    assert marker_s(page) == pytest.approx(t[-2], abs=1e-6)
+    test_gui.shot(page, "replay_3d")
+
+
+def test_play_advances_time_and_pause_stops_it(page, replay_run):
+    run = replay_run
+    t = run.trace(0)["t_s"]
+    open_and_select(page, run, 1)
+    clock = page.get_by_test_id("replay-clock")
+    clock.filter(has_text="t = 0.000 s").wait_for()
+    slider = page.get_by_test_id("replay-time")
+
+    def now() -> float:
+        return float(slider.get_attribute("aria-valuenow"))
+
+    page.get_by_test_id("replay-play").click()
+    page.wait_for_function(
+        "(el) => Number(el.getAttribute('aria-valuenow')) > 0.1",
+        arg=slider.element_handle(),
+    )
+    page.get_by_test_id("replay-play").click()  # pause
+    page.get_by_test_id("replay-play").and_(page.locator('[aria-label="play"]')).wait_for()
+    paused = now()
+    assert 0.1 < paused <= t[-1]
+    # the bodies are where the slider's row is, and they stay there
+    k = int(np.argmin(np.abs(t.astype(np.float32) - paused)))
+    obj = np.array(bodies(page)["object"][0])
+    trace = run.trace(0)
+    np.testing.assert_allclose(obj, [trace[f"object_{c}_m"][k] for c in "xyz"], atol=PAGE_TOL_M)
+    time.sleep(0.5)
+    assert now() == paused
+
+
+def test_a_failed_pick_point_is_drawn_in_the_failure_colour(page, replay_run):
+    run = replay_run
+    open_and_select(page, run, 2)
+    page.get_by_test_id("replay-outcome").filter(has_text="outcome: no_contact").wait_for()
+    page.wait_for_function(
+        """([id, colour]) => {
+            const root = window['scene_' + id]?.getObjectByName('pick-replay');
+            const part = root?.getObjectByName('object');
+            return part && '#' + part.children[0].material.color.getHexString() === colour;
+        }""",
+        arg=[page.get_by_test_id("replay-scene").get_attribute("id"), FAILURE_COLOUR],
+    )
+    shown = bodies(page)
+    assert shown["finger_left"][1] != FAILURE_COLOUR  # only the part
+    trace = run.trace(1)
+    np.testing.assert_allclose(
+        shown["object"][0], [trace[f"object_{c}_m"][0] for c in "xyz"], atol=PAGE_TOL_M
+    )
