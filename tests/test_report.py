@@ -168,7 +168,7 @@ def test_view_checks_its_inputs_then_the_display(run_dir, monkeypatch, capsys):
     assert f"--pick 99999: not traced in {run_dir}; traced pick-points: " in err
     assert all(str(p) in err for p in traced)
     assert main(["view", str(run_dir), "--pick", str(traced[0]), "--speed", "0"]) == 2
-    assert "view.speed = 0.0 is out of range" in capsys.readouterr().err
+    assert "--speed = 0.0 is out of range" in capsys.readouterr().err
     monkeypatch.setattr(sys, "platform", "linux")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)

@@ -141,3 +141,60 @@ def test_a_second_robust_with_other_settings_does_not_replace_the_first(rg2_run)
     assert (out / "robustness.parquet").read_bytes() == before
     cli(*argv, "--m", "4", "--overwrite", "--backend", "mujoco", "--no-progress", check=True)
     assert (out / "results.parquet").is_file()  # evaluate's own files stay
+
+
+# ---------------------------------------------------------------- numbers: one rule each
+
+
+@pytest.mark.parametrize(
+    "argv, said",
+    [
+        (["evaluate", "block", "--seed", "-1"], "--seed = -1 is out of range"),
+        (["evaluate", "block", "--traces", "-1"], "--traces = -1 is out of range"),
+        (["evaluate", "block", "--n", "2.5"], "--n = 2.5 must be a whole number"),
+        (["evaluate", "block", "--n", "nan"], "--n = nan must be a finite number"),
+        (["evaluate", "block", "--mass-g", "5", "--density-kg-m3", "900"], "give one"),
+        (["evaluate", "block", "--density-kg-m3", "900"], "density_kg_m3 does not apply"),
+        (["evaluate", "block", "--stability-um", "inf"], "--stability-um = inf must be a finite"),
+        (["robust", "block", "--m", "0"], "--m = 0 is out of range"),
+        (["sweep", "block", "--param", "contact.pad_friction=0.1:1:100000"], "N = 100000"),
+        (["sweep", "block", "--param", "contact.pad_friction=0.1,nan"], "must be a finite"),
+        (["design", "block", "--bound", "stroke_mm=10:30"], "none of the 12 variants"),
+        (["sweep", "block", "--param", "gripper.stroke_mm=20,85"], "variant gripper.stroke_mm=20"),
+    ],
+)
+def test_a_number_out_of_its_range_is_refused_before_work(argv, said, tmp_path):
+    res = cli(*argv, "--out", tmp_path / "never", "--backend", "mujoco", check=False)
+    assert said in res.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_every_bad_number_of_a_command_line_is_named_at_once():
+    res = cli("evaluate", "block", "--seed", "-1", "--traces", "0.5", "--n", "0", check=False)
+    assert "3 problems" in res.stderr
+    for flag in ("--seed", "--traces", "--n"):
+        assert f"{flag} = " in res.stderr
+
+
+def test_a_picks_file_with_an_absurd_or_repeated_pose_is_refused(tmp_path):
+    huge, turn = tmp_path / "huge.csv", tmp_path / "turn.csv"
+    huge.write_text("x_mm,y_mm,yaw_deg\n0,0,1e300\n")
+    turn.write_text("x_mm,y_mm,yaw_deg\n0,0,10\n1,0,0\n0,0,370\n")
+    res = cli("evaluate", "block", "--picks", huge, "--backend", "mujoco", check=False)
+    assert "line 2: yaw_deg = 1e+300 is out of range: allowed -360 <= yaw_deg <= 720" in res.stderr
+    res = cli("evaluate", "block", "--picks", turn, "--backend", "mujoco", check=False)
+    assert "line 4 repeats line 2" in res.stderr
+
+
+def test_report_on_a_damaged_results_table_says_so(tmp_path):
+    import pyarrow.parquet as pq
+
+    run = tmp_path / "run"
+    cli("evaluate", "block", "--n", "4", "--out", run, "--traces", "0", *FAST, check=True)
+    table = pq.read_table(run / "results.parquet")
+    pq.write_table(table.drop(["score"]), run / "results.parquet")
+    res = cli("report", run, "--no-animations", check=False)
+    assert "has no score column" in res.stderr
+    pq.write_table(table.slice(0, 0), run / "results.parquet")
+    res = cli("report", run, "--no-animations", check=False)
+    assert "has no pick-points" in res.stderr

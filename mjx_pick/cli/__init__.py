@@ -25,7 +25,7 @@ import os
 import sys
 
 from mjx_pick.cli.clock import process_age_s
-from mjx_pick.cli.parser import build_parser
+from mjx_pick.cli.parser import build_parser, refused
 from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError
 from mjx_pick.engine import interrupts, registry
@@ -74,6 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         # a Ctrl-C is never swallowed, and SIGTERM stops a run as it does (see interrupts)
         with interrupts.catching_sigint():
+            refused(args)  # every number out of its range, before any work
             return int(args.func(args) or 0)
     except ConfigError as err:
         end_claims("failed", error_message(err))

@@ -84,12 +84,19 @@ def _fmt(v) -> str:
 
 
 def cmd_sweep(args) -> int:
-    from mjx_pick.studies.sweeps import ParamSpec, sweep
+    from mjx_pick.studies.sweeps import ParamSpec, sweep, variants
 
     if not args.param:
         raise ConfigError("sweep needs at least one --param NAME=LO:HI:N (`mjx-pick params`)")
     obj, base, picks_cfg = base_settings(args)
     params = [ParamSpec.parse(p) for p in args.param]
+    count = len(variants(params, args.random, args.seed))
+    echo(
+        f"mjx-pick: sweep: {count} variant(s) x {args.n} pick-points = up to "
+        f"{count * args.n:,} simulations (pick-points a variant makes infeasible are not "
+        "simulated)",
+        sys.stderr,
+    )
     res = sweep(
         obj,
         params,

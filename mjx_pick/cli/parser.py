@@ -27,7 +27,47 @@ from mjx_pick.cli.commands import (
     cmd_view,
 )
 from mjx_pick.cli.setting_flags import PHYSICS_FLAGS, PICK_FLAGS, add_setting_flags
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.numbers import INPUTS
 from mjx_pick.engine import registry
+
+
+class Refused(str):
+    """A flag's text that its rule refused; ``problem`` says why (see :func:`refused`)."""
+
+    problem: str
+
+
+def number(name: str, flag: str):
+    """An argparse type: the flag's text parsed and checked by the rule of the input
+    `name` (``core.numbers.INPUTS``): finite, in range, whole where it counts. A value
+    it refuses comes back as :class:`Refused`, so that :func:`refused` reports every
+    bad number of a command line at once. (A settings field's flag is checked by its
+    dataclass, with the field's own declaration, with the other settings.)"""
+    rule = INPUTS[name]
+
+    def parse(text: str):
+        try:
+            return rule.parse(flag, text)
+        except ConfigError as err:
+            bad = Refused(text)
+            bad.problem = f"{err}"
+            return bad
+
+    parse.__name__ = name  # argparse names the type in some of its messages
+    return parse
+
+
+def refused(args: argparse.Namespace) -> None:
+    """Raise one ConfigError naming every number of the command line that its rule
+    refused (nothing when none was)."""
+    problems = [v.problem for v in vars(args).values() if isinstance(v, Refused)]
+    if len(problems) == 1:
+        raise ConfigError(problems[0])
+    if problems:
+        err = ConfigError(f"{len(problems)} problems:\n" + "\n".join(f"  - {p}" for p in problems))
+        err.problems = problems
+        raise err
 
 
 class DefaultsHelp(argparse.HelpFormatter):
@@ -63,21 +103,23 @@ def _add_object_args(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--px-per-mm",
-        type=float,
+        type=number("px_per_mm", "--px-per-mm"),
         help="image scale, pixels per mm (an image: required; a shipped asset: its own)",
     )
     g.add_argument(
         "--thickness-mm",
-        type=float,
+        type=number("thickness_mm", "--thickness-mm"),
         help="object thickness (prism height), mm (an image: required; an asset: its own)",
     )
     g.add_argument(
         "--mass-g",
-        type=float,
+        type=number("mass_g", "--mass-g"),
         help="object mass, g (an image or mesh: this or --density-kg-m3; an asset: its own)",
     )
     g.add_argument(
-        "--density-kg-m3", type=float, help="object density, kg/m^3, instead of --mass-g"
+        "--density-kg-m3",
+        type=number("density_kg_m3", "--density-kg-m3"),
+        help="object density, kg/m^3, instead of --mass-g",
     )
     g.add_argument(
         "--unit", choices=("m", "mm"), help="unit of a mesh file's coordinates (a mesh: required)"
@@ -95,12 +137,12 @@ def _add_object_args(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--pick-height-mm",
-        type=float,
+        type=number("pick_height_mm", "--pick-height-mm"),
         help="fingertip height above the table at the grasp, mm (default: --grasp-height's rule)",
     )
     g.add_argument(
         "--simplify-mm",
-        type=float,
+        type=number("simplify_mm", "--simplify-mm"),
         help="outline simplification tolerance of an image, mm (default: 0.3)",
     )
     g.add_argument(
@@ -148,15 +190,19 @@ def _add_physics_args(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--batch-size",
-        type=int,
+        type=number("batch_size", "--batch-size"),
         help=f"simulations per backend call (default: {registry.batch_size_help()})",
     )
 
 
 def _add_pick_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("pick-points")
-    g.add_argument("--n", type=int, default=1000, help="pick-points to generate (Normal mode)")
-    g.add_argument("--seed", type=int, default=0, help="seed: same seed, same pick-points")
+    g.add_argument(
+        "--n", type=number("n", "--n"), default=1000, help="pick-points to generate (Normal mode)"
+    )
+    g.add_argument(
+        "--seed", type=number("seed", "--seed"), default=0, help="seed: same seed, same pick-points"
+    )
     add_setting_flags(g, PICK_FLAGS)
 
 
@@ -260,32 +306,32 @@ def _add_evaluate_parser(sub) -> None:
     _add_overwrite(ev)
     ev.add_argument(
         "--chunk-size",
-        type=int,
+        type=number("chunk_size", "--chunk-size"),
         help="pick-points per chunk saved while the run goes on, the unit of --resume "
         "(default: from device memory; one batch on the CPU)",
     )
     ev.add_argument(
         "--traces",
-        type=int,
+        type=number("n_traces", "--traces"),
         default=3,
         help="trace the n best and n worst pick-points (traces.parquet: force plots, "
         "animations, view)",
     )
     ev.add_argument(
         "--until",
-        type=int,
+        type=number("until", "--until"),
         metavar="K",
         help="Optimization mode: stop once K pick-points reach --min-score (default: off)",
     )
     ev.add_argument(
         "--min-score",
-        type=float,
+        type=number("min_score", "--min-score"),
         default=0.9,
         help="Optimization mode: the score, eq. (2) in [0, 1], a good pick-point reaches",
     )
     ev.add_argument(
         "--max",
-        type=int,
+        type=number("max_n", "--max"),
         help="Optimization mode: most pick-points to simulate (default: 10 x --until)",
     )
     _add_progress(ev)
@@ -297,7 +343,7 @@ def _add_evaluate_parser(sub) -> None:
     )
     ev.add_argument(
         "--stability-um",
-        type=float,
+        type=number("stability_um", "--stability-um"),
         default=0.0,
         help="simulate every pick-point again with the object moved this far along x, um "
         "(0-100; 0: off), and add label_stable: a label a micrometre flips rests on a "
@@ -338,7 +384,7 @@ def _add_sweep_parser(sub) -> None:
     )
     sw.add_argument(
         "--random",
-        type=int,
+        type=number("random", "--random"),
         metavar="K",
         help="K random variants within the LO:HI ranges (default: the grid)",
     )
@@ -374,10 +420,15 @@ def _add_design_parser(sub) -> None:
         help="a searched gripper field and its bounds in the field's unit (e.g. "
         "finger_width_mm=10:40; mjx-pick params gripper); repeat",
     )
-    ds.add_argument("--variants", type=int, default=12, help="gripper variants sampled")
+    ds.add_argument(
+        "--variants",
+        type=number("variants", "--variants"),
+        default=12,
+        help="gripper variants sampled",
+    )
     ds.add_argument(
         "--rounds",
-        type=int,
+        type=number("rounds", "--rounds"),
         default=3,
         help="successive-halving rounds (round r: n x 2^r pick-points, the best third kept)",
     )
@@ -402,17 +453,24 @@ def _add_robust_parser(sub) -> None:
         help="an evaluate output folder or results.parquet to rank (default: simulate --n "
         "pick-points first)",
     )
-    rb.add_argument("--top-k", type=int, default=10, help="best successful pick-points tested")
-    rb.add_argument("--m", type=int, default=32, help="perturbed draws per pick-point")
+    rb.add_argument(
+        "--top-k",
+        type=number("top_k", "--top-k"),
+        default=10,
+        help="best successful pick-points tested",
+    )
+    rb.add_argument(
+        "--m", type=number("m", "--m"), default=32, help="perturbed draws per pick-point"
+    )
     rb.add_argument(
         "--sigma-xy-mm",
-        type=float,
+        type=number("sigma_xy_mm", "--sigma-xy-mm"),
         default=2.0,
         help="vision error: standard deviation of x and y, mm",
     )
     rb.add_argument(
         "--sigma-yaw-deg",
-        type=float,
+        type=number("sigma_yaw_deg", "--sigma-yaw-deg"),
         default=3.0,
         help="vision error: standard deviation of yaw, deg",
     )
@@ -446,7 +504,7 @@ def _add_calibrate_parser(sub) -> None:
     _add_estimator_args(cb)
     cb.add_argument(
         "--replicates",
-        type=int,
+        type=number("replicates", "--replicates"),
         default=3,
         help="simulations of each row with a measured trace (the pick-point and copies "
         "0.05 mm off): their spread is the model's own uncertainty about a chaotic "
@@ -454,7 +512,7 @@ def _add_calibrate_parser(sub) -> None:
     )
     cb.add_argument(
         "--trace-window-s",
-        type=float,
+        type=number("trace_window_s", "--trace-window-s"),
         default=0.05,
         help="moving average over which measured and simulated traces are compared (s)",
     )
@@ -471,9 +529,17 @@ def _add_calibrate_parser(sub) -> None:
         help="skip the intervals / identifiability after the fit",
     )
     cb.add_argument(
-        "--checkpoint-every", type=int, default=10, help="steps between saved checkpoints"
+        "--checkpoint-every",
+        type=number("checkpoint_every", "--checkpoint-every"),
+        default=10,
+        help="steps between saved checkpoints",
     )
-    cb.add_argument("--log-every", type=int, default=10, help="steps between printed loss lines")
+    cb.add_argument(
+        "--log-every",
+        type=number("log_every", "--log-every"),
+        default=10,
+        help="steps between printed loss lines",
+    )
     cb.add_argument(
         "--resume", action="store_true", help="continue an interrupted fit from its checkpoint"
     )
@@ -512,15 +578,20 @@ def _add_fitted_args(p: argparse.ArgumentParser) -> None:
 
 def _add_estimator_args(p: argparse.ArgumentParser) -> None:
     """calibrate's estimator and its steps, budget and smoothing."""
-    p.add_argument("--steps", type=int, default=100, help="estimator steps (lsq: iterations)")
+    p.add_argument(
+        "--steps",
+        type=number("steps", "--steps"),
+        default=100,
+        help="estimator steps (lsq: iterations)",
+    )
     p.add_argument(
         "--budget",
-        type=int,
+        type=number("budget", "--budget"),
         help="stop after this many pick-point simulations (default: no limit)",
     )
     p.add_argument(
         "--lr",
-        type=float,
+        type=number("lr", "--lr"),
         default=0.1,
         help="Adam step, dimensionless: in the bounded space, whose range is 1 (smoothed, jvp)",
     )
@@ -535,19 +606,19 @@ def _add_estimator_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--samples",
-        type=int,
+        type=number("samples", "--samples"),
         default=2,
         help="quadrature node pairs per parameter and step (smoothed)",
     )
     p.add_argument(
         "--sigma",
-        type=float,
+        type=number("sigma", "--sigma"),
         default=0.2,
         help="smoothing spread, dimensionless: in the bounded space, whose range is 1",
     )
     p.add_argument(
         "--temperature-mm",
-        type=float,
+        type=number("temperature_mm", "--temperature-mm"),
         default=2.0,
         help="outcome smoothing, mm of final lift",
     )
@@ -558,8 +629,15 @@ def _add_report_parser(sub) -> None:
     rp = sub.add_parser("report", help="plots, maps, animations, 1:1 template, robot export, HTML")
     rp.add_argument("run", help="an evaluate output folder")
     rp.add_argument("--out", help="write here (default: into the run folder)")
-    rp.add_argument("--n", type=int, default=3, help="best and worst pick-points on the template")
-    rp.add_argument("--k", type=int, default=10, help="pick-points in the robot export")
+    rp.add_argument(
+        "--n",
+        type=number("report_n", "--n"),
+        default=3,
+        help="best and worst pick-points on the template",
+    )
+    rp.add_argument(
+        "--k", type=number("report_k", "--k"), default=10, help="pick-points in the robot export"
+    )
     rp.add_argument(
         "--frame",
         metavar="X,Y,Z,ROLL,PITCH,YAW",
@@ -568,7 +646,7 @@ def _add_report_parser(sub) -> None:
     )
     rp.add_argument(
         "--anim-every",
-        type=int,
+        type=number("anim_every", "--anim-every"),
         default=8,
         help="control ticks per animation frame (a tick: grasp.control_period_s)",
     )
@@ -638,7 +716,9 @@ def _add_cache_parser(sub) -> None:
 def _add_gui_parser(sub) -> None:
     gp = sub.add_parser("gui", help="the web GUI: the paper's four tabs and a sweep tab")
     gp.add_argument("--host", default="127.0.0.1", help="interface to listen on")
-    gp.add_argument("--port", type=int, default=0, help="TCP port (0: a free one)")
+    gp.add_argument(
+        "--port", type=number("port", "--port"), default=0, help="TCP port (0: a free one)"
+    )
     gp.add_argument("--workdir", default="runs/gui", help="folder for uploads and runs")
     gp.add_argument("--no-browser", action="store_true", help="do not open a browser")
     gp.set_defaults(func=cmd_gui)
@@ -690,10 +770,10 @@ def _add_trials_plan_parser(steps) -> None:
     )
     pl.add_argument("run", help="a finished evaluate output folder (its gripper and physics)")
     _add_object_args(pl)
-    pl.add_argument("--n", type=int, default=12, help="pick-points to try")
+    pl.add_argument("--n", type=number("trials_n", "--n"), default=12, help="pick-points to try")
     pl.add_argument(
         "--repeats",
-        type=int,
+        type=number("repeats", "--repeats"),
         default=5,
         help="trials per pick-point (the paper: 5)",
     )
@@ -703,29 +783,44 @@ def _add_trials_plan_parser(steps) -> None:
         help="the uncertain parameters that decide what is informative (as calibrate --params)",
     )
     _add_trials_ranges(pl)
-    pl.add_argument("--draws", type=int, default=6, help="parameter draws from the prior")
+    pl.add_argument(
+        "--draws", type=number("draws", "--draws"), default=6, help="parameter draws from the prior"
+    )
     pl.add_argument(
         "--placements",
-        type=int,
+        type=number("placements", "--placements"),
         default=3,
         help="placements per pick-point and draw: the template pose and jittered ones",
     )
-    pl.add_argument("--jitter-mm", type=float, default=1.0, help="placing error on x and y, mm")
-    pl.add_argument("--jitter-deg", type=float, default=2.0, help="placing error on yaw, deg")
+    pl.add_argument(
+        "--jitter-mm",
+        type=number("jitter_mm", "--jitter-mm"),
+        default=1.0,
+        help="placing error on x and y, mm",
+    )
+    pl.add_argument(
+        "--jitter-deg",
+        type=number("jitter_deg", "--jitter-deg"),
+        default=2.0,
+        help="placing error on yaw, deg",
+    )
     pl.add_argument(
         "--pool",
-        type=int,
+        type=number("pool", "--pool"),
         default=32,
         help="candidates simulated, from the run's successes and failures",
     )
     pl.add_argument(
         "--info-share",
-        type=float,
+        type=number("info_share", "--info-share"),
         default=0.5,
         help="fraction chosen by expected information (the rest: best and worst, as the paper)",
     )
     pl.add_argument(
-        "--seed", type=int, default=0, help="seed of the parameter draws and placements"
+        "--seed",
+        type=number("seed", "--seed"),
+        default=0,
+        help="seed of the parameter draws and placements",
     )
     pl.add_argument(
         "--paper", choices=("a4", "letter"), default="a4", help="paper size of the templates"
@@ -736,7 +831,11 @@ def _add_trials_plan_parser(steps) -> None:
         help="keep the predictions out of trials.csv (the person at the robot does not see them)",
     )
     _add_trials_backend(pl)
-    pl.add_argument("--batch-size", type=int, help="simulations per backend call")
+    pl.add_argument(
+        "--batch-size",
+        type=number("batch_size", "--batch-size"),
+        help="simulations per backend call",
+    )
     pl.add_argument("--out", required=True, help="the trials folder")
     _add_overwrite(pl)
     pl.set_defaults(func=cmd_trials_plan)
@@ -768,7 +867,7 @@ def _add_trials_fit_parser(steps) -> None:
     _add_object_args(ft)
     ft.add_argument("--params", help="parameters to fit (default: the plan's --params)")
     _add_trials_ranges(ft)
-    ft.add_argument("--steps", type=int, default=40, help="estimator steps")
+    ft.add_argument("--steps", type=number("steps", "--steps"), default=40, help="estimator steps")
     ft.add_argument(
         "--estimator",
         choices=("cma", "smoothed", "random"),
@@ -777,24 +876,32 @@ def _add_trials_fit_parser(steps) -> None:
     )
     ft.add_argument(
         "--temperature-mm",
-        type=float,
+        type=number("temperature_mm", "--temperature-mm"),
         help="outcome smoothing, mm of final lift (default: as calibrate)",
     )
     ft.add_argument(
         "--next",
-        type=int,
+        type=number("next", "--next"),
         default=6,
         help="pick-points of the next round, where the fitted model is least sure (0: none)",
     )
     ft.add_argument("--partial", action="store_true", help="fit the tried rows, others blank")
     ft.add_argument(
-        "--seed", type=int, default=0, help="seed of the fit and of the next round's draws"
+        "--seed",
+        type=number("seed", "--seed"),
+        default=0,
+        help="seed of the fit and of the next round's draws",
     )
     ft.add_argument("--no-identify", action="store_true", help="skip the intervals")
     ft.add_argument(
         "--paper", choices=("a4", "letter"), default="a4", help="paper size of the templates"
     )
-    ft.add_argument("--log-every", type=int, default=10, help="steps between printed loss lines")
+    ft.add_argument(
+        "--log-every",
+        type=number("log_every", "--log-every"),
+        default=10,
+        help="steps between printed loss lines",
+    )
     _add_trials_backend(ft)
     ft.add_argument("--resume", action="store_true", help="continue this round's fit")
     ft.add_argument("--overwrite", action="store_true", help="replace this round's earlier fit")
@@ -815,7 +922,7 @@ def _add_view_parser(sub) -> None:
     )
     vp.add_argument(
         "--speed",
-        type=float,
+        type=number("speed", "--speed"),
         default=1.0,
         help="playback speed, a multiple of real time",
     )

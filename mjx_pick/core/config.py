@@ -40,20 +40,98 @@ def check_range(
     *,
     lo_open: bool = False,
     hi_open: bool = False,
+    integer: bool = False,
 ) -> None:
-    """Raise ConfigError unless lo <= value <= hi (strict where *_open)."""
+    """Raise ConfigError unless value is a finite number with lo <= value <= hi
+    (strict where *_open), and a whole number where integer."""
     name = f"{owner}.{field}" if owner else field
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if isinstance(value, bool) or not isinstance(value, (int, float, *_np_number())):
         raise ConfigError(f"{name} = {value!r} must be a number")
     if not math.isfinite(value):
-        raise ConfigError(f"{name} = {value!r} must be finite")
+        raise ConfigError(f"{name} = {value!r} must be a finite number")
+    if integer and value != int(value):
+        raise ConfigError(f"{name} = {value!r} must be a whole number")
     bad = (lo is not None and (value <= lo if lo_open else value < lo)) or (
         hi is not None and (value >= hi if hi_open else value > hi)
     )
     if bad:
-        lo_s = "" if lo is None else f"{lo:g} {'<' if lo_open else '<='} "
-        hi_s = "" if hi is None else f" {'<' if hi_open else '<='} {hi:g}"
+        lo_s = "" if lo is None else f"{bound_text(lo)} {'<' if lo_open else '<='} "
+        hi_s = "" if hi is None else f" {'<' if hi_open else '<='} {bound_text(hi)}"
         raise ConfigError(f"{name} = {value!r} is out of range: allowed {lo_s}{field}{hi_s}")
+
+
+def bound_text(b: float) -> str:
+    """A bound as a person reads it: whole numbers in full (4294967295, not 4.29e+09)."""
+    if isinstance(b, int | float) and float(b).is_integer() and abs(b) < 1e12:
+        return str(int(b))
+    return f"{b:g}"
+
+
+def _np_number() -> tuple:
+    """numpy's scalar number types where numpy is loaded (a value read from a table)."""
+    import sys
+
+    np = sys.modules.get("numpy")
+    return (np.integer, np.floating) if np is not None else ()
+
+
+@dataclasses.dataclass(frozen=True)
+class Number:
+    """What one numeric input may be: the one rule a settings field (:func:`setting`),
+    a run option or a study parameter declares, and the CLI, the GUI and the library
+    check alike -- finite, within [lo, hi] (strict where *_open), whole where integer.
+
+    unit: its unit ("mm", "N", ...; "-" for a plain number); doc: one line, its meaning.
+    """
+
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    integer: bool = False
+    unit: str = "-"
+    doc: str = ""
+
+    def check(self, name: str, value: Any, where: str = "") -> int | float:
+        """value, checked (ConfigError naming name, value and what is allowed, after
+        where: "picks.csv, line 3: "); an int where integer."""
+        try:
+            check_range(
+                "",
+                name,
+                value,
+                self.lo,
+                self.hi,
+                lo_open=self.lo_open,
+                hi_open=self.hi_open,
+                integer=self.integer,
+            )
+        except ConfigError as err:
+            raise ConfigError(f"{where}{err}") from None
+        return int(value) if self.integer else float(value)
+
+    def parse(self, name: str, text: str | float, where: str = "") -> int | float:
+        """The number a user typed (a CLI flag, a form field, a CSV cell), checked."""
+        if isinstance(text, str):
+            raw = text.strip()
+            try:
+                value: Any = int(raw) if self.integer and _INT.match(raw) else float(raw)
+            except ValueError:
+                kind = "a whole number" if self.integer else "a number"
+                raise ConfigError(f"{where}{name} = {text!r} is not {kind}") from None
+        else:
+            value = text
+        return self.check(name, value, where)
+
+    def text(self, name: str = "x") -> str:
+        """The allowed values in words: "0 <= n <= 100 (a whole number)"."""
+        words = range_text((self.lo, self.hi, self.lo_open, self.hi_open)).replace("x", name, 1)
+        if words == "any":
+            words = "any finite number"
+        return words + (" (a whole number)" if self.integer else "")
+
+
+_INT = re.compile(r"^[+-]?\d+$")
 
 
 Bound = float | str | None  # a number, no bound, or another field: "name" / "name + 360"
@@ -69,6 +147,7 @@ def setting(
     lo_open: bool = False,
     hi_open: bool = False,
     choices: tuple | None = None,
+    integer: bool | None = None,
 ) -> Any:
     """A settings-dataclass field that says what it is: its unit, its meaning and the
     range it must lie in. The one definition: :func:`check_fields` (called by the
@@ -83,10 +162,31 @@ def setting(
         optional offset ("yaw_min_deg + 360"), read from the instance being checked.
         A field whose value is None (where None is allowed) is not checked.
       choices: the values a text field may take (instead of a range).
+      integer: the value must be a whole number (default: when the default is an int).
     """
+    if integer is None:
+        integer = isinstance(default, int) and not isinstance(default, bool)
     rng = None if choices else (lo, hi, lo_open, hi_open)
-    meta = {"unit": unit, "doc": doc, "range": rng, "choices": choices}
+    meta = {"unit": unit, "doc": doc, "range": rng, "choices": choices, "integer": integer}
     return dataclasses.field(default=default, metadata=meta)
+
+
+def field_number(cls: type, name: str) -> Number:
+    """The :class:`Number` rule of a settings field declared with :func:`setting` (a
+    bound that names another field is left open: it is checked with the instance)."""
+    f = {f.name: f for f in dataclasses.fields(cls)}[name]
+    if f.metadata.get("range") is None:
+        raise KeyError(f"{cls.__name__}.{name} is not declared with setting()")
+    lo, hi, lo_open, hi_open = f.metadata["range"]
+    return Number(
+        lo if not isinstance(lo, str) else None,
+        hi if not isinstance(hi, str) else None,
+        lo_open,
+        hi_open,
+        bool(f.metadata.get("integer")),
+        f.metadata["unit"],
+        f.metadata["doc"],
+    )
 
 
 _BOUND = re.compile(r"^\s*([A-Za-z_]\w*)\s*(?:([+-])\s*([0-9.eE+-]+))?\s*$")
@@ -119,7 +219,8 @@ def check_fields(obj: Any, owner: str) -> None:
             continue
         lo, hi, lo_open, hi_open = f.metadata["range"]
         lo, hi = _bound(obj, lo), _bound(obj, hi)
-        check_range(owner, f.name, value, lo, hi, lo_open=lo_open, hi_open=hi_open)
+        integer = bool(f.metadata.get("integer"))
+        check_range(owner, f.name, value, lo, hi, lo_open=lo_open, hi_open=hi_open, integer=integer)
 
 
 def range_text(rng: tuple | None) -> str:
@@ -127,7 +228,7 @@ def range_text(rng: tuple | None) -> str:
     if rng is None:
         return "any"
     lo, hi, lo_open, hi_open = rng
-    fmt = lambda b: f"{b:g}" if isinstance(b, int | float) else str(b)  # noqa: E731
+    fmt = lambda b: bound_text(b) if isinstance(b, int | float) else str(b)  # noqa: E731
     if lo is None and hi is None:
         return "any"
     if hi is None:

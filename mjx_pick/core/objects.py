@@ -28,7 +28,7 @@ import trimesh
 from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.polygon import orient
 
-from mjx_pick.core import cache
+from mjx_pick.core import cache, numbers
 from mjx_pick.core.config import ConfigError, PlausibilityWarning, check_range
 
 # what a slow preparation step is doing, said as it starts (the CLI shows it on stderr)
@@ -468,6 +468,11 @@ def _finger_may_enter(hole: Polygon, depth_mm: float, width_mm: float) -> bool:
 def _mass_kg(name: str, volume_m3: float, mass_g: float | None, density: float | None) -> float:
     if mass_g is None and density is None:
         raise ConfigError(f"object {name!r}: give mass_g or density_kg_m3")
+    if mass_g is not None and density is not None:
+        raise ConfigError(
+            f"object {name!r}: mass_g = {mass_g:g} and density_kg_m3 = {density:g} are both "
+            "given: give one (--mass-g or --density-kg-m3); the other follows from the volume"
+        )
     if mass_g is not None:
         check_range("object", "mass_g", mass_g, 0, lo_open=True)
         mass_kg = mass_g * 1e-3
@@ -995,9 +1000,47 @@ def load_object(
     material: str | None = None,
     largest_body: bool = False,
 ) -> ObjectModel:
-    """An object from a shipped asset name, an image file or a mesh file (CLI entry)."""
+    """An object from a shipped asset name, an image file or a mesh file (CLI entry).
+    Every number is checked by its rule (``core.numbers``) and an option the source
+    does not use is refused, never dropped."""
     text = str(source)
     suffix = Path(text).suffix.lower()
+    given = {
+        "px_per_mm": px_per_mm,
+        "thickness_mm": thickness_mm,
+        "mass_g": mass_g,
+        "density_kg_m3": density_kg_m3,
+        "pick_height_mm": pick_height_mm,
+        "simplify_mm": simplify_mm,
+    }
+    for name, value in given.items():
+        numbers.check_optional(name, value)
+    if mass_g is not None and density_kg_m3 is not None:
+        raise ConfigError(
+            f"object {text!r}: mass_g = {mass_g:g} and density_kg_m3 = {density_kg_m3:g} are "
+            "both given: give one (--mass-g or --density-kg-m3); the other follows from the "
+            "volume"
+        )
+    kind = "an image" if suffix in IMAGE_SUFFIXES else "a mesh" if suffix in MESH_SUFFIXES else ""
+    unused = {
+        "an image": {"unit": unit, "largest_body": largest_body or None},
+        "a mesh": {
+            "px_per_mm": px_per_mm,
+            "thickness_mm": thickness_mm,
+            "simplify_mm": simplify_mm,
+        },
+        "": {"density_kg_m3": density_kg_m3, "unit": unit, "largest_body": largest_body or None},
+    }[kind]
+    if pose != "as_given" and kind != "a mesh":
+        unused["pose"] = pose
+    extra = [k for k, v in unused.items() if v is not None]
+    if extra:
+        what = kind or "a shipped asset"
+        raise ConfigError(
+            f"object {text!r} is {what}: {', '.join(extra)} does not apply to it (leave "
+            + ", ".join("--" + k.replace("_", "-") for k in extra)
+            + " out)"
+        )
     common = {"pick_height_mm": pick_height_mm}
     if material is not None:
         common["material"] = material

@@ -466,6 +466,24 @@ def _narrowest_run(bounds, areas, fill: float, xr: float) -> float:
     return best
 
 
+def stroke_refusal(
+    obj: ObjectModel,
+    gripper: GripperSpec,
+    config: PickConfig | None = None,
+    grasp: GraspConfig | None = None,
+) -> str | None:
+    """Why :func:`check_stroke` refuses gripper for obj (no pick-point can fit), or None
+    where one may: the quick check a study runs on each of its grippers before any
+    candidate is drawn (its may-fit-at-few-yaws warning is left to a single run)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            check_stroke(obj, gripper, config, grasp)
+        except ConfigError as err:
+            return str(err)
+    return None
+
+
 def check_stroke(
     obj: ObjectModel,
     gripper: GripperSpec,

@@ -135,6 +135,10 @@ def compare(
     base = base or Settings()
     n, seed, pick_config, out = opts.n_or(200), opts.seed, opts.picks, opts.out
     pp.check_raster(obj, pick_config)  # before any allocation or folder
+    fitted = [base.on_gripper(g)[0] for g in grippers]  # each at its own force and speed
+    refused = [pp.stroke_refusal(obj, s.gripper, pick_config, s.grasp) for s in fitted]
+    if all(refused):  # none can take it: said now, not after max_candidates draws
+        raise ConfigError("no gripper can take the part: " + "; ".join(refused))
     opts.check_resume()
     with opts.simulator(obj, simulator) as sim:
         request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
@@ -376,7 +380,10 @@ def design_search(
 
     Round r simulates the surviving variants on n * 2**r shared pick-points (n: 64 by
     default) and keeps the best third (at least one); the survivor is then compared
-    with the base gripper on final_n (default 4 n) fresh pick-points. options, or its
+    with the base gripper on final_n (default 4 n) fresh pick-points. The answer is
+    always a variant within bounds (the base gripper is the reference): variants that
+    no pick-point can fit (``pickpoints.stroke_refusal``) are left out before any
+    draw, and a search none of whose variants fits is refused. options, or its
     fields as keywords (``options.RunOptions``): out is saved to as the rounds go (their
     finished chunks, ``engine.chunks.ChunkStore``), so that resume continues an
     interrupted search (on a complete one: reads it back); ray runs every
@@ -399,7 +406,19 @@ def design_search(
     request = {"object": obj.summary(), "bounds": {k: list(v) for k, v in bounds.items()}}
     request.update(base=to_dict(base), variants=variants, n=n, rounds=rounds, seed=seed)
     request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
-    pool = sample_variants(base.gripper, bounds, variants, seed) + [base.gripper]
+    drawn = sample_variants(base.gripper, bounds, variants, seed)
+    # a variant no pick-point can fit is no design: left out before any draw; none left,
+    # refused (the base gripper is the reference, never the answer)
+    fitting = [g for g in drawn if pp.stroke_refusal(obj, g, pick_config, base.grasp) is None]
+    if not fitting:
+        why = pp.stroke_refusal(obj, drawn[0], pick_config, base.grasp)
+        raise ConfigError(
+            f"design: none of the {len(drawn)} variants within "
+            + ", ".join(f"{k}={lo:g}:{hi:g}" for k, (lo, hi) in bounds.items())
+            + f" can take the part; e.g. {why}"
+        )
+    request.update(too_narrow=len(drawn) - len(fitting))
+    pool = fitting
     with opts.simulator(obj, simulator) as sim:
         store, complete = open_store(
             out, "design", request, resume=opts.resume, overwrite=opts.overwrite

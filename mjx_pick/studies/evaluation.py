@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from mjx_pick.core import numbers
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import (
     ConfigError,
@@ -254,7 +255,12 @@ def evaluate(
         raise ConfigError(
             "--min-force does not run on a Ray cluster yet: leave out --ray or --min-force"
         )
-    check_range("evaluate", "stability_um", stability_um, 0, 100)
+    n_traces = numbers.check("n_traces", n_traces)
+    min_score = numbers.check("min_score", min_score)
+    stability_um = numbers.check("stability_um", stability_um)
+    chunk_size = numbers.check_optional("chunk_size", chunk_size)
+    until = numbers.check_optional("until", until)
+    max_n = numbers.check_optional("max_n", max_n)
     if ray is not None and stability_um:
         raise ConfigError(
             "--stability-um does not run on a Ray cluster yet: leave out --ray or --stability-um"
@@ -265,8 +271,6 @@ def evaluate(
         )
     if step_check:
         half_step(solver)  # a step that cannot be halved is refused now, not after the run
-    if chunk_size is not None and int(chunk_size) < 1:
-        raise ConfigError(f"chunk_size = {chunk_size} is out of range: allowed >= 1")
     opts.check_resume()
     user_batch = None
     if picks is not None and not isinstance(picks, pp.PickBatch) and until is None:
@@ -409,7 +413,6 @@ def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
     # every input is checked before the folder is claimed: a bad one leaves it as it was
     t_picks = time.perf_counter()
     if req.until is not None:
-        check_range("evaluate", "until", req.until, 1, 10**9)
         req = dataclasses.replace(req, max_n=req.max_n or 10 * req.until)
         check_range("evaluate", "max_n", req.max_n, req.until, 10**9)
         picks_batch = None

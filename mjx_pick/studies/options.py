@@ -16,6 +16,7 @@ import dataclasses
 from collections.abc import Iterator
 from pathlib import Path
 
+from mjx_pick.core import numbers
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.objects import ObjectModel
@@ -49,6 +50,12 @@ class RunOptions:
     resume: bool = False
     ray: str | None = None
     progress: bool = False
+
+    def __post_init__(self):
+        # the one rule of each number (core.numbers), as the CLI and the GUI check it
+        for name in ("n", "seed", "batch_size"):
+            value = numbers.check_optional(name, getattr(self, name))
+            object.__setattr__(self, name, value)
 
     @classmethod
     def of(cls, options: RunOptions | None = None, /, **fields) -> RunOptions:

@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from mjx_pick.core import numbers
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError, open_csv, to_dict, write_atomic
 from mjx_pick.core.gripper import GripperSpec
@@ -138,10 +139,10 @@ def read_picks_csv(path: str | Path) -> UserPicks:
             line = reader.line_num
             if None in row:
                 raise ConfigError(f"picks file {path.name}, line {line}: more cells than columns")
-            try:
-                rows.append([float(row[c]) for c in PICK_COLUMNS])
-            except (TypeError, ValueError) as err:
-                raise ConfigError(f"picks file {path.name}, line {line}: {err}") from err
+            # each cell by its input's rule (core.numbers): finite, within the reach of
+            # any part on any gripper, a yaw within one turn either side
+            where = f"picks file {path.name}, line {line}: "
+            rows.append([numbers.INPUTS[c].parse(c, row[c] or "", where) for c in PICK_COLUMNS])
             ids.append(_pick_id(row["pick_id"], path, line) if has_id else k)
             lines.append(line)
     if not rows:
@@ -153,7 +154,9 @@ def read_picks_csv(path: str | Path) -> UserPicks:
         raise ConfigError(f"picks file {path.name}, line {bad}: values must be finite")
     ids = np.asarray(ids, np.int64)
     _refuse_repeats(path, "pick_id", ids, lines)
-    _refuse_repeats(path, "pose (x_mm, y_mm, yaw_deg)", [tuple(r) for r in a], lines)
+    # one pose, one row: a yaw and the same yaw a turn on (10 and 370 deg) are one pose
+    poses = [(x, y, round(yaw % 360.0, 9) % 360.0) for x, y, yaw in a]
+    _refuse_repeats(path, "pose (x_mm, y_mm, yaw_deg; a yaw and yaw + 360 are one)", poses, lines)
     return UserPicks(ids, a[:, 0], a[:, 1], a[:, 2], lines)
 
 

@@ -33,8 +33,16 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from mjx_pick.core import numbers
 from mjx_pick.core import pickpoints as pp
-from mjx_pick.core.config import ConfigError, describe_fields, to_dict, write_json, write_parquet
+from mjx_pick.core.config import (
+    ConfigError,
+    Number,
+    describe_fields,
+    to_dict,
+    write_json,
+    write_parquet,
+)
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.metrics import rate_summary, results_table
 from mjx_pick.core.objects import ObjectModel
@@ -164,27 +172,31 @@ class ParamSpec:
                 f"--param {text!r}: write NAME=LO:HI:N, NAME=A,B,C or NAME=LO:HI (random)"
             )
         name = canonical(label)
+        where = f"--param {text!r}: "
+        value = Number()  # a swept value: any finite number (its field checks it)
         try:
             if ":" in spec:
                 parts = spec.split(":")
                 log = parts[-1] == "log"
                 if log:
                     parts = parts[:-1]
-                lo, hi = float(parts[0]), float(parts[1])
+                if len(parts) not in (2, 3):
+                    raise ValueError("write LO:HI:N, LO:HI:N:log or LO:HI (random)")
+                lo, hi = value.parse("LO", parts[0], where), value.parse("HI", parts[1], where)
                 if len(parts) == 2:
                     return cls(name, label, (), lo, hi, log)
-                if len(parts) != 3:
-                    raise ValueError("too many ':'")
-                n = int(parts[2])
-                if n < 1:
-                    raise ValueError("N must be >= 1")
+                n = numbers.INPUTS["grid_points"].parse("N", parts[2], where)
                 if log and (lo <= 0 or hi <= 0):
                     raise ValueError("a log range needs positive ends")
                 grid = np.geomspace(lo, hi, n) if log else np.linspace(lo, hi, n)
                 return cls(name, label, tuple(float(v) for v in grid), lo, hi, log)
-            values = tuple(float(v) for v in spec.split(","))
+            cells = spec.split(",")
+            numbers.INPUTS["grid_points"].check("the number of values", len(cells), where)
+            values = tuple(value.parse("a value", v, where) for v in cells)
         except ValueError as err:
-            raise ConfigError(f"--param {text!r}: {err}") from err
+            if isinstance(err, ConfigError):
+                raise
+            raise ConfigError(f"{where}{err}") from err
         return cls(name, label, values, min(values), max(values))
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -202,21 +214,37 @@ def variants(params: list[ParamSpec], random: int | None = None, seed: int = 0) 
     if len({p.name for p in params}) != len(params):
         raise ConfigError("each parameter may be swept once: " + ", ".join(p.label for p in params))
     if random is not None:
-        if random < 1:
-            raise ConfigError(f"random = {random} is out of range: allowed >= 1")
+        random = numbers.check("random", random)
         rng = np.random.default_rng(seed)
         draws = {p.name: p.draw(rng, random) for p in params}
         return [{k: float(v[i]) for k, v in draws.items()} for i in range(random)]
     for p in params:
         if not p.values:
             raise ConfigError(f"--param {p.label}: a grid sweep needs LO:HI:N or A,B,C")
-    grid = [
+    sizes = [len(p.values) for p in params]
+    most = int(numbers.INPUTS["variants"].hi)
+    if math.prod(sizes) > most:  # counted before the product is made
+        raise ConfigError(
+            f"the grid has {math.prod(sizes)} variants ({' x '.join(map(str, sizes))} values); "
+            f"at most {most}: use fewer values, or --random K variants"
+        )
+    return [
         dict(zip([p.name for p in params], combo, strict=True))
         for combo in itertools.product(*(p.values for p in params))
     ]
-    if len(grid) > 100_000:
-        raise ConfigError(f"the grid has {len(grid)} variants (> 100000): use fewer values")
-    return grid
+
+
+def _refuse_narrow(obj, combos: list[dict], settings: list, pick_config) -> None:
+    """Refuse a sweep one of whose variants no pick-point can fit (``stroke_refusal``),
+    naming the variant: found now, not after drawing max_candidates for it."""
+    seen: dict = {}
+    for combo, s in zip(combos, settings, strict=True):
+        key = (s.gripper, s.grasp)
+        if key not in seen:
+            seen[key] = pp.stroke_refusal(obj, s.gripper, pick_config, s.grasp)
+        if seen[key] is not None:
+            values = ", ".join(f"{k}={v:g}" for k, v in combo.items())
+            raise ConfigError(f"sweep variant {values}: {seen[key]}")
 
 
 @dataclasses.dataclass
@@ -262,11 +290,6 @@ def sweep(
         request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
         request.update(params=to_dict(params), n=n, seed=seed, random=random)
         request.update(picks=to_dict(pick_config))
-        store, complete = open_store(
-            out, "sweep", request, resume=opts.resume, overwrite=opts.overwrite
-        )
-        if complete:
-            return _read_sweep(Path(out))
         combos = variants(params, random, seed)
         settings = []
         for combo in combos:
@@ -274,6 +297,12 @@ def sweep(
             for name, value in combo.items():
                 s = apply(s, name, value)
             settings.append(s)
+        _refuse_narrow(obj, combos, settings, pick_config)  # before any draw or folder
+        store, complete = open_store(
+            out, "sweep", request, resume=opts.resume, overwrite=opts.overwrite
+        )
+        if complete:
+            return _read_sweep(Path(out))
         picks_for: dict[GripperSpec, pp.PickBatch] = {}
         for s in settings:
             if s.gripper not in picks_for:

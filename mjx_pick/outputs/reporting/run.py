@@ -21,6 +21,10 @@ from mjx_pick.kernels import types as kt
 __all__ = ["Run"]
 
 
+# what every report reads of an evaluate results table
+RESULT_COLUMNS = ("pick_id", "x_mm", "y_mm", "yaw_deg", "opening_mm", "success", "score", "failure")
+
+
 @dataclasses.dataclass
 class Run:
     """An evaluate output folder, read back."""
@@ -59,9 +63,18 @@ class Run:
         summary = read_json(path / "summary.json")
         if not isinstance(summary, dict):
             raise ConfigError(f"{path}/summary.json is not a summary (damaged)")
+        table = read_parquet(path / "results.parquet")
+        absent = [c for c in RESULT_COLUMNS if c not in table.column_names]
+        if absent:
+            raise ConfigError(
+                f"{path}/results.parquet has no {', '.join(absent)} column(s): it is not an "
+                "evaluate results table (damaged, or written by another program)"
+            )
+        if table.num_rows == 0:
+            raise ConfigError(f"{path}/results.parquet has no pick-points: nothing to report")
         return cls(
             path=path,
-            table=_success_labelled(read_parquet(path / "results.parquet")),
+            table=_success_labelled(table),
             traces=traces,
             config=config,
             summary=_success_counted(summary),

@@ -14,7 +14,8 @@ import os
 import sys
 import time
 
-from mjx_pick.core.config import ConfigError, check_range
+from mjx_pick.core import numbers
+from mjx_pick.core.config import ConfigError
 from mjx_pick.outputs.display import display_problem
 from mjx_pick.outputs.reporting.body_poses import TracePose
 from mjx_pick.outputs.reporting.run import Run
@@ -27,7 +28,7 @@ def check_view(run_dir: str | os.PathLike, pick_id: int | str, speed: float = 1.
     naming the input when one is wrong (before anything opens a window). pick_id: a
     traced pick_id, or "best" / "worst": the best or worst traced pick-point."""
     run = Run.load(run_dir)
-    check_range("view", "speed", speed, 0, 100, lo_open=True)
+    numbers.check("speed", speed)
     ranked = run.traced()
     traced = [pid for pid, _ in ranked]
     if run.traces is None or not traced:
