@@ -6,6 +6,7 @@ hidden friction (checkpoints and resume), the CLI and the contact file's provena
 import dataclasses
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from shapely.geometry import box
 
 import mjx_pick as mp
 from mjx_pick.cli import main
-from mjx_pick.core.config import to_toml
+from mjx_pick.core.config import PlausibilityWarning, to_toml
 from mjx_pick.core.physics import load_contact
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine.inputs import pick_inputs
@@ -756,3 +757,34 @@ def test_outcomes_of_another_mass_or_gripper_are_refused_unless_forced(tmp_path,
     (tmp_path / "mine.toml").write_text("weight = 3\n")
     with pytest.raises(mp.ConfigError, match="mine.toml: unknown key"):
         cal.read_outcomes(csv)
+
+
+def test_the_shipped_synthetic_outcomes_are_what_the_physics_makes():
+    # block_1kg_rg2.csv is simulated (tools/make_outcomes.py): when the defaults or the
+    # model it was made with change, the example and README's fit of it no longer hold.
+    # Cheap: the digest of its hidden settings and model, and four rows simulated again.
+    import importlib.util
+
+    from mjx_pick.studies.calibration.synthetic_outcomes import (
+        synthetic_digest,
+        synthetic_outcomes,
+    )
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("make_outcomes", root / "tools/make_outcomes.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    with pytest.warns(PlausibilityWarning):  # a lead-filled block: denser than solids
+        obj, hidden, x, y, yaw, f = tool.example()
+    rows = cal.read_outcomes("block_1kg_rg2")
+    regenerate = "regenerate it: python tools/make_outcomes.py, and check README's fit"
+    assert rows.measured["synthetic"] == synthetic_digest(obj, hidden), (
+        f"block_1kg_rg2.csv was simulated with other settings or another model; {regenerate}"
+    )
+    np.testing.assert_allclose(rows.grip_force_n, f, atol=1e-4)
+    np.testing.assert_allclose(rows.yaw_deg, yaw, atol=1e-4)
+    some = [3, 4, 16, 17]  # rows on both sides of the force that just holds the part
+    again = synthetic_outcomes(obj, hidden, x[some], y[some], yaw[some], f[some])
+    assert list(again.successes) == list(rows.successes[some]), (
+        f"block_1kg_rg2.csv's outcomes are not what the physics gives now; {regenerate}"
+    )

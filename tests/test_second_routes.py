@@ -159,7 +159,7 @@ def test_a_second_robust_with_other_settings_does_not_replace_the_first(rg2_run)
         (["robust", "block", "--m", "0"], "--m = 0 is out of range"),
         (["sweep", "block", "--param", "contact.pad_friction=0.1:1:100000"], "N = 100000"),
         (["sweep", "block", "--param", "contact.pad_friction=0.1,nan"], "must be a finite"),
-        (["design", "block", "--bound", "stroke_mm=10:30"], "none of the 12 variants"),
+        (["design", "block", "--bound", "stroke_mm=10:28"], "none of the 12 variants"),
         (["sweep", "block", "--param", "gripper.stroke_mm=20,85"], "variant gripper.stroke_mm=20"),
     ],
 )
@@ -198,3 +198,85 @@ def test_report_on_a_damaged_results_table_says_so(tmp_path):
     pq.write_table(table.slice(0, 0), run / "results.parquet")
     res = cli("report", run, "--no-animations", check=False)
     assert "has no pick-points" in res.stderr
+
+
+def test_a_fit_without_intervals_still_says_what_it_could_not_check(tmp_path):
+    # outcomes without their record (no TOML beside the CSV), a fit pressed on its bound
+    # and --no-identify: each said on the terminal and in the report, never a bare value
+    shipped = Path(__file__).resolve().parents[1] / "mjx_pick/assets/outcomes/block_1kg_rg2.csv"
+    rows = shipped.read_text().splitlines()
+    csv = tmp_path / "mine.csv"
+    csv.write_text("\n".join(rows[:1] + rows[4:8]) + "\n")
+    out = tmp_path / "cal"
+    # a search that starts on its lower bound and takes no step: its optimum is on it
+    argv = ["calibrate", csv, "block", "--mass-g", "1000", "--gripper", "onrobot-rg2"]
+    argv += ["--pad-friction", "0.3", "--bounds", "pad_friction=0.3:0.9"]
+    argv += ["--estimator", "random", "--steps", "0"]
+    argv += ["--no-identify", "--backend", "mujoco", "--no-progress", "--out", out]
+    res = cli(*argv, check=True)
+    assert "note: the outcomes have no record" in res.stderr
+    assert "fit at its lower bound: NOT identified" in res.stdout
+    toml = (out / "contact.toml").read_text()
+    assert 'not_identified = ["pad_friction"]' in toml
+    report = (out / "report.md").read_text()
+    assert "kept at its starting value" in report and "lower bound" in report
+    assert "no record of what they were measured with" in report
+
+
+def _box_stl(path: Path, flip: int | None = None) -> Path:
+    """A 30 x 20 x 15 mm box as a binary STL (9.0 g at 1000 kg/m^3); flip: one triangle
+    wound the wrong way (a closed surface whose volume is then wrong)."""
+    import trimesh
+
+    box = trimesh.creation.box([30.0, 20.0, 15.0])
+    faces = box.faces.copy()
+    if flip is not None:
+        faces[flip] = faces[flip][::-1]
+    trimesh.Trimesh(box.vertices, faces, process=False).export(path)
+    return path
+
+
+def test_a_mesh_repaired_on_import_is_right_or_refused_and_always_said(tmp_path):
+    stl = _box_stl(tmp_path / "flipped.stl", flip=0)
+    out = tmp_path / "picks"
+    argv = ["picks", stl, "--unit", "mm", "--density-kg-m3", "1000", "--n", "2", "--out", out]
+    res = cli(*argv, "--no-cache", check=True)
+    assert "was not a closed solid" in res.stderr and "check them" in res.stderr
+    obj = json.loads((out / "run.json").read_text())["config"]["object"]
+    assert obj["mass_g"] == pytest.approx(9.0, rel=1e-6)  # not 4.5 g, nor shifted
+    assert obj["bounds_mm"] == pytest.approx([-15.0, -10.0, 15.0, 10.0], abs=1e-6)
+
+
+def test_a_mesh_file_too_big_or_cut_short_is_refused_from_its_header(tmp_path):
+    whole = _box_stl(tmp_path / "box.stl").read_bytes()
+    cut = tmp_path / "cut.stl"
+    cut.write_bytes(whole[:300])
+    big = tmp_path / "big.stl"
+    with big.open("wb") as fh:  # 3.9 million triangles (a sparse file: no disk used)
+        fh.write(whole[:80] + (3_900_000).to_bytes(4, "little"))
+        fh.truncate(84 + 50 * 3_900_000)
+    for path, said in ((cut, "is cut short"), (big, "has 3,900,000 triangles")):
+        res = cli(
+            "picks",
+            path,
+            "--unit",
+            "mm",
+            "--mass-g",
+            "9",
+            "--n",
+            "2",
+            "--out",
+            tmp_path / "never",
+            check=False,
+            timeout=60,
+        )
+        assert said in res.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_resume_of_a_folder_that_does_not_exist_is_refused(tmp_path):
+    res = cli(
+        "evaluate", "block", "--n", "4", "--out", tmp_path / "typo", "--resume", *FAST, check=False
+    )
+    assert "does not exist, so there is no run to continue" in res.stderr
+    assert not (tmp_path / "typo").exists()

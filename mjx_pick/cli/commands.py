@@ -129,7 +129,7 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from mjx_pick.studies.comparison import compare
+    from mjx_pick.studies.comparison import compare, unequal_forces
 
     obj, base, picks_cfg = base_settings(args)
     res = compare(
@@ -154,6 +154,9 @@ def cmd_compare(args) -> int:
             "p_vs_best",
         ],
     )
+    note = unequal_forces(res.ranking)
+    if note:
+        print(f"note: {note}")
     if args.out:
         print(f"results in {args.out}/ (ranking.json, ranking.png, maps.png, results.parquet)")
     return 0
@@ -225,6 +228,8 @@ def cmd_calibrate(args) -> int:
     obj, base, picks_cfg = base_settings(args)
     names = cal.canonical_params(args.params)
     problem, holdout = _calibration_problems(args, obj, base, picks_cfg, names)
+    for note in problem.notes:  # said before the fit, and again in report.md
+        print(f"mjx-pick: note: {note}", file=sys.stderr)
     res = _fit(args, problem, holdout)
     _print_fit(res, names)
     print(
@@ -301,7 +306,15 @@ def _print_fit(res, names) -> None:
     for name in names:
         info = ident.get(name)
         where = ""
-        if info:
+        if info and info.get("interval") is None:  # --no-identify: only the bound is known
+            if info.get("at_bound"):
+                where = (
+                    f"  fit at its {info['at_bound']} bound: NOT identified (the bound stopped "
+                    "the search), kept at its start"
+                )
+            else:
+                where = "  (no interval: --no-identify)"
+        elif info:
             lo, hi = info["interval"]
             where = f"  (95 % {lo:.4g}-{hi:.4g})"
             if info.get("at_bound"):

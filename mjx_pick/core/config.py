@@ -266,6 +266,26 @@ def describe_fields(cls: type) -> list[dict]:
     return out
 
 
+NAME_RULE = (
+    "1-100 characters, without '/', '\\', control characters, a leading '.' or spaces at either end"
+)
+
+
+def check_name(owner: str, name: Any) -> None:
+    """Raise ConfigError unless name is a name that results, file names and reports may
+    carry as it is: text of 1-100 characters without a path separator, a control
+    character or a leading dot (any other Unicode, an emoji too, is fine)."""
+    ok = (
+        isinstance(name, str)
+        and 0 < len(name) <= 100
+        and not name.startswith(".")
+        and not any(c in "/\\" or ord(c) < 32 or ord(c) == 127 for c in name)
+        and name.strip() == name
+    )
+    if not ok or any(0xD800 <= ord(c) <= 0xDFFF for c in name):
+        raise ConfigError(f"{owner}.name = {name!r} is not allowed: {NAME_RULE}")
+
+
 def check_choice(owner: str, field: str, value: Any, choices: tuple) -> None:
     """Raise ConfigError unless value is one of choices."""
     if value not in choices:
@@ -420,13 +440,28 @@ def to_toml(obj: Any) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _toml_string(text: str) -> str:
+    """A TOML basic string: any Unicode as it is (json.dumps would write an emoji as two
+    surrogate escapes, which TOML refuses); quote, backslash and control characters
+    escaped."""
+
+    def esc(c: str) -> str:
+        if c in '"\\':
+            return "\\" + c
+        if ord(c) < 32 or ord(c) == 127:
+            return f"\\u{ord(c):04x}"
+        return c
+
+    return '"' + "".join(esc(c) for c in text) + '"'
+
+
 def _toml_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int | float):
         return repr(float(value)) if isinstance(value, float) else str(value)
     if isinstance(value, str):
-        return json.dumps(value)
+        return _toml_string(value)
     if isinstance(value, list):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     if value is None:

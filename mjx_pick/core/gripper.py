@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core import mjcf_gripper, urdf_gripper
-from mjx_pick.core.config import ConfigError, check_fields, from_mapping, setting
+from mjx_pick.core.config import ConfigError, check_fields, check_name, from_mapping, setting
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,6 +104,7 @@ class GripperSpec:
     mjcf: mjcf_gripper.MjcfGripper | None = None
 
     def __post_init__(self):
+        check_name("gripper", self.name)
         o = f"gripper[{self.name}]"
         if isinstance(self.mjcf, dict):  # from a saved config (JSON) or a TOML table
             mjcf = from_mapping(mjcf_gripper.MjcfGripper, self.mjcf, where=f"{o}.mjcf")

@@ -32,6 +32,9 @@ INPUTS: dict[str, Number] = {
     "grid_points": Number(1, 1000, integer=True, unit="values", doc="values of a swept grid"),
     "variants": Number(1, 10_000, integer=True, unit="variants", doc="design variants"),
     "rounds": Number(1, 20, integer=True, unit="rounds", doc="successive-halving rounds"),
+    "sweep_simulations": Number(
+        1, 1e7, integer=True, unit="simulations", doc="a sweep's variants x pick-points"
+    ),
     # robust
     "top_k": Number(1, 100_000, integer=True, unit="pick-points", doc="best ones tested"),
     "m": Number(1, 100_000, integer=True, unit="draws", doc="perturbed draws per pick-point"),

@@ -662,6 +662,7 @@ def object_from_mesh(
             f"mesh {str(path)!r} is a {size / 2**20:.0f} MiB file: allowed at most "
             f"{MAX_MESH_FILE_BYTES / 2**20:.0f} MiB; simplify it (fewer triangles)"
         )
+    _check_mesh_header(path, size)  # a count or a cut its header shows: before any load
     # everything that decides the prepared geometry; mass and material are applied after
     key = {
         "file_sha256": cache.file_digest(path),
@@ -678,6 +679,9 @@ def object_from_mesh(
     dropped = prepared["dropped_note"].tobytes().decode()
     if dropped:  # bodies left out by largest_body: said on every load
         warnings.warn(dropped, stacklevel=2)
+    repaired = prepared["repair_note"].tobytes().decode() if "repair_note" in prepared else ""
+    if repaired:  # a surface this import closed or turned: said on every load
+        warnings.warn(repaired, PlausibilityWarning, stacklevel=2)
     # rebuilt from the arrays whether they were read or computed: one path, same bits
     mesh = trimesh.Trimesh(prepared["vertices"], prepared["faces"], process=False)
     height_mm = float(mesh.bounds[1, 2] * 1e3)
@@ -694,6 +698,38 @@ def object_from_mesh(
 MESH_SCALES = {"m": 1.0, "mm": 1e-3}
 
 
+def _check_mesh_header(path: Path, size: int) -> None:
+    """Refuse, from its first bytes, a mesh file that holds too many triangles or is cut
+    short: a binary STL's header gives its triangle count (and so its length), a PLY's
+    its face count -- found before a load that may take gigabytes and minutes."""
+    suffix = path.suffix.lower()
+    with path.open("rb") as fh:
+        head = fh.read(4096)
+    count = None
+    if suffix == ".stl" and len(head) >= 84:
+        n = int(np.frombuffer(head[80:84], "<u4")[0])
+        binary = not head[:5].lower().startswith(b"solid") or size == 84 + 50 * n
+        if binary:
+            if size < 84 + 50 * n:
+                raise ConfigError(
+                    f"mesh {str(path)!r} is cut short: its header says {n:,} triangles "
+                    f"({84 + 50 * n:,} bytes), the file has {size:,} bytes; export it again"
+                )
+            count = n
+    elif suffix == ".ply":
+        header = head.split(b"end_header", 1)[0].decode("ascii", "replace")
+        for line in header.splitlines():
+            parts = line.split()
+            if parts[:2] == ["element", "face"] and len(parts) == 3 and parts[2].isdigit():
+                count = int(parts[2])
+    if count is not None and count > MAX_MESH_FACES:
+        raise ConfigError(
+            f"mesh {str(path)!r} has {count:,} triangles: allowed at most {MAX_MESH_FACES:,}; "
+            "decimate it (e.g. MeshLab's quadric edge collapse, or trimesh's "
+            "simplify_quadric_decimation) to a few ten thousand"
+        )
+
+
 def _prepare_mesh(
     path: Path, unit: str, pose: str, coacd_threshold: float, largest_body: bool
 ) -> dict:
@@ -708,7 +744,10 @@ def _prepare_mesh(
         log.info("reading mesh %s ...", path.name)
         mesh = trimesh.load(str(path), force="mesh", process=True)
     except Exception as err:  # noqa: BLE001 - trimesh raises many types for bad files
-        raise ConfigError(f"mesh {str(path)!r} cannot be read: {err}") from err
+        # trimesh's own failures name its internals (a missing optional module for text
+        # it could not decode): the user needs to know the file is not a mesh it reads
+        why = "a damaged or truncated file?" if isinstance(err, ImportError) else str(err)
+        raise ConfigError(f"mesh {str(path)!r} cannot be read as a mesh ({why})") from err
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise ConfigError(f"mesh {str(path)!r} holds no triangles")
     if len(mesh.faces) > MAX_MESH_FACES:
@@ -718,13 +757,7 @@ def _prepare_mesh(
             "trimesh's simplify_quadric_decimation) to a few ten thousand"
         )
     mesh.apply_scale(MESH_SCALES[unit])
-    if not mesh.is_watertight:
-        mesh.fill_holes()
-    if not mesh.is_watertight:
-        raise ConfigError(
-            f"mesh {str(path)!r} is not watertight; mass properties need a closed surface "
-            "(repair it, e.g. with MeshLab's 'close holes')"
-        )
+    repaired = _closed_solid(mesh, path)
     if mesh.volume < 0:
         mesh.invert()
     mesh, dropped = _one_body(mesh, path, largest_body)
@@ -749,7 +782,41 @@ def _prepare_mesh(
         "piece_vertices": np.concatenate(pieces).astype(np.float64),
         "piece_sizes": np.array([len(p) for p in pieces], np.int64),
         "dropped_note": np.frombuffer(dropped.encode(), np.uint8),
+        "repair_note": np.frombuffer(repaired.encode(), np.uint8),
     }
+
+
+def _closed_solid(mesh: trimesh.Trimesh, path: Path) -> str:
+    """Make mesh (in place) a closed, consistently wound solid, or refuse it: a surface
+    with a hole or a triangle turned the wrong way has no volume, mass or centre of
+    mass to trust. Small repairs (trimesh's fill_holes, fix_winding) are kept only when
+    the result is a solid; then the returned note says what was repaired, for the
+    caller to warn with (a repair may guess a surface: check the mass and outline);
+    "" when nothing was."""
+    done = []
+    if not mesh.is_watertight:
+        before = len(mesh.faces)
+        mesh.fill_holes()
+        done.append(f"{len(mesh.faces) - before} triangles added to close its holes")
+    if mesh.is_watertight and not mesh.is_winding_consistent:
+        trimesh.repair.fix_winding(mesh)
+        done.append("triangles facing the wrong way turned")
+    if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume < 0:
+        mesh.invert()  # wound inside out: the same solid
+    if not (mesh.is_watertight and mesh.is_winding_consistent and mesh.is_volume):
+        raise ConfigError(
+            f"mesh {str(path)!r} is not a closed solid (a hole, or triangles facing "
+            "inconsistently), and could not be repaired: mass properties need a closed, "
+            "consistently wound surface (repair it, e.g. with MeshLab's 'close holes' and "
+            "'re-orient faces coherently')"
+        )
+    if not done:
+        return ""
+    return (
+        f"mesh {str(path)!r} was not a closed solid: {' and '.join(done)}; the mass, "
+        "centre of mass and outline follow from that repair -- check them, or repair the "
+        "file yourself"
+    )
 
 
 def _one_body(mesh: trimesh.Trimesh, path: Path, largest_body: bool) -> tuple[trimesh.Trimesh, str]:

@@ -758,23 +758,44 @@ def optimize(
 
 
 def _empty_message(obj, gripper, config, picks: PickBatch) -> str:
-    counts = picks.rejected
-    top = max(counts, key=counts.get) if counts and any(counts.values()) else "off_object"
-    advice = {
-        "off_object": "the offset ranges miss the object; reduce x_range_mm/y_range_mm",
+    """Why no candidate was feasible, in the user's words: each reason that rejected a
+    tenth of them or more, with its count and what to change (the most common first)."""
+    counts = {k: int(v) for k, v in (picks.rejected or {}).items() if v}
+    total = sum(counts.values())
+    default = PickConfig()
+    raised = (
+        f"; the minimum coverage {config.min_coverage:g} is above the default "
+        f"{default.min_coverage:g}: lower it, and more poses fit"
+        if config.min_coverage > default.min_coverage
+        else ""
+    )
+    why = {
+        "off_object": (
+            "the pose missed the object",
+            "the offset ranges miss the object: reduce x_range_mm / y_range_mm",
+        ),
         "too_wide": (
-            f"the object is wider than the stroke of {gripper.name} ({gripper.stroke_mm:g} mm) "
-            f"with a {config.safety_zone_mm:g} mm safety zone at every tried pose; use a gripper "
-            "with a larger stroke or a smaller safety_zone_mm"
+            "the part was wider than the fingers can open around it",
+            f"use a gripper with a larger stroke (now {gripper.stroke_mm:g} mm) or a smaller "
+            f"safety zone (now {config.safety_zone_mm:g} mm){raised}",
         ),
-        "clearance": "the fingers land on the object everywhere; use a larger stroke",
-        "coverage": f"lower min_coverage (now {config.min_coverage:g})",
+        "clearance": (
+            "a finger landed on the object",
+            "use a larger stroke, or a smaller safety zone",
+        ),
+        "coverage": (
+            "the object filled too little of the region between the pads",
+            f"lower the minimum coverage (now {config.min_coverage:g}; default "
+            f"{default.min_coverage:g})",
+        ),
         "pad_path": (
-            "the linkage's near pad rides over the part at every tried pose (its pads "
-            "descend while closing); a parallel-jaw gripper or centred poses may take it"
+            "the linkage's near pad rode over the part while closing",
+            "a parallel-jaw gripper or centred poses may take it",
         ),
-    }[top]
+    }
+    shown = [k for k in sorted(counts, key=counts.get, reverse=True) if counts[k] >= 0.1 * total]
+    reasons = "; ".join(f"{counts[k]:,} because {why[k][0]} ({why[k][1]})" for k in shown)
     return (
         f"no feasible pick-point for {obj.name} with {gripper.name} after "
-        f"{picks.n_candidates} candidates (rejected: {counts}): {advice}"
+        f"{picks.n_candidates:,} candidates: {reasons or why['off_object'][1]}"
     )

@@ -256,6 +256,37 @@ def cli_flags(settings: Settings, paths: dict[str, Path]) -> list[str]:
     ]
 
 
+def sweep_range(name: str) -> tuple[float, float, float]:
+    """A parameter's starting sweep (start, end, step): five values around its default
+    within its declared range, so that choosing another parameter never keeps the
+    previous one's numbers (a friction's 0.4-1.0 as a finger width in mm)."""
+    from mjx_pick.core.config import field_number
+    from mjx_pick.studies.sweeps import SECTIONS as SWEPT
+    from mjx_pick.studies.sweeps import canonical, describe_params
+
+    key = canonical(name)
+    info = next(r for r in describe_params(key) if r["name"] == key)
+    section, field = key.split(".", 1)
+    rule = field_number(SWEPT[section], field)
+    default = info["default"]
+    if default is None:  # a field whose default is "none": the middle of its range
+        default = ((rule.lo or 0.0) + (rule.hi if rule.hi is not None else 1.0)) / 2
+    default = float(default)
+    lo = default * 0.5 if default > 0 else default - 1.0
+    hi = default * 1.5 if default > 0 else default + 1.0
+    if rule.lo is not None:
+        lo = max(lo, rule.lo)
+    if rule.hi is not None:
+        hi = min(hi, rule.hi)
+    if not hi > lo:  # a default on the edge of its range
+        return default, default, 1.0
+    step = float(f"{(hi - lo) / 4:.2g}") or 1.0
+    start = round(round(lo / step) * step, 10)
+    if rule.lo is not None and start < rule.lo:
+        start = round(start + step, 10)
+    return start, round(start + 4 * step, 10), step
+
+
 def sweep_values(start, end, step) -> tuple[tuple[float, ...] | None, dict]:
     """The paper's sweep tab (start, end, step) as values, or errors by field."""
     errors = {}

@@ -40,6 +40,19 @@ class PageState:
         """The log file of a run the page starts."""
         return self.workdir / "logs" / f"{name}.log"
 
+    def inside(self, text: str) -> Path | None:
+        """The folder a user typed, when it lies inside the work folder (a relative name
+        is read from the work folder; links are followed before the test), else None:
+        the page opens nothing else, so a server reachable beyond this machine cannot
+        be used to read it."""
+        text = (text or "").strip()
+        if not text:
+            return None
+        root = self.workdir.resolve()
+        path = Path(text)
+        path = (path if path.is_absolute() else root / path).resolve()
+        return path if path == root or root in path.parents else None
+
     def run_folder(self, name: str) -> Path | None:
         """The output folder of a run named name, or None if the name is not allowed."""
         name = name.strip()

@@ -108,6 +108,20 @@ def shared_candidates(
     return cand, batches, reasons
 
 
+def unequal_forces(ranking: list[dict]) -> str:
+    """A sentence for a ranking whose grippers squeezed different grip forces (one
+    could not reach F_d and ran at its most), '' when they all squeezed the same: a
+    ranking at unequal forces compares the forces too, and must say so."""
+    forces = {row["gripper"]: row.get("grip_force_n") for row in ranking}
+    if len({f for f in forces.values() if f is not None}) <= 1:
+        return ""
+    each = ", ".join(f"{g} at {f:g} N" for g, f in forces.items())
+    return (
+        f"the grippers squeezed different grip forces ({each}): a gripper that cannot "
+        "reach the set force runs at its largest, so the ranking compares forces too"
+    )
+
+
 def compare(
     obj: ObjectModel,
     grippers: list[GripperSpec],
@@ -461,6 +475,13 @@ def _design(
             by_name = {g.name: g for g in pool}
             pool = [by_name[row["gripper"]] for row in res.ranking[:keep]]
         best = pool[0]
+        last = next(row for row in history[-1] if row["gripper"] == best.name)
+        if last["feasible"] == 0 or last["success_rate"] == 0:
+            raise ConfigError(
+                f"design: no variant within the bounds picks the part: the best, {best.name}, "
+                f"succeeded on none of its {last['feasible']} feasible pick-points; widen the "
+                "bounds"
+            )
         contenders = [best] if best == base.gripper else [best, base.gripper]
         if bar is not None:
             bar.note("final: the best against the base gripper on fresh pick-points")

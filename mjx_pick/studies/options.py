@@ -81,6 +81,11 @@ class RunOptions:
         """resume needs an output folder to continue from."""
         if self.resume and self.out is None:
             raise ConfigError("--resume needs --out: the folder of the run to continue")
+        if self.resume and not Path(self.out).is_dir():
+            raise ConfigError(
+                f"--resume: {self.out} does not exist, so there is no run to continue; leave "
+                "out --resume to start one there (or check the folder's name)"
+            )
 
     def only(self, study: str, *names: str) -> None:
         """Refuse fields that study does not use (given a value other than the default)."""

@@ -298,6 +298,7 @@ def sweep(
                 s = apply(s, name, value)
             settings.append(s)
         _refuse_narrow(obj, combos, settings, pick_config)  # before any draw or folder
+        numbers.check("sweep_simulations", len(combos) * n, "variants x pick-points")
         store, complete = open_store(
             out, "sweep", request, resume=opts.resume, overwrite=opts.overwrite
         )

@@ -20,7 +20,7 @@ from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS, fmt
 from mjx_pick.gui.one_pick import simulate_untraced
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.replay_view import ReplayView
-from mjx_pick.gui.page.widgets import error_label, show_picture, whole
+from mjx_pick.gui.page.widgets import checked, error_label, show_picture
 from mjx_pick.gui.state import PageState
 
 TABLE_COLUMNS = (
@@ -143,7 +143,13 @@ class AnalyzeTab:
         from mjx_pick.outputs.reporting import Run
 
         self.error.set_text("")
-        path = Path((self.run_dir.value or "").strip()).expanduser()
+        path = self.state.inside(self.run_dir.value)
+        if path is None:
+            self.error.set_text(
+                f"{(self.run_dir.value or '').strip() or '(empty)'}: only run folders inside "
+                f"the work folder ({self.state.workdir}) open here; give a run's name"
+            )
+            return
         unfinished = self.unfinished(path)
         if unfinished:
             self.error.set_text(unfinished)
@@ -311,7 +317,7 @@ class AnalyzeTab:
             return
         if self.panel.busy(self.error):
             return
-        n = whole(self.export_n, 1, 50)
+        n = checked(self.export_n, "report_n")
         if n is None:
             return
         log = self.state.log(f"{opened.path.name}-report")

@@ -19,10 +19,10 @@ from mjx_pick.gui.formatting import fmt, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
+    checked,
     error_label,
     need_object,
     run_folder,
-    whole,
 )
 from mjx_pick.gui.state import PageState
 
@@ -101,8 +101,8 @@ class GenerateTab:
                 self.run_summary = ui.markdown("").props('data-testid="run-summary"')
 
     def pick_numbers(self) -> tuple[int, int] | None:
-        n = whole(self.n, 1, 10_000_000)
-        seed = whole(self.seed, 0, 2**31 - 1)
+        n = checked(self.n, "n")
+        seed = checked(self.seed, "seed")
         return None if n is None or seed is None else (n, seed)
 
     async def generate(self) -> None:

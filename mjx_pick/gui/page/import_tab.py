@@ -115,11 +115,13 @@ class ImportTab:
         problem = check_upload(name, len(data), data)
         if problem:
             self.upload_error.set_text(problem)
+            self.forget_upload()
             return
         try:
             self.upload_path = await run.io_bound(save_upload, data, name, self.state.uploads)
         except (OSError, ConfigError) as err:
             self.upload_error.set_text(f"{name}: cannot be stored ({err})")
+            self.forget_upload()
             return
         self.asset.value = UPLOADED
         self.show_mesh_fields(Path(name).suffix.lower() in MESH_SUFFIXES)
@@ -127,6 +129,13 @@ class ImportTab:
         self.object_info.set_text(
             f"uploaded {name}: set its scale, thickness and mass, then Import object"
         )
+
+    def forget_upload(self) -> None:
+        """A refused upload replaces the one before it: Import must not take the earlier
+        file, and no later tab runs on the object imported from it."""
+        self.upload_path = None
+        if self.asset.value == UPLOADED and self.state.obj is not None:
+            self.forget_object()
 
     def show_mesh_fields(self, mesh: bool) -> None:
         """A mesh has a unit; an image has a scale and a thickness."""
@@ -148,7 +157,8 @@ class ImportTab:
         from mjx_pick.core.objects import load_object
 
         self.import_error.set_text("")
-        self.upload_error.set_text("")  # an earlier upload's message is history now
+        if self.asset.value != UPLOADED or self.upload_path is not None:
+            self.upload_error.set_text("")  # an earlier upload's message is history now
         self.import_warning.set_text("")
         for w in self.fields().values():
             w.error = None

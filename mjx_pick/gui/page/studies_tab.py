@@ -20,6 +20,7 @@ from mjx_pick.gui.formatting import fmt, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
+    checked,
     error_label,
     need_object,
     picture,
@@ -27,7 +28,6 @@ from mjx_pick.gui.page.widgets import (
     show_picture,
     show_rows,
     upload,
-    whole,
 )
 from mjx_pick.gui.state import PageState
 from mjx_pick.gui.uploads import OUTCOMES_MAX_BYTES, check_outcomes_upload, save_upload
@@ -71,6 +71,7 @@ class CompareStudy:
                     'data-testid="start-compare"'
                 )
                 self.error = error_label().props('data-testid="compare-error"')
+                self.note = ui.label("").props('data-testid="compare-note"')
             with ui.column().classes("grow"):
                 self.table = ui.table(columns=[], rows=[], row_key="rank").props(
                     'dense data-testid="compare-table"'
@@ -79,9 +80,10 @@ class CompareStudy:
 
     def start(self) -> None:
         self.error.set_text("")
+        self.note.set_text("")
         if self.panel.busy(self.error) or not need_object(self.state, self.error):
             return
-        n = whole(self.n, 1, 1_000_000)
+        n = checked(self.n, "n")
         settings = self.form.read()
         out = run_folder(self.state, self.name)
         if n is None or settings is None or out is None:
@@ -102,9 +104,12 @@ class CompareStudy:
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         if progress.state == "complete":
             self.name.value = f"compare-{stamp()}"  # this name is taken now
+            from mjx_pick.studies.comparison import unequal_forces
+
             rows = json.loads((job.out / "ranking.json").read_text())
             keys = ["rank", "gripper", "success_rate", "success_ci", "score_mean"]
-            show_rows(self.table, rows, keys + ["feasible", "p_vs_best"])
+            show_rows(self.table, rows, keys + ["grip_force_n", "feasible", "p_vs_best"])
+            self.note.set_text(unequal_forces(rows))
             show_picture(self.image, (job.out / "maps.png").read_bytes())
 
 
@@ -137,14 +142,9 @@ class RobustStudy:
         if opened is None:
             self.error.set_text("open an evaluate output folder in tab 4 first")
             return
-        k = whole(self.k, 1, 1000)
-        m = whole(self.m, 2, 10_000)
-        sig = []
-        for w in (self.sigma_xy, self.sigma_yaw):
-            w.error = None
-            if w.value is None or not 0 <= w.value <= 100:
-                w.error = "from 0 to 100"
-            sig.append(w.value)
+        k = checked(self.k, "top_k")
+        m = checked(self.m, "m")
+        sig = [checked(self.sigma_xy, "sigma_xy_mm"), checked(self.sigma_yaw, "sigma_yaw_deg")]
         settings = self.form.read()
         if (
             k is None
@@ -257,7 +257,7 @@ class CalibrationStudy:
         if self.outcomes_path is None:
             self.error.set_text("upload an outcomes CSV first")
             return
-        steps = whole(self.steps, 1, 100_000)
+        steps = checked(self.steps, "steps")
         settings = self.form.read()
         out = run_folder(self.state, self.name)
         params = list(self.params.value or [])

@@ -7,17 +7,19 @@ from pathlib import Path
 
 from nicegui import ui
 
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.numbers import INPUTS
 from mjx_pick.gui import forms, jobs
 from mjx_pick.gui.formatting import column_label, fmt, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
+    checked,
     error_label,
     need_object,
     picture,
     run_folder,
     show_picture,
-    whole,
 )
 from mjx_pick.gui.state import PageState
 
@@ -35,11 +37,15 @@ class SweepTab:
                     value="contact.pad_friction",
                     label="parameter",
                     with_input=True,
+                    on_change=self.on_param,
                 ).classes("w-full")
-                self.start = ui.number("start", value=0.4, step=0.05)
-                self.end = ui.number("end", value=1.0, step=0.05)
-                self.step = ui.number("step", value=0.2, step=0.05)
-                self.n = ui.number("simulations per value", value=100, step=1)
+                self.start = ui.number("start", value=0.4, step=0.05, on_change=self.estimate)
+                self.end = ui.number("end", value=1.0, step=0.05, on_change=self.estimate)
+                self.step = ui.number("step", value=0.2, step=0.05, on_change=self.estimate)
+                self.n = ui.number(
+                    "simulations per value", value=100, step=1, on_change=self.estimate
+                )
+                self.count = ui.label("").props('data-testid="sweep-count"')
                 self.name = ui.input("run folder name", value=f"sweep-{stamp()}")
                 ui.button("Start sweep", on_click=self.start_sweep).props(
                     'data-testid="start-sweep"'
@@ -51,6 +57,31 @@ class SweepTab:
                 )
                 self.image = picture("w-full max-w-3xl")
 
+    def on_param(self, _=None) -> None:
+        """Another parameter: its own starting range (never the last one's numbers)."""
+        if not self.param.value:
+            return
+        try:
+            start, end, step = forms.sweep_range(self.param.value)
+        except (ConfigError, StopIteration, KeyError):
+            return
+        self.start.value, self.end.value, self.step.value = start, end, step
+        for w in (self.start, self.end, self.step):
+            w.props(f"step={step:g}")
+        self.estimate()
+
+    def estimate(self, _=None) -> None:
+        """How many simulations the sweep as set would run, before it starts."""
+        values, _errors = forms.sweep_values(self.start.value, self.end.value, self.step.value)
+        n = self.n.value
+        if values is None or n is None or n != int(n) or n < 1:
+            self.count.set_text("")
+            return
+        total = len(values) * int(n)
+        self.count.set_text(
+            f"{len(values)} values x {int(n):,} pick-points = {total:,} simulations"
+        )
+
     def start_sweep(self) -> None:
         """``mjx-pick sweep`` of the chosen parameter with the page's object and settings."""
         self.error.set_text("")
@@ -60,7 +91,7 @@ class SweepTab:
         values, errors = forms.sweep_values(*(w.value for w in fields.values()))
         for key, widget in fields.items():
             widget.error = errors.get(key)
-        n = whole(self.n, 1, 1_000_000)
+        n = checked(self.n, "n")
         if n is None:
             return
         settings = self.form.read()
@@ -69,6 +100,13 @@ class SweepTab:
             return
         if not self.param.value:
             self.error.set_text("choose a parameter")
+            return
+        most = int(INPUTS["sweep_simulations"].hi)
+        if len(values) * int(n) > most:
+            self.n.error = (
+                f"{len(values)} values x {int(n):,} = {len(values) * int(n):,} simulations: "
+                f"at most {most:,} in one sweep"
+            )
             return
         problem = forms.sweep_problem(settings, self.param.value, values)
         if problem:

@@ -6,6 +6,8 @@ from pathlib import Path
 
 from nicegui import ui
 
+from mjx_pick.core.config import ConfigError
+from mjx_pick.core.numbers import INPUTS
 from mjx_pick.gui.formatting import column_label, fmt_cell
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
 from mjx_pick.gui.views import data_uri
@@ -42,14 +44,35 @@ def show_picture(image: ui.image, data: bytes, mime: str = "image/png") -> None:
     image.set_visibility(True)
 
 
-def whole(widget, lo: int, hi: int) -> int | None:
-    """A whole number field in [lo, hi], or None with the message under it."""
-    v = widget.value
+def checked(widget, name: str) -> int | float | None:
+    """A number field checked by the input's one rule (``core.numbers.INPUTS[name]``,
+    as the CLI and the library check it), or None with the rule under the field."""
+    rule = INPUTS[name]
     widget.error = None
-    if v is None or v != int(v) or not lo <= v <= hi:
-        widget.error = f"a whole number from {lo} to {hi:,}"
+    value = widget.value
+    try:
+        if value is None or value == "":
+            raise ConfigError("empty")
+        return rule.check(name, value)
+    except ConfigError:
+        widget.error = rule_words(rule)
         return None
-    return int(v)
+
+
+def rule_words(rule) -> str:
+    """What a number field takes, in the page's words: 'a whole number from 1 to 1,000'."""
+    kind = "a whole number" if rule.integer else "a number"
+    lo = None if rule.lo is None else f"{rule.lo:,.10g}"
+    hi = None if rule.hi is None else f"{rule.hi:,.10g}"
+    if lo is not None and hi is not None:
+        low = f"above {lo}" if rule.lo_open else f"from {lo}"
+        high = f"below {hi}" if rule.hi_open else f"to {hi}"
+        return f"{kind} {low} {high}"
+    if lo is not None:
+        return f"{kind} {'above' if rule.lo_open else 'of at least'} {lo}"
+    if hi is not None:
+        return f"{kind} {'below' if rule.hi_open else 'of at most'} {hi}"
+    return kind
 
 
 def run_folder(state: PageState, name_widget, resume: bool = False) -> Path | None:

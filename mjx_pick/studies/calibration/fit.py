@@ -19,7 +19,12 @@ from mjx_pick.engine import registry
 from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.rundir import claim, config_hash, finish
 from mjx_pick.studies.calibration import estimators as E
-from mjx_pick.studies.calibration.identify import data_nll, identifiability, theta_of_z
+from mjx_pick.studies.calibration.identify import (
+    at_bound,
+    data_nll,
+    identifiability,
+    theta_of_z,
+)
 from mjx_pick.studies.calibration.parameters import fitted_contact
 from mjx_pick.studies.options import RunOptions
 
@@ -221,6 +226,11 @@ def _open_fit(problem, out_dir: Path | None, resume: bool, state, **fit):
         return None, None, state, history, step, wall0, visited
     if (out_dir / "checkpoint").is_dir() and not resume:
         raise ConfigError(f"{out_dir} holds an earlier fit: pass --resume or another --out")
+    if resume and not out_dir.is_dir():
+        raise ConfigError(
+            f"--resume: {out_dir} does not exist, so there is no fit to continue; leave out "
+            "--resume to start one there (or check the folder's name)"
+        )
     space = problem.space
     request = {"object": problem.object.summary(), "names": list(problem.names)}
     request.update(settings=to_dict(problem.settings), steps=fit["steps"])
@@ -310,6 +320,15 @@ def _finish(
         lost = tuple(n for n in problem.names if not ident[n]["identified"])
         for n in lost:  # not pinned by the data: keep the start, do not pretend
             values[n] = ident[n]["written"] = kept_value(initial[n], ident[n]["interval"])
+    else:  # no intervals: still, an optimum the bounds stopped is no answer
+        z = space.z([optimum[n] for n in problem.names])
+        ident = {}
+        for i, n in enumerate(problem.names):
+            side = at_bound(space, z, i)
+            ident[n] = {"identified": None, "at_bound": side, "interval": None}
+            if side is not None:
+                ident[n]["written"] = values[n] = initial[n]
+        lost = tuple(n for n in problem.names if ident[n]["at_bound"])
     answer = space.theta([values[n] for n in problem.names])
     acc_after = holdout.accuracy(answer) if holdout is not None else None
     contact = fitted_contact(base, values)

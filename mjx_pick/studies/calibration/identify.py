@@ -375,7 +375,9 @@ def at_bound(space, z, i: int, half_width_z: float | None = None) -> str | None:
     where the bound stopped the search, not where the data put it: the best value may
     lie beyond, and an interval cut at the bound is no 95 % interval -- such a
     parameter is never reported identified."""
-    tol = AT_BOUND * (space.z_hi[i] - space.z_lo[i])
+    # theta keeps every value AT_BOUND inside the bounds: a value on that margin is on
+    # the bound, whatever float32's sigmoid rounds it to
+    tol = AT_BOUND * (1 + 1e-3) * (space.z_hi[i] - space.z_lo[i])
     if half_width_z is not None and np.isfinite(half_width_z):
         tol = max(tol, float(half_width_z))
     if z[i] <= space.z_lo[i] + tol:

@@ -131,6 +131,7 @@ def write_result(result, problem, out_dir: Path) -> None:
             "optimum": result.optimum,
             "not_identified": list(result.not_identified),
             "identifiability": result.identifiability,
+            "notes": list(getattr(problem, "notes", [])),
             "bounds": {
                 n: [float(a), float(b)]
                 for n, a, b in zip(space.names, space.lo, space.hi, strict=True)
@@ -204,6 +205,21 @@ def _loss_plot(result, path: Path) -> None:
     save_png(fig, path)
 
 
+def what_was_written(result, name: str) -> str:
+    """One sentence: the value written for a parameter the data did not identify, and
+    why that one (its start, or its interval's end; at a bound without intervals)."""
+    info = (result.identifiability or {}).get(name, {})
+    start, written = result.initial[name], result.values[name]
+    side = info.get("at_bound")
+    bound = f"its optimum lies on its {side} bound; " if side else ""
+    if abs(written - start) <= 1e-12 * max(1.0, abs(start)):
+        return f"{name}: {bound}kept at its starting value {start:.4g}"
+    return (
+        f"{name}: {bound}its starting value {start:.4g} lies outside the data's 95 % "
+        f"interval, whose nearest end {written:.4g} is written"
+    )
+
+
 def report_md(result, problem) -> str:
     ident = result.identifiability or {}
     lines = [
@@ -229,16 +245,19 @@ def report_md(result, problem) -> str:
             f"{result.values[n]:.4g} |"
         )
     if result.not_identified:
+        lines += ["", "Not identified by these data (what contact.toml holds for each):"]
+        lines += [f"- {what_was_written(result, n)}" for n in result.not_identified]
         lines += [
             "",
-            f"Not identified by these data: {', '.join(result.not_identified)} -- kept at "
-            "their starting values (the data alone do not narrow them to half their "
-            "prior's range; or, along the parameter's bounds, other values fit the data "
-            "as well as the optimum; or, with the other parameters re-fitted -- the "
-            "profile likelihood -- values beyond its interval do: a valley across "
-            "parameters, as pad friction against grip force). Measure what moves them "
-            "(traces, other grip forces) to fit them.",
+            "The data alone do not narrow them to half their prior's range; or, along "
+            "the parameter's bounds, other values fit the data as well as the optimum; "
+            "or, with the other parameters re-fitted -- the profile likelihood -- values "
+            "beyond its interval do: a valley across parameters, as pad friction against "
+            "grip force; or the optimum lies on a bound, which stopped the search there. "
+            "Measure what moves them (traces, other grip forces) to fit them.",
         ]
+    if getattr(problem, "notes", None):
+        lines += ["", "Notes:"] + [f"- {note}" for note in problem.notes]
     if result.history:
         lines += [
             "",

@@ -131,7 +131,19 @@ class Problem:
         self.names = canonical_params(names)
         # outcomes of another mass, gripper or procedure fit confidently and wrongly
         self.mismatches = check_measured(outcomes.measured, obj, s, force_mismatch)
+        # what the fit could not check, said with its results (report.md, calibration.json)
+        self.notes: list[str] = []
+        if outcomes.measured is None:
+            self.notes.append(
+                "the outcomes have no record of what they were measured with (a TOML of "
+                "the CSV's name beside it): the part's mass, the gripper and the procedure "
+                "were not checked against this fit's"
+            )
         if self.mismatches:
+            self.notes.append(
+                "fitted although the outcomes were measured with other settings "
+                "(--force-mismatch): " + "; ".join(self.mismatches)
+            )
             warnings.warn(
                 "fitting outcomes measured with other settings (forced): "
                 + "; ".join(self.mismatches),

@@ -6,6 +6,7 @@ Beside an outcomes CSV, a TOML of the same name (``block_1kg_rg2.toml`` beside
     object = "block"          # what was picked (said in a mismatch, never compared)
     mass_g = 1000.0           # the part's mass
     gripper = "onrobot-rg2"   # the gripper's name (GripperSpec.name)
+    synthetic = "sha256:..."  # simulated, not measured: the digest of what made it
     [grasp]                   # any GraspConfig field the cell's procedure set
     lift_height_mm = 100.0
 
@@ -25,7 +26,7 @@ from pathlib import Path
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.procedure import GraspConfig
 
-KEYS = ("object", "mass_g", "gripper", "grasp")
+KEYS = ("object", "mass_g", "gripper", "synthetic", "grasp")
 MASS_TOLERANCE = 0.02  # relative: a scale's reading and a model's volume x density
 
 

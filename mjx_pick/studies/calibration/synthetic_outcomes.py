@@ -75,3 +75,23 @@ def synthetic_outcomes(
         lift_time_s=lift,
         traces=tuple(row_traces),
     )
+
+
+def synthetic_digest(obj: ObjectModel, hidden: Settings) -> str:
+    """What decides synthetic outcomes besides their poses and forces, as one digest:
+    the hidden settings and the simulated model (the object, gripper, contact and
+    solver as MuJoCo reads them). Shipped synthetic outcomes record it, so that a test
+    sees when the physics they ship with no longer made them."""
+    import hashlib
+    import json
+
+    from mjx_pick.core.config import to_dict
+    from mjx_pick.core.scene import build_scene
+
+    h = hidden
+    scene = build_scene(obj, h.gripper, h.contact, h.solver, h.grasp)
+    settings = {k: v for k, v in to_dict(h).items()}
+    settings["gripper"].pop("source", None)  # where a preset was read from
+    obj_summary = {k: v for k, v in obj.summary().items() if k != "source"}
+    text = json.dumps({"settings": settings, "object": obj_summary}, sort_keys=True, default=str)
+    return "sha256:" + hashlib.sha256((text + scene.portable_xml()).encode()).hexdigest()[:16]

@@ -1,0 +1,116 @@
+"""The GUI's second routes, in Chromium: a refused upload, a gripper's name, a folder
+outside the work folder -- each refused in the page's words, nothing silently reused.
+The harness (server, browser, page) is tests/test_gui.py's."""
+
+from __future__ import annotations
+
+import json
+
+import test_gui
+from test_gui import BLOCK, import_shipped, wait_job
+
+# test_gui's fixtures: one GUI server for this module, one browser, a page per test
+server, browser, page = test_gui.server, test_gui.browser, test_gui.page
+
+
+def upload_object(page, path) -> None:
+    page.get_by_test_id("object-upload").locator("input[type=file]").set_input_files(str(path))
+
+
+def test_a_refused_upload_is_not_replaced_by_the_one_before(page, tmp_path):
+    page.get_by_text("1 Import object model").click()
+    upload_object(page, BLOCK)
+    page.get_by_text("uploaded block.png").wait_for()
+    page.get_by_label("image scale (px per mm)", exact=True).fill("10")
+    page.get_by_label("thickness (mm)", exact=True).fill("20")
+    page.get_by_label("mass (g)", exact=True).fill("43.2")
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+    empty = tmp_path / "empty.png"
+    empty.write_bytes(b"")
+    upload_object(page, empty)
+    page.get_by_test_id("upload-error").filter(has_text="empty.png").wait_for()
+    assert "No object imported" in page.get_by_test_id("object-info").inner_text()
+    page.get_by_test_id("import").click()  # the earlier file is not taken in its place
+    page.get_by_test_id("import-error").filter(has_text="upload an image").wait_for()
+    assert "No object imported" in page.get_by_test_id("object-info").inner_text()
+    assert "empty.png" in page.get_by_test_id("upload-error").inner_text()  # still said
+
+
+def test_a_gripper_name_is_any_text_but_never_a_path(page, server, tmp_path):
+    from playwright.sync_api import expect
+
+    _, work = server
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    base = (BLOCK.parents[2] / "assets" / "grippers" / "robotiq-2f85.toml").read_text()
+    evil = tmp_path / "evil.toml"
+    evil.write_text(base.replace('name = "robotiq-2f85"', 'name = "../../etc/g"'))
+    upload = page.get_by_test_id("gripper-upload").locator("input[type=file]")
+    upload.set_input_files(str(evil))
+    page.get_by_test_id("toml-error").filter(has_text="is not allowed").wait_for()
+    smile = tmp_path / "smile.toml"
+    smile.write_text(base.replace('name = "robotiq-2f85"', 'name = "grip 😀"'), "utf-8")
+    upload.set_input_files(str(smile))
+    expect(page.get_by_test_id("toml-error")).to_have_text("")  # taken: the refusal is gone
+    page.get_by_label("lift height (mm)", exact=True).fill("5")
+    page.get_by_label("hold (s)", exact=True).fill("0.05")
+    page.get_by_text("3 Generate input data").click()
+    page.get_by_label("pick-points", exact=True).fill("2")
+    page.get_by_label("run folder name").fill("smile")
+    page.get_by_test_id("start-batch").click()
+    status = wait_job(page, "evaluate smile")
+    assert status.startswith("complete"), status
+    config = json.loads((work / "smile" / "config.json").read_text(encoding="utf-8"))
+    assert config["gripper"]["name"] == "grip 😀"
+    assert not (work.parent / "etc").exists()
+
+
+def test_tab_4_opens_only_folders_inside_the_work_folder(page, tmp_path):
+    page.get_by_text("4 Analyze").first.click()
+    for outside in ("/etc", "../..", str(tmp_path)):
+        page.get_by_test_id("run-dir").fill(outside)
+        page.get_by_test_id("open-run").click()
+        error = page.get_by_test_id("analyze-error")
+        error.filter(has_text="inside the work folder").wait_for()
+        assert outside in error.inner_text()
+
+
+def test_a_sweep_takes_its_parameters_own_range_and_says_its_size(page):
+    from playwright.sync_api import expect
+
+    import_shipped(page)
+    page.get_by_text("Parameter sweep").click()
+    select = page.get_by_label("parameter", exact=True)
+    select.fill("gripper.finger_width_mm")
+    page.get_by_role("option", name="gripper.finger_width_mm", exact=True).click()
+    # the finger's own range (around its 22 mm), not the friction's 0.4-1.0
+    expect(page.get_by_label("start", exact=True)).to_have_value("11")
+    expect(page.get_by_label("end", exact=True)).to_have_value("33")
+    count = page.get_by_test_id("sweep-count")
+    box = page.get_by_label("simulations per value", exact=True)
+    box.fill("1000000")
+    box.blur()
+    expect(count).to_have_text("5 values x 1,000,000 pick-points = 5,000,000 simulations")
+    box.fill("3000000")
+    box.blur()
+    page.get_by_label("run folder name").last.fill("huge")
+    page.get_by_test_id("start-sweep").click()
+    page.locator(".q-field__messages").filter(has_text="at most 10,000,000").wait_for()
+    assert not page.get_by_test_id("job-title").is_visible()
+
+
+def test_compare_says_when_grippers_ran_at_different_forces(page, server):
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    page.get_by_label("lift height (mm)", exact=True).fill("5")
+    page.get_by_label("hold (s)", exact=True).fill("0.05")  # F_d stays 50 N: above the RG2's
+    page.get_by_text("Studies", exact=True).click()
+    page.get_by_label("pick-points", exact=True).filter(visible=True).first.fill("2")
+    page.get_by_label("run folder name").filter(visible=True).first.fill("forces")
+    page.get_by_test_id("start-compare").click()
+    assert wait_job(page, "compare forces").startswith("complete")
+    note = page.get_by_test_id("compare-note")
+    note.filter(has_text="different grip forces").wait_for()
+    assert "onrobot-rg2 at 40 N" in note.inner_text()
+    assert "robotiq-2f85 at 50 N" in note.inner_text()
