@@ -298,7 +298,7 @@ def test_paper_workflow(page, server):
     test_info = page.get_by_test_id("test-info")
     test_info.filter(has_text="score").wait_for(timeout=TIMEOUT_MS)
     text = test_info.inner_text()
-    assert "check: feasible" in text and "height compensation" in text
+    assert "check: feasible" in text and "fingertip height above the table" in text
     shot(page, "2_gripper")
 
     # 3 generate: 6 pick-points, see them, run the batch

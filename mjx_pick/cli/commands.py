@@ -416,6 +416,7 @@ def print_summary(s: dict, out, total_s: float | None = None) -> None:
 
 
 def cmd_picks(args) -> int:
+    from mjx_pick.core.pickpoints import rejected_text
     from mjx_pick.studies.pickfiles import write_picks
 
     obj, gripper = objects(args)
@@ -429,8 +430,9 @@ def cmd_picks(args) -> int:
         overwrite=args.overwrite,
     )
     print(
-        f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates; rejected "
-        f"{picks.rejected}; written to {args.out}/ (picks.csv, pick_0.png, candidates.png)"
+        f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates; rejected: "
+        f"{rejected_text(picks.rejected)}; written to {args.out}/ (picks.csv, pick_0.png, "
+        "candidates.png)"
     )
     return 0
 

@@ -724,7 +724,7 @@ def _check_mesh_header(path: Path, size: int) -> None:
                 count = int(parts[2])
     if count is not None and count > MAX_MESH_FACES:
         raise ConfigError(
-            f"mesh {str(path)!r} has {count:,} triangles: allowed at most {MAX_MESH_FACES:,}; "
+            f"mesh {str(path)!r} has {count} triangles: allowed at most {MAX_MESH_FACES}; "
             "decimate it (e.g. MeshLab's quadric edge collapse, or trimesh's "
             "simplify_quadric_decimation) to a few ten thousand"
         )

@@ -36,6 +36,23 @@ from mjx_pick.kernels import feasibility as fk
 # what a slow step is doing, said as it starts (the CLI shows it on stderr)
 log = logging.getLogger(__name__)
 REASONS = fk.REASONS
+# each feasibility outcome in a user's words (messages, the GUI, the CLI's counts)
+REASON_WORDS = {
+    "feasible": "feasible",
+    "off_object": "the gripper misses the object",
+    "too_wide": "the part is wider than the stroke, with a safety zone each side",
+    "clearance": "a finger lands on the object",
+    "coverage": "the object fills too little of the region between the pads",
+    "pad_path": "the linkage's near pad rides over the part while closing",
+}
+
+
+def rejected_text(rejected: dict) -> str:
+    """A batch's rejection counts in words, most first: '120 the gripper misses ...'."""
+    shown = sorted(((int(v), k) for k, v in (rejected or {}).items() if v), reverse=True)
+    return "; ".join(f"{v:,}: {REASON_WORDS.get(k, k)}" for v, k in shown) or "none"
+
+
 CANDIDATE_BLOCK = 4096  # candidates are drawn in fixed blocks: same seed, same stream
 # cells of the feasibility raster (yaw bins x rows x columns, ~5 bytes each while it is
 # built: the 0/1 masks, the uint16 stack and its copy on the device): more is refused
@@ -771,25 +788,25 @@ def _empty_message(obj, gripper, config, picks: PickBatch) -> str:
     )
     why = {
         "off_object": (
-            "the pose missed the object",
+            REASON_WORDS["off_object"],
             "the offset ranges miss the object: reduce x_range_mm / y_range_mm",
         ),
         "too_wide": (
-            "the part was wider than the fingers can open around it",
+            REASON_WORDS["too_wide"],
             f"use a gripper with a larger stroke (now {gripper.stroke_mm:g} mm) or a smaller "
             f"safety zone (now {config.safety_zone_mm:g} mm){raised}",
         ),
         "clearance": (
-            "a finger landed on the object",
+            REASON_WORDS["clearance"],
             "use a larger stroke, or a smaller safety zone",
         ),
         "coverage": (
-            "the object filled too little of the region between the pads",
+            REASON_WORDS["coverage"],
             f"lower the minimum coverage (now {config.min_coverage:g}; default "
             f"{default.min_coverage:g})",
         ),
         "pad_path": (
-            "the linkage's near pad rode over the part while closing",
+            REASON_WORDS["pad_path"],
             "a parallel-jaw gripper or centred poses may take it",
         ),
     }

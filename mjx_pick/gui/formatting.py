@@ -55,3 +55,13 @@ def fmt_cell(v) -> str:
     if isinstance(v, list | tuple):
         return "[" + ", ".join(fmt(x) for x in v) + "]"
     return fmt(v)
+
+
+_MARKDOWN = set("\\`*_{}[]()#+-.!|<>~")
+
+
+def md_text(text: str) -> str:
+    """Plain text (a file name, a library's message) for a markdown element: every
+    character markdown reads as markup escaped, so that contact.pad_friction keeps its
+    underscore and a path its stars."""
+    return "".join("\\" + c if c in _MARKDOWN else c for c in str(text))

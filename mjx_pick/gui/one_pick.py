@@ -29,11 +29,20 @@ def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, b
     res = checker(np.array([x]), np.array([y]), np.array([yaw]))
     reason = pp.REASONS[int(res["reason"][0])]
     tip = fingertip_height_mm(obj, settings.gripper, settings.grasp)
+    opening, coverage = float(res["opening_mm"][0]), float(res["coverage"][0])
+    measured = ", ".join(
+        text
+        for value, text in (
+            (opening, f"opening {opening:.1f} mm"),
+            (coverage, f"coverage {coverage:.2f}"),
+        )
+        if np.isfinite(value)  # a pose that misses the object has neither
+    )
     head = [
-        f"- clearance and coverage check: **{reason}** (opening "
-        f"{float(res['opening_mm'][0]):.1f} mm, coverage {float(res['coverage'][0]):.2f})",
+        f"- clearance and coverage check: **{pp.REASON_WORDS[reason]}**"
+        + (f" ({measured})" if measured else ""),
         f"- initial (closing) speed: {settings.grasp.closing_speed_mm_s:g} mm/s",
-        f"- height compensation (fingertips above the table): {tip:.1f} mm",
+        f"- fingertip height above the table: {tip:.1f} mm",
     ]
     if reason != "feasible":
         return {

@@ -16,7 +16,7 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs, views
-from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS, fmt
+from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS, fmt, md_text
 from mjx_pick.gui.one_pick import simulate_untraced
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.replay_view import ReplayView
@@ -287,7 +287,7 @@ class AnalyzeTab:
         name = (opened.config.get("object") or {}).get("name", "its object")
         if self.state.obj is None:
             self.detail.set_content(
-                "\n".join(lines) + note + f"import the run's object ({name}) in tab 1 to "
+                "\n".join(lines) + note + f"import the run's object ({md_text(name)}) in tab 1 to "
                 "simulate it here for its force plot and replay."
             )
             return None
@@ -295,7 +295,9 @@ class AnalyzeTab:
         try:
             trace, again = await run.io_bound(simulate_untraced, opened, self.state.obj, pid)
         except ConfigError as err:
-            self.detail.set_content("\n".join(lines) + note + f"it cannot be simulated here: {err}")
+            self.detail.set_content(
+                "\n".join(lines) + note + f"it cannot be simulated here: {md_text(err)}"
+            )
             return None
         self.simulated[key] = trace
         if self.state.run is not opened or self.shown != (opened, pid):

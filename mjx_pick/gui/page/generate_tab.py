@@ -14,8 +14,9 @@ from pathlib import Path
 from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
+from mjx_pick.core.pickpoints import rejected_text
 from mjx_pick.gui import jobs, views
-from mjx_pick.gui.formatting import fmt, stamp
+from mjx_pick.gui.formatting import fmt, md_text, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
@@ -127,10 +128,10 @@ class GenerateTab:
         self.picks, self.pixels = picks, pixels
         self.drawn_for = (obj, settings, n, seed)
         self.picks_warning.set_text("warning: " + "; ".join(warned) if warned else "")
-        rejected = ", ".join(f"{k} {v}" for k, v in picks.rejected.items() if v)
+        rejected = rejected_text(picks.rejected)
         self.picks_info.set_text(
             f"{len(picks)} feasible pick-points of {picks.n_candidates} candidates checked "
-            f"(rejected: {rejected or 'none'})"
+            f"(rejected: {rejected})"
         )
         self.picks_image.set_source(views.data_uri(png, "image/png"))
         self.picks_image.set_visibility(True)
@@ -206,7 +207,7 @@ class GenerateTab:
             self.run_name.value = out.name
             self.resume.value = True
             self.run_summary.set_content(
-                f"**{out.name}**: cancelled; its finished chunks are kept. Start the "
+                f"**{md_text(out.name)}**: cancelled; its finished chunks are kept. Start the "
                 "batch again (resume is ticked) to continue it."
             )
             return
@@ -227,7 +228,7 @@ class GenerateTab:
             if key in s
         )
         self.run_summary.set_content(
-            f"**{out.name}**: success rate {rate_text(s['successes'], s['n'])}, "
+            f"**{md_text(out.name)}**: success rate {rate_text(s['successes'], s['n'])}, "
             f"mean score {fmt(s['score_mean'])}, "
             f"{s['picks_per_s']} pick-points/s on {s['backend']}.{checks} Open tab 4."
         )

@@ -16,7 +16,7 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs
-from mjx_pick.gui.formatting import fmt, stamp
+from mjx_pick.gui.formatting import fmt, md_text, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
@@ -246,7 +246,7 @@ class CalibrationStudy:
             return
         self.outcomes_path = path
         self.info.set_content(
-            f"outcomes: {name}, {len(outcomes)} tested pick-points "
+            f"outcomes: {md_text(name)}, {len(outcomes)} tested pick-points "
             f"({int(np.sum(outcomes.trials))} trials)"
         )
 
