@@ -351,7 +351,7 @@ def probes(tmp: Path) -> list[tuple[str, str, Callable[[], tuple[str, str]]]]:
         @add("9/17 numbers", " ".join(argv[2:]) or argv[0])
         def _(argv=argv, said=said):
             folder = tmp / "never_numbers"
-            needs_out = argv[0] not in ("report", "gui", "calibrate")
+            needs_out = argv[0] not in ("report", "gui")
             res = run(*argv, *(["--out", folder] if needs_out else []), timeout=120)
             return verdict(res, refused_with=said, folder=folder if needs_out else None)
 

@@ -65,7 +65,9 @@ class SweepTab:
             start, end, step = forms.sweep_range(self.param.value)
         except (ConfigError, StopIteration, KeyError):
             return
-        self.start.value, self.end.value, self.step.value = start, end, step
+        # a whole number as one ("11", not "11.0")
+        whole = [int(v) if float(v).is_integer() else v for v in (start, end, step)]
+        self.start.value, self.end.value, self.step.value = whole
         for w in (self.start, self.end, self.step):
             w.props(f"step={step:g}")
         self.estimate()
