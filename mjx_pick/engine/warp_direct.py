@@ -244,7 +244,7 @@ class _Pool:
 
         self.slots = slots
         self.record_ticks = record_ticks
-        dev = backend.device_name
+        self.device_name = dev = backend.device_name
         scene = backend.scene
         mjm = scene.model
         self.fields = backend.fields  # per-pick model fields this pool carries
@@ -333,6 +333,17 @@ class _Pool:
         arrays += [self.field_view(name) for name in self.fields]
         arrays += [getattr(self, name) for name in self.SLOT]
         return [a for a in arrays if a.size > 0]
+
+    def load_gather_kernels(self) -> None:
+        """Build (or load) the gathers a compaction into this pool launches, one per
+        array type, now: a compaction in a run's tail must not wait for a compiler."""
+        wp = _warp()
+        kern = _kernels()
+        with wp.ScopedDevice(self.device_name):
+            none = wp.full(self.slots, -1, dtype=int)
+            for arr in self.state_arrays():
+                gather = kern.gather_slots if arr.ndim == 1 else kern.gather_rows
+                wp.launch(gather, dim=arr.shape, inputs=[none, arr, arr])
 
     def field_view(self, name: str):
         """The model's (slots, K) float rows of a carried field."""
@@ -536,6 +547,10 @@ class WarpBackend:
             pool = _Pool(self, slots, record_ticks)
             self._setup("model_and_data", t0)
             pool.capture(self)
+            if len(family) > 1:
+                t0 = time.perf_counter()
+                pool.load_gather_kernels()
+                self._setup("kernels", t0)
             self._pools[key] = pool
         return pool
 
@@ -605,7 +620,9 @@ class WarpBackend:
             sizes = (n,)
         else:
             sizes = shrink_sizes(self.pool_size(n), self.shrink_levels, self.shrink_min_slots)
-        pools = [self._pool(sizes[0], self.n_ticks if record else 0, sizes)]
+        # every pool of the tail built (and captured) before the run: setup, not run time
+        family = [self._pool(size, self.n_ticks if record else 0, sizes) for size in sizes]
+        pools = family[:1]
         t0 = time.perf_counter()
         with wp.ScopedDevice(self.device_name):
             src = _device_inputs(inputs, self.fields, gw)
@@ -636,7 +653,7 @@ class WarpBackend:
                 elif next_pick >= n and level + 1 < len(sizes) and live.sum() <= sizes[level + 1]:
                     # the queue is empty and half the pool idles: the live slots move
                     # into a pool half the size
-                    small = self._pool(sizes[level + 1], 0, sizes)
+                    small = family[level + 1]
                     slot_pick = self._compact(pool, small, slot_pick)
                     pools.append(small)
                     counters0.append(small.counters())
