@@ -22,6 +22,7 @@ buffers. With ``MJX_PICK_WARP_CPU=1`` the same code runs on Warp's CPU device
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import os
@@ -116,6 +117,20 @@ def _warp():
     wp.config.quiet = True  # no banner on stdout
     wp.init()
     return wp
+
+
+# Warp's current device is one for the whole process (wp.ScopedDevice sets it for every
+# thread): backends on several devices take turns at this lock for each stretch of Warp
+# calls, and wait for their device outside it
+_WARP_LOCK = threading.RLock()
+
+
+@contextlib.contextmanager
+def on_device(name: str):
+    """Warp calls on device `name`, from any thread (see _WARP_LOCK)."""
+    wp = _warp()
+    with _WARP_LOCK, wp.ScopedDevice(name):
+        yield
 
 
 def cuda_devices() -> list[str]:
@@ -248,7 +263,7 @@ class _Pool:
         scene = backend.scene
         mjm = scene.model
         self.fields = backend.fields  # per-pick model fields this pool carries
-        with wp.ScopedDevice(dev):
+        with on_device(dev):
             batch = {name: slots for name in ("pair_friction", "pair_solref", "pair_solimp")}
             for name in self.fields:
                 if not name.startswith("opt."):
@@ -287,6 +302,7 @@ class _Pool:
             self.slot_pick = wp.full(S, -1, dtype=int)
             self.fresh = wp.zeros(S, dtype=int)
             self.ended = wp.zeros(S, dtype=int)
+            self.ended_host = wp.zeros(S, dtype=int, device="cpu", pinned=wp.get_device().is_cuda)
             self.saved_cfrc = wp.zeros_like(self.d.cfrc_ext)
             self.niter_hist = wp.zeros(int(mjm.opt.iterations) + 1, dtype=int)
             self.niter_step_max = wp.zeros(1, dtype=int)
@@ -339,7 +355,7 @@ class _Pool:
         array type, now: a compaction in a run's tail must not wait for a compiler."""
         wp = _warp()
         kern = _kernels()
-        with wp.ScopedDevice(self.device_name):
+        with on_device(self.device_name):
             none = wp.full(self.slots, -1, dtype=int)
             for arr in self.state_arrays():
                 gather = kern.gather_slots if arr.ndim == 1 else kern.gather_rows
@@ -410,7 +426,7 @@ class _Pool:
         wp = _warp()
         if self.graph is not None or not wp.get_device(backend.device_name).is_cuda:
             return
-        with wp.ScopedDevice(backend.device_name):
+        with on_device(backend.device_name):
             # one eager period first: Warp builds (or loads) every kernel outside the capture
             t0 = time.perf_counter()
             self.period(backend)
@@ -624,7 +640,8 @@ class WarpBackend:
         family = [self._pool(size, self.n_ticks if record else 0, sizes) for size in sizes]
         pools = family[:1]
         t0 = time.perf_counter()
-        with wp.ScopedDevice(self.device_name):
+        dev = self.device_name
+        with on_device(dev):
             src = _device_inputs(inputs, self.fields, gw)
             out = _Outputs(n)
             pool = pools[0]
@@ -633,21 +650,24 @@ class WarpBackend:
             slot_pick = np.full(pool.slots, -1, np.int32)
             first = min(pool.slots, n)
             slot_pick[:first] = np.arange(first)
-            next_pick = first
-            slot_ticks = 0
-            rounds = 0
             self._refill(pool, src, slot_pick, slot_pick >= 0)
-            while True:
+        next_pick = first
+        slot_ticks = 0
+        rounds = 0
+        while True:
+            with on_device(dev):
                 for _ in range(self.ticks_per_call):
                     pool.run_period(self)
-                rounds += 1
-                slot_ticks += pool.slots * self.ticks_per_call
-                ended = self._save_ended(pool, out)
-                slot_pick, fresh, next_pick = refill_order(slot_pick, ended, next_pick, n)
-                live = slot_pick >= 0
-                if not live.any():
-                    break
-                level = len(pools) - 1
+                done = self._save_ended(pool, out)
+            ended = done()  # waits for the device outside the lock
+            rounds += 1
+            slot_ticks += pool.slots * self.ticks_per_call
+            slot_pick, fresh, next_pick = refill_order(slot_pick, ended, next_pick, n)
+            live = slot_pick >= 0
+            if not live.any():
+                break
+            level = len(pools) - 1
+            with on_device(dev):
                 if fresh.any():
                     self._refill(pool, src, slot_pick, fresh)
                 elif next_pick >= n and level + 1 < len(sizes) and live.sum() <= sizes[level + 1]:
@@ -660,6 +680,7 @@ class WarpBackend:
                     pool = small
                 else:
                     pool.slot_pick.assign(slot_pick)
+        with on_device(dev):
             wp.synchronize_device()
             counters = [p.counters() - c0 for p, c0 in zip(pools, counters0, strict=True)]
             picks = _finalize_device(_kernels(), src, out.acc, gw)
@@ -673,8 +694,10 @@ class WarpBackend:
         self.pool_stats.add(rounds, slot_ticks, int(k.sum()), n, sum(counters))
         return picks, traces, diag
 
-    def _save_ended(self, pool: _Pool, out: _Outputs) -> np.ndarray:
-        """Slots whose pick has ended write it to its row of out; (S,) bool of them."""
+    def _save_ended(self, pool: _Pool, out: _Outputs):
+        """Slots whose pick has ended write it to its row of out. Returns a function
+        that waits for the device and gives (S,) bool of them (call it outside
+        :func:`on_device`, so other devices' threads run meanwhile)."""
         wp = _warp()
         wp.launch(
             _kernels().save,
@@ -697,7 +720,18 @@ class WarpBackend:
                 out.nacon,
             ],
         )
-        return pool.ended.numpy().astype(bool)
+        if not wp.get_device().is_cuda:
+            ended = pool.ended.numpy().astype(bool)
+            return lambda: ended
+        # the flags to pinned host memory, behind the round on the device's stream
+        wp.copy(pool.ended_host, pool.ended)
+        event = wp.record_event()
+
+        def wait() -> np.ndarray:
+            wp.synchronize_event(event)
+            return pool.ended_host.numpy().astype(bool)
+
+        return wait
 
     def _compact(self, big: _Pool, small: _Pool, slot_pick: np.ndarray) -> np.ndarray:
         """The live slots of big (slot order) into the first slots of small: their
