@@ -103,10 +103,13 @@ class Outcome(NamedTuple):
 
 
 def auto_chunk(backend: Backend) -> int:
-    """Chunk size: what fits in half the free device memory (MJX/Warp on an
-    accelerator), capped at 65536 pick-points, a whole number of batches; else one
-    batch (the C engine, or a device that reports no memory)."""
+    """Chunk size: the backend's preferred one where it has one; else what fits in half
+    the free device memory (MJX on an accelerator), capped at 65536 pick-points, a whole
+    number of batches; else one batch (the C engine, or a device that reports no
+    memory)."""
     batch = backend.batch_size
+    if hasattr(backend, "preferred_chunk"):  # a backend that knows its own (Warp)
+        return int(backend.preferred_chunk())
     stats = None
     if hasattr(backend, "device_bytes_per_pick"):  # MJX, Warp: a device program
         dev = backend.devices[0]

@@ -57,6 +57,8 @@ INSTALL_HINT = 'pip install ".[gpu]" (warp-lang and mujoco-warp, CUDA 13)'
 DEFAULT_TICKS_PER_CALL = 10
 # small runs use a smaller pool, a multiple of this many slots
 POOL_QUANTUM = 256
+# a long run's chunks hold this many pools' worth of pick-points (runner.auto_chunk)
+CHUNK_POOLS = 2
 # result fields of kernels.grasp.finalize, in its order
 RESULT_FIELDS = (
     "success",
@@ -544,6 +546,11 @@ class WarpBackend:
         return int(wp.get_mempool_used_mem_high(dev))
 
     # --- sizes
+    def preferred_chunk(self) -> int:
+        """Pick-points per chunk of a long run: two pools' worth, so that a chunk's tail
+        (its pool draining) is a small part of it."""
+        return CHUNK_POOLS * self.batch_size
+
     def pool_size(self, n: int) -> int:
         """Slots for a run of n picks: the batch size, or fewer for a small run."""
         q = POOL_QUANTUM
@@ -947,6 +954,9 @@ class MultiDevice:
     def peak_device_bytes(self) -> int | None:
         peaks = [p.peak_device_bytes() for p in self.parts]
         return None if None in peaks else sum(peaks)
+
+    def preferred_chunk(self) -> int:
+        return CHUNK_POOLS * self.batch_size
 
     @property
     def growths(self) -> int:
