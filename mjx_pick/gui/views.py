@@ -147,7 +147,14 @@ def force_chart(trace: dict, grip_force_n: float) -> dict:
         "animation": False,
         "legend": {"top": 0},
         "grid": {"left": 50, "right": 20, "top": 30, "bottom": 40},
-        "xAxis": {"type": "value", "name": "time, s", "nameLocation": "middle", "nameGap": 25},
+        "xAxis": {
+            "type": "value",
+            "name": "time, s",
+            "nameLocation": "middle",
+            "nameGap": 25,
+            "min": t[0],
+            "max": t[-1],  # the slider's range: its time and the marker line up
+        },
         "yAxis": {"type": "value", "name": f"force, N (F_d = {grip_force_n:g} N)"},
         "series": lines,
     }

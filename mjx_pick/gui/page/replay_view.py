@@ -155,7 +155,7 @@ class ReplayView:
         self.box.set_visibility(True)
         if first:  # the canvas measured itself while hidden
             self.scene.run_method("resize")
-            self.scene.move_camera(0.16, -0.26, 0.2, 0.0, 0.0, 0.03, duration=0)
+            self.scene.move_camera(0.19, -0.31, 0.21, 0.0, 0.0, 0.04, duration=0)
 
     def on_time(self, e) -> None:
         """The slider's time: the clock line, and where the server moved it (play, a new
