@@ -23,6 +23,7 @@ buffers. With ``MJX_PICK_WARP_CPU=1`` the same code runs on Warp's CPU device
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 import logging
 import os
@@ -231,6 +232,18 @@ class PoolStats:
         if self.solver_iterations.size != hist.size:
             self.solver_iterations = np.zeros(hist.size, np.int64)
         self.solver_iterations += hist
+
+    def merge(self, after: PoolStats, before: PoolStats) -> None:
+        """Add what another PoolStats counted between two readings (a device's run)."""
+        for f in dataclasses.fields(PoolStats):
+            now, then = getattr(after, f.name), getattr(before, f.name)
+            if isinstance(now, np.ndarray):
+                now = now - (then if then.size == now.size else 0)
+                mine = self.solver_iterations
+                mine = mine if mine.size == now.size else np.zeros(now.size, np.int64)
+                self.solver_iterations = mine + now
+            else:
+                setattr(self, f.name, getattr(self, f.name) + now - then)
 
     def iteration_quantile(self, q: float) -> float:
         """The q-quantile (0..1) of solver iterations per live world-step."""
@@ -980,7 +993,7 @@ class MultiDevice:
 
         shares = self.shares(len(inputs))
         compile0 = [p.stats.compile_s for p in self.parts]
-        before = [dataclasses.replace(p.pool_stats) for p in self.parts]
+        before = [copy.deepcopy(p.pool_stats) for p in self.parts]
         t0 = time.perf_counter()
         with ThreadPoolExecutor(len(self.parts)) as ex:
             futures = [
@@ -994,12 +1007,7 @@ class MultiDevice:
         self.stats.run_s += max(wall - max(compiled), 0.0)
         self.stats.n += len(inputs)
         for p, b in zip(self.parts, before, strict=True):
-            for f in dataclasses.fields(PoolStats):
-                now = getattr(p.pool_stats, f.name) - getattr(b, f.name)
-                old = getattr(self.pool_stats, f.name)
-                if isinstance(now, np.ndarray) and old.size != now.size:
-                    old = np.zeros(now.size, np.int64)
-                setattr(self.pool_stats, f.name, old + now)
+            self.pool_stats.merge(p.pool_stats, b)
         merged = {k: np.concatenate([o[0][k] for o in outs]) for k in outs[0][0]}
         traces = np.concatenate([o[1] for o in outs]) if record else None
         diags = [p.last_diagnostics for p in self.parts]
