@@ -35,9 +35,9 @@ from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.settings import Settings
-from mjx_pick.engine.chunks import ChunkStore, open_store
-from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
-from mjx_pick.outputs.rundir import finish, portable_object, release
+from mjx_pick.engine.chunks import ChunkStore
+from mjx_pick.engine.simulator import Simulator, showing_progress
+from mjx_pick.outputs.rundir import portable_object
 from mjx_pick.studies.options import RunOptions
 
 
@@ -147,47 +147,37 @@ def compare(
     if len(set(names)) != len(names):
         raise ConfigError(f"gripper names must differ: {names}")
     base = base or Settings()
-    n, seed, pick_config, out = opts.n_or(200), opts.seed, opts.picks, opts.out
-    pp.check_raster(obj, pick_config)  # before any allocation or folder
+    n, seed, pick_config = opts.n_or(200), opts.seed, opts.picks
+    pp.check_raster(obj, pick_config)  # before the stroke checks
     fitted = [base.on_gripper(g)[0] for g in grippers]  # each at its own force and speed
     refused = [pp.stroke_refusal(obj, s.gripper, pick_config, s.grasp) for s in fitted]
     if all(refused):  # none can take it: said now, not after max_candidates draws
         raise ConfigError("no gripper can take the part: " + "; ".join(refused))
-    opts.check_resume()
-    with opts.simulator(obj, simulator) as sim:
-        request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
-        request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
-        request.update(picks=to_dict(pick_config))
-        store, complete = open_store(
-            out, "compare", request, resume=opts.resume, overwrite=opts.overwrite
-        )
-        store = store if store is not None else _store
-        if complete:
-            return _read_comparison(Path(out), obj, grippers, base, n, seed, pick_config)
+    request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
+    request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
+    request.update(picks=to_dict(pick_config))
+    with opts.opening("compare", obj, request, simulator) as study:
+        if study.complete:
+            return _read_comparison(study.out_dir, obj, grippers, base, n, seed, pick_config)
+        sim, store = study.sim, study.store if study.store is not None else _store
         t0 = time.perf_counter()
-        with marking_stops(out, "compare"):
-            result = _compare(obj, grippers, base, n, seed, pick_config, rank_by, sim, store, opts)
-        if out is not None:
-            out_dir = Path(out)
-            config = {
-                "object": obj.summary(),
-                "grippers": [to_dict(g) for g in grippers],
-                "base": to_dict(base),
-                "n": n,
-                "seed": seed,
-                "rank_by": rank_by,
-            }
-            write_json(out_dir / "config.json", config)
-            write_json(out_dir / "ranking.json", result.ranking)
-            write_parquet(out_dir / "results.parquet", result.table)
-            plot_comparison(obj, result, out_dir)
-            result.out_dir = out_dir
+        result = _compare(obj, grippers, base, n, seed, pick_config, rank_by, sim, store, opts)
+        if study.out_dir is not None:
+            config = {"object": obj.summary(), "grippers": [to_dict(g) for g in grippers]}
+            config.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
+            _write_comparison(study.out_dir, obj, config, result)
             meta = sim.runner.describe(time.perf_counter() - t0)
-            config["picks"] = to_dict(pick_config)
-            finish(out_dir, command="compare", config=config, seed=seed, release_lock=False, **meta)
-            store.remove()  # every row is in results.parquet now
-            release(out_dir)
+            study.close({**config, "picks": to_dict(pick_config)}, meta)
         return result
+
+
+def _write_comparison(out_dir: Path, obj, config: dict, result: Comparison) -> None:
+    """A comparison's outputs: configuration, ranking, results and pictures."""
+    write_json(out_dir / "config.json", config)
+    write_json(out_dir / "ranking.json", result.ranking)
+    write_parquet(out_dir / "results.parquet", result.table)
+    plot_comparison(obj, result, out_dir)
+    result.out_dir = out_dir
 
 
 def _compare(
@@ -407,8 +397,7 @@ def design_search(
     open; backend, batch_size and ray are then its own).
     """
     opts = RunOptions.of(options, **run)
-    n, seed, pick_config, out = opts.n_or(64), opts.seed, opts.pick_config, opts.out
-    opts.check_resume()
+    n, seed, pick_config = opts.n_or(64), opts.seed, opts.pick_config
     base = base or Settings()
     check_range("design", "rounds", rounds, 1, 20)
     check_range("design", "n", n, 1, 1e8)
@@ -433,26 +422,21 @@ def design_search(
         )
     request.update(too_narrow=len(drawn) - len(fitting))
     pool = fitting
-    with opts.simulator(obj, simulator) as sim:
-        store, complete = open_store(
-            out, "design", request, resume=opts.resume, overwrite=opts.overwrite
-        )
-        search = {"rounds": rounds, "n": n, "final_n": final_n, "seed": seed}
-        search.update(rank_by=rank_by, pick_config=pick_config)
-        if complete:
-            return _read_design(Path(out), obj, base, pool, **search)
-        with marking_stops(out, "design"):
-            return _design(
-                obj, base, pool, sim, bounds, request, t0, out, opts.progress, store, **search
-            )
+    search = {"rounds": rounds, "n": n, "final_n": final_n, "seed": seed}
+    search.update(rank_by=rank_by, pick_config=pick_config)
+    with opts.opening("design", obj, request, simulator) as study:
+        if study.complete:
+            return _read_design(study.out_dir, obj, base, pool, **search)
+        return _design(obj, base, pool, study, bounds, request, t0, opts.progress, **search)
 
 
 def _design(
-    obj, base, pool, sim, bounds, request, t0, out, progress, store, *,
+    obj, base, pool, study, bounds, request, t0, progress, *,
     rounds, n, final_n, seed, rank_by, pick_config,
 ) -> DesignResult:  # fmt: skip
     """design_search once its inputs are checked, its simulator made and out claimed
-    (store: its chunks there, or None)."""
+    (study: the opened study, ``options.OpenStudy``)."""
+    sim, store, out = study.sim, study.store, study.out_dir
     history = []
     desc = f"design: {rounds} rounds + final ({sim.runner.backend_name})"
     with showing_progress(sim.runner, desc, "sim", progress) as bar:
@@ -518,10 +502,7 @@ def _design(
         write_parquet(out_dir / "results.parquet", final.table)
         plot_comparison(obj, final, out_dir)
         result.out_dir = out_dir
-        meta = sim.runner.describe(time.perf_counter() - t0)
-        finish(out_dir, command="design", config=request, seed=seed, release_lock=False, **meta)
-        store.remove()  # every row is in the outputs now
-        release(out_dir)
+        study.close(request, sim.runner.describe(time.perf_counter() - t0))
     return result
 
 

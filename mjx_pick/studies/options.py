@@ -20,8 +20,10 @@ from mjx_pick.core import numbers
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.objects import ObjectModel
+from mjx_pick.engine.chunks import ChunkStore, open_store
 from mjx_pick.engine.registry import AUTO
-from mjx_pick.engine.simulator import Simulator, study_simulator
+from mjx_pick.engine.simulator import Simulator, marking_stops, study_simulator
+from mjx_pick.outputs.rundir import finish, release
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,3 +108,52 @@ class RunOptions:
         obj on this backend, batch size and cluster, closed when the study ends."""
         with study_simulator(obj, simulator, self.backend, self.batch_size, self.ray) as sim:
             yield sim
+
+    @contextlib.contextmanager
+    def opening(
+        self,
+        command: str,
+        obj: ObjectModel,
+        request: dict,
+        simulator: Simulator | None = None,
+        joins: tuple[str, ...] = (),
+    ) -> Iterator[OpenStudy]:
+        """The opening every study of simulated variants shares (sweep, compare, design,
+        robust): the pick-point raster and resume checked, the simulator made (or the
+        caller's), out claimed for command under request's key (``chunks.open_store``;
+        joins: commands whose folder it may add to). A run stopped inside marks out
+        (``simulator.marking_stops``)."""
+        pp.check_raster(obj, self.picks)  # before any allocation or folder
+        self.check_resume()
+        with self.simulator(obj, simulator) as sim:
+            store, complete = open_store(
+                self.out, command, request, resume=self.resume, overwrite=self.overwrite,
+                joins=joins,
+            )  # fmt: skip
+            out_dir = Path(self.out) if self.out is not None else None
+            with marking_stops(self.out, command):
+                yield OpenStudy(command, sim, store, complete, out_dir, self.seed)
+
+
+@dataclasses.dataclass
+class OpenStudy:
+    """A study once opened (:meth:`RunOptions.opening`): its simulator, its output
+    folder's chunks (None without one) and whether that folder holds it complete
+    already (then it is read back, nothing simulated)."""
+
+    command: str
+    sim: Simulator
+    store: ChunkStore | None
+    complete: bool
+    out_dir: Path | None
+    seed: int
+
+    def close(self, config: dict, meta: dict) -> None:
+        """The folder finished (``rundir.finish``: the one metadata writer) once every
+        row is in its outputs: its chunks dropped, its lock released."""
+        finish(
+            self.out_dir, command=self.command, config=config, seed=self.seed,
+            release_lock=False, **meta,
+        )  # fmt: skip
+        self.store.remove()
+        release(self.out_dir)

@@ -34,10 +34,9 @@ from mjx_pick.core.config import ConfigError, check_range, to_dict, write_json, 
 from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.core.objects import ObjectModel, check_same_object
 from mjx_pick.core.settings import Settings
-from mjx_pick.engine.chunks import ChunkStore, open_store
 from mjx_pick.engine.registry import AUTO
-from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
-from mjx_pick.outputs.rundir import config_hash, finish, portable_object, release
+from mjx_pick.engine.simulator import Simulator, showing_progress
+from mjx_pick.outputs.rundir import config_hash, portable_object
 from mjx_pick.studies.options import RunOptions
 from mjx_pick.studies.recorded import settings_changes, settings_of
 
@@ -146,22 +145,17 @@ def robustness(
     opts = RunOptions.of(options, **run)
     opts.only("robustness", *_ROBUST_FIELDS)
     check_draws(m, sigma_xy_mm, sigma_yaw_deg)
-    opts.check_resume()
     base = base or Settings()
     draws = _Draws(m, sigma_xy_mm, sigma_yaw_deg)
-    with opts.simulator(obj, simulator) as sim:
-        request = _request(obj, base, opts, draws, pick_points=_digest(picks))
-        store, complete = _open(opts, request)
-        if complete:
-            return _read_robust(Path(opts.out))
-        t0 = time.perf_counter()
+    request = _request(obj, base, opts, draws, pick_points=_digest(picks))
+    with opts.opening("robust", obj, request, simulator, joins=("evaluate",)) as study:
+        if study.complete:
+            return _read_robust(study.out_dir)
+        sim, t0 = study.sim, time.perf_counter()
         desc = f"robustness: {len(picks)} pick-points x {m} draws ({sim.runner.backend_name})"
-        with (
-            marking_stops(opts.out, "robust"),
-            showing_progress(sim.runner, desc, "sim", opts.progress),
-        ):
-            table = _robustness(obj, picks, base, sim, store, draws, opts)
-        _write(obj, base, opts, draws, table, sim, store, request, t0)
+        with showing_progress(sim.runner, desc, "sim", opts.progress):
+            table = _robustness(obj, picks, base, sim, study.store, draws, opts)
+        _write(obj, base, opts, draws, table, study, request, t0)
         return table
 
 
@@ -188,19 +182,6 @@ def _digest(picks: pp.PickBatch) -> str:
     return h.hexdigest()[:16]
 
 
-def _open(opts: RunOptions, request: dict) -> tuple[ChunkStore | None, bool]:
-    """robust's output folder claimed (a new one, or added to an evaluate folder) and
-    its chunks, or whether it holds this run complete already (``chunks.open_store``)."""
-    return open_store(
-        opts.out,
-        "robust",
-        request,
-        resume=opts.resume,
-        overwrite=opts.overwrite,
-        joins=("evaluate",),
-    )
-
-
 def _robustness(obj, picks, base, sim, store, draws: _Draws, opts: RunOptions) -> pa.Table:
     """robustness's draws simulated through sim (chunks read from and saved to store,
     when given) and its table; nothing written."""
@@ -210,12 +191,12 @@ def _robustness(obj, picks, base, sim, store, draws: _Draws, opts: RunOptions) -
     return _robust_table(picks, placed, out_d, m)
 
 
-def _write(obj, base, opts: RunOptions, draws: _Draws, table, sim, store, request, t0) -> None:
-    """robust's outputs in opts.out (nothing without it): robustness.parquet and
+def _write(obj, base, opts: RunOptions, draws: _Draws, table, study, request, t0) -> None:
+    """robust's outputs in its folder (nothing without one): robustness.parquet and
     robustness.json, the run's record, then its chunks are dropped."""
-    if opts.out is None:
+    out_dir = study.out_dir
+    if out_dir is None:
         return
-    out_dir = Path(opts.out)
     write_parquet(out_dir / "robustness.parquet", table)
     record = {"object": obj.summary(), "settings": to_dict(base), **draws._asdict()}
     record["seed"] = opts.seed
@@ -225,19 +206,8 @@ def _write(obj, base, opts: RunOptions, draws: _Draws, table, sim, store, reques
     config.update(seed=opts.seed, picks=to_dict(opts.picks))
     # in an evaluate folder: run-robust.json beside evaluate's own run.json, with this
     # run's key (rundir.is_complete reads it)
-    meta = sim.runner.describe(time.perf_counter() - t0)
-    key = config_hash(request)
-    finish(
-        out_dir,
-        command="robust",
-        config=config,
-        seed=opts.seed,
-        key=key,
-        release_lock=False,
-        **meta,
-    )
-    store.remove()  # every row is in robustness.parquet now
-    release(out_dir)
+    meta = study.sim.runner.describe(time.perf_counter() - t0)
+    study.close(config, {**meta, "key": config_hash(request)})
 
 
 def _read_robust(out_dir: Path) -> pa.Table:
@@ -396,27 +366,23 @@ def robust_best(
     check_range("robust", "top_k", top_k, 1, 100_000)
     if results is None:
         check_range("robust", "n", n, 1, 1e8)
-    opts.check_resume()
+    opts.check_resume()  # before results are read
     table = None
     if results is not None:
         table, base, opts = _read_results(Path(results), obj, base, opts)
     base = base or Settings()
     draws = _Draws(m, sigma_xy_mm, sigma_yaw_deg)
-    with opts.simulator(obj, simulator) as sim:
-        source = str(results) if results is not None else None
-        request = _request(obj, base, opts, draws, top_k=top_k, results=source, n=n)
-        store, complete = _open(opts, request)
-        if complete:
-            return _read_robust(Path(opts.out))
-        t0 = time.perf_counter()
+    source = str(results) if results is not None else None
+    request = _request(obj, base, opts, draws, top_k=top_k, results=source, n=n)
+    with opts.opening("robust", obj, request, simulator, joins=("evaluate",)) as study:
+        if study.complete:
+            return _read_robust(study.out_dir)
+        sim, store, t0 = study.sim, study.store, time.perf_counter()
         desc = f"robust ({sim.runner.backend_name})"
-        with (
-            marking_stops(opts.out, "robust"),
-            showing_progress(sim.runner, desc, "sim", opts.progress),
-        ):
+        with showing_progress(sim.runner, desc, "sim", opts.progress):
             picks = _best_picks(obj, base, sim, store, table, n, top_k, opts)
             ranked = _robustness(obj, picks, base, sim, store, draws, opts)
-        _write(obj, base, opts, draws, ranked, sim, store, request, t0)
+        _write(obj, base, opts, draws, ranked, study, request, t0)
         return ranked
 
 

@@ -49,9 +49,8 @@ from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.physics import ContactParams, SolverParams
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.settings import Settings
-from mjx_pick.engine.chunks import open_store
-from mjx_pick.engine.simulator import Simulator, marking_stops, showing_progress
-from mjx_pick.outputs.rundir import finish, portable_object, release
+from mjx_pick.engine.simulator import Simulator, showing_progress
+from mjx_pick.outputs.rundir import portable_object
 from mjx_pick.studies.options import RunOptions
 
 SECTIONS = {
@@ -283,79 +282,82 @@ def sweep(
     """
     opts = RunOptions.of(options, **run)
     base = base or Settings()
-    n, seed, pick_config, out = opts.n_or(200), opts.seed, opts.picks, opts.out
-    pp.check_raster(obj, pick_config)  # before any allocation or folder
-    opts.check_resume()
-    with opts.simulator(obj, simulator) as sim:
-        request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
-        request.update(params=to_dict(params), n=n, seed=seed, random=random)
-        request.update(picks=to_dict(pick_config))
-        combos = variants(params, random, seed)
-        settings = []
-        for combo in combos:
-            s = base
-            for name, value in combo.items():
-                s = apply(s, name, value)
-            settings.append(s)
-        _refuse_narrow(obj, combos, settings, pick_config)  # before any draw or folder
-        numbers.check("sweep_simulations", len(combos) * n, "variants x pick-points")
-        store, complete = open_store(
-            out, "sweep", request, resume=opts.resume, overwrite=opts.overwrite
-        )
-        if complete:
-            return _read_sweep(Path(out))
-        picks_for: dict[GripperSpec, pp.PickBatch] = {}
-        for s in settings:
-            if s.gripper not in picks_for:
-                picks_for[s.gripper] = pp.generate_normal(
-                    obj, s.gripper, n, seed, pick_config, grasp=s.grasp
-                )
-        jobs = [(s, picks_for[s.gripper]) for s in settings]
-        before = sim.runner.timing
-        t0 = time.perf_counter()
+    n, seed, pick_config = opts.n_or(200), opts.seed, opts.picks
+    request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
+    request.update(params=to_dict(params), n=n, seed=seed, random=random)
+    request.update(picks=to_dict(pick_config))
+    combos = variants(params, random, seed)
+    settings = [_settings(base, combo) for combo in combos]
+    _refuse_narrow(obj, combos, settings, pick_config)  # before any draw or folder
+    numbers.check("sweep_simulations", len(combos) * n, "variants x pick-points")
+    with opts.opening("sweep", obj, request, simulator) as study:
+        if study.complete:
+            return _read_sweep(study.out_dir)
+        jobs = _jobs(obj, settings, n, seed, pick_config)
+        sim = study.sim
+        before, t0 = sim.runner.timing, time.perf_counter()
         desc = f"sweep: {len(jobs)} variants ({sim.runner.backend_name})"
-        with marking_stops(out, "sweep"), showing_progress(sim.runner, desc, "sim", opts.progress):
-            outs = sim.run(jobs, store)
-        wall = time.perf_counter() - t0
-        spent = sim.runner.timing - before  # this sweep's compiles and runs alone
-        compile_s, run_s = spent.compile_s, spent.run_s
-        n_sims = sum(len(p) for _, p in jobs)
-        timing = {
-            "simulations": n_sims,
-            "scenes": sim.scenes,  # compiled MuJoCo models
-            "programs": len(sim.backends),  # backends (compiled programs on MJX/Warp)
-            "compile_s": round(compile_s, 3),
-            "run_s": round(run_s, 3),
-            "wall_s": round(wall, 3),
-            "simulations_per_s": round(n_sims / run_s, 2) if run_s > 0 else None,
-        }
-        if store is not None:
-            timing["chunks_resumed"] = store.read_chunks  # read back, not simulated
+        with showing_progress(sim.runner, desc, "sim", opts.progress):
+            outs = sim.run(jobs, study.store)
+        timing = _timing(sim, sim.runner.timing - before, time.perf_counter() - t0, jobs)
+        if study.store is not None:
+            timing["chunks_resumed"] = study.store.read_chunks  # read back, not simulated
         table, summaries = _variant_tables(jobs, outs, combos)
-        out_dir = Path(out) if out is not None else None
-        if out_dir is not None:
-            config = {
-                "object": obj.summary(),
-                "base": to_dict(base),
-                "params": [to_dict(p) for p in params],
-                "random": random,
-                "n": n,
-                "seed": seed,
-                "picks": to_dict(pick_config),
-            }
+        if study.out_dir is not None:
+            config = {"object": obj.summary(), "base": to_dict(base)}
+            config.update(params=[to_dict(p) for p in params], random=random, n=n, seed=seed)
+            config.update(picks=to_dict(pick_config))
             meta = {
                 "backend": sim.backends[0].name if sim.backends else opts.backend,
                 "device": sim.backends[0].device if sim.backends else None,
                 "timing": timing,
             }
-            write_json(out_dir / "config.json", {**config, **meta})
-            write_parquet(out_dir / "results.parquet", table)
-            write_json(out_dir / "variants.json", summaries)
-            plot_sweep(summaries, table, [p.name for p in params], out_dir / "sweep.png")
-            finish(out_dir, command="sweep", config=config, seed=seed, release_lock=False, **meta)
-            store.remove()  # every row is in results.parquet now
-            release(out_dir)
-        return SweepResult(table, summaries, timing, out_dir)
+            _write_sweep(study.out_dir, {**config, **meta}, table, summaries, params)
+            study.close(config, meta)
+        return SweepResult(table, summaries, timing, study.out_dir)
+
+
+def _settings(base: Settings, combo: dict) -> Settings:
+    """base with one variant's parameter values (``apply``: each by its name)."""
+    s = base
+    for name, value in combo.items():
+        s = apply(s, name, value)
+    return s
+
+
+def _jobs(obj, settings: list[Settings], n, seed, pick_config) -> list[tuple]:
+    """(settings, pick-points) per variant: the same pick-points for every variant of
+    one gripper (drawn once per gripper)."""
+    picks_for: dict[GripperSpec, pp.PickBatch] = {}
+    for s in settings:
+        if s.gripper not in picks_for:
+            picks_for[s.gripper] = pp.generate_normal(
+                obj, s.gripper, n, seed, pick_config, grasp=s.grasp
+            )
+    return [(s, picks_for[s.gripper]) for s in settings]
+
+
+def _timing(sim, spent, wall: float, jobs) -> dict:
+    """A sweep's timing: its own compiles and runs (spent: the runner's timing since it
+    began), scenes and programs, simulations per second."""
+    n_sims = sum(len(p) for _, p in jobs)
+    return {
+        "simulations": n_sims,
+        "scenes": sim.scenes,  # compiled MuJoCo models
+        "programs": len(sim.backends),  # backends (compiled programs on MJX/Warp)
+        "compile_s": round(spent.compile_s, 3),
+        "run_s": round(spent.run_s, 3),
+        "wall_s": round(wall, 3),
+        "simulations_per_s": round(n_sims / spent.run_s, 2) if spent.run_s > 0 else None,
+    }
+
+
+def _write_sweep(out_dir: Path, config: dict, table, summaries, params) -> None:
+    """A sweep's outputs: its configuration, results, variants and picture."""
+    write_json(out_dir / "config.json", config)
+    write_parquet(out_dir / "results.parquet", table)
+    write_json(out_dir / "variants.json", summaries)
+    plot_sweep(summaries, table, [p.name for p in params], out_dir / "sweep.png")
 
 
 def _variant_tables(jobs, outs, combos) -> tuple[pa.Table, list[dict]]:
