@@ -48,6 +48,7 @@ _PUBLIC = {
     "Settings": "core.settings",
     # studies
     "Evaluation": "studies.evaluation",
+    "EvaluateRequest": "studies.evaluation",
     "evaluate": "studies.evaluation",
     "ParamSpec": "studies.sweeps",
     "sweep": "studies.sweeps",

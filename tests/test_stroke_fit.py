@@ -37,7 +37,7 @@ def no_work(monkeypatch):
         raise Reached("work started")
 
     monkeypatch.setattr(pp.fk, "packed_bins", refuse)
-    monkeypatch.setattr(evaluation, "build_scene", refuse)
+    monkeypatch.setattr(evaluation, "scene_of", refuse)
 
 
 def disc_photo(diameter_mm: float):

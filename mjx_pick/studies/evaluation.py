@@ -32,7 +32,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import threading
 import time
 import warnings
 from pathlib import Path
@@ -62,7 +61,6 @@ from mjx_pick.engine.chunks import ChunkStore
 from mjx_pick.engine.inputs import scene_of
 from mjx_pick.engine.runner import (
     Cancelled,
-    ProgressFn,
     Runner,
     auto_chunk,
     chunk_name,
@@ -81,7 +79,7 @@ from mjx_pick.outputs.rundir import (
     release,
     versions,
 )
-from mjx_pick.studies.options import RunOptions
+from mjx_pick.studies.options import RunOptions, split_fields
 from mjx_pick.studies.pickfiles import read_picks_csv
 from mjx_pick.studies.robust import min_grip_force
 
@@ -145,219 +143,176 @@ def _resolve(obj, gripper) -> tuple[ObjectModel, GripperSpec]:
     return obj, gripper
 
 
+@dataclasses.dataclass(frozen=True)
+class EvaluateRequest:
+    """What :func:`evaluate` computes (how it runs: ``options.RunOptions``).
+
+    Attributes:
+      picks: a PickBatch or a CSV path (x_mm, y_mm, yaw_deg) instead of generating n.
+      contact, solver, grasp: settings (None: the paper's; a grasp left None is fitted
+        to the gripper's ranges, ``GraspConfig.fitted_to``).
+      n_traces: traces kept for the n best and n worst pick-points.
+      until, min_score, max_n: Optimization mode: simulate batches until `until`
+        pick-points reach min_score or max_n are spent (resumable: batch j is chunk j).
+      min_force: add each pick-point's smallest successful F_d within the gripper's
+        force range (a batched bisection, ``robust.min_grip_force``).
+      stability_um: > 0: simulate every pick-point again with the object moved this far
+        along x (at most 100 um) and add success_shifted, score_shifted, label_stable
+        (docs/physics.md, "Labels decided by a hair").
+      step_check: simulate every pick-point again at half the time step and add
+        success_half_step, label_converged.
+      skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
+        them) instead of refusing the file.
+    """
+
+    picks: pp.PickBatch | str | Path | None = None
+    contact: ContactParams | None = None
+    solver: SolverParams | None = None
+    grasp: GraspConfig | None = None
+    n_traces: int = 3
+    until: int | None = None
+    min_score: float = 0.9
+    max_n: int | None = None
+    min_force: bool = False
+    stability_um: float = 0.0
+    step_check: bool = False
+    skip_infeasible: bool = False
+
+
 def evaluate(
     obj: ObjectModel | str,
     gripper: GripperSpec | str = "robotiq-2f85",
     options: RunOptions | None = None,
     *,
-    picks: pp.PickBatch | str | Path | None = None,
-    contact: ContactParams | None = None,
-    solver: SolverParams | None = None,
-    grasp: GraspConfig | None = None,
-    n_traces: int = 3,
-    until: int | None = None,
-    min_score: float = 0.9,
-    max_n: int | None = None,
-    chunk_size: int | None = None,
-    min_force: bool = False,
-    stability_um: float = 0.0,
-    step_check: bool = False,
-    skip_infeasible: bool = False,
-    keep_chunks: bool = False,
-    on_progress: ProgressFn | None = None,
-    cancel: threading.Event | None = None,
-    on_cluster_event=None,
-    fixed_costs: dict | None = None,
-    **run,
+    request: EvaluateRequest | None = None,
+    **fields,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
 
     Args:
       obj: an ObjectModel, a shipped asset name, or an image/mesh path (see load_object).
       gripper: a GripperSpec, a preset name or a gripper TOML path.
-      options: the run options (``options.RunOptions``), or their fields as keywords
-        (a keyword overrides the same field of options): n, seed, pick_config,
-        backend, batch_size, out, progress, resume, overwrite, ray, as below.
-      n: pick-points to generate (Normal mode) when picks is None (default 1000).
-      seed: generator seed (same seed, same pick-points).
-      picks: a PickBatch or a CSV path (x_mm, y_mm, yaw_deg) instead of generating.
-      contact, solver, grasp, pick_config: settings (defaults: the paper's).
-      backend: 'auto' or a backend's name (``engine.registry``).
-      batch_size: simulations per backend call (default: per backend).
-      out: output folder (nothing is written without one).
-      n_traces: traces kept for the n best and n worst pick-points.
-      progress: show a progress bar (tqdm, on stderr).
-      on_progress: called as on_progress(done, total) with the pick-points simulated
-        (or read back on resume) of the main run, before the first chunk and after each
-        (Optimization mode, whose total is not known ahead, reports nothing).
-      cancel: a threading.Event; once set, the run stops before its next chunk with
-        mjx_pick.engine.runner.Cancelled (the output folder keeps its finished chunks).
-      resume: continue an interrupted run of the same experiment (:func:`experiment_key`)
-        in out: finished chunks are read, not simulated; the run keeps its chunk size.
-      overwrite: replace what another command (or another configuration) wrote in out.
-      keep_chunks: keep out/chunks/ after a complete run (default: removed once every
-        row is in results.parquet; a run that stops early always keeps it).
-      skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
-        them) instead of refusing the file.
-      until, min_score, max_n: Optimization mode -- simulate batches until `until`
-        pick-points reach min_score or max_n are spent (resumable too: batch j is
-        chunk j).
-      chunk_size: pick-points per chunk written to disk (default: from device memory;
-        with ray, one actor batch). Keep it a whole number of batches: a chunk smaller
-        than a batch is a call of another shape, whose float32 rounding may differ.
-      min_force: add a min_force_n column: each pick-point's smallest successful F_d
-        within the gripper's force range (a batched bisection, about 10 more
-        simulations per pick-point; see mjx_pick.studies.robust.min_grip_force).
-      stability_um: > 0: simulate every pick-point again with the object moved this far
-        along x (micrometres, at most 100) and add success_shifted, score_shifted and
-        label_stable (the two labels agree). A label that a micrometre flips rests on a
-        threshold (a part that just holds or just slips; an edge contact that creeps
-        off the pad or not): no engine reproduces it reliably -- MuJoCo Warp's own
-        run-to-run differences flip such labels too (benchmarks/RESULTS.md, "Run-to-run
-        determinism"). One more simulation per pick-point. One probe finds about half
-        of the labels that some micrometre move flips (RESULTS.md): a flag marks a coin
-        toss; no flag promises less (robust() samples more moves).
-      step_check: simulate every pick-point again at half the solver's time step and add
-        success_half_step and label_converged (the two labels agree). A label the time
-        step changes is decided by the numerics, not by the part and the gripper: a
-        heavy part slipping near its torque limit, a turn ending near max_rotation_deg
-        (benchmarks/RESULTS.md, "Labels decided by a hair"). About two more simulations
-        per pick-point (twice the steps) and one more compile.
-      ray: run the chunks on a Ray cluster: "auto" or the head's "HOST:PORT" (needs
-        the cluster extra; see mjx_pick.engine.cluster). This process still writes out.
-      on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` (an actor
-        started or answered, a chunk sent, done or lost), in the driver's loop.
-      fixed_costs: seconds the caller spent before this call, shown first in the
-        summary's ``time_s`` breakdown (the CLI: ``import_s``, ``object_s``).
+      options: how it runs (``options.RunOptions``: n, default 1000; seed, backend,
+        out, resume, chunk_size, cancel, ...).
+      request: what it computes (:class:`EvaluateRequest`: picks, settings, traces,
+        Optimization mode, extra checks).
+      fields: fields of either, by name (a keyword overrides the same field given in
+        options or request).
     """
-    opts = RunOptions.of(options, **run)
+    req, opts = split_fields(EvaluateRequest, request, options, fields)
     opts = dataclasses.replace(opts, n=opts.n_or(1000), pick_config=opts.picks)
-    backend, batch_size, ray = opts.backend, opts.batch_size, opts.ray
     obj, gripper = _resolve(obj, gripper)
-    # the default procedure is fitted to the gripper's ranges; one given is the user's
-    keep = () if grasp is None else [f.name for f in dataclasses.fields(GraspConfig)]
-    settings, note = Settings(
-        contact=contact or ContactParams(),
-        solver=solver or SolverParams(),
-        grasp=grasp or GraspConfig(),
-    ).on_gripper(gripper, keep)
-    if note:
-        warnings.warn(note, stacklevel=2)
-    contact, solver, grasp = settings.contact, settings.solver, settings.grasp
-    pick_config = opts.pick_config
-    grasp.check_gripper(gripper)
-    pp.check_raster(obj, pick_config)  # before any allocation or folder
-    if not isinstance(picks, pp.PickBatch):  # a batch given here was checked when drawn
-        # a part wider than the stroke everywhere: refused now, not after a raster, a
-        # scene and max_candidates draws that find no pick-point
-        pp.check_stroke(obj, gripper, pick_config, grasp)
-    if ray is not None and min_force:
-        raise ConfigError(
-            "--min-force does not run on a Ray cluster yet: leave out --ray or --min-force"
-        )
-    n_traces = numbers.check("n_traces", n_traces)
-    min_score = numbers.check("min_score", min_score)
-    stability_um = numbers.check("stability_um", stability_um)
-    chunk_size = numbers.check_optional("chunk_size", chunk_size)
-    until = numbers.check_optional("until", until)
-    max_n = numbers.check_optional("max_n", max_n)
-    if ray is not None and stability_um:
-        raise ConfigError(
-            "--stability-um does not run on a Ray cluster yet: leave out --ray or --stability-um"
-        )
-    if ray is not None and step_check:
-        raise ConfigError(
-            "--step-check does not run on a Ray cluster yet: leave out --ray or --step-check"
-        )
-    if step_check:
-        half_step(solver)  # a step that cannot be halved is refused now, not after the run
-    opts.check_resume()
-    user_batch = None
-    if picks is not None and not isinstance(picks, pp.PickBatch) and until is None:
-        # the user's file is read and checked before a simulator or a folder is made
-        rows = read_picks_csv(picks)
-        user_batch = user_picks(
-            obj,
-            gripper,
-            rows.x_mm,
-            rows.y_mm,
-            rows.yaw_deg,
-            config=pick_config,
-            grasp=grasp,
-            skip_infeasible=skip_infeasible,
-            pick_id=rows.pick_id,
-            line=rows.line,
-        )
+    req, opts = _numbers(req, opts)
+    settings = _settings(gripper, req)
+    _check(obj, settings, req, opts)
+    user_batch = _user_batch(obj, settings, req, opts)
     t_scene = time.perf_counter()
     scene = scene_of(obj, settings)
-    if ray is None:
-        runner = Runner(backend, batch_size, chunk_size=chunk_size or None, cancel=cancel)
-    else:
-        from mjx_pick.engine.cluster import ray_runner
-
-        runner = ray_runner(ray, backend, batch_size, cancel=cancel, on_event=on_cluster_event)
+    runner = _runner(opts)
     try:
-        made = runner.make(scene, grasp)
+        made = runner.make(scene, settings.grasp)
         # the run's fixed costs, seconds: filled in as they are paid (summary "time_s")
-        costs = {k: float(v) for k, v in (fixed_costs or {}).items()}
+        costs = {k: float(v) for k, v in (opts.fixed_costs or {}).items()}
         costs["scene_s"] = time.perf_counter() - t_scene  # MjModel, and the backend that holds it
-        ctx = _Context(runner.chunks(made, grasp), runner, made, scene, costs, user_batch)
-        req = _Request(
-            obj,
-            gripper,
-            contact,
-            solver,
-            grasp,
-            opts,
-            picks=picks,
-            n_traces=n_traces,
-            until=until,
-            min_score=min_score,
-            max_n=max_n,
-            chunk_size=chunk_size,
-            min_force=min_force,
-            stability_um=stability_um,
-            step_check=step_check,
-            keep_chunks=keep_chunks,
-            on_progress=on_progress,
-        )
-        return _evaluate(ctx, req)
+        chunks = runner.chunks(made, settings.grasp)
+        ctx = _Context(chunks, runner, made, scene, costs, user_batch)
+        return _evaluate(ctx, _Request(obj, settings, req, opts))
     finally:
         runner.close()
 
 
+def _numbers(req: EvaluateRequest, opts: RunOptions) -> tuple[EvaluateRequest, RunOptions]:
+    """The request's and options' numbers checked (``core.numbers``: a ConfigError
+    naming the input, the value and what is allowed), whole ones as ints."""
+    check, optional = numbers.check, numbers.check_optional
+    req = dataclasses.replace(
+        req,
+        n_traces=check("n_traces", req.n_traces),
+        min_score=check("min_score", req.min_score),
+        stability_um=check("stability_um", req.stability_um),
+        until=optional("until", req.until),
+        max_n=optional("max_n", req.max_n),
+    )
+    opts = dataclasses.replace(opts, chunk_size=optional("chunk_size", opts.chunk_size))
+    return req, opts
+
+
+def _settings(gripper: GripperSpec, req: EvaluateRequest) -> Settings:
+    """The run's settings: the request's on gripper, a procedure left unset fitted to
+    the gripper's ranges (with a warning saying what moved)."""
+    keep = () if req.grasp is None else [f.name for f in dataclasses.fields(GraspConfig)]
+    settings, note = Settings(
+        contact=req.contact or ContactParams(),
+        solver=req.solver or SolverParams(),
+        grasp=req.grasp or GraspConfig(),
+    ).on_gripper(gripper, keep)
+    if note:
+        warnings.warn(note, stacklevel=3)
+    return settings
+
+
+def _check(obj: ObjectModel, settings: Settings, req: EvaluateRequest, opts: RunOptions) -> None:
+    """Every check of the inputs that can fail before a scene, a runner or a folder."""
+    settings.grasp.check_gripper(settings.gripper)
+    pp.check_raster(obj, opts.pick_config)
+    if not isinstance(req.picks, pp.PickBatch):  # a batch given was checked when drawn
+        # a part wider than the stroke everywhere: refused now, not after a raster, a
+        # scene and max_candidates draws that find no pick-point
+        pp.check_stroke(obj, settings.gripper, opts.pick_config, settings.grasp)
+    on_cluster = {"--min-force": req.min_force, "--stability-um": req.stability_um}
+    on_cluster["--step-check"] = req.step_check
+    for flag, wanted in on_cluster.items():
+        if opts.ray is not None and wanted:
+            raise ConfigError(
+                f"{flag} does not run on a Ray cluster yet: leave out --ray or {flag}"
+            )
+    if req.step_check:
+        half_step(settings.solver)  # a step that cannot be halved: refused now
+    opts.check_resume()
+
+
+def _user_batch(obj, settings: Settings, req: EvaluateRequest, opts: RunOptions):
+    """The user's pick-points file, read and checked before a simulator or a folder is
+    made (None: pick-points are drawn, or given as a PickBatch)."""
+    if req.picks is None or isinstance(req.picks, pp.PickBatch) or req.until is not None:
+        return None
+    rows = read_picks_csv(req.picks)
+    return user_picks(
+        obj,
+        settings.gripper,
+        rows.x_mm,
+        rows.y_mm,
+        rows.yaw_deg,
+        config=opts.pick_config,
+        grasp=settings.grasp,
+        skip_infeasible=req.skip_infeasible,
+        pick_id=rows.pick_id,
+        line=rows.line,
+    )
+
+
+def _runner(opts: RunOptions) -> Runner:
+    """The run's runner: in this process, or on a Ray cluster's actors."""
+    if opts.ray is None:
+        chunk = opts.chunk_size or None
+        return Runner(opts.backend, opts.batch_size, chunk_size=chunk, cancel=opts.cancel)
+    from mjx_pick.engine.cluster import ray_runner
+
+    return ray_runner(
+        opts.ray, opts.backend, opts.batch_size, cancel=opts.cancel, on_event=opts.on_cluster_event
+    )
+
+
 @dataclasses.dataclass(frozen=True)
 class _Request:
-    """One evaluate() call's settings once resolved and checked (see evaluate's Args):
-    the value its steps pass down instead of two dozen loose parameters. run: the run
-    options, n and pick_config resolved."""
+    """One evaluate() call once resolved and checked: the object, the settings, what it
+    computes and how it runs (n and pick_config resolved): the one value its steps
+    read."""
 
     obj: ObjectModel
-    gripper: GripperSpec
-    contact: ContactParams
-    solver: SolverParams
-    grasp: GraspConfig
+    settings: Settings
+    what: EvaluateRequest
     run: RunOptions
-    picks: pp.PickBatch | str | Path | None
-    n_traces: int
-    until: int | None
-    min_score: float
-    max_n: int | None
-    chunk_size: int | None
-    min_force: bool
-    stability_um: float
-    step_check: bool
-    keep_chunks: bool
-    on_progress: ProgressFn | None
-
-    # the run options evaluate's steps read
-    n = property(lambda self: self.run.n)
-    seed = property(lambda self: self.run.seed)
-    pick_config = property(lambda self: self.run.pick_config)
-    out = property(lambda self: self.run.out)
-    progress = property(lambda self: self.run.progress)
-    resume = property(lambda self: self.run.resume)
-    overwrite = property(lambda self: self.run.overwrite)
 
 
 @dataclasses.dataclass
@@ -377,24 +332,24 @@ class _Context:
 
 def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
     """evaluate() once its runner (this process, or a Ray cluster) is ready."""
-    out_dir = Path(req.out) if req.out is not None else None
+    out_dir = Path(req.run.out) if req.run.out is not None else None
     settings = experiment_settings(
         ctx.scene,
         {
-            "gripper": req.gripper,
-            "contact": req.contact,
-            "solver": req.solver,
-            "grasp": req.grasp,
-            "picks": req.pick_config,
-            "source": _picks_source(req.picks),
-            "n": req.n if req.picks is None and req.until is None else None,
-            "seed": req.seed,
-            "until": req.until,
-            "min_score": req.min_score if req.until is not None else None,
-            "max_n": req.max_n,
-            "min_force": req.min_force,
-            "stability_um": req.stability_um,
-            "step_check": req.step_check,
+            "gripper": req.settings.gripper,
+            "contact": req.settings.contact,
+            "solver": req.settings.solver,
+            "grasp": req.settings.grasp,
+            "picks": req.run.pick_config,
+            "source": _picks_source(req.what.picks),
+            "n": req.run.n if req.what.picks is None and req.what.until is None else None,
+            "seed": req.run.seed,
+            "until": req.what.until,
+            "min_score": req.what.min_score if req.what.until is not None else None,
+            "max_n": req.what.max_n,
+            "min_force": req.what.min_force,
+            "stability_um": req.what.stability_um,
+            "step_check": req.what.step_check,
             "backend": ctx.chunks.name,
             # a batched program's float32 rounding depends on its batch shape, on the C
             # engine too (its per-tick kernel: engine module docstring)
@@ -402,8 +357,8 @@ def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
         },
     )
     key = config_hash(settings)
-    done = _complete_run(out_dir, key) if out_dir is not None and not req.overwrite else None
-    if done is not None and req.resume:
+    done = _complete_run(out_dir, key) if out_dir is not None and not req.run.overwrite else None
+    if done is not None and req.run.resume:
         return done
     if done is not None:  # its chunks are gone: the chunk store would no longer see it
         raise ConfigError(
@@ -412,22 +367,33 @@ def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
         )
     # every input is checked before the folder is claimed: a bad one leaves it as it was
     t_picks = time.perf_counter()
-    if req.until is not None:
-        req = dataclasses.replace(req, max_n=req.max_n or 10 * req.until)
-        check_range("evaluate", "max_n", req.max_n, req.until, 10**9)
+    if req.what.until is not None:
+        what = dataclasses.replace(req.what, max_n=req.what.max_n or 10 * req.what.until)
+        req = dataclasses.replace(req, what=what)
+        check_range("evaluate", "max_n", req.what.max_n, req.what.until, 10**9)
         picks_batch = None
-    elif req.picks is None:
+    elif req.what.picks is None:
         picks_batch = pp.generate_normal(
-            req.obj, req.gripper, req.n, seed=req.seed, config=req.pick_config, grasp=req.grasp
+            req.obj,
+            req.settings.gripper,
+            req.run.n,
+            seed=req.run.seed,
+            config=req.run.pick_config,
+            grasp=req.settings.grasp,
         )
-    elif isinstance(req.picks, pp.PickBatch):
-        picks_batch = req.picks
+    elif isinstance(req.what.picks, pp.PickBatch):
+        picks_batch = req.what.picks
     else:
         picks_batch = ctx.user_batch  # read and checked before the scene was built
     ctx.costs["picks_s"] = time.perf_counter() - t_picks  # sampling and the feasibility checks
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
         claim(
-            out_dir, "evaluate", key, resume=req.resume, overwrite=req.overwrite, settings=settings
+            out_dir,
+            "evaluate",
+            key,
+            resume=req.run.resume,
+            overwrite=req.run.overwrite,
+            settings=settings,
         )
     try:
         return _evaluate_claimed(ctx, req, picks_batch, out_dir, key)
@@ -443,7 +409,7 @@ def _evaluate_claimed(
     ctx: _Context, req: _Request, picks_batch: pp.PickBatch | None, out_dir: Path | None, key: str
 ) -> Evaluation:
     """evaluate() once its inputs are checked and its folder (if any) claimed."""
-    store = ChunkStore(out_dir, key, req.resume) if out_dir is not None else None
+    store = ChunkStore(out_dir, key, req.run.resume) if out_dir is not None else None
     chunk = _chunk_size(ctx, req, picks_batch, store)
     config = _run_config(ctx, req, picks_batch, chunk, key)
     if out_dir is not None:
@@ -452,19 +418,25 @@ def _evaluate_claimed(
 
     t0 = time.perf_counter()
     try:
-        if req.until is not None:
+        if req.what.until is not None:
             picks_batch, table = _optimize(ctx.chunks, chunk, store, req)
             config["n"], config["mode"] = int(len(picks_batch)), picks_batch.mode
             if out_dir is not None:
                 write_json(out_dir / "config.json", config)
         else:
-            table = _simulate(ctx.chunks, picks_batch, chunk, store, req.progress, req.on_progress)
+            table = _simulate(
+                ctx.chunks, picks_batch, chunk, store, req.run.progress, req.run.on_progress
+            )
         summary = _run_summary(ctx, req, picks_batch, table, time.perf_counter() - t0)
         table = _extra_passes(ctx, req, picks_batch, table, summary)
-        traces = _traces(ctx.chunks, picks_batch, table, req.n_traces) if req.n_traces else None
+        traces = (
+            _traces(ctx.chunks, picks_batch, table, req.what.n_traces)
+            if req.what.n_traces
+            else None
+        )
         interrupts.raise_if_requested()  # a Ctrl-C swallowed in the last chunk: not complete
     except (KeyboardInterrupt, Cancelled) as stop:
-        _stopped(out_dir, stop, ctx.chunks, req.seed, config, time.perf_counter() - t0)
+        _stopped(out_dir, stop, ctx.chunks, req.run.seed, config, time.perf_counter() - t0)
         raise
     t_write = time.perf_counter()
     if out_dir is not None:
@@ -478,9 +450,14 @@ def _evaluate_claimed(
         meta = ctx.chunks.describe(time.perf_counter() - t0)
         meta["timing"]["breakdown_s"] = summary["time_s"]
         finish(
-            out_dir, command="evaluate", config=config, seed=req.seed, release_lock=False, **meta
+            out_dir,
+            command="evaluate",
+            config=config,
+            seed=req.run.seed,
+            release_lock=False,
+            **meta,
         )
-        if not req.keep_chunks:  # every row is in results.parquet now
+        if not req.run.keep_chunks:  # every row is in results.parquet now
             store.remove()
         release(out_dir)
     return Evaluation(table, summary, config, traces, out_dir)
@@ -493,11 +470,11 @@ def _chunk_size(
     meaning), else the user's, else Optimization mode's batch, free device memory's
     (this process) or one actor batch (a cluster) -- saved in the store before the
     first chunk is simulated."""
-    if req.until is not None:
-        batch = int(req.chunk_size or until_batch(req.until, ctx.chunks.batch_size))
-        proposed = min(batch, req.max_n)
-    elif req.chunk_size:
-        proposed = int(req.chunk_size)
+    if req.what.until is not None:
+        batch = int(req.run.chunk_size or until_batch(req.what.until, ctx.chunks.batch_size))
+        proposed = min(batch, req.what.max_n)
+    elif req.run.chunk_size:
+        proposed = int(req.run.chunk_size)
     elif ctx.runner.cluster is None:
         proposed = auto_chunk(ctx.backend)
     else:
@@ -512,19 +489,19 @@ def _run_config(
     parameters, pick-points, backend, device, batch and chunk size, versions."""
     return {
         "object": req.obj.summary(),
-        "gripper": to_dict(req.gripper),
-        "contact": to_dict(req.contact),
+        "gripper": to_dict(req.settings.gripper),
+        "contact": to_dict(req.settings.contact),
         "contact_in_mujoco": to_dict(ctx.scene.contact),
         "scene": {
             # where the pads grip (GraspConfig.grasp_height) and their contact patch
             "fingertip_height_mm": round(ctx.scene.index.pad_bottom_z0_m * 1e3, 6),
             "pad_patch_mm": [round(v, 6) for v in ctx.scene.pad_patch_mm],
         },
-        "solver": to_dict(req.solver),
-        "grasp": to_dict(req.grasp),
-        "picks": to_dict(req.pick_config),
+        "solver": to_dict(req.settings.solver),
+        "grasp": to_dict(req.settings.grasp),
+        "picks": to_dict(req.run.pick_config),
         "n": int(len(picks_batch)) if picks_batch is not None else None,
-        "seed": int(req.seed),
+        "seed": int(req.run.seed),
         "mode": picks_batch.mode if picks_batch is not None else "optimization",
         "backend": ctx.chunks.name,
         "device": ctx.chunks.device,
@@ -542,16 +519,16 @@ def _run_summary(
     """summary.json of the main run: counts and rates (``metrics.summarize``), eq. (1)'s
     F_Gmin (N), candidates, compile apart from run time (s), pick-points per second."""
     summary = summarize(table)
-    mu = req.contact.pad_friction
+    mu = req.settings.contact.pad_friction
     timing = ctx.chunks.describe()["timing"]
     summary.update(
         {
             "object": req.obj.name,
-            "gripper": req.gripper.name,
+            "gripper": req.settings.gripper.name,
             "backend": ctx.chunks.name,
             "device": ctx.chunks.device,
-            "f_gmin_n": min_grasp_force_n(req.obj, mu, req.grasp.safety_factor),
-            "grip_force_n": req.grasp.grip_force_n,
+            "f_gmin_n": min_grasp_force_n(req.obj, mu, req.settings.grasp.safety_factor),
+            "grip_force_n": req.settings.grasp.grip_force_n,
             "candidates_checked": int(picks_batch.n_candidates),
             "rejected": dict(picks_batch.rejected),
             "compile_s": timing["compile_s"],
@@ -561,8 +538,9 @@ def _run_summary(
             "picks_per_s": round(timing["simulations"] / timing["run_s"], 2)
             if timing["run_s"] > 0
             else None,
-            "simulated_s_per_pick": round(req.grasp.duration_s, 3),
-            "physics_steps_per_pick": req.grasp.n_ticks() * req.grasp.substeps(req.solver),
+            "simulated_s_per_pick": round(req.settings.grasp.duration_s, 3),
+            "physics_steps_per_pick": req.settings.grasp.n_ticks()
+            * req.settings.grasp.substeps(req.settings.solver),
         }
     )
     if hasattr(ctx.chunks, "cluster_summary"):
@@ -577,35 +555,41 @@ def _extra_passes(
     stability, label convergence), their figures added to summary. They run through the
     run's own runner and backend (no new compile; the half time step's scene compiles
     its own program)."""
-    if not (req.min_force or req.stability_um or req.step_check):
+    if not (req.what.min_force or req.what.stability_um or req.what.step_check):
         return table
-    settings = Settings(req.gripper, req.contact, req.solver, req.grasp)
+    settings = Settings(
+        req.settings.gripper, req.settings.contact, req.settings.solver, req.settings.grasp
+    )
     sim = Simulator(req.obj, runner=ctx.runner)
     sim.adopt(settings, ctx.backend)
-    if req.min_force:
+    if req.what.min_force:
         t1 = time.perf_counter()
-        with showing_progress(ctx.runner, "minimum grip force (bisection)", "sim", req.progress):
+        with showing_progress(
+            ctx.runner, "minimum grip force (bisection)", "sim", req.run.progress
+        ):
             forces = min_grip_force(req.obj, picks_batch, settings, simulator=sim)
         table = table.append_column("min_force_n", pa.array(forces))
         # holding at the gripper's smallest force says only that the true minimum is at
         # or below it: flagged, never presented as the minimum itself
-        at_floor = np.isfinite(forces) & (forces <= req.gripper.force_min_n + 1e-9)
+        at_floor = np.isfinite(forces) & (forces <= req.settings.gripper.force_min_n + 1e-9)
         table = table.append_column("min_force_at_floor", pa.array(at_floor))
         summary["min_force_at_floor"] = int(at_floor.sum())
         summary["min_force_s"] = round(time.perf_counter() - t1, 3)
         summary["min_force_n_median"] = (
             float(np.nanmedian(forces)) if np.isfinite(forces).any() else None
         )
-    if req.stability_um:
+    if req.what.stability_um:
         t1 = time.perf_counter()
-        table = _stability(table, picks_batch, sim, settings, req.stability_um, req.progress)
+        table = _stability(
+            table, picks_batch, sim, settings, req.what.stability_um, req.run.progress
+        )
         stable = table["label_stable"].to_numpy(zero_copy_only=False)
-        summary["stability_um"] = req.stability_um
+        summary["stability_um"] = req.what.stability_um
         summary["labels_unstable"] = int((~stable).sum())
         summary["stability_s"] = round(time.perf_counter() - t1, 3)
-    if req.step_check:
+    if req.what.step_check:
         t1 = time.perf_counter()
-        table = _step_check(table, picks_batch, sim, settings, req.progress)
+        table = _step_check(table, picks_batch, sim, settings, req.run.progress)
         converged = table["label_converged"].to_numpy(zero_copy_only=False)
         summary["labels_unconverged"] = int((~converged).sum())
         summary["step_check_s"] = round(time.perf_counter() - t1, 3)
@@ -803,8 +787,8 @@ def _simulate(chunks, picks, chunk: int, store, bar: bool, on_progress):
 
 
 def _optimize(chunks, chunk: int, store: ChunkStore | None, req: _Request):
-    """Optimization mode: batches of chunk pick-points until req.until reach
-    req.min_score or req.max_n are spent; (PickBatch, results table of every simulated
+    """Optimization mode: batches of chunk pick-points until req.what.until reach
+    req.what.min_score or req.what.max_n are spent; (PickBatch, results table of every simulated
     pick).
 
     Batch j is chunk j of the run (the batches depend only on the seed and the batch
@@ -827,15 +811,15 @@ def _optimize(chunks, chunk: int, store: ChunkStore | None, req: _Request):
 
     res = pp.optimize(
         req.obj,
-        req.gripper,
+        req.settings.gripper,
         score_fn,
-        k=req.until,
-        min_score=req.min_score,
-        max_n=req.max_n,
+        k=req.what.until,
+        min_score=req.what.min_score,
+        max_n=req.what.max_n,
         batch_size=chunk,
-        seed=req.seed,
-        config=req.pick_config,
-        grasp=req.grasp,
+        seed=req.run.seed,
+        config=req.run.pick_config,
+        grasp=req.settings.grasp,
     )
     return res.picks, pa.concat_tables(tables)
 

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-from collections.abc import Iterator
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from mjx_pick.core import numbers
@@ -40,6 +41,19 @@ class RunOptions:
     resume: continue an interrupted run of the same configuration in out.
     ray: run on a Ray cluster, "auto" or the head's "HOST:PORT" (None: this process).
     progress: show a progress bar on stderr.
+    chunk_size: pick-points per chunk, the unit saved, resumed and cancelled (None:
+      from free device memory; on a cluster one actor batch). Keep it a whole number
+      of batches: a smaller chunk is a call of another shape, whose float32 rounding
+      may differ.
+    keep_chunks: keep out/chunks/ after a complete run (a run that stops keeps them).
+    on_progress: called as on_progress(done, total) with the pick-points simulated (or
+      read back on resume) before the first chunk and after each.
+    cancel: a threading.Event; once set, the run stops before its next chunk
+      (``runner.Cancelled``; out keeps its finished chunks).
+    on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` in the
+      driver's loop.
+    fixed_costs: seconds the caller spent before the call, by name, shown first in the
+      summary's ``time_s`` (the CLI's ``import_s``, ``object_s``).
     """
 
     n: int | None = None
@@ -52,6 +66,16 @@ class RunOptions:
     resume: bool = False
     ray: str | None = None
     progress: bool = False
+    chunk_size: int | None = None
+    keep_chunks: bool = False
+    on_progress: Callable[[int, int], None] | None = None
+    cancel: threading.Event | None = None
+    on_cluster_event: Callable | None = None
+    fixed_costs: dict | None = None
+
+    def __post_init__(self):
+        if self.chunk_size is not None and int(self.chunk_size) < 1:
+            raise ConfigError(f"chunk_size = {self.chunk_size} is out of range: allowed >= 1")
 
     def __post_init__(self):
         # the one rule of each number (core.numbers), as the CLI and the GUI check it
@@ -133,6 +157,18 @@ class RunOptions:
             out_dir = Path(self.out) if self.out is not None else None
             with marking_stops(self.out, command):
                 yield OpenStudy(command, sim, store, complete, out_dir, self.seed)
+
+
+def split_fields(request_cls: type, request, options: RunOptions | None, fields: dict):
+    """(request, options) of a study: what it computes (a request_cls value, default
+    request_cls()) and how it runs, each with the fields given by name replaced (a name
+    of neither is a TypeError, as for any function)."""
+    what = {f.name for f in dataclasses.fields(request_cls)}
+    given = {k: v for k, v in fields.items() if k in what}
+    request = request if request is not None else request_cls()
+    request = dataclasses.replace(request, **given) if given else request
+    opts = RunOptions.of(options, **{k: v for k, v in fields.items() if k not in what})
+    return request, opts
 
 
 @dataclasses.dataclass
