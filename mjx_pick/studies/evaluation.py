@@ -202,7 +202,7 @@ def evaluate(
     req, opts = split_fields(EvaluateRequest, request, options, fields)
     opts = dataclasses.replace(opts, n=opts.n_or(1000), pick_config=opts.picks)
     obj, gripper = _resolve(obj, gripper)
-    req, opts = _numbers(req, opts)
+    req = _numbers(req)
     settings = _settings(gripper, req)
     _check(obj, settings, req, opts)
     user_batch = _user_batch(obj, settings, req, opts)
@@ -221,11 +221,11 @@ def evaluate(
         runner.close()
 
 
-def _numbers(req: EvaluateRequest, opts: RunOptions) -> tuple[EvaluateRequest, RunOptions]:
-    """The request's and options' numbers checked (``core.numbers``: a ConfigError
-    naming the input, the value and what is allowed), whole ones as ints."""
+def _numbers(req: EvaluateRequest) -> EvaluateRequest:
+    """The request's numbers checked (``core.numbers``: a ConfigError naming the input,
+    the value and what is allowed), whole ones as ints (RunOptions checks its own)."""
     check, optional = numbers.check, numbers.check_optional
-    req = dataclasses.replace(
+    return dataclasses.replace(
         req,
         n_traces=check("n_traces", req.n_traces),
         min_score=check("min_score", req.min_score),
@@ -233,8 +233,6 @@ def _numbers(req: EvaluateRequest, opts: RunOptions) -> tuple[EvaluateRequest, R
         until=optional("until", req.until),
         max_n=optional("max_n", req.max_n),
     )
-    opts = dataclasses.replace(opts, chunk_size=optional("chunk_size", opts.chunk_size))
-    return req, opts
 
 
 def _settings(gripper: GripperSpec, req: EvaluateRequest) -> Settings:

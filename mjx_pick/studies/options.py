@@ -74,12 +74,8 @@ class RunOptions:
     fixed_costs: dict | None = None
 
     def __post_init__(self):
-        if self.chunk_size is not None and int(self.chunk_size) < 1:
-            raise ConfigError(f"chunk_size = {self.chunk_size} is out of range: allowed >= 1")
-
-    def __post_init__(self):
         # the one rule of each number (core.numbers), as the CLI and the GUI check it
-        for name in ("n", "seed", "batch_size"):
+        for name in ("n", "seed", "batch_size", "chunk_size"):
             value = numbers.check_optional(name, getattr(self, name))
             object.__setattr__(self, name, value)
 
