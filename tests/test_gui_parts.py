@@ -590,3 +590,27 @@ def test_a_restarted_server_remembers_the_runs_of_its_work_folder(tmp_path):
     finally:
         os.close(fd)
     assert not got["evaluate live"].running  # the lock released: it ended
+
+
+def test_a_refused_folder_is_explained_in_the_pages_words(tmp_path):
+    # the CLI's refusal of a folder of another configuration, as the page shows it: no
+    # flags the page does not have, no digests, what changed by name
+    import pytest
+
+    from mjx_pick.core.config import ConfigError
+    from mjx_pick.gui.forms import page_advice
+    from mjx_pick.outputs.rundir import claim, config_hash, end_claims
+
+    out = tmp_path / "run"
+    first = {"seed": 0, "model": "sha256:" + "a" * 16}
+    claim(out, "evaluate", config_hash(first), settings=first)
+    (out / "chunks").mkdir()
+    (out / "chunks" / "part-000000.parquet").write_bytes(b"x")
+    end_claims("interrupted", "stopped")
+    second = {"seed": 1, "model": "sha256:" + "b" * 16}
+    with pytest.raises(ConfigError) as err:
+        claim(out, "evaluate", config_hash(second), settings=second)
+    shown = page_advice(str(err.value))
+    assert "--out" not in shown and "--overwrite" not in shown and "--resume" not in shown
+    assert "sha256" not in shown and "model: its content changed" in shown
+    assert "seed: 0 -> 1" in shown and "'resume' ticked" in shown and "run folder name" in shown

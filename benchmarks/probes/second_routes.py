@@ -133,7 +133,7 @@ def probes(tmp: Path) -> list[tuple[str, str, Callable[[], tuple[str, str]]]]:
             killed_run(folder)
             before = snapshot(folder)
             argv = ["evaluate", "block", "--n", "96", "--batch-size", "8", "--chunk-size", "8"]
-            argv = argv if change[0] != "--n" else argv[:3] + argv[4:]
+            argv = argv if change[0] != "--n" else argv[:2] + argv[4:]
             res = run(*argv, *change, "--out", folder, *FAST)
             return verdict(res, refused_with="finished chunks", folder=folder, before=before)
 

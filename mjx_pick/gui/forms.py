@@ -334,3 +334,46 @@ def sweep_problem(settings: Settings, name: str, values) -> str:
 def backend_choices() -> list[str]:
     """The backend select's options: 'auto' and every backend of the registry."""
     return list(registry.choices())
+
+
+# the CLI's advice in a refusal, as the page offers it (it has no flags, and never
+# deletes a run: a run's name is its folder)
+_PAGE_ADVICE = (
+    (
+        "Keep them: continue it with its settings and --resume, or write elsewhere with "
+        "--out NEW; --overwrite deletes them",
+        "Keep them: continue it with the same settings and 'resume' ticked, or choose "
+        "another run folder name",
+    ),
+    (
+        "Keep them: write elsewhere with --out NEW; --overwrite deletes them",
+        "Keep them: choose another run folder name",
+    ),
+    (
+        "keep them and write elsewhere with --out NEW, or pass --overwrite to delete them "
+        "and start again",
+        "keep them: choose another run folder name",
+    ),
+    (
+        "Keep them and write elsewhere with --out NEW, or pass --overwrite to delete them "
+        "and start again",
+        "Keep them: choose another run folder name",
+    ),
+    (
+        "pass --resume to continue it, or choose another --out",
+        "tick 'resume' to continue it, or choose another run folder name",
+    ),
+    ("choose another --out or pass --overwrite", "choose another run folder name"),
+    ("choose another --out", "choose another run folder name"),
+    ("--out NEW", "another run folder name"),
+)
+
+
+def page_advice(message: str) -> str:
+    """A refusal's advice in the page's words (run folder names and the resume box,
+    not --out, --resume and --overwrite)."""
+    for cli, page in _PAGE_ADVICE:
+        message = message.replace(cli, page)
+    if message.startswith("--out "):  # the folder a refusal names first
+        message = "run folder " + message.removeprefix("--out ")
+    return message

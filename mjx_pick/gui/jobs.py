@@ -640,7 +640,7 @@ class Job:
 
     def error_message(self, code: int) -> str:
         """One line for the page: the CLI's own error line, else the exception's."""
-        from mjx_pick.gui.forms import user_words
+        from mjx_pick.gui.forms import page_advice, user_words
 
         # paths inside the work folder as the page names them (relative to it)
         work = f"{self.log.parent.parent}/"
@@ -648,7 +648,7 @@ class Job:
         log = self.log.relative_to(self.log.parent.parent)
         for line in reversed(lines):
             if "error: " in line and line.startswith("mjx-pick"):
-                return user_words(line.split("error: ", 1)[1].strip())
+                return user_words(page_advice(line.split("error: ", 1)[1].strip()))
         last = next((ln.strip() for ln in reversed(lines) if ln.strip()), "")
         # the exception's last line, never the traceback; the log keeps the rest
         return f"the run stopped (exit code {code}): {last[-300:]}; its log: {log}"

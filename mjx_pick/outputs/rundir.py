@@ -274,11 +274,18 @@ def changed_settings(old: dict | None, new: dict | None) -> list[str]:
     if old is None or new is None:
         return []
     names = sorted(set(old) | set(new))
-    return [
-        f"{k}: {_show(old.get(k, _MISSING))} -> {_show(new.get(k, _MISSING))}"
-        for k in names
-        if old.get(k, _MISSING) != new.get(k, _MISSING)
-    ]
+
+    def line(k) -> str:
+        a, b = old.get(k, _MISSING), new.get(k, _MISSING)
+        if _digest(a) and _digest(b):  # a model or a file by its digest: no hash to read
+            return f"{k}: its content changed"
+        return f"{k}: {_show(a)} -> {_show(b)}"
+
+    return [line(k) for k in names if old.get(k, _MISSING) != new.get(k, _MISSING)]
+
+
+def _digest(v) -> bool:
+    return isinstance(v, str) and v.startswith("sha256:")
 
 
 def what_changed(old: dict, settings: dict | None) -> str:
