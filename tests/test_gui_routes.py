@@ -114,3 +114,33 @@ def test_compare_says_when_grippers_ran_at_different_forces(page, server):
     note.filter(has_text="different grip forces").wait_for()
     assert "onrobot-rg2 at 40 N" in note.inner_text()
     assert "robotiq-2f85 at 50 N" in note.inner_text()
+
+
+def test_a_runs_settings_load_from_its_folder_into_a_fresh_page(page, server, browser):
+    from playwright.sync_api import expect
+
+    url, _ = server
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    page.get_by_label("lift height (mm)", exact=True).fill("6")
+    page.get_by_label("hold (s)", exact=True).fill("0.05")
+    page.get_by_label("pad friction", exact=True).fill("0.7")
+    page.get_by_text("3 Generate input data").click()
+    page.get_by_label("pick-points", exact=True).fill("3")
+    page.get_by_label("seed", exact=True).fill("5")
+    page.get_by_label("run folder name").fill("remembered")
+    page.get_by_test_id("start-batch").click()
+    assert wait_job(page, "evaluate remembered").startswith("complete")
+    # another browser: a page that knows nothing of the run until it reads its folder
+    fresh = browser.new_context().new_page()
+    fresh.goto(url)
+    import_shipped(fresh)
+    fresh.get_by_text("3 Generate input data").click()
+    fresh.get_by_label("run folder name").fill("remembered")
+    fresh.get_by_test_id("load-run").click()
+    expect(fresh.get_by_label("pick-points", exact=True)).to_have_value("3")
+    expect(fresh.get_by_label("seed", exact=True)).to_have_value("5")
+    fresh.get_by_text("2 Set gripper parameters").click()
+    expect(fresh.get_by_label("lift height (mm)", exact=True)).to_have_value("6")
+    expect(fresh.get_by_label("pad friction", exact=True)).to_have_value("0.7")
+    fresh.context.close()

@@ -105,13 +105,14 @@ class Settings:
     contact: ContactParams
 
 
-def defaults(gripper: GripperSpec) -> dict[str, float]:
-    """Field values for a gripper with the paper's other settings."""
+def defaults(gripper: GripperSpec, **others) -> dict[str, float]:
+    """Field values for a gripper with the paper's other settings (or those given as
+    picks=, grasp=, contact=: a run's)."""
     objs = {
         "gripper": gripper,
-        "picks": PickConfig(),
-        "grasp": GraspConfig(),
-        "contact": ContactParams(),
+        "picks": others.get("picks") or PickConfig(),
+        "grasp": others.get("grasp") or GraspConfig(),
+        "contact": others.get("contact") or ContactParams(),
     }
     return {f.key: float(getattr(objs[f.section], f.name)) for f in SETTINGS_FIELDS}
 
@@ -150,6 +151,8 @@ def build(
     values: dict[str, float | None],
     gripper: GripperSpec,
     contact: ContactParams | None = None,
+    grasp: GraspConfig | None = None,
+    picks: PickConfig | None = None,
 ) -> tuple[Settings | None, dict]:
     """Settings from form values, or None and {key: message} for every bad field.
 
@@ -159,12 +162,14 @@ def build(
         form does not show).
       contact: the contact parameters it started from (e.g. calibrated ones; default:
         the paper's), for the fields the form does not show (stiffness, damping, ...).
+      grasp, picks: the procedure and pick-point settings it started from (a run's,
+        loaded from its folder; default: the paper's), likewise.
     Returns:
       (settings, {}) or (None, errors); errors may hold "" for a message that names no
       field (shown above the form).
     """
     errors: dict[str, str] = {}
-    base = {"gripper": gripper, "picks": PickConfig(), "grasp": GraspConfig()}
+    base = {"gripper": gripper, "picks": picks or PickConfig(), "grasp": grasp or GraspConfig()}
     base["contact"] = contact or ContactParams()
     changes: dict[str, dict] = {s: {} for s in SECTIONS}
     for f in SETTINGS_FIELDS:

@@ -70,6 +70,9 @@ class GenerateTab:
                 )
                 self.run_name = ui.input("run folder name", value=f"evaluate-{stamp()}")
                 self.resume = ui.checkbox("resume an interrupted run of this folder")
+                ui.button("Load this run folder's settings", on_click=self.load_run_settings).props(
+                    'flat dense data-testid="load-run"'
+                )
                 self.checks = ui.checkbox(
                     "check each label: again at half the time step and with the part moved "
                     "1 um (about 3x the simulation)"
@@ -100,6 +103,37 @@ class GenerateTab:
                 )
                 self.picks_image.set_visibility(False)
                 self.run_summary = ui.markdown("").props('data-testid="run-summary"')
+
+    def load_run_settings(self) -> None:
+        """The settings a run in the work folder was made with (its config.json, written
+        when it starts: a stopped run has one), into this page: tab 2's fields, the
+        pick-points, the seed and the name, resume ticked -- so that it can be continued
+        after a reload, or a run repeated."""
+        from mjx_pick.outputs.rundir import read_manifest
+        from mjx_pick.studies.recorded import settings_of
+
+        self.error.set_text("")
+        folder = self.state.run_folder(self.run_name.value or "")
+        config_path = folder / "config.json" if folder is not None else None
+        if config_path is None or not config_path.is_file():
+            self.run_name.error = "no run of this name in the work folder"
+            return
+        self.run_name.error = None
+        try:
+            config = json.loads(config_path.read_text())
+            settings, picks = settings_of(config, f"run {folder.name}")
+        except (ValueError, ConfigError) as err:
+            self.error.set_text(f"{folder.name}: its settings cannot be read ({err})")
+            return
+        self.form.adopt_run(settings, picks, config.get("backend"))
+        if config.get("n") is not None:
+            self.n.value = int(config["n"])
+        self.seed.value = int(config.get("seed") or 0)
+        done = (read_manifest(folder) or {}).get("status")
+        self.resume.value = done != "complete"
+        obj = (config.get("object") or {}).get("name")
+        if self.state.obj is None or self.state.obj.name != obj:
+            self.error.set_text(f"{folder.name} is a run of {obj}: import it in tab 1")
 
     def pick_numbers(self) -> tuple[int, int] | None:
         n = checked(self.n, "n")

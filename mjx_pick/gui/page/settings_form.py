@@ -29,6 +29,7 @@ class SettingsForm:
 
         self.show = show
         self.base_contact = None  # calibrated contact parameters, once adopted
+        self.base_grasp = self.base_picks = None  # a run's, once loaded from its folder
         self.inputs: dict[str, ui.number] = {}
         with ui.row().classes("items-end"):
             self.preset = ui.select(
@@ -117,8 +118,23 @@ class SettingsForm:
         self.preset.value = before.preset.value
         self.backend.value = before.backend.value
         self.base_gripper, self.base_contact = before.base_gripper, before.base_contact
+        self.base_grasp, self.base_picks = before.base_grasp, before.base_picks
         for key, widget in self.inputs.items():
             widget.value = before.inputs[key].value
+
+    def adopt_run(self, settings, picks, backend: str | None) -> None:
+        """A run's own settings (read from its folder), every field of them: its gripper,
+        contact, procedure and pick-point settings, and its backend."""
+        self.base_gripper, self.base_contact = settings.gripper, settings.contact
+        self.base_grasp, self.base_picks = settings.grasp, picks
+        values = forms.defaults(
+            settings.gripper, picks=picks, grasp=settings.grasp, contact=settings.contact
+        )
+        for key, value in values.items():
+            self.inputs[key].value = int(value) if float(value).is_integer() else value
+            self.inputs[key].error = None
+        if backend in (self.backend.options or []):
+            self.backend.value = backend
 
     def adopt_contact(self, contact) -> None:
         """Fitted contact parameters (the calibration study) for every later run."""
@@ -129,7 +145,9 @@ class SettingsForm:
     def read(self) -> forms.Settings | None:
         """The settings, or None with each error next to its field (and the form shown)."""
         values = {k: w.value for k, w in self.inputs.items()}
-        settings, errors = forms.build(values, self.base_gripper, self.base_contact)
+        settings, errors = forms.build(
+            values, self.base_gripper, self.base_contact, self.base_grasp, self.base_picks
+        )
         for key, widget in self.inputs.items():
             widget.error = errors.get(key)
         self.settings_error.set_text(errors.get("", ""))
