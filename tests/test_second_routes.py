@@ -280,3 +280,18 @@ def test_resume_of_a_folder_that_does_not_exist_is_refused(tmp_path):
     )
     assert "does not exist, so there is no run to continue" in res.stderr
     assert not (tmp_path / "typo").exists()
+
+
+def test_a_part_that_fits_only_at_its_corners_is_said_to(tmp_path):
+    # a 120 mm square on the 2F-85's 85 mm stroke: a few poses take a corner between
+    # the pads; such pick-points are drawn, and the rarity is said (not silently ranked)
+    import cv2
+    import numpy as np
+
+    img = np.full((1300, 1300, 3), 255, np.uint8)
+    img[50:1250, 50:1250] = 0
+    square = tmp_path / "square.png"
+    cv2.imwrite(str(square), img)
+    argv = ["picks", square, "--px-per-mm", "10", "--thickness-mm", "20", "--mass-g", "200"]
+    res = cli(*argv, "--n", "2", "--out", tmp_path / "p", check=True)
+    assert "barely fits between the pads" in res.stderr

@@ -437,7 +437,7 @@ def probes(tmp: Path) -> list[tuple[str, str, Callable[[], tuple[str, str]]]]:
             res = run(cmd, "block", *extra, "--n", "2", "--out", folder, "--resume", *FAST)
             return verdict(res, refused_with="does not exist", folder=folder)
 
-    @add("18 late refusals", "compare: no gripper can take a 120 mm part")
+    @add("18 late refusals", "compare: a 120 mm square that fits only at its corners")
     def _():
         import cv2
         import numpy as np
@@ -457,7 +457,7 @@ def probes(tmp: Path) -> list[tuple[str, str, Callable[[], tuple[str, str]]]]:
             "--mass-g",
             "200",
             "--grippers",
-            "onrobot-rg2,franka-hand",
+            "robotiq-2f85,franka-hand",
             "--n",
             "4",
             "--out",
@@ -465,7 +465,8 @@ def probes(tmp: Path) -> list[tuple[str, str, Callable[[], tuple[str, str]]]]:
             *FAST,
             timeout=300,
         )
-        return verdict(res, refused_with="no gripper can take", folder=folder)
+        # handled: it runs, says the part barely fits, and ranks both at what they do
+        return verdict(res, ok=lambda: "barely fits" in res.stderr)
 
     # 15: gripper names
     for name, good in (("grip 😀", True), ("a/b", False), ("..", False), ("x\x07y", False)):

@@ -70,8 +70,10 @@ INPUTS: dict[str, Number] = {
     # an object from an image or a mesh
     "px_per_mm": Number(0, 1000, lo_open=True, unit="px/mm", doc="image scale"),
     "thickness_mm": Number(0, 2000, lo_open=True, unit="mm", doc="object thickness"),
-    "mass_g": Number(0, 1e6, lo_open=True, unit="g", doc="object mass"),
-    "density_kg_m3": Number(0, 1e5, lo_open=True, unit="kg/m^3", doc="object density"),
+    # mass and density: positive here; what a solid can be is the object's own check
+    # (objects.DENSITY_POSSIBLE_KG_M3, which names the density they make)
+    "mass_g": Number(0, None, lo_open=True, unit="g", doc="object mass"),
+    "density_kg_m3": Number(0, None, lo_open=True, unit="kg/m^3", doc="object density"),
     "pick_height_mm": Number(0, 2000, lo_open=True, unit="mm", doc="fingertip height"),
     "simplify_mm": Number(0, 5, unit="mm", doc="outline simplification"),
     # a pick-point given by the user (a picks CSV, a form)

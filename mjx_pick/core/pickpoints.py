@@ -47,6 +47,24 @@ REASON_WORDS = {
 }
 
 
+RARE_FEASIBLE = 1e-3  # a feasible share of candidates below this: edge cases only
+
+
+def warn_rare(obj, gripper, feasible: int, drawn: int) -> None:
+    """Warn when feasible pick-points are a tiny share of the candidates drawn: the part
+    barely fits the gripper (a corner, a narrow end between the pads), and its rates
+    rest on those edge cases."""
+    if drawn and 0 < feasible < RARE_FEASIBLE * drawn:
+        warnings.warn(
+            f"{obj.name!r} with {gripper.name}: only {feasible} of {drawn:,} candidate poses "
+            f"are feasible ({100 * feasible / drawn:.2g} %): the part barely fits between "
+            "the pads (a corner, a narrow end), and every rate rests on those edge cases; "
+            "check their pictures, or use a gripper with a larger stroke",
+            PlausibilityWarning,
+            stacklevel=3,
+        )
+
+
 def rejected_text(rejected: dict) -> str:
     """A batch's rejection counts in words, most first: '120 the gripper misses ...'."""
     shown = sorted(((int(v), k) for k, v in (rejected or {}).items() if v), reverse=True)
@@ -656,10 +674,11 @@ def generate_normal(
     picks = concat(batches)
     if len(picks) == 0:
         raise ConfigError(_empty_message(obj, gripper, checker.config, picks))
+    warn_rare(obj, gripper, len(picks), picks.n_candidates)
     if len(picks) < n:
         warnings.warn(
             f"only {len(picks)} of {n} pick-points are feasible after {picks.n_candidates} "
-            f"candidates (rejected: {picks.rejected})",
+            f"candidates (rejected: {rejected_text(picks.rejected)})",
             stacklevel=2,
         )
         return picks

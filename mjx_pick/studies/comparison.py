@@ -91,6 +91,9 @@ def shared_candidates(
                 [{k: v[keep] for k, v in res.items()} for res in checks],
             )
         )
+    for g, gripper in enumerate(grippers):  # a gripper that takes the part only at its edges
+        ok = sum(int(np.sum(p[4][g]["reason"] == 0)) for p in parts)
+        pp.warn_rare(obj, gripper, ok, drawn)
     if found == 0:
         raise ConfigError(
             f"none of {', '.join(g.name for g in grippers)} can take {obj.name} at any of "
