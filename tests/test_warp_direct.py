@@ -7,8 +7,6 @@ benchmarks/throughput.py and benchmarks/real_objects.py; here the same code runs
 CPU, kernel by kernel (no CUDA graphs).
 """
 
-import os
-
 import jax
 import numpy as np
 import pytest
@@ -256,32 +254,37 @@ def test_without_a_gpu_warp_says_what_is_missing(block_scene, monkeypatch):
         wd.WarpBackend(block_scene, SHORT, 4)
 
 
-@pytest.mark.skipif(
-    os.environ.get("MJX_PICK_SLOW_WARP_CPU") == "0", reason="MuJoCo Warp on the CPU skipped"
-)
-def test_picks_on_warp_cpu_agree_with_the_c_engine_and_do_not_depend_on_their_slot(
-    block_scene,
-):
-    """Three picks through a pool of two slots (one refilled) on Warp's CPU device:
-    labels equal MuJoCo C's, the force and lift metrics within the engines' agreement;
-    the same picks one per slot (record) give the same results bit for bit, and their
-    traces end where C's do."""
-    picks = pp.generate_normal(block_scene.object, block_scene.gripper, 3, seed=0, grasp=SHORT)
-    inputs = make_inputs(block_scene, SHORT, picks)
+# the shortest procedure that still closes, lifts and holds: the end-to-end test runs
+# MuJoCo Warp on the CPU kernel by kernel (~50 ms a physics step)
+BRIEF = GraspConfig(close_timeout_s=0.4, lift_height_mm=5.0, hold_s=0.02)
+
+
+def test_picks_through_a_refilled_shrinking_pool_match_one_slot_each_and_the_c_engine():
+    """Three picks through a pool of two slots on Warp's CPU device -- one slot refilled,
+    then the pool halved to one slot in the tail -- give bitwise the results of the
+    same picks one slot each (record, no refill), so a pick's result does not depend on
+    its slot or pool; labels equal MuJoCo C's, forces and lift within the engines'
+    agreement, and the traces end where C's do."""
+    scene = mp.build_scene(mp.load_object("block"), mp.GripperSpec(), grasp=BRIEF)
+    picks = pp.generate_normal(scene.object, scene.gripper, 3, seed=0, grasp=BRIEF)
+    inputs = make_inputs(scene, BRIEF, picks)
     from mjx_pick.engine.c_backend import MujocoBackend
 
-    ref, ref_traces = MujocoBackend(block_scene, SHORT, 8, nthread=1).run(inputs, record=True)
-    backend = wd.WarpBackend(block_scene, SHORT, batch_size=2, ticks_per_call=5)
+    ref, ref_traces = MujocoBackend(scene, BRIEF, 8, nthread=1).run(inputs, record=True)
+    backend = wd.WarpBackend(
+        scene, BRIEF, batch_size=2, ticks_per_call=5, shrink_levels=1, shrink_min_slots=1
+    )
     pooled, _ = backend.run(inputs)
+    assert sorted(k[0] for k in backend._pools) == [1, 2]  # the tail ran in the halved pool
     assert backend.pool_stats.rounds > 3 and backend.pool_stats.picks == 3
+    alone, traces = backend.run(inputs, record=True)
+    for name in wd.RESULT_FIELDS:
+        np.testing.assert_array_equal(pooled[name], alone[name], err_msg=name)
     np.testing.assert_array_equal(pooled["success"], ref["success"])
     np.testing.assert_array_equal(pooled["failure"], ref["failure"])
     # two engines, two colliders: forces at F_d within 1 %, lift within 0.1 mm
     np.testing.assert_allclose(pooled["max_force_left_n"], ref["max_force_left_n"], rtol=0.01)
     np.testing.assert_allclose(pooled["lift_height_mm"], ref["lift_height_mm"], atol=0.1)
-    alone, traces = backend.run(inputs, record=True)
-    for name in wd.RESULT_FIELDS:
-        np.testing.assert_array_equal(alone[name], pooled[name], err_msg=name)
     assert traces.shape == ref_traces.shape
     t, z = gk.TRACE_FIELDS.index("t_s"), gk.TRACE_FIELDS.index("object_z_m")
     np.testing.assert_allclose(traces[..., t], ref_traces[..., t], rtol=1e-5)
@@ -317,26 +320,6 @@ def test_variant_models_differ_only_in_fields_warp_takes_per_world(block):
         leaf = getattr(mb, name).numpy()
         mine = np.asarray(getattr(b.model, name), np.float32).reshape(leaf.shape)
         np.testing.assert_array_equal(leaf, mine, err_msg=name)
-
-
-def test_a_shrinking_pool_keeps_each_picks_state(block_scene):
-    """Six picks in a pool of 4 slots that halves twice in the tail (to 2, then 1):
-    the picks moved into the smaller pools run on as if they had stayed -- bitwise the
-    results of a pool that never shrinks (Warp's CPU device runs worlds one by one)."""
-    picks = pp.generate_normal(block_scene.object, block_scene.gripper, 6, seed=1, grasp=SHORT)
-    inputs = make_inputs(block_scene, SHORT, picks)
-    common = dict(batch_size=4, ticks_per_call=5, shrink_min_slots=1)
-    fixed = wd.WarpBackend(block_scene, SHORT, shrink_levels=0, **common)
-    ref, _ = fixed.run(inputs)
-    shrinking = wd.WarpBackend(block_scene, SHORT, shrink_levels=2, **common)
-    out, _ = shrinking.run(inputs)
-    assert sorted(k[0] for k in shrinking._pools) == [1, 2, 4]
-    assert shrinking.pool_stats.slot_ticks < fixed.pool_stats.slot_ticks
-    for name in wd.RESULT_FIELDS:
-        np.testing.assert_array_equal(out[name], ref[name], err_msg=name)
-    np.testing.assert_array_equal(
-        shrinking.last_diagnostics.overflow, fixed.last_diagnostics.overflow
-    )
 
 
 def test_a_process_plans_its_jax_for_the_backends_it_will_build(monkeypatch):
