@@ -1,36 +1,11 @@
-"""MuJoCo Warp backend: the MJX program with ``impl='warp'`` on an NVIDIA GPU.
+"""MJX-Warp backend: the MJX program with ``impl='warp'`` on NVIDIA GPUs.
 
-mujoco-mjx vendors MuJoCo Warp (``mujoco.mjx.third_party.mujoco_warp``) and calls its
-CUDA kernels from JAX, so the project's rollout (``mjx_pick.engine.mjx_backend``: the shared
-controller/metrics tick and ``mjx.step`` under ``lax.scan``, ``vmap`` and ``jit``) runs
-unchanged; per-pick contact-pair parameters stay batched model fields. What differs:
-
-* **Buffers.** Warp allocates contacts and constraint rows up front: ``naconmax``
-  contacts for ALL simulations of a call together, ``njmax`` constraint rows for EACH.
-  :func:`size_buffers` sizes them from the scene by measurement (a sample of
-  pick-points simulated on the MuJoCo C engine, the largest counts seen, plus a
-  margin). Warp raises an overflow bit in a simulation whose contacts or rows did not
-  fit (and drops them); the rollout ORs those bits over every step, and the picks
-  that overflowed are re-simulated with doubled buffers (``MAX_GROWTH`` times at most,
-  then :class:`BufferOverflowError`): no result ever comes from a dropped contact.
-* **cfrc_ext**, which the pad-force measurement reads, is computed by Warp only with
-  the option ``run_rne_postconstraint`` on; it is switched on here.
-* **No gradients** through Warp: MJX's JAX implementation (``backend='mjx'``) stays for
-  forward-mode derivatives.
-* **CUDA graphs.** ``graph_mode`` 'WARP' (Warp captures each call's kernels as a CUDA
-  graph and replays it while the buffers stay where they are) measured fastest on an
-  H100 (benchmarks/warp_profile.py compares the graph modes). Hence the
-  refilled pool runs as one device program per run (``mjx_backend.make_pool``): with
-  a device call per refill round it lost ~70 ms per call and ran out of memory at
-  32,768 slots (likely re-captured graphs, which Warp caches with their scratch).
-
-Requirements: warp-lang at mujoco-mjx's own pin (``pip install ".[gpu]"``) and a CUDA
-GPU that both JAX and Warp see. ``MJX_PICK_WARP_CPU=1`` lets Warp run on the CPU
-instead (LLVM-compiled kernels; slow; for development and tests only).
-
-Importing this module imports neither warp nor ``mujoco.mjx`` (``backend='auto'`` asks
-:func:`warp_problem` on every machine); :class:`WarpBackend`, which needs both, is
-built on first access.
+MJX's JAX rollout (``engine.mjx_backend``) on MuJoCo Warp's kernels, which mujoco-mjx
+vendors and calls from JAX: the MJX path at the default physics. Buffers are sized as for
+the direct Warp backend (``engine.warp_buffers``; overflowing picks are re-simulated with
+grown buffers); ``run_rne_postconstraint`` is on (cfrc_ext gives the pad forces); the
+refilled pool runs as one device program per call, its CUDA graphs captured by Warp
+(graph mode 'WARP'). docs/gpu.md compares it with the direct backend.
 """
 
 from __future__ import annotations
@@ -185,11 +160,9 @@ def _warp_backend_class():
             self.stats.compile_s += time.perf_counter() - t0
 
         def _build_kernels(self) -> None:
-            """One physics step of one world, now: Warp builds its CUDA kernels at their
-            first launch (over two minutes on a fresh machine, then cached in
-            ~/.cache/warp), and that build belongs to compile time, not to the first
-            batch's run time (measured on an H100: a first evaluate of 40,000 door-opener
-            pick-points reported 257/s, the second 2,388/s)."""
+            """One physics step of one world, now: Warp builds (or loads from its cache)
+            its kernels at their first launch, and that belongs to compile time, not to
+            the first batch's run time."""
             from mujoco import mjx
 
             phys = self.physics(1)

@@ -1,23 +1,12 @@
 """MuJoCo Warp backend: the whole rollout on NVIDIA GPUs as Warp kernels and CUDA graphs.
 
-The ``mujoco-warp`` package is the engine; no JAX is in this path. A pool of
-``batch_size`` simulation slots (MuJoCo Warp "worlds") steps together. One control
-period -- the controller tick of every slot (``kernels.grasp_warp``: measure, P force
-controller, phase machine, metrics) and ``n_substeps`` physics steps -- is captured once
-as a CUDA graph, with MuJoCo Warp's graph conditionals on, so the constraint solver stops
-iterating as soon as every world has converged. The host replays that graph for a round
-of ``ticks_per_call`` periods, then reads which slots' picks have ended (one small
-transfer), stores their accumulators in the pick's row and gives those slots the next
-pick-points in order (a reset, the pick's inputs written into its slot's data and
-model rows, one forward pass). A slot's results depend on its pick-point alone, never on
-which slot ran it or what ran beside it; results come back in pick-point order.
-
-Per-pick contact-pair parameters and gripper-variant fields (``PickInputs.model``) are
-rows of batched model arrays, written at a slot's refill: one model, one graph, for
-every chunk and every variant that is data. Buffers are sized as for the MJX-Warp path
-(``engine.warp_buffers``); picks whose buffers overflowed are re-simulated with doubled
-buffers. With ``MJX_PICK_WARP_CPU=1`` the same code runs on Warp's CPU device
-(kernels launched one by one: slow; for tests).
+The ``mujoco-warp`` package is the engine; no JAX is in this path. A pool of slots steps
+together; one control period (every slot's controller tick, then the physics steps) is
+captured once as a CUDA graph with MuJoCo Warp's graph conditionals; between rounds of
+periods the host hands slots whose pick ended the next pick-points (a reset, the pick's
+rows written, a forward pass), and in a run's tail moves the live slots into a pool half
+the size. A pick's result depends on its pick-point alone. docs/gpu.md describes it.
+With ``MJX_PICK_WARP_CPU=1`` the same code runs on Warp's CPU device (for tests).
 """
 
 from __future__ import annotations
