@@ -599,8 +599,8 @@ def _add_estimator_args(p: argparse.ArgumentParser) -> None:
         "--estimator",
         choices=("smoothed", "random", "cma", "lsq", "jvp"),
         default="cma",
-        help="cma: CMA-ES (it reached the common target on 1, 3 and 5 hidden parameters, "
-        "benchmarks/RESULTS.md); smoothed: Gauss-Hermite smoothed gradient + Adam; "
+        help="cma: CMA-ES (docs/calibration.md says why it is the default); smoothed: "
+        "Gauss-Hermite smoothed gradient + Adam; "
         "random: uniform search; lsq: Levenberg-Marquardt on the residuals "
         "(mujoco.sysid); jvp: forward mode through MJX",
     )

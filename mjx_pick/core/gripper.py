@@ -89,8 +89,7 @@ class GripperSpec:
     # class drive (J ~ 1e-7 kg m^2, ~75 mm/s per finger at 3,000-6,000 rpm) reflects
     # 2-7 kg. Off by default: it calms the pads of a finger that loses its part for a
     # step, but a heavy part sliding through the pads then hammers them with the
-    # drive's momentum (above the gripper's maximum force; benchmarks/RESULTS.md,
-    # "Pad chatter")
+    # drive's momentum (above the gripper's maximum force; docs/physics.md)
     drive_inertia_kg: float = setting(
         0.0, "kg", "the finger drive's inertia at the finger (motor and gears)", lo=0
     )

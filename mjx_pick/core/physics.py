@@ -1,77 +1,6 @@
-"""Contact parameters (the paper's Table 1) and solver settings, and their MuJoCo mapping.
+"""Contact parameters (the paper's Table 1), solver settings, and their MuJoCo mapping.
 
-The paper's ADAMS model uses an impact contact: force = K * depth**e + B * depth_rate,
-with K = 1e5 N/mm, B = 5.5 N s/mm (finger-object) or 10 N s/mm (object-ground),
-exponents 1.2 / 2.2, full damping at 1 um / 10 um penetration, and static/dynamic
-Coulomb friction with stiction and friction transition velocities (Table 1).
-
-MuJoCo has a different, soft-constraint contact model, so the mapping is partial:
-
-* Friction: MuJoCo has one Coulomb coefficient per contact (pyramidal or elliptic
-  cone). The pads use the paper's static coefficient (0.86, equal to its dynamic one):
-  holding is sticking. The object-table contact uses the *dynamic* coefficient (0.2):
-  the object slides on the table when the first finger pushes it, and MuJoCo's soft
-  contacts creep under any tangential load, so stiction is not representable anyway.
-* Stiffness and damping: a negative ``solref = (-k, -b)`` gives MuJoCo a mass-normalised
-  spring k [1/s^2] and damper b [1/s]. We take k = K / m and b = B / m with m the
-  object's mass (the contact's effective mass: the fingers are held by stiff servos and
-  the table is fixed). MuJoCo integrates this reference spring once per time step, so
-  it is stable only for a contact time constant of at least about two time steps (its
-  own ``refsafe`` rule for positive solref). Table 1's values are 4-5 orders of
-  magnitude stiffer than that at any practical time step (ADAMS used a variable-step
-  stiff integrator and ~1 um penetration), so they are clamped to the stiffest stable
-  contact: critically damped with time constant ``SolverParams.timeconst_s``.
-  Softer values (e.g. from calibration) pass through unclamped. ``mujoco_contact``
-  reports what was clamped.
-* Pad contacts are soft-finger contacts (``condim`` 4): besides Coulomb friction in
-  the pad plane they resist spinning about the contact normal -- the grip axis -- up
-  to a torque of mu_t * N. A single point contact with condim 3 cannot: a part held
-  off its centre of mass turned in the grasp and slid out at any force. A real pad
-  carries that torque with its contact patch: under uniform pressure p = N / A, the
-  friction of each patch element acts at its distance r from the patch centre, so the
-  largest torque is mu * N * mean(r). Hence mu_t = mu_pad * r_mean(patch), with the
-  patch a rectangle: the pad's width (or the object's, if narrower) by the height of
-  the object's side wall within the pads' band (``ObjectModel.wall_height_mm``; a rigid
-  curved side touches a flat rubber pad only near its widest section).
-  ``pad_torsion_mm`` sets mu_t directly. Where the collider spreads a contact over
-  several points (the four corners of a pad's overlap with a flat face, the two ends of
-  a line contact), their Coulomb friction also resists spin, at the corners: with
-  pyramidal cones a corner at (a, b) from the patch centre resists with mu N max(|a|,
-  |b|) of its normal force N. With the whole pad colliding (``pad_collision = "pad"``,
-  the default before issue 32) the grasp then holds 1.5-1.9x (pyramidal) or 1.5-2.8x
-  (elliptic) the torque of a uniformly pressed pad,
-  whose limit in pure torsion is mu N r_mean (the uniform-pressure result for a flat
-  contact, a disc's 2/3 mu N R; Goyal, Ruina and Papadopoulos, "Planar sliding with dry
-  friction", Wear 143, 1991). ``pad_collision = "mean_radius"`` makes a parametric pad
-  collide through a box cut to the patch's mean radius
-  (``mjx_pick.core.scene.pad_collision_box_mm``: its corners at most r_mean from the
-  patch centre), which brings the torque close to a rubber pad's where the load is a
-  small part of the pads' friction capacity. With elliptic cones (the default) a corner
-  resists with mu N sqrt(a^2 + b^2) and its point torsion adds in quadrature, so the box
-  is cut so that the overlap's corners sit at r_mean cos(30 deg) and each point keeps
-  mu r_mean sin(30 deg) of torsion (``ELLIPTIC_TORSION_SHARE``). Why a narrower geom
-  and not more contact points: MuJoCo's solver shares a pad's normal force among its
-  coplanar contacts as the friction demand asks, not as a pressure field would, so
-  under torsion the force moves to the outermost points and the capacity follows the
-  largest lever (a 2 x 2 grid of pad cells held 1.6-2.3x a rubber pad). The box alone
-  touches a part only within it: a pick at a part's corner or end under the pad's
-  outer region is missed (no_contact, force_not_reached), and a part the pads turn into
-  line with them on closing turns less than under the real pad. ``pad_collision =
-  "rimmed"``, the default, keeps the box and adds the whole pad recessed
-  ``PAD_RIM_RECESS_MM`` behind it with the same friction: a flat face the box presses
-  stays clear of the rim, so its torque is the box's, and a part the box misses meets
-  the rim and is gripped and aligned as by the whole pad. Where the part's surface
-  reaches the rim beside the box (a curved or tapered part), the rim's contacts add
-  their own lever, as a real pad pressed harder at its edge would. An MJCF gripper
-  whose pads are boxes gets the same box and rim over its pad geoms' bounding box
-  (``mjx_pick.core.scene``); other MJCF pads, and ``"pad"``, keep the gripper's own
-  geoms. ``mjx_pick.core.holding`` states the
-  model's capacity from the contact points and a rubber pad's for comparison;
-  benchmarks/RESULTS.md ("Torque", "Torsion like rubber") gives the figures.
-* Not mappable: the force exponent (MuJoCo's spring is linear in depth; solimp shapes
-  the impedance instead), the penetration depth for full damping (solimp's width plays a
-  similar role), the static/dynamic split and the stiction/friction transition
-  velocities (no velocity-dependent friction in MuJoCo).
+The mapping and the defaults' reasons: docs/physics.md.
 """
 
 from __future__ import annotations
@@ -90,35 +19,25 @@ from mjx_pick.core.config import (
     setting,
 )
 
-# the largest time step whose grasp labels match those of smaller steps (the default
-# procedure, MuJoCo C; benchmarks/RESULTS.md, "Time-step convergence"): larger ones are warned about
+# the largest time step whose labels match smaller steps' (docs/physics.md, "Time step")
 CONVERGED_TIMESTEP_S = 0.002
 
 
 # what a parametric pad collides through (ContactParams.pad_collision)
 PAD_COLLISIONS = ("pad", "mean_radius", "rimmed")
 
-# "rimmed": the "mean_radius" box and, behind it, the whole pad recessed by
-# PAD_RIM_RECESS_MM as a second collision geom with the same friction. A face the box
-# touches stays clear of the rim (the box's contacts sit a few micrometres deep), so
-# the torque is the box's; a part the box misses (a corner or end under the pad's outer
-# region) meets the rim after that much more travel and is gripped as by the whole pad.
-# 0.1 mm: well beyond the box's depth at the largest grip forces, and within a rubber
-# pad's compression; labels moved by 1-2 in 128 picks between 0.05 and 0.2 mm
-# (benchmarks/RESULTS.md, "A rim behind the pad box")
+# "rimmed": how far the whole pad sits behind the "mean_radius" box (docs/physics.md,
+# "What a pad collides through")
 PAD_RIM_RECESS_MM = 0.1
 
-# elliptic cones with the "mean_radius" box: the share sin(theta) of the rubber pad's
-# torsion that each contact point's soft-finger torsion carries; the box's corners sit
-# at r_mean cos(theta) (mjx_pick.core.scene.pad_collision_box_mm). 0.5 (theta 30 deg):
-# without point torsion a 2 kg, 3 mm plate on the RG2 turned out of a grip that must
-# hold (benchmarks/RESULTS.md, "Elliptic cones, impratio 10 and a rubber-like pad box")
+# elliptic cones with the "mean_radius" box: the share sin(30 deg) of a rubber pad's
+# torsion each contact point carries, its corners at r_mean cos(30 deg) (docs/physics.md)
 ELLIPTIC_TORSION_SHARE = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
 class ContactParams:
-    """Contact parameters. Defaults: the paper's Table 1 (see the module docstring)."""
+    """Contact parameters. Defaults: the paper's Table 1 (docs/physics.md)."""
 
     # Coulomb coefficients (MuJoCo: one per contact; sliding, both tangent directions)
     pad_friction: float = setting(
@@ -146,40 +65,20 @@ class ContactParams:
         10.0, "N s/mm", "object-table contact damping (above the stable limit: clamped)",
         lo=0, lo_open=True,
     )  # fmt: skip
-    # torsional friction of the pad contacts (length: torque limit per newton of
-    # normal force); None: derived from the pad's contact patch (module docstring)
+    # torsional friction of the pad contacts; None: from the pad's contact patch
     pad_torsion_mm: float | None = setting(
         None, "mm", "pads' torsional friction: torque limit per N of normal force "
         "(none: pad_friction x the contact patch's mean radius)",
         lo=0, hi=100,
     )  # fmt: skip
-    # MuJoCo impedance (dmin, dmax, width[m], midpoint, power). The pads: 0.99 instead
-    # of MuJoCo's default 0.9-0.95: a soft constraint's regularisation lets a held part
-    # creep down through friction at a rate that grows with (1 - d) / d; at 0.99 the
-    # creep over lift and hold dropped several-fold. The table keeps MuJoCo's default:
-    # made as stiff, a part pushed and spun over it by the first pad changed its label
-    # with the time step (benchmarks/RESULTS.md, "creep").
+    # MuJoCo impedance (dmin, dmax, width [m], midpoint, power): docs/physics.md,
+    # "Impedance"
     pad_solimp: tuple[float, float, float, float, float] = (0.99, 0.99, 0.001, 0.5, 2.0)
     table_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
-    # what a pad collides through, on the parametric jaw and on an MJCF gripper's box
-    # pads (module docstring, "Pad contacts"): "pad", the whole pad (an MJCF gripper's
-    # own geoms; MuJoCo's corner contacts resist spin at the patch's edges: 1.3-2.8x
-    # a rubber pad's torque); "mean_radius", a box cut so that the corners and the
-    # points' own torsion hold a uniformly pressed rubber pad's torque for the solver's
-    # cone (mjx_pick.core.scene.pad_collision_box_mm), touching a part only within the
-    # box; or "rimmed" (the default), that box with the whole pad recessed behind it,
-    # so that a part the box misses is still gripped (PAD_RIM_RECESS_MM)
+    # what a pad collides through: "pad", "mean_radius" or "rimmed" (docs/physics.md,
+    # "What a pad collides through")
     pad_collision: str = "rimmed"
-    # MuJoCo's pair margin on the pad contacts: the collider keeps every point of a
-    # pad's overlap with a part that lies within this distance of touching, and the
-    # solver pushes from there (the pad's face acts this much proud of its geom, as a
-    # rubber layer's surface does before it is compressed). At 0 only penetrating points
-    # count; on a thin strip or a line contact (a plate's edge, a handle) they come and
-    # go as the part rocks by micrometres, each engine's collider picks them its own
-    # way, and the pads chattered and labels differed between MuJoCo C and Warp. 0.05 mm,
-    # within a rubber pad's compression, keeps them (benchmarks/RESULTS.md, "A contact
-    # margin on the pads"). MJX's JAX collider has none for boxes against meshes:
-    # mjx_backend.jax_model leaves it out
+    # MuJoCo's pair margin on the pad contacts (docs/physics.md, "A contact margin")
     pad_margin_mm: float = setting(
         0.05, "mm", "pad contacts: points within this distance of touching join the contact",
         lo=0, hi=1,
@@ -203,37 +102,9 @@ class ContactParams:
 
 @dataclasses.dataclass(frozen=True)
 class SolverParams:
-    """MuJoCo solver settings shared by both backends.
+    """MuJoCo solver settings shared by every backend (the defaults' reasons:
+    docs/physics.md, "The solver defaults")."""
 
-    Defaults chosen by measurement on the shipped presets with the default procedure
-    (benchmarks/RESULTS.md, "Elliptic cones, impratio 10 and a rubber-like pad box" and
-    "impratio 100", issue 32): elliptic cones (pyramidal: 26 wrong labels on
-    the 288-pick preset grid, pad chatter on 71 must-hold picks), MuJoCo's own 50
-    line-search iterations (at 8, elliptic cones diverged) and impratio 100.
-
-    impratio sets how soft friction is against the normal direction: MuJoCo regularises
-    an elliptic contact's friction rows by R_0 mu_0^2 / (mu_i^2 impratio), and a part
-    held below its friction limit still creeps through the pads at a steady
-    (1 - d) / d * a / (b * impratio). Over a lift and a hold that creep decides labels
-    near the slip and rotation limits, and it divides among a pad's contact points, so
-    it made those labels depend on how many points the collider returns (MuJoCo C's
-    multi-contact against MuJoCo Warp's, which the engines do not share). At 1 the
-    rubber-like pad box crept out of grips (banana 46 %), at 10 parts gripped far from
-    their centre of mass still crept millimetres; 100 leaves the friction limit where
-    it is (Coulomb's law: the preset grid stays at 0 wrong labels and 0 diverged on
-    MuJoCo C and Warp) and cuts the creep about tenfold.
-
-    MJX-JAX: its forward-mode gradient (calibration's ``jvp`` estimator) is NaN with
-    elliptic cones (measured, issue 32): that estimator refuses them and asks for
-    ``cone = "pyramidal"``, ``impratio = 1``; the other estimators simulate with these
-    settings. Forward simulation on MJX uses them too (not measured there).
-    """
-
-    # 1 ms with 50 solver iterations (benchmarks/RESULTS.md, "Pad chatter"): at 10
-    # iterations the solver stopped unconverged on the pads' stiff low-friction contacts
-    # (pyramidal cones stiffen them as 1 / mu^2) and heavy or slippery parts diverged;
-    # 50 removed that at the 1 ms step for little extra cost (a smaller step cuts the
-    # wrong labels further but doubles the steps, and lets pad forces pass the limit)
     timestep_s: float = setting(0.001, "s", "physics time step", lo=1e-5, hi=0.01)
     cone: str = "elliptic"
     impratio: float = setting(
@@ -244,9 +115,6 @@ class SolverParams:
     ls_iterations: int = setting(
         50, "iterations", "line-search iterations per solver iteration", lo=1, hi=1000
     )
-    # the solver stops once its improvement or gradient falls below this (MuJoCo's
-    # default; MuJoCo Warp keeps iterating every simulation of a call until the last
-    # one is there or the iteration cap is hit)
     tolerance: float = setting(
         1e-8, "-", "solver stops below this relative improvement", lo=0, hi=1e-2
     )
@@ -255,9 +123,7 @@ class SolverParams:
         0, "iterations", "MuJoCo's no-slip post-solver (0: off; C and Warp only)", lo=0, hi=1000
     )
     integrator: str = "implicitfast"
-    # softest-allowed contact time constant: stiffer requests (Table 1) are clamped to
-    # it. Fixed in seconds, so halving the time step refines the integration of the
-    # same contact; never below two time steps (MuJoCo's refsafe rule).
+    # the stiffest contact allowed (Table 1's values are clamped to it): docs/physics.md
     contact_timeconst_s: float = setting(
         0.002, "s", "stiffest contact allowed: its time constant (at least 2 time steps)",
         lo=0, hi=1, lo_open=True,
@@ -271,9 +137,9 @@ class SolverParams:
         if self.timestep_s > CONVERGED_TIMESTEP_S:
             warnings.warn(
                 f"solver.timestep_s = {self.timestep_s:g} is above {CONVERGED_TIMESTEP_S:g} s, "
-                "the largest step measured to leave the labels as they are at smaller steps: "
-                "successes may turn into failures or diverge (benchmarks/RESULTS.md, "
-                f"'Time-step convergence'); use --timestep-s {CONVERGED_TIMESTEP_S:g} or less",
+                "the largest step known to leave the labels as they are at smaller steps: "
+                "successes may turn into failures or diverge (docs/physics.md, 'Time step'); "
+                f"use --timestep-s {CONVERGED_TIMESTEP_S:g} or less",
                 PlausibilityWarning,
                 stacklevel=3,
             )
@@ -286,7 +152,7 @@ class SolverParams:
 
 @dataclasses.dataclass(frozen=True)
 class MujocoContact:
-    """What ContactParams become in MuJoCo for one object (see the module docstring)."""
+    """What ContactParams become in MuJoCo for one object (docs/physics.md)."""
 
     pad_friction: float
     pad_torsion_m: float  # torsional friction coefficient of the pad contacts, m

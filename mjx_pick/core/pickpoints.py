@@ -204,8 +204,8 @@ class FeasibilityChecker:
     so the pads grip at the grasp height. But with the part off-centre the near pad
     reaches it first, at a wider opening, where it rides higher by the drop between
     that opening and the grasp gap; if that lifts its tip above the part's top, it
-    passes over the part and lands on it (the door opener: 29 of the 30 such poses
-    failed in simulation, benchmarks/RESULTS.md). A fourth check rejects those poses
+    passes over the part and lands on it (such poses fail in simulation). A fourth
+    check rejects those poses
     as "pad_path" (the part's full height is taken as its top: optimistic for a mesh
     lower under the near pad).
     """

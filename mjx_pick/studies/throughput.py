@@ -1,6 +1,6 @@
 """Throughput measurement: pick-points per second against batch size, per backend.
 
-Used by ``benchmarks/throughput.py`` (CSV rows for RESULTS.md) and the throughput
+Used by ``benchmarks/throughput.py`` (CSV rows) and the throughput
 notebook; ``plot_throughput`` draws rows against the paper's figures. ``side_by_side``
 runs several backends (Warp, MJX's JAX physics, MuJoCo C) on the same pick-points and
 compares their labels with MuJoCo C's. Both run through ``mjx_pick.engine.runner.Runner``,

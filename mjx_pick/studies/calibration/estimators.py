@@ -9,23 +9,19 @@ ask / tell because a step's simulations run in one engine batch between them:
 * ``tell(state, thetas, losses (S,)) -> state``;
 * ``best(state) -> theta (P,)``: the current answer.
 
-Estimators (benchmarks/calibration.py compares them at equal budgets; RESULTS.md):
+Estimators (why ``cma`` is the default and ``jvp`` is not: docs/calibration.md):
 
-* ``cma`` (the default) -- see below; in benchmarks/calibration.py it is the only one
-  to reach the common target with 3 hidden parameters and the first with 5 (with one,
-  the smoothed gradient and least squares are faster; RESULTS.md).
 * ``smoothed`` -- optax Adam on the gradient of the loss smoothed with a Gaussian along
   each parameter, E[L(theta + sigma Z e_i)], by Gauss-Hermite quadrature (symmetric
   node pairs; 1 + 2 x pairs x P vectors per step): deterministic, no derivatives, sees
   across flips of an outcome. The spread shrinks over the fit; the answer is the
   iterate with the lowest loss (the simulation is deterministic).
 * ``random`` -- uniform draws in the bounds, best so far.
-* ``cma`` -- CMA-ES (the ``cma`` package, N. Hansen's reference implementation) in
-  theta space: a population per step, step size and covariance adapted.
+* ``cma`` (the default) -- CMA-ES (the ``cma`` package, N. Hansen's reference
+  implementation) in theta space: a population per step, step size and covariance
+  adapted.
 * ``jvp`` -- Adam on forward-mode derivatives through MJX (``Problem.mjx_loss_and_grad``;
-  the fit loop supplies the gradient). Kept for smooth losses: over a pick its
-  derivative disagrees with finite differences, which do not even converge on a
-  chaotic grasp (RESULTS.md), so it is no default.
+  the fit loop supplies the gradient), for smooth losses.
 
 A least-squares fit of the residuals with MuJoCo's own optimiser (``mujoco.sysid``)
 is ``fit.least_squares``: it runs its own loop (Levenberg-Marquardt with batched

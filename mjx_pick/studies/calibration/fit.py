@@ -26,7 +26,7 @@ from mjx_pick.studies.calibration.identify import (
     theta_of_z,
 )
 from mjx_pick.studies.calibration.parameters import fitted_contact
-from mjx_pick.studies.options import RunOptions
+from mjx_pick.studies.options import RunOptions, split_fields
 
 
 @dataclasses.dataclass
@@ -71,146 +71,195 @@ class _Checkpoints:
         self.mngr.close()
 
 
-def calibrate(
-    problem,
-    options: RunOptions | None = None,
-    *,
-    steps: int = 200,
-    learning_rate: float = 0.1,
-    estimator: str = "cma",
-    samples: int = 2,
-    sigma: float = 0.2,
-    batch: int | None = None,
-    popsize: int | None = None,
-    budget: int | None = None,
-    target: float | None = None,
-    checkpoint_every: int = 10,
-    holdout=None,
-    identify: bool = True,
-    log=None,
-    **run,
-) -> CalibrationResult:
-    """Fit problem's parameters; see ``estimators`` for the estimators.
+@dataclasses.dataclass(frozen=True)
+class FitRequest:
+    """What :func:`calibrate` computes (how it runs: ``options.RunOptions``).
 
-    Args:
+    Attributes:
       steps: estimator steps (each one engine batch).
-      estimator: 'cma' (default: CMA-ES won the equal-budget comparison,
-        benchmarks/RESULTS.md), 'smoothed', 'random' or 'jvp' (MJX forward mode).
+      estimator: 'cma' (CMA-ES: the default, docs/calibration.md says why), 'smoothed',
+        'random' or 'jvp' (forward mode through MJX's JAX physics).
       learning_rate, samples, sigma: Adam's step and the smoothing's quadrature node
         pairs per parameter and spread in theta (smoothed; learning_rate: jvp too).
-      batch: draws per step (random); popsize: CMA-ES population; seed: both.
+      batch: draws per step (random); popsize: CMA-ES population.
       budget: stop once this many pick-point simulations were spent.
       target: stop once a simulated loss is at or below it.
       checkpoint_every: steps between orbax checkpoints (with out); resume continues.
       holdout: a Problem on held-out pick-points for the accuracy before and after.
       identify: after the fit, intervals and identifiability (``identify.py``); the
         parameters not identified keep their starting values in the answer.
-      log: called with each step's history entry (progress output).
-      options, or its fields as keywords (``options.RunOptions``; the backend, batch
-        size and pick-points are the problem's): seed (random, CMA-ES, smoothed draws),
-        out (the results folder and its checkpoints), resume (continue from out's last
-        checkpoint: the optimiser's state, not simulated chunks), progress (a progress
-        bar of the steps on stderr, ``progress.ProgressBar``; print log lines with
-        ``progress.echo`` so that they do not break it).
     """
-    opts = RunOptions.of(options, **run)
+
+    steps: int = 200
+    learning_rate: float = 0.1
+    estimator: str = "cma"
+    samples: int = 2
+    sigma: float = 0.2
+    batch: int | None = None
+    popsize: int | None = None
+    budget: int | None = None
+    target: float | None = None
+    checkpoint_every: int = 10
+    holdout: object = None
+    identify: bool = True
+
+
+def calibrate(
+    problem,
+    options: RunOptions | None = None,
+    *,
+    request: FitRequest | None = None,
+    log=None,
+    **fields,
+) -> CalibrationResult:
+    """Fit problem's parameters; see ``estimators`` for the estimators.
+
+    options: how it runs (``options.RunOptions``; the backend, batch size and
+    pick-points are the problem's): seed (random, CMA-ES, smoothed draws), out (the
+    results folder and its checkpoints), resume (continue from out's last checkpoint:
+    the optimiser's state, not simulated chunks), progress (a bar of the steps on
+    stderr; print log lines with ``progress.echo`` so that they do not break it).
+    request: what it computes (:class:`FitRequest`). fields: fields of either by name.
+    log: called with each step's history entry (progress output).
+    """
+    req, opts = split_fields(FitRequest, request, options, fields)
     opts.only("calibrate", "seed", "out", "resume", "progress")
-    seed, out, resume, progress = opts.seed, opts.out, opts.resume, opts.progress
     est = E.make(
-        estimator,
-        steps,
-        learning_rate=learning_rate,
-        samples=samples,
-        sigma=sigma,
-        batch=batch,
-        popsize=popsize,
-        seed=seed,
+        req.estimator,
+        req.steps,
+        learning_rate=req.learning_rate,
+        samples=req.samples,
+        sigma=req.sigma,
+        batch=req.batch,
+        popsize=req.popsize,
+        seed=opts.seed,
     )
-    check_range("calibrate", "steps", steps, 0, 1_000_000)
-    check_range("calibrate", "checkpoint_every", checkpoint_every, 1)
-    if budget is not None:
-        check_range("calibrate", "budget", budget, 1)
-    space = problem.space
-    base = problem.settings.contact
+    check_range("calibrate", "steps", req.steps, 0, 1_000_000)
+    check_range("calibrate", "checkpoint_every", req.checkpoint_every, 1)
+    if req.budget is not None:
+        check_range("calibrate", "budget", req.budget, 1)
     initial = dict(problem.start)
-    state = est.init(problem.start_theta())
-    out_dir = Path(out) if out is not None else None
-    fit = {"learning_rate": learning_rate, "samples": samples, "sigma": sigma, "seed": seed}
-    ckpt, request, state, history, step, wall0, visited = _open_fit(
-        problem, out_dir, resume, state, steps=steps, estimator=estimator, **fit
+    out_dir = Path(opts.out) if opts.out is not None else None
+    fit = {"learning_rate": req.learning_rate, "samples": req.samples, "sigma": req.sigma}
+    fit.update(seed=opts.seed)
+    ckpt, request_key, state, history, step, wall0, visited = _open_fit(
+        problem,
+        out_dir,
+        opts.resume,
+        est.init(problem.start_theta()),
+        steps=req.steps,
+        estimator=req.estimator,
+        **fit,
     )
-    best = min([h["best_loss"] for h in history], default=math.inf)
     acc_before = None
-    if holdout is not None and step == 0:
-        acc_before = holdout.accuracy(problem.start_theta())
+    if req.holdout is not None and step == 0:
+        acc_before = req.holdout.accuracy(problem.start_theta())
     t0 = time.perf_counter() - wall0
     spent0 = problem.rollouts - (history[-1]["rollouts"] if history else 0)
-    bar = ProgressBar(f"calibrating ({estimator})", "step", enabled=progress, total=steps)
-    bar(step, steps)
-    try:
-        while step < steps:
-            if budget is not None and problem.rollouts - spent0 >= budget:
-                break
-            if target is not None and best <= target:
-                break
-            state, thetas, losses, diverged = _fit_step(
-                problem, est, state, estimator, visited, step
-            )
-            best = min(best, float(np.nanmin(losses)))
-            centre = estimator in ("smoothed", "jvp")
-            entry = {
-                "step": step,
-                # smoothed / jvp: the loss at the iterate; search: the batch's best
-                "loss": float(losses[0] if centre else np.nanmin(losses)),
-                "best_loss": best,
-                "values": space.as_dict(est.best(state)),
-                # rows that blew up (at the iterate, or the batch's fewest)
-                "diverged": None
-                if diverged is None
-                else int(diverged[0] if centre else diverged.min()),
-                "wall_s": round(time.perf_counter() - t0, 3),
-                "rollouts": problem.rollouts - spent0,
-            }
-            history.append(entry)
-            if log is not None:
-                log(entry)
-            step += 1
-            bar.note(f"best loss {best:.4g}")
-            bar(step, steps)
-            if ckpt is not None and (step % checkpoint_every == 0 or step == steps):
-                ckpt.save(
-                    step,
-                    {
-                        "state": E.dumps(state),
-                        "history": E.dumps(history),
-                        "visited": E.dumps(visited),
-                        "step": np.int64(step),
-                        "wall_s": np.float64(time.perf_counter() - t0),
-                    },
-                )
-    finally:
-        bar.close()
-        if ckpt is not None:
-            ckpt.close()
-    theta = est.best(state)
+    loop = _FitLoop(problem, est, req, ckpt, visited, t0, spent0, log)
+    state = loop.run(state, history, step, opts.progress)
     result = _finish(
         problem,
-        theta,
+        est.best(state),
         initial,
         history,
         acc_before,
-        holdout,
-        identify,
-        estimator,
+        req.holdout,
+        req.identify,
+        req.estimator,
         out_dir,
-        base,
+        problem.settings.contact,
         visited,
     )
     result.rollouts = problem.rollouts - spent0
     result.wall_s = time.perf_counter() - t0
     if out_dir is not None:
-        _write_fit(result, problem, out_dir, request, estimator, time.perf_counter() - t0)
+        wall = time.perf_counter() - t0
+        _write_fit(result, problem, out_dir, request_key, req.estimator, wall)
     return result
+
+
+@dataclasses.dataclass
+class _FitLoop:
+    """A fit's steps: ask, simulate, tell; each step's history entry, checkpoints."""
+
+    problem: object
+    est: object  # the estimator (``estimators``)
+    req: FitRequest
+    ckpt: _Checkpoints | None
+    visited: list
+    t0: float  # when the fit began (a resumed fit's earlier seconds counted in)
+    spent0: int  # the problem's rollouts before this fit
+    log: object
+
+    def run(self, state, history: list, step: int, progress: bool):
+        """Steps from step until req.steps, a budget or a target stops it: the final
+        estimator state (history grows by an entry a step)."""
+        req, problem = self.req, self.problem
+        best = min([h["best_loss"] for h in history], default=math.inf)
+        desc = f"calibrating ({req.estimator})"
+        bar = ProgressBar(desc, "step", enabled=progress, total=req.steps)
+        bar(step, req.steps)
+        try:
+            while step < req.steps:
+                if req.budget is not None and problem.rollouts - self.spent0 >= req.budget:
+                    break
+                if req.target is not None and best <= req.target:
+                    break
+                state, entry = self._step(state, step, best)
+                best = entry["best_loss"]
+                history.append(entry)
+                if self.log is not None:
+                    self.log(entry)
+                step += 1
+                bar.note(f"best loss {best:.4g}")
+                bar(step, req.steps)
+                self._checkpoint(step, state, history)
+        finally:
+            bar.close()
+            if self.ckpt is not None:
+                self.ckpt.close()
+        return state
+
+    def _step(self, state, step: int, best: float) -> tuple:
+        """One estimator step: (its new state, its history entry)."""
+        req = self.req
+        state, thetas, losses, diverged = _fit_step(
+            self.problem, self.est, state, req.estimator, self.visited, step
+        )
+        best = min(best, float(np.nanmin(losses)))
+        centre = req.estimator in ("smoothed", "jvp")
+        entry = {
+            "step": step,
+            # smoothed / jvp: the loss at the iterate; search: the batch's best
+            "loss": float(losses[0] if centre else np.nanmin(losses)),
+            "best_loss": best,
+            "values": self.problem.space.as_dict(self.est.best(state)),
+            # rows that blew up (at the iterate, or the batch's fewest)
+            "diverged": None
+            if diverged is None
+            else int(diverged[0] if centre else diverged.min()),
+            "wall_s": round(time.perf_counter() - self.t0, 3),
+            "rollouts": self.problem.rollouts - self.spent0,
+        }
+        return state, entry
+
+    def _checkpoint(self, step: int, state, history: list) -> None:
+        """The fit's state saved every checkpoint_every steps and at the last."""
+        if self.ckpt is None or not (
+            step % self.req.checkpoint_every == 0 or step == self.req.steps
+        ):
+            return
+        self.ckpt.save(
+            step,
+            {
+                "state": E.dumps(state),
+                "history": E.dumps(history),
+                "visited": E.dumps(self.visited),
+                "step": np.int64(step),
+                "wall_s": np.float64(time.perf_counter() - self.t0),
+            },
+        )
 
 
 def _open_fit(problem, out_dir: Path | None, resume: bool, state, **fit):

@@ -50,7 +50,7 @@ sources, the first free:
   ``fit.calibrate`` and ``fit.least_squares``) bounds the profile from above -- a vector
   whose likelihood is not excluded keeps its value of each parameter, whatever the
   others are. CMA-ES's population follows the valley as its covariance adapts to it,
-  but stops where the fit stopped: alone it missed valleys (RESULTS.md).
+  but stops where the fit stopped: alone it misses valleys (docs/calibration.md).
 * refit: at each profile point the others' best of two starts -- theta's values and
   the valley's linear continuation (their Gauss-Newton optimum given the fixed value) --
   then a small CMA-ES (``estimators.cma_es``, ``profile_popsize`` x ``profile_steps``

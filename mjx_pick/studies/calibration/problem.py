@@ -352,7 +352,7 @@ class Problem:
                 # MJX's forward-mode derivatives are finite with pyramidal cones only
                 raise ConfigError(
                     "the jvp estimator differentiates MJX in forward mode, finite only "
-                    "with pyramidal cones; the default is elliptic since issue 32: pass a "
+                    "with pyramidal cones; the default is elliptic: pass a "
                     "solver with cone = 'pyramidal' and impratio = 1 (a --solver TOML), "
                     "or use another estimator"
                 )

@@ -79,10 +79,11 @@ def _template_writer(paper: str):
 def plan(run_dir, obj: ObjectModel, out, *, paper: str = "a4", **options) -> dict:
     """Plan round 1 (``calibration.trials.plan_trials``: options are its keywords) and
     print its templates (templates_round1.pdf, on `paper`: a4 or letter)."""
-    return plan_trials(run_dir, obj, out, write_templates=_template_writer(paper), **options)
+    return plan_trials(run_dir, obj, out=out, write_templates=_template_writer(paper), **options)
 
 
 def fit(folder, obj: ObjectModel, params=None, *, paper: str = "a4", **options):
     """Fit the tried rows and plan the next round (``calibration.trials.fit_trials``:
     options are its keywords), printing the next round's templates."""
-    return fit_trials(folder, obj, params, write_templates=_template_writer(paper), **options)
+    writer = _template_writer(paper)
+    return fit_trials(folder, obj, params=params, write_templates=writer, **options)

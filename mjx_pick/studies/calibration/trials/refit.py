@@ -48,6 +48,7 @@ from mjx_pick.studies.calibration.trials.sheet import (
     tried_rows,
     write_sheet,
 )
+from mjx_pick.studies.options import RunOptions, split_fields
 
 
 @dataclasses.dataclass
@@ -73,100 +74,156 @@ class TrialFit:
     report: dict
 
 
+@dataclasses.dataclass(frozen=True)
+class TrialsFit:
+    """What :func:`fit_trials` fits (the fit's own settings: ``fit.FitRequest``; how it
+    runs: ``options.RunOptions``: seed, backend, overwrite, resume).
+
+    Attributes:
+      params: the parameters to fit (None: the plan's).
+      partial: fit the tried rows while others are still blank.
+      bounds, priors, temperature_mm: as ``Problem`` (bounds and priors: default the
+        plan's, for the parameters it names).
+      next_n: pick-points of the next round (0: none), chosen as the plan chose, with
+        the fitted parameters as the nominal ones and draws from the fit's intervals
+        (the prior's spread for a parameter the data did not identify).
+    """
+
+    params: str | tuple | None = None
+    partial: bool = False
+    bounds: dict | None = None
+    priors: dict | None = None
+    temperature_mm: float | None = None
+    next_n: int = 6
+
+
 def fit_trials(
     folder,
     obj: ObjectModel,
-    params=None,
+    options: RunOptions | None = None,
     *,
-    partial: bool = False,
-    steps: int = 40,
-    estimator: str = "cma",
-    seed: int = 0,
-    identify: bool = True,
-    bounds: dict | None = None,
-    priors: dict | None = None,
-    temperature_mm: float | None = None,
-    next_n: int = 6,
-    backend: str = AUTO,
-    overwrite: bool = False,
-    resume: bool = False,
+    request: TrialsFit | None = None,
     log=None,
     write_templates: TemplateWriter | None = None,
-    **calibrate_options,
+    **fields,
 ) -> TrialFit:
     """Fit the tried rows, re-simulate them with the fitted parameters, compare the
     agreement before and after, and propose the next round.
 
     Args:
       folder: a trials folder; obj: its object (checked against the plan).
-      params: the parameters to fit (default: the plan's).
-      partial: fit the tried rows while others are still blank.
-      steps, estimator, seed, identify, bounds, priors, temperature_mm, and
-        calibrate_options: as ``calibrate`` / ``Problem`` (bounds and priors: default
-        the plan's, for the parameters it names).
-      next_n: pick-points of the next round (0: none), chosen as the plan chose, with
-        the fitted parameters as the nominal ones and draws from the fit's intervals
-        (the prior's spread for a parameter the data did not identify).
-      overwrite / resume: replace / continue an earlier fit of the same round.
-      write_templates: as :func:`plan_trials`, for the next round.
+      options: how it runs; request: what it fits (:class:`TrialsFit`); fields: fields
+        of either, or of ``fit.FitRequest`` (steps: 40 unless given), by name.
+      log: as ``calibrate``'s; write_templates: as :func:`plan_trials`'s, for the next
+        round.
 
     Writes ``fit-round<r>/`` (r: the last round with a tried row): calibrate's files
     plus agreement.json and agreement.md; appends the next round to the sheet and the
     plan (replacing a proposed round none of whose rows was tried yet).
     """
-    from mjx_pick.studies.calibration.fit import calibrate
+    from mjx_pick.studies.calibration.fit import FitRequest, calibrate
+
+    fit_names = {f.name for f in dataclasses.fields(FitRequest)}
+    fit = dataclasses.replace(
+        FitRequest(steps=40), **{k: fields.pop(k) for k in fit_names & set(fields)}
+    )
+    req, opts = split_fields(TrialsFit, request, options, fields)
+    opts.only("trials fit", "seed", "backend", "overwrite", "resume", "progress")
+    check_range("trials", "next", req.next_n, 0, 1000)
+    folder = Path(folder)
+    trial = _open_trials(folder, obj, req, opts)
+    res = calibrate(
+        trial.problem,
+        dataclasses.replace(opts, backend=AUTO, out=trial.out_dir, overwrite=False),
+        request=fit,
+        log=log,
+    )
+    before, after, optimum, rerun = _agreements(trial.problem, res, trial.names, trial.tried)
+    report = _fit_report(trial.names, res, trial.tried, before, after, optimum, rerun)
+    write_json(trial.out_dir / "agreement.json", report)
+    write_atomic(trial.out_dir / "agreement.md", fit_md(report, trial.plan))
+    notes = report["notes"]
+    next_round = _next_round(trial, obj, res, req.next_n, opts.backend, notes, write_templates)
+    return TrialFit(
+        res,
+        before,
+        after,
+        report["mcnemar_p"],
+        report["rerun_differs"],
+        trial.out_dir,
+        next_round,
+        notes,
+        report,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class _OpenTrials:
+    """A trials folder opened for a fit: its plan, the rows tried, the settings and
+    pick configuration they were planned with, the fit's folder and its Problem."""
+
+    folder: Path
+    plan: dict
+    names: list
+    tried: object
+    settings: object
+    pick_config: object
+    last: int  # the last round with a tried row
+    out_dir: Path
+    problem: object
+
+
+def _open_trials(folder: Path, obj: ObjectModel, req: TrialsFit, opts: RunOptions) -> _OpenTrials:
+    """The fit's inputs, every one checked before anything is simulated."""
     from mjx_pick.studies.calibration.problem import Problem
 
-    folder = Path(folder)
     plan = load_plan(folder)
     check_same_object(plan["object"], obj, f"trials folder {folder}")
-    names = canonical_params(params or plan["params"])
-    check_range("trials", "next", next_n, 0, 1000)
-    tried = tried_rows(folder, plan, partial)
+    names = canonical_params(req.params or plan["params"])
+    tried = tried_rows(folder, plan, req.partial)
     settings, pick_config = plan_settings(plan, folder)
-    bounds = {**_named(plan.get("bounds"), names), **(bounds or {})}
-    priors = {**_named(plan.get("priors"), names), **(priors or {})}
+    bounds = {**_named(plan.get("bounds"), names), **(req.bounds or {})}
+    priors = {**_named(plan.get("priors"), names), **(req.priors or {})}
     last = max(e["round"] for e in tried.entries)
-    out_dir = _fit_folder(folder, last, overwrite, resume)
+    out_dir = _fit_folder(folder, last, opts.overwrite, opts.resume)
     problem = Problem(
         obj,
         tried.outcomes,
         names,
         settings,
-        temperature_mm=temperature_mm,
+        temperature_mm=req.temperature_mm,
         bounds=bounds,
         priors=priors,
         pick_config=pick_config,
-        backend=backend,
+        backend=opts.backend,
     )
-    res = calibrate(
-        problem,
-        steps=steps,
-        estimator=estimator,
-        seed=seed,
-        identify=identify,
-        out=out_dir,
-        resume=resume,
-        log=log,
-        **calibrate_options,
+    return _OpenTrials(folder, plan, names, tried, settings, pick_config, last, out_dir, problem)
+
+
+def _next_round(trial: _OpenTrials, obj, res, next_n: int, backend, notes, write_templates):
+    """The next round proposed from the fit (None: none), added to the folder's plan
+    and sheet (its templates printed by write_templates); a note on why not, if any."""
+    if not next_n:
+        return None
+    next_round, note = _propose(
+        trial.folder,
+        obj,
+        trial.plan,
+        trial.problem,
+        res,
+        trial.settings,
+        trial.pick_config,
+        trial.last + 1,
+        next_n,
+        backend,
     )
-    before, after, optimum, rerun = _agreements(problem, res, names, tried)
-    report = _fit_report(names, res, tried, before, after, optimum, rerun)
-    notes, p_change, rerun_differs = report["notes"], report["mcnemar_p"], report["rerun_differs"]
-    write_json(out_dir / "agreement.json", report)
-    write_atomic(out_dir / "agreement.md", fit_md(report, plan))
-    next_round = None
-    if next_n:
-        next_round, note = _propose(
-            folder, obj, plan, problem, res, settings, pick_config, last + 1, next_n, backend
-        )
-        if note:
-            notes.append(note)
-        if next_round is not None:
-            _add_round(folder, plan, next_round)
-            if write_templates is not None:
-                write_templates(folder, plan, next_round)
-    return TrialFit(res, before, after, p_change, rerun_differs, out_dir, next_round, notes, report)
+    if note:
+        notes.append(note)
+    if next_round is not None:
+        _add_round(trial.folder, trial.plan, next_round)
+        if write_templates is not None:
+            write_templates(trial.folder, trial.plan, next_round)
+    return next_round
 
 
 def _fit_folder(folder: Path, last: int, overwrite: bool, resume: bool) -> Path:
