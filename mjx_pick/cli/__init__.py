@@ -1,21 +1,6 @@
 """``mjx-pick``: the command line.
 
-  mjx-pick evaluate OBJECT [--gripper robotiq-2f85] [--n 1000] [--seed 0] --out DIR
-                    [--ray auto|HOST:PORT]           (on a Ray cluster; the studies too)
-  mjx-pick picks OBJECT --n 500 --out DIR          (pick-points and their pictures only)
-  mjx-pick sweep OBJECT --param contact.pad_friction=0.4:1.0:7 [--param ...] --out DIR
-  mjx-pick compare OBJECT --grippers robotiq-2f85,onrobot-rg2 --out DIR
-  mjx-pick design OBJECT --bound finger_width_mm=10:40 --bound stroke_mm=60:140 --out DIR
-  mjx-pick robust OBJECT [--results DIR] --top-k 10 --m 32 --out DIR
-  mjx-pick report DIR                               (plots, maps, animations, template, HTML)
-  mjx-pick export DIR --format acronym|graspgen|isaac-grasp   (the labels as grasp files)
-  mjx-pick calibrate OUTCOMES.csv OBJECT --params pad_friction,stiffness --out DIR
-  mjx-pick presets | assets                          (what is shipped)
-  mjx-pick cache info | clear                        (object results, compiled programs)
-
-OBJECT is a shipped asset name (``mjx-pick assets``), a top-down image (with
---px-per-mm, --thickness-mm and --mass-g) or a mesh (with --unit and --mass-g).
-Every bad input ends with one line naming the input, the value and what is allowed.
+Details: docs/outputs.md (cli/__init__.py).
 """
 
 from __future__ import annotations

@@ -1,35 +1,6 @@
 """An on-disk cache of pure, expensive results: object preparation across processes.
 
-A new mesh costs a convex decomposition (CoACD), its outlines and the rasterised
-silhouettes of the feasibility checks; each is a pure function of the file's content and
-a few settings, and a second run of the same part would pay it all again. This module
-stores such results as ``.npz`` files (plain arrays; read back without pickle), one per
-key, in the user's cache folder:
-
-* folder: ``platformdirs.user_cache_dir("mjx-pick")``, or ``$MJX_PICK_CACHE_DIR``; object
-  results go to its ``objects/`` subfolder, JAX's compiled programs to ``jax/``
-  (``mjx_pick.engine.compiled``);
-* bypass: ``MJX_PICK_CACHE=0`` (the CLI's ``--no-cache`` sets it): nothing is read or
-  written, every result is computed;
-* size: ``$MJX_PICK_CACHE_MAX_MB`` (default 2048 MB) for the whole folder: a quarter of
-  it for object results, kept by least-recently-used eviction (a read touches the
-  entry's mtime), the rest for JAX's own least-recently-used store.
-
-An entry's name is a hash of what decides the result (the caller's key: the file's or
-mesh's content and every parameter); the entry holds that key in full, with this
-package's version and the versions of the libraries that compute it, and both are
-checked when it is read. An entry of another version is thus found, not used, and
-replaced by this version's result (one warning): an upgrade renews the entries it meets
-instead of leaving them to eviction. Writes go to a temporary file in the same folder and are
-renamed into place (``os.replace``), so concurrent processes see an old, a new or no
-entry, never part of one. A corrupt entry, an entry of another version, or a folder that
-cannot be written is bypassed with one :class:`CacheWarning` (once per problem and
-folder in a process) and the result is computed: the cache may cost time, never a
-result.
-
-Why it lives in ``core/``: ``core.objects`` and ``core.pickpoints`` use it, and a layer may
-only import downwards. It is generic file I/O and imports nothing of the package, so any
-layer may use it.
+Details: docs/model.md (core/cache.py).
 """
 
 from __future__ import annotations

@@ -1,15 +1,6 @@
 """Parametric parallel-jaw (two-finger) gripper specs and the shipped presets.
 
-Gripper frame: the gripper centre is the origin, fingers close along x, the gripper
-approaches along -z. Each finger is a pad box: ``finger_depth_mm`` along x (the closing
-direction), ``finger_width_mm`` along y, ``pad_height_mm`` along z. ``stroke_mm`` is the
-largest distance between the pads' inner faces.
-
-A gripper TOML with an ``[mjcf]`` table is a real gripper's MJCF model instead
-(``mjx_pick.core.mjcf_gripper``): its stroke and pad geometry are measured from the model,
-and the TOML gives its name, force and speed ranges and which geoms and actuator are
-its pads and drive. A ``[urdf]`` table names a URDF instead (``mjx_pick.core.urdf_gripper``:
-its pad links, the joint to drive and the servo's gains), which then takes the same path.
+Details: docs/model.md (core/gripper.py).
 """
 
 from __future__ import annotations

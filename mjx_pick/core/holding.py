@@ -1,32 +1,6 @@
 """What a grasp can hold by Coulomb's law, at the contact points the engine makes.
 
-The test of a friction model is a prediction made before the simulation: the largest
-load a grasp holds. For a load along the grip's vertical this is eq. (1) of the paper
-(2 mu F >= m (g + a)). For a part held off its centre of mass, gravity also turns it
-about the grip axis, and what resists that depends on where the pads touch.
-
-MuJoCo does not model a pad's pressure field. Its box-convex collider represents a flat
-pad on a flat face by up to four contact points at the corners of their overlap (a
-line contact by its two ends, a point by one), each pressed with an equal share of the
-pad's force when neither body tilts. The overlap is that of the pad's collision geom
-with the part: the whole pad, or with ``ContactParams.pad_collision = "mean_radius"`` or
-``"rimmed"`` (the default) a box cut so that its corners sit at the patch's mean radius
-(:func:`mjx_pick.core.scene.pad_collision_box_mm`; the rim behind it touches only a part
-the box misses). Each point is a soft-finger contact (condim 4,
-:mod:`mjx_pick.core.physics`): Coulomb friction mu in the pad plane and torsional friction
-mu_t about the normal. With pyramidal cones the three share one budget,
-|f_1| / mu + |f_2| / mu + |tau| / mu_t <= N; with elliptic cones (the default) their Euclidean norm
-is bounded instead. The holding limit is then a linear program over those points:
-the largest lever d of the centre of mass from the grip axis at which some friction
-forces within every point's cone carry the weight and its torque. Nothing in it is
-fitted to simulations; tests/test_physics.py checks the simulated threshold against it.
-
-The reference is a rubber pad under uniform pressure with isotropic friction:
-:func:`uniform_patch_points` (a grid over the patch) in :func:`hold_limit_m` with
-elliptic cones and no torsion is its limit surface (Goyal, Ruina and Papadopoulos,
-Wear 143, 1991): in pure torsion mu N r_mean, r_mean the patch's mean radius.
-``benchmarks/pad_contact.py torque`` and ``rubber`` report the model's capacity, the
-simulated threshold and the rubber pad's.
+Details: docs/model.md (core/holding.py).
 """
 
 from __future__ import annotations

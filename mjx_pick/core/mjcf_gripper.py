@@ -1,39 +1,6 @@
 """Two-finger grippers from MJCF files (e.g. Menagerie's Robotiq 2F-85 linkage).
 
-A gripper TOML with an ``[mjcf]`` table names an MJCF file, the body to mount, the pad
-geoms of each finger and the actuator that closes them (:class:`MjcfGripper`). Loading
-it checks the model (every name exists, one pad per side, the actuator is a position
-servo that closes the pads along the gripper's x axis) and measures, on the MuJoCo C
-model, a quasi-static close from fully open to closed (:func:`characterise`): each pad's
-closing travel, its height (a linkage's pads travel along a curve), the finger joints,
-the actuator length, the drive's stiffness at the pads and every gripper joint, sampled
-along the stroke (:class:`Kinematics`). From these come
-
-* the GripperSpec fields the rest of the tool reads (stroke, pad width, depth and
-  height: the pads' real geometry, so the feasibility checks see the real pads);
-* the kernels' DriveMap (finger joint -> travel, travel -> control, travel ->
-  stiffness), so the ONE P force controller in ``mjx_pick.kernels.grasp`` drives it;
-* the height compensation (the paper's section 3.5): how much to raise the gripper at
-  the start so the pad centre meets the object at the grasp height after the pads
-  have descended along their path (:meth:`Kinematics.height_compensation_m`).
-
-A ``[urdf]`` table (``mjx_pick.core.urdf_gripper``) makes the same spec from a URDF: the
-model is MuJoCo's URDF import plus the servo a URDF lacks (``MjcfGripper.urdf``).
-
-Frames: the gripper's mount body is attached under the scene's ``gripper`` body with
-``mount_quat``; the scene's gripper frame has the fingers closing along x (left pad at
--x) and the pads below it (approach along -z). Gripper geoms never collide: the pads
-touch the object through the scene's explicit contact pairs only (``mjx_pick.core.scene``),
-which keeps the link meshes out of MJX's collision work (its compile time with
-colliding link meshes was 480 s on 2 CPU cores).
-
-Actuator: MJCF grippers ship with whatever limits their authors chose (Menagerie's
-2F-85: ~42-55 N per pad, closing several times faster than the real gripper). The TOML
-can set the servo's stiffness, damping and force limit (``actuator_kp``, ``_kv``,
-``_forcerange``, in the actuator's own units) to reach the real gripper's ranges; the
-P controller's closing speed stays the user's setting (``grasp.closing_speed_mm_s``,
-checked against the gripper's speed range), and loading fails when the force limit
-cannot deliver ``force_max_n`` at some opening.
+Details: docs/model.md (core/mjcf_gripper.py).
 """
 
 from __future__ import annotations

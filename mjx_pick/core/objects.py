@@ -1,14 +1,6 @@
 """Object import: a top-down image plus thickness, or a mesh, to an :class:`ObjectModel`.
 
-Object frame (used everywhere downstream): z up, the table is z = 0, the object rests on
-it, and the origin's x, y is the object's centre of mass. A pick-point (x, y, yaw) is the
-pose of this frame relative to the gripper centre.
-
-Image objects are prisms of constant thickness (the paper's assumption). Their collision
-geometry is an *exact* convex partition of the silhouette polygon (triangulation merged
-by Hertel-Mehlhorn), extruded: a hook keeps its gap, and every piece stays under MJX's
-vertex budget for convex-convex collisions. Mesh objects (variable depth, the paper's
-future work) are split by CoACD, whose collision-aware cuts keep concave features.
+Details: docs/model.md (core/objects.py).
 """
 
 from __future__ import annotations

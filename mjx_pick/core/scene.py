@@ -1,30 +1,6 @@
 """Scene: object on a table under a two-finger gripper, as one MuJoCo model.
 
-The model compiles for the MuJoCo C engine and for MJX (``mujoco.mjx.put_model``).
-Only the contacts that matter exist: every geom has contype = conaffinity = 0 and the
-contacts are explicit ``<pair>``s -- each pad against each convex collision piece of the
-object (soft-finger contacts with torsional friction, see ``mjx_pick.core.physics``), and
-the table against the object's convex hull (a rigid body on a plane touches
-it only on its hull, so one pair replaces one per piece). Fingers never collide with the
-table or each
-other, which keeps MJX's fixed-size contact buffers small.
-
-Bodies: ``object`` (free joint), ``gripper`` (vertical ``lift`` slide joint, position
-servo), ``finger_left`` / ``finger_right`` (slide joints along +x / -x measuring each
-finger's closing travel from fully open, position servos with a force limit of the
-gripper's maximum force). The object's pad contact forces are read from ``cfrc_ext`` of
-the finger bodies; an accelerometer on the object makes both engines compute it.
-
-A gripper from an MJCF file (``GripperSpec.mjcf``, ``mjx_pick.core.mjcf_gripper``) replaces
-the two finger bodies: its model is attached under ``gripper`` (names prefixed
-``gripper/``), its own actuator drives it and none of its other geoms collide. Its pads
-touch the object through the parallel jaw's collision boxes for
-``ContactParams.pad_collision`` (named ``pad_left``, ``pad_left_rim``, ..., added to
-its pad bodies) when its pad geoms are boxes, else through its own pad geoms.
-``gripper`` then sits so that the pads' centre is at the grasp height when the fingers
-are fully open; each pick-point starts with the lift raised by the height compensation
-for the gap the pads will close to (the paper's section 3.5), so the pads meet the
-object at the grasp height despite their descent while closing.
+Details: docs/model.md (core/scene.py).
 """
 
 from __future__ import annotations

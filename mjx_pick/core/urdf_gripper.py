@@ -1,18 +1,6 @@
 """Two-finger grippers from URDF files: MuJoCo's URDF import plus the servo a URDF lacks.
 
-A gripper TOML with a ``[urdf]`` table names a URDF file, the links that carry each
-finger's pads and the joint that closes them (:class:`UrdfGripper`). MuJoCo's own URDF
-parser makes the model (its ``<mimic>`` joints become joint equalities); this module
-checks the file first (every named link and joint exists, every collision mesh is
-there), resolves the mesh paths (relative, absolute or ``package://NAME/...``), names
-the pads' collision geoms (MuJoCo leaves URDF geoms unnamed), adds the couplings the
-TOML gives and a URDF lacks (``mimic``), and adds the position servo on the joint,
-its control range the joint's limits. The result goes down the ``[mjcf]`` path
-(``mjx_pick.core.mjcf_gripper``): the same checks, the measured close, the same P force
-controller and height compensation.
-
-Visual geometry is dropped (``discardvisual``): the pads touch the object through
-explicit contact pairs, and the link collision meshes show the gripper in renders.
+Details: docs/model.md (core/urdf_gripper.py).
 """
 
 from __future__ import annotations

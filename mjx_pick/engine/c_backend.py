@@ -1,15 +1,6 @@
 """MuJoCo C backend: the same pick-points on ``mujoco.batch`` (CPU threads).
 
-Physics runs in the C engine, one simulation per pick-point on a thread pool (MuJoCo
->= 4.0). Once per control period the shared tick (``mjx_pick.kernels.grasp.tick``:
-measure, P controller, phase machine, metrics) runs for the whole batch as one jitted
-``vmap`` on the CPU, exactly the code MJX runs, then every simulation still running
-advances ``n_substeps`` physics steps. Finished pick-points (DONE) stop stepping.
-
-MuJoCo C normally resets a simulation whose state blows up; here auto-reset is
-disabled (as in MJX, a blown-up state stays non-finite), so a non-finite state, an
-absurd speed, a MuJoCo error or a reset that happens anyway all mark the pick-point
-``diverged``.
+Details: docs/engine.md (engine/c_backend.py).
 """
 
 from __future__ import annotations

@@ -1,37 +1,6 @@
 """Resume: a run's finished chunks in its output folder, the same way for every command.
 
-``evaluate``, ``sweep``, ``compare``, ``design``, ``robust`` and ``calibrate`` each
-claim their output folder (``rundir.claim``) under a configuration key; a
-:class:`ChunkStore` then keeps, under ``chunks/`` (or ``chunks/<command>/`` for a
-command that adds its results to another command's folder: robust into an evaluate
-folder),
-
-* ``plan.json`` -- the folder's key, the versions of the packages that decide the
-  results (``rundir.result_versions``: a run is continued only under the same) and
-  the chunk size of each kind of run in it,
-  saved (atomically) before the first chunk of that kind is simulated. A resumed run
-  keeps the saved size: the size a new start would pick (from free device memory, a
-  cluster's size, another ``--chunk-size``) may differ, and a saved chunk must mean the
-  same pick-points -- and the same batch shapes, whose float32 rounding may differ
-  (``engine.runner`` says why);
-* ``part-<name>.parquet`` -- one finished chunk, written atomically as it finishes (a
-  chunk is done exactly when its file exists). Its name says what decides its rows:
-  evaluate's chunk k (``part-000007``) under the folder's key, which holds every
-  setting of the run; a study's chunk by a digest of its compiled program (structure,
-  backend, batch size), each row's settings (its variant) and each row's per-pick
-  inputs (pose, contact, controller) -- not of the model fields a simulator happens to
-  carry for other variants it ran, so a chunk is found again by any simulator that
-  runs the same rows, in this process or on a Ray cluster.
-
-Why one store of named parquet chunks: a study's chunks must be found by content (a
-design search's rounds, a bisection's steps are not numbered ahead), which a plan of
-numbered chunks cannot do, while evaluate's numbered chunks are content too once named
-under the run's key; parquet holds evaluate's result rows (with their pick ids, checked
-on reading) and a study's result arrays alike, and the GUI counts ``part-*`` files.
-
-A chunk file that cannot be read (a disk error, a copy cut short) is simulated again
-and written over. Once a run's outputs are written the chunks are removed (every row is
-in the outputs); a run that stops early keeps them for ``resume``.
+Details: docs/engine.md (engine/chunks.py).
 """
 
 from __future__ import annotations

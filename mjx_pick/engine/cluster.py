@@ -1,29 +1,6 @@
 """Ray: the runner's chunks on the actors of a Ray cluster.
 
-:func:`ray_runner` makes a ``runner.Runner`` whose backends and chunks run on a Ray
-cluster's actors: ``evaluate(..., ray="auto" | "HOST:PORT")`` (``mjx-pick evaluate
---ray``) hands each chunk to one actor (``Runner.chunks``); the studies (``sweep``,
-``compare``, ...) call its backends, whose calls are cut into actor batches spread over
-the actors. Everything here but :func:`ray_runner`, the cluster events and the local
-cluster helpers is the runner's implementation. Who owns what (docs/cluster.md says why):
-
-* the driver (the process that called evaluate) owns the experiment: it draws the
-  pick-points, cuts them into chunks (``engine.chunks.ChunkStore``), hands chunks out,
-  and is the only writer of the output folder -- every chunk file, the one results
-  table, summary, config and traces;
-* an actor (:class:`_Worker`) owns a backend: one per GPU on GPU nodes (the GPU
-  backend), one per node on CPU nodes (the MuJoCo C engine on all the node's CPUs). It
-  gets the driver's compiled scene (the MjModel travels with it: no object, mesh or MJCF
-  file has to exist on the node), simulates the chunks it is given through a runner of
-  its own, as a single-machine run does, and returns result rows.
-
-Faults: an actor that dies (its process killed, its node gone) loses only the chunks it
-held; they go back to the queue and run on another actor, and the driver starts a new
-actor on that node if the node is still alive. Nodes that join during a run get actors.
-A driver that dies loses only the chunks in flight: ``--resume`` reads the chunk files.
-
-Ray is an optional dependency (``pip install 'mjx-pick[cluster]'``), imported only when
-a run asks for a cluster.
+Details: docs/engine.md (engine/cluster.py).
 """
 
 from __future__ import annotations

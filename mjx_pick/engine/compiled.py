@@ -1,24 +1,6 @@
 """Compiled programs reused across processes: JAX's persistent compilation cache.
 
-Every new process compiles its device programs again (the MJX/Warp rollouts, the C
-engine's per-tick controller), which on a short run costs more than the simulation.
-JAX can keep compiled executables on disk; :func:`use_persistent_cache` points it at the
-``jax/`` subfolder of mjx-pick's cache folder (``mjx_pick.core.cache``). The engine calls
-it when it builds a backend that runs JAX programs -- the point where a command or a
-study starts simulating -- never at import time (nor in a process that never uses JAX).
-
-* Programs that compiled in less than :data:`MIN_COMPILE_S` are not stored: reading an
-  entry costs about as much as compiling the smallest programs (single operations run
-  eagerly), and they would fill the folder. The C engine's per-tick controller, the
-  feasibility check and the results' finalisation are small programs, yet together they
-  can cost a short run more than its simulation: they are kept.
-* Bypassed with the rest of the cache (``MJX_PICK_CACHE=0``, the CLI's ``--no-cache``).
-* A folder set already -- ``JAX_COMPILATION_CACHE_DIR`` or the user's own
-  ``jax.config.update`` -- is left as it is.
-* Its size is kept under three quarters of ``MJX_PICK_CACHE_MAX_MB`` by JAX's own
-  least-recently-used eviction (which needs the ``filelock`` package).
-* JAX fixes the folder at the first compile that uses it: a later change of
-  ``MJX_PICK_CACHE_DIR`` in the same process moves only the object results.
+Details: docs/engine.md (engine/compiled.py).
 """
 
 from __future__ import annotations

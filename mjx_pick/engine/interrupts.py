@@ -1,20 +1,6 @@
 """Ctrl-C that is never lost.
 
-Python turns SIGINT into a ``KeyboardInterrupt`` raised wherever the main thread is.
-When that is inside a garbage-collector callback (JAX registers one,
-``_xla_gc_callback``), Python reports the exception as "ignored" and goes on: a user's
-Ctrl-C -- or the GUI's cancel, which is a SIGINT to the CLI child -- was seen to vanish
-and the run to finish "complete". So the CLI installs :func:`catching_sigint`: its
-handler raises as Python's own does and also records the request, which the engine
-reads between chunks (:func:`raise_if_requested`) -- if the first exception was
-swallowed, the run still stops at the next chunk, marked "interrupted", its finished
-chunks kept for ``--resume``.
-
-SIGTERM (``kill``, a job scheduler, a container stopping) is handled the same way: it
-raises :class:`Terminated` (a ``KeyboardInterrupt``, so every path that keeps a stopped
-run's chunks keeps them) and the folder is marked "terminated", never left "running".
-
-The record is process-wide because a signal is; it is cleared when the context ends.
+Details: docs/engine.md (engine/interrupts.py).
 """
 
 from __future__ import annotations

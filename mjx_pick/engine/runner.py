@@ -1,40 +1,6 @@
 """The runner: the one place where pick-points are simulated.
 
-Every caller runs its simulations through a :class:`Runner`: ``evaluate`` (chunked,
-resumable: :func:`run_chunks`), the studies through ``simulator.Simulator`` (sweep, compare,
-design search, robustness, minimum grip force), calibration (``calibration.Problem``) and
-the throughput benchmarks (``throughput.measure``, ``side_by_side``). It owns
-
-* backend choice: ``backend.make_backend`` by a name of ``engine.registry``; a new
-  backend is one module implementing the small ``backend.Backend`` protocol and one
-  registry entry;
-* batching: inputs reach the backend in chunks, which the backend splits into its own
-  batches -- MJX/Warp run fixed-size padded batches or a pool of slots refilled as
-  picks end (the refill stays inside those backends: it is part of the device program);
-* chunking and resume (:func:`run_chunks`, ``engine.chunks.ChunkStore``): a run's chunks
-  come from this process (one backend) or from the actors of a Ray cluster (a runner
-  made by ``cluster.ray_runner``); the caller alone writes the output folder;
-* progress: ``on_progress(done, total)`` in pick-points, called once before the first
-  chunk and after every chunk;
-* cancellation: a ``threading.Event`` checked before every chunk; once set, the run
-  stops with :class:`Cancelled` (finished chunks of an output folder are kept for
-  ``resume``); a recorded Ctrl-C (``mjx_pick.engine.interrupts``) stops it the same way with
-  ``KeyboardInterrupt``. A chunk that has started runs to its end: a device program cannot be
-  interrupted, and a chunk is the unit that is saved;
-* compile time apart from run time (:class:`Timing`, read from the backends' stats).
-
-Every pick-point is simulated on its own (MJX pads batches with copies whose results
-are dropped; a refilled pool gives the results of full-length rollouts), but the float32
-rounding of a batched program may depend on the batch's SHAPE: on the C engine, the
-per-tick kernel (XLA on the CPU) gave some scores one float32 step apart in batches of
-different sizes (labels equal); it runs on
-``c_backend.tick_rows(n)`` rows, the next power of two. So results
-are bitwise the same for the same batch size and chunk size -- chunks that are whole
-numbers of batches give every call the full batch but the run's last -- which is why a
-resumed run keeps its chunk size and a cluster run chunks as one machine would.
-
-The one path that does not go through :meth:`Runner.run` is calibration's forward-mode
-gradient: ``simulator.differentiable_rollout`` says why.
+Details: docs/engine.md (engine/runner.py).
 """
 
 from __future__ import annotations

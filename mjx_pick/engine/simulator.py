@@ -1,14 +1,7 @@
 """The study-facing simulator: what sweep, compare, design, robustness, minimum force
 and calibration run their (settings, pick-points) jobs through.
 
-A :class:`Simulator` groups jobs whose scenes share one compiled program
-(``engine.variants``: the same model structure, a gripper variant's numbers carried per
-pick-point as model fields) into one batch of per-pick parameters and runs it on the
-runner (:class:`~mjx_pick.engine.runner.Runner`, in this process or on a Ray cluster:
-``cluster.ray_runner``); it caches scenes and backends so a loop that runs again
-compiles nothing new. :func:`marking_stops` and :func:`showing_progress` are
-the pieces every study wraps its runs in; :func:`differentiable_rollout` is the one path
-that does not go through the runner (it says why).
+Details: docs/engine.md (engine/simulator.py).
 """
 
 from __future__ import annotations

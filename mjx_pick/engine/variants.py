@@ -1,34 +1,7 @@
 """Gripper variants as data: which scenes can share ONE compiled program, and the
 per-simulation model fields that make each variant what it is.
 
-Two settings whose compiled MuJoCo models have the same structure -- every size, id,
-address, type, mesh and option the same -- differ only in numbers a simulation reads
-at run time: a pad's half-sizes, a finger's mass and inertia, joint and control
-ranges, servo gains (a sweep over finger width, pad height, stroke, finger mass, force
-limit or drive stiffness). Such variants run on one backend (one compile on MJX and
-Warp): each pick-point carries its variant's values of the fields that differ
-(``PickInputs.model``, (N, ...) each), and every backend applies them per simulation --
-the C engine through ``mujoco.batch.Batch.expand``, MJX and Warp as batched
-``mjx.Model`` fields under ``vmap`` (the way per-pick contact-pair parameters already
-enter). Anything else (another mesh, another number of collision pieces, another
-solver setting, another scan length) gets a backend of its own.
-
-The values are never edited by hand: every variant's scene is compiled on its own and
-its fields are read from its own ``MjModel``, so the quantities MuJoCo derives at
-compile time (body inertia from geom sizes, ``geom_rbound``/``geom_aabb``,
-``body_subtreemass``, ``actuator_acc0``, ``dof_invweight0``, ...) are each variant's.
-
-Which fields a backend takes per simulation (:func:`carried_fields`): float fields of
-``MjModel`` that ``mujoco.batch`` can expand (the C engine: all of them); on MJX only
-those it keeps as traced arrays (a field MJX holds as numpy is read while tracing and
-baked into the program); on Warp, also only those its model holds per world
-(``mjx.warp.types._BATCH_DIM``), or that it does not read at all. Solver values that
-are model options are carried the same way, named ``opt.<field>`` (:data:`OPT_FIELDS`:
-the solver's tolerances and, except on Warp, the impedance ratio -- Warp's model holds
-it as a derived ``impratio_invsqrt`` that the MJX model's ``opt.impratio`` does not
-reach, so impedance-ratio variants get a program each there). The contact-pair fields
-are left out: they are already per-pick inputs (``PickInputs.pair_*``, from each
-variant's own scene).
+Details: docs/engine.md (engine/variants.py).
 """
 
 from __future__ import annotations

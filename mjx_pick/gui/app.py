@@ -1,16 +1,6 @@
 """The web server and its page: the paper's four tabs (its Fig. 10), a sweep tab, studies.
 
-Built with NiceGUI (docs/gui.md says why). :func:`serve` starts the server;
-:func:`build_page` builds one page per browser tab from the tab modules in
-:mod:`mjx_pick.gui.page` and wires them: one :class:`~mjx_pick.gui.state.PageState`
-(the imported object, the open run), the settings form of tab 2 and the job panel (the
-current run) are handed to the tabs that use them. Every tab is a thin layer over the
-public API: short steps run in a worker thread of this process; long runs are the CLI
-command itself in a child process (:mod:`mjx_pick.gui.jobs`), so their output folders
-are the CLI's.
-
-NiceGUI is imported only inside these functions: ``import mjx_pick.gui.app`` does not
-load the web framework.
+Details: docs/gui.md (gui/app.py).
 """
 
 from __future__ import annotations

@@ -1,24 +1,6 @@
 """Long runs started from the GUI: the CLI command itself, in a child process.
 
-A run is ``python -m mjx_pick.cli <command> ...`` with exactly the flags a user would
-type, so its output folder is the CLI's own (the CLI can report, resume or compare it)
-and the command is shown in the page to be copied. A child process, not a thread: a
-cancel is a SIGINT, which the CLI turns into a clean stop (evaluate keeps every
-finished chunk and marks the folder "interrupted", so ``--resume`` continues it), and
-whatever the run does to memory or the GL context cannot take the page down with it.
-
-Progress of an evaluate run is read from its folder: each finished chunk is a file
-``chunks/part-*.parquet`` of ``chunk`` pick-points (``evaluate --chunk-size``).
-
-A warm worker (:class:`Workers`) serves the simulation commands: one long-lived process
-per backend, started in the same isolated mode from the same package, that runs the CLI
-command in itself (:mod:`mjx_pick.gui.worker`) -- so a second job does not pay the
-imports, the object's preparation and the compile again. To the page it is the same
-job: the same log, progress, cancel (SIGINT to the worker while the job runs), run
-folder and exit code. A worker that dies is reported in the job it ran and replaced for
-the next; one whose memory grew is replaced after its job. A job the worker cannot serve
-(another command, a Ray cluster, a worker busy with another tab's job) runs in its own
-process as before.
+Details: docs/gui.md (gui/jobs.py).
 """
 
 from __future__ import annotations

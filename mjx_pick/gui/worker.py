@@ -1,38 +1,6 @@
 """The warm worker's side: a long-lived process that runs GUI jobs one after another.
 
-A job started as a new process pays the interpreter's start, the imports (JAX, MuJoCo),
-the object's preparation and the compile of the engine's programs before it simulates
-anything. A worker pays them once: it stays alive between jobs, so a second job on the
-same object and gripper finds its modules imported, its compiled programs in JAX's
-in-process caches and starts simulating at once. The server side (start, restart, the
-job's handle) is :mod:`mjx_pick.gui.jobs`; this module is what runs inside the worker.
-
-A job is still exactly the CLI command: ``mjx_pick.cli.main(argv)``, with the process
-made to look, for that command, as a new CLI process would:
-
-* its output -- Python's and the C libraries' (MuJoCo, XLA) -- goes to the job's log:
-  file descriptors 1 and 2 point at the log while it runs, and back at the worker's own
-  log after;
-* its working directory is the job's (the work folder's ``logs/``), its environment
-  the worker's as it was before the job (a ``--no-cache`` sets a variable; it must not
-  stay for the next job), and Python's warnings are shown as in a new process: each
-  job starts with the worker's warning filters and an empty "already shown" record, so
-  a warning the run gives (e.g. few feasible pick-points) reaches every job's log, where
-  the page reads it;
-* a cancel is a SIGINT to the worker while the job runs, which the CLI turns into a
-  clean stop as it would in its own process; between jobs SIGINT is ignored, so a
-  cancel that arrives just after a job ended cannot kill the worker or the next job;
-* the CLI's fixed-cost timer (``cli.clock``) counts from when the server started the
-  job, not from when the worker started;
-* a folder the command claimed and did not close (it cannot happen through ``main``,
-  which closes its claims on every error) is closed as failed, so its lock is never held
-  by an idle worker.
-
-Protocol: one JSON object per line on the worker's stdin -- ``{"id", "argv", "log",
-"cwd", "started"}`` -- and one per line on the reply pipe (the file descriptor given on
-the command line): ``{"ready": pid}`` once imported, ``{"id", "code", "rss"}`` after each
-job (the exit code the CLI process would have had, and the worker's resident memory in
-bytes). End of stdin ends the worker.
+Details: docs/gui.md (gui/worker.py).
 """
 
 from __future__ import annotations

@@ -1,25 +1,6 @@
 """Geometric feasibility of pick-points (the paper's three checks), batched in numpy.
 
-Method. For a pick-point (x, y, yaw) only the *band* under the fingers matters: the strip
-|y_g| <= finger_width / 2 of the gripper frame, from one fully-open finger's outer face
-to the other's. The object's silhouette is pre-rasterised once per yaw bin (rotated about
-its origin, axes aligned with the gripper's) and cumulated along rows, so the amount of
-object in the band at any gripper-frame column is one subtraction of two gathered rows.
-From that column profile:
-
-* off the object: no object between the fully open fingers;
-* distance ("too wide"): each finger starts ``safety_zone`` outside the outermost object
-  column between the open fingers; the (symmetric) opening this needs must fit the stroke;
-* clearance: both finger footprints (depth x width) at that opening are free of object;
-* coverage: object area between the fingertips over the area between them (opening x
-  finger width) is at least ``min_coverage``.
-
-A plain reference (:func:`reference_check`) samples the exact polygon point by point
-for one candidate; tests pin the batched check to it. The raster costs at most half a
-pixel of position and half a yaw bin of angle (bins are chosen so that this is also at
-most half a pixel at the object's rim). It runs on the host in float32 (the arithmetic of
-the JAX kernel it replaced: see docs/architecture.md), so no process needs JAX to draw
-pick-points.
+Details: docs/engine.md (kernels/feasibility.py).
 """
 
 from __future__ import annotations

@@ -1,33 +1,6 @@
 """One pick-point's controller, phase machine and metric accumulation (pure JAX).
 
-Written for ONE pick-point: every function takes scalars (or small vectors) and is
-batched with ``vmap`` by the runners. Both backends call these same functions once per
-control period -- MJX inside its jitted scan, the MuJoCo C backend through a jitted
-vmap on the CPU -- so the controller, the phase machine and the metrics have one
-definition.
-
-Phases: SETTLE (object comes to rest) -> CLOSE (P force controller) -> DWELL (optional)
--> LIFT -> HOLD -> DONE. The P controller (the paper's Fig. 6) commands each finger's
-closing speed v = clip(kp * (F_d - F), -v_open, v_close) from the mean pad force F
-once a pad touches (v_close before: the approach at the set closing speed); the
-speed is integrated into the finger servos' position target, so the force loop has
-integral action and holds F_d without steady-state error. Like the real gripper's
-current limit, the integrated target never runs more than F_lim / k_drive ahead
-of the slower finger: when the object slips or turns and the measured force drops, the
-drive cannot wind up and slam the pads beyond the limit once it catches again. Lifting
-starts as soon as F reaches reach_fraction * F_d (the paper's rule against slip before
-the lift), after the optional dwell.
-
-Grippers: a parametric parallel jaw has one slide joint and one position servo per
-finger, whose coordinate IS the finger's closing travel. A gripper from an MJCF file (a
-linkage such as the Robotiq 2F-85) has neither: its fingers are driven through joints
-and tendons, and its pads travel along a curve. :class:`DriveMap` (static tables
-measured on the MuJoCo C model, ``mjx_pick.core.mjcf_gripper``) maps its finger joints to
-each pad's closing travel, the commanded travel to the actuator's control, and the
-travel to the drive's stiffness at the pads; the controller itself still works in
-travel, so the same code regulates both. The gripper's starting lift may be non-zero
-(the linkage's height compensation raises it per pick-point): the lift is measured
-from where it started.
+Details: docs/engine.md (kernels/grasp.py).
 """
 
 from __future__ import annotations

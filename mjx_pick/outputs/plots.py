@@ -1,11 +1,6 @@
 """Pictures of pick-points on the silhouette (PNG, matplotlib figures without pyplot).
 
-``draw_pick`` is the paper's Fig. 9 for one pick-point, in the gripper frame: the object
-at its pose, both finger footprints at the starting opening, the coverage region
-between the fingertips and the object's bounding box. ``draw_candidates`` shows many
-candidates in the object frame, each as the gripper centre with its closing axis,
-coloured by feasibility reason or by a score, or by outcome (successes by score,
-failures as crosses).
+Details: docs/outputs.md (outputs/plots.py).
 """
 
 from __future__ import annotations

@@ -1,16 +1,6 @@
 """Progress of a long command on stderr, fed by the engine's progress callbacks.
 
-The engine reports progress as ``on_progress(done, total)`` (``engine.ProgressFn``);
-:class:`ProgressBar` is such a callback. Every long command uses it: evaluate, sweep,
-compare, design and robust (pick-point simulations), calibrate (fit steps) and report
-(the report's parts).
-
-On a terminal it is a tqdm bar. Anywhere else -- a log file, a pipe, the GUI's job log
--- a redrawn bar is the wrong thing: tqdm writes every redraw as ``\\r`` + the bar, and
-its ``close()`` draws the final state once more (with the overall rate instead of the
-smoothed one), so a log shows the 100 % line twice (and a reader that splits on
-``\\r`` a line per redraw). There it writes whole lines instead: one each time another
-tenth of the work is done, and the last one exactly once.
+Details: docs/outputs.md (outputs/progress.py).
 """
 
 from __future__ import annotations

@@ -1,28 +1,6 @@
 """Output folders that are owned: checked and claimed before any work starts.
 
-Every command that writes a folder (evaluate, sweep, compare, design, robust,
-calibrate, picks) first calls :func:`claim`. The folder gets a manifest,
-``mjx_pick_run.json``: the command, a hash of its configuration and the settings
-hashed, its status and when. A later command refuses the folder when another command
-wrote it, or the same command with another configuration (naming each setting that
-changed), unless the user asks to ``overwrite`` (the folder is emptied first) or to
-``resume``. A path that cannot hold results -- a file, a read-only place, a folder that
-cannot be created -- is refused with one line naming the path and the reason, before
-anything is simulated.
-
-While a command writes a folder it holds the folder's advisory lock (``flock`` on
-``.mjx_pick.lock``): no other process -- a second writer, ``--overwrite`` -- removes or
-writes files under it, and the refusal names the process. The kernel drops the lock
-with the process, so a run killed outright leaves no stale lock: its manifest says
-"running" under a free lock, and the next claim knows it died.
-
-When the command ends -- complete, interrupted, terminated, cancelled or failed (with
-its error message) -- :func:`finish` records the
-status in the manifest and writes the run's metadata, ``run.json``: the same record
-for every command (the merged configuration, package versions, backend, device, seed,
-compile / run / wall time, status and when). A command that adds its files to another
-command's folder (robust into an evaluate folder) writes ``run-<command>.json`` and
-leaves the folder's manifest and ``run.json`` alone.
+Details: docs/outputs.md (outputs/rundir.py).
 """
 
 from __future__ import annotations

@@ -1,22 +1,6 @@
 """Gripper comparison and gripper design search (the paper's applications 2 and 3).
 
-Every gripper sees the SAME candidate pick-points: the object's seeded candidate stream
-(poses depend on the object only), kept where at least one gripper is feasible.
-Feasibility is then decided per gripper, and a pick-point a gripper cannot take
-(too wide for its stroke, a finger on the object, too little coverage) counts as a
-failure of that gripper with score 0: for a cell that must pick the object wherever
-it lies, not reaching a pose is as bad as dropping it. Rates over the gripper's own
-feasible pick-points are reported beside them.
-
-Grippers are ranked by success rate (or mean score) with 95% intervals (Wilson for
-rates, normal for means), and each is tested against the leader on the shared
-pick-points with an exact McNemar test (paired successes).
-
-The design search samples gripper variants (Latin hypercube within bounds on any
-numeric GripperSpec field, e.g. finger width, finger depth, stroke), keeps the best
-third of them on a growing number of pick-points (successive halving), and compares
-the winner with the base gripper on FRESH pick-points, so that its figure is not
-inflated by having been selected on the same data.
+Details: docs/studies.md (studies/comparison.py).
 """
 
 from __future__ import annotations

@@ -1,30 +1,6 @@
 """Evaluate pick-points end to end: object + gripper -> pick-points -> simulation -> results.
 
-``evaluate`` is the Python form of ``mjx-pick evaluate``. With ``out`` it writes:
-
-* ``config.json``  the merged configuration, versions, backend, device and seed;
-* ``scene.xml``    the MuJoCo model that was simulated;
-* ``results.parquet`` one row per pick-point (``mjx_pick.core.metrics.COLUMNS``);
-* ``summary.json`` counts, success rate, score quantiles, failure reasons, eq. (1)'s
-  F_Gmin, pick-points per second, compile time apart from run time;
-* ``traces.parquet`` long-format traces of the n best and n worst pick-points (they
-  are re-simulated with recording on: keeping traces of every pick-point of a large
-  batch would not fit in device memory).
-
-Every simulation runs through the runner: large runs go in chunks
-(``runner.run_chunks``) -- on this process's backend, or with
-``ray="auto" | "HOST:PORT"`` on the actors of a Ray cluster (``mjx_pick.engine.cluster``);
-either way this process alone writes the folder. Each finished chunk is written
-atomically under ``chunks/`` beside the chunk plan (``engine.chunks.ChunkStore``, the
-resume of every command), so that ``resume=True`` redoes nothing that finished, for the
-same experiment (:func:`experiment_key`). Once the
-run is complete (results, summary and traces written), ``chunks/`` is removed: its
-rows are all in results.parquet. A run that stops early keeps it for ``resume``;
-``resume`` on a complete folder simulates nothing and returns what it holds (without
-``resume`` or ``overwrite``, such a folder is refused).
-``on_progress(done, total)`` reports pick-points done after each chunk; setting the
-``cancel`` event stops the run before the next chunk (``engine.Cancelled``; the folder
-is marked "cancelled" and its finished chunks stay for ``resume``).
+Details: docs/studies.md (studies/evaluation.py).
 """
 
 from __future__ import annotations

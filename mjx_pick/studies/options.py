@@ -1,12 +1,6 @@
 """RunOptions: how a study runs, the one value every study carries.
 
-evaluate, sweep, compare, design_search, robustness, robust_best and calibrate share the
-same handful of run settings -- how many pick-points and which seed, how they are
-sampled, which backend and batch size, where the results go and whether to resume or
-overwrite them, a Ray cluster, a progress bar. They travel as one :class:`RunOptions`
-from the public call (or the CLI, which builds it once) down to the study's steps. The
-public functions also take these fields as keywords, as they always did: a keyword
-given there overrides the same field of ``options``.
+Details: docs/studies.md (studies/options.py).
 """
 
 from __future__ import annotations

@@ -1,21 +1,6 @@
 """Pick-point robustness under vision error, and each pick-point's minimum grip force.
 
-Robustness (the paper's proposed next step). A vision system that reports the object
-at (x, y, yaw) is wrong by a few millimetres and degrees; the robot plans its fingers'
-opening for the reported pose and closes on the real one. For each pick-point, M
-real poses are drawn around the reported one (Gaussian, sigma_xy_mm on x and y,
-sigma_yaw_deg on yaw), the fingers start at the PLANNED opening, and each draw is
-simulated. A draw where the object reaches under a finger at that opening is a failure
-(the finger lands on it) without simulation, as is one with no object between the
-fingers. The robust success probability is the
-fraction of successful draws, with its Wilson 95% interval; pick-points are ranked by
-it (ties: by the interval's lower end, then by mean score).
-
-Minimum grip force, the physics counterpart of the analytic minimum-friction grasp
-metrics: for each pick-point, the smallest F_d in [lo, hi] at which the pick succeeds,
-found by a batched bisection (every pick-point's next F_d in one simulation batch per
-step). It assumes success is monotone in F_d over that range (more squeeze never
-hurts); a pick-point that fails at hi gets NaN, one that succeeds at lo gets lo.
+Details: docs/studies.md (studies/robust.py).
 """
 
 from __future__ import annotations

@@ -1,24 +1,6 @@
 """Parameter sweeps: pick-points x parameter values, on a grid or at random.
 
-A parameter is named ``section.field`` after the settings dataclass it changes:
-``contact.`` (ContactParams), ``grasp.`` (GraspConfig), ``gripper.`` (GripperSpec) or
-``solver.`` (SolverParams); ``grasp.grip_force_n``, ``controller.kp``,
-``controller.v_close`` and ``controller.v_open`` are aliases of the grasp fields
-grip_force_n, kp_mm_s_per_n, closing_speed_mm_s and opening_speed_mm_s. Values:
-
-* ``lo:hi:n``      n values evenly spaced from lo to hi (``lo:hi:n:log``: geometric);
-* ``a,b,c``        exactly these values;
-* ``lo:hi``        a range for random sweeps (``random=K`` draws K variants uniformly).
-
-Contact, controller and phase settings are per-pick data of one compiled simulation,
-and so are gripper variants that keep the model's structure (finger width, pad height,
-stroke, masses, force limit: their model fields are carried per pick-point,
-``engine.variants``): every variant that shares the program runs in ONE batch of
-pick-points x variants (``simulator.Simulator``), one compile on MJX and Warp. A value
-that changes the model's structure (the object's collision pieces for a finger that
-fits a hole, a solver setting, the scan length) is a batch and a compile of its own.
-Pick-points are drawn per gripper geometry with the same seed, so variants that share
-a gripper see the same pick-points (paired).
+Details: docs/studies.md (studies/sweeps.py).
 """
 
 from __future__ import annotations

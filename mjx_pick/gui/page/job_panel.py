@@ -1,12 +1,6 @@
 """The job panel: the run this browser tab started, its progress, Cancel, its CLI command.
 
-The panel owns the current job (a :class:`mjx_pick.gui.jobs.Job`): tabs start runs
-through :meth:`JobPanel.start` and ask :meth:`JobPanel.busy` before they do. A job is
-current from its start until the panel has shown how it ended and called its ``on_end``
-(which draws its results). ``busy`` goes by that, not by whether the child process still
-runs: the process exits up to one poll (0.5 s) before the panel sees it, and a run
-started in that gap used to replace the job whose end was never shown -- its results
-never drawn, its status line left at "running".
+Details: docs/gui.md (gui/page/job_panel.py).
 """
 
 from __future__ import annotations

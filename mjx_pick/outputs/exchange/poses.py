@@ -1,20 +1,6 @@
 """A run's pick-points as gripper poses in the object's frame, in the exchange formats' axes.
 
-mjx_pick's gripper frame G (``docs/formats.md``): z up, the gripper approaches along
--z, its fingers close along x; a pick-point (x, y, yaw) is the object's planar pose in
-G. The exchange formats (ACRONYM, GraspGen, isaac_grasp as GraspGen uses it) put a
-gripper's frame E at its base with the approach along +z and the closing along x, the
-grasp centre (TCP) ``depth`` along +z from the base. So E is G turned half a turn about
-its x axis (x stays, y and z flip), at the gripper's base:
-
-    R_OE = Rz(-yaw) diag(1, -1, -1)
-    p_OE = -Rz(-yaw) (x, y, 0) + (0, 0, z_tcp + depth)
-
-with z_tcp the grasp centre's height above the table (the fingertips' height plus half
-the pad height) and depth the base's height above it: a model gripper's (MJCF or
-URDF) mount at the pick's start (its height above the pads' centre when fully open,
-plus the pick's height compensation), 0 for a parametric gripper (whose frame is its
-pads' centre), or a depth the caller gives (GraspGen's ``depth`` of a real gripper).
+Details: docs/outputs.md (outputs/exchange/poses.py).
 """
 
 from __future__ import annotations

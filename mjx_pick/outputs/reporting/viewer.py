@@ -1,11 +1,7 @@
 """``mjx-pick view RUN --pick ID``: one traced pick-point replayed in MuJoCo's
 interactive viewer (``mujoco.viewer.launch_passive``), where a display exists.
 
-The replay simulates nothing: every trace row holds the whole joint state, which
-:class:`~mjx_pick.outputs.reporting.body_poses.TracePose` puts into the run's own model
-(``scene.xml``), row after row at the trace's pace. Every input is checked first (the
-run folder, the pick-point, the speed), then the display: without one the command ends
-with one line saying what it needs.
+Details: docs/outputs.md (outputs/reporting/viewer.py).
 """
 
 from __future__ import annotations

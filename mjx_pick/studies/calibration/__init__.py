@@ -1,25 +1,7 @@
 """Sim-to-real calibration: fit contact parameters (and the gripper's force offset) to
 measured pick outcomes and traces.
 
-One module per responsibility, in the order of the flow:
-
-* ``data`` -- the measured-outcomes CSV and its trace files (read, check, write);
-* ``parameters`` -- the parameter space: names, bounds, priors, and the mapping of a
-  parameter vector to simulation inputs through ``physics`` / ``Settings``;
-* ``loss`` -- residuals per measurement kind (outcome, lift time, force / lift /
-  rotation traces, prior) and the loss;
-* ``problem`` -- the simulations of a fit, through the one engine;
-* ``estimators`` -- smoothed-gradient Adam, random search, CMA-ES, forward mode, as
-  ask/tell pairs;
-* ``fit`` -- the fit loop (orbax checkpoints, resume) and the least-squares fit with
-  ``mujoco.sysid``;
-* ``identify`` -- intervals and identifiability from the loss's curvature;
-* ``outputs`` -- contact.toml (with what it was fitted for), calibration.json, plots,
-  report; the contact-file check used by evaluate;
-* ``synthetic`` -- outcomes and traces simulated with hidden parameters;
-* ``trials`` -- the paper's template-and-trial loop (``mjx-pick trials``): which
-  pick-points to try, the sheet, the agreement of simulation and reality, the fit and
-  the next round (imported on its own: ``from mjx_pick.studies.calibration import trials``).
+Details: docs/calibration.md (studies/calibration/__init__.py).
 """
 
 from mjx_pick.studies.calibration.data import (

@@ -1,22 +1,6 @@
 """Measured outcomes and traces: the CSV a user fills in, read and checked, and written.
 
-One row per tested pick-point (examples in ``assets/outcomes/``):
-
-=================  ===========================================================
-x_mm, y_mm         the object's offset under the gripper centre (as for evaluate)
-yaw_deg            its yaw
-grip_force_n       F_d used on the real gripper
-trials, successes  how often it was tried, how often it was lifted and held
-lift_time_s        optional: time from the close command to the start of the lift
-force_trace        optional: a CSV (t_s, force_n; path relative to the outcomes
-                   file) of the mean pad force from the close command on
-trace              optional: a CSV with t_s and any of force_n (mean pad force, from
-                   a gauge), lift_mm (the object's rise above its start, from video),
-                   rotation_deg (its turn about the vertical axis since the start,
-                   from video); a blank cell is "not measured at that time"
-=================  ===========================================================
-
-Times in traces count from the close command (the end of the simulated settling).
+Details: docs/calibration.md (studies/calibration/data.py).
 """
 
 from __future__ import annotations

@@ -1,31 +1,6 @@
 """Estimators: how the next parameter vectors to simulate are chosen.
 
-Each is a pair of functions in the manner of optax (``init``/``update``), split as
-ask / tell because a step's simulations run in one engine batch between them:
-
-* ``init(theta0) -> state``: a NamedTuple whose fields say their shapes;
-* ``ask(state) -> thetas (S, P)``: the parameter vectors (unconstrained theta,
-  ``parameters.ParamSpace``) to simulate next, all in one batch;
-* ``tell(state, thetas, losses (S,)) -> state``;
-* ``best(state) -> theta (P,)``: the current answer.
-
-Estimators (why ``cma`` is the default and ``jvp`` is not: docs/calibration.md):
-
-* ``smoothed`` -- optax Adam on the gradient of the loss smoothed with a Gaussian along
-  each parameter, E[L(theta + sigma Z e_i)], by Gauss-Hermite quadrature (symmetric
-  node pairs; 1 + 2 x pairs x P vectors per step): deterministic, no derivatives, sees
-  across flips of an outcome. The spread shrinks over the fit; the answer is the
-  iterate with the lowest loss (the simulation is deterministic).
-* ``random`` -- uniform draws in the bounds, best so far.
-* ``cma`` (the default) -- CMA-ES (the ``cma`` package, N. Hansen's reference
-  implementation) in theta space: a population per step, step size and covariance
-  adapted.
-* ``jvp`` -- Adam on forward-mode derivatives through MJX (``Problem.mjx_loss_and_grad``;
-  the fit loop supplies the gradient), for smooth losses.
-
-A least-squares fit of the residuals with MuJoCo's own optimiser (``mujoco.sysid``)
-is ``fit.least_squares``: it runs its own loop (Levenberg-Marquardt with batched
-finite-difference Jacobians), so it is no ask/tell pair.
+Details: docs/calibration.md (studies/calibration/estimators.py).
 """
 
 from __future__ import annotations

@@ -1,42 +1,6 @@
 """Residuals and loss: how far simulated pick-points are from the measured ones.
 
-Everything is a residual vector r in units of its own noise, so that the negative log
-likelihood is 0.5 * |r|^2 (least squares, identifiability and the loss all read it):
-
-* outcome, per row: the deviance residual of the trials' successes against
-  p = sigmoid((final lift - success height) / temperature) (the logit clipped to +-5):
-  sign(y - p) * sqrt(2 w (BCE(p, y) - H(y))), w the trials, H the binary entropy (so a
-  perfect fit has 0). A diverged simulation is a failure of the parameters, never a fit:
-  its row costs the most wrong prediction the clipped logit allows.
-* lift time, per row where measured: (simulated - measured) / ``noise.lift_time_s``
-  (a simulation that never reached F_d waited its whole close timeout).
-* traces, one residual per trace kind and row. A grasp that chatters, slips or drops
-  is chaotic: a 0.1 % change of a parameter moves every tick's pad force and the tick
-  the part drops at (docs/calibration.md, "Traces of a chaotic grasp"), so one
-  simulated trace is one draw of what the model predicts. Each traced row is therefore
-  simulated at K placements (``Problem(replicates=K)``: the pick-point and K - 1 copies
-  moved by a few hundredths of a millimetre), every trace -- measured and simulated --
-  is smoothed by a ``noise.trace_window_s`` moving average (a gauge's bandwidth), and
-  the residual is the Gaussian negative log likelihood of the measured trace under the
-  replicas' mean m_t and spread v_t (sample variance over K, at least its mean over
-  the 4 windows around: three replicas may agree by chance), per sample
-
-      z_t^2 + log(1 + v_t / s_t^2),   z_t = (m_t - measured_t) / sqrt(s_t^2 + v_t)
-
-  (s_t the noise of the kind: force ``noise.force_fraction`` of F_d, lift
-  ``noise.lift_mm``, rotation ``noise.rotation_deg``), averaged over the measured
-  samples, square-rooted: an RMS in noise units. Where the replicas agree (v = 0) it is
-  the plain RMS of (simulated - measured) / s; where the model itself cannot say when
-  the force chatters or the part drops, that spread widens the tolerance, and the log
-  term charges for it (the likelihood's normaliser) so that a chaotic simulation does
-  not fit by being vague. K = 1 and window 0 give the former per-sample RMS. One number
-  per trace, not one per sample: a trace's samples are strongly correlated, so hundreds
-  of them must not outweigh the trials' outcomes (nor claim hundreds of independent
-  observations in the intervals). A diverged row (or replica) counts as predicting
-  nothing (zero); a diverged row is at least one noise unit off.
-* prior, per parameter: the standardised distance from its prior mean.
-
-loss = 0.5 |r|^2 / (total trials): per trial, as the old outcome cross-entropy was.
+Details: docs/calibration.md (studies/calibration/loss.py).
 """
 
 from __future__ import annotations

@@ -2,12 +2,7 @@
 parameter vector becomes simulation inputs (through ``physics`` and ``Settings``: the
 one ContactParams -> MuJoCo mapping, nothing re-derived here).
 
-Every parameter lives in a bounded space: its coordinate z (the value, or its logarithm
-for the ``log`` ones) is lo + (hi - lo) * sigmoid(theta), so an optimiser works on an
-unconstrained theta and no step leaves the bounds. Each has a Gaussian prior in z
-(mean: the starting value; spread: ``prior_sd``), added to the loss as a negative log
-density: it keeps a parameter the data cannot see where it started, and is the yardstick
-of identifiability (``identify.py``).
+Details: docs/calibration.md (studies/calibration/parameters.py).
 """
 
 from __future__ import annotations

@@ -1,19 +1,6 @@
 """What measured outcomes were measured with, and whether a fit's run matches it.
 
-Beside an outcomes CSV, a TOML of the same name (``block_1kg_rg2.toml`` beside
-``block_1kg_rg2.csv``) may record what the real cell used::
-
-    object = "block"          # what was picked (said in a mismatch, never compared)
-    mass_g = 1000.0           # the part's mass
-    gripper = "onrobot-rg2"   # the gripper's name (GripperSpec.name)
-    synthetic = "sha256:..."  # simulated, not measured: the digest of what made it
-    [grasp]                   # any GraspConfig field the cell's procedure set
-    lift_height_mm = 100.0
-
-A fit simulates the run's object, gripper and procedure: fitted to outcomes of another
-mass, gripper or procedure it answers confidently and wrongly (a 1 kg part's slips
-read as a 43 g part's friction). So :func:`mismatches` lists each difference and
-``Problem`` refuses them unless forced.
+Details: docs/calibration.md (studies/calibration/provenance.py).
 """
 
 from __future__ import annotations

@@ -1,16 +1,6 @@
 """The paper's template-and-trial loop as a product (``mjx-pick trials``).
 
-``plan`` chooses pick-points of an evaluate run to try on the real cell and prints a 1:1
-positioning template for each; a person places the real object on each template under
-the real gripper, tries it, and records the outcomes (``record``, or an editor);
-``agree`` reports how often the simulation was right; ``fit`` fits the contact
-parameters to the outcomes, re-simulates the tried pick-points with them, reports the
-agreement before and after, and plans the next round where the fitted model is least
-sure. The logic lives in ``mjx_pick.studies.calibration.trials`` (the studies layer); this
-module adds the printed templates (the outputs layer).
-
-Each round's templates are ``templates_round<r>.pdf`` in the trials folder, one page
-per pick-point in the sheet's page order.
+Details: docs/calibration.md (studies/calibration/trials/loop.py).
 """
 
 from __future__ import annotations
