@@ -22,7 +22,7 @@ from mjx_pick.core.settings import Settings
 from mjx_pick.engine.chunks import ChunkStore
 from mjx_pick.engine.simulator import Simulator, showing_progress
 from mjx_pick.outputs.rundir import portable_object
-from mjx_pick.studies.options import RunOptions
+from mjx_pick.studies.options import RunOptions, split_fields
 
 
 @dataclasses.dataclass
@@ -354,18 +354,37 @@ def _short(field: str) -> str:
     return {"finger_width_mm": "w", "finger_depth_mm": "d", "stroke_mm": "s"}.get(field, field)
 
 
+@dataclasses.dataclass(frozen=True)
+class DesignRequest:
+    """What :func:`design_search` searches: variants drawn within the bounds, rounds of
+    halving thirds, the final comparison's pick-points (None: 4 n) and the ranking
+    ('success' or 'score')."""
+
+    variants: int = 12
+    rounds: int = 3
+    final_n: int | None = None
+    rank_by: str = "success"
+
+    def check(self, n: int) -> None:
+        check_range("design", "rounds", self.rounds, 1, 20)
+        check_range("design", "n", n, 1, 1e8)
+        if self.final_n is not None:
+            check_range("design", "final_n", self.final_n, 1, 1e8)
+        if self.rank_by not in ("success", "score"):
+            raise ConfigError(
+                f"rank_by = {self.rank_by!r} is not allowed: choose 'success' or 'score'"
+            )
+
+
 def design_search(
     obj: ObjectModel,
     bounds: dict[str, tuple[float, float]],
     base: Settings | None = None,
     options: RunOptions | None = None,
     *,
-    variants: int = 12,
-    rounds: int = 3,
-    final_n: int | None = None,
-    rank_by: str = "success",
+    request: DesignRequest | None = None,
     simulator: Simulator | None = None,
-    **run,
+    **fields,
 ) -> DesignResult:
     """Search gripper geometry within bounds; see the module docstring.
 
@@ -383,22 +402,30 @@ def design_search(
     starts: a round's size depends on the last). simulator: run through this one (kept
     open; backend, batch_size and ray are then its own).
     """
-    opts = RunOptions.of(options, **run)
+    req, opts = split_fields(DesignRequest, request, options, fields)
     n, seed, pick_config = opts.n_or(64), opts.seed, opts.pick_config
     base = base or Settings()
-    check_range("design", "rounds", rounds, 1, 20)
-    check_range("design", "n", n, 1, 1e8)
-    if final_n is not None:
-        check_range("design", "final_n", final_n, 1, 1e8)
-    if rank_by not in ("success", "score"):
-        raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
+    req.check(n)
     t0 = time.perf_counter()
     request = {"object": obj.summary(), "bounds": {k: list(v) for k, v in bounds.items()}}
-    request.update(base=to_dict(base), variants=variants, n=n, rounds=rounds, seed=seed)
-    request.update(final_n=final_n, rank_by=rank_by, picks=to_dict(pick_config))
+    request.update(base=to_dict(base), variants=req.variants, n=n, rounds=req.rounds)
+    request.update(seed=seed, final_n=req.final_n, rank_by=req.rank_by)
+    request.update(picks=to_dict(pick_config))
+    pool, too_narrow = _fitting_variants(obj, base, bounds, req.variants, seed, pick_config)
+    request.update(too_narrow=too_narrow)
+    search = {"rounds": req.rounds, "n": n, "final_n": req.final_n, "seed": seed}
+    search.update(rank_by=req.rank_by, pick_config=pick_config)
+    with opts.opening("design", obj, request, simulator) as study:
+        if study.complete:
+            return _read_design(study.out_dir, obj, base, pool, **search)
+        return _design(obj, base, pool, study, bounds, request, t0, opts.progress, **search)
+
+
+def _fitting_variants(obj, base: Settings, bounds, variants: int, seed: int, pick_config):
+    """(the variants drawn within bounds that some pick-point fits, how many were left
+    out): a variant none fits is no design; none left, a ConfigError (the base gripper
+    is the reference, never the answer)."""
     drawn = sample_variants(base.gripper, bounds, variants, seed)
-    # a variant no pick-point can fit is no design: left out before any draw; none left,
-    # refused (the base gripper is the reference, never the answer)
     fitting = [g for g in drawn if pp.stroke_refusal(obj, g, pick_config, base.grasp) is None]
     if not fitting:
         why = pp.stroke_refusal(obj, drawn[0], pick_config, base.grasp)
@@ -407,14 +434,7 @@ def design_search(
             + ", ".join(f"{k}={lo:g}:{hi:g}" for k, (lo, hi) in bounds.items())
             + f" can take the part; e.g. {why}"
         )
-    request.update(too_narrow=len(drawn) - len(fitting))
-    pool = fitting
-    search = {"rounds": rounds, "n": n, "final_n": final_n, "seed": seed}
-    search.update(rank_by=rank_by, pick_config=pick_config)
-    with opts.opening("design", obj, request, simulator) as study:
-        if study.complete:
-            return _read_design(study.out_dir, obj, base, pool, **search)
-        return _design(obj, base, pool, study, bounds, request, t0, opts.progress, **search)
+    return fitting, len(drawn) - len(fitting)
 
 
 def _design(
@@ -423,74 +443,62 @@ def _design(
 ) -> DesignResult:  # fmt: skip
     """design_search once its inputs are checked, its simulator made and out claimed
     (study: the opened study, ``options.OpenStudy``)."""
-    sim, store, out = study.sim, study.store, study.out_dir
-    history = []
+    sim = study.sim
+    # every comparison of the search: the same sampling, ranking, simulator and chunks
+    rank = {"rank_by": rank_by, "pick_config": pick_config, "simulator": sim}
+    rank["_store"] = study.store
     desc = f"design: {rounds} rounds + final ({sim.runner.backend_name})"
     with showing_progress(sim.runner, desc, "sim", progress) as bar:
-        for r in range(rounds):
-            if bar is not None:
-                bar.note(f"round {r + 1}/{rounds}: {len(pool)} grippers")
-            res = compare(
-                obj,
-                pool,
-                base,
-                n=n * 2**r,
-                seed=seed,
-                rank_by=rank_by,
-                pick_config=pick_config,
-                simulator=sim,
-                _store=store,
-            )
-            history.append(res.ranking)
-            keep = max(1, math.ceil(len(pool) / 3)) if r < rounds - 1 else 1
-            by_name = {g.name: g for g in pool}
-            pool = [by_name[row["gripper"]] for row in res.ranking[:keep]]
-        best = pool[0]
-        last = next(row for row in history[-1] if row["gripper"] == best.name)
-        if last["feasible"] == 0 or last["success_rate"] == 0:
-            raise ConfigError(
-                f"design: no variant within the bounds picks the part: the best, {best.name}, "
-                f"succeeded on none of its {last['feasible']} feasible pick-points; widen the "
-                "bounds"
-            )
+        best, history = _rounds(obj, base, pool, rounds, n, seed, bar, rank)
         contenders = [best] if best == base.gripper else [best, base.gripper]
         if bar is not None:
             bar.note("final: the best against the base gripper on fresh pick-points")
-        final = compare(
-            obj,
-            contenders,
-            base,
-            n=final_n or 4 * n,
-            seed=seed + 1_000_003,
-            rank_by=rank_by,
-            pick_config=pick_config,
-            simulator=sim,
-            _store=store,
-        )
+        final_seed = seed + 1_000_003
+        final = compare(obj, contenders, base, n=final_n or 4 * n, seed=final_seed, **rank)
     result = DesignResult(best, base.gripper, final, history, None)
-    if out is not None:
-        out_dir = Path(out)
-        write_json(
-            out_dir / "design.json",
-            {
-                "object": obj.summary(),
-                "bounds": {k: list(v) for k, v in bounds.items()},
-                "best": to_dict(best),
-                "base": to_dict(base.gripper),
-                "final": final.ranking,
-                "rounds": history,
-                "seed": seed,
-                "rollouts": sim.rollouts,
-            },
-        )
-        from mjx_pick.core.config import to_toml, write_atomic
-
-        write_atomic(out_dir / "best_gripper.toml", to_toml(best))
-        write_parquet(out_dir / "results.parquet", final.table)
-        plot_comparison(obj, final, out_dir)
-        result.out_dir = out_dir
+    if study.out_dir is not None:
+        _write_design(study.out_dir, obj, base, bounds, result, seed, sim.rollouts)
         study.close(request, sim.runner.describe(time.perf_counter() - t0))
     return result
+
+
+def _rounds(obj, base, pool, rounds: int, n: int, seed: int, bar, rank: dict):
+    """The search's rounds: round r compares the pool on n * 2**r pick-points and keeps
+    the best third (the last round: the best). Returns (the best, each round's
+    ranking); a best that picks nothing is a ConfigError."""
+    history = []
+    for r in range(rounds):
+        if bar is not None:
+            bar.note(f"round {r + 1}/{rounds}: {len(pool)} grippers")
+        res = compare(obj, pool, base, n=n * 2**r, seed=seed, **rank)
+        history.append(res.ranking)
+        keep = max(1, math.ceil(len(pool) / 3)) if r < rounds - 1 else 1
+        by_name = {g.name: g for g in pool}
+        pool = [by_name[row["gripper"]] for row in res.ranking[:keep]]
+    best = pool[0]
+    last = next(row for row in history[-1] if row["gripper"] == best.name)
+    if last["feasible"] == 0 or last["success_rate"] == 0:
+        raise ConfigError(
+            f"design: no variant within the bounds picks the part: the best, {best.name}, "
+            f"succeeded on none of its {last['feasible']} feasible pick-points; widen the "
+            "bounds"
+        )
+    return best, history
+
+
+def _write_design(out_dir: Path, obj, base, bounds, result: DesignResult, seed, rollouts) -> None:
+    """A design search's outputs: its record, the best gripper's TOML, the final
+    comparison's results and pictures."""
+    from mjx_pick.core.config import to_toml, write_atomic
+
+    record = {"object": obj.summary(), "bounds": {k: list(v) for k, v in bounds.items()}}
+    record.update(best=to_dict(result.best), base=to_dict(base.gripper))
+    record.update(final=result.final.ranking, rounds=result.rounds, seed=seed, rollouts=rollouts)
+    write_json(out_dir / "design.json", record)
+    write_atomic(out_dir / "best_gripper.toml", to_toml(result.best))
+    write_parquet(out_dir / "results.parquet", result.final.table)
+    plot_comparison(obj, result.final, out_dir)
+    result.out_dir = out_dir
 
 
 def _read_design(

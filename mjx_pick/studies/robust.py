@@ -19,10 +19,9 @@ from mjx_pick.core.config import ConfigError, check_range, to_dict, write_json, 
 from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.core.objects import ObjectModel, check_same_object
 from mjx_pick.core.settings import Settings
-from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.simulator import Simulator, showing_progress
 from mjx_pick.outputs.rundir import config_hash, portable_object
-from mjx_pick.studies.options import RunOptions
+from mjx_pick.studies.options import RunOptions, split_fields
 from mjx_pick.studies.recorded import settings_changes, settings_of
 
 
@@ -97,24 +96,34 @@ def check_draws(m: int, sigma_xy_mm: float, sigma_yaw_deg: float) -> None:
     check_range("robustness", "sigma_yaw_deg", sigma_yaw_deg, 0, 180)
 
 
+@dataclasses.dataclass(frozen=True)
+class Perturbations:
+    """How the real poses are drawn around each reported one: m draws, each moved by
+    N(0, sigma_xy_mm) in x and y (mm) and N(0, sigma_yaw_deg) in yaw (deg)."""
+
+    m: int = 32
+    sigma_xy_mm: float = 2.0
+    sigma_yaw_deg: float = 3.0
+
+    def check(self) -> None:
+        check_draws(self.m, self.sigma_xy_mm, self.sigma_yaw_deg)
+
+
 def robustness(
     obj: ObjectModel,
     picks: pp.PickBatch,
     base: Settings | None = None,
     options: RunOptions | None = None,
     *,
-    m: int = 32,
-    sigma_xy_mm: float = 2.0,
-    sigma_yaw_deg: float = 3.0,
+    request: Perturbations | None = None,
     simulator: Simulator | None = None,
-    **run,
+    **fields,
 ) -> pa.Table:
     """Robust success probability of each pick-point; rows ranked best first.
 
-    m draws per pick-point, each moved by N(0, sigma_xy_mm) in x and y (mm) and
-    N(0, sigma_yaw_deg) in yaw (deg). options, or its fields as keywords
-    (``options.RunOptions``; n is not used): out is a new folder, or the evaluate
-    folder the pick-points came from (its files stay; robustness.parquet and
+    request: the draws (:class:`Perturbations`: m, sigma_xy_mm, sigma_yaw_deg); options, or
+    either's fields as keywords (``options.RunOptions``; n is not used): out is a new
+    folder, or the evaluate folder the pick-points came from (its files stay; robustness.parquet and
     robustness.json join them); finished chunks are kept there as the draws are
     simulated (``engine.chunks.ChunkStore``; in an evaluate folder under
     ``chunks/robust/``) and removed once the outputs are written. resume: continue an
@@ -127,35 +136,29 @@ def robustness(
     robust_ci_high, trials, successes, landed (draws where a finger lands on the
     object), missed (nothing between the fingers), robust_score_mean and rank.
     """
-    opts = RunOptions.of(options, **run)
+    draws, opts = split_fields(Perturbations, request, options, fields)
     opts.only("robustness", *_ROBUST_FIELDS)
-    check_draws(m, sigma_xy_mm, sigma_yaw_deg)
+    draws.check()
     base = base or Settings()
-    draws = _Draws(m, sigma_xy_mm, sigma_yaw_deg)
     request = _request(obj, base, opts, draws, pick_points=_digest(picks))
     with opts.opening("robust", obj, request, simulator, joins=("evaluate",)) as study:
         if study.complete:
             return _read_robust(study.out_dir)
         sim, t0 = study.sim, time.perf_counter()
-        desc = f"robustness: {len(picks)} pick-points x {m} draws ({sim.runner.backend_name})"
+        desc = f"robustness: {len(picks)} pick-points x {draws.m} draws"
+        desc += f" ({sim.runner.backend_name})"
         with showing_progress(sim.runner, desc, "sim", opts.progress):
             table = _robustness(obj, picks, base, sim, study.store, draws, opts)
         _write(obj, base, opts, draws, table, study, request, t0)
         return table
 
 
-class _Draws(NamedTuple):
-    """How the real poses are drawn around each reported one (see :func:`robustness`)."""
-
-    m: int
-    sigma_xy_mm: float
-    sigma_yaw_deg: float
-
-
-def _request(obj: ObjectModel, base: Settings, opts: RunOptions, draws: _Draws, **more) -> dict:
+def _request(
+    obj: ObjectModel, base: Settings, opts: RunOptions, draws: Perturbations, **more
+) -> dict:
     """What decides a robust run's table: its configuration key's settings."""
     request = {"object": portable_object(obj.summary()), "base": to_dict(base)}
-    request.update(draws._asdict(), seed=opts.seed, picks=to_dict(opts.picks))
+    request.update(dataclasses.asdict(draws), seed=opts.seed, picks=to_dict(opts.picks))
     return {**request, **more}
 
 
@@ -167,23 +170,23 @@ def _digest(picks: pp.PickBatch) -> str:
     return h.hexdigest()[:16]
 
 
-def _robustness(obj, picks, base, sim, store, draws: _Draws, opts: RunOptions) -> pa.Table:
+def _robustness(obj, picks, base, sim, store, draws: Perturbations, opts: RunOptions) -> pa.Table:
     """robustness's draws simulated through sim (chunks read from and saved to store,
     when given) and its table; nothing written."""
-    m, sigma_xy_mm, sigma_yaw_deg = draws
+    m, sigma_xy_mm, sigma_yaw_deg = draws.m, draws.sigma_xy_mm, draws.sigma_yaw_deg
     placed = placements(obj, picks, base, m, sigma_xy_mm, sigma_yaw_deg, opts.seed, opts.picks)
     (out_d,) = sim.run([(base, placed.draws)], store)
     return _robust_table(picks, placed, out_d, m)
 
 
-def _write(obj, base, opts: RunOptions, draws: _Draws, table, study, request, t0) -> None:
+def _write(obj, base, opts: RunOptions, draws: Perturbations, table, study, request, t0) -> None:
     """robust's outputs in its folder (nothing without one): robustness.parquet and
     robustness.json, the run's record, then its chunks are dropped."""
     out_dir = study.out_dir
     if out_dir is None:
         return
     write_parquet(out_dir / "robustness.parquet", table)
-    record = {"object": obj.summary(), "settings": to_dict(base), **draws._asdict()}
+    record = {"object": obj.summary(), "settings": to_dict(base), **dataclasses.asdict(draws)}
     record["seed"] = opts.seed
     write_json(out_dir / "robustness.json", {**record, "ranking": table.slice(0, 50).to_pylist()})
     config = {"object": obj.summary(), "settings": to_dict(base), "m": draws.m, "k": len(table)}
@@ -256,31 +259,43 @@ _ROBUST_FIELDS = (
 )
 
 
+@dataclasses.dataclass(frozen=True)
+class ForceSearch:
+    """The bisection of :func:`min_grip_force`: the bracket lo_n..hi_n, N (default: the
+    gripper's force range); it stops when every bracket is narrower than tolerance_n."""
+
+    lo_n: float | None = None
+    hi_n: float | None = None
+    tolerance_n: float = 0.5
+
+
 def min_grip_force(
     obj: ObjectModel,
     picks: pp.PickBatch,
     base: Settings | None = None,
+    options: RunOptions | None = None,
     *,
-    lo_n: float | None = None,
-    hi_n: float | None = None,
-    tolerance_n: float = 0.5,
-    backend: str = AUTO,
-    batch_size: int | None = None,
+    request: ForceSearch | None = None,
     simulator: Simulator | None = None,
+    **fields,
 ) -> np.ndarray:
     """Smallest successful F_d per pick-point, N (N,); see the module docstring.
 
-    lo_n, hi_n: the bracket (default: the gripper's force range); the bisection stops
-    when every bracket is narrower than tolerance_n.
+    request: the bisection (:class:`ForceSearch`); options: backend and batch_size
+    (``options.RunOptions``; a simulator given is used instead); or either's fields
+    as keywords.
     """
+    search, opts = split_fields(ForceSearch, request, options, fields)
+    opts.only("min_force", "backend", "batch_size")
     base = base or Settings()
     g = base.gripper
-    lo_n = g.force_min_n if lo_n is None else float(lo_n)
-    hi_n = g.force_max_n if hi_n is None else float(hi_n)
+    lo_n = g.force_min_n if search.lo_n is None else float(search.lo_n)
+    hi_n = g.force_max_n if search.hi_n is None else float(search.hi_n)
+    tolerance_n = search.tolerance_n
     check_range("min_force", "lo_n", lo_n, g.force_min_n, g.force_max_n)
     check_range("min_force", "hi_n", hi_n, lo_n, g.force_max_n, lo_open=True)
     check_range("min_force", "tolerance_n", tolerance_n, 0, lo_open=True)
-    sim = simulator or Simulator(obj, backend, batch_size)
+    sim = simulator or Simulator(obj, opts.backend, opts.batch_size)
     n = len(picks)
 
     def succeeds(force: np.ndarray, which: np.ndarray) -> np.ndarray:
@@ -314,29 +329,35 @@ def min_grip_force(
     return np.where(at_hi, result, np.nan)
 
 
+@dataclasses.dataclass(frozen=True)
+class RobustBest(Perturbations):
+    """What :func:`robust_best` tests: the top_k best successful pick-points of an
+    evaluate folder's results (None: of n pick-points simulated first), each under
+    the draws (:class:`Perturbations`)."""
+
+    results: str | Path | None = None
+    top_k: int = 10
+
+
 def robust_best(
     obj: ObjectModel,
     base: Settings | None = None,
     options: RunOptions | None = None,
     *,
-    results: str | Path | None = None,
-    top_k: int = 10,
-    m: int = 32,
-    sigma_xy_mm: float = 2.0,
-    sigma_yaw_deg: float = 3.0,
+    request: RobustBest | None = None,
     simulator: Simulator | None = None,
-    **run,
+    **fields,
 ) -> pa.Table:
     """The robustness of the ``top_k`` best successful pick-points (``mjx-pick robust``).
 
-    results: an evaluate folder (or its results.parquet) of this object to take them
-    from; without it, ``n`` (default 1000) pick-points drawn with ``seed`` are
-    simulated first. base: the settings the draws are simulated with (gripper,
-    physics, procedure); with results, None takes the run's own (its config.json),
-    and settings that differ from the run's are refused, naming each: its pick-points
-    were ranked under the run's. Without results, None is ``Settings()``.
-    m, sigma_xy_mm (mm), sigma_yaw_deg (deg): as :func:`robustness`.
-    options, or its fields as keywords (``options.RunOptions``): out, overwrite and
+    request (:class:`RobustBest`): results, an evaluate folder (or its
+    results.parquet) of this object to take them from; without it, ``n`` (default
+    1000) pick-points drawn with ``seed`` are simulated first; top_k; the draws.
+    base: the settings the draws are simulated with (gripper, physics, procedure);
+    with results, None takes the run's own (its config.json), and settings that
+    differ from the run's are refused, naming each: its pick-points were ranked under
+    the run's. Without results, None is ``Settings()``.
+    options, or either's fields as keywords (``options.RunOptions``): out, overwrite and
     resume as :func:`robustness` (the n pick-points' chunks are kept and resumed
     too); ray: every simulation on a Ray cluster ("auto" or "HOST:PORT";
     mjx_pick.engine.cluster). simulator: run through this one (e.g. a caller's on a
@@ -344,10 +365,10 @@ def robust_best(
     checked, and out claimed, before anything is simulated. progress: one progress bar
     on stderr over every simulation (the n pick-points, then the draws).
     """
-    opts = RunOptions.of(options, **run)
+    req, opts = split_fields(RobustBest, request, options, fields)
     opts.only("robust", "n", *_ROBUST_FIELDS)
-    n = opts.n_or(1000)
-    check_draws(m, sigma_xy_mm, sigma_yaw_deg)
+    n, results, top_k = opts.n_or(1000), req.results, req.top_k
+    req.check()
     check_range("robust", "top_k", top_k, 1, 100_000)
     if results is None:
         check_range("robust", "n", n, 1, 1e8)
@@ -356,7 +377,7 @@ def robust_best(
     if results is not None:
         table, base, opts = _read_results(Path(results), obj, base, opts)
     base = base or Settings()
-    draws = _Draws(m, sigma_xy_mm, sigma_yaw_deg)
+    draws = Perturbations(req.m, req.sigma_xy_mm, req.sigma_yaw_deg)
     source = str(results) if results is not None else None
     request = _request(obj, base, opts, draws, top_k=top_k, results=source, n=n)
     with opts.opening("robust", obj, request, simulator, joins=("evaluate",)) as study:
