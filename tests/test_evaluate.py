@@ -79,6 +79,26 @@ def test_evaluate_writes_every_output(tmp_path, block):
         )
 
 
+def test_the_summary_times_every_fixed_cost_this_call_paid(block):
+    # an object given by name is prepared by evaluate: its time is the run's "object";
+    # one given prepared is not; the caller's own costs come first
+    by_name = evaluate("block", n=4, grasp=FAST, backend="mujoco", batch_size=8, n_traces=0)
+    parts = by_name.summary["time_s"]
+    assert list(parts) == ["object", "scene", "picks", "compile", "simulate", "write"]
+    assert all(v >= 0 for v in parts.values())
+    given = evaluate(
+        block,
+        n=4,
+        grasp=FAST,
+        backend="mujoco",
+        batch_size=8,
+        n_traces=0,
+        fixed_costs={"import_s": 1.5},
+    )
+    assert list(given.summary["time_s"])[:2] == ["import", "scene"]
+    assert given.summary["time_s"]["import"] == 1.5
+
+
 def test_cli_evaluate_with_user_picks(tmp_path, fast_toml, capsys):
     picks = tmp_path / "picks.csv"
     picks.write_text("x_mm,y_mm,yaw_deg\n0,0,0\n2,-1,15\n")

@@ -47,7 +47,8 @@ class RunOptions:
     on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` in the
       driver's loop.
     fixed_costs: seconds the caller spent before the call, by name, shown first in the
-      summary's ``time_s`` (the CLI's ``import_s``, ``object_s``).
+      summary's ``time_s`` (the CLI's ``import_s``, ``object_s``); an object evaluate
+      is given by name or path is prepared there, and that counts as ``object_s``.
     """
 
     n: int | None = None
