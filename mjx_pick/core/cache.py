@@ -5,6 +5,7 @@ Details: docs/model.md (core/cache.py).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import json
@@ -67,13 +68,20 @@ def limit_bytes() -> int:
 
 def versions() -> dict[str, str | None]:
     """The versions that are part of every key (this package and its geometry libraries)."""
+    return dict(_installed())
+
+
+@functools.cache
+def _installed() -> tuple[tuple[str, str | None], ...]:
+    """versions(), asked of the installed packages' metadata once per process (each
+    question reads files: tens of milliseconds per entry read or written)."""
     out: dict[str, str | None] = {"format": str(FORMAT)}
     for pkg in LIBRARIES:
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
             out[pkg] = None
-    return out
+    return tuple(out.items())
 
 
 def digest(*parts: bytes | str | np.ndarray) -> str:
