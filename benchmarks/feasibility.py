@@ -67,7 +67,7 @@ def main() -> None:
         "object": args.object,
         "gripper": args.gripper,
         "n": args.n,
-        "yaw_bins": checker.stack.cum_rows.shape[1],
+        "yaw_bins": len(checker.stack.crops),
         "stack_s": round(stack_s, 3),
         "first_call_s": round(first_s, 3),
         "check_s_median": round(run_s, 4),

@@ -4,10 +4,12 @@ import math
 
 import numpy as np
 import pytest
+import shapely
 from shapely.geometry import Point, box
 
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.kernels import feasibility as fk
 
 GRIPPER = mp.GripperSpec()  # Robotiq 2F-85: stroke 85, width 22, depth 8
@@ -146,6 +148,30 @@ def test_yaw_symmetry(door_opener):
     both = (a["reason"] == fk.FEASIBLE) & (turned["reason"] == fk.FEASIBLE)
     assert both.sum() >= 10
     np.testing.assert_allclose(a["gap_left_mm"][both], turned["gap_right_mm"][both], atol=1e-4)
+
+
+def test_the_cropped_stack_holds_every_bins_column_counts(door_opener):
+    # each yaw bin keeps only the rows and columns its silhouette occupies: any band of
+    # rows of any column of the full grid still sums to what the stack's block gives
+    from mjx_pick.core.objects import rasterize
+
+    stack = pp.FeasibilityChecker(door_opener, GRIPPER).stack
+    polygon = door_opener.band_outline(*pp.pad_band_mm(door_opener, GRIPPER, GraspConfig()))
+    radius = float(np.hypot(*shapely.get_coordinates(polygon).T).max())
+    n_bins, rng = len(stack.crops), np.random.default_rng(2)
+    for k in (0, n_bins // 3, n_bins - 1):
+        mask, _ = rasterize(polygon, stack.res_mm, k * math.pi / n_bins, radius_mm=radius)
+        base, row0, rows, col0, cols = stack.crops[k]
+        block = stack.cum[base : base + (rows + 1) * cols].reshape(rows + 1, cols)
+        for _ in range(200):
+            lo, hi = np.sort(rng.integers(0, stack.size + 1, 2))
+            j = rng.integers(0, stack.size)
+            if col0 <= j < col0 + cols:
+                a, b = (np.clip(i - row0, 0, rows) for i in (lo, hi))
+                got = int(block[b, j - col0]) - int(block[a, j - col0])
+            else:
+                got = 0
+            assert got == int(mask[lo:hi, j].sum())
 
 
 def test_a_candidates_result_does_not_depend_on_its_batch(door_opener):

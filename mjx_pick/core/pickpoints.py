@@ -598,13 +598,13 @@ def _stack_cached(key, polygon, res_mm: float):
     radius = float(np.hypot(*shapely.get_coordinates(polygon).T).max())  # one piece or several
     res_mm = raster_resolution(key[0], radius, res_mm)
     # the rasterised yaw bins are a pure function of the silhouette: kept on disk across
-    # runs (mjx_pick.core.cache), a bit per pixel, row by row as the stack is built
+    # runs (mjx_pick.core.cache), a bit per pixel of each bin's crop
     entry = {
         "silhouette_sha256": cache.digest(polygon.wkb),
         "res_mm": float(res_mm),
         "radius_mm": float(radius),
         "yaw_bins": fk.yaw_bins(res_mm, radius),
-        "layout": "rows, bins, packed columns",
+        "layout": "bins cropped, rows of packed columns",
     }
 
     def compute() -> dict:
@@ -613,11 +613,13 @@ def _stack_cached(key, polygon, res_mm: float):
             key[0],
             fk.yaw_bins(res_mm, radius),
         )
-        bits, width, x0 = fk.packed_bins(rasterize, polygon, res_mm, radius)
-        return {"bits": bits, "width": np.array(width, np.int64), "x0_mm": np.array(x0)}
+        bits, crops, size, x0 = fk.packed_bins(rasterize, polygon, res_mm, radius)
+        return {"bits": bits, "crops": crops, "size": np.array(size), "x0_mm": np.array(x0)}
 
     arrays = cache.memo("silhouettes", entry, compute)
-    return fk.stack_from_bits(arrays["bits"], int(arrays["width"]), res_mm, float(arrays["x0_mm"]))
+    return fk.stack_from_bits(
+        arrays["bits"], arrays["crops"], int(arrays["size"]), res_mm, float(arrays["x0_mm"])
+    )
 
 
 def _stack(name: str, silhouette, res_mm: float) -> fk.SilhouetteStack:

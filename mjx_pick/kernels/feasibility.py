@@ -29,17 +29,23 @@ class GripperBand(NamedTuple):
 
 
 class SilhouetteStack(NamedTuple):
-    """Row-cumulated rotated silhouettes.
+    """Row-cumulated rotated silhouettes, each yaw bin cropped to the rows and columns
+    its silhouette occupies (a long part fills a fraction of its square grid).
 
-    cum_rows: (H + 1, K, W) uint16; cum_rows[i, k, j] = object pixels in rows < i of
-      column j of the silhouette rotated by yaw k * pi / K (at most H, which the raster's
-      cell limit keeps far below 2**16). Rows outermost: the stack is built a row at a
-      time over contiguous (K, W) slabs.
+    cum: (C,) uint16, the bins' blocks one after the other. Bin k (the silhouette
+      rotated by yaw k * pi / K) has crops[k] = (base, row0, rows, col0, cols): its block
+      of (rows + 1, cols) cells, row-major from cum[base], holds at [i, j] the object
+      pixels in grid rows row0 .. row0 + i - 1 of grid column col0 + j (at most the
+      grid's side, which the raster's cell limit keeps far below 2**16).
+    crops: (K, 5) int64, as above.
+    size: the side of every bin's square grid, cells.
     res_mm: pixel size, mm.
     x0_mm: lower-left corner of every grid (x and y), mm.
     """
 
-    cum_rows: np.ndarray
+    cum: np.ndarray
+    crops: np.ndarray
+    size: int
     res_mm: float
     x0_mm: float
 
@@ -50,8 +56,8 @@ def build_stack(rasterize, polygon, res_mm: float, radius_mm: float) -> Silhouet
     Yaw and yaw + pi give the same checks with (x, y) negated (the gripper is symmetric),
     so half a turn suffices.
     """
-    bits, width, x0 = packed_bins(rasterize, polygon, res_mm, radius_mm)
-    return stack_from_bits(bits, width, res_mm, x0)
+    bits, crops, size, x0 = packed_bins(rasterize, polygon, res_mm, radius_mm)
+    return stack_from_bits(bits, crops, size, res_mm, x0)
 
 
 def yaw_bins(res_mm: float, radius_mm: float) -> int:
@@ -62,38 +68,52 @@ def yaw_bins(res_mm: float, radius_mm: float) -> int:
 
 def packed_bins(rasterize, polygon, res_mm: float, radius_mm: float):
     """The silhouette rotated by yaw k * pi / K for each of the K yaw bins, rasterised
-    by ``rasterize`` (``mjx_pick.core.objects.rasterize``) and packed a bit per pixel.
+    by ``rasterize`` (``mjx_pick.core.objects.rasterize``), cropped to the rows and
+    columns it occupies and packed a bit per pixel.
 
     Returns:
-      bits (H, K, ceil(W / 8)) uint8: row i of bin k, ``np.packbits`` along the row;
-      W, the grids' width; x0, the grids' lower-left corner (mm; the same for x and y
-      and every bin).
+      bits (B,) uint8: each bin's crop, row by row, ``np.packbits`` along the row, the
+      bins one after the other; crops (K, 4) int64: each bin's row0, rows, col0, cols in
+      its grid; the grids' side (cells); x0, the grids' lower-left corner (mm; the same
+      for x and y and every bin).
     """
     n_bins = yaw_bins(res_mm, radius_mm)
-    bits = None
-    x0 = width = None
+    parts, crops = [], np.zeros((n_bins, 4), np.int64)
+    x0 = size = None
     for k in range(n_bins):
         mask, (x0, _) = rasterize(polygon, res_mm, k * math.pi / n_bins, radius_mm=radius_mm)
-        if bits is None:
-            width = mask.shape[1]
-            bits = np.empty((mask.shape[0], n_bins, -(-width // 8)), np.uint8)
-        bits[:, k] = np.packbits(mask.astype(bool), axis=-1)
-    return bits, int(width), float(x0)
+        size = mask.shape[0]
+        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        if len(rows):
+            r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+            crops[k] = (r0, r1 - r0, c0, c1 - c0)
+            parts.append(np.packbits(mask[r0:r1, c0:c1].astype(bool), axis=1).ravel())
+    bits = np.concatenate(parts) if parts else np.zeros(0, np.uint8)
+    return bits, crops, int(size), float(x0)
 
 
-def stack_from_bits(bits: np.ndarray, width: int, res_mm: float, x0_mm: float) -> SilhouetteStack:
-    """The row-cumulated stack of :func:`packed_bins`' bits (H, K, ceil(W / 8))."""
-    n_rows, n_bins, _ = bits.shape
-    if n_rows >= 2**16:
-        raise ValueError(f"a raster of {n_rows} rows does not fit the uint16 stack")
-    cum = np.empty((n_rows + 1, n_bins, width), np.uint16)
-    cum[0] = 0
-    # a row at a time: each add runs over one contiguous (K, W) slab, and no unpacked
-    # copy of the whole raster is ever held
-    for i in range(n_rows):
-        row = np.unpackbits(bits[i], axis=-1, count=width)
-        np.add(cum[i], row, out=cum[i + 1], casting="unsafe")
-    return SilhouetteStack(cum, float(res_mm), float(x0_mm))
+def stack_from_bits(
+    bits: np.ndarray, crops: np.ndarray, size: int, res_mm: float, x0_mm: float
+) -> SilhouetteStack:
+    """The row-cumulated stack of :func:`packed_bins`' bits and crops."""
+    if size >= 2**16:
+        raise ValueError(f"a raster of {size} rows does not fit the uint16 stack")
+    crops = np.asarray(crops, np.int64)
+    rows, cols = crops[:, 1], crops[:, 3]
+    cells = (rows + 1) * cols
+    base = np.concatenate([[0], np.cumsum(cells)[:-1]])
+    cum = np.empty(int(cells.sum()), np.uint16)
+    offset = 0  # in bits' bytes
+    for k in range(len(crops)):
+        r, c = int(rows[k]), int(cols[k])
+        n_bytes = r * (-(-c // 8))
+        mask = np.unpackbits(bits[offset : offset + n_bytes].reshape(r, -1), axis=1, count=c)
+        offset += n_bytes
+        block = cum[base[k] : base[k] + cells[k]].reshape(r + 1, c)
+        block[0] = 0
+        np.cumsum(mask, axis=0, dtype=np.uint16, out=block[1:])
+    table = np.column_stack([base, crops]).astype(np.int64)
+    return SilhouetteStack(cum, table, int(size), float(res_mm), float(x0_mm))
 
 
 def _columns(band: GripperBand, res_mm: float) -> np.ndarray:
@@ -120,8 +140,7 @@ def _check_block(stack: SilhouetteStack, band: GripperBand, x, y, yaw, opening_m
     contiguous runs of the (ascending) columns, are summed from prefix sums.
     """
     f32 = np.float32
-    cum = stack.cum_rows
-    n_rows1, n_bins, n_cols = cum.shape
+    n_bins, n_rows1 = len(stack.crops), stack.size + 1
     res, g0 = stack.res_mm, stack.x0_mm
     # fold yaw into [0, pi): (x, y, yaw + pi) is (-x, -y, yaw) for a symmetric gripper
     turns = yaw / np.pi
@@ -139,11 +158,16 @@ def _check_block(stack: SilhouetteStack, band: GripperBand, x, y, yaw, opening_m
     i_hi = np.clip(i_hi, 0, n_rows1 - 1)
     px = np.asarray(_columns(band, res), dtype=f32)
     j = np.floor((px - x[:, None] - g0) / res).astype(np.int32)
-    valid = (j >= 0) & (j < n_cols)
-    j = np.clip(j, 0, n_cols - 1)
-    flat = cum.reshape(-1)
-    hi = flat[((i_hi * n_bins + k) * n_cols)[:, None] + j].astype(np.int32)
-    counts = np.where(valid, hi - flat[((i_lo * n_bins + k) * n_cols)[:, None] + j], 0)
+    # the band's rows and columns in bin k's crop: rows above and below it hold nothing
+    # (clipped to its ends), columns beside it nothing (counted 0)
+    base, row0, rows, col0, cols = stack.crops[k].T
+    j = j - col0[:, None]
+    valid = (j >= 0) & (j < cols[:, None])
+    at_hi = base + np.clip(i_hi - row0, 0, rows) * cols
+    at_lo = base + np.clip(i_lo - row0, 0, rows) * cols
+    hi = np.where(valid, at_hi[:, None] + j, 0)
+    lo = np.where(valid, at_lo[:, None] + j, 0)
+    counts = np.where(valid, stack.cum[hi].astype(np.int32) - stack.cum[lo], 0)
     occupied = counts > 0
 
     # the columns between the open fingers, a contiguous run
