@@ -409,17 +409,26 @@ class _Budget(Exception):
     pass
 
 
+@dataclasses.dataclass(frozen=True)
+class LeastSquaresRequest:
+    """What :func:`least_squares` fits: at most max_iters iterations, relative
+    finite-difference step eps, a simulation budget, identifiability after the fit and
+    a holdout Problem for the accuracy before and after (as :class:`FitRequest`)."""
+
+    max_iters: int = 30
+    eps: float = 0.03
+    budget: int | None = None
+    identify: bool = True
+    holdout: object = None
+
+
 def least_squares(
     problem,
     options: RunOptions | None = None,
     *,
-    max_iters: int = 30,
-    eps: float = 0.03,
-    budget: int | None = None,
-    identify: bool = True,
-    holdout=None,
+    request: LeastSquaresRequest | None = None,
     log=None,
-    **run,
+    **fields,
 ) -> CalibrationResult:
     """Levenberg-Marquardt on the residuals with ``mujoco.sysid.optimize`` (MuJoCo's
     ``minimize.least_squares``; its finite-difference Jacobian runs all P shifted
@@ -433,11 +442,13 @@ def least_squares(
     killed fit starts again). progress: a progress bar of the residual evaluations
     (steps; their number is not known ahead) on stderr. options, or its fields as
     keywords (``options.RunOptions``): out and progress (a seed is allowed and unused:
-    the method draws nothing).
+    the method draws nothing); request: :class:`LeastSquaresRequest`, or its fields.
     """
-    opts = RunOptions.of(options, **run)
+    req, opts = split_fields(LeastSquaresRequest, request, options, fields)
     opts.only("least_squares", "seed", "out", "progress")
     out, progress = opts.out, opts.progress
+    max_iters, eps, budget = req.max_iters, req.eps, req.budget
+    identify, holdout = req.identify, req.holdout
     from mujoco import sysid
 
     check_range("calibrate", "max_iters", max_iters, 1, 10_000)
