@@ -58,7 +58,7 @@ case "$1" in
     # carried fields, a sweep of 3 widths compiles once and agrees per scene and with C
     JAX_PLATFORMS=cuda,cpu python -m pytest -o addopts="" -o filterwarnings=ignore -q -s \
       tests/test_variants.py 2>&1 | tee "$out/test_variants_warp.log" || true
-    python benchmarks/variant_programs.py --object door_opener > "$out/variant_programs.json" ;;
+    python benchmarks/probes/variant_programs.py --object door_opener > "$out/variant_programs.json" ;;
   design)  # time to answer, design's defaults on the door opener (one compile for all)
     python benchmarks/time_to_answer.py --backend warp --cases design --runs first,second \
       --out "$out/time_to_answer_design_h100.json" ;;
@@ -74,7 +74,7 @@ case "$1" in
     t python -c "import jax, warp as wp; jax.devices(); wp.init()"
     t python -c "import jax, warp as wp; from mujoco import mjx; from mujoco.mjx.third_party import mujoco_warp; jax.devices(); wp.init()" ;;
   contacts)  # C and Warp collision on the same states (pad contacts per pad, span)
-    (cd benchmarks && python contact_sets.py --objects "${OBJECTS:-011_banana,050_medium_clamp,040_large_marker}" \
+    (cd benchmarks && python probes/contact_sets.py --objects "${OBJECTS:-011_banana,050_medium_clamp,040_large_marker}" \
       --n "${N:-64}" --gripper "${GRIPPER:-robotiq-2f85}" --force-n "${FORCE:-50}" \
       --out "$out/contact_sets_h100${TAG:-}.json") ;;
   plate)  # the franka-hand's 0.5 kg, 3 mm plate at pad friction 0.3: six copies in one
@@ -110,9 +110,9 @@ case "$1" in
       --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" ;;
   differ)  # the picks certain on C that Warp labelled otherwise, 8 copies each on both
     (cd benchmarks
-     python differing_picks.py --object 048_hammer --pick-ids 6108 --out "$out/differ_hammer.json"
-     python differing_picks.py --object 050_medium_clamp --pick-ids 1084 --out "$out/differ_clamp.json"
-     python differing_picks.py --object 011_banana --pick-ids 1472 --out "$out/differ_banana.json") ;;
+     python probes/differing_picks.py --object 048_hammer --pick-ids 6108 --out "$out/differ_hammer.json"
+     python probes/differing_picks.py --object 050_medium_clamp --pick-ids 1084 --out "$out/differ_clamp.json"
+     python probes/differing_picks.py --object 011_banana --pick-ids 1472 --out "$out/differ_banana.json") ;;
   grid)  # the preset Coulomb grid on Warp; STEP_CHECK=1 COPIES=3 PRESETS=... for the
     # step check's flags on Warp's run-to-run spread (one JSON per call: PRESETS splits it)
     python benchmarks/preset_coulomb.py --backend warp --presets "${PRESETS:-robotiq-2f85,robotiq-2f85-linkage,robotiq-2f140,onrobot-rg2,franka-hand}" \

@@ -93,7 +93,7 @@ def test_coulomb_grid_on_the_c_engine(thickness_mm):
     reason="MJX's JAX implementation lets the pads chatter on a part at low pad friction "
     "(0.1: forces alternate 0 / 10-57 N between pads, the block tips over) where MuJoCo C "
     "holds it. Upstream cause (benchmarks/RESULTS.md, 'Why MJX chatters at low friction'; "
-    "benchmarks/mjx_contact_repro.py): MJX-JAX's convex collider makes one edge contact "
+    "benchmarks/probes/mjx_contact_repro.py): MJX-JAX's convex collider makes one edge contact "
     "instead of four on a flat pad, and drops points shallower than 1e-6 m, which is "
     "where a low-friction pyramidal contact settles.",
 )

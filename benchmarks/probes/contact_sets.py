@@ -15,9 +15,9 @@ Per engine, over the states: contacts per pad (between a finger's geoms and the 
 the share of pads with none, and the span of each pad's contact points (mm, the largest
 distance between two of them: the lever a pad has against the part turning in the grip).
 
-    python benchmarks/contact_sets.py --objects 011_banana,050_medium_clamp --n 64 \\
+    python benchmarks/probes/contact_sets.py --objects 011_banana,050_medium_clamp --n 64 \\
         --out benchmarks/results/contact_sets_h100.json        # a GPU machine
-    python benchmarks/contact_sets.py --engines c,c_no_multiccd --n 16   # a CPU
+    python benchmarks/probes/contact_sets.py --engines c,c_no_multiccd --n 16   # a CPU
 """
 
 from __future__ import annotations
@@ -25,12 +25,15 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import sys
 import time
 from pathlib import Path
 
 import mujoco
 import numpy as np
-from real_objects import load_ycb  # benchmarks/ is on sys.path when run from there
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: real_objects
+from real_objects import load_ycb
 
 import mjx_pick as mp
 from mjx_pick.core import pickpoints as pp

@@ -1,6 +1,6 @@
 """Pick-points on which two engines disagree, each simulated R times on every backend.
 
-    python benchmarks/differing_picks.py --object 048_hammer --pick-ids 6108 --repeats 8 \
+    python benchmarks/probes/differing_picks.py --object 048_hammer --pick-ids 6108 --repeats 8 \
         --backends mujoco,warp
 
 The pick-points are those of ``real_objects.py`` (``mp.evaluate(..., n, seed)`` on
@@ -15,9 +15,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: real_objects
 from real_objects import load_ycb, multiccd_off, table_picks, ycb_manifest
 
 import mjx_pick as mp

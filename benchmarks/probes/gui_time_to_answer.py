@@ -23,7 +23,7 @@ in one warm worker (``mjx_pick.gui.jobs.Workers``), with the worker's resident m
 after each. Run it from a checkout with ``PYTHONPATH`` set to it; one JSON under
 ``benchmarks/results/``.
 
-  PYTHONPATH=$PWD python benchmarks/gui_time_to_answer.py --n 200 --rss-jobs 10
+  PYTHONPATH=$PWD python benchmarks/probes/gui_time_to_answer.py --n 200 --rss-jobs 10
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests"))
 
 

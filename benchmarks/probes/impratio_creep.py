@@ -1,8 +1,8 @@
 """impratio against labels on MuJoCo C (issue 32): how much each part's labels depend
 on the collider's contact points, and which labels an impratio moves.
 
-    python benchmarks/impratio_creep.py --gripper onrobot-rg2 --force-n 30
-    python benchmarks/impratio_creep.py --objects 037_scissors --impratios 10,100
+    python benchmarks/probes/impratio_creep.py --gripper onrobot-rg2 --force-n 30
+    python benchmarks/probes/impratio_creep.py --objects 037_scissors --impratios 10,100
 
 Per part (``real_objects.py``'s pick-points: ``--n``, seed 0) and impratio: C's success,
 and the share of labels that C with multi-contact off (``real_objects.without_multiccd``)
@@ -16,7 +16,10 @@ from __future__ import annotations
 
 import argparse
 import collections
+import sys
+from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: real_objects
 from real_objects import load_ycb, multiccd_off, table_picks, ycb_manifest
 
 import mjx_pick as mp

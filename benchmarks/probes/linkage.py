@@ -2,18 +2,19 @@
 parallel-jaw 2F-85 on the same pick-points.
 
     # the height-compensation table: pad drop against opening (CSV)
-    python benchmarks/linkage.py path --out benchmarks/results/linkage_path.csv
+    python benchmarks/probes/linkage.py path --out benchmarks/results/linkage_path.csv
     # both 2F-85 presets on one shared candidate set per object, MuJoCo C; label changes
     # by failure class, the object's tilt/turn/slip on the changed picks, and pictures of
     # the most common change re-simulated with traces
-    python benchmarks/linkage.py compare --objects door_opener --n 300 \\
+    python benchmarks/probes/linkage.py compare --objects door_opener --n 300 \\
         --out benchmarks/results/linkage_vs_parallel_door_opener.json \\
         --pictures benchmarks/results/linkage_pictures
-    python benchmarks/linkage.py compare --ycb --n 48 \\
+    python benchmarks/probes/linkage.py compare --ycb --n 48 \\
         --out benchmarks/results/linkage_vs_parallel_ycb.json
     # what colliding link meshes cost: MuJoCo C step time; MJX / Warp compile time and
     # pick-points per second of a batched rollout (on a GPU machine)
-    python benchmarks/linkage.py links --backends mujoco,warp,mjx --out benchmarks/out/links.json
+    python benchmarks/probes/linkage.py links --backends mujoco,warp,mjx \\
+        --out benchmarks/out/links.json
 
 Compile time and throughput on the GPU backends: benchmarks/throughput.py with
 --gripper robotiq-2f85-linkage (benchmarks/RESULTS.md gives the command).

@@ -72,12 +72,12 @@ outcomes on the perturbed picks); in float32 2 of 3 perturbed picks held.
 
 Run (repo root, venv active; C takes < 0.1 s, MJX on CPU ~20 s per run on 2 cores):
 
-    python benchmarks/mjx_contact_repro.py                     # mesh block, mu 0.1, C and MJX
-    python benchmarks/mjx_contact_repro.py --obj box
-    python benchmarks/mjx_contact_repro.py --mu 0.5            # contrast: MJX holds
-    python benchmarks/mjx_contact_repro.py --x64               # MJX in float64
-    python benchmarks/mjx_contact_repro.py --px 1e-6 --pyaw 1e-3   # perturbed block pose
-    python benchmarks/mjx_contact_repro.py --print 0.12:0.16   # per-tick trace
+    python benchmarks/probes/mjx_contact_repro.py              # mesh block, mu 0.1, C and MJX
+    python benchmarks/probes/mjx_contact_repro.py --obj box
+    python benchmarks/probes/mjx_contact_repro.py --mu 0.5            # contrast: MJX holds
+    python benchmarks/probes/mjx_contact_repro.py --x64               # MJX in float64
+    python benchmarks/probes/mjx_contact_repro.py --px 1e-6 --pyaw 1e-3   # perturbed block pose
+    python benchmarks/probes/mjx_contact_repro.py --print 0.12:0.16   # per-tick trace
 
 Meant as the repro attached to the upstream (google-deepmind/mujoco) bug report: it imports
 only numpy, mujoco and mujoco.mjx.

@@ -1,12 +1,13 @@
 """Pad-contact measurements behind the soft-finger model (issue 16), on MuJoCo C.
 
-    python benchmarks/pad_contact.py creep        # slip over lift + hold vs pad solimp
-    python benchmarks/pad_contact.py convergence  # door-opener labels, the step vs half of it
-    python benchmarks/pad_contact.py torque       # off-centre bar and rod: where they turn
-    python benchmarks/pad_contact.py coulomb --backend warp   # tests' Coulomb grid, any backend
-    python benchmarks/pad_contact.py rubber --variants corners,square  # levers vs a rubber pad
-    python benchmarks/pad_contact.py torsion --variants corners,square # pure torsion vs rubber
-    python benchmarks/pad_contact.py torsion --variants rimmed --grippers robotiq-2f85-linkage
+    cd benchmarks/probes
+    python pad_contact.py creep        # slip over lift + hold vs pad solimp
+    python pad_contact.py convergence  # door-opener labels, the step vs half of it
+    python pad_contact.py torque       # off-centre bar and rod: where they turn
+    python pad_contact.py coulomb --backend warp   # tests' Coulomb grid, any backend
+    python pad_contact.py rubber --variants corners,square  # levers vs a rubber pad
+    python pad_contact.py torsion --variants corners,square # pure torsion vs rubber
+    python pad_contact.py torsion --variants rimmed --grippers robotiq-2f85-linkage
         # a tilting pad: also against rubber pads tilted as much (tilted_rubber_torque)
 
 rubber and torsion compare pad-contact candidates (the "--variants" below: corners,
@@ -22,6 +23,8 @@ from __future__ import annotations
 import argparse
 import collections
 import dataclasses
+import sys
+from pathlib import Path
 
 import numpy as np
 from shapely.geometry import box
@@ -33,6 +36,8 @@ from mjx_pick.engine.inputs import make_inputs
 from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 from mjx_pick.studies.evaluation import half_step
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: real_objects
 
 FREE = mp.GripperSpec(name="test-gripper", force_min_n=0.01)
 # rubber and torsion: the solver settings (--solver TOML; None: the defaults)
@@ -189,7 +194,7 @@ def _pad(contact, variant: str):
 def _xml_with(xml: str, variant: str, mu_t_tile_m=0.0, r_mean_m=0.0) -> str:
     import re
 
-    from real_objects import pad_visual_size, without_multiccd  # benchmarks/ is on sys.path
+    from real_objects import pad_visual_size, without_multiccd
 
     if variant in ("square", "rimmed"):  # the library's own "mean_radius" / "rimmed"
         return xml

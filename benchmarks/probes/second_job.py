@@ -1,6 +1,6 @@
 """A second job in the same process: the compiled program kept, or compiled again.
 
-    python benchmarks/second_job.py --backend warp --n 1024 [--object door_opener]
+    python benchmarks/probes/second_job.py --backend warp --n 1024 [--object door_opener]
 
 The GUI's worker, a notebook or a script runs one evaluation after another in one
 process. Three evaluations of the same part and settings, each its own call of

@@ -3,7 +3,7 @@
 256 door-opener pick-points (seed 0), default procedure, against the default solver
 (iterations 10, ls_iterations 8): labels changed, diverged count, median score change.
 
-  python benchmarks/solver_iterations.py
+  python benchmarks/probes/solver_iterations.py
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ and counts the success labels that differ from those of the first (smallest) ste
 steps must divide the procedure's control period (5 ms). Sets
 ``mjx_pick.core.physics.CONVERGED_TIMESTEP_S``, above which a time step is warned about.
 
-  python benchmarks/timestep_labels.py --object door_opener --n 256 \\
+  python benchmarks/probes/timestep_labels.py --object door_opener --n 256 \\
       --steps 0.0005,0.001,0.00125,0.0016666666666666668,0.0025,0.005
 """
 

@@ -1,7 +1,7 @@
 """The Robotiq 2F-85 from its URDF against its MJCF twin (MuJoCo Menagerie's linkage):
 measured geometry, then the labels of the same pick-points on MuJoCo C.
 
-    python benchmarks/urdf_twin.py --objects door_opener,block --n 200 \\
+    python benchmarks/probes/urdf_twin.py --objects door_opener,block --n 200 \\
         --out benchmarks/results/urdf_twin.json
 
 Writes one JSON: each gripper's measured stroke, pad size and pad descent, and per

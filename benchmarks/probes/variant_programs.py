@@ -6,7 +6,7 @@ bounds on finger width, finger depth and stroke -- and counts the distinct
 ``program_key``s per backend: one backend (one compile on MJX and Warp) per key. Nothing
 is simulated; the answer takes seconds on any machine.
 
-  python benchmarks/variant_programs.py --object door_opener
+  python benchmarks/probes/variant_programs.py --object door_opener
 """
 
 from __future__ import annotations

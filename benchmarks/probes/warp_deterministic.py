@@ -1,8 +1,8 @@
 """Benchmark: does Warp's deterministic mode make MuJoCo Warp's labels repeat, and at what
 cost? One process per mode (the mode must be set before Warp builds its modules):
 
-    python benchmarks/warp_deterministic.py --mode run_to_run --n 4096 --repeats 2
-    python benchmarks/warp_deterministic.py --mode not_guaranteed --n 4096 --repeats 2
+    python benchmarks/probes/warp_deterministic.py --mode run_to_run --n 4096 --repeats 2
+    python benchmarks/probes/warp_deterministic.py --mode not_guaranteed --n 4096 --repeats 2
 
 Prints one JSON line: per repeat the wall time of the evaluate call, and the share of
 labels (success) and failure reasons that differ from the first repeat.

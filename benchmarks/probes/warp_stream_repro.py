@@ -11,7 +11,7 @@ carries model fields, and check its remedy (--remedy):
 On a GPU machine, run it at least twice (the first process on a machine builds Warp's
 kernels and did not fail):
 
-  python benchmarks/warp_stream_repro.py --remedy unfixed -- sweep door_opener \\
+  python benchmarks/probes/warp_stream_repro.py --remedy unfixed -- sweep door_opener \\
       --param gripper.finger_width_mm=12,22,30 --n 64 --backend warp --out DIR
 """
 

@@ -53,7 +53,7 @@ class MjcfGripper:
     actuator_forcerange: float | None = None
     # also let the file's other collision geoms (the link meshes) touch the object: one
     # contact pair per link geom and object piece. Off by default: MJX compiles every
-    # pair's mesh-mesh collision (benchmarks/linkage.py links measures the cost), and
+    # pair's mesh-mesh collision (benchmarks/probes/linkage.py links measures the cost), and
     # the table force is then the object's external force less the pads' AND the links'
     link_contacts: bool = False
     # the URDF this model is made from (``mjx_pick.core.urdf_gripper``): file is then the
