@@ -200,13 +200,13 @@ def test_default_sizing_is_measured_once_then_read_from_the_cache(
     monkeypatch.setenv(cache.ENV_DIR, str(tmp_path / "cache"))
     monkeypatch.delenv(cache.ENV_SWITCH, raising=False)
     measured = []
-    real = bw.measure_buffers
+    real = warp_buffers.measure_buffers
 
     def counting(*args, **kwargs):
         measured.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(bw, "measure_buffers", counting)
+    monkeypatch.setattr(warp_buffers, "measure_buffers", counting)
     first = bw.size_buffers(block_scene, SHORT, n_sample=2, nthread=1)
     again = bw.size_buffers(block_scene, SHORT, n_sample=2, nthread=1)
     assert measured == [1] and first == again and first.sample == 2
@@ -316,7 +316,7 @@ def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
     # held pick with an empty one.
     import jax
 
-    from mjx_pick.engine.pool_sizes import shrink_sizes
+    from mjx_pick.engine.pool import shrink_sizes
 
     assert shrink_sizes(8, 2) == (8, 4, 2) and shrink_sizes(8, 5) == (8, 4, 2, 1)
     assert shrink_sizes(6, 3) == (6, 3) and shrink_sizes(8, 0) == (8,)
@@ -374,7 +374,7 @@ def test_device_threads_run_shares_side_by_side_in_pick_order(block_scene):
     import threading
 
     from mjx_pick.engine.backend import RunStats
-    from mjx_pick.engine.mjx_backend import Diagnostics, PoolStats, _DeviceThreads
+    from mjx_pick.engine.pool import DeviceThreads, Diagnostics, PoolStats
 
     barrier = threading.Barrier(2, timeout=20)
 
@@ -400,8 +400,8 @@ def test_device_threads_run_shares_side_by_side_in_pick_order(block_scene):
             return {"x": x, "device": np.full(n, self.devices[0])}, None
 
     with pytest.raises(ValueError, match=">= 2"):
-        _DeviceThreads([StandIn(0)])
-    both = _DeviceThreads([StandIn(0), StandIn(1)])
+        DeviceThreads([StandIn(0)])
+    both = DeviceThreads([StandIn(0), StandIn(1)])
     assert both.shares(11) == [slice(0, 6), slice(6, 11)]
     assert both.pool_size(11) == 6 + 5 and both.batch_size == 16
     picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 11, seed=0, grasp=SHORT)

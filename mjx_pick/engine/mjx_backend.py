@@ -53,7 +53,13 @@ from mjx_pick.core.config import ConfigError
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine.backend import PickInputs, RunStats, addresses
-from mjx_pick.engine.pool_sizes import DEFAULT_SHRINK_LEVELS, SHRINK_MIN_SLOTS, shrink_sizes
+from mjx_pick.engine.pool import (
+    DEFAULT_SHRINK_LEVELS,
+    SHRINK_MIN_SLOTS,
+    Diagnostics,
+    PoolStats,
+    shrink_sizes,
+)
 from mjx_pick.kernels import grasp as gk
 
 # TF32 matrix products would change contact solutions on GPUs: the rollouts are traced
@@ -164,14 +170,6 @@ def jax_physics(scene: Scene) -> Physics:
     """MJX's JAX implementation on JAX's default device (:func:`jax_model`)."""
     mx = jax_model(scene.model)
     return Physics(mx, mjx.make_data(mx), "jax")
-
-
-class Diagnostics(NamedTuple):
-    """Per-simulation buffer use, read after a run (int32 each)."""
-
-    overflow: jax.Array  # OR of the overflow bits raised at any step
-    nefc_max: jax.Array  # most constraint rows in use at any step (-1: not tracked)
-    nacon_max: jax.Array  # most contacts of the whole call in use at any step (-1: not tracked)
 
 
 def _physics_steps(phys: Physics, m, d, diag: Diagnostics, n_sub: int):
@@ -532,21 +530,6 @@ def _fields_key(args) -> tuple:
     return tuple((k, tuple(v.shape[1:])) for k, v in sorted(args[5].items()))
 
 
-@dataclasses.dataclass
-class PoolStats:
-    """Work of refilled runs: how much of the pool's stepping simulated live picks."""
-
-    rounds: int = 0  # rounds of ticks_per_call control periods (summed over devices)
-    slot_ticks: int = 0  # slots x ticks per round, summed over rounds
-    pick_ticks: int = 0  # ticks run by picks up to their end, summed over picks
-    picks: int = 0
-
-    @property
-    def occupancy(self) -> float:
-        """Fraction of slot-ticks that simulated a pick that had not ended."""
-        return self.pick_ticks / self.slot_ticks if self.slot_ticks else float("nan")
-
-
 class MjxBackend:
     """Runs PickInputs in fixed-size batches (padded), one compile per batch size.
 
@@ -562,7 +545,7 @@ class MjxBackend:
     name = "mjx"
     impl = "jax"
     POOL_QUANTUM = 256
-    SHRINK_MIN_SLOTS = SHRINK_MIN_SLOTS  # pool_sizes: a class attribute tests may lower
+    SHRINK_MIN_SLOTS = SHRINK_MIN_SLOTS  # engine.pool's: a class attribute tests may lower
 
     def __init__(
         self,
@@ -744,80 +727,3 @@ class MjxBackend:
         st.picks += n
         results = {k: np.array(v)[:n] for k, v in out.items()}
         return results, Diagnostics(*(np.array(x)[:n] for x in diag))
-
-
-class _DeviceThreads:
-    """Several single-device backends as one: each runs a contiguous share of the
-    pick-points on its own device, from its own host thread, and nothing passes between
-    devices. Results come back in pick-point order.
-
-    Why threads and not one sharded program: Warp's contact buffer is one array for all
-    simulations of a call, which the pool carries unsharded, and each device's
-    program should run (and be refilled) at its own pace -- a device whose picks end
-    sooner must not wait for another's. JAX releases the GIL while a device program
-    runs, so the devices work at the same time.
-
-    parts: backends of one class, one device each, built for the same scene and
-    procedure.
-    """
-
-    def __init__(self, parts: list):
-        if len(parts) < 2:
-            raise ValueError(f"_DeviceThreads needs >= 2 backends, got {len(parts)}")
-        self.parts = list(parts)
-        p0 = self.parts[0]
-        self.name, self.scene, self.grasp = p0.name, p0.scene, p0.grasp
-        self.batch_size = sum(p.batch_size for p in self.parts)
-        self.devices = [d for p in self.parts for d in p.devices]
-        self.device = f"{p0.device} x{len(self.parts)}"
-        self.refill = p0.refill
-        self.stats = RunStats()
-        self.pool_stats = PoolStats()
-        self.last_diagnostics: Diagnostics | None = None
-
-    def shares(self, n: int) -> list[slice]:
-        """Contiguous, near-equal shares of n pick-points, one per device."""
-        bounds = np.linspace(0, n, len(self.parts) + 1).round().astype(int)
-        return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-
-    def pool_size(self, n: int) -> int:
-        return sum(
-            p.pool_size(s.stop - s.start) for p, s in zip(self.parts, self.shares(n), strict=True)
-        )
-
-    @property
-    def growths(self) -> int:
-        return sum(getattr(p, "growths", 0) for p in self.parts)
-
-    @property
-    def buffers(self):
-        return getattr(self.parts[0], "buffers", None)
-
-    def run(self, inputs: PickInputs, record: bool = False):
-        from concurrent.futures import ThreadPoolExecutor
-
-        shares = self.shares(len(inputs))
-        compile0 = [p.stats.compile_s for p in self.parts]
-        before = [dataclasses.replace(p.pool_stats) for p in self.parts]
-        t0 = time.perf_counter()
-        with ThreadPoolExecutor(len(self.parts)) as pool:
-            futures = [
-                pool.submit(p.run, inputs.take(s), record)
-                for p, s in zip(self.parts, shares, strict=True)
-            ]
-            outs = [f.result() for f in futures]  # re-raises a part's error
-        wall = time.perf_counter() - t0
-        # compiles run side by side too: the run is the wall time less the longest
-        compiled = [p.stats.compile_s - c for p, c in zip(self.parts, compile0, strict=True)]
-        self.stats.compile_s += max(compiled)
-        self.stats.run_s += max(wall - max(compiled), 0.0)
-        self.stats.n += len(inputs)
-        for p, b in zip(self.parts, before, strict=True):
-            for f in dataclasses.fields(PoolStats):
-                now = getattr(p.pool_stats, f.name) - getattr(b, f.name)
-                setattr(self.pool_stats, f.name, getattr(self.pool_stats, f.name) + now)
-        merged = {k: np.concatenate([o[0][k] for o in outs]) for k in outs[0][0]}
-        traces = np.concatenate([o[1] for o in outs]) if record else None
-        diags = [p.last_diagnostics for p in self.parts]
-        self.last_diagnostics = Diagnostics(*(np.concatenate(x) for x in zip(*diags, strict=True)))
-        return merged, traces

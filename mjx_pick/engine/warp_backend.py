@@ -256,7 +256,7 @@ def make_warp_backend(scene: Scene, grasp: GraspConfig, batch_size: int, devices
     """The Warp backend on `devices` (default: every CUDA GPU JAX sees; the CPU with
     MJX_PICK_WARP_CPU=1 and no GPU). One device: a WarpBackend with batch_size slots.
     Several: one WarpBackend per device with batch_size / n slots each, run side by side
-    (``mjx_backend._DeviceThreads``: contiguous shares of the pick-points, nothing
+    (``pool.DeviceThreads``: contiguous shares of the pick-points, nothing
     communicated); their buffers are sized once, on the C engine, for all."""
     check_warp()
     if devices is None:
@@ -267,12 +267,12 @@ def make_warp_backend(scene: Scene, grasp: GraspConfig, batch_size: int, devices
     WarpBackend = _warp_backend_class()
     if len(devices) == 1:
         return WarpBackend(scene, grasp, batch_size, devices=devices, **options)
-    from mjx_pick.engine.mjx_backend import _DeviceThreads
+    from mjx_pick.engine.pool import DeviceThreads
 
     if options.get("buffers") is None:
         options["buffers"] = size_buffers(scene, grasp)
     per_device = -(-int(batch_size) // len(devices))
-    return _DeviceThreads(
+    return DeviceThreads(
         [WarpBackend(scene, grasp, per_device, devices=[d], **options) for d in devices]
     )
 

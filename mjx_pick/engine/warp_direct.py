@@ -12,13 +12,11 @@ With ``MJX_PICK_WARP_CPU=1`` the same code runs on Warp's CPU device (for tests)
 from __future__ import annotations
 
 import contextlib
-import copy
 import dataclasses
 import logging
 import os
 import threading
 import time
-import typing
 
 import mujoco
 import numpy as np
@@ -28,7 +26,14 @@ from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine import devices
 from mjx_pick.engine.backend import PickInputs, RunStats, addresses
-from mjx_pick.engine.pool_sizes import DEFAULT_SHRINK_LEVELS, SHRINK_MIN_SLOTS, shrink_sizes
+from mjx_pick.engine.pool import (
+    DEFAULT_SHRINK_LEVELS,
+    SHRINK_MIN_SLOTS,
+    DeviceThreads,
+    Diagnostics,
+    PoolStats,
+    shrink_sizes,
+)
 from mjx_pick.engine.registry import Impl
 from mjx_pick.engine.warp_buffers import (
     MAX_GROWTH,
@@ -186,69 +191,6 @@ def _kernels():
     from mjx_pick.engine import warp_kernels
 
     return warp_kernels
-
-
-@dataclasses.dataclass
-class PoolStats:
-    """Work of refilled runs: how much of the pool's stepping simulated live picks, and
-    how the solver converged (over live world-steps)."""
-
-    rounds: int = 0  # refill rounds (summed over runs)
-    slot_ticks: int = 0  # slots x ticks per round, summed over rounds
-    pick_ticks: int = 0  # ticks run by picks up to their end, summed over picks
-    picks: int = 0
-    steps: int = 0  # physics steps of the pool
-    steps_converged: int = 0  # ... in which every live world converged before the cap
-    solver_iterations: np.ndarray = dataclasses.field(
-        default_factory=lambda: np.zeros(0, np.int64)
-    )  # histogram over live world-steps: [i] = world-steps that took i iterations
-
-    @property
-    def occupancy(self) -> float:
-        """Fraction of slot-ticks that simulated a pick that had not ended."""
-        return self.pick_ticks / self.slot_ticks if self.slot_ticks else float("nan")
-
-    def add(self, rounds: int, slot_ticks: int, pick_ticks: int, picks: int, counters) -> None:
-        """Count one run: its rounds, slot-ticks, pick-ticks, picks and the pools'
-        counters (``_Pool.counters``: steps, steps converged, iteration histogram)."""
-        self.rounds += rounds
-        self.slot_ticks += slot_ticks
-        self.pick_ticks += pick_ticks
-        self.picks += picks
-        self.steps += int(counters[0])
-        self.steps_converged += int(counters[1])
-        hist = np.asarray(counters[2:], np.int64)
-        if self.solver_iterations.size != hist.size:
-            self.solver_iterations = np.zeros(hist.size, np.int64)
-        self.solver_iterations += hist
-
-    def merge(self, after: PoolStats, before: PoolStats) -> None:
-        """Add what another PoolStats counted between two readings (a device's run)."""
-        for f in dataclasses.fields(PoolStats):
-            now, then = getattr(after, f.name), getattr(before, f.name)
-            if isinstance(now, np.ndarray):
-                now = now - (then if then.size == now.size else 0)
-                mine = self.solver_iterations
-                mine = mine if mine.size == now.size else np.zeros(now.size, np.int64)
-                self.solver_iterations = mine + now
-            else:
-                setattr(self, f.name, getattr(self, f.name) + now - then)
-
-    def iteration_quantile(self, q: float) -> float:
-        """The q-quantile (0..1) of solver iterations per live world-step."""
-        h = self.solver_iterations
-        if not h.size or not h.sum():
-            return float("nan")
-        cum = np.cumsum(h) / h.sum()
-        return float(np.searchsorted(cum, q))
-
-
-class Diagnostics(typing.NamedTuple):
-    """Per-pick buffer use (int32 each), as the MJX backends report it."""
-
-    overflow: np.ndarray  # Warp's overflow bits raised during the pick
-    nefc_max: np.ndarray  # most constraint rows in use at any step
-    nacon_max: np.ndarray  # most contacts of the whole pool in use at any step
 
 
 class _Pool:
@@ -474,7 +416,7 @@ class WarpBackend:
       device: a Warp device name ('cuda:0'; default: the first CUDA device, or the CPU
         with MJX_PICK_WARP_CPU=1).
       ticks_per_call: control periods per refill round.
-      shrink_levels: halvings of the pool in a run's tail (``pool_sizes``), never below
+      shrink_levels: halvings of the pool in a run's tail (``engine.pool``), never below
         ``shrink_min_slots`` slots.
       buffers: Warp's buffer sizes (default: ``warp_buffers.size_buffers`` of the scene).
       deterministic: MuJoCo Warp's deterministic mode (stable contact and constraint
@@ -935,75 +877,6 @@ def _describe_overflow(bits: int) -> str:
     return "|".join(f.name for f in t if f.value and f.value & bits and f != t.ALL) or "none"
 
 
-class MultiDevice:
-    """Several single-device backends as one: each runs a contiguous share of the
-    pick-points on its own GPU from its own host thread (Warp releases the GIL while a
-    graph runs); nothing passes between devices. Results come back in pick-point order."""
-
-    def __init__(self, parts: list[WarpBackend]):
-        if len(parts) < 2:
-            raise ValueError(f"MultiDevice needs >= 2 backends, got {len(parts)}")
-        self.parts = parts
-        p0 = parts[0]
-        self.name, self.scene, self.grasp = p0.name, p0.scene, p0.grasp
-        self.batch_size = sum(p.batch_size for p in parts)
-        self.device = f"{p0.device} x{len(parts)}"
-        self.stats = RunStats()
-        self.pool_stats = PoolStats()
-        self.last_diagnostics: Diagnostics | None = None
-        self.refill = True
-
-    def peak_device_bytes(self) -> int | None:
-        peaks = [p.peak_device_bytes() for p in self.parts]
-        return None if None in peaks else sum(peaks)
-
-    def preferred_chunk(self) -> int:
-        return CHUNK_POOLS * self.batch_size
-
-    @property
-    def growths(self) -> int:
-        return sum(p.growths for p in self.parts)
-
-    @property
-    def buffers(self) -> BufferSizes:
-        return self.parts[0].buffers
-
-    def shares(self, n: int) -> list[slice]:
-        bounds = np.linspace(0, n, len(self.parts) + 1).round().astype(int)
-        return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-
-    def pool_size(self, n: int) -> int:
-        return sum(
-            p.pool_size(s.stop - s.start) for p, s in zip(self.parts, self.shares(n), strict=True)
-        )
-
-    def run(self, inputs: PickInputs, record: bool = False):
-        from concurrent.futures import ThreadPoolExecutor
-
-        shares = self.shares(len(inputs))
-        compile0 = [p.stats.compile_s for p in self.parts]
-        before = [copy.deepcopy(p.pool_stats) for p in self.parts]
-        t0 = time.perf_counter()
-        with ThreadPoolExecutor(len(self.parts)) as ex:
-            futures = [
-                ex.submit(p.run, inputs.take(s), record)
-                for p, s in zip(self.parts, shares, strict=True)
-            ]
-            outs = [f.result() for f in futures]
-        wall = time.perf_counter() - t0
-        compiled = [p.stats.compile_s - c for p, c in zip(self.parts, compile0, strict=True)]
-        self.stats.compile_s += max(compiled)
-        self.stats.run_s += max(wall - max(compiled), 0.0)
-        self.stats.n += len(inputs)
-        for p, b in zip(self.parts, before, strict=True):
-            self.pool_stats.merge(p.pool_stats, b)
-        merged = {k: np.concatenate([o[0][k] for o in outs]) for k in outs[0][0]}
-        traces = np.concatenate([o[1] for o in outs]) if record else None
-        diags = [p.last_diagnostics for p in self.parts]
-        self.last_diagnostics = Diagnostics(*(np.concatenate(x) for x in zip(*diags, strict=True)))
-        return merged, traces
-
-
 def make_backend(
     scene: Scene,
     grasp: GraspConfig,
@@ -1043,4 +916,4 @@ def make_backend(
         t.join()
     if any(p is None for p in parts):
         raise RuntimeError("backend 'warp': a device failed to start (see the log)")
-    return MultiDevice(parts)
+    return DeviceThreads(parts)

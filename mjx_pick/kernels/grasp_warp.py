@@ -32,76 +32,32 @@ NTRACE = wp.constant(len(gk.TRACE_FIELDS))
 vec5 = wp.types.vector(length=5, dtype=wp.float32)
 
 
-@wp.struct
-class Params:
-    """gk.GraspParams."""
-
-    grip_force_n: float
-    force_limit_fraction: float
-    force_max_n: float
-    drive_stiffness_n_per_m: float
-    kp: float
-    v_close: float
-    v_open: float
-    reach_fraction: float
-    reach_settle_s: float
-    dwell_s: float
-    settle_s: float
-    close_timeout_s: float
-    lift_height_m: float
-    lift_speed_m_s: float
-    lift_accel_m_s2: float
-    hold_s: float
-    pad_contact_fraction: float
-    table_contact_n: float
-    success_height_fraction: float
-    max_rotation_rad: float
-    divergence_speed: float
-    dt: float
+def _mirror(name: str, fields: tuple[str, ...], types: dict | None = None):
+    """A Warp struct with a NamedTuple's fields, in its order (float unless types says
+    otherwise), so that numpy converts between the two field by field."""
+    types = types or {}
+    cls = type(name, (), {"__annotations__": {f: types.get(f, float) for f in fields}})
+    cls.__doc__ = f"kernels.types' {name} fields, for Warp kernels."
+    cls.__module__ = __name__
+    return wp.struct(cls)
 
 
-@wp.struct
-class Control:
-    """gk.ControlState."""
-
-    phase: int
-    t_phase: float
-    finger_target: float
-    lift_target: float
-    lift_velocity: float
-    t_steady: float
-    lift_start: float
-
-
-@wp.struct
-class Acc:
-    """gk.Accumulators (bools as wp.bool)."""
-
-    contact_seen: wp.bool
-    reached: wp.bool
-    t_reached: float
-    held: wp.bool
-    held_time: float
-    off_table_time: float
-    phi_max: float
-    yaw_max: float
-    tilt_max: float
-    force_left_max: float
-    force_right_max: float
-    lift_after_lift: float
-    table_after_lift: wp.bool
-    slip_max: float
-    lift_final: float
-    table_final: wp.bool
-    rot_final: float
-    finished: wp.bool
-    diverged: wp.bool
-    t: float
-    touch_left: wp.bool
-    touch_right: wp.bool
-    lost_left: wp.bool
-    lost_right: wp.bool
-    chatter: float
+_ACC_BOOLS = (
+    "contact_seen",
+    "reached",
+    "held",
+    "table_after_lift",
+    "table_final",
+    "finished",
+    "diverged",
+    "touch_left",
+    "touch_right",
+    "lost_left",
+    "lost_right",
+)
+Params = _mirror("Params", gk.GraspParams._fields)
+Control = _mirror("Control", gk.ControlState._fields, {"phase": int})
+Acc = _mirror("Acc", gk.Accumulators._fields, dict.fromkeys(_ACC_BOOLS, wp.bool))
 
 
 @wp.struct
