@@ -443,7 +443,7 @@ def test_warp_on_cpu_agrees_with_c_and_grows_overflowing_buffers(
     assert small.growths >= 1 and (small.last_diagnostics.overflow == 0).all()
     np.testing.assert_array_equal(t["success"], w["success"])
     # and when growing is not allowed, a clear error instead of a result
-    monkeypatch.setattr(bw, "MAX_GROWTH", 0)
+    monkeypatch.setattr(warp_buffers, "MAX_GROWTH", 0)
     tiny = make_backend(
         "mjx-warp", scene, SHORT, batch_size=4, ticks_per_call=20, buffers=bw.BufferSizes(1, 8)
     )

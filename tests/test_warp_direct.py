@@ -333,3 +333,55 @@ def test_a_process_plans_its_jax_for_the_backends_it_will_build(monkeypatch):
     assert not devices._jax_on_cpu
     backend.plan_jax(["mujoco", "warp"])  # beside Warp: JAX's CPU platform only
     assert devices._jax_on_cpu
+
+
+def test_overflowing_picks_are_rerun_with_grown_buffers_until_none_overflows(monkeypatch):
+    """Both Warp backends' overflow rule on a stand-in engine: a pick overflows while
+    its need exceeds the buffers; overflowing picks alone are re-run with the buffers
+    doubled where they overflowed, their rows replaced; past MAX_GROWTH, an error."""
+    import types
+
+    from mjx_pick.engine import pool, warp_buffers
+    from mjx_pick.engine.backend import RunStats
+
+    contact_bit, row_bit = 1, 4
+    need = np.array([3, 9, 20, 4])  # contacts each pick needs
+
+    def engine(backend):
+        def run(inputs):
+            idx = inputs.qpos0[:, 0].astype(int)
+            over = np.where(need[idx] > backend.buffers.contacts, contact_bit, 0)
+            backend.stats.n += len(idx)
+            out = {"value": idx * 10.0 + backend.buffers.contacts}
+            return out, None, pool.Diagnostics(over, need[idx], need[idx])
+
+        return run
+
+    def inputs_for(n):
+        return wd.PickInputs(
+            qpos0=np.arange(n, dtype=np.float32)[:, None],
+            params=np.zeros(n, np.float32),
+            pair_friction=np.zeros((n, 1, 5), np.float32),
+            pair_solref=np.zeros((n, 1, 2), np.float32),
+            pair_solimp=np.zeros((n, 1, 5), np.float32),
+        )
+
+    backend = types.SimpleNamespace(
+        buffers=warp_buffers.BufferSizes(4, 8), growths=0, stats=RunStats()
+    )
+    run = engine(backend)
+    inputs = inputs_for(4)
+    merged, _, diag = warp_buffers.rerun_overflowed(
+        backend, inputs, run(inputs), run, (contact_bit, row_bit), str
+    )
+    # 4 -> 8 -> 16 -> 32 contacts: pick 1 fits at 16, pick 2 at 32; picks 0 and 3 never re-run
+    assert backend.growths == 3 and backend.buffers.contacts == 32 and backend.buffers.rows == 8
+    np.testing.assert_array_equal(merged["value"], [4.0, 26.0, 52.0, 34.0])
+    assert not diag.overflow.any() and backend.stats.n == 4
+    monkeypatch.setattr(warp_buffers, "MAX_GROWTH", 0)
+    small = types.SimpleNamespace(
+        buffers=warp_buffers.BufferSizes(4, 8), growths=0, stats=RunStats()
+    )
+    run = engine(small)
+    with pytest.raises(warp_buffers.BufferOverflowError, match="in 2 of 4 pick-points"):
+        warp_buffers.rerun_overflowed(small, inputs, run(inputs), run, (1, 4), str)

@@ -15,7 +15,6 @@ import logging
 import time
 
 import jax
-import numpy as np
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.procedure import GraspConfig
@@ -28,6 +27,7 @@ from mjx_pick.engine.warp_buffers import (  # noqa: F401 (re-exported: benchmark
     BufferSizes,
     buffer_margin,
     measure_buffers,
+    rerun_overflowed,
     size_buffers,
 )
 
@@ -209,43 +209,17 @@ def _warp_backend_class():
 
         def run(self, inputs: PickInputs, record: bool = False):
             """As MjxBackend.run; picks whose buffers overflowed are re-simulated with
-            doubled buffers (a new compile), MAX_GROWTH times at most over the backend's
-            life, then BufferOverflowError."""
-            merged, traces = super().run(inputs, record)
-            diag = self.last_diagnostics
-            todo = np.flatnonzero(diag.overflow != 0)
-            while len(todo):
-                seen = int(np.bitwise_or.reduce(diag.overflow[todo]))
-                if self.growths >= MAX_GROWTH:
-                    raise BufferOverflowError(
-                        f"Warp's buffers overflowed ({describe_overflow(seen)}) in {len(todo)} of "
-                        f"{len(inputs)} pick-points even at {self.buffers.contacts} contacts and "
-                        f"{self.buffers.rows} constraint rows per simulation; pass larger "
-                        "BufferSizes (make_backend(..., buffers=...)) or use backend 'mujoco'"
-                    )
-                self.buffers = self.buffers.grown(
-                    contacts=bool(seen & self._contact_mask), rows=bool(seen & self._row_mask)
-                )
-                self.growths += 1
-                log.warning(
-                    "Warp buffer overflow (%s) in %d pick-points: re-simulating them with %d "
-                    "contacts and %d constraint rows per simulation",
-                    describe_overflow(seen),
-                    len(todo),
-                    self.buffers.contacts,
-                    self.buffers.rows,
-                )
+            doubled buffers, a new compile (``warp_buffers.rerun_overflowed``)."""
+            first = (*super().run(inputs, record), self.last_diagnostics)
+
+            def rerun(sub):
                 self._compiled.clear()  # programs of the old sizes
-                self.stats.n -= len(todo)  # counted again by the re-run
-                out, rows = super().run(inputs.take(todo), record)
-                sub = self.last_diagnostics
-                for k in merged:
-                    merged[k][todo] = out[k]
-                if record:
-                    traces[todo] = rows
-                for f in diag._fields:
-                    getattr(diag, f)[todo] = getattr(sub, f)
-                todo = todo[sub.overflow != 0]
+                out, rows = super(WarpBackend, self).run(sub, record)
+                return out, rows, self.last_diagnostics
+
+            merged, traces, diag = rerun_overflowed(
+                self, inputs, first, rerun, (self._contact_mask, self._row_mask), describe_overflow
+            )
             self.last_diagnostics = diag
             return merged, traces
 

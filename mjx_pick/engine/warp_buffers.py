@@ -213,3 +213,55 @@ def _sample_inputs(scene: Scene, grasp: GraspConfig, n: int, seed: int):
     if not len(picks):
         raise ConfigError("no feasible pick-point to size Warp's buffers with")
     return make_inputs(scene, grasp, picks)
+
+
+def rerun_overflowed(backend, inputs, first, run, masks: tuple[int, int], describe):
+    """Re-simulate the picks whose buffers overflowed, with doubled buffers, until none
+    does (MAX_GROWTH growths at most over the backend's life, then BufferOverflowError):
+    no result ever comes from a dropped contact or constraint row.
+
+    Args:
+      backend: has ``buffers`` (BufferSizes), ``growths`` and ``stats``; its buffers
+        are grown here.
+      inputs: the run's PickInputs; first: its (results, traces, Diagnostics).
+      run: inputs -> (results, traces, Diagnostics), at the backend's current buffers.
+      masks: (contact bits, row bits) of the engine's overflow flags.
+      describe: overflow bits -> their names.
+
+    Returns:
+      (results, traces, Diagnostics), the re-simulated picks' rows replaced.
+    """
+    merged, traces, diag = first
+    overflowing = masks[0] | masks[1]
+    todo = np.flatnonzero(np.asarray(diag.overflow) & overflowing)
+    while len(todo):
+        seen = int(np.bitwise_or.reduce(diag.overflow[todo]))
+        if backend.growths >= MAX_GROWTH:
+            raise BufferOverflowError(
+                f"Warp's buffers overflowed ({describe(seen)}) in {len(todo)} of {len(inputs)} "
+                f"pick-points even at {backend.buffers.contacts} contacts and "
+                f"{backend.buffers.rows} constraint rows per simulation; pass larger "
+                "BufferSizes (make_backend(..., buffers=...)) or use backend 'mujoco'"
+            )
+        backend.buffers = backend.buffers.grown(
+            contacts=bool(seen & masks[0]), rows=bool(seen & masks[1])
+        )
+        backend.growths += 1
+        log.warning(
+            "Warp buffer overflow (%s) in %d pick-points: re-simulating them with %d "
+            "contacts and %d constraint rows per simulation",
+            describe(seen),
+            len(todo),
+            backend.buffers.contacts,
+            backend.buffers.rows,
+        )
+        backend.stats.n -= len(todo)  # counted again by the re-run
+        out, rows, sub = run(inputs.take(todo))
+        for key in merged:
+            merged[key][todo] = out[key]
+        if traces is not None:
+            traces[todo] = rows
+        for field, values in zip(diag, sub, strict=True):
+            field[todo] = values
+        todo = todo[(np.asarray(sub.overflow) & overflowing) != 0]
+    return merged, traces, diag

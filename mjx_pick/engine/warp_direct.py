@@ -35,12 +35,7 @@ from mjx_pick.engine.pool import (
     shrink_sizes,
 )
 from mjx_pick.engine.registry import Impl
-from mjx_pick.engine.warp_buffers import (
-    MAX_GROWTH,
-    BufferOverflowError,
-    BufferSizes,
-    size_buffers,
-)
+from mjx_pick.engine.warp_buffers import BufferSizes, rerun_overflowed, size_buffers
 from mjx_pick.kernels import grasp as gk
 
 log = logging.getLogger(__name__)
@@ -524,45 +519,22 @@ class WarpBackend:
     # --- running
     def run(self, inputs: PickInputs, record: bool = False):
         """Simulate all inputs; returns (results dict of (N,) arrays, traces (N, T, F) or
-        None). Picks whose buffers overflowed are re-simulated with doubled buffers,
-        MAX_GROWTH times at most over the backend's life, then BufferOverflowError."""
+        None). Picks whose buffers overflowed are re-simulated with doubled buffers
+        (``warp_buffers.rerun_overflowed``)."""
         n = len(inputs)
         if n == 0:
             empty = _typed({name: np.zeros(0) for name in RESULT_FIELDS})
             self.last_diagnostics = Diagnostics(*(np.zeros(0, np.int32) for _ in range(3)))
             return empty, (np.zeros((0, self.n_ticks, len(gk.TRACE_FIELDS))) if record else None)
-        merged, traces, diag = self._run_once(inputs, record)
-        todo = np.flatnonzero(diag.overflow & (self._masks[0] | self._masks[1]))
-        while len(todo):
-            seen = int(np.bitwise_or.reduce(diag.overflow[todo]))
-            if self.growths >= MAX_GROWTH:
-                raise BufferOverflowError(
-                    f"Warp's buffers overflowed ({_describe_overflow(seen)}) in {len(todo)} "
-                    f"of {n} pick-points even at {self.buffers.contacts} contacts and "
-                    f"{self.buffers.rows} constraint rows per simulation; pass larger "
-                    "BufferSizes (buffers=...) or use backend 'mujoco'"
-                )
-            self.buffers = self.buffers.grown(
-                contacts=bool(seen & self._masks[0]), rows=bool(seen & self._masks[1])
-            )
-            self.growths += 1
-            log.warning(
-                "Warp buffer overflow (%s) in %d pick-points: re-simulating them with %d "
-                "contacts and %d constraint rows per simulation",
-                _describe_overflow(seen),
-                len(todo),
-                self.buffers.contacts,
-                self.buffers.rows,
-            )
-            self.stats.n -= len(todo)  # counted again by the re-run
-            out, rows, sub = self._run_once(inputs.take(todo), record)
-            for key in merged:
-                merged[key][todo] = out[key]
-            if record:
-                traces[todo] = rows
-            for f, g in zip(diag, sub, strict=True):
-                f[todo] = g
-            todo = todo[(sub.overflow & (self._masks[0] | self._masks[1])) != 0]
+        first = self._run_once(inputs, record)
+        merged, traces, diag = rerun_overflowed(
+            self,
+            inputs,
+            first,
+            lambda sub: self._run_once(sub, record),
+            self._masks,
+            _describe_overflow,
+        )
         self.last_diagnostics = diag
         return merged, traces
 
