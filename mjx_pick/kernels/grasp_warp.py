@@ -100,21 +100,13 @@ class Result:
     label_margin: float
 
 
-@wp.struct
-class Addresses:
-    """gk.Addresses; finger travel through a DriveMap when has_drive (tables in Drive)."""
-
-    object_qpos: int
-    lift_qpos: int
-    finger_left_qpos: int
-    finger_right_qpos: int
-    object_body: int
-    finger_left_body: int
-    finger_right_body: int
-    lift_actuator: int
-    finger_left_actuator: int
-    finger_right_actuator: int
-    has_drive: wp.bool
+# gk.Addresses' integer fields (nu: the ctrl row's length), and whether finger travel goes
+# through a DriveMap (its tables in Drive)
+Addresses = _mirror(
+    "Addresses",
+    (*(f for f in gk.Addresses._fields if f not in ("nu", "drive")), "has_drive"),
+    {**dict.fromkeys(gk.Addresses._fields, int), "has_drive": wp.bool},
+)
 
 
 @wp.struct
