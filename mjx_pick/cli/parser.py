@@ -246,7 +246,8 @@ def _version_line() -> str:
     from mjx_pick.outputs.rundir import versions
 
     v = {k: x or "not installed" for k, x in versions().items()}
-    parts = ", ".join(f"{d} {v[d]}" for d in ("mujoco", "mujoco-mjx", "jax", "warp-lang"))
+    engines = ("mujoco", "mujoco-warp", "warp-lang", "mujoco-mjx", "jax")
+    parts = ", ".join(f"{d} {v[d]}" for d in engines)
     return f"mjx-pick {v['mjx-pick']} ({parts})"
 
 

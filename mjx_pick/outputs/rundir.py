@@ -517,12 +517,7 @@ def check_versions(path: Path, record: dict | None, command: str | None = None) 
 def versions() -> dict:
     """Python, platform and the versions of the packages that decide the results."""
     out = {"python": sys.version.split()[0], "platform": platform.platform()}
-    for pkg in ("mjx-pick", "mujoco", "mujoco-mjx", "jax", "jaxlib", "numpy", "warp-lang"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = None
-    return out
+    return out | result_versions()
 
 
 def finish(
