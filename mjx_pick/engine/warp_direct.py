@@ -36,7 +36,7 @@ from mjx_pick.engine.pool import (
 )
 from mjx_pick.engine.registry import Impl
 from mjx_pick.engine.warp_buffers import BufferSizes, rerun_overflowed, size_buffers
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 
 log = logging.getLogger(__name__)
 
@@ -49,26 +49,7 @@ DEFAULT_TICKS_PER_CALL = 10
 POOL_QUANTUM = 256
 # a long run's chunks hold this many pools' worth of pick-points (runner.auto_chunk)
 CHUNK_POOLS = 2
-# result fields of kernels.grasp.finalize, in its order
-RESULT_FIELDS = (
-    "success",
-    "failure",
-    "diverged",
-    "score",
-    "t_grasp",
-    "phi_max_deg",
-    "t_grasp_nc",
-    "yaw_max_deg",
-    "tilt_max_deg",
-    "t_reached_s",
-    "max_force_left_n",
-    "max_force_right_n",
-    "lift_height_mm",
-    "slip_mm",
-    "chatter",
-    "rotation_final_deg",
-    "label_margin",
-)
+RESULT_FIELDS = kt.RESULT_FIELDS
 
 
 def warp_problem(allow_cpu: bool | None = None) -> str | None:
@@ -133,10 +114,10 @@ def cuda_devices() -> list[str]:
 
 def default_devices() -> list[str]:
     """Every CUDA device, or the CPU when allowed and there is none."""
-    devices = cuda_devices()
-    if not devices and os.environ.get(ALLOW_CPU_ENV, "") == "1":
-        devices = ["cpu"]
-    return devices
+    found = cuda_devices()
+    if not found and os.environ.get(ALLOW_CPU_ENV, "") == "1":
+        found = ["cpu"]
+    return found
 
 
 def batched_model_fields() -> frozenset[str]:
@@ -525,7 +506,7 @@ class WarpBackend:
         if n == 0:
             empty = _typed({name: np.zeros(0) for name in RESULT_FIELDS})
             self.last_diagnostics = Diagnostics(*(np.zeros(0, np.int32) for _ in range(3)))
-            return empty, (np.zeros((0, self.n_ticks, len(gk.TRACE_FIELDS))) if record else None)
+            return empty, (np.zeros((0, self.n_ticks, len(kt.TRACE_FIELDS))) if record else None)
         first = self._run_once(inputs, record)
         merged, traces, diag = rerun_overflowed(
             self,
@@ -769,8 +750,8 @@ def pad_traces(rows: np.ndarray, ticks: np.ndarray, phase: np.ndarray, grasp: Gr
     running on and the phase it ended in, as the C backend leaves a finished pick."""
     out = np.array(rows, np.float32, copy=True)
     dt = float(grasp.control_period_s)
-    t_col = gk.TRACE_FIELDS.index("t_s")
-    phase_col = gk.TRACE_FIELDS.index("phase")
+    t_col = kt.TRACE_FIELDS.index("t_s")
+    phase_col = kt.TRACE_FIELDS.index("phase")
     for i, k in enumerate(np.asarray(ticks)):
         k = int(k)
         if 0 < k < out.shape[1]:
@@ -824,9 +805,9 @@ def _typed(host: dict) -> dict:
     out = {}
     for name in RESULT_FIELDS:
         v = host[name]
-        if name in ("success", "diverged"):
+        if name in kt.RESULT_FLAGS:
             out[name] = v.astype(bool)
-        elif name in ("failure", "chatter"):
+        elif name in kt.RESULT_COUNTS:
             out[name] = v.astype(np.int32)
         else:
             out[name] = v.astype(np.float32)

@@ -12,22 +12,22 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from mjx_pick.kernels import grasp as gk
+from mjx_pick.kernels import types as kt
 
-SETTLE = wp.constant(gk.SETTLE)
-CLOSE = wp.constant(gk.CLOSE)
-DWELL = wp.constant(gk.DWELL)
-LIFT = wp.constant(gk.LIFT)
-HOLD = wp.constant(gk.HOLD)
-DONE = wp.constant(gk.DONE)
-OK = wp.constant(gk.Outcome.OK)
-NO_CONTACT = wp.constant(gk.Outcome.NO_CONTACT)
-FORCE_NOT_REACHED = wp.constant(gk.Outcome.FORCE_NOT_REACHED)
-SLIPPED_IN_LIFT = wp.constant(gk.Outcome.SLIPPED_IN_LIFT)
-DROPPED_IN_HOLD = wp.constant(gk.Outcome.DROPPED_IN_HOLD)
-ROTATED = wp.constant(gk.Outcome.ROTATED)
-DIVERGED = wp.constant(gk.Outcome.DIVERGED)
-NTRACE = wp.constant(len(gk.TRACE_FIELDS))
+SETTLE = wp.constant(kt.SETTLE)
+CLOSE = wp.constant(kt.CLOSE)
+DWELL = wp.constant(kt.DWELL)
+LIFT = wp.constant(kt.LIFT)
+HOLD = wp.constant(kt.HOLD)
+DONE = wp.constant(kt.DONE)
+OK = wp.constant(kt.Outcome.OK)
+NO_CONTACT = wp.constant(kt.Outcome.NO_CONTACT)
+FORCE_NOT_REACHED = wp.constant(kt.Outcome.FORCE_NOT_REACHED)
+SLIPPED_IN_LIFT = wp.constant(kt.Outcome.SLIPPED_IN_LIFT)
+DROPPED_IN_HOLD = wp.constant(kt.Outcome.DROPPED_IN_HOLD)
+ROTATED = wp.constant(kt.Outcome.ROTATED)
+DIVERGED = wp.constant(kt.Outcome.DIVERGED)
+NTRACE = wp.constant(len(kt.TRACE_FIELDS))
 # MuJoCo Warp's pair_friction and pair_solimp rows
 vec5 = wp.types.vector(length=5, dtype=wp.float32)
 
@@ -55,14 +55,14 @@ _ACC_BOOLS = (
     "lost_left",
     "lost_right",
 )
-Params = _mirror("Params", gk.GraspParams._fields)
-Control = _mirror("Control", gk.ControlState._fields, {"phase": int})
-Acc = _mirror("Acc", gk.Accumulators._fields, dict.fromkeys(_ACC_BOOLS, wp.bool))
+Params = _mirror("Params", kt.GraspParams._fields)
+Control = _mirror("Control", kt.ControlState._fields, {"phase": int})
+Acc = _mirror("Acc", kt.Accumulators._fields, dict.fromkeys(_ACC_BOOLS, wp.bool))
 
 
 @wp.struct
 class Measurement:
-    """gk.Measurement (drive_stiffness_n_per_m < 0: GraspParams' constant)."""
+    """kt.Measurement (drive_stiffness_n_per_m < 0: GraspParams' constant)."""
 
     force_left: float
     force_right: float
@@ -77,41 +77,25 @@ class Measurement:
     drive_stiffness_n_per_m: float
 
 
-@wp.struct
-class Result:
-    """gk.finalize's fields, one pick."""
-
-    success: wp.bool
-    failure: int
-    diverged: wp.bool
-    score: float
-    t_grasp: float
-    phi_max_deg: float
-    t_grasp_nc: float
-    yaw_max_deg: float
-    tilt_max_deg: float
-    t_reached_s: float
-    max_force_left_n: float
-    max_force_right_n: float
-    lift_height_mm: float
-    slip_mm: float
-    chatter: int
-    rotation_final_deg: float
-    label_margin: float
+Result = _mirror(
+    "Result",
+    kt.RESULT_FIELDS,
+    {**dict.fromkeys(kt.RESULT_FLAGS, wp.bool), **dict.fromkeys(kt.RESULT_COUNTS, int)},
+)
 
 
-# gk.Addresses' integer fields (nu: the ctrl row's length), and whether finger travel goes
+# kt.Addresses' integer fields (nu: the ctrl row's length), and whether finger travel goes
 # through a DriveMap (its tables in Drive)
 Addresses = _mirror(
     "Addresses",
-    (*(f for f in gk.Addresses._fields if f not in ("nu", "drive")), "has_drive"),
-    {**dict.fromkeys(gk.Addresses._fields, int), "has_drive": wp.bool},
+    (*(f for f in kt.Addresses._fields if f not in ("nu", "drive")), "has_drive"),
+    {**dict.fromkeys(kt.Addresses._fields, int), "has_drive": wp.bool},
 )
 
 
 @wp.struct
 class Drive:
-    """gk.DriveMap's tables, (K,) each (empty without a drive)."""
+    """kt.DriveMap's tables, (K,) each (empty without a drive)."""
 
     q_left: wp.array(dtype=float)
     travel_left: wp.array(dtype=float)
@@ -124,8 +108,8 @@ class Drive:
     ctrl_at_zero_length: float
 
 
-def addresses(ad: gk.Addresses) -> Addresses:
-    """The Warp struct of gk.Addresses."""
+def addresses(ad: kt.Addresses) -> Addresses:
+    """The Warp struct of kt.Addresses."""
     out = Addresses()
     for name in Addresses.vars:
         if name != "has_drive":
@@ -134,7 +118,7 @@ def addresses(ad: gk.Addresses) -> Addresses:
     return out
 
 
-def drive(ad: gk.Addresses, device) -> Drive:
+def drive(ad: kt.Addresses, device) -> Drive:
     """The Warp struct of a DriveMap's tables on device (empty tables without one)."""
     out = Drive()
     dm = ad.drive
@@ -241,7 +225,7 @@ def measure(
     qvel: wp.array(dtype=float),
     cfrc_ext: wp.array(dtype=wp.spatial_vector),
 ):
-    """gk.measure for one simulation: qpos (nq,), qvel (nv,), cfrc_ext (nbody,) rows
+    """kernels.grasp.measure for one simulation: qpos (nq,), qvel (nv,), cfrc_ext (nbody,) rows
     of (torque, force) in world axes."""
     f_obj = cfrc_ext[ad.object_body]
     f_left = cfrc_ext[ad.finger_left_body]
@@ -274,7 +258,7 @@ def measure(
 
 @wp.func
 def control_step(p: Params, s: Control, m: Measurement):
-    """gk.control_step: the next Control (its targets are this period's commands)."""
+    """kernels.grasp.control_step: the next Control (its targets are this period's commands)."""
     force = 0.5 * (m.force_left + m.force_right)
     t = s.t_phase + p.dt
     ph = s.phase
@@ -353,7 +337,7 @@ def control_step(p: Params, s: Control, m: Measurement):
 def accumulate(
     p: Params, a: Acc, s: Control, s_next: Control, m: Measurement, pos0: wp.vec3, quat0: wp.vec4
 ):
-    """gk.accumulate: one tick's measurement folded into the metrics."""
+    """kernels.grasp.accumulate: one tick's measurement folded into the metrics."""
     running = s.phase != DONE
     bad = (not m.finite or m.speed_max > p.divergence_speed) and running
     diverged = a.diverged or bad
@@ -453,7 +437,7 @@ def accumulate(
 
 @wp.func
 def finalize(p: Params, a: Acc):
-    """gk.finalize: eq. (2) score, success, failure reason and margins of one pick."""
+    """kernels.grasp.finalize: eq. (2) score, success, failure reason and margins of one pick."""
     window = p.dwell_s + lift_duration(p) + p.hold_s
     t_grasp = wp.clamp(a.held_time / window, 0.0, 1.0)
     t_nc = wp.clamp(a.off_table_time / window, 0.0, 1.0)
@@ -519,7 +503,7 @@ def finalize(p: Params, a: Acc):
 
 @wp.func
 def finger_command(ad: Addresses, dr: Drive, finger_target: float):
-    """The finger actuators' control for a closing-travel target (gk.command)."""
+    """The finger actuators' control for a closing-travel target (kernels.grasp.command)."""
     if ad.has_drive:
         length = interp(finger_target, dr.travel, dr.length)
         return dr.ctrl_at_zero_length + dr.ctrl_per_length * length
@@ -528,7 +512,7 @@ def finger_command(ad: Addresses, dr: Drive, finger_target: float):
 
 @wp.func
 def write_command(ad: Addresses, dr: Drive, s: Control, ctrl: wp.array(dtype=float)):
-    """gk.command into ctrl (nu,): zeros but for the lift and the finger actuators."""
+    """kernels.grasp.command into ctrl (nu,): zeros but for the lift and the finger actuators."""
     for i in range(ctrl.shape[0]):
         ctrl[i] = 0.0
     ctrl[ad.lift_actuator] = s.lift_target
@@ -539,7 +523,7 @@ def write_command(ad: Addresses, dr: Drive, s: Control, ctrl: wp.array(dtype=flo
 
 @wp.func
 def initial_control(ad: Addresses, dr: Drive, qpos0: wp.array(dtype=float)):
-    """gk.initial's ControlState from a pick's initial qpos (nq,)."""
+    """kernels.grasp.initial's ControlState from a pick's initial qpos (nq,)."""
     s = Control()
     s.phase = SETTLE
     s.t_phase = 0.0
@@ -553,7 +537,7 @@ def initial_control(ad: Addresses, dr: Drive, qpos0: wp.array(dtype=float)):
 
 @wp.func
 def initial_acc():
-    """gk.initial_accumulators."""
+    """kernels.grasp.initial_accumulators."""
     a = Acc()
     a.contact_seen = False
     a.reached = False
@@ -585,7 +569,7 @@ def initial_acc():
 
 @wp.func
 def trace_row(a: Acc, s: Control, m: Measurement, row: wp.array(dtype=float)):
-    """gk.tick's trace row (gk.TRACE_FIELDS order) into row (NTRACE,)."""
+    """kernels.grasp.tick's trace row (kt.TRACE_FIELDS order) into row (NTRACE,)."""
     row[0] = a.t
     row[1] = m.force_left
     row[2] = m.force_right

@@ -198,3 +198,28 @@ TRACE_FIELDS = (
     "lift_m",
     "phase",
 )
+
+
+# a pick's results (``kernels.grasp.finalize``'s keys, in its order); the flags and counts
+# among them, the rest float32
+RESULT_FIELDS = (
+    "success",
+    "failure",
+    "diverged",
+    "score",
+    "t_grasp",
+    "phi_max_deg",
+    "t_grasp_nc",
+    "yaw_max_deg",
+    "tilt_max_deg",
+    "t_reached_s",
+    "max_force_left_n",
+    "max_force_right_n",
+    "lift_height_mm",
+    "slip_mm",
+    "chatter",
+    "rotation_final_deg",
+    "label_margin",
+)
+RESULT_FLAGS = ("success", "diverged")
+RESULT_COUNTS = ("failure", "chatter")
