@@ -23,13 +23,18 @@ def each_checked(*makers):
         except ConfigError as err:
             problems += getattr(err, "problems", [str(err)])  # a nested list: flattened
             values.append(None)
+    raise_problems(problems)
+    return values
+
+
+def raise_problems(problems: list[str]) -> None:
+    """ONE ConfigError listing every problem (its ``problems``); nothing when none."""
     if len(problems) == 1:
         raise ConfigError(problems[0])
     if problems:
         err = ConfigError(f"{len(problems)} problems:\n" + "\n".join(f"  - {p}" for p in problems))
         err.problems = problems
         raise err
-    return values
 
 
 def objects(args):

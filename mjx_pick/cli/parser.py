@@ -26,6 +26,7 @@ from mjx_pick.cli.commands import (
     cmd_trials_record,
     cmd_view,
 )
+from mjx_pick.cli.inputs import raise_problems
 from mjx_pick.cli.setting_flags import PHYSICS_FLAGS, PICK_FLAGS, add_setting_flags
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
@@ -61,13 +62,7 @@ def number(name: str, flag: str):
 def refused(args: argparse.Namespace) -> None:
     """Raise one ConfigError naming every number of the command line that its rule
     refused (nothing when none was)."""
-    problems = [v.problem for v in vars(args).values() if isinstance(v, Refused)]
-    if len(problems) == 1:
-        raise ConfigError(problems[0])
-    if problems:
-        err = ConfigError(f"{len(problems)} problems:\n" + "\n".join(f"  - {p}" for p in problems))
-        err.problems = problems
-        raise err
+    raise_problems([v.problem for v in vars(args).values() if isinstance(v, Refused)])
 
 
 class DefaultsHelp(argparse.HelpFormatter):

@@ -313,29 +313,7 @@ class _Context:
 def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
     """evaluate() once its runner (this process, or a Ray cluster) is ready."""
     out_dir = Path(req.run.out) if req.run.out is not None else None
-    settings = experiment_settings(
-        ctx.scene,
-        {
-            "gripper": req.settings.gripper,
-            "contact": req.settings.contact,
-            "solver": req.settings.solver,
-            "grasp": req.settings.grasp,
-            "picks": req.run.pick_config,
-            "source": _picks_source(req.what.picks),
-            "n": req.run.n if req.what.picks is None and req.what.until is None else None,
-            "seed": req.run.seed,
-            "until": req.what.until,
-            "min_score": req.what.min_score if req.what.until is not None else None,
-            "max_n": req.what.max_n,
-            "min_force": req.what.min_force,
-            "stability_um": req.what.stability_um,
-            "step_check": req.what.step_check,
-            "backend": ctx.chunks.name,
-            # a batched program's float32 rounding depends on its batch shape, on the C
-            # engine too (its per-tick kernel: engine module docstring)
-            "batch_size": ctx.chunks.batch_size,
-        },
-    )
+    settings = experiment_settings(ctx.scene, _key_settings(ctx, req))
     key = config_hash(settings)
     done = _complete_run(out_dir, key) if out_dir is not None and not req.run.overwrite else None
     if done is not None and req.run.resume:
@@ -347,33 +325,12 @@ def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
         )
     # every input is checked before the folder is claimed: a bad one leaves it as it was
     t_picks = time.perf_counter()
-    if req.what.until is not None:
-        what = dataclasses.replace(req.what, max_n=req.what.max_n or 10 * req.what.until)
-        req = dataclasses.replace(req, what=what)
-        check_range("evaluate", "max_n", req.what.max_n, req.what.until, 10**9)
-        picks_batch = None
-    elif req.what.picks is None:
-        picks_batch = pp.generate_normal(
-            req.obj,
-            req.settings.gripper,
-            req.run.n,
-            seed=req.run.seed,
-            config=req.run.pick_config,
-            grasp=req.settings.grasp,
-        )
-    elif isinstance(req.what.picks, pp.PickBatch):
-        picks_batch = req.what.picks
-    else:
-        picks_batch = ctx.user_batch  # read and checked before the scene was built
+    req, picks_batch = _picks(ctx, req)
     ctx.costs["picks_s"] = time.perf_counter() - t_picks  # sampling and the feasibility checks
     if out_dir is not None:  # before any simulation: a folder it may not use is refused now
+        run = req.run
         claim(
-            out_dir,
-            "evaluate",
-            key,
-            resume=req.run.resume,
-            overwrite=req.run.overwrite,
-            settings=settings,
+            out_dir, "evaluate", key, resume=run.resume, overwrite=run.overwrite, settings=settings
         )
     try:
         return _evaluate_claimed(ctx, req, picks_batch, out_dir, key)
@@ -383,6 +340,49 @@ def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
         if out_dir is not None:  # never left "running": the next run replaces it
             fail(out_dir, err, command="evaluate")
         raise
+
+
+def _key_settings(ctx: _Context, req: _Request) -> dict:
+    """What decides the run's results (``experiment_key`` hashes it with the scene)."""
+    s, what, run = req.settings, req.what, req.run
+    return {
+        "gripper": s.gripper,
+        "contact": s.contact,
+        "solver": s.solver,
+        "grasp": s.grasp,
+        "picks": run.pick_config,
+        "source": _picks_source(what.picks),
+        "n": run.n if what.picks is None and what.until is None else None,
+        "seed": run.seed,
+        "until": what.until,
+        "min_score": what.min_score if what.until is not None else None,
+        "max_n": what.max_n,
+        "min_force": what.min_force,
+        "stability_um": what.stability_um,
+        "step_check": what.step_check,
+        "backend": ctx.chunks.name,
+        # a batched program's float32 rounding depends on its batch shape, on the C
+        # engine too (its per-tick kernel: engine module docstring)
+        "batch_size": ctx.chunks.batch_size,
+    }
+
+
+def _picks(ctx: _Context, req: _Request):
+    """(req, the pick-points of the main run): drawn, given, or the user's checked
+    file; None in Optimization mode, whose max_n is then settled in req."""
+    what, run, s = req.what, req.run, req.settings
+    if what.until is not None:
+        what = dataclasses.replace(what, max_n=what.max_n or 10 * what.until)
+        check_range("evaluate", "max_n", what.max_n, what.until, 10**9)
+        return dataclasses.replace(req, what=what), None
+    if what.picks is None:
+        batch = pp.generate_normal(
+            req.obj, s.gripper, run.n, seed=run.seed, config=run.pick_config, grasp=s.grasp
+        )
+        return req, batch
+    if isinstance(what.picks, pp.PickBatch):
+        return req, what.picks
+    return req, ctx.user_batch  # read and checked before the scene was built
 
 
 def _evaluate_claimed(

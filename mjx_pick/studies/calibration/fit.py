@@ -124,20 +124,7 @@ def calibrate(
     """
     req, opts = split_fields(FitRequest, request, options, fields)
     opts.only("calibrate", "seed", "out", "resume", "progress")
-    est = E.make(
-        req.estimator,
-        req.steps,
-        learning_rate=req.learning_rate,
-        samples=req.samples,
-        sigma=req.sigma,
-        batch=req.batch,
-        popsize=req.popsize,
-        seed=opts.seed,
-    )
-    check_range("calibrate", "steps", req.steps, 0, 1_000_000)
-    check_range("calibrate", "checkpoint_every", req.checkpoint_every, 1)
-    if req.budget is not None:
-        check_range("calibrate", "budget", req.budget, 1)
+    est = _estimator(req, opts.seed)
     initial = dict(problem.start)
     out_dir = Path(opts.out) if opts.out is not None else None
     fit = {"learning_rate": req.learning_rate, "samples": req.samples, "sigma": req.sigma}
@@ -158,25 +145,33 @@ def calibrate(
     spent0 = problem.rollouts - (history[-1]["rollouts"] if history else 0)
     loop = _FitLoop(problem, est, req, ckpt, visited, t0, spent0, log)
     state = loop.run(state, history, step, opts.progress)
-    result = _finish(
-        problem,
-        est.best(state),
-        initial,
-        history,
-        acc_before,
-        req.holdout,
-        req.identify,
-        req.estimator,
-        out_dir,
-        problem.settings.contact,
-        visited,
-    )
+    fitted = (est.best(state), initial, history, acc_before, req.holdout, req.identify)
+    result = _finish(problem, *fitted, req.estimator, out_dir, problem.settings.contact, visited)
     result.rollouts = problem.rollouts - spent0
     result.wall_s = time.perf_counter() - t0
     if out_dir is not None:
         wall = time.perf_counter() - t0
         _write_fit(result, problem, out_dir, request_key, req.estimator, wall)
     return result
+
+
+def _estimator(req: FitRequest, seed: int):
+    """The request's estimator (``estimators.make``), its numbers checked."""
+    est = E.make(
+        req.estimator,
+        req.steps,
+        learning_rate=req.learning_rate,
+        samples=req.samples,
+        sigma=req.sigma,
+        batch=req.batch,
+        popsize=req.popsize,
+        seed=seed,
+    )
+    check_range("calibrate", "steps", req.steps, 0, 1_000_000)
+    check_range("calibrate", "checkpoint_every", req.checkpoint_every, 1)
+    if req.budget is not None:
+        check_range("calibrate", "budget", req.budget, 1)
+    return est
 
 
 @dataclasses.dataclass
@@ -449,12 +444,33 @@ def least_squares(
     out, progress = opts.out, opts.progress
     max_iters, eps, budget = req.max_iters, req.eps, req.budget
     identify, holdout = req.identify, req.holdout
-    from mujoco import sysid
-
     check_range("calibrate", "max_iters", max_iters, 1, 10_000)
     out_dir = None if out is None else Path(out)
     request = _claim_lsq(problem, out_dir, max_iters)
     initial = dict(problem.start)
+    residuals = _lsq_fit(problem, initial, max_iters, eps, budget, log, progress)
+    t0, spent0 = residuals.t0, residuals.spent0
+    fitted = (residuals.best["theta"], initial, residuals.history, None, holdout, identify)
+    result = _finish(
+        problem, *fitted, "least_squares", out_dir, problem.settings.contact, residuals.visited
+    )
+    result.rollouts = problem.rollouts - spent0
+    result.wall_s = time.perf_counter() - t0
+    if out_dir is not None:
+        from mjx_pick.studies.calibration.outputs import write_result
+
+        write_result(result, problem, out_dir)
+        meta = problem.runner.describe(result.wall_s)
+        meta["timing"]["rollouts"] = result.rollouts
+        finish(out_dir, command="calibrate", config=request, **meta)
+    return result
+
+
+def _lsq_fit(problem, initial, max_iters: int, eps: float, budget, log, progress: bool):
+    """MuJoCo's Levenberg-Marquardt (``mujoco.sysid``) over the unit parameters until
+    max_iters or the budget: the residuals' record (best, history, visited)."""
+    from mujoco import sysid
+
     bar = ProgressBar("calibrating (lsq)", "step", enabled=progress)
     residuals = _Residuals(problem, budget, log, bar)
     try:
@@ -472,30 +488,7 @@ def least_squares(
         pass
     finally:
         bar.close()
-    t0, spent0, history = residuals.t0, residuals.spent0, residuals.history
-    result = _finish(
-        problem,
-        residuals.best["theta"],
-        initial,
-        history,
-        None,
-        holdout,
-        identify,
-        "least_squares",
-        out_dir,
-        problem.settings.contact,
-        residuals.visited,
-    )
-    result.rollouts = problem.rollouts - spent0
-    result.wall_s = time.perf_counter() - t0
-    if out_dir is not None:
-        from mjx_pick.studies.calibration.outputs import write_result
-
-        write_result(result, problem, out_dir)
-        meta = problem.runner.describe(result.wall_s)
-        meta["timing"]["rollouts"] = result.rollouts
-        finish(out_dir, command="calibrate", config=request, **meta)
-    return result
+    return residuals
 
 
 def _claim_lsq(problem, out_dir: Path | None, max_iters: int) -> dict | None:
