@@ -30,6 +30,17 @@ log = logging.getLogger(__name__)
 # test ("sharp bits" of the MJX docs); a prism of 12 polygon corners has 24.
 MAX_PIECE_CORNERS = 12
 MAX_HULL_VERTICES = 32
+# CoACD's search besides the concavity threshold (object_from_mesh's coacd_threshold):
+# at most 32 pieces; 60 tree-search iterations, not CoACD's 150 -- the shipped parts'
+# labels move no more than under another seed, in less time (benchmarks/RESULTS.md,
+# "Time to answer: host-side fixed costs (CPU)"). Part of the prepared mesh's cache key.
+COACD_SETTINGS = {
+    "max_convex_hull": 32,
+    "preprocess_mode": "auto",
+    "mcts_max_depth": 3,
+    "mcts_iterations": 60,
+    "seed": 0,
+}
 MIN_PIECE_MM2 = 0.01  # a band outline's pieces smaller than this are arithmetic specks
 # a disconnected blob is dropped with a warning only when it is this small beside the
 # largest; otherwise the image holds several objects and we refuse to guess
@@ -663,6 +674,7 @@ def object_from_mesh(
         "pose": pose,
         "coacd_threshold": float(coacd_threshold),
         "max_hull_vertices": MAX_HULL_VERTICES,
+        "coacd": dict(COACD_SETTINGS),
         "largest_body": bool(largest_body),
     }
     prepared = cache.memo(
@@ -916,9 +928,7 @@ def _coacd_pieces(mesh: trimesh.Trimesh, threshold: float) -> tuple[np.ndarray, 
     parts = coacd.run_coacd(
         coacd.Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)),
         threshold=threshold,
-        max_convex_hull=32,
-        preprocess_mode="auto",
-        seed=0,
+        **COACD_SETTINGS,
     )
     pieces = []
     for verts, faces in parts:
