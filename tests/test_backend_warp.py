@@ -117,7 +117,7 @@ def test_gpu_extra_pins_warp_like_mujoco_mjx():
 def test_streams_warp_does_not_own_stay_registered(monkeypatch):
     # Warp's registry of CUDA streams has no count: freeing any wrapper of XLA's stream
     # unregistered it under a newer wrapper's graph capture (GPU evidence:
-    # benchmarks/warp_stream_repro.py). Here a stand-in for warp.Stream, as CI has no warp.
+    # benchmarks/probes/warp_stream_repro.py). Here a stand-in for warp.Stream, as CI has no warp.
     import sys
     import types
 

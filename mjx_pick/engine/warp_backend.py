@@ -83,7 +83,7 @@ def keep_xla_stream_registrations() -> None:
     garbage collector frees while a newer wrapper of the same stream begins its graph
     capture leaves that capture on an "unknown stream", and the whole program fails --
     seen with programs that carry model fields, in every process after the first on a
-    machine (benchmarks/warp_stream_repro.py reproduces it; with this, or with the
+    machine (benchmarks/probes/warp_stream_repro.py reproduces it; with this, or with the
     collector off, it runs). XLA's streams live as long as the process, so keeping them
     registered costs one CUDA event per graph capture. Idempotent."""
     import warp as wp
