@@ -23,7 +23,7 @@ Estimators: ``smoothed`` (Gauss-Hermite smoothed gradient + Adam),
 against simulations and wall time; simulations and wall time to reach the target loss
 (90 % of the way from the start's loss to the hidden parameters' loss); each
 parameter's relative error, interval and identifiability; held-out accuracy before and
-after. Rows go to a JSON file; ``--table`` prints RESULTS.md's table from it.
+after. Rows go to a JSON file; ``--table`` prints the estimators' table from it.
 
   JAX_PLATFORMS=cpu python benchmarks/calibration.py \
       --out benchmarks/results/calibration_estimators.json
@@ -323,7 +323,7 @@ def gradient_check_tiny() -> dict:
 def to_target(fits: list[dict]) -> None:
     """Per fit, simulations and wall time until its best loss came within 10 % of the
     way from the start's loss to the best loss ANY estimator found on that problem
-    (the hidden parameters' own loss is no reachable target: see RESULTS.md)."""
+    (the hidden parameters' own loss is no reachable target: benchmarks/results/history.md)."""
     for p in sorted({f["hidden_parameters"] for f in fits}):
         group = [f for f in fits if f["hidden_parameters"] == p]
         best = min(f["best_loss"] for f in group)
@@ -454,7 +454,7 @@ def main() -> None:
         help="the engine of the ground truth and of every fit (warp: a GPU)",
     )
     ap.add_argument("--out", default="benchmarks/out/calibration_estimators.json")
-    ap.add_argument("--table", help="print the RESULTS.md table of this JSON and stop")
+    ap.add_argument("--table", help="print the estimators' table of this JSON and stop")
     ap.add_argument(
         "--gradients-tiny",
         action="store_true",

@@ -18,7 +18,8 @@ the time step, as `evaluate --step-check` does, and counts the wrong labels it f
 
 The blocks are "centred" to within a measurement: --offset-um (default 20 um along the
 grip axis, 0.5 mm along the pads and 0.2 deg of yaw), since an exactly symmetric pick
-hides what any real, image-derived part shows (benchmarks/RESULTS.md, "preset Coulomb").
+hides what any real, image-derived part shows (benchmarks/results/history.md, "The preset
+grid's CI subset, and the README demo").
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 Per object: success rate with its Wilson 95 % interval, failure reasons, and (with
 --backends) the labels of MuJoCo C against another backend on the same pick-points.
 Light rigid parts grasped across by a 2F-85 at 50 N must mostly succeed; every failure
-class that remains must be explained physically (benchmarks/RESULTS.md, "Real objects").
+class that remains must be explained physically (benchmarks/results/history.md, "Pad
+contact and real objects (issue 16)"); the current figures are in benchmarks/RESULTS.md.
 
     python benchmarks/real_objects.py --n 48 --out benchmarks/results/real_objects.json
     python benchmarks/real_objects.py --n 256 --backends mujoco,warp   # on a GPU machine

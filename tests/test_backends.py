@@ -31,7 +31,7 @@ def test_backends_agree_on_door_opener(door_opener):
     agree = np.mean(c["success"] == j["success"])
     # the two engines differ in their collision routines and solver details, so a
     # chaotic pick (a part spun over the table by the first pad) may end apart: 90 %
-    # of labels at this size (99.6 % measured at 16,384 on a GPU, RESULTS.md). Scores
+    # of labels at this size (99.6 % measured at 16,384 on a GPU, results/history.md). Scores
     # of successes crowd near 1, where a rank correlation measures noise: their
     # median absolute difference must stay below 0.02 (a tenth of a typical gap
     # between a clean grasp and one that turned 30 deg)

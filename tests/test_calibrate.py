@@ -36,7 +36,7 @@ SOLVER = mp.SolverParams(iterations=10)
 # and the pads: the box without the rim behind it (the default since). With the rim these
 # 24 rows still lead the fit to 0.61, but the loss is rougher near it and the local
 # identifiability tests find no quadratic basin, so the fit honestly reports the
-# friction as not identified and writes its start (benchmarks/RESULTS.md)
+# friction as not identified and writes its start (benchmarks/results/history.md)
 PADS = mp.ContactParams(pad_collision="mean_radius")
 
 
@@ -283,7 +283,7 @@ def test_identifiability_outcomes_against_traces(heavy_block):
     # outcomes alone pin pad friction and the gripper's force offset only loosely (the
     # outcome mostly sees mu x (F_d + offset)); a force gauge's traces narrow the offset
     # (the squeeze itself) -- less than tick-by-tick residuals claimed: their jumps made
-    # a steep local curvature (RESULTS.md); pad friction barely (the force does not
+    # a steep local curvature (results/history.md); pad friction barely (the force does not
     # see it until the part slips, and a slipping grasp's trace is chaotic). The table's
     # damping, which neither sees, is reported as not identified
     hidden = mp.Settings(LIGHT, mp.ContactParams(pad_friction=HIDDEN), grasp=SHORT)
@@ -318,10 +318,10 @@ def test_trace_loss_is_smooth_around_the_hidden_friction(heavy_block):
     # sensitive grasp: only the exact hidden value redraws it); the replicas' likelihood
     # (loss.py) lowers that share. How much depends on the physics: with pyramidal cones
     # (chattering pads) tick by tick > 0.4 and replicas < 0.15; with the elliptic default
-    # 0.32 and 0.20 (benchmarks/RESULTS.md). Without the pads' contact margin: with the
+    # 0.32 and 0.20 (benchmarks/results/history.md). Without the pads' contact margin: with the
     # default 0.05 mm a 0.1 % step costs as much as a 10 % one tick by tick on two of
     # three draws of these poses, and the replicas no longer smooth it on one
-    # (benchmarks/RESULTS.md, "A contact margin on the pads"): the margin's known cost
+    # (benchmarks/results/history.md, "A contact margin on the pads"): the margin's known cost
     hidden = mp.Settings(
         LIGHT, mp.ContactParams(pad_friction=HIDDEN, pad_margin_mm=0.0), grasp=GRASP
     )
@@ -520,7 +520,7 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
     problem = cal.Problem(heavy_block, synthetic, ["pad_friction"], base, backend="mujoco")
     before = problem.loss(problem.space.theta([0.45])[None])[0]
     # the smoothed gradient from below: on these 24 outcome + lift-time rows CMA-ES (the
-    # default) stopped in 8 steps at 0.72, a local basin of this loss (RESULTS.md)
+    # default) stopped in 8 steps at 0.72, a local basin of this loss (results/history.md)
     kw = dict(estimator="smoothed", steps=12, checkpoint_every=6)
     whole = cal.calibrate(problem, **kw)
     mu = whole.values["pad_friction"]

@@ -375,7 +375,7 @@ def test_linkage_closes_alike_in_mjx_and_mujoco_c(linkage, block):
     """MJX (JAX physics) runs the linkage's loop constraints, tendon and overridden
     servo like the C engine: the same free close (object set aside), step by step. Its
     link meshes do not collide (only the pad boxes have contact pairs), which keeps one
-    MJX step's compile near 30 s on 2 CPU cores (benchmarks/RESULTS.md)."""
+    MJX step's compile near 30 s on 2 CPU cores (benchmarks/results/history.md)."""
     from mujoco import mjx
 
     scene = mp.build_scene(block, linkage, None, None, PROC)
@@ -520,7 +520,7 @@ def test_linkage_torque_threshold_is_a_rubber_pads(linkage):
     # tests/test_physics.py's rubber-pad lever test on the linkage, default procedure: a
     # 200 mm bar gripped at d from its centre of mass turns with m (g + a) d. Against a
     # rubber pad pressed uniformly over the patch it must hold at 0.8x that pad's lever
-    # and turn at 1.2x. Its own two pad boxes held to 1.5-2x (benchmarks/RESULTS.md,
+    # and turn at 1.2x. Its own two pad boxes held to 1.5-2x (benchmarks/results/history.md,
     # "The linkage's pads: the rubber-like box")
     mass, force, mu = 0.6, 30.0, 0.5
     part = mp.object_from_polygon(box(-10, -100, 10, 100), thickness_mm=40, mass_g=mass * 1e3)

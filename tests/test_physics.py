@@ -92,7 +92,7 @@ def test_coulomb_grid_on_the_c_engine(thickness_mm):
     raises=AssertionError,
     reason="MJX's JAX implementation lets the pads chatter on a part at low pad friction "
     "(0.1: forces alternate 0 / 10-57 N between pads, the block tips over) where MuJoCo C "
-    "holds it. Upstream cause (benchmarks/RESULTS.md, 'Why MJX chatters at low friction'; "
+    "holds it. Upstream cause (benchmarks/results/history.md, 'Why MJX chatters at low friction'; "
     "benchmarks/probes/mjx_contact_repro.py): MJX-JAX's convex collider makes one edge contact "
     "instead of four on a flat pad, and drops points shallower than 1e-6 m, which is "
     "where a low-friction pyramidal contact settles.",
@@ -149,7 +149,7 @@ def test_torque_threshold_is_the_capacity_the_model_states(shape, tmp_path):
     # rod -- with soft-finger torsion). It must hold at 0.85x that lever and turn out
     # of the grasp at 1.15x: the threshold within 15 % of the stated capacity. With the
     # whole pad colliding (the default) that capacity is 1.5-1.9x a rubber pad's
-    # (benchmarks/RESULTS.md, "Torque"; the rubber pad's test is the next one)
+    # (benchmarks/results/history.md, "Torque"; the rubber pad's test is the next one)
     part, grasp, contact, scene, weight, force, mu = torque_case(shape, tmp_path, "pad")
     points = holding.pad_contacts(scene)
     assert len(points.points_m) == (8 if shape == "bar" else 4)

@@ -32,7 +32,7 @@ PAD_FORCE_MARGIN = 1.0
 # measured wrong on MuJoCo C at the defaults, and still open: (preset, mass kg, pad
 # friction, must hold). Empty since the elliptic-cone default (issue 32): the 2F-85's
 # 20 N floor on a 0.1 kg part at pad friction 0.1 (8.5x eq. (1)'s force) was lost in the
-# lift with pyramidal cones and holds now (benchmarks/RESULTS.md, "Elliptic cones,
+# lift with pyramidal cones and holds now (benchmarks/results/history.md, "Elliptic cones,
 # impratio 10 and a rubber-like pad box")
 KNOWN_WRONG: set[tuple[str, float, float, bool]] = set()
 

@@ -44,7 +44,7 @@ def run_dir(tmp_path_factory, heavy):
     # the fit's parameter path.) No pad contact margin either: at the default 0.05 mm
     # the 6-step fit found no friction that explains these 8 picks better than the
     # start (the margin makes a heavy part's slip more sensitive to small changes of
-    # the contact: benchmarks/RESULTS.md, "A contact margin on the pads")
+    # the contact: benchmarks/results/history.md, "A contact margin on the pads")
     solver = mp.SolverParams()
     contact = mp.ContactParams(pad_collision="mean_radius", pad_margin_mm=0.0)
     mp.evaluate(

@@ -1,7 +1,8 @@
 """Benchmark: do MuJoCo C and MuJoCo Warp find the same pad contacts at the same state?
 
 On the YCB meshes Warp's labels are a few points less often "success" than C's, also on
-labels a micrometre's shift does not flip (RESULTS.md, "stable labels"). Both engines
+labels a micrometre's shift does not flip (benchmarks/results/history.md, "Time to answer,
+seventh session"). Both engines
 integrate the same model; they differ most in collision: each has its own convex
 collider (C: libccd/native CCD with multi-contact ``multiccd``; Warp: its own GJK/EPA
 port with its own multi-contact rules). This compares the contacts themselves, with no

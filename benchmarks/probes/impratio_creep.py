@@ -9,7 +9,7 @@ and the share of labels that C with multi-contact off (``real_objects.without_mu
 gives alike -- soft friction's creep divides among a pad's contact points, so a part
 whose labels rest on creep changes them with the point count. Then every label that
 moves between the first impratio and the last, as (failure before, failure after)
-counts. Figures: benchmarks/RESULTS.md, "impratio 100".
+counts. Figures: benchmarks/results/history.md, "impratio 100".
 """
 
 from __future__ import annotations

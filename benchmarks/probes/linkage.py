@@ -17,7 +17,8 @@ parallel-jaw 2F-85 on the same pick-points.
         --out benchmarks/out/links.json
 
 Compile time and throughput on the GPU backends: benchmarks/throughput.py with
---gripper robotiq-2f85-linkage (benchmarks/RESULTS.md gives the command).
+--gripper robotiq-2f85-linkage (benchmarks/results/history.md, "GPU: the linkage on MuJoCo
+Warp (H100)", gives the command).
 """
 
 from __future__ import annotations

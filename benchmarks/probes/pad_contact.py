@@ -14,7 +14,7 @@ rubber and torsion compare pad-contact candidates (the "--variants" below: corne
 centre, shrunk, square, guarded, tiles; "corners" is the library's default pad_contact "pad",
 "square" its "mean_radius") with a uniformly pressed rubber pad.
 
-Each prints a table; the figures are in benchmarks/RESULTS.md ("Pad contact", "Torsion
+Each prints a table; the figures are in benchmarks/results/history.md ("Pad contact", "Torsion
 like rubber").
 """
 

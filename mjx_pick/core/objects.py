@@ -32,8 +32,8 @@ MAX_PIECE_CORNERS = 12
 MAX_HULL_VERTICES = 32
 # CoACD's search besides the concavity threshold (object_from_mesh's coacd_threshold):
 # at most 32 pieces; 60 tree-search iterations, not CoACD's 150 -- the shipped parts'
-# labels move no more than under another seed, in less time (benchmarks/RESULTS.md,
-# "Time to answer: host-side fixed costs (CPU)"). Part of the prepared mesh's cache key.
+# labels move no more than under another seed, in less time (benchmarks/coacd_labels.py
+# measures it). Part of the prepared mesh's cache key.
 COACD_SETTINGS = {
     "max_convex_hull": 32,
     "preprocess_mode": "auto",
