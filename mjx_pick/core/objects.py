@@ -965,13 +965,38 @@ def rasterize(
     corners' distances differ in the last bits, and ceil() can turn that into a pixel.
 
     Pixel (i, j) covers x in [x0 + j*s, x0 + (j+1)*s), y in [y0 + i*s, ...) (row = +y);
-    a pixel is object when its centre is inside. Scan lines: along each row's centre
-    line, the crossings of the outline's edges (every ring, holes too) toggle
-    inside/outside (the even-odd rule: shapely's ``contains_xy`` on every centre, bar a
-    centre lying on an edge to the last bit, at a fraction of its cost).
+    a pixel is object when its centre is inside (:func:`rasterize_window`).
 
     Returns:
       mask (H, W) uint8 and (x0, y0) of the grid's lower-left corner, mm.
+    """
+    window, corner, (row0, col0), size = rasterize_window(
+        polygon, mm_per_px, yaw_rad, pad_px, radius_mm
+    )
+    mask = np.zeros((size, size), np.uint8)
+    mask[row0 : row0 + window.shape[0], col0 : col0 + window.shape[1]] = window
+    return mask, corner
+
+
+def rasterize_window(
+    polygon: Polygon,
+    mm_per_px: float,
+    yaw_rad: float = 0.0,
+    pad_px: int = 2,
+    radius_mm: float | None = None,
+):
+    """:func:`rasterize`'s grid, computed and returned only where the rotated polygon's
+    bounding box lies (the rest of the grid is empty).
+
+    Scan lines: along each row's centre line, the crossings of the outline's edges
+    (every ring, holes too) toggle inside/outside -- the even-odd rule, which is shapely's
+    ``contains_xy`` on every centre, at a fraction of its cost; a centre on the outline
+    is outside, as shapely has it.
+
+    Returns:
+      window (h, w) uint8: the grid's rows row0 .. row0 + h - 1 and columns col0 ..
+      col0 + w - 1; (x0, y0), the whole grid's lower-left corner, mm; (row0, col0); the
+      whole grid's side, cells.
     """
     rot = shapely.affinity.rotate(polygon, yaw_rad, origin=(0, 0), use_radians=True)
     if radius_mm is None:  # one piece or several
@@ -982,10 +1007,15 @@ def rasterize(
     centres = x0 + (np.arange(n) + 0.5) * mm_per_px
     rings = [r for p in shapely.get_parts(rot) for r in (p.exterior, *p.interiors)]
     ends = [shapely.get_coordinates(r) for r in rings]
-    if not ends:
-        return np.zeros((n, n), np.uint8), (x0, y0)
+    if not ends or not len(np.concatenate(ends)):
+        return np.zeros((0, 0), np.uint8), (x0, y0), (0, 0), n
     a = np.concatenate([e[:-1] for e in ends])  # each edge from a to b
     b = np.concatenate([e[1:] for e in ends])
+    # the window: the centres within the outline's bounds
+    (xmin, ymin), (xmax, ymax) = np.minimum(a, b).min(axis=0), np.maximum(a, b).max(axis=0)
+    r0, r1 = np.searchsorted(centres, ymin, "left"), np.searchsorted(centres, ymax, "right")
+    c0, c1 = np.searchsorted(centres, xmin, "left"), np.searchsorted(centres, xmax, "right")
+    h, w = int(r1 - r0), int(c1 - c0)
     # rows whose centre line an edge crosses: min(ya, yb) <= yc < max(ya, yb), so that a
     # vertex on a centre line counts once and a horizontal edge not at all
     first = np.searchsorted(centres, np.minimum(a[:, 1], b[:, 1]), "left")
@@ -994,23 +1024,25 @@ def rasterize(
     row = np.arange(len(edge)) + np.repeat(first - (np.cumsum(rows_of) - rows_of), rows_of)
     (xa, ya), (xb, yb) = a[edge].T, b[edge].T
     x = xa + (centres[row] - ya) * (xb - xa) / (yb - ya)
-    # a crossing toggles every pixel whose centre lies right of it
+    # a crossing toggles every pixel whose centre lies right of it (window columns from
+    # its first, col - c0 in [0, w])
     col = np.searchsorted(centres, x, "right")
-    toggles = np.bincount(row * (n + 1) + col, minlength=n * (n + 1)).astype(np.uint8)
-    mask = np.cumsum(toggles.reshape(n, n + 1)[:, :n], axis=1, dtype=np.uint8)
+    at = (row - r0) * (w + 1) + (col - c0)
+    toggles = np.bincount(at, minlength=h * (w + 1)).astype(np.uint8)
+    mask = np.cumsum(toggles.reshape(h, w + 1)[:, :w], axis=1, dtype=np.uint8)
     mask &= 1  # the parity of the crossings to the left (a uint8 sum wraps: parity kept)
     # a centre on the outline is outside (as shapely says): on a crossing, or on a
     # horizontal edge lying on its row's centre line (axis-aligned edges at yaw 0 and
     # 90 degrees meet centres exactly)
     on = col - 1
-    hit = (on >= 0) & (centres[np.maximum(on, 0)] == x)
-    mask[row[hit], on[hit]] = 0
+    hit = (on >= c0) & (centres[np.maximum(on, 0)] == x)
+    mask[row[hit] - r0, on[hit] - c0] = 0
     flat = (a[:, 1] == b[:, 1]) & np.isin(a[:, 1], centres)
     for (xa, y), (xb, _) in zip(a[flat], b[flat], strict=True):
-        lo = np.searchsorted(centres, min(xa, xb), "left")
-        hi = np.searchsorted(centres, max(xa, xb), "right")
-        mask[np.searchsorted(centres, y), lo:hi] = 0
-    return mask, (x0, y0)
+        lo = np.searchsorted(centres, min(xa, xb), "left") - c0
+        hi = np.searchsorted(centres, max(xa, xb), "right") - c0
+        mask[np.searchsorted(centres, y) - r0, lo:hi] = 0
+    return mask, (x0, y0), (int(r0), int(c0)), n
 
 
 # --------------------------------------------------------------------------- assets

@@ -29,7 +29,7 @@ from mjx_pick.core.config import (
     setting,
 )
 from mjx_pick.core.gripper import GripperSpec
-from mjx_pick.core.objects import ObjectModel, rasterize
+from mjx_pick.core.objects import ObjectModel, rasterize_window
 from mjx_pick.core.procedure import GraspConfig, pad_band_mm
 from mjx_pick.kernels import feasibility as fk
 
@@ -613,7 +613,7 @@ def _stack_cached(key, polygon, res_mm: float):
             key[0],
             fk.yaw_bins(res_mm, radius),
         )
-        bits, crops, size, x0 = fk.packed_bins(rasterize, polygon, res_mm, radius)
+        bits, crops, size, x0 = fk.packed_bins(rasterize_window, polygon, res_mm, radius)
         return {"bits": bits, "crops": crops, "size": np.array(size), "x0_mm": np.array(x0)}
 
     arrays = cache.memo("silhouettes", entry, compute)

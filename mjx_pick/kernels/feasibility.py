@@ -50,13 +50,13 @@ class SilhouetteStack(NamedTuple):
     x0_mm: float
 
 
-def build_stack(rasterize, polygon, res_mm: float, radius_mm: float) -> SilhouetteStack:
+def build_stack(rasterize_window, polygon, res_mm: float, radius_mm: float) -> SilhouetteStack:
     """Rasterise the silhouette for yaw bins over [0, pi) (:func:`yaw_bins` of them).
 
     Yaw and yaw + pi give the same checks with (x, y) negated (the gripper is symmetric),
     so half a turn suffices.
     """
-    bits, crops, size, x0 = packed_bins(rasterize, polygon, res_mm, radius_mm)
+    bits, crops, size, x0 = packed_bins(rasterize_window, polygon, res_mm, radius_mm)
     return stack_from_bits(bits, crops, size, res_mm, x0)
 
 
@@ -66,10 +66,11 @@ def yaw_bins(res_mm: float, radius_mm: float) -> int:
     return max(8, int(math.ceil(math.pi * radius_mm / res_mm)))
 
 
-def packed_bins(rasterize, polygon, res_mm: float, radius_mm: float):
+def packed_bins(rasterize_window, polygon, res_mm: float, radius_mm: float):
     """The silhouette rotated by yaw k * pi / K for each of the K yaw bins, rasterised
-    by ``rasterize`` (``mjx_pick.core.objects.rasterize``), cropped to the rows and
-    columns it occupies and packed a bit per pixel.
+    by ``rasterize_window`` (``mjx_pick.core.objects.rasterize_window``: the grid where
+    the polygon lies), cropped to the rows and columns it occupies and packed a bit per
+    pixel.
 
     Returns:
       bits (B,) uint8: each bin's crop, row by row, ``np.packbits`` along the row, the
@@ -81,13 +82,14 @@ def packed_bins(rasterize, polygon, res_mm: float, radius_mm: float):
     parts, crops = [], np.zeros((n_bins, 4), np.int64)
     x0 = size = None
     for k in range(n_bins):
-        mask, (x0, _) = rasterize(polygon, res_mm, k * math.pi / n_bins, radius_mm=radius_mm)
-        size = mask.shape[0]
-        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        window, (x0, _), (w_row, w_col), size = rasterize_window(
+            polygon, res_mm, k * math.pi / n_bins, radius_mm=radius_mm
+        )
+        rows, cols = np.flatnonzero(window.any(axis=1)), np.flatnonzero(window.any(axis=0))
         if len(rows):
             r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
-            crops[k] = (r0, r1 - r0, c0, c1 - c0)
-            parts.append(np.packbits(mask[r0:r1, c0:c1].astype(bool), axis=1).ravel())
+            crops[k] = (w_row + r0, r1 - r0, w_col + c0, c1 - c0)
+            parts.append(np.packbits(window[r0:r1, c0:c1].astype(bool), axis=1).ravel())
     bits = np.concatenate(parts) if parts else np.zeros(0, np.uint8)
     return bits, crops, int(size), float(x0)
 
