@@ -720,10 +720,7 @@ class MjxBackend:
         sizes = np.asarray(shrink_sizes(size // n_dev, self.shrink_levels, self.SHRINK_MIN_SLOTS))
         rounds = np.asarray(rounds, np.int64).reshape(n_dev, len(sizes))
         ticks = np.asarray(ticks)[:n]
-        st = self.pool_stats
-        st.rounds += int(rounds.sum())
-        st.slot_ticks += int((rounds * sizes).sum()) * self.ticks_per_call
-        st.pick_ticks += int(ticks.sum())
-        st.picks += n
+        slot_ticks = int((rounds * sizes).sum()) * self.ticks_per_call
+        self.pool_stats.add(int(rounds.sum()), slot_ticks, int(ticks.sum()), n)
         results = {k: np.array(v)[:n] for k, v in out.items()}
         return results, Diagnostics(*(np.array(x)[:n] for x in diag))

@@ -60,6 +60,22 @@ class PoolStats:
         """Fraction of slot-ticks that simulated a pick that had not ended."""
         return self.pick_ticks / self.slot_ticks if self.slot_ticks else float("nan")
 
+    def add(self, rounds: int, slot_ticks: int, pick_ticks: int, picks: int, counters=()) -> None:
+        """Count one run: its refill rounds, slot-ticks, pick-ticks, picks and, where the
+        backend counts them, the solver's counters (steps, steps converged, then the
+        iteration histogram)."""
+        self.rounds += rounds
+        self.slot_ticks += slot_ticks
+        self.pick_ticks += pick_ticks
+        self.picks += picks
+        if len(counters):
+            self.steps += int(counters[0])
+            self.steps_converged += int(counters[1])
+            hist = np.asarray(counters[2:], np.int64)
+            if self.solver_iterations.size != hist.size:
+                self.solver_iterations = np.zeros(hist.size, np.int64)
+            self.solver_iterations += hist
+
     def merge(self, after: PoolStats, before: PoolStats) -> None:
         """Add what another PoolStats counted between two readings (a device's run)."""
         for f in dataclasses.fields(PoolStats):
