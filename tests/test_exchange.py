@@ -158,7 +158,7 @@ def test_clear_errors(runs, tmp_path):
     shutil.copytree(run, broken)
     table = pq.read_table(broken / "results.parquet").drop_columns(["yaw_deg"])
     pq.write_table(table, broken / "results.parquet")
-    with pytest.raises(ConfigError, match=r"has no yaw_deg column\(s\): it is not an evaluate results table"):
+    with pytest.raises(ConfigError, match=r"has no yaw_deg column\(s\): it is not an evaluate"):
         mp.export_labels(broken, "graspgen")
     (tmp_path / "x.json").write_text("{}")
     with pytest.raises(ConfigError, match="is not a GraspGen grasp file"):
