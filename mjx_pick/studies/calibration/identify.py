@@ -31,38 +31,24 @@ def identifiability(
     profile_scales=(1.0, 1.5, 3.0),
     seed: int = 0,
 ) -> dict:
-    """Intervals and identifiability of problem's parameters at theta.
+    """Intervals and identifiability of problem's parameters at theta (docs/calibration.md).
 
     Args:
       step: finite-difference step, a fraction of each parameter's bounds in z.
       ratio: identified iff the data-only 95 % half-width < ratio x the prior's.
-      profile_points: G, slice points per parameter over its bounds (the global check,
-        module docstring; P x G more parameter vectors); 0 skips it.
-      visited: (thetas (N, P), data negative log likelihoods (N,)) the fit simulated:
-        the empirical profile (no simulation); None: none.
-      profile_steps: CMA-ES generations of the refit profile per point; 0: only its
-        two starts (theta's other values and the valley's linear continuation).
-      profile_popsize: vectors per generation and profile point. The refit costs, per
-        parameter that reaches it, up to 2 x len(profile_scales) points x (2 +
-        profile_popsize x profile_steps) vectors (defaults: 156), all parameters'
-        points in 1 + profile_steps engine batches.
-      profile_sigma: CMA-ES's initial step, in units of each other parameter's
-        interval half-width (clipped to 2-25 % of its bounds).
-      profile_scales: where the profile is taken, multiples (>= 1 first: the interval's
-        end) of the interval's half-width in z, on both sides; empty: no profile.
+      profile_points: G, slice points per parameter over its bounds; 0 skips the slice.
+      visited: (thetas (N, P), data negative log likelihoods (N,)) the fit simulated,
+        for the empirical profile (no simulation); None: none.
+      profile_steps, profile_popsize: CMA-ES generations, and vectors per generation,
+        of the refit profile per point; 0 steps: only its two starts.
+      profile_sigma: CMA-ES's initial step, in the others' interval half-widths
+        (clipped to 2-25 % of their bounds).
+      profile_scales: multiples (>= 1) of the half-width in z, both sides, profiled; (): none.
       seed: the refit's CMA-ES seed.
 
     Returns:
-      {name: {value, interval (lo, hi) natural units, half_width_z, data_half_width_z
-      (and at the fine step), prior_half_width_z, curvature (J^T J diagonal, data only),
-      locally_quadratic, basin, local (the local tests' verdict), global (the slice:
-      z and natural values (G,), nll_rise (G,), interval, passed), slice_identified and
-      slice_interval (the verdict and interval before the profile), profile (None, or
-      {threshold, empirical: {points, reach_z, interval, passed} | None, refit:
-      {points: [{z, value, scale, nll_rise, others, kept}], reach_z, open, interval,
-      passed} | None, half_width_z, interval, passed}), identified}}, plus
-      'correlation' (P x P, data + prior), 'rollouts' spent (the refit's as
-      'profile_rollouts'), 'rows', 'wall_s'.
+      {name: that parameter's entry (keys: docs/calibration.md), 'correlation' (P x P,
+      data + prior), 'rollouts', 'profile_rollouts', 'rows', 'residuals', 'wall_s'}.
     """
     scales = _check_options(
         step, ratio, profile_points, profile_steps, profile_popsize, profile_sigma, profile_scales
@@ -84,19 +70,31 @@ def identifiability(
     options = (profile_points, profile_steps, profile_popsize, profile_sigma, seed)
     j_data = loc.jac[: ev.n_data]
     _profile(out, problem, z0, loc.nll[0], thr, wide_z, limit, seen, scales, j_data, options)
-    for i, name in enumerate(space.names):  # an optimum pressed on a bound: not fitted
-        side = at_bound(space, z0, i, out[name]["half_width_z"])
-        out[name]["at_bound"] = side
-        if side is not None:
-            out[name]["identified"] = False
-    cov = _covariance(loc.jac)
-    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = cov / np.outer(sd, sd)
-    out["correlation"] = np.where(np.isfinite(corr), corr, 0.0).round(4).tolist()
+    _mark_at_bound(out, space, z0)
+    out["correlation"] = _correlation(loc.jac)
     out["rollouts"] = problem.rollouts - spent0
     out.setdefault("profile_rollouts", 0)
     out["wall_s"] = time.perf_counter() - t_start
     return out
+
+
+def _mark_at_bound(out: dict, space, z0: np.ndarray) -> None:
+    """Sets each parameter's 'at_bound' in out (in place) and withdraws 'identified'
+    where the optimum z0 (P,) is pressed on a bound: not fitted."""
+    for i, name in enumerate(space.names):
+        side = at_bound(space, z0, i, out[name]["half_width_z"])
+        out[name]["at_bound"] = side
+        if side is not None:
+            out[name]["identified"] = False
+
+
+def _correlation(jac: np.ndarray) -> list:
+    """The parameters' correlation matrix (P x P nested lists, rounded to 4 places; 0
+    where undefined) from the residuals' Jacobian jac (M, P), data + prior rows."""
+    cov = _covariance(jac)
+    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = cov / np.outer(sd, sd)
+    return np.where(np.isfinite(corr), corr, 0.0).round(4).tolist()
 
 
 def _check_options(
@@ -548,12 +546,7 @@ def _refit(problem, z0, specs, jac, scale, steps, popsize, sigma, seed):
         run(starts, np.arange(k_n))
         return best_nll, best_z
     others = [np.delete(np.arange(p), s[0]) for s in specs]
-    h = jac.T @ jac
-    linear = starts.copy()
-    for k, (i, _, _, zi) in enumerate(specs):
-        o = others[k]
-        linear[k, o] = z0[o] - np.linalg.pinv(h[np.ix_(o, o)]) @ h[o, i] * (zi - z0[i])
-    linear = np.clip(linear, lo, hi)
+    linear = _valley_starts(starts, z0, specs, others, jac, lo, hi)
     run(np.concatenate([starts, linear]), np.tile(np.arange(k_n), 2))
     mean = best_z.copy()  # the better start
     est = E.cma_es(popsize, sigma, seed)
@@ -572,6 +565,18 @@ def _refit(problem, z0, specs, jac, scale, steps, popsize, sigma, seed):
             m = np.flatnonzero(owners == k)
             states[k] = est.tell(states[k], asked[k], np.minimum(nll[m], 1e30))
     return best_nll, best_z
+
+
+def _valley_starts(starts, z0, specs, others, jac, lo, hi) -> np.ndarray:
+    """The refit's second starts (K, P) in z: for each spec (i, _, _, zi), starts' row
+    with the others (indices others[k]) at their Gauss-Newton optimum given z_i = zi
+    (jac: the data's Jacobian (M, P) at z0), clipped to the bounds lo, hi (P,)."""
+    h = jac.T @ jac
+    linear = starts.copy()
+    for k, (i, _, _, zi) in enumerate(specs):
+        o = others[k]
+        linear[k, o] = z0[o] - np.linalg.pinv(h[np.ix_(o, o)]) @ h[o, i] * (zi - z0[i])
+    return np.clip(linear, lo, hi)
 
 
 def _global(grid, rise, z0, half, spacing, steps_z, steps_rise) -> dict:
