@@ -107,7 +107,7 @@ def residuals(sim: dict, data, noise: Noise, prior=None):
     sim: (..., R) 'lift_height_mm', 't_reached_s', 'diverged' and, where traces are
     measured, (..., R, T) arrays named as the trace kinds, and optionally their
     replicas '<kind>_replicas' (..., R, K - 1, T) with 'diverged_replicas'
-    (..., R, K - 1) (module docstring). data: a ``LossData``.
+    (..., R, K - 1) (docs/calibration.md). data: a ``LossData``.
     prior: (..., P) prior residuals of the parameters (or None).
     """
     out = {}
@@ -124,56 +124,85 @@ def residuals(sim: dict, data, noise: Noise, prior=None):
         out["outcome"] = np.sqrt(noise.outcome_weight) * r
     has = np.isfinite(data.lift_time_s)
     if noise.time_weight and has.any():
-        t = sim["t_reached_s"]
-        sim_t = jnp.where(t >= 0, t - data.settle_s, data.close_timeout_s)
-        sim_t = jnp.where(diverged, data.close_timeout_s, jnp.nan_to_num(sim_t))
-        meas = jnp.broadcast_to(jnp.asarray(np.nan_to_num(data.lift_time_s), jnp.float32), t.shape)
-        err = (sim_t - meas) / noise.lift_time_s
+        err = _lift_time_errors(sim, data, noise)
         out["lift_time"] = np.sqrt(noise.time_weight) * err[..., has]
-    tt = data.traces
-    if noise.trace_weight and tt is not None:
-        r_n, t_n = tt.target.shape[1:]
-        scale = {
-            "force_n": np.repeat(noise.force_fraction * data.grip_force_n[:, None], t_n, 1),
-            "lift_mm": np.full((r_n, t_n), noise.lift_mm),
-            "rotation_deg": np.full((r_n, t_n), noise.rotation_deg),
-        }
-        width = int(round(noise.trace_window_s / data.dt_s)) if data.dt_s else 0
-        for k, kind in enumerate(tt.kinds):
-            rows = tt.mask[k].any(axis=-1)
-            pred = jnp.where(diverged[..., None], 0.0, jnp.nan_to_num(sim[kind]))
-            # (..., R, K, T): the row's own simulation first, then its replicas
-            reps = sim.get(f"{kind}_replicas")
-            ens = pred[..., None, :]
-            if reps is not None:
-                rd = sim.get("diverged_replicas", jnp.zeros(reps.shape[:-1], bool))
-                reps = jnp.where(rd[..., None], 0.0, jnp.nan_to_num(reps))
-                ens = jnp.concatenate([ens, reps], axis=-2)
-            mask = np.asarray(tt.mask[k], np.float32)
-            target = moving_average(np.asarray(tt.target[k]) * mask, width)
-            weight = moving_average(mask, width)
-            target = np.where(weight > 0, target / np.maximum(weight, 1e-9), 0.0)
-            ens = moving_average(ens, width)
-            mean = ens.mean(axis=-2)
-            var = ens.var(axis=-2, ddof=1) if ens.shape[-2] > 1 else jnp.zeros_like(mean)
-            # a few replicas' variance is itself noisy (by chance they agree at a tick
-            # where the grasp is chaotic): at least its mean over 4 windows around
-            var = jnp.maximum(var, moving_average(var, 4 * width))
-            shape = mean.shape
-
-            def full(a, shape=shape):
-                return jnp.broadcast_to(jnp.asarray(a, jnp.float32), shape)
-
-            m = full(mask)
-            s2 = full(scale[kind]) ** 2
-            nll = (mean - full(target)) ** 2 / (s2 + var) + jnp.log1p(var / s2)
-            rms = jnp.sqrt(jnp.sum(nll * m, axis=-1) / jnp.maximum(m.sum(-1), 1.0))
-            floor = jnp.maximum(rms, 1.0)
-            rms = jnp.where(diverged, floor, rms)
-            out[kind] = np.sqrt(noise.trace_weight) * rms[..., rows]
+    if noise.trace_weight and data.traces is not None:
+        out.update(_trace_residuals(sim, data, noise))
     if prior is not None and noise.prior_weight:
         out["prior"] = np.sqrt(noise.prior_weight) * jnp.asarray(prior, jnp.float32)
     return out
+
+
+def _lift_time_errors(sim: dict, data, noise: Noise):
+    """(..., R) simulated minus measured time to lift (s, from the settle), in units of
+    noise.lift_time_s; a pick that never lifted or diverged counts at the close timeout."""
+    t = sim["t_reached_s"]
+    sim_t = jnp.where(t >= 0, t - data.settle_s, data.close_timeout_s)
+    sim_t = jnp.where(sim["diverged"], data.close_timeout_s, jnp.nan_to_num(sim_t))
+    meas = jnp.broadcast_to(jnp.asarray(np.nan_to_num(data.lift_time_s), jnp.float32), t.shape)
+    return (sim_t - meas) / noise.lift_time_s
+
+
+def _trace_residuals(sim: dict, data, noise: Noise) -> dict:
+    """{kind: (..., R_kind)}: per measured row of each trace kind, its RMS negative log
+    likelihood over the ticks (``_trace_rms``), times the square root of the trace weight."""
+    tt = data.traces
+    diverged = sim["diverged"]
+    r_n, t_n = tt.target.shape[1:]
+    scale = {
+        "force_n": np.repeat(noise.force_fraction * data.grip_force_n[:, None], t_n, 1),
+        "lift_mm": np.full((r_n, t_n), noise.lift_mm),
+        "rotation_deg": np.full((r_n, t_n), noise.rotation_deg),
+    }
+    width = int(round(noise.trace_window_s / data.dt_s)) if data.dt_s else 0
+    out = {}
+    for k, kind in enumerate(tt.kinds):
+        rows = tt.mask[k].any(axis=-1)
+        ens = _trace_ensemble(sim, kind, diverged)
+        rms = _trace_rms(ens, tt.target[k], tt.mask[k], scale[kind], width, diverged)
+        out[kind] = np.sqrt(noise.trace_weight) * rms[..., rows]
+    return out
+
+
+def _trace_ensemble(sim: dict, kind: str, diverged):
+    """(..., R, K, T) the simulated traces of kind: the row's own simulation first, then
+    its replicas ('<kind>_replicas', if any); a diverged simulation's trace is 0."""
+    pred = jnp.where(diverged[..., None], 0.0, jnp.nan_to_num(sim[kind]))
+    reps = sim.get(f"{kind}_replicas")
+    ens = pred[..., None, :]
+    if reps is not None:
+        rd = sim.get("diverged_replicas", jnp.zeros(reps.shape[:-1], bool))
+        reps = jnp.where(rd[..., None], 0.0, jnp.nan_to_num(reps))
+        ens = jnp.concatenate([ens, reps], axis=-2)
+    return ens
+
+
+def _trace_rms(ens, target, mask, scale, width: int, diverged):
+    """(..., R) RMS over the measured ticks of a trace's Gaussian negative log likelihood:
+    ens (..., R, K, T) simulated traces, target and mask (R, T), scale (R, T) the noise
+    (trace units), all smoothed over width ticks; the variance is the replicas' spread
+    plus scale^2. A diverged row counts at least 1."""
+    mask = np.asarray(mask, np.float32)
+    target = moving_average(np.asarray(target) * mask, width)
+    weight = moving_average(mask, width)
+    target = np.where(weight > 0, target / np.maximum(weight, 1e-9), 0.0)
+    ens = moving_average(ens, width)
+    mean = ens.mean(axis=-2)
+    var = ens.var(axis=-2, ddof=1) if ens.shape[-2] > 1 else jnp.zeros_like(mean)
+    # a few replicas' variance is itself noisy (by chance they agree at a tick
+    # where the grasp is chaotic): at least its mean over 4 windows around
+    var = jnp.maximum(var, moving_average(var, 4 * width))
+    shape = mean.shape
+
+    def full(a):
+        return jnp.broadcast_to(jnp.asarray(a, jnp.float32), shape)
+
+    m = full(mask)
+    s2 = full(scale) ** 2
+    nll = (mean - full(target)) ** 2 / (s2 + var) + jnp.log1p(var / s2)
+    rms = jnp.sqrt(jnp.sum(nll * m, axis=-1) / jnp.maximum(m.sum(-1), 1.0))
+    floor = jnp.maximum(rms, 1.0)
+    return jnp.where(diverged, floor, rms)
 
 
 def moving_average(x, width: int):

@@ -178,9 +178,21 @@ def param_space(
     name to (mean, sd) in natural units (sd in log units for log parameters).
     """
     names = canonical_params(names)
-    k_max, b_max = stiffest_spring(mass_kg, settings.solver.timeconst_s)  # N/mm, N s/mm
     f_min = float(np.min(grip_force_n)) if grip_force_n is not None and len(grip_force_n) else 12.5
-    default = {
+    default = _default_bounds(mass_kg, settings.solver.timeconst_s, f_min)
+    bounds = {canonical_params([k])[0]: v for k, v in (bounds or {}).items()}
+    priors = {canonical_params([k])[0]: v for k, v in (priors or {}).items()}
+    lo, hi = _checked_bounds(names, bounds, default, f_min)
+    log = np.array([PARAMS[n].log for n in names])
+    mean, sd = _prior_moments(names, lo, hi, log, start, priors)
+    return ParamSpace(names, lo, hi, log, mean, sd)
+
+
+def _default_bounds(mass_kg: float, timeconst_s: float, f_min: float) -> dict:
+    """{name: (lo, hi)} natural units, every parameter's default bounds (param_space's
+    docstring); f_min: the smallest F_d measured (N)."""
+    k_max, b_max = stiffest_spring(mass_kg, timeconst_s)  # N/mm, N s/mm
+    return {
         "pad_friction": (0.05, 2.0),
         "pad_torsion_mm": (0.05, 20.0),
         "table_friction": (0.01, 2.0),
@@ -190,8 +202,12 @@ def param_space(
         "table_damping_ns_per_mm": (b_max / 100, b_max),
         "force_offset_n": (-0.4 * f_min, 0.4 * f_min),
     }
-    bounds = {canonical_params([k])[0]: v for k, v in (bounds or {}).items()}
-    priors = {canonical_params([k])[0]: v for k, v in (priors or {}).items()}
+
+
+def _checked_bounds(names, bounds: dict, default: dict, f_min: float):
+    """(lo, hi) (P,) natural units: bounds' value of each name, else default's; a ConfigError
+    names a pair that is empty, not finite, not positive (all but the force offset) or
+    whose force offset would make the smallest F_d (f_min, N) zero or negative."""
     lo, hi = [], []
     for n in names:
         a, b = (float(x) for x in bounds.get(n, default[n]))
@@ -206,8 +222,13 @@ def param_space(
             )
         lo.append(a)
         hi.append(b)
-    lo, hi = np.asarray(lo), np.asarray(hi)
-    log = np.array([PARAMS[n].log for n in names])
+    return np.asarray(lo), np.asarray(hi)
+
+
+def _prior_moments(names, lo, hi, log, start: dict | None, priors: dict):
+    """(mean, sd) (P,) of each parameter's prior in z: priors' (mean, sd) where given
+    (checked: mean within lo..hi, sd > 0), else the start (or the bounds' middle) and
+    half the bounds' width in z."""
     zlo, zhi = _z(lo, log), _z(hi, log)
     mean, sd = [], []
     for i, n in enumerate(names):
@@ -228,7 +249,7 @@ def param_space(
             z = math.log(v) if log[i] else v
         mean.append(z)
         sd.append(0.5 * (zhi[i] - zlo[i]))
-    return ParamSpace(names, lo, hi, log, np.asarray(mean), np.asarray(sd))
+    return np.asarray(mean), np.asarray(sd)
 
 
 def check_start(space: ParamSpace, start: dict[str, float]) -> None:

@@ -52,21 +52,9 @@ def synthetic_outcomes(
     theta = problem.space.theta([force_offset_n])
     out = problem.simulate(theta[None])
     g = hidden.grasp
-    keep = problem.t_ticks >= 0
-    t = problem.t_ticks[keep]
-    rng = np.random.default_rng(seed)
     row_traces = [None] * n
     if traces:
-        row_traces = []
-        for i in range(n):
-            tr = {}
-            for k in kinds:
-                v = out[k][0, i, keep].astype(float)
-                sd = (trace_noise or {}).get(k, 0.0)
-                if sd:
-                    v = v + rng.normal(0.0, sd, v.shape)
-                tr[k] = np.stack([t, v], axis=1)
-            row_traces.append(tr)
+        row_traces = _row_traces(out, kinds, n, problem.t_ticks, trace_noise, seed)
     lift = out["t_reached_s"][0] - g.settle_s
     lift = np.where(out["t_reached_s"][0] >= 0, lift, np.nan) if lift_times else np.full(n, np.nan)
     return dataclasses.replace(
@@ -75,6 +63,26 @@ def synthetic_outcomes(
         lift_time_s=lift,
         traces=tuple(row_traces),
     )
+
+
+def _row_traces(out: dict, kinds, n: int, t_ticks, trace_noise: dict | None, seed: int):
+    """Per row of n, {kind: (T, 2) [t (s), value]} of the simulated traces out[kind] (1, R, T')
+    on the ticks from the close command on (t_ticks >= 0), each with Gaussian noise of sd
+    trace_noise[kind] (drawn row by row, kind by kind, from one generator of seed)."""
+    keep = t_ticks >= 0
+    t = t_ticks[keep]
+    rng = np.random.default_rng(seed)
+    row_traces = []
+    for i in range(n):
+        tr = {}
+        for k in kinds:
+            v = out[k][0, i, keep].astype(float)
+            sd = (trace_noise or {}).get(k, 0.0)
+            if sd:
+                v = v + rng.normal(0.0, sd, v.shape)
+            tr[k] = np.stack([t, v], axis=1)
+        row_traces.append(tr)
+    return row_traces
 
 
 def synthetic_digest(obj: ObjectModel, hidden: Settings) -> str:
