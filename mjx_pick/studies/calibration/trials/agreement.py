@@ -35,10 +35,6 @@ def agreement(predicted, trials, successes, rows: list[dict] | None = None) -> d
     lo, hi = wilson_interval(k, n)
     majority = bool(real.sum() * 2 >= n)
     base_k = int(np.sum(real == majority))
-
-    def rate(num, den):
-        return None if den == 0 else {"value": num / den, "ci": list(wilson_interval(num, den))}
-
     out = {
         "pick_points": n,
         "trials": int(t.sum()),
@@ -51,8 +47,8 @@ def agreement(predicted, trials, successes, rows: list[dict] | None = None) -> d
             "sim_failure_real_success": fn,
             "sim_failure_real_failure": tn,
         },
-        "sensitivity": rate(tp, tp + fn),  # real successes predicted as such
-        "specificity": rate(tn, tn + fp),  # real failures predicted as such
+        "sensitivity": _rate(tp, tp + fn),  # real successes predicted as such
+        "specificity": _rate(tn, tn + fp),  # real failures predicted as such
         "baseline": {
             "predict": "success" if majority else "failure",
             "correct": base_k,
@@ -63,8 +59,22 @@ def agreement(predicted, trials, successes, rows: list[dict] | None = None) -> d
         "trials_agreeing": int(np.sum(np.where(pred, s, t - s))),
         "split": int(np.sum(s * 2 == t)),
     }
+    out["rows"] = _per_row(pred, t, s, real, correct, rows)
+    out["notes"] = agreement_notes(out, pred, real)
+    return out
+
+
+def _rate(num: int, den: int) -> dict | None:
+    """num / den with its Wilson 95 % interval, {value, ci}; None without a denominator."""
+    return None if den == 0 else {"value": num / den, "ci": list(wilson_interval(num, den))}
+
+
+def _per_row(pred, t, s, real, correct, rows: list[dict] | None) -> list[dict]:
+    """The per pick-point table: rows' entry (or {}) with the prediction, the tried
+    successes and trials, the real verdict with its Wilson 95 % interval and whether
+    they agree; pred, t, s, real, correct: (R,) arrays."""
     per = []
-    for i in range(n):
+    for i in range(len(pred)):
         row = dict(rows[i]) if rows else {}
         ci = wilson_interval(int(s[i]), int(t[i]))
         row.update(
@@ -76,9 +86,7 @@ def agreement(predicted, trials, successes, rows: list[dict] | None = None) -> d
             agrees=bool(correct[i]),
         )
         per.append(row)
-    out["rows"] = per
-    out["notes"] = agreement_notes(out, pred, real)
-    return out
+    return per
 
 
 def agreement_notes(a: dict, pred, real) -> list[str]:

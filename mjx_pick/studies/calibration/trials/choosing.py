@@ -125,20 +125,7 @@ def new_round(
 ) -> dict:
     """Choose a round of pick-points from `table`'s rows (not in exclude); its plan
     entry (``trials.json``'s rounds)."""
-    rows_at = candidate_pool(table, exclude, pool)
-    if len(rows_at) == 0:
-        raise ConfigError(
-            "no pick-point left to try: every usable pick-point of the run is in the sheet "
-            "(evaluate more pick-points and plan again)"
-        )
-    sub = table.take(pa.array(rows_at))
-    checker = pp.FeasibilityChecker(
-        sims.object, sims.settings.gripper, pick_config, sims.settings.grasp
-    )
-    cols = {c: np.asarray(sub[c]) for c in ("pick_id", "x_mm", "y_mm", "yaw_deg")}
-    picks = checker.batch(cols["pick_id"], cols["x_mm"], cols["y_mm"], cols["yaw_deg"], "trials")
-    keep = np.isin(cols["pick_id"], picks.pick_id)
-    sub = sub.filter(pa.array(keep))
+    sub, picks = _feasible_candidates(sims, table, exclude, pool, pick_config)
     draw_dicts = [dict(zip(names, map(float, d), strict=True)) for d in draws]
     spent = sims.simulations
     info = information(
@@ -152,13 +139,7 @@ def new_round(
         seed=seed,
         pick_config=pick_config,
     )
-    run_success = np.asarray(sub["success"], bool)
-    run_score = np.asarray(sub["score"], float)
-    run_failure = np.asarray(sub["failure"].to_pylist(), dtype=object)
-    if predictions_from_table:  # the run's own answer is the prediction under test
-        success, score, failure = run_success, run_score, run_failure
-    else:
-        success, score, failure = info.success, info.score, info.failure
+    success, score, failure = _prediction_under_test(sub, info, predictions_from_table)
     rows = _candidates(picks, info, success, score, failure, len(draws))
     chosen, why = choose(rows, n, info_share)
     grip_force_n = float(sims.settings.grasp.grip_force_n)
@@ -178,6 +159,37 @@ def new_round(
             {k: r[k] for k in ("pick_id", "success", "p_nominal", "bits")} for r in rows
         ],
     }
+
+
+def _feasible_candidates(sims: Simulations, table: pa.Table, exclude, pool: int, pick_config):
+    """table's candidate pool (``candidate_pool``, at most pool rows not in exclude)
+    that the gripper can reach: (those rows (C,), their feasible picks). ConfigError
+    when no usable pick-point is left to try."""
+    rows_at = candidate_pool(table, exclude, pool)
+    if len(rows_at) == 0:
+        raise ConfigError(
+            "no pick-point left to try: every usable pick-point of the run is in the sheet "
+            "(evaluate more pick-points and plan again)"
+        )
+    sub = table.take(pa.array(rows_at))
+    checker = pp.FeasibilityChecker(
+        sims.object, sims.settings.gripper, pick_config, sims.settings.grasp
+    )
+    cols = {c: np.asarray(sub[c]) for c in ("pick_id", "x_mm", "y_mm", "yaw_deg")}
+    picks = checker.batch(cols["pick_id"], cols["x_mm"], cols["y_mm"], cols["yaw_deg"], "trials")
+    keep = np.isin(cols["pick_id"], picks.pick_id)
+    return sub.filter(pa.array(keep)), picks
+
+
+def _prediction_under_test(sub: pa.Table, info, from_table: bool) -> tuple:
+    """(success, score, failure) (C,) of the prediction the trials test: the run's own
+    answer in sub where from_table, else the nominal re-simulation's (info)."""
+    run_success = np.asarray(sub["success"], bool)
+    run_score = np.asarray(sub["score"], float)
+    run_failure = np.asarray(sub["failure"].to_pylist(), dtype=object)
+    if from_table:
+        return run_success, run_score, run_failure
+    return info.success, info.score, info.failure
 
 
 def _candidates(picks, info, success, score, failure, n_draws: int) -> list[dict]:
