@@ -99,7 +99,19 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
     )
     out["score_map"] = out_dir / "score_map.png"
 
-    # the gripper is symmetric: yaw and yaw + 180 are the same grasp
+    _success_by_yaw(x, y, yaw, success, yaw_bins, out_dir / "success_by_yaw.png")
+    out["success_by_yaw"] = out_dir / "success_by_yaw.png"
+    _score_hist(np.asarray(t["score"], float), success, out_dir / "score_hist.png")
+    out["score_hist"] = out_dir / "score_hist.png"
+    failures = np.asarray(t["failure"].to_pylist(), dtype=object)
+    _failures_chart(failures, out_dir / "failures.png")
+    out["failures"] = out_dir / "failures.png"
+    return out
+
+
+def _success_by_yaw(x, y, yaw, success, yaw_bins: int, path: Path) -> None:
+    """One success-rate map over the offsets (x, y mm, (N,)) per bin of yaw (deg, folded
+    to 0-180: the gripper is symmetric, yaw and yaw + 180 are the same grasp)."""
     folded = np.mod(yaw, 180.0)
     edges = np.linspace(0.0, 180.0, yaw_bins + 1)
     fig, axes = new_figure(1, yaw_bins, figsize=(3.6 * yaw_bins, 3.6), squeeze=False)
@@ -118,12 +130,14 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
         if k == 0:
             ax.set_ylabel("y offset, mm")
     fig.colorbar(im, ax=axes[0].tolist(), label="success rate", shrink=0.8)
-    save_png(fig, out_dir / "success_by_yaw.png")
-    out["success_by_yaw"] = out_dir / "success_by_yaw.png"
+    save_png(fig, path)
 
+
+def _score_hist(raw: np.ndarray, success: np.ndarray, path: Path) -> None:
+    """Histogram of the scores (N,) over 0-1, successes and failures stacked; diverged
+    pick-points (no score: NaN) left out."""
     fig, ax = new_figure(figsize=(6, 3.5))
-    raw = np.asarray(t["score"], float)
-    scored = np.isfinite(raw)  # diverged pick-points have no score
+    scored = np.isfinite(raw)
     ax.hist(
         [raw[scored & success], raw[scored & ~success]],
         bins=np.linspace(0, 1, 26),
@@ -135,11 +149,12 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
     ax.set_ylabel("pick-points")
     ax.legend()
     fig.tight_layout()
-    save_png(fig, out_dir / "score_hist.png")
-    out["score_hist"] = out_dir / "score_hist.png"
+    save_png(fig, path)
 
+
+def _failures_chart(failures: np.ndarray, path: Path) -> None:
+    """Bar chart of how many pick-points ended in each outcome (failures: (N,) names)."""
     names = list(kt.FAILURES)
-    failures = np.asarray(t["failure"].to_pylist(), dtype=object)
     counts = [int(np.sum(failures == name)) for name in names]
     fig, ax = new_figure(figsize=(6, 3.5))
     ax.barh(
@@ -152,6 +167,4 @@ def maps(run: Run, out_dir: Path, yaw_bins: int = 4) -> dict[str, Path]:
     ax.set_xlabel("pick-points")
     ax.set_title("outcome: success, or why it failed")
     fig.tight_layout()
-    save_png(fig, out_dir / "failures.png")
-    out["failures"] = out_dir / "failures.png"
-    return out
+    save_png(fig, path)

@@ -79,31 +79,14 @@ def robot_picks(
     rows = table.to_pylist()
     by_id = {r["pick_id"]: r for r in rows}
     doubt = {r["pick_id"]: in_doubt_reasons(r) for r in rows}
-    if robust is not None:
-        order = [r["pick_id"] for r in robust.to_pylist() if r["pick_id"] in by_id]
-        prob = {r["pick_id"]: r for r in robust.to_pylist()}
-    else:
-        from mjx_pick.core.metrics import best_successes
-
-        success = np.asarray(table["success"])
-        best = [rows[i]["pick_id"] for i in best_successes(success, table["score"], len(success))]
-        order = [pid for pid in best if not doubt[pid]]
-        order += [pid for pid in best if doubt[pid]]  # each part by score
-        prob = {}
+    order, prob = _pick_order(table, rows, by_id, doubt, robust)
     user = frame_matrix(frame) if frame is not None else None
     out = []
     for pid in order[:k]:
         r = by_id[pid]
-        rot = _rot_z(-r["yaw_deg"])  # gripper axes in the object frame
         # a linkage starts raised so its pads meet the part at the grasp height
         raise_mm = float(r.get("height_compensation_mm") or 0.0)
-        pos = -rot @ np.array([r["x_mm"], r["y_mm"], 0.0]) + np.array(
-            [0, 0, pick_height_mm + raise_mm]
-        )
-        t = np.eye(4)
-        t[:3, :3], t[:3, 3] = rot, pos
-        if user is not None:
-            t = user @ t
+        t = _gripper_pose(r, pick_height_mm + raise_mm, user)
         q = Rotation.from_matrix(t[:3, :3]).as_quat()  # x, y, z, w
         entry = {
             "pick_id": int(pid),
@@ -127,3 +110,33 @@ def robot_picks(
         }
         out.append(entry)
     return out
+
+
+def _pick_order(table: pa.Table, rows: list[dict], by_id: dict, doubt: dict, robust):
+    """(pick_ids best first, {pick_id: robust row}): robust's order and rows where given
+    (pick-points of table only), else table's successes by score, clear ones first, then
+    those whose label is in doubt (doubt: {pick_id: reasons}), and no robust rows."""
+    if robust is not None:
+        order = [r["pick_id"] for r in robust.to_pylist() if r["pick_id"] in by_id]
+        prob = {r["pick_id"]: r for r in robust.to_pylist()}
+        return order, prob
+    from mjx_pick.core.metrics import best_successes
+
+    success = np.asarray(table["success"])
+    best = [rows[i]["pick_id"] for i in best_successes(success, table["score"], len(success))]
+    order = [pid for pid in best if not doubt[pid]]
+    order += [pid for pid in best if doubt[pid]]  # each part by score
+    return order, {}
+
+
+def _gripper_pose(r: dict, height_mm: float, user: np.ndarray | None) -> np.ndarray:
+    """4x4 transform (mm) of the gripper in the object frame for results row r (the
+    object's x_mm, y_mm, yaw_deg in the gripper frame), at height_mm above the table;
+    in the user's frame when user (4x4, the object frame's pose there) is given."""
+    rot = _rot_z(-r["yaw_deg"])  # gripper axes in the object frame
+    pos = -rot @ np.array([r["x_mm"], r["y_mm"], 0.0]) + np.array([0, 0, height_mm])
+    t = np.eye(4)
+    t[:3, :3], t[:3, 3] = rot, pos
+    if user is not None:
+        t = user @ t
+    return t
