@@ -299,13 +299,9 @@ def claim(
 ) -> Path:
     """Check that `out` may take this command's results, lock it and mark it running.
 
-    The folder's advisory lock (``.mjx_pick.lock``, a ``flock``) is taken first and
-    held until :func:`finish` (or :func:`end_claims`, or the process's end): while
-    another process holds it, the folder is refused -- with --overwrite too -- naming
-    that process. A folder whose last run failed, or says "running" while no process
-    holds its lock (a run killed outright), holds nothing finished: another
-    configuration replaces its files without --overwrite; the same one continues
-    (--resume) from what it kept.
+    The folder's advisory lock is held until :func:`finish` (or :func:`end_claims`, or
+    the process's end), refusing any other process's claim meanwhile, --overwrite too;
+    what may replace a folder's files: docs/outputs.md.
 
     Args:
       command: the writing command's name ("evaluate", "sweep", ...).
@@ -314,7 +310,7 @@ def claim(
       overwrite: empty a folder this project wrote and start again.
       joins: commands whose folder this one may add its files to (robust adds its
         ranking to an evaluate folder).
-      settings: the settings hashed into key (JSON-able); recorded in the manifest
+      settings: the settings hashed into key (JSON-able), recorded in the manifest
         (:func:`flat_settings`) so that a later refusal names what changed.
 
     Returns:
@@ -340,6 +336,13 @@ def claim(
         if held is not None:
             held.settings, held.key = flat, key  # recorded in run-<command>.json by finish
         return path  # add to it; its own manifest stays
+    _write_running_manifest(path, command, key, flat)
+    return path
+
+
+def _write_running_manifest(path: Path, command: str, key: str, flat: dict | None) -> None:
+    """path's manifest for a run that starts now: the command, its configuration key and
+    flat settings, status "running", this process and the result-deciding versions."""
     write_json(
         path / MANIFEST,
         {
@@ -353,7 +356,6 @@ def claim(
             "versions": result_versions(),
         },
     )
-    return path
 
 
 def _decide(path, command, key, old, joined, taken, resume, overwrite, flat) -> None:
@@ -534,25 +536,20 @@ def finish(
     release_lock: bool = True,
     key: str | None = None,
 ) -> Path:
-    """Record that a command's run in `path` ended, and write its metadata.
+    """Record that a command's run in `path` ended, and write its metadata (docs/outputs.md).
 
     Args:
       status: "complete", "interrupted" (Ctrl-C), "terminated" (SIGTERM), "cancelled"
-        (a cancel event) or "failed" (an error, given as message).
-      message: why the run stopped (recorded in the manifest and run.json).
-      release_lock: give up the folder's lock (:func:`claim`) once written; False for
-        a caller that still tidies the folder (then :func:`release`).
+        (a cancel event) or "failed"; message: why it stopped (manifest and run.json).
+      release_lock: give up the folder's lock once written; False for a caller that
+        still tidies the folder (then :func:`release`).
       command: the command (default: the manifest's, i.e. the folder's owner).
-      config: the merged configuration of the run (JSON-able).
-      seed, backend, device: what ran ('mujoco', 'cpu:2 threads', ...).
+      config (merged, JSON-able), seed, backend ('mujoco'), device ('cpu:2 threads'): what ran.
       timing: seconds, e.g. ``runner.Runner.describe()['timing']`` plus wall_s.
-      key: the configuration key of a command that joined another command's folder
-        (its own folder's key is the manifest's): recorded, so that
-        :func:`is_complete` knows the run again.
+      key: the configuration key of a command that joined another's folder (is_complete).
 
     Returns:
-      the metadata file: ``run.json``, or ``run-<command>.json`` for a command that
-      joined another command's folder (whose manifest is then left as it is).
+      ``run.json``, or ``run-<command>.json`` for a command that joined another's folder.
     """
     path = Path(path)
     now = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
@@ -560,14 +557,9 @@ def finish(
     command = command or manifest.get("command")
     own = manifest.get("command") in (None, command)
     if own:
-        manifest["status"] = status
-        manifest["finished"] = now
-        manifest.pop("message", None)
-        if message:
-            manifest["message"] = message
-        write_json(path / MANIFEST, manifest)
-    held = _held.get(path.resolve())
-    if not own and key is None and held is not None:
+        _mark_finished(path, manifest, status, now, message)
+    held = None if own else _held.get(path.resolve())
+    if held is not None and key is None:
         key = held.key  # a joined run stopped early: its claim's key
     record = {
         "command": command,
@@ -583,10 +575,21 @@ def finish(
         "versions": versions(),
         "config": config,
     }
-    if not own and held is not None and held.settings is not None:
+    if held is not None and held.settings is not None:
         record["settings"] = held.settings  # what a later refusal names as changed
     try:
         return write_json(path / (RUN if own else f"run-{command}.json"), record)
     finally:
         if release_lock:
             release(path)
+
+
+def _mark_finished(path: Path, manifest: dict, status: str, now: str, message) -> None:
+    """Rewrites path's manifest (as read: manifest) with the run's end status, when it
+    ended (ISO time now) and why (message; an earlier run's message is dropped)."""
+    manifest["status"] = status
+    manifest["finished"] = now
+    manifest.pop("message", None)
+    if message:
+        manifest["message"] = message
+    write_json(path / MANIFEST, manifest)
