@@ -169,6 +169,32 @@ def _kernels():
     return warp_kernels
 
 
+def _put_model(mjm, slots: int, fields: tuple[str, ...], deterministic: bool):
+    """The scene's model on the current Warp device with a row per slot for the contact
+    pair values and each carried field (an ``opt.*`` field: one value per slot)."""
+    import mujoco_warp as mjw
+
+    wp = _warp()
+    batch = {name: slots for name in ("pair_friction", "pair_solref", "pair_solimp")}
+    for name in fields:
+        if not name.startswith("opt."):
+            batch[name] = slots
+    m = mjw.put_model(mjm, batch_sizes=batch)
+    for name in fields:
+        if name.startswith("opt."):
+            attr = "impratio_invsqrt" if name == "opt.impratio" else name[4:]
+            one = getattr(m.opt, attr).numpy()
+            setattr(m.opt, attr, wp.array(np.repeat(one[:1], slots), dtype=float))
+    m.opt.run_rne_postconstraint = True  # cfrc_ext: the pad forces
+    m.opt.warn_overflow = 0  # read back per pick instead
+    m.opt.graph_conditional = wp.get_device().is_cuda
+    if deterministic:
+        from mujoco_warp._src.types import DeterminismType
+
+        m.opt.deterministic = DeterminismType.ALL
+    return m
+
+
 class _Pool:
     """One pool of slots on one device: the model with its batched rows, the data, the
     slots' controller state and the captured control period."""
@@ -186,24 +212,7 @@ class _Pool:
         mjm = scene.model
         self.fields = backend.fields  # per-pick model fields this pool carries
         with on_device(dev):
-            batch = {name: slots for name in ("pair_friction", "pair_solref", "pair_solimp")}
-            for name in self.fields:
-                if not name.startswith("opt."):
-                    batch[name] = slots
-            m = mjw.put_model(mjm, batch_sizes=batch)
-            for name in self.fields:
-                if name.startswith("opt."):
-                    attr = "impratio_invsqrt" if name == "opt.impratio" else name[4:]
-                    one = getattr(m.opt, attr).numpy()
-                    setattr(m.opt, attr, wp.array(np.repeat(one[:1], slots), dtype=float))
-            m.opt.run_rne_postconstraint = True  # cfrc_ext: the pad forces
-            m.opt.warn_overflow = 0  # read back per pick instead
-            m.opt.graph_conditional = wp.get_device().is_cuda
-            if backend.deterministic:
-                from mujoco_warp._src.types import DeterminismType
-
-                m.opt.deterministic = DeterminismType.ALL
-            self.m = m
+            self.m = _put_model(mjm, slots, self.fields, backend.deterministic)
             self.buffers = backend.buffers
             self.d = mjw.make_data(
                 mjm,
@@ -587,15 +596,26 @@ class WarpBackend:
         with on_device(dev):
             wp.synchronize_device()
             counters = [p.counters() - c0 for p, c0 in zip(pools, counters0, strict=True)]
-            picks = _finalize_device(_kernels(), src, out.acc, gw)
-            k = out.k.numpy().copy()
-            traces = None
-            if record:
-                traces = pad_traces(pool.trace.numpy()[:n], k, out.phase.numpy().copy(), self.grasp)
-            diag = Diagnostics(*(a.numpy().copy() for a in (out.overflow, out.nefc, out.nacon)))
+            picks, traces, diag = self._read_out(src, out, pool if record else None)
+            pick_ticks = int(out.k.numpy().sum())
         self.stats.run_s += time.perf_counter() - t0
         self.stats.n += n
-        self.pool_stats.add(rounds, slot_ticks, int(k.sum()), n, sum(counters))
+        self.pool_stats.add(rounds, slot_ticks, pick_ticks, n, sum(counters))
+        return picks, traces, diag
+
+    def _read_out(self, src: dict, out: _Outputs, recorded: _Pool | None):
+        """The run's results from the device: (results, traces or None, Diagnostics) in
+        pick-point order; traces from the recorded pool (one slot per pick)."""
+        from mjx_pick.kernels import grasp_warp as gw
+
+        n = out.k.shape[0]
+        picks = _finalize_device(_kernels(), src, out.acc, gw)
+        k = out.k.numpy().copy()
+        traces = None
+        if recorded is not None:
+            trace = recorded.trace.numpy()[:n]
+            traces = pad_traces(trace, k, out.phase.numpy().copy(), self.grasp)
+        diag = Diagnostics(*(a.numpy().copy() for a in (out.overflow, out.nefc, out.nacon)))
         return picks, traces, diag
 
     def _save_ended(self, pool: _Pool, out: _Outputs):
@@ -702,10 +722,20 @@ class WarpBackend:
                 dim=(pool.slots, rows.shape[1]),
                 inputs=[pool.fresh, pool.slot_pick, rows, pool.field_view(name)],
             )
+        self._forward_fresh(pool)
+
+    @staticmethod
+    def _forward_fresh(pool: _Pool) -> None:
+        """One forward pass of the pool; fresh slots take its contact forces and buffer
+        use, the others keep the forces their last step measured."""
+        import mujoco_warp as mjw
+
+        wp = _warp()
+        d = pool.d
         wp.copy(pool.saved_cfrc, d.cfrc_ext)
-        mjw.forward(m, d)
+        mjw.forward(pool.m, d)
         wp.launch(
-            kern.after_forward,
+            _kernels().after_forward,
             dim=(pool.slots, d.cfrc_ext.shape[1]),
             inputs=[
                 pool.fresh,
