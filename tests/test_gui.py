@@ -248,7 +248,7 @@ def start_short_batch(page, url: str, name: str, n: int, chunk: int | None = Non
     page.get_by_text("3 Generate input data").click()
     number(page, "pick-points", n)
     if chunk is not None:
-        number(page, "chunk (pick-points per saved part; empty: automatic)", chunk)
+        number(page, "pick-points per saved chunk", chunk)
     page.get_by_label("run folder name").fill(name)
     page.get_by_test_id("start-batch").click()
 
@@ -305,7 +305,7 @@ def test_paper_workflow(page, server):
     page.get_by_text("3 Generate input data").click()
     number(page, "pick-points", 6)
     number(page, "traced best and worst (force plots)", 2)
-    number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+    number(page, "pick-points per saved chunk", 2)
     page.get_by_label("run folder name").fill("gui-run")
     page.get_by_test_id("label-checks").click()  # each label again: half step, 1 um
     page.get_by_test_id("generate").click()
@@ -509,7 +509,7 @@ def test_bad_inputs_are_shown_in_the_page(page, server, tmp_path):
     # a bad run name, then a long run cancelled from the page: what finished is kept
     page.get_by_text("3 Generate input data").click()
     number(page, "pick-points", 40)
-    number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+    number(page, "pick-points per saved chunk", 2)
     page.get_by_label("run folder name").fill("../outside")
     page.get_by_test_id("start-batch").click()
     assert "letters, digits" in field_error(page, "run folder name")
@@ -804,7 +804,7 @@ def test_a_reload_brings_back_the_object_settings_and_run(page, server):
     number(page, "grip force F_d (N)", 45)
     page.get_by_text("3 Generate input data").click()
     number(page, "pick-points", 40)
-    number(page, "chunk (pick-points per saved part; empty: automatic)", 2)
+    number(page, "pick-points per saved chunk", 2)
     page.get_by_label("run folder name").fill("gui-reload")
     page.get_by_test_id("start-batch").click()
     page.get_by_test_id("job-title").filter(has_text="evaluate gui-reload").wait_for()

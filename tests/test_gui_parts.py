@@ -614,3 +614,44 @@ def test_a_refused_folder_is_explained_in_the_pages_words(tmp_path):
     assert "--out" not in shown and "--overwrite" not in shown and "--resume" not in shown
     assert "sha256" not in shown and "model: its content changed" in shown
     assert "seed: 0 -> 1" in shown and "'resume' ticked" in shown and "run folder name" in shown
+
+
+def test_a_crashed_run_says_what_failed_and_where_its_log_is(tmp_path):
+    """An exception no input check foresaw: the page names the library, the kind and the
+    run's log -- never the traceback, its paths or the library's own words."""
+    import trimesh
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    log = logs / "crash.log"
+    library = Path(trimesh.__file__).parent / "creation.py"
+    log.write_text(
+        "$ mjx-pick evaluate thin.png --thickness-mm 0.00001\n"
+        "Traceback (most recent call last):\n"
+        f'  File "{jobs.__file__}", line 10, in main\n'
+        "    run()\n"
+        f'  File "{library}", line 519, in extrude_triangulation\n'
+        '    raise ValueError("Height must be nonzero!")\n'
+        "ValueError: Height must be nonzero!\n"
+    )
+    message = jobs.Job(["evaluate"], log).error_message(1)
+    assert "inside trimesh (ValueError)" in message
+    assert "logs/crash.log in the work folder" in message
+    for raw in ("Height must be nonzero", "Traceback", str(library.parent), "line 519"):
+        assert raw not in message
+
+
+def test_messages_never_show_the_softwares_own_paths():
+    """A path into Python's or mjx_pick's installation becomes its file name; the
+    user's own paths stay as they are."""
+    import trimesh
+
+    import mjx_pick
+    from mjx_pick.gui.formatting import md_text, page_text
+
+    shipped = Path(mjx_pick.__file__).parent / "assets" / "objects" / "block.png"
+    library = Path(trimesh.__file__).parent / "creation.py"
+    text = f"image '{shipped}' is 0.4 mm; see {library}:519. Yours: /srv/parts/a.png."
+    shown = page_text(text)
+    assert shown == "image 'block.png' is 0.4 mm; see creation.py:519. Yours: /srv/parts/a.png."
+    assert str(library.parent) not in md_text(text)

@@ -7,7 +7,9 @@ from __future__ import annotations
 import json
 
 import test_gui
-from test_gui import BLOCK, import_shipped, wait_job
+from test_gui import BLOCK, TIMEOUT_MS, import_shipped, number, start_short_batch, wait_job
+
+from mjx_pick.gui.app import TABS
 
 # test_gui's fixtures: one GUI server for this module, one browser, a page per test
 server, browser, page = test_gui.server, test_gui.browser, test_gui.page
@@ -144,3 +146,78 @@ def test_a_runs_settings_load_from_its_folder_into_a_fresh_page(page, server, br
     expect(fresh.get_by_label("lift height (mm)", exact=True)).to_have_value("6")
     expect(fresh.get_by_label("pad friction", exact=True)).to_have_value("0.7")
     fresh.context.close()
+
+
+def test_a_second_browser_tab_follows_a_run_to_its_end(page, server, browser):
+    """Tab 4 of another browser tab, asked for a folder still being written, follows
+    that run and opens it when it completes: never 'still running' after its end."""
+    from playwright.sync_api import expect
+
+    url, _ = server
+    start_short_batch(page, url, "followed", 40, chunk=2)
+    page.get_by_test_id("job-title").filter(has_text="evaluate followed").wait_for()
+    other = browser.new_context(viewport={"width": 1500, "height": 1000}).new_page()
+    try:
+        other.goto(url)
+        other.get_by_text("4 Analyze results").click()
+        other.get_by_test_id("run-dir").fill("followed")
+        other.get_by_test_id("open-run").click()
+        error = other.get_by_test_id("analyze-error")
+        error.filter(has_text="followed is still running").wait_for()
+        assert wait_job(page, "evaluate followed").startswith("complete")
+        rows = other.get_by_test_id("picks-table").locator("tbody tr")
+        expect(rows.first).to_be_visible(timeout=TIMEOUT_MS)
+        expect(error).to_have_text("")
+        assert "pick-points, success rate" in other.get_by_test_id("run-info").inner_text()
+    finally:
+        other.context.close()
+
+
+# the page's fields and labels, tab by tab, at a laptop's width
+CLIPPED = """() => [...document.querySelectorAll(
+    '.q-field__label, .q-tab__label, .q-btn__content, .q-checkbox__label, th, '
+    + '.q-select .q-field__native > span, input.q-field__native:not(.q-select input)')]
+  .filter(e => e.getClientRects().length && e.scrollWidth > e.clientWidth + 1)
+  .map(e => (e.innerText || e.value || e.getAttribute('aria-label') || '').slice(0, 60))"""
+
+
+def test_no_label_or_value_is_clipped(browser, server):
+    url, _ = server
+    context = browser.new_context(viewport={"width": 1280, "height": 900})
+    try:
+        page = context.new_page()
+        page.goto(url)
+        page.get_by_text("1 Import object model").wait_for()
+        clipped = {}
+        for _, label in TABS:
+            page.get_by_text(label, exact=True).first.click()
+            if label == "Studies":  # every study's form open
+                for study in ("Robustness of the best", "Calibrate contact parameters"):
+                    page.get_by_text(study).click()
+            page.wait_for_timeout(500)  # the tab's panel drawn
+            found = page.evaluate(CLIPPED)
+            if found:
+                clipped[label] = found
+        assert not clipped
+    finally:
+        context.close()
+
+
+def test_an_object_the_libraries_cannot_build_is_refused_in_the_users_words(page):
+    """A thickness no mesh can be extruded from and a scale that makes the part a
+    speck: the field's own rule and the tab's words, no library's text, no path of
+    the software's files, no CLI flag."""
+    page.get_by_text("1 Import object model").click()
+    number(page, "thickness (mm)", 0.000001)
+    page.get_by_test_id("import").click()
+    field = page.locator("label.q-field").filter(has=page.get_by_label("thickness (mm)"))
+    field.locator(".q-field__messages").filter(has_text="a number from 0.1 to 1,000").wait_for()
+    number(page, "thickness (mm)", 20)
+    number(page, "image scale (px per mm)", 1000)  # the 40 mm block becomes 0.4 mm
+    page.get_by_test_id("import").click()
+    error = page.get_by_test_id("import-error")
+    error.filter(has_text="block.png").wait_for()
+    text = page.locator("body").inner_text()
+    assert "check image scale (px per mm)" in error.inner_text()
+    for raw in ("Height must be nonzero", str(BLOCK.parent), "--px-per-mm", "px_per_mm"):
+        assert raw not in text

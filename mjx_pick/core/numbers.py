@@ -69,7 +69,9 @@ INPUTS: dict[str, Number] = {
     "next": Number(0, 1000, integer=True, unit="pick-points", doc="next round's pick-points"),
     # an object from an image or a mesh
     "px_per_mm": Number(0, 1000, lo_open=True, unit="px/mm", doc="image scale"),
-    "thickness_mm": Number(0, 2000, lo_open=True, unit="mm", doc="object thickness"),
+    # a prism's thickness: from a sheet of paper's (thinner, no pad takes it from the
+    # side, and its mesh cannot be built) to the largest object's 1 m
+    "thickness_mm": Number(0.1, 1000, unit="mm", doc="object thickness"),
     # mass and density: positive here; what a solid can be is the object's own check
     # (objects.DENSITY_POSSIBLE_KG_M3, which names the density they make)
     "mass_g": Number(0, None, lo_open=True, unit="g", doc="object mass"),

@@ -392,8 +392,8 @@ def object_from_image(
         raise ConfigError("px_per_mm is required for an image object (pixels per millimetre)")
     if thickness_mm is None:
         raise ConfigError("thickness_mm is required for an image object")
-    check_range("object", "px_per_mm", px_per_mm, 0, lo_open=True)
-    check_range("object", "thickness_mm", thickness_mm, 0, SIZE_RANGE_MM[1], lo_open=True)
+    numbers.check("px_per_mm", px_per_mm)
+    numbers.check("thickness_mm", thickness_mm)
     check_range("object", "simplify_mm", simplify_mm, 0, 5)
     mask = segment_image(path)
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
@@ -435,7 +435,7 @@ def object_from_polygon(
     collision_simplify_mm is the outline tolerance of the collision pieces (the
     silhouette for the geometric checks keeps the polygon as given).
     """
-    check_range("object", "thickness_mm", thickness_mm, 0, SIZE_RANGE_MM[1], lo_open=True)
+    numbers.check("thickness_mm", thickness_mm)
     polygon = orient(shapely.make_valid(polygon)) if not polygon.is_valid else orient(polygon)
     if polygon.is_empty or polygon.area <= 0:
         raise ConfigError(f"object {name!r}: the silhouette has no area")

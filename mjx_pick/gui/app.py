@@ -5,12 +5,17 @@ Details: docs/gui.md (gui/app.py).
 
 from __future__ import annotations
 
+import logging
 import subprocess
 import uuid
 from pathlib import Path
 
 from mjx_pick.gui import jobs
-from mjx_pick.gui.state import PageState
+from mjx_pick.gui.formatting import raised_in, unexpected_text
+from mjx_pick.gui.state import PageState, server_log
+
+# the page's unexpected errors, with their tracebacks (the server's log, :func:`log_to_file`)
+log = logging.getLogger(__name__)
 
 # (name, label) of each tab, in the page's order
 TABS = (
@@ -42,6 +47,9 @@ def build_page(workdir: Path, runs: jobs.Runs, pages: dict | None = None) -> Pag
 
     state = PageState(workdir)
     ui.page_title("mjx-pick")
+    # a field in a column takes the column's width (one without a width of its own):
+    # Quasar's fields shrink to 160 px otherwise, and clip their labels and values
+    ui.add_css(".nicegui-column > .q-field { align-self: stretch; }")
     with ui.header().classes("items-center py-1"):
         ui.label("mjx-pick: pick-point evaluation").classes("text-lg")
         ui.label(f"runs in {workdir}").classes("text-xs opacity-80")
@@ -88,15 +96,33 @@ def build_page(workdir: Path, runs: jobs.Runs, pages: dict | None = None) -> Pag
         panel.reattach(tab_id)
 
     ui.timer(0.05, attach, once=True)
-    # a bug in a handler: one line in the page, the traceback only in the server log
-    ui.on_exception(
-        lambda e: ui.notify(
-            f"unexpected error: {type(e).__name__}: {str(e)[:300]} (details in the server's log)",
-            type="negative",
-            multi_line=True,
+
+    def unexpected(err: Exception) -> None:
+        """A bug in a handler: what failed in a line in the page, the traceback only in
+        the server's log."""
+        log.error("a page handler failed", exc_info=err)
+        library = raised_in(err)
+        text = unexpected_text(
+            "the last action", library, type(err).__name__, state.where(state.server_log)
         )
-    )
+        ui.notify(text, type="negative", multi_line=True)
+
+    ui.on_exception(unexpected)
     return state
+
+
+def log_to_file(workdir: Path) -> None:
+    """The server's log, also in the work folder (:func:`state.server_log`): the
+    tracebacks of unexpected errors, which the page names but never shows."""
+    import logging
+
+    path = server_log(workdir)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handler = logging.FileHandler(path, encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s: %(message)s"))
+    logger = logging.getLogger("mjx_pick")
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
 
 
 def serve(host: str, port: int, workdir: Path, show: bool) -> None:
@@ -105,6 +131,7 @@ def serve(host: str, port: int, workdir: Path, show: bool) -> None:
 
     workdir = Path(workdir).resolve()
     workdir.mkdir(parents=True, exist_ok=True)
+    log_to_file(workdir)
     # server-side: they outlive the page (a reload finds them); the simulation commands
     # run in warm workers, the default backend's started now so a first job may find it
     workers = jobs.Workers(workdir / "logs")

@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import datetime
 import math
+import re
+import sys
+import sysconfig
+import traceback
+from pathlib import Path
 
 # The one frame of every pick-point the page shows or takes: the object's planar pose
 # relative to the gripper's centre (the results table's x_mm, y_mm, yaw_deg)
@@ -64,4 +69,66 @@ def md_text(text: str) -> str:
     """Plain text (a file name, a library's message) for a markdown element: every
     character markdown reads as markup escaped, so that contact.pad_friction keeps its
     underscore and a path its stars."""
-    return "".join("\\" + c if c in _MARKDOWN else c for c in str(text))
+    return "".join("\\" + c if c in _MARKDOWN else c for c in page_text(text))
+
+
+def _install_roots() -> tuple[str, ...]:
+    """Folders of Python's and this package's installation: a path inside them names
+    the software's files, never the user's."""
+    import mjx_pick
+
+    roots = {str(Path(mjx_pick.__file__).resolve().parent)}
+    roots |= {sys.prefix, sys.base_prefix, sys.exec_prefix}
+    for key in ("stdlib", "platstdlib", "purelib", "platlib"):
+        path = sysconfig.get_paths().get(key)
+        if path:
+            roots.add(path)
+    return tuple(sorted({r.rstrip("/") for r in roots if r and r != "/"}, key=len, reverse=True))
+
+
+_ROOTS = _install_roots()
+# an absolute path as messages write it: up to a quote, a space, a colon or a bracket
+_PATH = re.compile(r"(?<![\w.])/[^\s'\"<>|;:,()\[\]]+")
+
+
+def page_text(text: str) -> str:
+    """A message for the page without the paths of the software's own files: a path
+    into Python's or this package's installation (site-packages, a shipped asset, a
+    library's source) becomes its file name. The user's own paths stay."""
+
+    def short(m: re.Match) -> str:
+        path = m.group(0).rstrip(".")  # a sentence's full stop is no part of it
+        rest = m.group(0)[len(path) :]
+        hidden = any(path == r or path.startswith(r + "/") for r in _ROOTS)
+        hidden = hidden or "/site-packages/" in path or "/dist-packages/" in path
+        return (Path(path).name if hidden else path) + rest
+
+    return _PATH.sub(short, str(text))
+
+
+def raised_in(err: BaseException) -> str:
+    """The library an exception came from (its innermost frame's package): "trimesh",
+    "mujoco", "mjx_pick" ..., or "Python" for the standard library."""
+    frames = traceback.extract_tb(err.__traceback__)
+    return library_of(frames[-1].filename) if frames else "Python"
+
+
+def library_of(filename: str) -> str:
+    """The package a source file belongs to, from its path."""
+    parts = Path(filename).parts
+    for marker in ("site-packages", "dist-packages"):
+        if marker in parts and parts.index(marker) + 1 < len(parts):
+            return parts[parts.index(marker) + 1].removesuffix(".py")
+    if "mjx_pick" in parts:
+        return "mjx_pick"
+    return "Python"
+
+
+def unexpected_text(what: str, library: str, kind: str, log: str) -> str:
+    """The page's words for an error no input check foresaw: what failed, in which
+    library, and where the full error is -- never a traceback or a library's own text."""
+    inside = "mjx-pick itself" if library == "mjx_pick" else library
+    return (
+        f"{what} failed on an unexpected error inside {inside} ({kind}) that the input "
+        f"checks did not catch; the full error is in {log}"
+    )

@@ -20,6 +20,7 @@ from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.pickpoints import PickConfig
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine import registry
+from mjx_pick.gui.formatting import page_text
 
 SECTIONS = {
     "gripper": GripperSpec,
@@ -134,6 +135,7 @@ def user_words(message: str) -> str:
         name = m.group(1) or m.group(2)
         return labels.get(name, m.group(0))
 
+    message = page_text(message)
     words = _INTERNAL.sub(label, message)
     return words if words == message else f"{words}\n(details: {message})"
 

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from mjx_pick.engine.registry import AUTO, Impl
+from mjx_pick.gui.formatting import library_of, unexpected_text
 
 CANCEL_GRACE_S = 15.0  # after a SIGINT, how long a run may take to write and stop
 # The child runs the very package this server runs, and nothing else from where it or the
@@ -627,13 +628,15 @@ class Job:
         # paths inside the work folder as the page names them (relative to it)
         work = f"{self.log.parent.parent}/"
         lines = self._log_text().replace(work, "").splitlines()
-        log = self.log.relative_to(self.log.parent.parent)
+        log = f"{self.log.relative_to(self.log.parent.parent)} in the work folder"
         for line in reversed(lines):
             if "error: " in line and line.startswith("mjx-pick"):
                 return user_words(page_advice(line.split("error: ", 1)[1].strip()))
-        last = next((ln.strip() for ln in reversed(lines) if ln.strip()), "")
-        # the exception's last line, never the traceback; the log keeps the rest
-        return f"the run stopped (exit code {code}): {last[-300:]}; its log: {log}"
+        crashed = _crash(lines)
+        if crashed is not None:  # what failed and where, never the traceback's text
+            library, kind = crashed
+            return unexpected_text(f"the run (exit code {code})", library, kind, log)
+        return f"the run stopped (exit code {code}) without an error message; its log: {log}"
 
 
 # the exit code a CLI run that ended with a folder's status had (main's return values)
@@ -765,6 +768,21 @@ def unused_path(path: Path) -> Path:
 
 
 _WARNING = re.compile(r"(?m)^\S*:\d+: \w*Warning: (.*)$")
+_FRAME = re.compile(r'^\s*File "([^"]+)", line \d+')
+_RAISED = re.compile(r"^([A-Za-z_][\w.]*(?:Error|Exception|Interrupt|Exit|Warning))\b")
+
+
+def _crash(lines: list[str]) -> tuple[str, str] | None:
+    """(library, exception type) of the last traceback in a run's log lines, or None."""
+    start = max((i for i, ln in enumerate(lines) if ln.startswith("Traceback")), default=None)
+    if start is None:
+        return None
+    frames = [m.group(1) for ln in lines[start:] if (m := _FRAME.match(ln))]
+    kind = next(
+        (m.group(1).rsplit(".", 1)[-1] for ln in lines[start:] if (m := _RAISED.match(ln))),
+        "an exception",
+    )
+    return (library_of(frames[-1]) if frames else "Python"), kind
 
 
 def _read_json(path: Path) -> dict | None:

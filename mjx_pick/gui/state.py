@@ -22,6 +22,11 @@ RUN_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,79}$")
 RUN_NAME_RULE = "letters, digits, '.', '_' and '-' only (at most 80)"
 
 
+def server_log(workdir: Path) -> Path:
+    """The GUI server's log file in a work folder (see :attr:`PageState.server_log`)."""
+    return Path(workdir) / "logs" / "_gui-server.log"
+
+
 @dataclasses.dataclass
 class PageState:
     """One browser tab's shared state; every field is set by one tab only."""
@@ -39,6 +44,19 @@ class PageState:
     def log(self, name: str) -> Path:
         """The log file of a run the page starts."""
         return self.workdir / "logs" / f"{name}.log"
+
+    @property
+    def server_log(self) -> Path:
+        """The server's own log (errors of the page's handlers with their tracebacks);
+        no run's log has its name (a run's name starts with a letter or a digit)."""
+        return server_log(self.workdir)
+
+    def where(self, path: Path) -> str:
+        """A file of the work folder as the page names it: relative to the work folder."""
+        try:
+            return f"{Path(path).relative_to(self.workdir)} in the work folder"
+        except ValueError:
+            return str(path)
 
     def inside(self, text: str) -> Path | None:
         """The folder a user typed, when it lies inside the work folder (a relative name

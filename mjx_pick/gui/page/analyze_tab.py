@@ -18,7 +18,7 @@ from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs, views
 from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS, fmt, md_text
 from mjx_pick.gui.one_pick import simulate_untraced
-from mjx_pick.gui.page.job_panel import JobPanel
+from mjx_pick.gui.page.job_panel import POLL_S, JobPanel
 from mjx_pick.gui.page.replay_view import ReplayView
 from mjx_pick.gui.page.widgets import checked, error_label, show_picture
 from mjx_pick.gui.state import PageState
@@ -113,6 +113,10 @@ class AnalyzeTab:
                 self.replay = ReplayView()
         self.simulated: dict = {}  # (run folder, pick id): trace of an untraced pick
         self.shown = None  # (run, pick id) the details show now
+        # a folder asked for while its run was still going: followed until it ends,
+        # whichever browser tab (or process) runs it, then opened
+        self.awaited: Path | None = None
+        ui.timer(POLL_S, self.follow)
         self.refresh_runs()
 
     def refresh_runs(self) -> None:
@@ -143,6 +147,7 @@ class AnalyzeTab:
         from mjx_pick.outputs.reporting import Run
 
         self.error.set_text("")
+        self.awaited = None
         path = self.state.inside(self.run_dir.value)
         if path is None:
             self.error.set_text(
@@ -153,6 +158,7 @@ class AnalyzeTab:
         unfinished = self.unfinished(path)
         if unfinished:
             self.error.set_text(unfinished)
+            self.awaited = path
             return
         try:
             opened = Run.load(path)
@@ -183,19 +189,43 @@ class AnalyzeTab:
         self.show_downloads()
         self.refresh_runs()
 
+    def follow(self) -> None:
+        """A folder that was still running when asked for: its state as it goes, and
+        opened here once it is complete (its run may be another browser tab's)."""
+        path = self.awaited
+        if path is None:
+            return
+        why = self.unfinished(path)
+        if why:
+            self.error.set_text(why)
+            if " is still running" not in why:  # it ended without results: said, done
+                self.awaited = None
+            return
+        self.awaited = None
+        if self.state.inside(self.run_dir.value) == path:  # still the folder asked for
+            self.open_run()
+
     def unfinished(self, path: Path) -> str:
         """Why an evaluate folder has no results to open yet ('' if it may have)."""
-        from mjx_pick.outputs.rundir import read_manifest
+        from mjx_pick.outputs.rundir import lock_holder, read_manifest
 
-        if self.panel.runs.writing(path) is not None:
-            return f"{path.name} is still running: it opens here when it is complete"
+        job = self.panel.runs.writing(path)
+        if job is not None:
+            p = job.poll()
+            count = f" ({p.done}/{p.total} {p.unit})" if p.done is not None else ""
+            return f"{path.name} is still running{count}: it opens here when it is complete"
         m = read_manifest(path) or {}
         if m.get("command") != "evaluate" or (path / "results.parquet").is_file():
             return ""
-        if m.get("status") == "running":
+        if m.get("status") == "running" and lock_holder(path) is not None:
             return (
-                f"{path.name} has no results yet: it is still running in another process, "
-                "or it stopped without finishing"
+                f"{path.name} is still running in another process: it opens here when it "
+                "is complete"
+            )
+        if m.get("status") == "running":  # no process writes it: it died mid-run
+            return (
+                f"{path.name} stopped without finishing: continue it in tab 3 (run folder "
+                f"name {path.name}, resume ticked)"
             )
         if m.get("status") in ("interrupted", "cancelled"):
             return (

@@ -24,6 +24,7 @@ from mjx_pick.gui.page.widgets import (
     error_label,
     need_object,
     run_folder,
+    warning_label,
 )
 from mjx_pick.gui.state import PageState
 
@@ -65,9 +66,8 @@ class GenerateTab:
                 ).props('data-testid="n"')
                 self.seed = ui.number("seed", value=0, step=1, on_change=self.forget_map)
                 self.traces = ui.number("traced best and worst (force plots)", value=3, step=1)
-                self.chunk = ui.number(
-                    "chunk (pick-points per saved part; empty: automatic)", value=None, step=1
-                )
+                self.chunk = ui.number("pick-points per saved chunk", value=None, step=1)
+                self.chunk.tooltip("empty: chosen so that the progress bar moves often")
                 self.run_name = ui.input("run folder name", value=f"evaluate-{stamp()}")
                 self.resume = ui.checkbox("resume an interrupted run of this folder")
                 ui.button("Load this run folder's settings", on_click=self.load_run_settings).props(
@@ -86,8 +86,7 @@ class GenerateTab:
                 self.error = error_label().props('data-testid="generate-error"')
             with ui.column().classes("grow"):
                 self.picks_info = ui.label("").props('data-testid="picks-info"')
-                self.picks_warning = ui.label("").classes("text-warning text-sm")
-                self.picks_warning.props('data-testid="picks-warning"')
+                self.picks_warning = warning_label("picks-warning")
                 self.map_help = ui.label(
                     "The map shows where the gripper's centre lands on the part (object "
                     "frame, as the outline of tab 1). Every pick-point value in the page -- "

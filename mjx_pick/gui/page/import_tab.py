@@ -6,6 +6,8 @@ every run) and shows its segmentation and outline.
 
 from __future__ import annotations
 
+import logging
+import re
 from importlib import resources
 from pathlib import Path
 
@@ -14,7 +16,15 @@ from nicegui import run, ui
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.objects import DENSITY_PLAUSIBLE_KG_M3, MESH_SUFFIXES
 from mjx_pick.gui import views
-from mjx_pick.gui.page.widgets import error_label, picture, show_picture, upload
+from mjx_pick.gui.formatting import page_text, raised_in, unexpected_text
+from mjx_pick.gui.page.widgets import (
+    checked,
+    error_label,
+    picture,
+    show_picture,
+    upload,
+    warning_label,
+)
 from mjx_pick.gui.state import PageState
 from mjx_pick.gui.uploads import (
     MESH_MAX_BYTES,
@@ -25,6 +35,8 @@ from mjx_pick.gui.uploads import (
 )
 
 UPLOADED = "(uploaded file)"
+# an import's unexpected error, with its traceback (the server's log)
+log = logging.getLogger(__name__)
 
 
 # the library's plausible density's upper end, in g/cm^3 (above osmium's 22.6)
@@ -85,8 +97,7 @@ class ImportTab:
                     'data-testid="import"'
                 )
                 self.import_error = error_label().props('data-testid="import-error"')
-                self.import_warning = ui.label("").classes("text-warning text-sm")
-                self.import_warning.props('data-testid="import-warning"')
+                self.import_warning = warning_label("import-warning")
             with ui.column().classes("grow"):
                 self.object_info = ui.label("No object imported yet.").props(
                     'data-testid="object-info"'
@@ -168,12 +179,11 @@ class ImportTab:
             self.import_error.set_text(str(err))
             return
         is_mesh = Path(source).suffix.lower() in MESH_SUFFIXES
-        values = {k: w.value for k, w in self.fields().items()}
         needed = ("mass_g",) if is_mesh else ("px_per_mm", "thickness_mm", "mass_g")
-        missing = [k for k in needed if values[k] is None]
-        for k in missing:
-            self.fields()[k].error = f"{k} is required"
-        if missing:
+        # each by the number's one rule (core.numbers), as the CLI and the library check
+        # it: a value no library could build an object from never reaches one
+        values = {k: checked(self.fields()[k], k) for k in needed}
+        if any(v is None for v in values.values()):
             return
         kwargs = {"mass_g": float(values["mass_g"])}
         args = [source, "--mass-g", repr(float(values["mass_g"]))]
@@ -196,7 +206,15 @@ class ImportTab:
             return
         except Exception as err:  # noqa: BLE001 - a bad file must not show a traceback
             self.forget_object()
-            self.import_error.set_text(f"{Path(source).name}: cannot be imported ({err})")
+            log.error("importing %s failed", source, exc_info=err)
+            self.import_error.set_text(
+                unexpected_text(
+                    f"importing {Path(source).name}",
+                    raised_in(err),
+                    type(err).__name__,
+                    self.state.where(self.state.server_log),
+                )
+            )
             return
         self.state.obj, self.state.obj_args = obj, args
         self.import_warning.set_text(mass_warning(obj))
@@ -226,9 +244,30 @@ class ImportTab:
             self.on_import()
 
     def show_error(self, message: str) -> None:
-        """An object's ConfigError under the field it names, else above the button."""
+        """An object's ConfigError, in the tab's words, under the field it names, else
+        above the button."""
+        words = object_words(message)
         for key, widget in self.fields().items():
             if f"object.{key}" in message or message.startswith(key):
-                widget.error = message
+                widget.error = words
                 return
-        self.import_error.set_text(message)
+        self.import_error.set_text(words)
+
+
+# the object's inputs as this tab names them (a library message names the arguments)
+OBJECT_LABELS = {
+    "px_per_mm": "image scale (px per mm)",
+    "thickness_mm": "thickness (mm)",
+    "mass_g": "mass (g)",
+    "density_kg_m3": "density (kg/m³)",
+}
+_CLI_FLAG = re.compile(r" \(--[a-z0-9-]+\)")
+
+
+def object_words(message: str) -> str:
+    """An object's error in this tab's words: its fields' labels for the library's
+    argument names, no CLI flags, no paths of the software's files."""
+    words = _CLI_FLAG.sub("", page_text(message))
+    for name, label in OBJECT_LABELS.items():
+        words = re.sub(rf"(?<![\w.]){name}\b", label, words)
+    return words

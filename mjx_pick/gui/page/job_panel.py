@@ -11,6 +11,7 @@ from collections.abc import Callable
 from nicegui import ui
 
 from mjx_pick.gui import jobs
+from mjx_pick.gui.page.widgets import MessageLabel, warning_label
 
 POLL_S = 0.5  # how often the panel reads the run's progress
 
@@ -34,7 +35,7 @@ class JobPanel:
         with ui.card().classes("w-full") as card:
             with ui.row().classes("items-center w-full"):
                 self.title = ui.label("").classes("font-bold").props('data-testid="job-title"')
-                self.status = ui.label("").props('data-testid="job-status"')
+                self.status = MessageLabel("").props('data-testid="job-status"')
                 ui.space()
                 self.cancel_button = ui.button("Cancel", on_click=self.cancel, color="red")
             self.offline = ui.label(
@@ -44,9 +45,7 @@ class JobPanel:
             self.bar = (
                 ui.linear_progress(value=0, show_value=False).props("size=12px").classes("mjx-live")
             )
-            self.warnings = (
-                ui.label("").classes("text-warning text-sm").props('data-testid="job-warnings"')
-            )
+            self.warnings = warning_label("job-warnings")
             self.where = ui.label("").classes("text-xs").props('data-testid="job-where"')
             self.command = ui.code("", language="bash").classes("w-full text-xs")
         self.status.classes("mjx-live")

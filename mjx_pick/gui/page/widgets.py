@@ -8,14 +8,27 @@ from nicegui import ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
-from mjx_pick.gui.formatting import column_label, fmt_cell
+from mjx_pick.gui.formatting import column_label, fmt_cell, page_text
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
 from mjx_pick.gui.views import data_uri
 
 
-def error_label() -> ui.label:
+class MessageLabel(ui.label):
+    """A label that shows messages (errors, warnings, a run's state): every text set
+    on it passes ``page_text``, so no path of the software's own files reaches the page."""
+
+    def set_text(self, text: str) -> None:
+        super().set_text(page_text(text) if text else text)
+
+
+def error_label() -> MessageLabel:
     """A red line for a message that belongs to no single field."""
-    return ui.label("").classes("text-negative text-sm").props('role="alert"')
+    return MessageLabel("").classes("text-negative text-sm").props('role="alert"')
+
+
+def warning_label(testid: str) -> MessageLabel:
+    """A line for a warning (a library's or a run's), in the warning colour."""
+    return MessageLabel("").classes("text-warning text-sm").props(f'data-testid="{testid}"')
 
 
 def upload(label: str, accept: str, max_bytes: int, on_upload, on_rejected, testid: str):
