@@ -672,9 +672,12 @@ def test_a_pick_point_count_below_one_is_refused(page):
 
 
 def test_one_frame_a_pick_clicked_on_the_map_is_tested_in_tab_2(page):
-    """The map draws gripper centres on the part (object frame); a click on one puts
-    that pick-point's own values -- the object's offset under the gripper, the frame of
-    the table and the test -- into tab 2, where it is feasible."""
+    """The map and every value are in one frame, the gripper frame, said beside the
+    map: a click on a pick-point draws it whole there and puts its own values into tab
+    2, whose test draws it in the same frame (with the fingertip height and the height
+    compensation said apart)."""
+    from playwright.sync_api import expect
+
     from mjx_pick.core.gripper import load_gripper
     from mjx_pick.core.objects import load_object
     from mjx_pick.core.pickpoints import generate_normal
@@ -686,15 +689,22 @@ def test_one_frame_a_pick_clicked_on_the_map_is_tested_in_tab_2(page):
     number(page, "seed", 0)
     page.get_by_test_id("generate").click()
     page.get_by_test_id("picks-info").filter(has_text="6 feasible pick-points").wait_for()
-    picks = generate_normal(load_object("block"), load_gripper("robotiq-2f85"), 6, 0)
-    _, pixels = views.picks_png(load_object("block"), picks)
+    gripper = load_gripper("robotiq-2f85")
+    picks = generate_normal(load_object("block"), gripper, 6, 0)
+    _, pixels = views.picks_png(load_object("block"), picks, gripper)
     k = 2
+    assert (
+        "Map and values in one frame, the gripper frame"
+        in page.get_by_text("Map and values in one frame").inner_text()
+    )
     img = page.get_by_test_id("picks-map").locator("img")
     img.wait_for()
+    before = img.get_attribute("src")
     natural = img.evaluate("i => i.naturalWidth")
     box = img.bounding_box()
     scale = box["width"] / natural
     img.click(position={"x": pixels[k, 0] * scale, "y": pixels[k, 1] * scale})
+    expect(img).not_to_have_attribute("src", before)  # the pick-point drawn whole
     page.get_by_text("2 Set gripper parameters").click()
     expected = {
         "object x under gripper (mm)": round(float(picks.x_mm[k]), 2),
@@ -711,6 +721,8 @@ def test_one_frame_a_pick_clicked_on_the_map_is_tested_in_tab_2(page):
     info = page.get_by_test_id("test-info")
     info.filter(has_text="score").wait_for(timeout=TIMEOUT_MS)
     assert "check: **feasible**" in info.inner_text() or "check: feasible" in info.inner_text()
+    assert "height compensation: 0.0 mm (how far the gripper starts raised" in info.inner_text()
+    expect(page.get_by_test_id("test-pose")).to_be_visible()
 
 
 def test_a_generator_warning_is_shown_in_the_page(page):

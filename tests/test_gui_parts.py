@@ -655,3 +655,48 @@ def test_messages_never_show_the_softwares_own_paths():
     shown = page_text(text)
     assert shown == "image 'block.png' is 0.4 mm; see creation.py:519. Yours: /srv/parts/a.png."
     assert str(library.parent) not in md_text(text)
+
+
+def test_a_runs_long_pick_point_check_shows_how_far_it_is(tmp_path):
+    """Before its first chunk, an evaluate run whose pick-point search takes long shows
+    the search's last progress line from its log, not a bare 'checking'."""
+    out = tmp_path / "run"
+    log = tmp_path / "run.log"
+    note = (
+        "checked 409,600 of at most 1,000,000 candidate poses: 0 of 200 feasible so far "
+        "(rejected: 380,000: the object fills too little of the region between the pads)"
+    )
+    log.write_text(f"$ mjx-pick evaluate block --n 200\nmjx-pick: {note}\n")
+    job = jobs.Job(["evaluate"], log, out, total=200, chunk=4)
+    assert job.poll().message == f"checking the pick-points: {note}"
+    assert jobs.Job(["sweep"], log).poll().message == f"checking the pick-points: {note}"
+    with log.open("a") as fh:  # the search is over: its line is history
+        fh.write("mjx-pick: simulating 3 variants\n")
+    assert "checked" not in jobs.Job(["sweep"], log).poll().message
+
+
+def test_height_compensation_means_the_linkages_lift_at_the_start_everywhere():
+    """Tab 2's test says the fingertip height and the height compensation apart: the
+    compensation is the results column's (how far a linkage starts raised), the same
+    number the run's table and the robot export carry, never the fingertip height."""
+    from mjx_pick.core.metrics import COLUMNS
+    from mjx_pick.core.objects import load_object
+    from mjx_pick.core.procedure import fingertip_height_mm
+    from mjx_pick.core.scene import height_compensation_mm
+    from mjx_pick.gui.one_pick import check_one_pick
+
+    obj = load_object("block")
+    for name, raised in (("robotiq-2f85-linkage", True), ("robotiq-2f85", False)):
+        gripper = load_gripper(name)
+        settings, errors = forms.build(forms.defaults(gripper), gripper)
+        assert not errors
+        checked = check_one_pick(obj, settings, 0.0, 0.0, 0.0)
+        text = "\n".join(checked["lines"])
+        lift = float(height_compensation_mm(settings.gripper, checked["batch"])[0])
+        assert (lift > 1.0) == raised, (name, lift)
+        assert (
+            f"height compensation: {lift:.1f} mm ({COLUMNS['height_compensation_mm'][1]})" in text
+        )
+        tip = fingertip_height_mm(obj, settings.gripper, settings.grasp)
+        assert f"fingertip height above the table: {tip:.1f} mm" in text
+        assert checked["pose"][:8] == b"\x89PNG\r\n\x1a\n"

@@ -221,3 +221,22 @@ def test_an_object_the_libraries_cannot_build_is_refused_in_the_users_words(page
     assert "check image scale (px per mm)" in error.inner_text()
     for raw in ("Height must be nonzero", str(BLOCK.parent), "--px-per-mm", "px_per_mm"):
         assert raw not in text
+
+
+def test_a_long_pick_point_search_shows_its_progress_and_stops(page):
+    """A minimum coverage few poses meet (0.97): Generate says how far its search is
+    and why candidates are rejected, and Stop ends it with what it found."""
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "minimum coverage", 0.97)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 200)
+    page.get_by_test_id("generate").click()
+    line = page.get_by_test_id("picks-search")
+    line.filter(has_text="of at most 1,000,000 checked").wait_for()
+    assert "the object fills too little of the region between the pads" in line.inner_text()
+    page.get_by_test_id("picks-search-stop").click()
+    line.filter(has_text="stopped after").wait_for()
+    assert "feasible (rejected:" in line.inner_text()
+    assert not page.get_by_test_id("picks-map").is_visible()
+    assert not page.get_by_test_id("picks-search-stop").is_visible()

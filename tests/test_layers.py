@@ -200,6 +200,7 @@ GUI_LEVELS = {
         "views",
         "uploads",
         "formatting",
+        "search",
         "state",
         "one_pick",
         "worker",

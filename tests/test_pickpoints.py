@@ -274,3 +274,29 @@ def test_pictures(tmp_path, door_opener):
     for name in ("pick.png", "overview.png"):
         img = mpimg.imread(tmp_path / name)
         assert img.shape[0] > 300 and img.std() > 0.05  # a real picture, not blank
+
+
+def test_a_long_search_reports_its_progress_and_can_be_stopped(block):
+    """Few feasible poses (coverage 0.97): the search says after each block how many
+    candidates it checked and why they were rejected, and stops when that callback
+    raises (the GUI's Stop) -- never minutes of silence."""
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def progress(drawn, found, rejected):
+        seen.append((drawn, found, dict(rejected)))
+        if len(seen) == 3:
+            raise Stop
+
+    strict = pp.PickConfig(min_coverage=0.97)
+    with pytest.raises(Stop):
+        pp.generate_normal(block, mp.load_gripper("robotiq-2f85"), 200, 0, strict, None, progress)
+    assert [d for d, _, _ in seen] == [pp.CANDIDATE_BLOCK * k for k in (1, 2, 3)]
+    drawn, found, rejected = seen[-1]
+    assert found + sum(rejected.values()) == drawn and rejected["coverage"] > drawn / 2
+    note = pp.search_note(drawn, 1_000_000, found, 200, rejected)
+    assert note.startswith(f"checked {drawn:,} of at most 1,000,000 candidate poses")
+    assert "the object fills too little of the region between the pads" in note

@@ -509,23 +509,19 @@ def probes(tmp: Path) -> list[tuple[str, str, Callable[[], tuple[str, str]]]]:
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="runs/probes", help="work folder (emptied first)")
-    ap.add_argument("--only", help="only probes whose family starts with this")
-    args = ap.parse_args()
-    tmp = Path(args.out).resolve()
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
+def run_and_count(probe_list, only: str | None, csv_path: Path, width: int = 28) -> None:
+    """Run each (family, name, probe) whose family starts with only (all when None):
+    one line per probe, its row in csv_path, then the counts per family."""
     rows, counts = [], {}
-    for family, name, probe in probes(tmp):
-        if args.only and not family.startswith(args.only):
+    for family, name, probe in probe_list:
+        if only and not family.startswith(only):
             continue
         t0 = time.monotonic()
         try:
             kind, note = probe()
         except Exception as err:  # noqa: BLE001 - a probe's own failure is a wrong outcome
             kind, note = "wrong", f"probe failed: {type(err).__name__}: {err}"
+        note = " ".join(str(note).split())
         counts.setdefault(family, {"refused": 0, "handled": 0, "wrong": 0})[kind] += 1
         rows.append(
             {
@@ -536,16 +532,27 @@ def main() -> None:
                 "seconds": round(time.monotonic() - t0, 1),
             }
         )
-        print(f"{family:28s} {name[:48]:48s} {kind:8s} {note[:110]}", flush=True)
-    with (tmp / "probes.csv").open("w", newline="") as fh:
+        print(f"{family:{width}s} {name[:48]:48s} {kind:8s} {note[:110]}", flush=True)
+    with csv_path.open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    print("\nfamily                        refused  handled  wrong")
+    print(f"\n{'family':{width}s}  refused  handled  wrong")
     for family, c in counts.items():
-        print(f"{family:28s} {c['refused']:8d} {c['handled']:8d} {c['wrong']:6d}")
+        print(f"{family:{width}s} {c['refused']:8d} {c['handled']:8d} {c['wrong']:6d}")
     total = {k: sum(c[k] for c in counts.values()) for k in ("refused", "handled", "wrong")}
-    print(f"{'all':28s} {total['refused']:8d} {total['handled']:8d} {total['wrong']:6d}")
+    print(f"{'all':{width}s} {total['refused']:8d} {total['handled']:8d} {total['wrong']:6d}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="runs/probes", help="work folder (emptied first)")
+    ap.add_argument("--only", help="only probes whose family starts with this")
+    args = ap.parse_args()
+    tmp = Path(args.out).resolve()
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    run_and_count(probes(tmp), args.only, tmp / "probes.csv")
 
 
 if __name__ == "__main__":

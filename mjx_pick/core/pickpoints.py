@@ -13,6 +13,7 @@ import dataclasses
 import functools
 import logging
 import math
+import time
 import warnings
 from collections.abc import Callable
 
@@ -72,6 +73,19 @@ def rejected_text(rejected: dict) -> str:
 
 
 CANDIDATE_BLOCK = 4096  # candidates are drawn in fixed blocks: same seed, same stream
+SEARCH_NOTE_S = 2.0  # a long search for feasible pick-points says how far it is this often
+
+
+def search_note(drawn: int, most: int, found: int, wanted: int, rejected: dict) -> str:
+    """How far a search for feasible pick-points is, in words (the CLI's log line, the
+    GUI's progress): candidates checked of the most it draws, feasible of those wanted,
+    and why the others were rejected."""
+    return (
+        f"checked {drawn:,} of at most {most:,} candidate poses: {found:,} of {wanted:,} "
+        f"feasible so far (rejected: {rejected_text(rejected)})"
+    )
+
+
 # cells of the feasibility raster (yaw bins x rows x columns, ~5 bytes each while it is
 # built: the 0/1 masks, the uint16 stack and its copy on the device): more is refused
 # before any is allocated
@@ -662,17 +676,34 @@ def generate_normal(
     seed: int = 0,
     config: PickConfig | None = None,
     grasp: GraspConfig | None = None,
+    progress: Callable[[int, int, dict], None] | None = None,
 ) -> PickBatch:
-    """Normal mode: the first n feasible pick-points of the seeded candidate stream."""
+    """Normal mode: the first n feasible pick-points of the seeded candidate stream.
+
+    A search that finds few feasible poses draws up to ``max_candidates``: it logs how
+    far it is every SEARCH_NOTE_S (:func:`search_note`), and calls progress(drawn,
+    found, rejected) -- candidates checked, feasible found, {reason: count} -- after
+    each block, which may raise to stop it (the GUI's Stop button).
+    """
     check_range("picks", "n", n, 1, 1e9)
     checker = FeasibilityChecker(obj, gripper, config, grasp)
+    most = checker.config.max_candidates
     batches, found, drawn = [], 0, 0
+    rejected: dict[str, int] = {}
+    noted = time.monotonic()
     for block in candidate_stream(checker, seed):
         batches.append(block)
         found += len(block)
         drawn += block.n_candidates
-        if found >= n or drawn >= checker.config.max_candidates:
+        for reason, count in block.rejected.items():
+            rejected[reason] = rejected.get(reason, 0) + int(count)
+        if progress is not None:
+            progress(drawn, found, rejected)
+        if found >= n or drawn >= most:
             break
+        if time.monotonic() - noted > SEARCH_NOTE_S:
+            log.info("%s", search_note(drawn, most, found, n, rejected))
+            noted = time.monotonic()
     picks = concat(batches)
     if len(picks) == 0:
         raise ConfigError(_empty_message(obj, gripper, checker.config, picks))

@@ -13,6 +13,15 @@ from pathlib import Path
 # The one frame of every pick-point the page shows or takes: the object's planar pose
 # relative to the gripper's centre (the results table's x_mm, y_mm, yaw_deg)
 FRAME_NAME = "gripper frame (the object's offset under the gripper)"
+# what the page's pick-point maps draw: the same frame, said beside each map
+MAP_HELP = (
+    "Map and values in one frame, the gripper frame: the gripper's centre at 0, x along "
+    "the fingers' closing direction, y across it, yaw counter-clockwise seen from above "
+    "(the arrows in the corner). Each mark is where the object's centre (the + of tab 1) "
+    "lies under the gripper, its tick the object's own x axis; the grey blocks are the "
+    "fingers fully open. A click on a pick-point draws it whole: the part at its pose, "
+    "the fingers at its opening."
+)
 PICK_LABELS = {
     "x_mm": "object x under gripper (mm)",
     "y_mm": "object y under gripper (mm)",
@@ -34,6 +43,14 @@ COLUMN_LABELS = {
     "n": "pick-points",
     "successes": "successes",
 }
+
+
+def compensation_text(mm: float) -> str:
+    """A pick's height compensation in the page's words: the one meaning the word has
+    in the results, the exports and docs/formats.md (never the fingertip height)."""
+    from mjx_pick.core.metrics import COLUMNS
+
+    return f"height compensation: {mm:.1f} mm ({COLUMNS['height_compensation_mm'][1]})"
 
 
 def column_label(key: str) -> str:

@@ -562,6 +562,11 @@ class Job:
             state = "running"
             if self._cancelled_at:
                 message = "stopping: finishing the current chunk"
+            elif not message or message == "checking the pick-points":
+                # a long search for feasible poses (any study's) says how far it is
+                searching = self._searching()
+                if searching:
+                    message = f"checking the pick-points: {searching}"
         elif code == 0:
             state, message = "complete", ""
             if total:
@@ -604,6 +609,13 @@ class Job:
             if len(new) >= 2 and new[-1] > new[0]:
                 rate = (len(new) - 1) * chunk / (new[-1] - new[0])
         return self._done, total, rate, message
+
+    def _searching(self) -> str:
+        """The progress line of a search for feasible pick-points the run is in now
+        (the last line of its log is one), or ''."""
+        lines = self._log_text().rstrip().splitlines()
+        found = _SEARCH_NOTE.match(lines[-1]) if lines else None
+        return found.group(1) if found else ""
 
     def warnings(self) -> tuple[str, ...]:
         """The run's warnings (Python's, in its log), each once, without the file and
@@ -768,6 +780,7 @@ def unused_path(path: Path) -> Path:
 
 
 _WARNING = re.compile(r"(?m)^\S*:\d+: \w*Warning: (.*)$")
+_SEARCH_NOTE = re.compile(r"^mjx-pick: (checked [\d,]+ of at most [\d,]+ candidate poses.*)$")
 _FRAME = re.compile(r'^\s*File "([^"]+)", line \d+')
 _RAISED = re.compile(r"^([A-Za-z_][\w.]*(?:Error|Exception|Interrupt|Exit|Warning))\b")
 
@@ -819,10 +832,16 @@ def progress_chunk(feasible: int) -> int:
     return max(1, math.ceil(feasible / PROGRESS_STEPS))
 
 
-def feasible_estimate(obj, settings, n: int, seed: int, sample: int = 2000) -> int:
+ESTIMATE_SAMPLE = 2000  # feasible pick-points drawn to estimate a large run's count
+
+
+def feasible_estimate(
+    obj, settings, n: int, seed: int, sample: int = ESTIMATE_SAMPLE, progress=None
+) -> int:
     """How many of n asked pick-points an evaluate run will find feasible (it simulates
     only those): exact when n <= sample, else from the feasible fraction of the first
-    `sample` candidates and the candidates the generator checks at most."""
+    `sample` candidates and the candidates the generator checks at most. progress:
+    ``generate_normal``'s (a :class:`~mjx_pick.gui.search.Search`)."""
     import warnings
 
     from mjx_pick.core.pickpoints import check_stroke, generate_normal
@@ -833,7 +852,13 @@ def feasible_estimate(obj, settings, n: int, seed: int, sample: int = 2000) -> i
         # run's job has started (its log shows the warnings check_stroke gives)
         check_stroke(obj, settings.gripper, settings.picks, settings.grasp)
         picks = generate_normal(
-            obj, settings.gripper, min(n, sample), seed, settings.picks, settings.grasp
+            obj,
+            settings.gripper,
+            min(n, sample),
+            seed,
+            settings.picks,
+            settings.grasp,
+            progress=progress,
         )
     if n <= sample or len(picks) < min(n, sample):
         return len(picks)

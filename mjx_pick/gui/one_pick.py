@@ -1,7 +1,8 @@
 """The gripper tab's test of one pick-point (no web framework; runs in a worker thread).
 
-Clearance and coverage first, then -- if the pick-point is feasible -- one recorded
-simulation through :func:`mjx_pick.evaluate` and its force plot.
+Clearance and coverage first, with the pick-point's picture in the gripper frame, then
+-- if it is feasible -- one recorded simulation through :func:`mjx_pick.evaluate` and
+its force plot.
 """
 
 from __future__ import annotations
@@ -10,20 +11,23 @@ import numpy as np
 
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.gui import views
-from mjx_pick.gui.formatting import fmt
+from mjx_pick.gui.formatting import compensation_text, fmt
 from mjx_pick.gui.forms import Settings
 
 
-def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, backend) -> dict:
-    """The check and simulation of the pick-point (x, y in mm, yaw in degrees).
+def check_one_pick(obj, settings: Settings, x: float, y: float, yaw: float) -> dict:
+    """The paper's checks of one pick-point (x, y in mm, yaw in degrees, gripper frame),
+    without simulating it.
 
     Returns:
-      {"text": markdown lines for the page, "plot": force plot PNG bytes, or None when
-      the pick-point is infeasible and was not simulated}.
+      {"lines": markdown lines for the page (the check, the initial speed, the fingertip
+      height and, when feasible, the height compensation), "batch": the feasible
+      PickBatch of one or None, "pose": PNG bytes of the pick-point in the gripper
+      frame (the part at its pose, the fingers at its opening or fully open)}.
     """
     from mjx_pick.core import pickpoints as pp
     from mjx_pick.core.procedure import fingertip_height_mm
-    from mjx_pick.studies.evaluation import evaluate
+    from mjx_pick.core.scene import height_compensation_mm
 
     checker = pp.FeasibilityChecker(obj, settings.gripper, settings.picks, settings.grasp)
     res = checker(np.array([x]), np.array([y]), np.array([yaw]))
@@ -38,20 +42,43 @@ def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, b
         )
         if np.isfinite(value)  # a pose that misses the object has neither
     )
-    head = [
+    lines = [
         f"- clearance and coverage check: **{pp.REASON_WORDS[reason]}**"
         + (f" ({measured})" if measured else ""),
         f"- initial (closing) speed: {settings.grasp.closing_speed_mm_s:g} mm/s",
-        f"- fingertip height above the table: {tip:.1f} mm",
+        f"- fingertip height above the table: {tip:.1f} mm (the pads' lower edges at the grasp)",
     ]
-    if reason != "feasible":
+    batch = None
+    if reason == "feasible":
+        batch = checker.batch(np.array([0]), np.array([x]), np.array([y]), np.array([yaw]), "user")
+        lines.append(
+            "- " + compensation_text(float(height_compensation_mm(settings.gripper, batch)[0]))
+        )
+    shown = opening if np.isfinite(opening) else settings.gripper.stroke_mm
+    pose = views.pose_png(obj, settings.gripper, x, y, yaw, shown)
+    return {"lines": lines, "batch": batch, "pose": pose}
+
+
+def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, backend) -> dict:
+    """The check and simulation of the pick-point (x, y in mm, yaw in degrees).
+
+    Returns:
+      {"text": markdown lines for the page, "pose": the pick-point's picture
+      (:func:`check_one_pick`), "plot": force plot PNG bytes, or None when the
+      pick-point is infeasible and was not simulated}.
+    """
+    from mjx_pick.studies.evaluation import evaluate
+
+    checked = check_one_pick(obj, settings, x, y, yaw)
+    head, batch = checked["lines"], checked["batch"]
+    if batch is None:
         return {
             "text": "\n".join(head)
             + "\n- not simulated: the pick-point is infeasible. A feasible one: generate "
             "pick-points in tab 3 and click one on its map.",
             "plot": None,
+            "pose": checked["pose"],
         }
-    batch = checker.batch(np.array([0]), np.array([x]), np.array([y]), np.array([yaw]), "user")
     ev = evaluate(
         obj,
         settings.gripper,
@@ -73,7 +100,7 @@ def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, b
         f"{settings.grasp.grip_force_n:g} N",
     ]
     plot = views.force_png(trace, settings.grasp.grip_force_n, f"test pick ({x:g}, {y:g}, {yaw:g})")
-    return {"text": "\n".join(head), "plot": plot}
+    return {"text": "\n".join(head), "plot": plot, "pose": checked["pose"]}
 
 
 def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict]:

@@ -1,8 +1,8 @@
 """Pictures the GUI shows, as PNG/GIF bytes: drawn by the project's own plotting code.
 
-Nothing here simulates: the outline is the ObjectModel's, the pick-point map is
-``plots.draw_candidates``, the force plot ``report.force_plot`` and, for the 3-D
-replay, the forces as ECharts options.
+Nothing here simulates: the outline is the ObjectModel's, the pick-point maps are
+``plots.draw_gripper_frame`` (the frame of the pick-points' values), the force plot
+``report.force_plot`` and, for the 3-D replay, the forces as ECharts options.
 """
 
 from __future__ import annotations
@@ -63,52 +63,57 @@ def object_png(obj: ObjectModel, image: Path | None = None) -> bytes:
     return _render(draw)
 
 
-def picks_png(obj: ObjectModel, picks: PickBatch) -> tuple[bytes, np.ndarray]:
-    """Generated pick-points on the silhouette: gripper centres and closing axes (object
-    frame), and the (N, 2) pixel position of each pick-point in the PNG (NaN: not drawn)."""
+def picks_png(
+    obj: ObjectModel, picks: PickBatch, gripper, pose: int | None = None
+) -> tuple[bytes, np.ndarray]:
+    """Generated pick-points in the gripper frame (the frame of their values: where the
+    object's centre lies under the gripper, its yaw), and the (N, 2) pixel position of
+    each in the PNG (NaN: not drawn). pose: the index of one drawn whole -- the part at
+    its pose, the fingers at its opening."""
     drawn = {}
+    shown = None if pose is None else (pose, float(picks.opening_mm[pose]))
 
     def draw(path):
-        drawn["pixels"] = plots.draw_candidates(obj, picks.x_mm, picks.y_mm, picks.yaw_deg, path)
+        drawn["pixels"] = plots.draw_gripper_frame(
+            obj.polygon, gripper, picks.x_mm, picks.y_mm, picks.yaw_deg, path, pose=shown
+        )
 
     return _render(draw), drawn["pixels"]
 
 
-def score_map_png(run) -> tuple[bytes, np.ndarray]:
-    """A run's pick-points on its outline by outcome, the successes coloured by score
-    (gripper centres, object frame), and each pick-point's pixel in the PNG (rows in
-    the run table's order)."""
+def pose_png(obj: ObjectModel, gripper, x: float, y: float, yaw: float, opening: float) -> bytes:
+    """One pick-point in the gripper frame (the paper's Fig. 9, with the frame's axes):
+    the part at its pose, the fingers at the opening, the coverage region, the stroke."""
+    title = f"object x {x:.1f} mm, y {y:.1f} mm, yaw {yaw:.1f} deg (gripper frame)"
+    return _render(lambda path: plots.draw_pick(obj, gripper, x, y, yaw, opening, path, title))
+
+
+def score_map_png(run, pose: int | None = None) -> tuple[bytes, np.ndarray]:
+    """A run's pick-points in the gripper frame by outcome, the successes coloured by
+    score, and each pick-point's pixel in the PNG (rows in the run table's order).
+    pose: the row of one drawn whole (its part and fingers), ringed."""
     t = run.table
     x, y, yaw = (np.asarray(t[c], float) for c in ("x_mm", "y_mm", "yaw_deg"))
     score = np.nan_to_num(np.asarray(t["score"], float), nan=0.0)
     success = np.asarray(t["success"], bool)
+    shown = None if pose is None else (pose, float(t["opening_mm"][pose].as_py()))
     drawn = {}
 
     def draw(path):
-        drawn["pixels"] = plots.draw_candidates(
+        drawn["pixels"] = plots.draw_gripper_frame(
             run.outline,
+            run.gripper,
             x,
             y,
             yaw,
             path,
             values=score,
             success=success,
-            title=plots.outcome_title(len(x)),
+            title=plots.outcome_title(len(x), "gripper frame: the object's centre"),
+            pose=shown,
         )
 
     return _render(draw), drawn["pixels"]
-
-
-def highlighted(png: bytes, pixel) -> bytes:
-    """png with a red ring around pixel (column, row): the selected pick-point."""
-    import cv2
-
-    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
-    if pixel is not None and np.all(np.isfinite(pixel)):
-        centre = (int(round(pixel[0])), int(round(pixel[1])))
-        cv2.circle(img, centre, 11, (0, 0, 220), 3, lineType=cv2.LINE_AA)
-    ok, out = cv2.imencode(".png", img)
-    return out.tobytes()
 
 
 def nearest_pick(pixels: np.ndarray, column: float, row: float, within: float = 12.0):

@@ -16,7 +16,14 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import jobs, views
-from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS, fmt, md_text
+from mjx_pick.gui.formatting import (
+    FRAME_NAME,
+    MAP_HELP,
+    PICK_LABELS,
+    compensation_text,
+    fmt,
+    md_text,
+)
 from mjx_pick.gui.one_pick import simulate_untraced
 from mjx_pick.gui.page.job_panel import POLL_S, JobPanel
 from mjx_pick.gui.page.replay_view import ReplayView
@@ -101,6 +108,10 @@ class AnalyzeTab:
                     .props('data-testid="score-map"')
                 )
                 self.score_map.set_visibility(False)
+                self.map_help = ui.label(MAP_HELP + " It also selects it in the table.").classes(
+                    "text-xs max-w-xl"
+                )
+                self.map_help.set_visibility(False)
                 self.detail = ui.markdown("Select a pick-point.").props('data-testid="pick-detail"')
                 with ui.column().classes("w-full"):
                     self.force_image = (
@@ -183,6 +194,7 @@ class AnalyzeTab:
         self.map_ids = [int(v) for v in opened.table["pick_id"].to_pylist()]
         self.score_map.set_source(views.data_uri(self.map_png, "image/png"))
         self.score_map.set_visibility(True)
+        self.map_help.set_visibility(True)
         self.detail.set_content("Select a pick-point (the table is ranked by score).")
         self.force_image.set_visibility(False)
         self.replay.hide()
@@ -253,13 +265,11 @@ class AnalyzeTab:
             await self.show_pick(e.selection[0])
 
     async def show_pick(self, row: dict) -> None:
-        """A pick-point's metrics, ringed on the map; if traced its force plot and replay."""
+        """A pick-point's metrics, drawn whole on the map (its part at its pose, the
+        fingers at its opening); if traced its force plot and replay."""
         opened = self.state.run
         pid = int(row["pick_id"])
         self.shown = (opened, pid)  # what the awaits below draw for, unless it changes
-        ring = self.map_pixels[self.map_ids.index(pid)]
-        png = views.highlighted(self.map_png, ring)
-        self.score_map.set_source(views.data_uri(png, "image/png"))
         full = opened.row(pid)
         lines = [
             f"**pick {pid}** (rank {row['rank']}): object x {full['x_mm']:.2f} mm, y "
@@ -272,10 +282,17 @@ class AnalyzeTab:
             f"- `phi_max`: {fmt(full['phi_max_deg'], 1)} deg (largest rotation)",
             f"- `t_grasp_nc`: {fmt(full['t_grasp_nc'])} (off the table, fraction)",
             f"- pad forces max {fmt(full['max_force_left_n'], 1)} / "
-            f"{fmt(full['max_force_right_n'], 1)} N, lift {fmt(full['lift_height_mm'], 1)} "
-            f"mm, slip {fmt(full['slip_mm'], 2)} mm",
+            f"{fmt(full['max_force_right_n'], 1)} N, object raised "
+            f"{fmt(full['lift_height_mm'], 1)} mm at the end of the hold, slip "
+            f"{fmt(full['slip_mm'], 2)} mm",
         ]
+        if full.get("height_compensation_mm") is not None:
+            lines.append("- " + compensation_text(full["height_compensation_mm"]))
         self.detail.set_content("\n".join(lines))
+        png, _ = await run.io_bound(views.score_map_png, opened, self.map_ids.index(pid))
+        if self.shown != (opened, pid):  # another pick chosen meanwhile: it draws its own
+            return
+        self.score_map.set_source(views.data_uri(png, "image/png"))
         f_d = float(opened.config["grasp"]["grip_force_n"])
         if row.get("traced") == "yes":
             trace = opened.trace(pid)

@@ -16,29 +16,33 @@ from nicegui import run, ui
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.pickpoints import rejected_text
 from mjx_pick.gui import jobs, views
-from mjx_pick.gui.formatting import fmt, md_text, stamp
+from mjx_pick.gui.formatting import MAP_HELP, fmt, md_text, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
+    SearchProgress,
     checked,
     error_label,
     need_object,
     run_folder,
     warning_label,
 )
+from mjx_pick.gui.search import Search
 from mjx_pick.gui.state import PageState
 
 
-def sample_picks(obj, settings, n: int, seed: int):
+def sample_picks(obj, settings, n: int, seed: int, progress=None):
     """The pick-points of tab 3's map and the warnings their generator gave (in the page,
-    not only in the server's log)."""
+    not only in the server's log); progress: the page's :class:`Search`."""
     from mjx_pick.core.pickpoints import check_stroke, generate_normal
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         # a part no pose fits is refused before the raster and the draws (as the CLI)
         check_stroke(obj, settings.gripper, settings.picks, settings.grasp)
-        picks = generate_normal(obj, settings.gripper, n, seed, settings.picks, settings.grasp)
+        picks = generate_normal(
+            obj, settings.gripper, n, seed, settings.picks, settings.grasp, progress=progress
+        )
     return picks, [str(w.message) for w in caught]
 
 
@@ -85,14 +89,11 @@ class GenerateTab:
                 )
                 self.error = error_label().props('data-testid="generate-error"')
             with ui.column().classes("grow"):
+                self.search = SearchProgress("picks-search")
                 self.picks_info = ui.label("").props('data-testid="picks-info"')
                 self.picks_warning = warning_label("picks-warning")
                 self.map_help = ui.label(
-                    "The map shows where the gripper's centre lands on the part (object "
-                    "frame, as the outline of tab 1). Every pick-point value in the page -- "
-                    "tab 2's test, tab 4's table, the exports -- is the object's offset "
-                    "under the gripper instead (gripper frame). Click a pick-point on the "
-                    "map to put it into tab 2's test simulation."
+                    MAP_HELP + " It also goes into tab 2's test simulation."
                 ).classes("text-xs max-w-2xl")
                 self.map_help.set_visibility(False)
                 self.picks_image = (
@@ -149,13 +150,20 @@ class GenerateTab:
         if settings is None or numbers is None:
             return
         n, seed = numbers
+        if self.search.running:
+            self.error.set_text("pick-points are being checked: wait for them or stop them")
+            return
         obj = self.state.obj
-        self.picks_info.set_text("generating ...")
+        self.forget_map()
         try:
-            picks, warned = await run.io_bound(sample_picks, obj, settings, n, seed)
-            png, pixels = await run.io_bound(views.picks_png, obj, picks)
+            found = await self.search.run(
+                Search(n, settings.picks.max_candidates), sample_picks, obj, settings, n, seed
+            )
+            if found is None:  # stopped: the search's line says how far it got
+                return
+            picks, warned = found
+            png, pixels = await run.io_bound(views.picks_png, obj, picks, settings.gripper)
         except ConfigError as err:
-            self.picks_info.set_text("")
             self.error.set_text(str(err))
             return
         self.picks, self.pixels = picks, pixels
@@ -173,6 +181,7 @@ class GenerateTab:
     def forget_map(self, _=None) -> None:
         """The map and its count no longer show what would run (another n, seed or
         object): hidden until Generate draws them again."""
+        self.search.clear()
         if self.picks is None:
             return
         self.picks = self.pixels = self.drawn_for = None
@@ -181,8 +190,9 @@ class GenerateTab:
         self.picks_image.set_visibility(False)
         self.map_help.set_visibility(False)
 
-    def on_map_click(self, e) -> None:
-        """The pick-point nearest a click on the map, into tab 2's test simulation."""
+    async def on_map_click(self, e) -> None:
+        """The pick-point nearest a click on the map: drawn whole on the map (its part
+        at its pose, the fingers at its opening) and put into tab 2's test simulation."""
         if self.picks is None:
             return
         i = views.nearest_pick(self.pixels, e.image_x, e.image_y)
@@ -191,6 +201,10 @@ class GenerateTab:
         p = self.picks
         x, y, yaw = (round(float(v[i]), 2) for v in (p.x_mm, p.y_mm, p.yaw_deg))
         self.on_pick(x, y, yaw, f"pick-point {int(p.pick_id[i])} of tab 3's map")
+        obj, settings = self.drawn_for[0], self.drawn_for[1]
+        png, _ = await run.io_bound(views.picks_png, obj, p, settings.gripper, i)
+        if self.picks is p:  # the map was not redrawn or forgotten meanwhile
+            self.picks_image.set_source(views.data_uri(png, "image/png"))
 
     async def start_evaluate(self) -> None:
         """``mjx-pick evaluate`` with the page's object, settings and numbers."""
@@ -211,11 +225,25 @@ class GenerateTab:
             drawn = self.drawn_for
             if drawn is not None and drawn[0] is obj and drawn[1:] == (settings, n, seed):
                 feasible = len(self.picks)
-            else:
+            elif self.search.running:
+                self.error.set_text("pick-points are being checked: wait for them or stop them")
+                return
+            else:  # the same search as the run's first step: shown, and it can be stopped
+                wanted = min(n, jobs.ESTIMATE_SAMPLE)
                 try:
-                    feasible = await run.io_bound(jobs.feasible_estimate, obj, settings, n, seed)
+                    feasible = await self.search.run(
+                        Search(wanted, settings.picks.max_candidates),
+                        jobs.feasible_estimate,
+                        obj,
+                        settings,
+                        n,
+                        seed,
+                    )
                 except ConfigError as err:
                     self.error.set_text(str(err))
+                    return
+                if feasible is None:
+                    self.error.set_text("not started: its pick-point check was stopped")
                     return
             chunk = jobs.progress_chunk(feasible)
         if self.panel.busy(self.error):  # another start while this one was estimating

@@ -14,7 +14,7 @@ from mjx_pick.core.config import ConfigError
 from mjx_pick.gui.formatting import FRAME_NAME, PICK_LABELS
 from mjx_pick.gui.one_pick import simulate_one_pick
 from mjx_pick.gui.page.settings_form import SettingsForm
-from mjx_pick.gui.page.widgets import error_label, need_object, picture, show_picture
+from mjx_pick.gui.page.widgets import checked, error_label, need_object, picture, show_picture
 from mjx_pick.gui.state import PageState
 
 # one frame for every pick-point the page shows or takes (named in formatting)
@@ -32,9 +32,10 @@ class GripperTab:
                 ui.label("Test simulation of one pick-point").classes("font-bold")
                 ui.label(
                     f"{FRAME}: where the object's centre (the + of tab 1) lies from the "
-                    "gripper's centre, x along the fingers' closing direction, and the "
-                    "object's rotation. Tab 4's table and the exports use it too; a click "
-                    "on tab 3's map fills it in."
+                    "gripper's centre, x along the fingers' closing direction, y across "
+                    "it, and the object's yaw, counter-clockwise seen from above. Tab 3's "
+                    "and tab 4's maps and tab 4's table use it too, with the same arrows "
+                    "in their corner; a click on tab 3's map fills it in."
                 ).classes("text-xs max-w-xl").props('data-testid="test-frame"')
                 with ui.row():
                     self.x = ui.number(PICK_LABELS["x_mm"], value=0.0, step=1).classes("w-56")
@@ -45,6 +46,7 @@ class GripperTab:
                 )
                 self.error = error_label().props('data-testid="test-pick-error"')
                 self.info = ui.markdown("").props('data-testid="test-info"')
+                self.pose = picture("w-full max-w-md").props('data-testid="test-pose"')
                 self.plot = picture()
 
     def use_pick(self, x: float, y: float, yaw: float, what: str) -> None:
@@ -52,6 +54,7 @@ class GripperTab:
         self.x.value, self.y.value, self.yaw.value = x, y, yaw
         self.info.set_content(f"{what}: press Test simulation")
         self.plot.set_visibility(False)
+        self.pose.set_visibility(False)
         ui.notify(f"{what} ({x:g}, {y:g}, {yaw:g}) is in tab 2's test simulation")
 
     async def test_pick(self) -> None:
@@ -62,9 +65,11 @@ class GripperTab:
         settings = self.form.read()
         if settings is None:
             return
-        pose = [self.x.value, self.y.value, self.yaw.value]
+        # each by its one rule (core.numbers), as a picks file's rows are checked
+        pose = [
+            checked(w, k) for w, k in ((self.x, "x_mm"), (self.y, "y_mm"), (self.yaw, "yaw_deg"))
+        ]
         if any(v is None for v in pose):
-            self.error.set_text("give x, y and yaw of the test pick-point")
             return
         self.info.set_content("simulating one pick-point ...")
         try:
@@ -80,6 +85,7 @@ class GripperTab:
             self.error.set_text(str(err))
             return
         self.info.set_content(result["text"])
+        show_picture(self.pose, result["pose"])
         if result["plot"] is not None:
             show_picture(self.plot, result["plot"])
         else:

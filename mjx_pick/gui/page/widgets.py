@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from nicegui import ui
+from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
 from mjx_pick.gui.formatting import column_label, fmt_cell, page_text
+from mjx_pick.gui.search import Search, SearchStopped
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
 from mjx_pick.gui.views import data_uri
 
@@ -29,6 +30,62 @@ def error_label() -> MessageLabel:
 def warning_label(testid: str) -> MessageLabel:
     """A line for a warning (a library's or a run's), in the warning colour."""
     return MessageLabel("").classes("text-warning text-sm").props(f'data-testid="{testid}"')
+
+
+class SearchProgress:
+    """A search for feasible pick-points the page waits for: a line saying how far it
+    is, a bar and a Stop button while it runs (a search that finds few feasible poses
+    checks up to a million candidates: minutes, never silent)."""
+
+    def __init__(self, testid: str):
+        self.line = MessageLabel("").classes("text-sm").props(f'data-testid="{testid}"')
+        with ui.row().classes("items-center w-full no-wrap") as self.running_row:
+            self.bar = ui.linear_progress(value=0, show_value=False).classes("grow")
+            ui.button("Stop", on_click=self.stop, color="red").props(
+                f'dense data-testid="{testid}-stop"'
+            )
+        self.running_row.set_visibility(False)
+        self.search: Search | None = None
+        self.timer = ui.timer(0.3, self.show, active=False)
+
+    @property
+    def running(self) -> bool:
+        return self.search is not None
+
+    async def run(self, search: Search, fn, *args):
+        """fn(*args, progress=search) in a worker thread, shown here as it goes: its
+        result, or None once stopped (the line then says how far it got)."""
+        self.search = search
+        self.line.set_text("checking candidate poses ...")
+        self.bar.set_value(0)
+        self.running_row.set_visibility(True)
+        self.timer.activate()
+        try:
+            result = await run.io_bound(fn, *args, progress=search)
+        except SearchStopped:
+            self.line.set_text(search.stopped_text())
+            return None
+        finally:
+            self.timer.deactivate()
+            self.running_row.set_visibility(False)
+            self.search = None
+        self.line.set_text("")
+        return result
+
+    def show(self) -> None:
+        if self.search is not None and self.search.drawn and not self.search.stopping:
+            self.line.set_text(self.search.text())
+            self.bar.set_value(self.search.fraction)
+
+    def stop(self) -> None:
+        if self.search is not None:
+            self.search.stop()
+            self.line.set_text("stopping ...")
+
+    def clear(self) -> None:
+        """Forget what the last search said (the map it was for is gone)."""
+        if not self.running:
+            self.line.set_text("")
 
 
 def upload(label: str, accept: str, max_bytes: int, on_upload, on_rejected, testid: str):
