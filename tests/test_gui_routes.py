@@ -225,7 +225,8 @@ def test_an_object_the_libraries_cannot_build_is_refused_in_the_users_words(page
 
 def test_a_long_pick_point_search_shows_its_progress_and_stops(page):
     """A minimum coverage few poses meet (0.97): Generate says how far its search is
-    and why candidates are rejected, and Stop ends it with what it found."""
+    and why candidates are rejected, and Stop ends it with what it found; one that a
+    few meet (0.71) is warned of by its reason, never as a part wider than the stroke."""
     import_shipped(page)
     page.get_by_text("2 Set gripper parameters").click()
     number(page, "minimum coverage", 0.97)
@@ -240,3 +241,14 @@ def test_a_long_pick_point_search_shows_its_progress_and_stops(page):
     assert "feasible (rejected:" in line.inner_text()
     assert not page.get_by_test_id("picks-map").is_visible()
     assert not page.get_by_test_id("picks-search-stop").is_visible()
+    # 0.71: a few poses meet it; the warning names the coverage, not the part's width
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "minimum coverage", 0.71)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 3)
+    page.get_by_test_id("generate").click()
+    page.get_by_test_id("picks-info").filter(has_text="3 feasible pick-points").wait_for()
+    warned = page.get_by_test_id("picks-warning").inner_text()
+    assert "the object fills too little of the region between the pads" in warned, warned
+    assert "lower the minimum coverage, now 0.71" in warned
+    assert "wider than the stroke" not in warned and "larger stroke" not in warned

@@ -300,3 +300,26 @@ def test_a_long_search_reports_its_progress_and_can_be_stopped(block):
     note = pp.search_note(drawn, 1_000_000, found, 200, rejected)
     assert note.startswith(f"checked {drawn:,} of at most 1,000,000 candidate poses")
     assert "the object fills too little of the region between the pads" in note
+
+
+def test_rare_feasible_poses_are_said_by_the_reason_that_rejects_the_others(block):
+    """A minimum coverage few poses meet (0.71 on the 2F-85): the warning and a compare
+    that finds none name the coverage and how to change it -- never a part wider than
+    the stroke (the reason only a part's width gives)."""
+    from mjx_pick.core.config import PlausibilityWarning
+    from mjx_pick.studies.comparison import shared_candidates
+
+    gripper = mp.load_gripper("robotiq-2f85")
+    with pytest.warns(PlausibilityWarning) as caught:
+        pp.generate_normal(block, gripper, 3, 0, pp.PickConfig(min_coverage=0.71))
+    (text,) = [str(w.message) for w in caught if "candidate poses are feasible" in str(w.message)]
+    assert "because the object fills too little of the region between the pads" in text
+    assert "lower the minimum coverage, now 0.71" in text
+    for wrong in ("wider than the stroke", "larger stroke", "barely fits"):
+        assert wrong not in text
+    strict = pp.PickConfig(min_coverage=0.95, max_candidates=8192)
+    with pytest.raises(mp.ConfigError) as refused:
+        shared_candidates(block, [gripper, mp.load_gripper("onrobot-rg2")], 5, 0, strict)
+    said = str(refused.value)
+    assert "robotiq-2f85: 7,527 because the object fills too little" in said
+    assert "onrobot-rg2: " in said and "stroke" not in said

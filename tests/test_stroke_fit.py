@@ -148,7 +148,7 @@ def test_the_gui_checks_with_the_same_function_before_sampling(tmp_path, no_work
     with pytest.raises(ConfigError, match="no pick-point can be feasible"):
         sample_picks(disc_photo(200.0), settings, 100, 0)  # tab 3's map
     # a warning goes to the page with the numbers, then sampling starts
-    monkeypatch.setattr(pp, "generate_normal", lambda *args: "sampled")
+    monkeypatch.setattr(pp, "generate_normal", lambda *args, **kw: "sampled")
     along = dataclasses.replace(settings, picks=pp.PickConfig(yaw_min_deg=-5, yaw_max_deg=5))
     picks, warned = sample_picks(bar_mesh(tmp_path), along, 100, 0)
     assert picks == "sampled" and any("at only 0 % of the yaws" in w for w in warned)

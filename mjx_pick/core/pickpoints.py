@@ -49,21 +49,65 @@ REASON_WORDS = {
 
 
 RARE_FEASIBLE = 1e-3  # a feasible share of candidates below this: edge cases only
+# the reasons that mean the part barely fits between the pads (its width, not a setting)
+_FIT_REASONS = ("too_wide", "clearance")
 
 
-def warn_rare(obj, gripper, feasible: int, drawn: int) -> None:
-    """Warn when feasible pick-points are a tiny share of the candidates drawn: the part
-    barely fits the gripper (a corner, a narrow end between the pads), and its rates
-    rest on those edge cases."""
-    if drawn and 0 < feasible < RARE_FEASIBLE * drawn:
-        warnings.warn(
-            f"{obj.name!r} with {gripper.name}: only {feasible} of {drawn:,} candidate poses "
-            f"are feasible ({100 * feasible / drawn:.2g} %): the part barely fits between "
-            "the pads (a corner, a narrow end), and every rate rests on those edge cases; "
-            "check their pictures, or use a gripper with a larger stroke",
-            PlausibilityWarning,
-            stacklevel=3,
-        )
+def warn_rare(obj, gripper, feasible: int, drawn: int, rejected: dict, config) -> None:
+    """Warn when feasible pick-points are a tiny share of the candidates drawn: every
+    rate rests on those few poses. The warning says why the others were rejected (each
+    reason with its count and what to change, :func:`why_rejected`) -- a minimum
+    coverage few poses meet is said as such, never as a part wider than the stroke.
+
+    rejected: {reason: candidates rejected for it}; config: the PickConfig they were
+    checked with."""
+    if not (drawn and 0 < feasible < RARE_FEASIBLE * drawn):
+        return
+    counts = {k: int(v) for k, v in (rejected or {}).items() if v}
+    top = max(counts, key=counts.get) if counts else "too_wide"
+    edge = (
+        "the part barely fits between the pads (a corner, a narrow end), and every rate "
+        "rests on those edge cases; check their pictures"
+        if top in _FIT_REASONS
+        else "every rate rests on those few poses"
+    )
+    warnings.warn(
+        f"{obj.name!r} with {gripper.name}: only {feasible} of {drawn:,} candidate poses "
+        f"are feasible ({100 * feasible / drawn:.2g} %): {edge}. Rejected: "
+        f"{why_rejected(counts, gripper, config)}",
+        PlausibilityWarning,
+        stacklevel=3,
+    )
+
+
+def why_rejected(rejected: dict, gripper, config) -> str:
+    """Why candidates were rejected, in the user's words: each reason that rejected a
+    tenth of them or more, the most common first, with its count and what to change.
+
+    rejected: {reason: count}; gripper: the GripperSpec; config: the PickConfig used."""
+    default = PickConfig()
+    raised = (
+        f"; the minimum coverage {config.min_coverage:g} is above the default "
+        f"{default.min_coverage:g}: lower it, and more poses fit"
+        if config.min_coverage > default.min_coverage
+        else ""
+    )
+    advice = {
+        "off_object": "the offset ranges miss the object: narrow the x and y offset ranges",
+        "too_wide": f"use a gripper with a larger stroke, now {gripper.stroke_mm:g} mm, or a "
+        f"smaller safety zone, now {config.safety_zone_mm:g} mm{raised}",
+        "clearance": "use a larger stroke, or a smaller safety zone",
+        "coverage": f"lower the minimum coverage, now {config.min_coverage:g}; default "
+        f"{default.min_coverage:g}",
+        "pad_path": "a parallel-jaw gripper or centred poses may take it",
+    }
+    counts = {k: int(v) for k, v in (rejected or {}).items() if v}
+    total = sum(counts.values())
+    shown = [k for k in sorted(counts, key=counts.get, reverse=True) if counts[k] >= 0.1 * total]
+    return (
+        "; ".join(f"{counts[k]:,} because {REASON_WORDS[k]} ({advice[k]})" for k in shown)
+        or advice["off_object"]
+    )
 
 
 def rejected_text(rejected: dict) -> str:
@@ -707,7 +751,7 @@ def generate_normal(
     picks = concat(batches)
     if len(picks) == 0:
         raise ConfigError(_empty_message(obj, gripper, checker.config, picks))
-    warn_rare(obj, gripper, len(picks), picks.n_candidates)
+    warn_rare(obj, gripper, len(picks), picks.n_candidates, picks.rejected, checker.config)
     if len(picks) < n:
         warnings.warn(
             f"only {len(picks)} of {n} pick-points are feasible after {picks.n_candidates} "
@@ -827,44 +871,8 @@ def optimize(
 
 
 def _empty_message(obj, gripper, config, picks: PickBatch) -> str:
-    """Why no candidate was feasible, in the user's words: each reason that rejected a
-    tenth of them or more, with its count and what to change (the most common first)."""
-    counts = {k: int(v) for k, v in (picks.rejected or {}).items() if v}
-    total = sum(counts.values())
-    default = PickConfig()
-    raised = (
-        f"; the minimum coverage {config.min_coverage:g} is above the default "
-        f"{default.min_coverage:g}: lower it, and more poses fit"
-        if config.min_coverage > default.min_coverage
-        else ""
-    )
-    why = {
-        "off_object": (
-            REASON_WORDS["off_object"],
-            "the offset ranges miss the object: reduce x_range_mm / y_range_mm",
-        ),
-        "too_wide": (
-            REASON_WORDS["too_wide"],
-            f"use a gripper with a larger stroke (now {gripper.stroke_mm:g} mm) or a smaller "
-            f"safety zone (now {config.safety_zone_mm:g} mm){raised}",
-        ),
-        "clearance": (
-            REASON_WORDS["clearance"],
-            "use a larger stroke, or a smaller safety zone",
-        ),
-        "coverage": (
-            REASON_WORDS["coverage"],
-            f"lower the minimum coverage (now {config.min_coverage:g}; default "
-            f"{default.min_coverage:g})",
-        ),
-        "pad_path": (
-            REASON_WORDS["pad_path"],
-            "a parallel-jaw gripper or centred poses may take it",
-        ),
-    }
-    shown = [k for k in sorted(counts, key=counts.get, reverse=True) if counts[k] >= 0.1 * total]
-    reasons = "; ".join(f"{counts[k]:,} because {why[k][0]} ({why[k][1]})" for k in shown)
+    """Why no candidate was feasible, in the user's words (:func:`why_rejected`)."""
     return (
         f"no feasible pick-point for {obj.name} with {gripper.name} after "
-        f"{picks.n_candidates:,} candidates: {reasons or why['off_object'][1]}"
+        f"{picks.n_candidates:,} candidates: {why_rejected(picks.rejected, gripper, config)}"
     )

@@ -58,12 +58,15 @@ def shared_candidates(
     check_range("compare", "n", n, 1, 1e8)
     checkers = [pp.FeasibilityChecker(obj, g, config, grasp) for g in grippers]
     parts, found, drawn = [], 0, 0
+    counts = np.zeros((len(grippers), len(pp.REASONS)), np.int64)  # per gripper, per reason
     for ids, x, y, yaw in pp.candidate_blocks(checkers[0], seed):
         if found >= n or drawn >= checkers[0].config.max_candidates:
             break
         drawn += len(ids)
         checks = [c(x, y, yaw) for c in checkers]
         r = np.stack([res["reason"] for res in checks])
+        for g in range(len(grippers)):
+            counts[g] += np.bincount(r[g], minlength=len(pp.REASONS))
         keep = np.flatnonzero((r == 0).any(axis=0))[: n - found]
         found += len(keep)
         parts.append(
@@ -75,13 +78,17 @@ def shared_candidates(
                 [{k: v[keep] for k, v in res.items()} for res in checks],
             )
         )
-    for g, gripper in enumerate(grippers):  # a gripper that takes the part only at its edges
-        ok = sum(int(np.sum(p[4][g]["reason"] == 0)) for p in parts)
-        pp.warn_rare(obj, gripper, ok, drawn)
+    rejected = [{r: int(row[i]) for i, r in enumerate(pp.REASONS) if i} for row in counts]
+    for g, gripper in enumerate(grippers):  # a gripper that takes the part only rarely
+        pp.warn_rare(obj, gripper, int(counts[g, 0]), drawn, rejected[g], checkers[g].config)
     if found == 0:
+        why = "; ".join(
+            f"{g.name}: {pp.why_rejected(rejected[i], g, checkers[i].config)}"
+            for i, g in enumerate(grippers)
+        )
         raise ConfigError(
             f"none of {', '.join(g.name for g in grippers)} can take {obj.name} at any of "
-            f"{drawn} candidate poses: check the strokes against the object's size"
+            f"{drawn:,} candidate poses: {why}"
         )
     ids, x, y, yaw = (np.concatenate([p[i] for p in parts]) for i in range(4))
     cand = {"x_mm": x, "y_mm": y, "yaw_deg": yaw, "pick_id": ids}
