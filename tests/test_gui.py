@@ -435,7 +435,8 @@ def test_paper_workflow(page, server):
     number(page, "simulations per value", 4)
     page.get_by_label("run folder name").last.fill("gui-sweep")
     page.get_by_test_id("start-sweep").click()
-    assert wait_job(page, "sweep gui-sweep").startswith("complete")
+    status = wait_job(page, "sweep gui-sweep")
+    assert status.startswith("complete, 8/8 simulations"), status  # counted, not a bare bar
     sweep_rows = page.get_by_test_id("sweep-table").locator("tbody tr")
     sweep_rows.first.wait_for()
     assert sweep_rows.count() == 2
@@ -450,7 +451,8 @@ def test_paper_workflow(page, server):
     number(page, "top pick-points", 2)
     number(page, "perturbed draws each", 4)
     click_start(page, "start-robust", "robust gui-run")
-    assert wait_job(page, "robust gui-run").startswith("complete")
+    status = wait_job(page, "robust gui-run")
+    assert re.match(r"complete, (\d+)/\1 simulations", status), status
     robust_rows = page.get_by_test_id("robust-table").locator("tbody tr")
     robust_rows.first.wait_for()
     assert robust_rows.count() == 2

@@ -700,3 +700,31 @@ def test_height_compensation_means_the_linkages_lift_at_the_start_everywhere():
         tip = fingertip_height_mm(obj, settings.gripper, settings.grasp)
         assert f"fingertip height above the table: {tip:.1f} mm" in text
         assert checked["pose"][:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_studys_run_counts_its_simulations(tmp_path):
+    """A sweep, compare or robust run shows how many simulations are done of how many
+    (read from its log), not a bar with no count; a server that finds such a run in
+    its work folder counts it the same way."""
+    from mjx_pick.gui.page.job_panel import status_line
+
+    log = tmp_path / "logs" / "sw.log"
+    log.parent.mkdir()
+    log.write_text(
+        "$ mjx-pick sweep block --n 6 --out sw\n"
+        "mjx-pick: sweep: 2 variant(s) x 6 pick-points = up to 12 simulations\n"
+        "sweep: 2 variants (mujoco):  50% 6/12 sim [00:01, 3.63 sim/s]\n"
+    )
+    job = jobs.study_job(["sweep"], log, tmp_path / "sw")
+    p = job.poll()
+    assert (p.done, p.total) == (6, 12) and status_line(p).startswith("running, 6/12 simulations")
+    with log.open("a") as fh:  # robust: its draws follow its pick-points, the total grows
+        fh.write("robust (mujoco): 100% 6/6 sim [00:02, 3 sim/s]\n")
+        fh.write("robust (mujoco):  27% 8/30 sim [00:03, 3 sim/s]\n")
+    assert (job.poll().done, job.poll().total) == (8, 30)
+    out = tmp_path / "sw"
+    out.mkdir()
+    manifest = {"command": "sweep", "status": "running", "started": "2026-11-24T01:00:00+00:00"}
+    (out / "mjx_pick_run.json").write_text(json.dumps(manifest))
+    (recovered,) = jobs.recovered_runs(tmp_path)
+    assert recovered.poll().total == 30 and recovered.unit == "simulations"

@@ -5,6 +5,7 @@ The harness (server, browser, page) is tests/test_gui.py's."""
 from __future__ import annotations
 
 import json
+import re
 
 import test_gui
 from test_gui import BLOCK, TIMEOUT_MS, import_shipped, number, start_short_batch, wait_job
@@ -84,8 +85,15 @@ def test_a_sweep_takes_its_parameters_own_range_and_says_its_size(page):
     import_shipped(page)
     page.get_by_text("Parameter sweep").click()
     select = page.get_by_label("parameter", exact=True)
-    select.fill("gripper.finger_width_mm")
-    page.get_by_role("option", name="gripper.finger_width_mm", exact=True).click()
+    # parameters in words: the form's labels, or a section and meaning -- no keys
+    expect(select).to_have_value("pad friction")
+    select.fill("finger")
+    width = page.get_by_role("option", name="finger width (mm)", exact=True)
+    width.wait_for()
+    options = page.get_by_role("option").all_inner_texts()
+    assert "gripper: mass of one finger (g)" in options, options
+    assert not [o for o in options if "_" in o or "gripper." in o], options
+    width.click()
     # the finger's own range (around its 22 mm), not the friction's 0.4-1.0
     expect(page.get_by_label("start", exact=True)).to_have_value("11")
     expect(page.get_by_label("end", exact=True)).to_have_value("33")
@@ -111,7 +119,8 @@ def test_compare_says_when_grippers_ran_at_different_forces(page, server):
     page.get_by_label("pick-points", exact=True).filter(visible=True).first.fill("2")
     page.get_by_label("run folder name").filter(visible=True).first.fill("forces")
     page.get_by_test_id("start-compare").click()
-    assert wait_job(page, "compare forces").startswith("complete")
+    status = wait_job(page, "compare forces")
+    assert re.match(r"complete, (\d+)/\1 simulations", status), status  # a count
     note = page.get_by_test_id("compare-note")
     note.filter(has_text="different grip forces").wait_for()
     assert "onrobot-rg2 at 40 N" in note.inner_text()

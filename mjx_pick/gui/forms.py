@@ -10,6 +10,7 @@ to the field it names; the page shows it next to that field.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 import tomllib
 from pathlib import Path
@@ -263,6 +264,39 @@ def cli_flags(settings: Settings, paths: dict[str, Path]) -> list[str]:
     ]
 
 
+# the sections of a sweep's parameters, in the page's words
+_SWEPT_SECTIONS = {
+    "gripper": "gripper",
+    "grasp": "procedure",
+    "contact": "contact",
+    "solver": "solver",
+}
+
+
+@functools.cache
+def sweep_labels() -> dict[str, str]:
+    """Every parameter a sweep takes, {key: what the page calls it}: a form field's own
+    label and unit, else its section, meaning (the declaration's, without its remark in
+    brackets) and unit -- never the key (``contact.pad_friction``). Aliases are left out: each
+    parameter once."""
+    from mjx_pick.studies.sweeps import describe_params
+
+    form = {f.key: f"{f.label} ({f.unit})" if f.unit else f.label for f in SETTINGS_FIELDS}
+    labels = {}
+    for row in describe_params():
+        key = row["name"]
+        if not row["sweepable"]:
+            continue
+        if key in form:
+            labels[key] = form[key]
+            continue
+        meaning, unit = row["meaning"].split(" (", 1)[0], row["unit"]
+        said = unit in (None, "-") or meaning.endswith(f" {unit}")  # "... iterations"
+        unit = "" if said else f" ({unit})"
+        labels[key] = f"{_SWEPT_SECTIONS[key.split('.', 1)[0]]}: {meaning}{unit}"
+    return labels
+
+
 def sweep_range(name: str) -> tuple[float, float, float]:
     """A parameter's starting sweep (start, end, step): five values around its default
     within its declared range, so that choosing another parameter never keeps the
@@ -327,7 +361,8 @@ def sweep_problem(settings: Settings, name: str, values) -> str:
         key = canonical(name)
     except ConfigError as err:
         return str(err)
-    label = next((f.label for f in SETTINGS_FIELDS if f.key == key), key)
+    form = next((f.label for f in SETTINGS_FIELDS if f.key == key), None)
+    label = form or sweep_labels().get(key, key)
     base = RunSettings(gripper=settings.gripper, contact=settings.contact, grasp=settings.grasp)
     for value in values:
         try:

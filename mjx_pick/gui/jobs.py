@@ -728,7 +728,10 @@ def recovered_runs(workdir: Path) -> list[Job]:
         if manifest["command"] == "evaluate":
             config = _read_json(folder / "config.json") or {}
             total, chunk = config.get("n"), config.get("chunk_size")
-        job = Job(argv, log, folder, total, chunk)
+        if manifest["command"] in STUDY_COMMANDS:
+            job = study_job(argv, log, folder)
+        else:
+            job = Job(argv, log, folder, total, chunk)
         job.title = f"{manifest['command']} {folder.name}"
         job._proc = FolderRun(folder)
         started, finished = _wall(manifest.get("started")), _wall(manifest.get("finished"))
@@ -753,6 +756,16 @@ def _wall(stamp: str | None) -> float | None:
 
 # the report's progress lines in its log (outputs.progress.ProgressBar's line mode)
 REPORT_PARTS = r"(?m)^report: +\d+% (\d+)/(\d+) part"
+# a study's (sweep, compare, robust): "sweep: 2 variants (mujoco):  50% 6/12 sim [...]"
+SIMULATED = r"(?m)^\w[^\n]*: +\d+% (\d+)/(\d+) sim \["
+STUDY_COMMANDS = ("sweep", "compare", "robust")  # the commands study_job counts
+
+
+def study_job(argv: list[str], log: Path, out: Path) -> Job:
+    """A sweep, compare or robust run writing into out, its progress counted in
+    simulations from its log (each tenth done; a study whose total grows as it goes,
+    robust's draws after its pick-points, says the total known so far)."""
+    return Job(argv, log, out, unit="simulations", counted=SIMULATED)
 
 
 def report_job(run: Path, n: int, animations: bool, log: Path) -> Job:

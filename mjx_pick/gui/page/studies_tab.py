@@ -98,7 +98,7 @@ class CompareStudy:
         argv = ["compare", *self.state.obj_args, *flags, "--grippers", ",".join(names)]
         argv += ["--n", str(n), "--rank-by", self.rank.value, "--out", str(out)]
 
-        job = jobs.Job(argv, self.state.log(out.name), out)
+        job = jobs.study_job(argv, self.state.log(out.name), out)
         self.panel.start(f"compare {out.name} ({len(names)} grippers x {n})", job)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
@@ -171,7 +171,7 @@ class RobustStudy:
         # continues, and one complete with these settings is read back
         argv += ["--out", str(out), "--resume"]
 
-        job = jobs.Job(argv, self.state.log(f"{out.name}-robust"), out)
+        job = jobs.study_job(argv, self.state.log(f"{out.name}-robust"), out)
         self.panel.start(f"robust {out.name} (top {k} x {m} draws)", job)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:

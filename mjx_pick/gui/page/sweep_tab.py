@@ -26,14 +26,12 @@ from mjx_pick.gui.state import PageState
 
 class SweepTab:
     def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
-        from mjx_pick.studies.sweeps import sweepable
-
         self.state, self.form, self.panel = state, form, panel
         panel.handle("sweep", self.ended)
         with ui.row().classes("w-full no-wrap items-start"):
             with ui.column().classes("w-96"):
                 self.param = ui.select(
-                    sweepable(),
+                    forms.sweep_labels(),  # in words; the run's argument is the key
                     value="contact.pad_friction",
                     label="parameter",
                     with_input=True,
@@ -122,7 +120,7 @@ class SweepTab:
         ]
         argv += ["--param", param, "--n", str(int(n)), "--out", str(out)]
 
-        job = jobs.Job(argv, self.state.log(out.name), out, None, None)
+        job = jobs.study_job(argv, self.state.log(out.name), out)
         self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
@@ -134,9 +132,7 @@ class SweepTab:
         """A complete sweep: one row per value, and its plot."""
         variants = json.loads((out / "variants.json").read_text())
         keys = [k for k in variants[0] if k not in ("success_ci", "score_ci")]
-        labels = {
-            f.key: f"{f.label} ({f.unit})" if f.unit else f.label for f in forms.SETTINGS_FIELDS
-        }
+        labels = forms.sweep_labels()
         self.table.columns = [
             {"name": k, "label": labels.get(k) or column_label(k), "field": k} for k in keys
         ]
