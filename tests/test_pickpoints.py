@@ -303,9 +303,11 @@ def test_a_long_search_reports_its_progress_and_can_be_stopped(block):
 
 
 def test_rare_feasible_poses_are_said_by_the_reason_that_rejects_the_others(block):
-    """A minimum coverage few poses meet (0.71 on the 2F-85): the warning and a compare
-    that finds none name the coverage and how to change it -- never a part wider than
-    the stroke (the reason only a part's width gives)."""
+    """A minimum coverage few poses meet (0.71 on the 2F-85): the warning names the
+    coverage and how to change it -- never a part wider than the stroke (the reason
+    only a part's width gives); one none meets (0.95) is refused first for the coverage,
+    the check every candidate the others let through failed, though the width
+    rejected some first."""
     from mjx_pick.core.config import PlausibilityWarning
     from mjx_pick.studies.comparison import shared_candidates
 
@@ -321,5 +323,7 @@ def test_rare_feasible_poses_are_said_by_the_reason_that_rejects_the_others(bloc
     with pytest.raises(mp.ConfigError) as refused:
         shared_candidates(block, [gripper, mp.load_gripper("onrobot-rg2")], 5, 0, strict)
     said = str(refused.value)
-    assert "robotiq-2f85: 7,527 because the object fills too little" in said
-    assert "onrobot-rg2: " in said and "stroke" not in said
+    # led by the check that rejected every candidate the others let through
+    lead = "those that passed the other checks were all rejected: "
+    assert f"robotiq-2f85: {lead}7,527 because the object fills too little" in said
+    assert f"onrobot-rg2: {lead}8,165 because the object fills too little" in said

@@ -871,8 +871,27 @@ def optimize(
 
 
 def _empty_message(obj, gripper, config, picks: PickBatch) -> str:
-    """Why no candidate was feasible, in the user's words (:func:`why_rejected`)."""
+    """Why no candidate was feasible, in the user's words (:func:`why_none`)."""
     return (
         f"no feasible pick-point for {obj.name} with {gripper.name} after "
-        f"{picks.n_candidates:,} candidates: {why_rejected(picks.rejected, gripper, config)}"
+        f"{picks.n_candidates:,} candidates: {why_none(picks.rejected, gripper, config)}"
+    )
+
+
+def why_none(rejected: dict, gripper, config) -> str:
+    """Why none of the candidates was feasible: first the check that rejected every
+    candidate that passed the others -- the last in REASONS order that rejected any (a
+    candidate is rejected by the first check it fails), the one that decided, however
+    few it saw -- then the others by count (:func:`why_rejected`). A minimum coverage
+    no pose meets is said as such even when most candidates were too wide anyway."""
+    counts = {k: int(v) for k, v in (rejected or {}).items() if v}
+    order = [r for r in REASONS[1:] if counts.get(r)]
+    if len(order) < 2:
+        return why_rejected(counts, gripper, config)
+    last = order[-1]
+    rest = {k: v for k, v in counts.items() if k != last}
+    return (
+        "those that passed the other checks were all rejected: "
+        f"{why_rejected({last: counts[last]}, gripper, config)}; before that, "
+        f"{why_rejected(rest, gripper, config)}"
     )

@@ -83,7 +83,7 @@ def shared_candidates(
         pp.warn_rare(obj, gripper, int(counts[g, 0]), drawn, rejected[g], checkers[g].config)
     if found == 0:
         why = "; ".join(
-            f"{g.name}: {pp.why_rejected(rejected[i], g, checkers[i].config)}"
+            f"{g.name}: {pp.why_none(rejected[i], g, checkers[i].config)}"
             for i, g in enumerate(grippers)
         )
         raise ConfigError(
