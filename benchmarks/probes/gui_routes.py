@@ -6,8 +6,9 @@ tests/test_gui.py) and runs one probe after another, each classified as
 
 * refused: the page says what is wrong with the input, in its words, before any work;
 * handled: the page does the right thing (a long search shows its progress and stops; a
-  second browser tab follows a run to its end; a map's pick-point is the value it
-  shows);
+  rare feasible share is warned of by its reason; a second browser tab follows a run to
+  its end; a study's run counts its simulations; a sweep's parameters are in words; a
+  map's pick-point is the value it shows);
 * wrong: anything else -- a hang, a raw library message, a path of the software's own
   files, a CLI flag or argument name, a traceback, a clipped label, a wrong number.
 
@@ -130,6 +131,112 @@ def probes(browser, url: str, work: Path, tmp: Path) -> list[tuple[str, str, Cal
                 if raw:
                     return "wrong", f"shows {raw!r}"
                 return "handled", shown[:110]
+            finally:
+                page.context.close()
+
+    # 12: coverages a few poses meet: the warning names the coverage, never the stroke
+    for obj, coverage, n in (
+        ("block", 0.66, 4),
+        ("block", 0.74, 2),
+        ("door_opener", 0.8, 3),
+    ):
+
+        @add("12 rare coverage", f"{obj} coverage {coverage} n {n}")
+        def _(obj=obj, coverage=coverage, n=n):
+            page = fresh(browser, url)
+            try:
+                import_shipped(page, obj)
+                page.get_by_text("2 Set gripper parameters").click()
+                number(page, "minimum coverage", coverage)
+                page.get_by_text("3 Generate input data").click()
+                number(page, "pick-points", n)
+                page.get_by_test_id("generate").click()
+                info = page.get_by_test_id("picks-info").filter(has_text="feasible pick-points")
+                refused = page.get_by_test_id("generate-error").filter(has_text="no feasible")
+                for _ in range(1200):  # 120 s
+                    if info.count() or refused.count():
+                        break
+                    page.wait_for_timeout(100)
+                # the reason a warning or refusal gives first: the one that rejected most
+                # (the info line's counts may name the stroke for the few it rejected)
+                if refused.count():
+                    said = page.get_by_test_id("generate-error").inner_text()
+                elif info.count():
+                    said = page.get_by_test_id("picks-warning").inner_text()
+                else:
+                    return "wrong", "no answer in 120 s"
+                first = said.split(" because ", 1)[1] if " because " in said else ""
+                rare = refused.count() or "candidate poses are feasible" in said
+                if rare and ("barely fits" in said or not first.startswith("the object fills")):
+                    return "wrong", said[:110]
+                if refused.count():
+                    return "refused", said[:110]
+                return "handled", (said or page.get_by_test_id("picks-info").inner_text())[:110]
+            finally:
+                page.context.close()
+
+    # 19: a study's run counts its simulations; the sweep's parameters are in words
+    for i, (study, setting) in enumerate(
+        (
+            ("sweep", ("grasp.hold_s", "hold", "0.05", "0.15", "0.05", 3)),
+            ("sweep", ("contact.table_friction", "table friction", "0.3", "0.5", "0.2", 2)),
+            ("compare", 3),
+        )
+    ):
+
+        @add("19 study counts", f"{study} {setting[0] if study == 'sweep' else setting}")
+        def _(study=study, setting=setting, name=f"count-{i}"):
+            page = fresh(browser, url)
+            try:
+                import_shipped(page)
+                page.get_by_text("2 Set gripper parameters").click()
+                number(page, "lift height (mm)", 5)
+                number(page, "hold (s)", 0.05)
+                if study == "sweep":
+                    _key, words, start, end, step, n = setting
+                    page.get_by_text("Parameter sweep").click()
+                    select = page.get_by_label("parameter", exact=True)
+                    select.fill(words)
+                    option = page.get_by_role("option", name=words, exact=False).first
+                    option.click()
+                    for label, value in (("start", start), ("end", end), ("step", step)):
+                        number(page, label, value)
+                    number(page, "simulations per value", n)
+                    page.get_by_label("run folder name").last.fill(name)
+                    page.get_by_test_id("start-sweep").click()
+                else:
+                    page.get_by_text("Studies", exact=True).click()
+                    page.get_by_label("pick-points", exact=True).filter(visible=True).first.fill(
+                        str(setting)
+                    )
+                    page.get_by_label("run folder name").filter(visible=True).first.fill(name)
+                    page.get_by_test_id("start-compare").click()
+                page.get_by_test_id("job-title").filter(has_text=name).wait_for()
+                status = page.get_by_test_id("job-status")
+                status.filter(has_text=re.compile(r"^(complete|failed|cancelled)")).wait_for(
+                    timeout=300_000
+                )
+                line = status.inner_text()
+                counted = re.match(r"complete, (\d+)/\1 simulations", line)
+                return ("handled" if counted else "wrong"), line[:110]
+            finally:
+                page.context.close()
+
+    for typed in ("friction", "stiff", "time", "iterations", "mass"):
+
+        @add("19 sweep names", f"typed {typed!r}")
+        def _(typed=typed):
+            page = fresh(browser, url)
+            try:
+                import_shipped(page)
+                page.get_by_text("Parameter sweep").click()
+                page.get_by_label("parameter", exact=True).fill(typed)
+                page.get_by_role("option").first.wait_for(timeout=10_000)
+                options = page.get_by_role("option").all_inner_texts()
+                keys = [o for o in options if "_" in o or re.search(r"\b[a-z]+\.[a-z]", o)]
+                if keys:
+                    return "wrong", f"keys shown: {keys[:3]}"
+                return "handled", "; ".join(options)[:110]
             finally:
                 page.context.close()
 
@@ -288,7 +395,14 @@ def probes(browser, url: str, work: Path, tmp: Path) -> list[tuple[str, str, Cal
             wrong = []
             for k in (0, 7, 13, 21, 29):
                 img.click(position={"x": pixels[k, 0] * scale, "y": pixels[k, 1] * scale})
-                page.wait_for_timeout(800)
+                said = f"pick-point {int(picks.pick_id[k])} of tab 3's map"  # its notice
+                notice = page.locator(".q-notification").filter(has_text=said)
+                try:
+                    notice.wait_for(timeout=20_000)
+                except Exception:  # noqa: BLE001 - the click took no pick-point
+                    wrong.append(k)
+                    continue
+                page.get_by_text("2 Set gripper parameters").click()
                 shown = [
                     float(page.get_by_label(label, exact=True).input_value())
                     for label in (
@@ -300,6 +414,9 @@ def probes(browser, url: str, work: Path, tmp: Path) -> list[tuple[str, str, Cal
                 want = [picks.x_mm[k], picks.y_mm[k], picks.yaw_deg[k]]
                 if not np.allclose(shown, want, atol=0.006):
                     wrong.append(k)
+                page.get_by_text("3 Generate input data").click()
+                img.wait_for()
+                page.wait_for_timeout(800)  # the tab's slide: the map still moves
             if wrong:
                 return "wrong", f"picks {wrong} put other values into tab 2"
             return "handled", "5 of 5 clicks put their own values into tab 2"
