@@ -251,10 +251,10 @@ def test_a_long_pick_point_search_shows_its_progress_and_stops(page):
     assert not page.get_by_test_id("picks-map").is_visible()
     assert not page.get_by_test_id("picks-search-stop").is_visible()
     # 0.71: a few poses meet it; the warning names the coverage, not the part's width
+    number(page, "pick-points", 3)  # here, not in a tab still sliding in
     page.get_by_text("2 Set gripper parameters").click()
     number(page, "minimum coverage", 0.71)
     page.get_by_text("3 Generate input data").click()
-    number(page, "pick-points", 3)
     page.get_by_test_id("generate").click()
     page.get_by_test_id("picks-info").filter(has_text="3 feasible pick-points").wait_for()
     warned = page.get_by_test_id("picks-warning").inner_text()

@@ -237,7 +237,7 @@ def test_bad_numbers(tmp_path, kwargs, match):
         # a traceback (trimesh: "mesh volume is too small") before
         ({"px_per_mm": 1000, "thickness_mm": 5, "mass_g": 1}, "is 0.202 x 0.201 mm: allowed"),
         # the CLI's and the GUI's rule for a scale (core.numbers) is the library's
-        ({"px_per_mm": 1e6, "thickness_mm": 5, "mass_g": 1}, "px_per_mm = 1e.06 is out"),
+        ({"px_per_mm": 1e6, "thickness_mm": 5, "mass_g": 1}, "px_per_mm = 1000000.0 is out"),
         # trimesh's "Height must be nonzero!" before: a thickness has its own range
         ({"px_per_mm": 10, "thickness_mm": 1e-6, "mass_g": 1}, "allowed 0.1 <= thickness_mm"),
         # 2 m across: ran silently for minutes

@@ -22,9 +22,7 @@ It prints one line per probe and the counts per family, and writes gui_probes.cs
 
 from __future__ import annotations
 
-import argparse
 import re
-import shutil
 import sys
 import tempfile
 import time
@@ -36,6 +34,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests"))  # the GUI tests' harness and steps
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # second_routes' counting
+from second_routes import ProbeList  # noqa: E402
 from test_gui import choose, import_shipped, number, start_short_batch  # noqa: E402
 
 # what a GUI user must never read: a library's own words, the software's files, a CLI
@@ -68,21 +67,10 @@ def fresh(browser, url: str, width: int = 1500):
     return page
 
 
-def field_message(page, label: str) -> str:
-    field = page.locator("label.q-field").filter(has=page.get_by_label(label, exact=True))
-    return field.locator(".q-field__messages").inner_text()
-
-
 def probes(browser, url: str, work: Path, tmp: Path) -> list[tuple[str, str, Callable]]:
     """(family, name, probe) for each probe; each probe returns its (class, note)."""
-    out: list = []
-
-    def add(family: str, name: str):
-        def wrap(fn):
-            out.append((family, name, fn))
-            return fn
-
-        return wrap
+    out = ProbeList()
+    add = out.add
 
     # 12: searches for feasible pick-points that take long: shown as they go, stoppable
     for obj, coverage, n, button in (
@@ -473,22 +461,16 @@ def probes(browser, url: str, work: Path, tmp: Path) -> list[tuple[str, str, Cal
 
 def main() -> None:
     from playwright.sync_api import sync_playwright
-    from second_routes import run_and_count
+    from second_routes import probe_arguments, run_and_count
     from test_gui import chromium_path, start_server, stop_server
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="runs/gui_probes", help="work folder (emptied first)")
-    ap.add_argument("--only", help="only probes whose family starts with this")
-    args = ap.parse_args()
-    out = Path(args.out).resolve()
-    shutil.rmtree(out, ignore_errors=True)
-    out.mkdir(parents=True)
+    out, only = probe_arguments(__doc__.splitlines()[0], "runs/gui_probes")
     url, proc = start_server(out / "work", out / "server.log")
     try:
         with sync_playwright() as p, tempfile.TemporaryDirectory() as tmp:
             browser = p.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
             found = probes(browser, url, out / "work", Path(tmp))
-            run_and_count(found, args.only, out / "gui_probes.csv", width=20)
+            run_and_count(found, only, out / "gui_probes.csv", width=20)
             browser.close()
     finally:
         stop_server(proc)

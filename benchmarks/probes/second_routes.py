@@ -113,16 +113,22 @@ def box_stl(path: Path, flip: int | None = None, drop: int | None = None, shape=
     return path
 
 
-def probes(tmp: Path) -> list[tuple[str, str, Callable[[], tuple[str, str]]]]:
-    """(family, name, probe) for each probe; each probe returns its (class, note)."""
-    out: list = []
+class ProbeList(list):
+    """(family, name, probe) rows, each added by decorating its probe: ``@add(family,
+    name)`` where ``add = probes.add``."""
 
-    def add(family: str, name: str):
+    def add(self, family: str, name: str):
         def wrap(fn):
-            out.append((family, name, fn))
+            self.append((family, name, fn))
             return fn
 
         return wrap
+
+
+def probes(tmp: Path) -> list[tuple[str, str, Callable[[], tuple[str, str]]]]:
+    """(family, name, probe) for each probe; each probe returns its (class, note)."""
+    out = ProbeList()
+    add = out.add
 
     # 1: a killed run's chunks and a rerun with other settings
     for i, change in enumerate((["--seed", "7"], ["--grip-force-n", "30"], ["--n", "80"])):
@@ -544,15 +550,22 @@ def run_and_count(probe_list, only: str | None, csv_path: Path, width: int = 28)
     print(f"{'all':{width}s} {total['refused']:8d} {total['handled']:8d} {total['wrong']:6d}")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="runs/probes", help="work folder (emptied first)")
+def probe_arguments(description: str, default_out: str) -> tuple[Path, str | None]:
+    """A probe script's command line: its work folder (--out, emptied and made) and
+    --only (the family prefix to run, or None)."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--out", default=default_out, help="work folder (emptied first)")
     ap.add_argument("--only", help="only probes whose family starts with this")
     args = ap.parse_args()
-    tmp = Path(args.out).resolve()
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    run_and_count(probes(tmp), args.only, tmp / "probes.csv")
+    out = Path(args.out).resolve()
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
+    return out, args.only
+
+
+def main() -> None:
+    tmp, only = probe_arguments(__doc__.splitlines()[0], "runs/probes")
+    run_and_count(probes(tmp), only, tmp / "probes.csv")
 
 
 if __name__ == "__main__":
