@@ -75,8 +75,8 @@ def test_tab_4_opens_only_folders_inside_the_work_folder(page, tmp_path):
         page.get_by_test_id("run-dir").fill(outside)
         page.get_by_test_id("open-run").click()
         error = page.get_by_test_id("analyze-error")
-        error.filter(has_text="inside the work folder").wait_for()
-        assert outside in error.inner_text()
+        # this folder's refusal, not the one before it still shown
+        error.filter(has_text=f"{outside}: only run folders inside the work folder").wait_for()
 
 
 def test_a_sweep_takes_its_parameters_own_range_and_says_its_size(page):
