@@ -299,19 +299,11 @@ def scene_xml(
     z_grip = fingertip_height_mm * 1e-3 + 0.5 * pad_h  # pad centres
     pad_pieces = obj.pad_pieces(gripper.finger_depth_mm, gripper.finger_width_mm)
     meshes, pieces = _object_meshes_xml(obj, pad_pieces)
-    inertia = obj.inertia_kg_m2
-    full = _fmt(
-        [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
-    )
     pairs = _contact_pairs_xml(gripper, mjc, len(pad_pieces), pad_boxes_mm)
     table_size = _fmt([TABLE_HALF_SIZE_M, TABLE_HALF_SIZE_M, 0.01])
     gripper_body, actuators = _gripper_xml(gripper, kinematics, z_grip, pad_boxes_mm)
     return f"""<mujoco model="mjx_pick {obj.name} {gripper.name}">
-  <compiler angle="radian" autolimits="true"/>
-  <option timestep="{solver.timestep_s:.9g}" cone="{solver.cone}" impratio="{solver.impratio:.9g}"
-          iterations="{solver.iterations}" ls_iterations="{solver.ls_iterations}"
-          tolerance="{solver.tolerance:.9g}" noslip_iterations="{solver.noslip_iterations}"
-          integrator="{ {"euler": "Euler"}.get(solver.integrator, solver.integrator) }"/>
+{_options_xml(solver)}
   <default>
     <geom contype="0" conaffinity="0"/>
   </default>
@@ -327,13 +319,7 @@ def scene_xml(
     <geom name="table" type="plane" size="{table_size}" material="grid"/>
     <camera name="top" pos="0 0 0.45" xyaxes="1 0 0 0 1 0"/>
     <camera name="side" pos="0 -0.35 0.12" xyaxes="1 0 0 0 0.2 1"/>
-    <body name="object">
-      <freejoint name="object"/>
-      <inertial pos="{_fmt(obj.com_m)}" mass="{obj.mass_kg:.9g}" fullinertia="{full}"/>
-      <site name="object_com" pos="{_fmt(obj.com_m)}"/>
-      <geom name="object_visual" type="mesh" mesh="visual" group="1" rgba=".2 .45 .8 1" mass="0"/>
-{pieces}
-    </body>
+{_object_body_xml(obj, pieces)}
 {gripper_body}
   </worldbody>
   <contact>
@@ -347,6 +333,32 @@ def scene_xml(
   </sensor>
 </mujoco>
 """
+
+
+def _options_xml(solver: SolverParams) -> str:
+    """The scene's ``<compiler>`` and ``<option>`` lines: the solver settings."""
+    integrator = {"euler": "Euler"}.get(solver.integrator, solver.integrator)
+    return f"""  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{solver.timestep_s:.9g}" cone="{solver.cone}" impratio="{solver.impratio:.9g}"
+          iterations="{solver.iterations}" ls_iterations="{solver.ls_iterations}"
+          tolerance="{solver.tolerance:.9g}" noslip_iterations="{solver.noslip_iterations}"
+          integrator="{integrator}"/>"""
+
+
+def _object_body_xml(obj: ObjectModel, pieces: str) -> str:
+    """The object's free body: its inertia (kg, kg m^2, about the centre of mass), the
+    accelerometer's site, its visual mesh and ``pieces``, its collision geoms' lines."""
+    inertia = obj.inertia_kg_m2
+    full = _fmt(
+        [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
+    )
+    return f"""    <body name="object">
+      <freejoint name="object"/>
+      <inertial pos="{_fmt(obj.com_m)}" mass="{obj.mass_kg:.9g}" fullinertia="{full}"/>
+      <site name="object_com" pos="{_fmt(obj.com_m)}"/>
+      <geom name="object_visual" type="mesh" mesh="visual" group="1" rgba=".2 .45 .8 1" mass="0"/>
+{pieces}
+    </body>"""
 
 
 def _object_meshes_xml(obj: ObjectModel, pad_pieces: list) -> tuple[list[str], str]:
@@ -470,30 +482,8 @@ def _parallel_jaw_body_xml(
     depth = gripper.finger_depth_mm * 1e-3
     width = gripper.finger_width_mm * 1e-3
     pad_h = gripper.pad_height_mm * 1e-3
-    fmass = gripper.finger_mass_g * 1e-3
     armature = f"{gripper.drive_inertia_kg:.9g}"  # the drive's reflected inertia
     finger_link_h = 0.03
-    pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
-
-    def pad(side: str) -> str:
-        if pad_boxes_mm is None:  # the whole pad collides
-            return f"""<geom name="pad_{side}" type="box" size="{pad_size}"
-              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>"""
-        boxes = []
-        for name, (half_w, half_h, dy, dz, recess) in zip(
-            _parallel_jaw_pad_names(pad_boxes_mm), pad_boxes_mm, strict=True
-        ):
-            # the box is thinned on both faces: its face towards the part lies behind
-            box_size = _fmt([0.5 * depth - recess * 1e-3, half_w * 1e-3, half_h * 1e-3])
-            box_pos = _fmt([0.0, dy * 1e-3, dz * 1e-3])
-            boxes.append(
-                f"""
-        <geom name="pad_{side}{name}" type="box" size="{box_size}" pos="{box_pos}"
-              mass="0" group="3" rgba=".9 .2 .2 .5"/>"""
-            )
-        return f"""<geom name="pad_{side}_visual" type="box" size="{pad_size}"
-              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>{"".join(boxes)}"""
-
     return f"""    <body name="gripper" pos="0 0 {z_grip:.9g}" gravcomp="1">
       <joint name="lift" type="slide" axis="0 0 1"/>
       <inertial pos="0 0 {0.5 * pad_h + 0.06:.9g}" mass="{gripper.body_mass_g * 1e-3:.9g}"
@@ -504,7 +494,7 @@ def _parallel_jaw_body_xml(
       <body name="finger_left" pos="{-0.5 * stroke - 0.5 * depth:.9g} 0 0" gravcomp="1">
         <joint name="finger_left" type="slide" axis="1 0 0"
                range="0 {0.5 * stroke:.9g}" armature="{armature}"/>
-        {pad("left")}
+        {_parallel_jaw_pad_xml(gripper, "left", pad_boxes_mm)}
         <geom name="link_left" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
               size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
               pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
@@ -512,12 +502,42 @@ def _parallel_jaw_body_xml(
       <body name="finger_right" pos="{0.5 * stroke + 0.5 * depth:.9g} 0 0" gravcomp="1">
         <joint name="finger_right" type="slide" axis="-1 0 0"
                range="0 {0.5 * stroke:.9g}" armature="{armature}"/>
-        {pad("right")}
+        {_parallel_jaw_pad_xml(gripper, "right", pad_boxes_mm)}
         <geom name="link_right" type="box" group="2" mass="0" rgba=".4 .4 .4 1"
               size="{0.5 * depth:.9g} {0.5 * width:.9g} {0.5 * finger_link_h:.9g}"
               pos="0 0 {0.5 * (pad_h + finger_link_h):.9g}"/>
       </body>
     </body>"""
+
+
+def _parallel_jaw_pad_xml(
+    gripper: GripperSpec, side: str, pad_boxes_mm: list[PadBox] | None
+) -> str:
+    """One finger's pad geoms (side: "left" or "right"): the whole pad, which collides,
+    or, with ``pad_boxes_mm``, the pad as built (``pad_<side>_visual``, the finger's
+    mass) and its collision boxes (:func:`_parallel_jaw_body_xml`)."""
+    depth = gripper.finger_depth_mm * 1e-3
+    width = gripper.finger_width_mm * 1e-3
+    pad_h = gripper.pad_height_mm * 1e-3
+    pad_size = _fmt([0.5 * depth, 0.5 * width, 0.5 * pad_h])
+    fmass = gripper.finger_mass_g * 1e-3
+    if pad_boxes_mm is None:  # the whole pad collides
+        return f"""<geom name="pad_{side}" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>"""
+    boxes = []
+    for name, (half_w, half_h, dy, dz, recess) in zip(
+        _parallel_jaw_pad_names(pad_boxes_mm), pad_boxes_mm, strict=True
+    ):
+        # the box is thinned on both faces: its face towards the part lies behind
+        box_size = _fmt([0.5 * depth - recess * 1e-3, half_w * 1e-3, half_h * 1e-3])
+        box_pos = _fmt([0.0, dy * 1e-3, dz * 1e-3])
+        boxes.append(
+            f"""
+        <geom name="pad_{side}{name}" type="box" size="{box_size}" pos="{box_pos}"
+              mass="0" group="3" rgba=".9 .2 .2 .5"/>"""
+        )
+    return f"""<geom name="pad_{side}_visual" type="box" size="{pad_size}"
+              mass="{fmass:.9g}" rgba=".1 .1 .1 1"/>{"".join(boxes)}"""
 
 
 def _parallel_jaw_actuators_xml(gripper: GripperSpec) -> str:
@@ -554,6 +574,30 @@ def build_scene(
     tip_mm, _ = pad_band_mm(obj, gripper, grasp)
     boxes = pad_collision_geoms_mm(obj, gripper, grasp, contact, solver.cone) if cut_pads else None
     xml = scene_xml(obj, gripper, mjc, solver, tip_mm, kin, boxes)
+    model, xml = _compile_scene(xml, gripper, kin, boxes)
+    index = _scene_index(model, gripper, kin, tip_mm)
+    return Scene(
+        model=model,
+        xml=xml,
+        index=index,
+        contact=mjc,
+        object=obj,
+        gripper=gripper,
+        solver=solver,
+        pad_patch_mm=tuple(float(v) for v in patch),
+        kinematics=kin,
+    )
+
+
+def _compile_scene(
+    xml: str,
+    gripper: GripperSpec,
+    kin: mjcf_gripper.Kinematics | None,
+    boxes: list[PadBox] | None,
+) -> tuple[mujoco.MjModel, str]:
+    """The compiled model of :func:`scene_xml`'s text and the model's MJCF text: an MJCF
+    gripper attached first (with the parallel jaw's pad boxes where it has them). In
+    qpos0 every joint is at 0 and the object's quaternion is the identity."""
     if kin is None:
         model = mujoco.MjModel.from_xml_string(xml)
     else:
@@ -565,15 +609,15 @@ def build_scene(
         xml = spec.to_xml()
     model.qpos0[:] = 0.0
     model.qpos0[model.jnt_qposadr[model.joint("object").id] + 3] = 1.0
+    return model, xml
 
-    def pairs(prefixes) -> tuple[int, ...]:
-        return tuple(i for i in range(model.npair) if model.pair(i).name.startswith(prefixes))
 
-    def qadr(joint: str) -> int:
-        return int(model.jnt_qposadr[model.joint(joint).id])
-
+def _finger_names(gripper: GripperSpec, kin: mjcf_gripper.Kinematics | None) -> dict[str, str]:
+    """The model's names of each finger's body, joint and actuator, by SceneIndex field:
+    the parallel jaw's own, or an attached MJCF gripper's pad bodies, finger joints and
+    its one actuator."""
     if kin is None:
-        names = {
+        return {
             "finger_left_body": "finger_left",
             "finger_right_body": "finger_right",
             "finger_left_qpos": "finger_left",
@@ -581,22 +625,40 @@ def build_scene(
             "finger_left_actuator": "finger_left",
             "finger_right_actuator": "finger_right",
         }
-        mjcf_fields = {}
-    else:
-        p, act = mjcf_gripper.PREFIX, gripper.mjcf.actuator
-        names = {
-            "finger_left_body": p + kin.pad_bodies[0],
-            "finger_right_body": p + kin.pad_bodies[1],
-            "finger_left_qpos": p + kin.finger_joints[0],
-            "finger_right_qpos": p + kin.finger_joints[1],
-            "finger_left_actuator": p + act,
-            "finger_right_actuator": p + act,
-        }
+    p, act = mjcf_gripper.PREFIX, gripper.mjcf.actuator
+    return {
+        "finger_left_body": p + kin.pad_bodies[0],
+        "finger_right_body": p + kin.pad_bodies[1],
+        "finger_left_qpos": p + kin.finger_joints[0],
+        "finger_right_qpos": p + kin.finger_joints[1],
+        "finger_left_actuator": p + act,
+        "finger_right_actuator": p + act,
+    }
+
+
+def _scene_index(
+    model: mujoco.MjModel,
+    gripper: GripperSpec,
+    kin: mjcf_gripper.Kinematics | None,
+    tip_mm: float,
+) -> SceneIndex:
+    """The compiled model's ids and addresses (tip_mm: the fingertips' height above the
+    table at the grasp, mm)."""
+
+    def pairs(prefixes) -> tuple[int, ...]:
+        return tuple(i for i in range(model.npair) if model.pair(i).name.startswith(prefixes))
+
+    def qadr(joint: str) -> int:
+        return int(model.jnt_qposadr[model.joint(joint).id])
+
+    names = _finger_names(gripper, kin)
+    mjcf_fields = {}
+    if kin is not None:
         mjcf_fields = {
             "drive": kin.drive_map(),
-            "gripper_qpos": tuple(qadr(p + j) for j in kin.joint_names),
+            "gripper_qpos": tuple(qadr(mjcf_gripper.PREFIX + j) for j in kin.joint_names),
         }
-    index = SceneIndex(
+    return SceneIndex(
         object_body=model.body("object").id,
         gripper_body=model.body("gripper").id,
         finger_left_body=model.body(names["finger_left_body"]).id,
@@ -614,17 +676,6 @@ def build_scene(
         pad_bottom_z0_m=tip_mm * 1e-3,
         stroke_m=gripper.stroke_mm * 1e-3,
         **mjcf_fields,
-    )
-    return Scene(
-        model=model,
-        xml=xml,
-        index=index,
-        contact=mjc,
-        object=obj,
-        gripper=gripper,
-        solver=solver,
-        pad_patch_mm=tuple(float(v) for v in patch),
-        kinematics=kin,
     )
 
 
