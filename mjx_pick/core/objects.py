@@ -653,33 +653,8 @@ def object_from_mesh(
     """
     path = Path(path)
     label = name or path.stem
-    if unit not in MESH_SCALES:
-        raise ConfigError(f"object.unit = {unit!r} is not allowed: choose 'm' or 'mm'")
-    if pose not in ("as_given", "stable"):
-        raise ConfigError(f"object.pose = {pose!r} is not allowed: choose 'as_given' or 'stable'")
-    if not path.is_file():
-        raise ConfigError(f"mesh {str(path)!r} does not exist")
-    size = path.stat().st_size
-    if size > MAX_MESH_FILE_BYTES:
-        raise ConfigError(
-            f"mesh {str(path)!r} is a {size / 2**20:.0f} MiB file: allowed at most "
-            f"{MAX_MESH_FILE_BYTES / 2**20:.0f} MiB; simplify it (fewer triangles)"
-        )
-    _check_mesh_header(path, size)  # a count or a cut its header shows: before any load
-    # everything that decides the prepared geometry; mass and material are applied after
-    key = {
-        "file_sha256": cache.file_digest(path),
-        "suffix": path.suffix.lower(),
-        "unit": unit,
-        "pose": pose,
-        "coacd_threshold": float(coacd_threshold),
-        "max_hull_vertices": MAX_HULL_VERTICES,
-        "coacd": dict(COACD_SETTINGS),
-        "largest_body": bool(largest_body),
-    }
-    prepared = cache.memo(
-        "mesh", key, lambda: _prepare_mesh(path, unit, pose, coacd_threshold, largest_body)
-    )
+    _check_mesh_file(path, unit, pose)
+    prepared = _prepared_mesh(path, unit, pose, coacd_threshold, largest_body)
     dropped = prepared["dropped_note"].tobytes().decode()
     if dropped:  # bodies left out by largest_body: said on every load
         warnings.warn(dropped, stacklevel=2)
@@ -700,6 +675,45 @@ def object_from_mesh(
 
 
 MESH_SCALES = {"m": 1.0, "mm": 1e-3}
+
+
+def _check_mesh_file(path: Path, unit: str, pose: str) -> None:
+    """Refuse, before any load, a unit or pose that is not allowed and a mesh file that
+    is missing, too large or (by its header) holds too many triangles or is cut short."""
+    if unit not in MESH_SCALES:
+        raise ConfigError(f"object.unit = {unit!r} is not allowed: choose 'm' or 'mm'")
+    if pose not in ("as_given", "stable"):
+        raise ConfigError(f"object.pose = {pose!r} is not allowed: choose 'as_given' or 'stable'")
+    if not path.is_file():
+        raise ConfigError(f"mesh {str(path)!r} does not exist")
+    size = path.stat().st_size
+    if size > MAX_MESH_FILE_BYTES:
+        raise ConfigError(
+            f"mesh {str(path)!r} is a {size / 2**20:.0f} MiB file: allowed at most "
+            f"{MAX_MESH_FILE_BYTES / 2**20:.0f} MiB; simplify it (fewer triangles)"
+        )
+    _check_mesh_header(path, size)  # a count or a cut its header shows: before any load
+
+
+def _prepared_mesh(
+    path: Path, unit: str, pose: str, coacd_threshold: float, largest_body: bool
+) -> dict[str, np.ndarray]:
+    """The mesh file's prepared geometry (:func:`_prepare_mesh`'s arrays), read from the
+    on-disk cache when this file was prepared alike before, else computed and stored."""
+    # everything that decides the prepared geometry; mass and material are applied after
+    key = {
+        "file_sha256": cache.file_digest(path),
+        "suffix": path.suffix.lower(),
+        "unit": unit,
+        "pose": pose,
+        "coacd_threshold": float(coacd_threshold),
+        "max_hull_vertices": MAX_HULL_VERTICES,
+        "coacd": dict(COACD_SETTINGS),
+        "largest_body": bool(largest_body),
+    }
+    return cache.memo(
+        "mesh", key, lambda: _prepare_mesh(path, unit, pose, coacd_threshold, largest_body)
+    )
 
 
 def _check_mesh_header(path: Path, size: int) -> None:
@@ -1005,16 +1019,35 @@ def rasterize_window(
     x0 = y0 = -half * mm_per_px
     n = 2 * half
     centres = x0 + (np.arange(n) + 0.5) * mm_per_px
-    rings = [r for p in shapely.get_parts(rot) for r in (p.exterior, *p.interiors)]
-    ends = [shapely.get_coordinates(r) for r in rings]
-    if not ends or not len(np.concatenate(ends)):
+    edges = _outline_edges(rot)
+    if edges is None:
         return np.zeros((0, 0), np.uint8), (x0, y0), (0, 0), n
-    a = np.concatenate([e[:-1] for e in ends])  # each edge from a to b
-    b = np.concatenate([e[1:] for e in ends])
+    a, b = edges
     # the window: the centres within the outline's bounds
     (xmin, ymin), (xmax, ymax) = np.minimum(a, b).min(axis=0), np.maximum(a, b).max(axis=0)
     r0, r1 = np.searchsorted(centres, ymin, "left"), np.searchsorted(centres, ymax, "right")
     c0, c1 = np.searchsorted(centres, xmin, "left"), np.searchsorted(centres, xmax, "right")
+    mask = _scan_window(a, b, centres, (r0, r1), (c0, c1))
+    return mask, (x0, y0), (int(r0), int(c0)), n
+
+
+def _outline_edges(polygon) -> tuple[np.ndarray, np.ndarray] | None:
+    """Every edge of the outline's rings (holes too) as (a, b): (E, 2) start and end
+    points, mm; None when the outline has no points."""
+    rings = [r for p in shapely.get_parts(polygon) for r in (p.exterior, *p.interiors)]
+    ends = [shapely.get_coordinates(r) for r in rings]
+    if not ends or not len(np.concatenate(ends)):
+        return None
+    a = np.concatenate([e[:-1] for e in ends])  # each edge from a to b
+    b = np.concatenate([e[1:] for e in ends])
+    return a, b
+
+
+def _scan_window(a, b, centres, rows, cols) -> np.ndarray:
+    """The window's mask by the even-odd rule on each row's centre line: (h, w) uint8,
+    1 where a cell's centre lies inside the edges a -> b ((E, 2), mm). centres: the
+    grid's cell centres along x and y, mm; rows, cols: the window's (first, end) cells."""
+    (r0, r1), (c0, c1) = rows, cols
     h, w = int(r1 - r0), int(c1 - c0)
     # rows whose centre line an edge crosses: min(ya, yb) <= yc < max(ya, yb), so that a
     # vertex on a centre line counts once and a horizontal edge not at all
@@ -1042,7 +1075,7 @@ def rasterize_window(
         lo = np.searchsorted(centres, min(xa, xb), "left") - c0
         hi = np.searchsorted(centres, max(xa, xb), "right") - c0
         mask[np.searchsorted(centres, y) - r0, lo:hi] = 0
-    return mask, (x0, y0), (int(r0), int(c0)), n
+    return mask
 
 
 # --------------------------------------------------------------------------- assets
@@ -1106,34 +1139,94 @@ def load_object(
     does not use is refused, never dropped."""
     text = str(source)
     suffix = Path(text).suffix.lower()
-    given = {
+    kind = "an image" if suffix in IMAGE_SUFFIXES else "a mesh" if suffix in MESH_SUFFIXES else ""
+    options = {
         "px_per_mm": px_per_mm,
         "thickness_mm": thickness_mm,
         "mass_g": mass_g,
         "density_kg_m3": density_kg_m3,
         "pick_height_mm": pick_height_mm,
         "simplify_mm": simplify_mm,
+        "unit": unit,
+        "pose": pose,
+        "largest_body": largest_body,
     }
-    for name, value in given.items():
-        numbers.check_optional(name, value)
+    _check_object_options(text, kind, options)
+    return _load_checked_object(text, suffix, options, material)
+
+
+def _load_checked_object(
+    text: str, suffix: str, options: dict, material: str | None
+) -> ObjectModel:
+    """:func:`load_object` once its options are checked: the image, mesh or shipped asset
+    that text names (suffix: its lower-case suffix), options its keywords by name."""
+    o = options
+    common = {"pick_height_mm": o["pick_height_mm"]}
+    if material is not None:
+        common["material"] = material
+    if suffix in IMAGE_SUFFIXES:
+        extra = {} if o["simplify_mm"] is None else {"simplify_mm": o["simplify_mm"]}
+        return object_from_image(
+            text,
+            px_per_mm=o["px_per_mm"],
+            thickness_mm=o["thickness_mm"],
+            mass_g=o["mass_g"],
+            density_kg_m3=o["density_kg_m3"],
+            **extra,
+            **common,
+        )
+    if suffix in MESH_SUFFIXES:
+        if o["unit"] is None:
+            raise ConfigError(f"mesh {text!r}: give its unit ('m' or 'mm', --unit)")
+        return object_from_mesh(
+            text,
+            unit=o["unit"],
+            mass_g=o["mass_g"],
+            density_kg_m3=o["density_kg_m3"],
+            pose=o["pose"],
+            largest_body=o["largest_body"],
+            **common,
+        )
+    if suffix == "" and text in asset_names():
+        return load_asset(
+            text,
+            px_per_mm=o["px_per_mm"],
+            thickness_mm=o["thickness_mm"],
+            mass_g=o["mass_g"],
+            simplify_mm=o["simplify_mm"],
+            **common,
+        )
+    raise ConfigError(
+        f"object {text!r} is neither a shipped asset ({', '.join(asset_names())}), an image "
+        f"({', '.join(IMAGE_SUFFIXES)}) nor a mesh ({', '.join(MESH_SUFFIXES)})"
+    )
+
+
+# load_object's numbers, each checked by its rule (``core.numbers``)
+_OBJECT_NUMBERS = (
+    "px_per_mm",
+    "thickness_mm",
+    "mass_g",
+    "density_kg_m3",
+    "pick_height_mm",
+    "simplify_mm",
+)
+
+
+def _check_object_options(text: str, kind: str, options: dict) -> None:
+    """Refuse, in this order, a number its rule refuses, a mass given with a density,
+    and an option the source does not use (kind: "an image", "a mesh", or "" for a
+    shipped asset). options: :func:`load_object`'s keywords by name."""
+    for name in _OBJECT_NUMBERS:
+        numbers.check_optional(name, options[name])
+    mass_g, density_kg_m3 = options["mass_g"], options["density_kg_m3"]
     if mass_g is not None and density_kg_m3 is not None:
         raise ConfigError(
             f"object {text!r}: mass_g = {mass_g:g} and density_kg_m3 = {density_kg_m3:g} are "
             "both given: give one (--mass-g or --density-kg-m3); the other follows from the "
             "volume"
         )
-    kind = "an image" if suffix in IMAGE_SUFFIXES else "a mesh" if suffix in MESH_SUFFIXES else ""
-    unused = {
-        "an image": {"unit": unit, "largest_body": largest_body or None},
-        "a mesh": {
-            "px_per_mm": px_per_mm,
-            "thickness_mm": thickness_mm,
-            "simplify_mm": simplify_mm,
-        },
-        "": {"density_kg_m3": density_kg_m3, "unit": unit, "largest_body": largest_body or None},
-    }[kind]
-    if pose != "as_given" and kind != "a mesh":
-        unused["pose"] = pose
+    unused = _unused_options(kind, options)
     extra = [k for k, v in unused.items() if v is not None]
     if extra:
         what = kind or "a shipped asset"
@@ -1142,45 +1235,27 @@ def load_object(
             + ", ".join("--" + k.replace("_", "-") for k in extra)
             + " out)"
         )
-    common = {"pick_height_mm": pick_height_mm}
-    if material is not None:
-        common["material"] = material
-    if suffix in IMAGE_SUFFIXES:
-        extra = {} if simplify_mm is None else {"simplify_mm": simplify_mm}
-        return object_from_image(
-            text,
-            px_per_mm=px_per_mm,
-            thickness_mm=thickness_mm,
-            mass_g=mass_g,
-            density_kg_m3=density_kg_m3,
-            **extra,
-            **common,
-        )
-    if suffix in MESH_SUFFIXES:
-        if unit is None:
-            raise ConfigError(f"mesh {text!r}: give its unit ('m' or 'mm', --unit)")
-        return object_from_mesh(
-            text,
-            unit=unit,
-            mass_g=mass_g,
-            density_kg_m3=density_kg_m3,
-            pose=pose,
-            largest_body=largest_body,
-            **common,
-        )
-    if suffix == "" and text in asset_names():
-        return load_asset(
-            text,
-            px_per_mm=px_per_mm,
-            thickness_mm=thickness_mm,
-            mass_g=mass_g,
-            simplify_mm=simplify_mm,
-            **common,
-        )
-    raise ConfigError(
-        f"object {text!r} is neither a shipped asset ({', '.join(asset_names())}), an image "
-        f"({', '.join(IMAGE_SUFFIXES)}) nor a mesh ({', '.join(MESH_SUFFIXES)})"
-    )
+
+
+def _unused_options(kind: str, options: dict) -> dict:
+    """The options a source of this kind does not use, by name (None: not given)."""
+    largest_body = options["largest_body"] or None
+    unused = {
+        "an image": {"unit": options["unit"], "largest_body": largest_body},
+        "a mesh": {
+            "px_per_mm": options["px_per_mm"],
+            "thickness_mm": options["thickness_mm"],
+            "simplify_mm": options["simplify_mm"],
+        },
+        "": {
+            "density_kg_m3": options["density_kg_m3"],
+            "unit": options["unit"],
+            "largest_body": largest_body,
+        },
+    }[kind]
+    if options["pose"] != "as_given" and kind != "a mesh":
+        unused["pose"] = options["pose"]
+    return unused
 
 
 def check_same_object(theirs: dict, obj: ObjectModel, where: str) -> None:
