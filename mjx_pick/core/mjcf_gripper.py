@@ -238,6 +238,48 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
     against gravity (the arm carries the gripper; the linkage is measured without it),
     the actuator overrides applied, and its options replaced by the scene's."""
     spec = _load(mjcf)
+    act = _named_parts(spec, mjcf)
+    _absolute_asset_paths(spec, mjcf)
+    for name, geom in zip(_link_names(spec, mjcf), _link_geoms(spec, mjcf), strict=True):
+        geom.name = name
+    for geom in spec.geoms:
+        geom.contype = 0
+        geom.conaffinity = 0
+    for body in spec.bodies:
+        body.gravcomp = 1.0
+    _override_servo(act, mjcf)
+    if mjcf.urdf is not None:
+        # a URDF's <mimic> is a rigid coupling; MuJoCo's default equality (a 20 ms time
+        # constant) lets the mimicking finger lag and overshoot the driven one by
+        # millimetres as the drive starts: make it the stiffest MuJoCo integrates
+        # stably, two time steps
+        step = option.timestep if option is not None else spec.option.timestep
+        for eq in spec.equalities:
+            eq.solref = [2.0 * step, 1.0]
+    # the scene's solver options win: copy them so attaching raises no conflict
+    if option is not None:
+        for name in _SCENE_OPTIONS:
+            setattr(spec.option, name, getattr(option, name))
+    return spec
+
+
+# the solver options an attached gripper takes from the scene
+_SCENE_OPTIONS = (
+    "timestep",
+    "impratio",
+    "cone",
+    "integrator",
+    "iterations",
+    "ls_iterations",
+    "tolerance",
+    "noslip_iterations",
+    "gravity",
+)
+
+
+def _named_parts(spec: mujoco.MjSpec, mjcf: MjcfGripper):
+    """The spec's actuator that closes the fingers, once the mount body, every pad geom
+    and that actuator are found in it (ConfigError naming the first that is missing)."""
     if spec.body(mjcf.mount_body) is None:
         raise _missing("body", "mount_body", mjcf.mount_body, _names(spec.bodies))
     for field in ("pad_left_geoms", "pad_right_geoms"):
@@ -247,7 +289,12 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
     act = spec.actuator(mjcf.actuator)
     if act is None:
         raise _missing("actuator", "actuator", mjcf.actuator, _names(spec.actuators))
-    # absolute asset paths: the scene's MJCF text (saved with every run) then loads anywhere
+    return act
+
+
+def _absolute_asset_paths(spec: mujoco.MjSpec, mjcf: MjcfGripper) -> None:
+    """Make the spec's mesh and texture files absolute: the scene's MJCF text (saved with
+    every run) then loads anywhere."""
     folder = Path(mjcf.file).parent
     for mesh in spec.meshes:
         if mesh.file:
@@ -255,13 +302,11 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
     for texture in spec.textures:
         if texture.file:
             texture.file = str((folder / spec.texturedir / texture.file).resolve())
-    for name, geom in zip(_link_names(spec, mjcf), _link_geoms(spec, mjcf), strict=True):
-        geom.name = name
-    for geom in spec.geoms:
-        geom.contype = 0
-        geom.conaffinity = 0
-    for body in spec.bodies:
-        body.gravcomp = 1.0
+
+
+def _override_servo(act, mjcf: MjcfGripper) -> None:
+    """Apply the ``actuator_kp`` / ``actuator_kv`` / ``actuator_forcerange`` overrides to
+    the closing actuator (act, a spec's position servo)."""
     # keep the ctrl -> reference-length mapping (gain / kp) while changing kp
     kp_old = -act.biasprm[1]
     if mjcf.actuator_kp is not None and kp_old > 0:
@@ -273,29 +318,6 @@ def gripper_spec(mjcf: MjcfGripper, option: mujoco.MjOption | None = None) -> mu
     if mjcf.actuator_forcerange is not None:
         act.forcerange = [-mjcf.actuator_forcerange, mjcf.actuator_forcerange]
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-    if mjcf.urdf is not None:
-        # a URDF's <mimic> is a rigid coupling; MuJoCo's default equality (a 20 ms time
-        # constant) lets the mimicking finger lag and overshoot the driven one by
-        # millimetres as the drive starts: make it the stiffest MuJoCo integrates
-        # stably, two time steps
-        step = option.timestep if option is not None else spec.option.timestep
-        for eq in spec.equalities:
-            eq.solref = [2.0 * step, 1.0]
-    # the scene's solver options win: copy them so attaching raises no conflict
-    if option is not None:
-        for name in (
-            "timestep",
-            "impratio",
-            "cone",
-            "integrator",
-            "iterations",
-            "ls_iterations",
-            "tolerance",
-            "noslip_iterations",
-            "gravity",
-        ):
-            setattr(spec.option, name, getattr(option, name))
-    return spec
 
 
 def _load(mjcf: MjcfGripper) -> mujoco.MjSpec:
@@ -490,31 +512,23 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
     j_left = _finger_joint(m, d, driven, "left", mjcf.actuator)
     j_right = _finger_joint(m, d, driven, "right", mjcf.actuator)
     jids = list(range(m.njnt))
-    names = tuple(m.joint(j).name[len(PREFIX) :] for j in jids)
     rows = _stroke_samples(m, d, a, settle, (c_open, c_closed), (j_left, j_right), jids)
-    xl = np.array([r[0] for r in rows])
-    xr = np.array([r[1] for r in rows])
-    opening = xr - xl
-    travel_l, travel_r = xl - xl[0], xr[0] - xr
+    return _tabulate(m, mjcf, a, rows, (j_left, j_right), (body_l, body_r), frames)
+
+
+def _tabulate(m: mujoco.MjModel, mjcf: MjcfGripper, a: int, rows, fingers, bodies, frames):
+    """The :class:`Kinematics` of the stroke samples rows (:func:`_stroke_samples`), kept
+    where the pads close steadily. a: the closing actuator's id; fingers: the (left,
+    right) finger joints' ids; bodies: the pads' bodies' ids; frames: their PadFrames
+    (None in either: not a box pad)."""
+    j_left, j_right = fingers
+    body_l, body_r = bodies
+    travel_l, travel_r, opening, keep = _steady_stroke(rows, mjcf.actuator)
     travel = 0.5 * (travel_l + travel_r)
-    # the closed end: the pads pass through each other (they never collide here); keep
-    # the monotonic part of the stroke with a gap >= 0
-    keep = (opening >= 0) & np.concatenate([[True], np.diff(travel) > 1e-6])
-    keep &= np.cumprod(keep).astype(bool)
-    if keep.sum() < 5:
-        raise ConfigError(
-            f"gripper.mjcf.actuator = {mjcf.actuator!r}: the pads do not close steadily over "
-            "its control range (fewer than 5 samples with a growing travel)"
-        )
     length = np.array([r[6] for r in rows])
     kp = -m.actuator_biasprm[a, 1]
     gain = m.actuator_gainprm[a, 0]
-    # virtual work: the actuator force tau on its length L balances both pads' forces F
-    # over their travels: tau dL = F (dx_l + dx_r) = 2 F dx
-    dx_dl = np.gradient(travel, length)
-    stiffness = kp / (2.0 * dx_dl**2)
-    f_range = m.actuator_forcerange[a] if m.actuator_forcelimited[a] else (-np.inf, np.inf)
-    force_limit = np.max(np.abs(f_range)) / (2.0 * np.abs(dx_dl))
+    stiffness, force_limit = _pad_servo(m, a, travel, length)
     extents = rows[0][8]
     depth = float(min(extents[0][0], extents[1][0]))
     width = float(min(extents[0][1], extents[1][1]))
@@ -532,7 +546,7 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
         length=length[keep],
         stiffness_n_per_m=stiffness[keep],
         force_limit_n=force_limit[keep],
-        joint_names=names,
+        joint_names=tuple(m.joint(j).name[len(PREFIX) :] for j in range(m.njnt)),
         joint_qpos=np.array([r[7] for r in rows])[keep],
         pad_width_m=width,
         pad_depth_m=depth,
@@ -545,6 +559,40 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
         finger_mass_kg=float(sum(m.body_mass[b] for b in finger_bodies)),
         pad_frames=None if None in frames else frames,
     )
+
+
+def _steady_stroke(rows, actuator: str):
+    """(left travel, right travel, opening, keep) of the stroke samples rows, m (K,)
+    each, and which samples to keep: the monotonic part of the stroke with a gap >= 0;
+    ConfigError when fewer than 5 remain."""
+    xl = np.array([r[0] for r in rows])
+    xr = np.array([r[1] for r in rows])
+    opening = xr - xl
+    travel_l, travel_r = xl - xl[0], xr[0] - xr
+    travel = 0.5 * (travel_l + travel_r)
+    # the closed end: the pads pass through each other (they never collide here); keep
+    # the monotonic part of the stroke with a gap >= 0
+    keep = (opening >= 0) & np.concatenate([[True], np.diff(travel) > 1e-6])
+    keep &= np.cumprod(keep).astype(bool)
+    if keep.sum() < 5:
+        raise ConfigError(
+            f"gripper.mjcf.actuator = {actuator!r}: the pads do not close steadily over "
+            "its control range (fewer than 5 samples with a growing travel)"
+        )
+    return travel_l, travel_r, opening, keep
+
+
+def _pad_servo(m: mujoco.MjModel, a: int, travel, length):
+    """(stiffness N/m, force limit N) the actuator a gives each pad along the stroke
+    ((K,) pad travels and actuator lengths, m): by virtual work."""
+    kp = -m.actuator_biasprm[a, 1]
+    # virtual work: the actuator force tau on its length L balances both pads' forces F
+    # over their travels: tau dL = F (dx_l + dx_r) = 2 F dx
+    dx_dl = np.gradient(travel, length)
+    stiffness = kp / (2.0 * dx_dl**2)
+    f_range = m.actuator_forcerange[a] if m.actuator_forcelimited[a] else (-np.inf, np.inf)
+    force_limit = np.max(np.abs(f_range)) / (2.0 * np.abs(dx_dl))
+    return stiffness, force_limit
 
 
 def _closing_direction(mjcf: MjcfGripper, m, d, settle, lo: float, hi: float):
