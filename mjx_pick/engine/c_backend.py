@@ -117,17 +117,15 @@ class MujocoBackend:
         return merged, (np.concatenate(traces) if record else None)
 
     def _run_chunk(self, inputs: PickInputs, record: bool):
+        """One batch of N <= batch_size simulations: (results of (N,) arrays, traces
+        (N, T, F) or None). The controller runs jitted on >= N rows (tick_rows), the
+        physics on the N alone, only the rows still running stepping each tick."""
         n = len(inputs)
         ad = self.ad
         n_sub = self.grasp.substeps(self.scene.solver)
         n_ticks = self.grasp.n_ticks()
         t_compile = time.perf_counter()
-        b = self._batch(n)
-        b.reset(stage=mujoco.mjtStage.mjSTAGE_NONE.value)
-        b.expand("pair_friction")[:] = inputs.pair_friction
-        b.expand("pair_solref")[:] = inputs.pair_solref
-        b.expand("pair_solimp")[:] = inputs.pair_solimp
-        self._set_model_fields(b, inputs.model)
+        b = self._loaded_batch(inputs)
         qpos, qvel, ctrl = b.bind("qpos"), b.bind("qvel"), b.bind("ctrl")
         cfrc, sim_time = b.bind("cfrc_ext"), b.bind("time")
         qpos[:] = inputs.qpos0
@@ -161,14 +159,7 @@ class MujocoBackend:
             if not running.any():
                 break
             ctrl[:] = np.asarray(u)[:n]
-            ids = np.flatnonzero(running)
-            failed = np.zeros(n, bool)
-            try:
-                b.step(ids=ids, nstep=n_sub)
-            except mujoco.batch.SimulationError as err:
-                failed[err.ids] = True
-            # a MuJoCo auto-reset (bad accelerations) sends time back: a blow-up
-            failed[ids] |= sim_time[ids] < (k + 1) * dt - 0.5 * dt
+            failed = _step_running(b, np.flatnonzero(running), n_sub, sim_time, (k + 1, dt))
             if failed.any():
                 broken |= failed
                 qpos[failed] = np.nan  # the next tick flags them diverged
@@ -176,11 +167,40 @@ class MujocoBackend:
             s, a, _, _ = tick(params, s, a, *state(), pos0, quat0)
         out = {k: np.asarray(v)[:n] for k, v in _finalize_fn()(params, a).items()}
         self.stats.run_s += time.perf_counter() - t_run
-        traces = None
-        if record:
-            traces = np.stack(rows, axis=1)
-            if traces.shape[1] < n_ticks:  # all finished early: hold the last row
-                pad = np.repeat(traces[:, -1:], n_ticks - traces.shape[1], axis=1)
-                pad[..., 0] = traces[:, -1:, 0] + dt * np.arange(1, n_ticks - traces.shape[1] + 1)
-                traces = np.concatenate([traces, pad], axis=1)
-        return out, traces
+        return out, (_held_traces(rows, n_ticks, dt) if record else None)
+
+    def _loaded_batch(self, inputs: PickInputs) -> mujoco.batch.Batch:
+        """The batch for len(inputs) simulations, reset, with each simulation's contact
+        pair values and model fields set."""
+        b = self._batch(len(inputs))
+        b.reset(stage=mujoco.mjtStage.mjSTAGE_NONE.value)
+        b.expand("pair_friction")[:] = inputs.pair_friction
+        b.expand("pair_solref")[:] = inputs.pair_solref
+        b.expand("pair_solimp")[:] = inputs.pair_solimp
+        self._set_model_fields(b, inputs.model)
+        return b
+
+
+def _step_running(b: mujoco.batch.Batch, ids, n_sub: int, sim_time, tick) -> np.ndarray:
+    """Step the simulations ids of b by n_sub physics steps; (N,) bool: those that blew
+    up (a SimulationError, or a time behind tick = (ticks done, control period s))."""
+    k_done, dt = tick
+    failed = np.zeros(len(sim_time), bool)
+    try:
+        b.step(ids=ids, nstep=n_sub)
+    except mujoco.batch.SimulationError as err:
+        failed[err.ids] = True
+    # a MuJoCo auto-reset (bad accelerations) sends time back: a blow-up
+    failed[ids] |= sim_time[ids] < k_done * dt - 0.5 * dt
+    return failed
+
+
+def _held_traces(rows: list[np.ndarray], n_ticks: int, dt: float) -> np.ndarray:
+    """The recorded (N, F) rows stacked to (N, n_ticks, F): where every simulation ended
+    early, the last row held (its time, column 0, going on by dt s per tick)."""
+    traces = np.stack(rows, axis=1)
+    if traces.shape[1] < n_ticks:  # all finished early: hold the last row
+        pad = np.repeat(traces[:, -1:], n_ticks - traces.shape[1], axis=1)
+        pad[..., 0] = traces[:, -1:, 0] + dt * np.arange(1, n_ticks - traces.shape[1] + 1)
+        traces = np.concatenate([traces, pad], axis=1)
+    return traces

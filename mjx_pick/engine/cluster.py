@@ -260,11 +260,9 @@ def plan_slots(backend: str, node: dict) -> list[_Slot]:
 
 class _ActorPool:
     """The actors of one run on a Ray cluster, and the fault-tolerant loop that feeds
-    them: see the module docstring.
-
-    Connecting, resolving the backend and checking the cluster happen here, so that a
-    bad address, a missing Ray or an unreachable cluster is one line before any
-    simulation. Actors start on the first :meth:`map`.
+    them (module docstring). Made, it has connected, resolved the backend and checked
+    the cluster (a bad address, a missing Ray: one line before any simulation); actors
+    start on the first :meth:`map`.
 
     Args:
       address: 'auto' or 'HOST:PORT' / 'ray://HOST:PORT' of the cluster's head.
@@ -488,32 +486,8 @@ class _ActorPool:
             self._scan()
             self._check_ready()
             ready = [s for s in self.slots if s.info is not None]
-            if not self.slots and not inflight:
-                why = (
-                    f"; the last actor that died said: {self.last_error}" if self.last_error else ""
-                )
-                raise RuntimeError(
-                    f"no Ray actor is left to run backend {self.name!r}: every node failed "
-                    f"{self.max_attempts} times or left the cluster{why}"
-                )
-            if not ready and not inflight and time.monotonic() - started > self.start_timeout_s:
-                raise RuntimeError(
-                    f"no Ray actor started within {self.start_timeout_s:.0f} s: does any node "
-                    f"have the resources for one ({self.name}; `ray status`)?"
-                )
-            while queue:
-                # the least busy actor first: one that just started (a node that joined,
-                # a replacement) gets work at once instead of what busy ones leave
-                free = [s for s in ready if s.inflight < self.depth]
-                if not free:
-                    break
-                slot = min(free, key=lambda s: s.inflight)
-                key = queue.popleft()
-                method, args = calls[key]
-                ref = getattr(slot.actor, method).remote(*args)
-                inflight[ref] = (key, slot)
-                slot.inflight += 1
-                self._emit("call_sent", slot, key=key)
+            self._check_actors_left(ready, inflight, started)
+            self._send(calls, queue, ready, inflight)
             if not inflight:
                 time.sleep(0.1)  # actors still starting
                 continue
@@ -525,27 +499,68 @@ class _ActorPool:
                     result = ray.get(ref)
                 except lost:
                     # the actor (or its node) died with this call: run it elsewhere
-                    attempts[key] += 1
-                    self.lost += 1
-                    if attempts[key] >= self.max_attempts:
-                        raise RuntimeError(
-                            f"call {key!r} was lost with its actor {attempts[key]} times: see "
-                            "the Ray logs of its nodes (`ray logs`)"
-                        ) from None
-                    queue.appendleft(key)
-                    if slot in self.slots:
-                        self._drop(slot)
-                    self._emit("call_lost", slot, key=key)
+                    self._requeue(key, slot, queue, attempts)
                     continue
-                wall = getattr(result, "wall_s", 0.0)
-                label = slot.info["label"]
-                self.node_picks[label] += sizes[key]
-                self.node_busy_s[label] += wall
-                self.compile_s += getattr(result, "compile_s", 0.0)
-                self.run_s += getattr(result, "run_s", 0.0)
-                self.simulated += sizes[key]
-                self._emit("call_done", slot, key=key)
+                self._account(key, slot, result, sizes[key])
                 yield key, result
+
+    def _check_actors_left(self, ready: list[_Slot], inflight: dict, started: float) -> None:
+        """RuntimeError when no actor is left to run on (every node failed or left), or
+        none has started within start_timeout_s of started (time.monotonic())."""
+        if not self.slots and not inflight:
+            why = f"; the last actor that died said: {self.last_error}" if self.last_error else ""
+            raise RuntimeError(
+                f"no Ray actor is left to run backend {self.name!r}: every node failed "
+                f"{self.max_attempts} times or left the cluster{why}"
+            )
+        if not ready and not inflight and time.monotonic() - started > self.start_timeout_s:
+            raise RuntimeError(
+                f"no Ray actor started within {self.start_timeout_s:.0f} s: does any node "
+                f"have the resources for one ({self.name}; `ray status`)?"
+            )
+
+    def _send(self, calls: dict, queue: collections.deque, ready: list[_Slot], inflight: dict):
+        """Send queued calls to the ready actors that have room (fewer than depth calls),
+        the least busy first; each sent call goes into inflight (ObjectRef -> (key, slot))."""
+        while queue:
+            # the least busy actor first: one that just started (a node that joined,
+            # a replacement) gets work at once instead of what busy ones leave
+            free = [s for s in ready if s.inflight < self.depth]
+            if not free:
+                break
+            slot = min(free, key=lambda s: s.inflight)
+            key = queue.popleft()
+            method, args = calls[key]
+            ref = getattr(slot.actor, method).remote(*args)
+            inflight[ref] = (key, slot)
+            slot.inflight += 1
+            self._emit("call_sent", slot, key=key)
+
+    def _requeue(self, key, slot: _Slot, queue: collections.deque, attempts) -> None:
+        """Put a call lost with its actor back at the front of the queue and drop the
+        actor; RuntimeError once it was lost max_attempts times."""
+        attempts[key] += 1
+        self.lost += 1
+        if attempts[key] >= self.max_attempts:
+            raise RuntimeError(
+                f"call {key!r} was lost with its actor {attempts[key]} times: see "
+                "the Ray logs of its nodes (`ray logs`)"
+            ) from None
+        queue.appendleft(key)
+        if slot in self.slots:
+            self._drop(slot)
+        self._emit("call_lost", slot, key=key)
+
+    def _account(self, key, slot: _Slot, result, picks: int) -> None:
+        """Count a finished call's pick-points and times against its node and the run."""
+        wall = getattr(result, "wall_s", 0.0)
+        label = slot.info["label"]
+        self.node_picks[label] += picks
+        self.node_busy_s[label] += wall
+        self.compile_s += getattr(result, "compile_s", 0.0)
+        self.run_s += getattr(result, "run_s", 0.0)
+        self.simulated += picks
+        self._emit("call_done", slot, key=key)
 
     def call(self, method: str, args: tuple):
         """One call on one actor (another if it dies): its result."""

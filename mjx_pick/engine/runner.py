@@ -263,14 +263,20 @@ class Runner:
             self.rollouts += min(chunk, n - start)
             if report is not None:
                 report(min(start + chunk, n), n)
-        merged = results[0]
-        if len(results) > 1:
-            merged = {k: np.concatenate([r[k] for r in results]) for k in results[0]}
-        merged_traces = None
-        if record:
-            merged_traces = traces[0] if len(traces) == 1 else np.concatenate(traces)
+        merged, merged_traces = _joined(results, traces if record else None)
         timing = Timing(stats.compile_s - compile0, stats.run_s - run0, time.perf_counter() - t0, n)
         return Outcome(merged, merged_traces, timing)
+
+
+def _joined(results: list[dict], traces: list | None) -> tuple[dict, np.ndarray | None]:
+    """The chunks' results joined into (N,) arrays, and their traces into (N, T, F)
+    (traces None: none were recorded)."""
+    merged = results[0]
+    if len(results) > 1:
+        merged = {k: np.concatenate([r[k] for r in results]) for k in results[0]}
+    if traces is None:
+        return merged, None
+    return merged, traces[0] if len(traces) == 1 else np.concatenate(traces)
 
 
 # ------------------------------------------------------------------- chunked, resumable

@@ -68,15 +68,12 @@ def showing_progress(
 class Simulator:
     """Runs (Settings, PickBatch) jobs for one object, batching what can share a program.
 
-    Every job's scene is compiled (once per ``Settings.structure``); jobs whose scenes
-    share a program (``variants.program_key``: contact and controller settings always;
-    gripper variants of one model structure -- finger width, pad height, stroke,
-    masses, force limit -- with their differing model fields carried per pick-point)
-    run as ONE batch of pick-points x variants on one backend -- one compile, one runner
-    call (chunked by the runner). A job whose model has another structure (another
-    collision mesh, solver option or scan length) gets a backend of its own. Scenes and
-    backends are cached, so a loop that calls ``run`` again (a bisection, an optimiser,
-    a design search's rounds) compiles nothing new.
+    Jobs whose scenes share a compiled program (``variants.program_key``: contact and
+    controller settings always; gripper variants of one model structure, their differing
+    model fields carried per pick-point) run as ONE batch of pick-points x variants: one
+    compile, one runner call. Another structure gets a backend of its own. Scenes and
+    backends are cached: a loop that calls ``run`` again compiles nothing new
+    (docs/engine.md).
 
     Args:
       obj: the object every job simulates.
@@ -183,23 +180,6 @@ class Simulator:
                     results[j] = {}
             if not live:
                 continue
-            backend = self.backend(jobs[live[0]][0])
-            structure = jobs[live[0]][0].structure()
-            scenes = [self.scene(jobs[j][0]) for j in live]
-            # the model fields in which this run's variants differ from the backend's
-            # scene, added to those carried before (same program, same inputs' shapes)
-            carried = set(self._carried.get(program, ()))
-            fields = carried_fields(self.runner.backend_name)
-            carried |= set(varying_fields(backend.scene.model, [s.model for s in scenes], fields))
-            self._carried[program] = names = tuple(sorted(carried))
-            parts = []
-            for j, scene in zip(live, scenes, strict=True):
-                settings, picks = jobs[j]
-                # every variant's own scene: its pick-points' start, contact and
-                # controller parameters and model fields are its own
-                part = pick_inputs(scene, settings, picks)
-                parts.append(with_model_fields(part, scene.model, names) if names else part)
-            inputs = PickInputs.concat(parts)
             offset = done
 
             def progress(k: int, _n: int, offset=offset) -> None:
@@ -207,19 +187,52 @@ class Simulator:
                 if report is not None and k > 0:
                     report(offset + k, total)
 
-            view = None
-            if store is not None:
-                rows = row_digests([jobs[j][0] for j in live], [len(jobs[j][1]) for j in live])
-                view = store.for_backend(backend, structure, rows)
-            out = self.runner.run(backend, inputs, on_progress=progress, store=view).results
-            done += len(inputs)
-            self.rollouts += len(inputs)
+            out, n_run = self._run_program(program, [jobs[j] for j in live], store, progress)
+            done += n_run
+            self.rollouts += n_run
             start = 0
             for j in live:
                 n = len(jobs[j][1])
                 results[j] = {k: v[start : start + n] for k, v in out.items()}
                 start += n
         return results
+
+    def _run_program(
+        self,
+        program: tuple,
+        jobs: list[tuple[Settings, PickBatch]],
+        store: ChunkStore | None,
+        progress: ProgressFn,
+    ) -> tuple[dict, int]:
+        """One program's jobs (none empty) as one runner call: (their results joined,
+        (M,) arrays in the jobs' order; M, the pick-point simulations run)."""
+        backend = self.backend(jobs[0][0])
+        structure = jobs[0][0].structure()
+        inputs = self._program_inputs(program, backend, jobs)
+        view = None
+        if store is not None:
+            rows = row_digests([settings for settings, _ in jobs], [len(p) for _, p in jobs])
+            view = store.for_backend(backend, structure, rows)
+        out = self.runner.run(backend, inputs, on_progress=progress, store=view).results
+        return out, len(inputs)
+
+    def _program_inputs(
+        self, program: tuple, backend: Backend, jobs: list[tuple[Settings, PickBatch]]
+    ) -> PickInputs:
+        """The jobs' inputs, each from its own scene, as one batch: every variant's
+        pick-points' start, contact and controller parameters and model fields."""
+        scenes = [self.scene(settings) for settings, _ in jobs]
+        # the model fields in which this run's variants differ from the backend's
+        # scene, added to those carried before (same program, same inputs' shapes)
+        carried = set(self._carried.get(program, ()))
+        fields = carried_fields(self.runner.backend_name)
+        carried |= set(varying_fields(backend.scene.model, [s.model for s in scenes], fields))
+        self._carried[program] = names = tuple(sorted(carried))
+        parts = []
+        for (settings, picks), scene in zip(jobs, scenes, strict=True):
+            part = pick_inputs(scene, settings, picks)
+            parts.append(with_model_fields(part, scene.model, names) if names else part)
+        return PickInputs.concat(parts)
 
 
 @contextlib.contextmanager
