@@ -90,12 +90,39 @@ class Parser(argparse.ArgumentParser):
 
 
 def _add_object_args(p: argparse.ArgumentParser) -> None:
+    """The object a command loads (``core.objects.load_object``) and how."""
     g = p.add_argument_group("object")
     g.add_argument(
         "object",
         help="a shipped asset name (mjx-pick assets), a top-down image (PNG/JPG) or a mesh "
         "(STL/OBJ/PLY/GLB)",
     )
+    _add_object_size_args(g)
+    _add_mesh_args(g)
+    g.add_argument(
+        "--pick-height-mm",
+        type=number("pick_height_mm", "--pick-height-mm"),
+        help="fingertip height above the table at the grasp, mm (default: --grasp-height's rule)",
+    )
+    g.add_argument(
+        "--simplify-mm",
+        type=number("simplify_mm", "--simplify-mm"),
+        help="outline simplification tolerance of an image, mm (default: 0.3)",
+    )
+    g.add_argument(
+        "--material",
+        help="object material name, recorded with the results (default: pla; an asset: its own)",
+    )
+    g.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="neither read nor write the cache of object preparation and compiled programs "
+        "(mjx-pick cache info; the same as MJX_PICK_CACHE=0)",
+    )
+
+
+def _add_object_size_args(g) -> None:
+    """An image's scale and thickness; an object's mass or density."""
     g.add_argument(
         "--px-per-mm",
         type=number("px_per_mm", "--px-per-mm"),
@@ -116,6 +143,10 @@ def _add_object_args(p: argparse.ArgumentParser) -> None:
         type=number("density_kg_m3", "--density-kg-m3"),
         help="object density, kg/m^3, instead of --mass-g",
     )
+
+
+def _add_mesh_args(g) -> None:
+    """What only a mesh takes: its unit, resting pose and disconnected bodies."""
     g.add_argument(
         "--unit", choices=("m", "mm"), help="unit of a mesh file's coordinates (a mesh: required)"
     )
@@ -129,26 +160,6 @@ def _add_object_args(p: argparse.ArgumentParser) -> None:
         "--largest-body",
         action="store_true",
         help="a mesh of several disconnected bodies: keep the largest (default: refuse it)",
-    )
-    g.add_argument(
-        "--pick-height-mm",
-        type=number("pick_height_mm", "--pick-height-mm"),
-        help="fingertip height above the table at the grasp, mm (default: --grasp-height's rule)",
-    )
-    g.add_argument(
-        "--simplify-mm",
-        type=number("simplify_mm", "--simplify-mm"),
-        help="outline simplification tolerance of an image, mm (default: 0.3)",
-    )
-    g.add_argument(
-        "--material",
-        help="object material name, recorded with the results (default: pla; an asset: its own)",
-    )
-    g.add_argument(
-        "--no-cache",
-        action="store_true",
-        help="neither read nor write the cache of object preparation and compiled programs "
-        "(mjx-pick cache info; the same as MJX_PICK_CACHE=0)",
     )
 
 
@@ -286,6 +297,16 @@ def _add_evaluate_parser(sub) -> None:
     _add_gripper_args(ev)
     _add_physics_args(ev)
     _add_pick_args(ev)
+    _add_evaluate_output_args(ev)
+    _add_optimization_args(ev)
+    _add_progress(ev)
+    _add_ray(ev)
+    _add_evaluate_checks(ev)
+    ev.set_defaults(func=cmd_evaluate)
+
+
+def _add_evaluate_output_args(ev: argparse.ArgumentParser) -> None:
+    """``evaluate``'s own pick-points, its output folder, chunks and traces."""
     ev.add_argument(
         "--picks",
         help="CSV of your own pick-points (columns x_mm, y_mm, yaw_deg), instead of --n",
@@ -313,6 +334,10 @@ def _add_evaluate_parser(sub) -> None:
         help="trace the n best and n worst pick-points (traces.parquet: force plots, "
         "animations, view)",
     )
+
+
+def _add_optimization_args(ev: argparse.ArgumentParser) -> None:
+    """``evaluate``'s Optimization mode: until K pick-points reach a score."""
     ev.add_argument(
         "--until",
         type=number("until", "--until"),
@@ -330,8 +355,10 @@ def _add_evaluate_parser(sub) -> None:
         type=number("max_n", "--max"),
         help="Optimization mode: most pick-points to simulate (default: 10 x --until)",
     )
-    _add_progress(ev)
-    _add_ray(ev)
+
+
+def _add_evaluate_checks(ev: argparse.ArgumentParser) -> None:
+    """``evaluate``'s extra columns: minimum force, stability, step convergence."""
     ev.add_argument(
         "--min-force",
         action="store_true",
@@ -351,7 +378,6 @@ def _add_evaluate_parser(sub) -> None:
         help="simulate every pick-point again at half the time step and add "
         "label_converged: a label the step changes is decided by the numerics",
     )
-    ev.set_defaults(func=cmd_evaluate)
 
 
 def _study_parser(sub, name: str, help_text: str) -> argparse.ArgumentParser:
@@ -779,6 +805,29 @@ def _add_trials_plan_parser(steps) -> None:
         help="the uncertain parameters that decide what is informative (as calibrate --params)",
     )
     _add_trials_ranges(pl)
+    _add_trials_placement_args(pl)
+    _add_trials_choice_args(pl)
+    pl.add_argument(
+        "--paper", choices=("a4", "letter"), default="a4", help="paper size of the templates"
+    )
+    pl.add_argument(
+        "--blind",
+        action="store_true",
+        help="keep the predictions out of trials.csv (the person at the robot does not see them)",
+    )
+    _add_trials_backend(pl)
+    pl.add_argument(
+        "--batch-size",
+        type=number("batch_size", "--batch-size"),
+        help="simulations per backend call",
+    )
+    pl.add_argument("--out", required=True, help="the trials folder")
+    _add_overwrite(pl)
+    pl.set_defaults(func=cmd_trials_plan)
+
+
+def _add_trials_placement_args(pl: argparse.ArgumentParser) -> None:
+    """``trials plan``'s parameter draws and the placing errors it simulates."""
     pl.add_argument(
         "--draws", type=number("draws", "--draws"), default=6, help="parameter draws from the prior"
     )
@@ -800,6 +849,10 @@ def _add_trials_plan_parser(steps) -> None:
         default=2.0,
         help="placing error on yaw, deg",
     )
+
+
+def _add_trials_choice_args(pl: argparse.ArgumentParser) -> None:
+    """``trials plan``'s candidates, how it chooses among them, and its seed."""
     pl.add_argument(
         "--pool",
         type=number("pool", "--pool"),
@@ -818,23 +871,6 @@ def _add_trials_plan_parser(steps) -> None:
         default=0,
         help="seed of the parameter draws and placements",
     )
-    pl.add_argument(
-        "--paper", choices=("a4", "letter"), default="a4", help="paper size of the templates"
-    )
-    pl.add_argument(
-        "--blind",
-        action="store_true",
-        help="keep the predictions out of trials.csv (the person at the robot does not see them)",
-    )
-    _add_trials_backend(pl)
-    pl.add_argument(
-        "--batch-size",
-        type=number("batch_size", "--batch-size"),
-        help="simulations per backend call",
-    )
-    pl.add_argument("--out", required=True, help="the trials folder")
-    _add_overwrite(pl)
-    pl.set_defaults(func=cmd_trials_plan)
 
 
 def _add_trials_record_agree_parsers(steps) -> None:
