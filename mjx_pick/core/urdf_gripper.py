@@ -24,27 +24,20 @@ _MOVING = ("revolute", "prismatic")
 class UrdfGripper:
     """The ``[urdf]`` table of a gripper TOML: what in the URDF file is what.
 
-    file: the URDF (relative paths: relative to the TOML); its meshes relative to it,
-      absolute, or ``package://NAME/...`` under an ancestor folder named NAME.
-    pad_left_links / pad_right_links: the links whose collision geometry are each
-      finger's pads (the object touches these and nothing else).
-    joint: the revolute or prismatic joint the servo drives; joints that follow it
-      (``<mimic>`` in the URDF, or ``mimic`` here) move with it.
-    servo_kp: the servo's stiffness, N m/rad (revolute) or N/m (prismatic).
-    servo_kv: its damping, N m s/rad or N s/m.
-    servo_forcerange: its symmetric force limit, N m or N.
-    drive_armature: the drive's inertia (motor and gears) reflected at the joint,
-      kg m^2 (revolute) or kg (prismatic); a URDF has no field for it.
-    linkage_armature: the same added to every other moving joint. MuJoCo holds a
-      ``<mimic>`` coupling as a soft constraint whose stiffness scales with the
-      joints' inertia: light links with none let a pad tilt away under load, and the
-      grip force is never reached (the shipped 2F-85: 0.005 and 0.001 kg m^2, MuJoCo
-      Menagerie's values for its linkage).
-    mount_link: the link whose subtree is the gripper ("": the URDF's root link).
-    mount_quat: its orientation in the scene's gripper frame (w, x, y, z): the pads
-      must end up below it, closing along x.
-    mimic: couplings the URDF lacks, {joint: multiplier}: that joint's position is
-      the multiplier times the driven joint's (``<mimic>`` with offset 0).
+    file: the URDF (relative to the TOML); its meshes relative to it, absolute, or
+      ``package://NAME/...`` under an ancestor folder named NAME.
+    pad_left_links / pad_right_links: each finger's pad links (their collision
+      geometry is all the object touches).
+    joint: the revolute or prismatic joint the servo drives (``<mimic>`` joints and
+      ``mimic`` follow it). servo_kp / servo_kv / servo_forcerange: the servo's
+      stiffness, damping and symmetric force limit (N m/rad, N m s/rad, N m; or N/m,
+      N s/m, N for a prismatic joint).
+    drive_armature: the drive's inertia reflected at the joint (kg m^2 or kg; a URDF
+      has no field for it); linkage_armature: the same on every other moving joint,
+      which keeps ``<mimic>`` couplings stiff (docs/model.md).
+    mount_link / mount_quat: the link whose subtree is the gripper ("": the root) and
+      its orientation (w, x, y, z) in the scene's gripper frame (pads below it, closing
+      along x). mimic: couplings the URDF lacks, {joint: multiplier} (offset 0).
     link_contacts: let the other links' collision geoms touch the object too.
     """
 

@@ -23,32 +23,24 @@ from mjx_pick.outputs.rundir import finish, release
 
 @dataclasses.dataclass(frozen=True)
 class RunOptions:
-    """How a study runs (the settings every study shares).
+    """How a study runs (the settings every study shares; docs/studies.md).
 
     n: pick-points per variant, gripper or run (None: the study's default).
     seed: pick-point (and perturbation) seed: same seed, same pick-points.
     pick_config: how pick-points are sampled and checked (None: ``PickConfig()``).
-    backend: 'auto' or a backend's name (``engine.registry``).
-    batch_size: simulations per backend call (None: the backend's default).
-    out: output folder (None: nothing is written).
-    overwrite: replace what another command (or configuration) wrote in out.
-    resume: continue an interrupted run of the same configuration in out.
+    backend / batch_size: 'auto' or a backend's name (``engine.registry``) /
+      simulations per backend call (None: the backend's default).
+    out: output folder (None: nothing is written); overwrite: replace what another
+      command (or configuration) wrote there; resume: continue an interrupted run of
+      the same configuration there; keep_chunks: keep out/chunks/ after a complete run.
     ray: run on a Ray cluster, "auto" or the head's "HOST:PORT" (None: this process).
-    progress: show a progress bar on stderr.
-    chunk_size: pick-points per chunk, the unit saved, resumed and cancelled (None:
-      from free device memory; on a cluster one actor batch). Keep it a whole number
-      of batches: a smaller chunk is a call of another shape, whose float32 rounding
-      may differ.
-    keep_chunks: keep out/chunks/ after a complete run (a run that stops keeps them).
-    on_progress: called as on_progress(done, total) with the pick-points simulated (or
-      read back on resume) before the first chunk and after each.
-    cancel: a threading.Event; once set, the run stops before its next chunk
-      (``runner.Cancelled``; out keeps its finished chunks).
-    on_cluster_event: with ray, called with each ``cluster.ClusterEvent`` in the
-      driver's loop.
-    fixed_costs: seconds the caller spent before the call, by name, shown first in the
-      summary's ``time_s`` (the CLI's ``import_s``, ``object_s``); an object evaluate
-      is given by name or path is prepared there, and that counts as ``object_s``.
+    progress: show a progress bar on stderr; on_progress: called as (done, total) with
+      the pick-points simulated or read back, before the first chunk and after each.
+    chunk_size: pick-points per chunk, the unit saved, resumed and cancelled (None: from
+      free device memory; on a cluster one actor batch); keep it whole batches.
+    cancel: a threading.Event; once set, the run stops before its next chunk.
+    on_cluster_event: with ray, called with each ``cluster.ClusterEvent``.
+    fixed_costs: seconds spent before the call, by name, first in the summary's ``time_s``.
     """
 
     n: int | None = None

@@ -66,7 +66,7 @@ def export_labels(
     Returns:
       {"labels": the file, "mesh": the object's mesh}.
     """
-    from mjx_pick.outputs.exchange.poses import GraspLabels, object_mesh, pick_poses
+    from mjx_pick.outputs.exchange.poses import object_mesh, pick_poses
     from mjx_pick.outputs.reporting.run import Run
 
     module = _format(fmt)
@@ -81,18 +81,36 @@ def export_labels(
         if p.exists() and not overwrite:
             raise ConfigError(f"{p} exists: choose another --out, or --overwrite to replace it")
     transforms, depth = pick_poses(run, depth_mm)
+    labels = _grasp_labels(run, transforms, depth, mesh_path.name)
+    extra = _run_fields(run)
+    write_atomic(mesh_path, object_mesh(run).export(file_type="obj"))
+    write_atomic(path, module.write(labels, extra))
+    return {"labels": path, "mesh": mesh_path}
+
+
+def _grasp_labels(run, transforms, depth_m, mesh_name: str) -> GraspLabels:
+    """The run's pick-points as GraspLabels: transforms (N, 4, 4) and depth_m (N,), m,
+    from ``poses.pick_poses``; mesh_name, the object's mesh file beside the labels."""
+    from mjx_pick.outputs.exchange.poses import GraspLabels
+
     table = run.table
-    labels = GraspLabels(
+    return GraspLabels(
         transforms=transforms,
         success=table["success"].to_numpy(zero_copy_only=False).astype(bool),
         score=table["score"].to_numpy(zero_copy_only=False).astype(float),
-        object_file=mesh_path.name,
+        object_file=mesh_name,
         object_scale=1.0,
-        depth_m=depth,
+        depth_m=depth_m,
         pick_id=table["pick_id"].to_numpy(),
     )
+
+
+def _run_fields(run) -> dict:
+    """What a format's file records besides the labels: the gripper, the object (its
+    mass, kg), the frames, the run folder and each pick-point's failure reason."""
+    table = run.table
     obj = run.config.get("object") or {}
-    extra = {
+    return {
         "gripper": run.gripper.name,
         "object": obj.get("name", ""),
         "object_frame": "origin at the centre of mass on the table, z up",
@@ -103,9 +121,6 @@ def export_labels(
         if "failure" in table.column_names
         else [""] * table.num_rows,
     }
-    write_atomic(mesh_path, object_mesh(run).export(file_type="obj"))
-    write_atomic(path, module.write(labels, extra))
-    return {"labels": path, "mesh": mesh_path}
 
 
 def read_labels(path: str | os.PathLike, fmt: str | None = None) -> GraspLabels:
