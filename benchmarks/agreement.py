@@ -62,7 +62,10 @@ def main() -> None:
     grasp = load_toml(GraspConfig, args.grasp) if args.grasp else GraspConfig()
     obj = mp.load_object(args.object)
     gripper = mp.load_gripper(args.gripper)
-    scene = mp.build_scene(obj, gripper)
+    # both engines at the physics MJX-JAX runs (it refuses others); its labels against
+    # C's at the default physics: benchmarks/mjx_physics.py
+    contact, solver = mp.ContactParams.differentiable(), mp.SolverParams.differentiable()
+    scene = mp.build_scene(obj, gripper, contact, solver)
     picks = pp.generate_normal(obj, gripper, args.n, seed=args.seed)
     inputs = make_inputs(scene, grasp, picks)
     res = {}

@@ -33,6 +33,7 @@ after. Rows go to a JSON file; ``--table`` prints the estimators' table from it.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import subprocess
 import time
@@ -209,12 +210,21 @@ def identify_counts(fits: list[dict]) -> dict:
     return counts
 
 
+def differentiable(settings: mp.Settings) -> mp.Settings:
+    """settings at the physics MJX-JAX runs (the differentiable physics; it refuses others)."""
+    return dataclasses.replace(
+        settings,
+        contact=mp.ContactParams.differentiable(settings.contact),
+        solver=mp.SolverParams.differentiable(settings.solver),
+    )
+
+
 def gradient_quality(obj, base, train) -> dict:
     """Forward-mode derivatives through MJX (estimator 'jvp') against central finite
     differences of the same jitted loss, two step sizes, three parameters."""
     names = ["pad_friction", "table_friction", "pad_stiffness_n_per_mm"]
     sub = train.take(np.arange(0, len(train), 3))
-    problem = cal.Problem(obj, sub, names, base, backend="mjx")
+    problem = cal.Problem(obj, sub, names, differentiable(base), backend="mjx")
     theta = problem.space.theta([0.62, 0.2, problem.space.hi[2] / 2])
     t0 = time.perf_counter()
     loss, grad = problem.mjx_loss_and_grad(theta)
@@ -254,7 +264,7 @@ def gradient_check_tiny() -> dict:
     obj = mp.object_from_polygon(box(-20, -10, 20, 10), thickness_mm=20, mass_g=1000, name="heavy")
     gripper = mp.GripperSpec(name="light-gripper", force_min_n=1.0)
     grasp = GraspConfig(close_timeout_s=0.4, lift_height_mm=20.0, hold_s=0.05)
-    base = mp.Settings(gripper=gripper, grasp=grasp)
+    base = differentiable(mp.Settings(gripper=gripper, grasp=grasp))
     names = ["pad_friction", "force_offset_n"]
     data = cal.synthetic_outcomes(
         obj, base, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [14.0, 6.0], traces=("force_n",)

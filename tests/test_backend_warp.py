@@ -34,6 +34,13 @@ def block_scene(block):
 
 
 @pytest.fixture()
+def mjx_scene(block):
+    """The block at the physics MJX's JAX engine runs (the 'mjx' backend's)."""
+    contact, solver = mp.ContactParams.differentiable(), mp.SolverParams.differentiable()
+    return mp.build_scene(block, mp.GripperSpec(), contact, solver, grasp=SHORT)
+
+
+@pytest.fixture()
 def fresh_probe():
     """warp_problem() is cached per process: clear it around a test that fakes the
     machine."""
@@ -220,25 +227,25 @@ def test_default_sizing_is_measured_once_then_read_from_the_cache(
 
 
 # --------------------------------------------------------------------------- refill
-def test_small_run_gets_a_small_pool(block_scene):
-    backend = make_backend("mjx", block_scene, SHORT, batch_size=8192, refill=True)
+def test_small_run_gets_a_small_pool(mjx_scene):
+    backend = make_backend("mjx", mjx_scene, SHORT, batch_size=8192, refill=True)
     n_dev = len(backend.devices)
     assert backend.pool_size(200) == 256 * n_dev  # not 8192 padded simulations
     assert backend.pool_size(10**6) == backend.batch_size
     with pytest.raises(ValueError, match="ticks_per_call"):
-        make_backend("mjx", block_scene, SHORT, batch_size=8, ticks_per_call=0)
+        make_backend("mjx", mjx_scene, SHORT, batch_size=8, ticks_per_call=0)
 
 
 @pytest.mark.mjx
-def test_refill_reassembles_in_order_and_equals_a_run_without_refill(block_scene, count_compiles):
+def test_refill_reassembles_in_order_and_equals_a_run_without_refill(mjx_scene, count_compiles):
     # 10 picks through a pool of 4 slots (one per CPU device): slots are refilled as
     # picks end -- pick 1 blows up at once, so its slot takes the next pick long before
     # the others end -- and the results come back in pick-point order, bit for bit those
     # of the same program with every pick in a slot of its own from start to end
-    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 10, seed=0, grasp=SHORT)
-    inputs = make_inputs(block_scene, SHORT, picks)
-    inputs.qpos0[1, block_scene.index.object_qpos + 2] = np.inf
-    backend = make_backend("mjx", block_scene, SHORT, batch_size=4, refill=True, ticks_per_call=9)
+    picks = pp.generate_normal(mjx_scene.object, mp.GripperSpec(), 10, seed=0, grasp=SHORT)
+    inputs = make_inputs(mjx_scene, SHORT, picks)
+    inputs.qpos0[1, mjx_scene.index.object_qpos + 2] = np.inf
+    backend = make_backend("mjx", mjx_scene, SHORT, batch_size=4, refill=True, ticks_per_call=9)
     out, traces = backend.run(inputs)
     assert traces is None
     stats = backend.pool_stats
@@ -275,21 +282,21 @@ def test_refill_reassembles_in_order_and_equals_a_run_without_refill(block_scene
     assert np.isnan(out["score"][1])
     # the C engine flags the same blow-up (labels of two engines are compared at full
     # size on a GPU: benchmarks/throughput.py, benchmarks/agreement.py)
-    c, _ = make_backend("mujoco", block_scene, SHORT, batch_size=10).run(inputs)
+    c, _ = make_backend("mujoco", mjx_scene, SHORT, batch_size=10).run(inputs)
     np.testing.assert_array_equal(out["diverged"], c["diverged"])
 
 
 @pytest.mark.mjx
 def test_a_new_backend_on_the_same_scene_runs_the_program_the_process_compiled(
-    block_scene, count_compiles
+    mjx_scene, count_compiles
 ):
     # the GUI's next job, a notebook's next evaluate: a new backend for the same scene,
     # procedure and pool settings runs the program compiled before in the process (the
     # same shapes as the refill test above, which in one process compiled it already)
-    picks = pp.generate_normal(block_scene.object, mp.GripperSpec(), 10, seed=0, grasp=SHORT)
-    inputs = make_inputs(block_scene, SHORT, picks)
+    picks = pp.generate_normal(mjx_scene.object, mp.GripperSpec(), 10, seed=0, grasp=SHORT)
+    inputs = make_inputs(mjx_scene, SHORT, picks)
 
-    def backend(scene=block_scene):
+    def backend(scene=mjx_scene):
         return make_backend("mjx", scene, SHORT, batch_size=4, refill=True, ticks_per_call=9)
 
     first, _ = backend().run(inputs)
@@ -299,13 +306,15 @@ def test_a_new_backend_on_the_same_scene_runs_the_program_the_process_compiled(
     for key in first:
         np.testing.assert_array_equal(first[key], second[key], err_msg=key)
     # another model is another program
-    contact = mp.ContactParams(pad_friction=0.3)
-    other = mp.build_scene(block_scene.object, mp.GripperSpec(), contact, grasp=SHORT)
+    contact = mp.ContactParams.differentiable(mp.ContactParams(pad_friction=0.3))
+    other = mp.build_scene(
+        mjx_scene.object, mp.GripperSpec(), contact, mjx_scene.solver, grasp=SHORT
+    )
     assert backend(other).program_identity() != again.program_identity()
 
 
 @pytest.mark.mjx
-def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
+def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(mjx_scene):
     # one device, 8 slots, 12 picks: once the queue is empty and at most 4 slots are
     # live, they move to a pool of 4. The picks are chosen so that their outcome does
     # not hang on rounding (XLA's CPU arithmetic differs a little with the batch shape,
@@ -322,16 +331,16 @@ def test_pool_shrinks_in_the_tail_and_keeps_each_picks_state(block_scene):
     assert shrink_sizes(6, 3) == (6, 3) and shrink_sizes(8, 0) == (8,)
     # never below the smallest pool worth its own program
     assert shrink_sizes(8192, 3, 4096) == (8192, 4096) and shrink_sizes(2048, 3, 4096) == (2048,)
-    checker = pp.FeasibilityChecker(block_scene.object, mp.GripperSpec(), grasp=SHORT)
+    checker = pp.FeasibilityChecker(mjx_scene.object, mp.GripperSpec(), grasp=SHORT)
     picks = checker.batch(np.arange(1), [0.0], [0.0], [0.0], "user")  # centred
-    inputs = make_inputs(block_scene, SHORT, picks.take(np.zeros(12, int)), {"pad_friction": 0.9})
+    inputs = make_inputs(mjx_scene, SHORT, picks.take(np.zeros(12, int)), {"pad_friction": 0.9})
     air = np.array([1, 3, 4, 6, 7, 9])  # the long picks come last: a tail of 4+ live slots
-    inputs.qpos0[air, block_scene.index.object_qpos] += 0.2
+    inputs.qpos0[air, mjx_scene.index.object_qpos] += 0.2
     held = np.setdiff1d(np.arange(12), air)
     one = jax.devices("cpu")[:1]
     backend = make_backend(
         "mjx",
-        block_scene,
+        mjx_scene,
         SHORT,
         batch_size=8,
         devices=one,

@@ -637,17 +637,16 @@ def test_forward_mode_gradient_through_mjx(heavy_block, synthetic):
     from mjx_pick.engine.mjx_backend import make_rollout
 
     rows = synthetic.take([0, len(synthetic) - 1])
-    # with the default elliptic cones MJX's forward-mode gradient is NaN (measured,
-    # issue 32): the jvp path refuses them and says what to pass
+    # MJX runs the differentiable physics alone (at the default's elliptic cones its
+    # forward-mode gradient is NaN): the jvp path refuses the defaults and says what to pass
     default = mp.Settings(LIGHT, mp.ContactParams(), grasp=SHORT)
     refused = cal.Problem(heavy_block, rows, ["pad_friction"], default, backend="mjx")
-    with pytest.raises(mp.ConfigError, match="pyramidal"):
+    with pytest.raises(mp.ConfigError, match="solver.cone = 'elliptic'.*pyramidal"):
         refused.mjx_loss_and_grad(refused.space.theta([0.75]))
-    pyramid = mp.SolverParams(cone="pyramidal", impratio=1.0)
     # the pad box without the rim: the rim's pairs make MJX several times slower on a
     # CPU, and the gradient's plumbing, tested here, does not depend on the pads
-    box = mp.ContactParams(pad_collision="mean_radius")
-    base = mp.Settings(LIGHT, box, pyramid, grasp=SHORT)
+    box = mp.ContactParams.differentiable(mp.ContactParams(pad_collision="mean_radius"))
+    base = mp.Settings(LIGHT, box, mp.SolverParams.differentiable(), grasp=SHORT)
     problem = cal.Problem(heavy_block, rows, ["pad_friction"], base, backend="mjx")
     loss, grad = problem.mjx_loss_and_grad(problem.space.theta([0.75]))
     assert np.isfinite(loss) and np.all(np.isfinite(grad))

@@ -43,8 +43,10 @@ def centred(obj, n, gripper=FREE, grasp=PROC, y_mm=None):
 BACKEND = os.environ.get("MJX_PICK_TEST_BACKEND", "mujoco")
 
 
-def simulate(obj, picks, backend=BACKEND, contact=None, grasp=PROC, record=False, **per_pick):
-    scene = mp.build_scene(obj, FREE, contact, None, grasp)
+def simulate(
+    obj, picks, backend=BACKEND, contact=None, grasp=PROC, record=False, solver=None, **per_pick
+):
+    scene = mp.build_scene(obj, FREE, contact, solver, grasp)
     runner = make_backend(backend, scene, grasp, batch_size=len(picks))
     out, traces = runner.run(make_inputs(scene, grasp, picks, per_pick), record=record)
     return out, traces, scene
@@ -110,6 +112,8 @@ def test_coulomb_on_mjx():
         block,
         centred(block, len(rows)),
         backend="mjx",
+        contact=mp.ContactParams.differentiable(),  # the physics MJX runs
+        solver=mp.SolverParams.differentiable(),
         pad_friction=np.array([r[1] for r in rows], np.float32),
         grip_force_n=np.array([r[3] for r in rows], np.float32),
     )
@@ -379,7 +383,9 @@ def test_noslip_setting_reaches_the_model_and_is_refused_where_unsupported():
     assert scene.model.opt.noslip_iterations == 5
     with pytest.raises(mp.ConfigError, match="noslip_iterations"):
         mp.SolverParams(noslip_iterations=-1)
-    with pytest.raises(mp.ConfigError, match="no no-slip solver"):
+    # MJX has no no-slip solver: the 'mjx' backend refuses it with the rest of what
+    # differs from the differentiable physics it runs
+    with pytest.raises(mp.ConfigError, match="solver.noslip_iterations = 5"):
         make_backend("mjx", scene, PROC, batch_size=1)
 
 

@@ -32,7 +32,8 @@ def test_mjx_sharded_over_four_devices_matches_one_and_does_not_recompile(block,
     # the pad box without the rim behind it: MJX's JAX physics computes every pair's
     # contacts every step, and the rim's pairs make it several times slower on a CPU;
     # what is tested here is the sharding, not the pads
-    scene = mp.build_scene(block, gripper, mp.ContactParams(pad_collision="mean_radius"))
+    contact = mp.ContactParams.differentiable(mp.ContactParams(pad_collision="mean_radius"))
+    scene = mp.build_scene(block, gripper, contact, mp.SolverParams.differentiable())
     # pick-points well inside the pads' collision box: no label hangs on rounding (the
     # sharded program reduces in another order; a pad meeting the part at the box's edge
     # can flip between no contact and force not reached)
@@ -66,7 +67,8 @@ def test_mjx_sharded_over_four_devices_matches_one_and_does_not_recompile(block,
 
 
 def test_uneven_batch_rounds_up_to_devices(block):
-    scene = mp.build_scene(block, mp.GripperSpec())
+    contact, solver = mp.ContactParams.differentiable(), mp.SolverParams.differentiable()
+    scene = mp.build_scene(block, mp.GripperSpec(), contact, solver)
     backend = make_backend("mjx", scene, FAST, batch_size=10)
     assert backend.batch_size == 12  # 4 devices x 3
 

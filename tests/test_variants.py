@@ -71,10 +71,14 @@ def test_solver_tolerances_and_impedance_ratio_are_data(block):
     base = mp.build_scene(block, _gripper())
     solver = mp.SolverParams(impratio=mp.SolverParams().impratio * 2, tolerance=1e-6)
     other = mp.build_scene(block, _gripper(), solver=solver)
-    for backend in ("mujoco", "mjx"):
-        assert va.program_key(base, FAST, backend) == va.program_key(other, FAST, backend)
-        fields = va.varying_fields(base.model, [other.model], va.carried_fields(backend))
-        assert fields == ("opt.impratio", "opt.tolerance")
+    assert va.program_key(base, FAST, "mujoco") == va.program_key(other, FAST, "mujoco")
+    fields = va.varying_fields(base.model, [other.model], va.carried_fields("mujoco"))
+    assert fields == ("opt.impratio", "opt.tolerance")
+    # MJX-JAX runs the differentiable physics' ratio alone: another ratio is another
+    # backend (which refuses it); the tolerance is data
+    assert va.program_key(base, FAST, "mjx") != va.program_key(other, FAST, "mjx")
+    assert "opt.impratio" not in va.carried_fields("mjx")
+    assert "opt.tolerance" in va.carried_fields("mjx")
     # Warp holds the ratio as a derived 1/sqrt that MJX's bridge does not reach: a
     # program per ratio there; the direct backend writes 1/sqrt of each pick's ratio
     assert va.program_key(base, FAST, "mjx-warp") != va.program_key(other, FAST, "mjx-warp")
@@ -292,14 +296,16 @@ def test_mjx_sweep_of_finger_widths_compiles_once_and_agrees_per_scene(block):
 
     sim = mp.Simulator(block, "mjx", batch_size=8)
     spec = ParamSpec.parse("gripper.finger_width_mm=" + ",".join(f"{w:g}" for w in WIDTHS))
-    res = mp.sweep(block, [spec], mp.Settings(grasp=TINY), n=2, simulator=sim)
+    contact, solver = mp.ContactParams.differentiable(), mp.SolverParams.differentiable()
+    at = mp.Settings(contact=contact, solver=solver, grasp=TINY)  # the physics MJX runs
+    res = mp.sweep(block, [spec], at, n=2, simulator=sim)
     (backend,) = sim.backends
     assert list(backend._compiled) == [("rollout", 8, False, backend_fields(backend))]
     assert res.timing["programs"] == 1 and res.timing["scenes"] == 3
     compiled_s = backend.stats.compile_s
     # a second sweep over other widths of the same structure: nothing new to compile
     other = ParamSpec.parse("gripper.finger_width_mm=15,25,35")
-    mp.sweep(block, [other], mp.Settings(grasp=TINY), n=2, simulator=sim)
+    mp.sweep(block, [other], at, n=2, simulator=sim)
     assert len(backend._compiled) == 1 and len(sim.backends) == 1
     assert backend.stats.compile_s == compiled_s
     # per scene, the width farthest from the backend's own scene (the first, 12 mm):
@@ -309,7 +315,7 @@ def test_mjx_sweep_of_finger_widths_compiles_once_and_agrees_per_scene(block):
     # rounding may flip one (the physics itself is checked step by step below)
     v = 2
     g = _gripper(finger_width_mm=WIDTHS[v])
-    scene = mp.build_scene(block, g)
+    scene = mp.build_scene(block, g, contact, solver)
     picks = pp.generate_normal(block, g, 2, 0, grasp=TINY)
     alone, _ = make_backend("mjx", scene, TINY, batch_size=8).run(make_inputs(scene, TINY, picks))
     rows = _variant_rows(res.table, v)
@@ -327,8 +333,11 @@ def test_mjx_steps_of_a_carried_variant_equal_its_own_scene(block):
     from mjx_pick.engine.inputs import make_inputs
     from mjx_pick.engine.mjx_backend import _pick_model, jax_physics
 
-    narrow = mp.build_scene(block, _gripper(finger_width_mm=12.0))
-    wide = mp.build_scene(block, _gripper(finger_width_mm=30.0, pad_height_mm=30.0))
+    contact, solver = mp.ContactParams.differentiable(), mp.SolverParams.differentiable()
+    narrow = mp.build_scene(block, _gripper(finger_width_mm=12.0), contact, solver)
+    wide = mp.build_scene(
+        block, _gripper(finger_width_mm=30.0, pad_height_mm=30.0), contact, solver
+    )
     picks = pp.generate_normal(block, wide.gripper, 4, 0, grasp=TINY)
     inputs = make_inputs(wide, TINY, picks)
     names = va.varying_fields(narrow.model, [wide.model], va.carried_fields("mjx"))

@@ -78,11 +78,18 @@ class ContactParams:
     # what a pad collides through: "pad", "mean_radius" or "rimmed" (docs/physics.md,
     # "What a pad collides through")
     pad_collision: str = "rimmed"
-    # MuJoCo's pair margin on the pad contacts (docs/physics.md, "A contact margin")
+    # MuJoCo's pair margin on the pad contacts (docs/physics.md, "A contact margin");
+    # MJX's JAX collider has none between boxes and meshes: the 'mjx' backend runs 0
     pad_margin_mm: float = setting(
         0.05, "mm", "pad contacts: points within this distance of touching join the contact",
         lo=0, hi=1,
     )  # fmt: skip
+
+    @classmethod
+    def differentiable(cls, base: ContactParams | None = None) -> ContactParams:
+        """base (default: the defaults) with the pad margin MJX's JAX engine runs
+        (``DIFFERENTIABLE_PAD_MARGIN_MM``: none)."""
+        return dataclasses.replace(base or cls(), pad_margin_mm=DIFFERENTIABLE_PAD_MARGIN_MM)
 
     def __post_init__(self):
         o = "contact"
@@ -148,6 +155,52 @@ class SolverParams:
     def timeconst_s(self) -> float:
         """The contact time constant in effect: at least two time steps."""
         return max(self.contact_timeconst_s, 2 * self.timestep_s)
+
+    @classmethod
+    def differentiable(cls, base: SolverParams | None = None) -> SolverParams:
+        """The solver MJX's JAX engine runs: base (default: the defaults) with the
+        fields of ``DIFFERENTIABLE_SOLVER``."""
+        return dataclasses.replace(base or cls(), **DIFFERENTIABLE_SOLVER)
+
+
+# The solver fields MJX's JAX engine runs with, whatever the defaults are: "the
+# differentiable physics", with pads without a contact margin (docs/physics.md, "MJX's
+# JAX physics"). The other solver fields (time step, tolerance, integrator, contact time
+# constant) are the user's
+DIFFERENTIABLE_SOLVER = {
+    "cone": "pyramidal",
+    "impratio": 1.0,
+    "iterations": 20,
+    "ls_iterations": 8,
+    "noslip_iterations": 0,
+}
+
+# MJX's JAX collider has no margin between a box and a mesh: its pads touch where they
+# penetrate
+DIFFERENTIABLE_PAD_MARGIN_MM = 0.0
+
+
+def differentiable_mismatches(solver: SolverParams, pad_margin_mm: float) -> tuple[str, ...]:
+    """The settings that keep MJX's JAX engine from running as asked, as
+    "section.field = value" (empty: it runs them)."""
+    wrong = [
+        f"solver.{k} = {getattr(solver, k)!r}"
+        for k, v in DIFFERENTIABLE_SOLVER.items()
+        if getattr(solver, k) != v
+    ]
+    if abs(pad_margin_mm - DIFFERENTIABLE_PAD_MARGIN_MM) > 1e-12:
+        wrong.append(f"contact.pad_margin_mm = {pad_margin_mm:g}")
+    return tuple(wrong)
+
+
+def differentiable_physics() -> str:
+    """The differentiable physics in words, for notes and errors."""
+    s = DIFFERENTIABLE_SOLVER
+    return (
+        f"{s['cone']} cones, impratio {s['impratio']:g}, {s['iterations']} solver and "
+        f"{s['ls_iterations']} line-search iterations, no no-slip solver, pads without a "
+        "contact margin"
+    )
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,33 +1,6 @@
-"""MJX backend: every pick-point of a batch in ONE jitted computation (GPU, or CPU).
-
-Two MJX implementations run the same program: ``impl='jax'`` (MJX's JAX physics: any
-device, forward-mode derivatives) and ``impl='warp'`` (MuJoCo Warp kernels called from
-JAX, NVIDIA GPUs; ``mjx_pick.engine.warp_backend`` builds it). :class:`Physics` holds what
-differs: the device model, the initial data and how to read buffer overflow.
-
-``rollout_one`` simulates one pick-point: ``lax.scan`` over control periods, each
-running the shared tick (measure, P controller, phase machine, metrics) and
-``n_substeps`` MJX physics steps. The batch is ``vmap`` of it, jitted once per batch
-shape; per-pick contact-pair parameters enter as traced model fields, so sweeps and
-gradients need no new code.
-
-Slot refill (``refill=True``): instead of simulating every pick-point for the longest
-possible pick, a fixed pool of simulation slots runs rounds of ``ticks_per_call``
-control periods inside ONE device program (``make_pool``); after each round, each slot
-whose pick ended (DONE, diverged, or out of ticks) takes the next pick-point. A pick's
-accumulators stop changing once it is DONE or diverged (``kernels.grasp.accumulate``),
-so a refilled run gives the same results as one that simulates every pick to the end;
-results are written in pick-point order.
-
-With several local devices the batch axis is sharded over all of them (a one-axis
-``Mesh``, ``NamedSharding`` for the data and ``shard_map`` for the program):
-pick-points are independent, so each device simulates its slice and nothing is
-communicated. Runs over several machines go through Ray (``mjx_pick.engine.cluster``: one
-actor per GPU), not ``jax.distributed``.
-
-Only per-pick summaries leave the device; full traces are produced only when asked
-(``record=True``), for the few pick-points whose plots are wanted (they are
-re-simulated: a trace of every pick of a large batch would not fit in memory).
+"""MJX backends: every pick-point of a batch in one jitted JAX program, MJX's JAX physics
+(backend 'mjx', the differentiable physics only) or MuJoCo Warp through MJX (the
+'mjx-warp' subclass). Details: docs/engine.md (engine/mjx_backend.py).
 """
 
 from __future__ import annotations
@@ -50,6 +23,7 @@ from mujoco import mjx
 
 from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError
+from mjx_pick.core.physics import differentiable_mismatches, differentiable_physics
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine.backend import PickInputs, RunStats, addresses
@@ -151,13 +125,37 @@ class Physics:
     nacon: Callable = lambda d: jnp.int32(-1)
 
 
+def shipped_physics_files() -> tuple[str, str]:
+    """The shipped --solver and --contact TOMLs of the differentiable physics (paths)."""
+    from importlib import resources
+
+    folder = resources.files("mjx_pick.assets")
+    return tuple(str(folder / f"differentiable_{k}.toml") for k in ("solver", "contact"))
+
+
+def check_physics(scene: Scene) -> None:
+    """Refuse a scene MJX's JAX engine would not simulate as its settings say: it runs
+    the differentiable physics alone (``physics.DIFFERENTIABLE_SOLVER``, pads without a
+    contact margin). A ConfigError names every setting that differs and what to pass."""
+    wrong = differentiable_mismatches(scene.solver, scene.contact.pad_margin_m * 1e3)
+    if wrong:
+        solver_file, contact_file = shipped_physics_files()
+        raise ConfigError(
+            f"{', '.join(wrong)}: MJX's JAX physics (backend 'mjx', calibration's jvp "
+            f"estimator) runs the differentiable physics only ({differentiable_physics()}); "
+            f"pass --solver {solver_file} and --contact {contact_file} (or pad_margin_mm = 0 "
+            "in your contact file; in Python: SolverParams.differentiable(), "
+            "ContactParams.differentiable()), or simulate these settings with backend "
+            "'mujoco' or 'warp'"
+        )
+
+
 def jax_model(model: mujoco.MjModel) -> mjx.Model:
     """MJX's JAX implementation of a scene's model.
 
     Its collider implements no margin between a box and a mesh (``put_model`` refuses
-    one), so the pads' contact margin (``ContactParams.pad_margin_mm``) is left out
-    here: MJX's pads touch only where they penetrate, as with a margin of 0. Under the
-    force servo that moves the pads' resting place by the margin, not the grip force.
+    one): :func:`check_physics` refuses a scene with a pad margin; other margins (an
+    MJCF gripper's own geoms') are left out here, as a margin of 0.
     """
     if model.pair_margin.any() or model.geom_margin.any():
         model = copy.copy(model)
@@ -167,7 +165,9 @@ def jax_model(model: mujoco.MjModel) -> mjx.Model:
 
 
 def jax_physics(scene: Scene) -> Physics:
-    """MJX's JAX implementation on JAX's default device (:func:`jax_model`)."""
+    """MJX's JAX implementation on JAX's default device (:func:`jax_model`), for a scene
+    of the differentiable physics (:func:`check_physics`)."""
+    check_physics(scene)
     mx = jax_model(scene.model)
     return Physics(mx, mjx.make_data(mx), "jax")
 
@@ -561,13 +561,8 @@ class MjxBackend:
             raise ValueError(f"ticks_per_call = {ticks_per_call} must be >= 1")
         if int(shrink_levels) < 0:
             raise ValueError(f"shrink_levels = {shrink_levels} must be >= 0")
-        if self.impl == "jax" and scene.solver.noslip_iterations > 0:
-            # MJX's JAX physics has no no-slip solver and would ignore the setting
-            raise ConfigError(
-                f"solver.noslip_iterations = {scene.solver.noslip_iterations}: the 'mjx' "
-                "backend (MJX's JAX physics) has no no-slip solver; set it to 0 or use "
-                "the 'mujoco' or 'warp' backend"
-            )
+        if self.impl == "jax":
+            check_physics(scene)  # before anything is compiled or simulated
         self.scene, self.grasp = scene, grasp
         self.devices = list(devices) if devices is not None else jax.local_devices()
         n_dev = len(self.devices)

@@ -13,6 +13,7 @@ import importlib
 from collections.abc import Callable
 
 from mjx_pick.core.config import ConfigError
+from mjx_pick.core.physics import differentiable_physics
 
 AUTO = "auto"  # the choice this module resolves (:func:`resolve`)
 
@@ -187,15 +188,16 @@ ENTRIES: dict[str, BackendEntry] = {
             "mjx_pick.engine.mjx_backend:MjxBackend",
             Device.JAX,
             BatchRule(cpu=64, accelerator=8192),
-            "MJX's JAX physics",
+            "MJX's JAX physics, for derivatives; runs the differentiable physics only",
             options=_POOL_OPTIONS,
             # not for 'auto': where Warp cannot run, the C engine's threads beat it
             model_fields="mjx_pick.engine.variants:mjx_fields",
             jax=Jax.DEVICES,
             differentiable=True,
-            note="MJX's JAX physics, kept for derivatives: at low pad friction (0.1-0.2) "
-            "its pads chatter where MuJoCo C and Warp hold the part; for labels use "
-            "--backend mujoco or warp (auto)",
+            note="MJX's JAX physics, kept for derivatives: it runs the differentiable "
+            f"physics alone ({differentiable_physics()}) and refuses other settings, saying "
+            "what to pass; its labels are not MuJoCo C's at the default physics: for labels "
+            "use --backend mujoco or warp (auto)",
         ),
         BackendEntry(
             Impl.MUJOCO,

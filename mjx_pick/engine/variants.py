@@ -66,8 +66,10 @@ def batch_fields(fields: frozenset[str]) -> frozenset[str]:
 def mjx_fields(fields: frozenset[str]) -> frozenset[str]:
     """MJX's JAX physics': those MJX traces (one it holds as numpy is static in its
     programs; one it lacks is unread), without the collision margins (its JAX collider
-    has none between a box and a mesh: ``mjx_backend.jax_model`` zeroes them)."""
-    return _mjx_traced(fields) - set(MARGIN_FIELDS)
+    has none between a box and a mesh: ``mjx_backend.jax_model`` zeroes them) and the
+    impedance ratio (the differentiable physics' own: a variant of another ratio gets a
+    backend of its own, which refuses it, ``mjx_backend.check_physics``)."""
+    return _mjx_traced(fields) - set(MARGIN_FIELDS) - {"opt.impratio"}
 
 
 def mjx_warp_fields(fields: frozenset[str]) -> frozenset[str]:

@@ -19,7 +19,7 @@ import numpy as np
 
 from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.objects import load_object
-from mjx_pick.core.physics import ContactParams
+from mjx_pick.core.physics import ContactParams, SolverParams
 from mjx_pick.core.settings import Settings
 from mjx_pick.engine import registry
 from mjx_pick.engine.backend import plan_jax
@@ -52,6 +52,14 @@ def tile_picks(picks: pp.PickBatch, n: int, offset: int) -> pp.PickBatch:
     return picks.take(idx)
 
 
+def _physics_of(backend: str, solver: SolverParams, contact: ContactParams):
+    """(solver, contact) a backend simulates: MJX-JAX's differentiable physics for it
+    (it refuses any other: ``mjx_backend.check_physics``), else the ones given."""
+    if registry.entry(backend).differentiable:
+        return SolverParams.differentiable(solver), ContactParams.differentiable(contact)
+    return solver, contact
+
+
 def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_devices=None):
     """One throughput row: compile time apart from run time (median of repeats over
     distinct pick-point sets, after a warm-up run), pick-points and physics steps per
@@ -60,7 +68,8 @@ def measure(obj_name, gripper, backend_name, batch, repeats, grasp, solver, n_de
     repeats = 0 times the first run itself (its compile is already apart: MJX compiles
     ahead of time), for runs where device time is short."""
     obj = load_object(obj_name)
-    scene = scene_of(obj, Settings(gripper, solver=solver, grasp=grasp))
+    solver, contact = _physics_of(backend_name, solver, ContactParams())
+    scene = scene_of(obj, Settings(gripper, contact, solver, grasp))
     pool = pp.generate_normal(obj, gripper, min(max(batch, 256), 20000), seed=0, grasp=grasp)
     devices = jax.local_devices()[:n_devices] if n_devices else None
     # one chunk per call: each timed call is one backend call of `batch` pick-points
@@ -205,10 +214,12 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
     scenes: dict = {}  # per solver and contact variant: (scene, inputs)
 
     def scene_for(spec: RunSpec):
-        key = (spec.solver, spec.contact)
+        own = registry.entry(spec.backend).differentiable  # MJX-JAX: its own physics
+        key = (spec.solver, spec.contact, own)
         if key not in scenes:
             variant = dataclasses.replace(solver, **dict(spec.solver))
             contact = ContactParams(**dict(spec.contact))
+            variant, contact = _physics_of(spec.backend, variant, contact)
             scene = scene_of(obj, Settings(gripper, contact, variant, grasp))
             scenes[key] = (scene, make_inputs(scene, grasp, picks))
         return scenes[key]
@@ -242,6 +253,8 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
             {
                 "timestep_s": scene.solver.timestep_s,
                 "cone": scene.solver.cone,
+                "impratio": scene.solver.impratio,
+                "pad_margin_mm": round(scene.contact.pad_margin_m * 1e3, 6),
                 "iterations": scene.solver.iterations,
                 "ls_iterations": scene.solver.ls_iterations,
                 "tolerance": scene.solver.tolerance,

@@ -19,6 +19,7 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.config import ConfigError, check_range
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.settings import Settings
+from mjx_pick.engine import registry
 from mjx_pick.engine.inputs import pick_inputs, scene_of
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import Runner
@@ -158,6 +159,11 @@ class Problem:
         self._add_replicas(checker, replicates, replica_jitter_mm)
         self.grip_force_n = outcomes.grip_force_n[self.row_of]  # (R + replicas,)
         self.scene = scene_of(obj, s)
+        if backend == registry.differentiable():
+            from mjx_pick.engine.mjx_backend import check_physics
+
+            # MJX-JAX runs the differentiable physics alone: said before any run
+            check_physics(self.scene)
         self.start = start_values(self.names, s, self.scene)
         self.start.update({canonical_params([k])[0]: float(v) for k, v in (start or {}).items()})
         self.space: ParamSpace = param_space(
@@ -348,14 +354,10 @@ class Problem:
         The one simulation outside ``Runner.run``: ``jax.jacfwd`` needs the rollout in
         its trace (``simulator.differentiable_rollout`` says why)."""
         if self._jvp is None:
-            if self.settings.solver.cone != "pyramidal":
-                # MJX's forward-mode derivatives are finite with pyramidal cones only
-                raise ConfigError(
-                    "the jvp estimator differentiates MJX in forward mode, finite only "
-                    "with pyramidal cones; the default is elliptic: pass a "
-                    "solver with cone = 'pyramidal' and impratio = 1 (a --solver TOML), "
-                    "or use another estimator"
-                )
+            from mjx_pick.engine.mjx_backend import check_physics
+
+            # MJX's forward-mode derivatives are finite at the differentiable physics
+            check_physics(self.scene)
             roll = differentiable_rollout(self.scene, self.settings.grasp, self.record)
             inp = self.inputs
 
