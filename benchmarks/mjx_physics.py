@@ -31,6 +31,7 @@ import os
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +42,7 @@ from mjx_pick.core import pickpoints as pp
 from mjx_pick.core.metrics import wilson_interval
 from mjx_pick.engine.inputs import pick_inputs, scene_of
 from mjx_pick.engine.runner import Runner
+from mjx_pick.kernels.types import FAILURES
 
 # the results whose forward-mode derivatives are checked
 JVP_FIELDS = ("lift_height_mm", "t_reached_s", "slip_mm", "yaw_max_deg", "max_force_left_n")
@@ -115,9 +117,12 @@ def per_pick(times: dict, n: int) -> dict:
 
 
 def summary(results) -> dict:
+    """Success rate, divergences and the failure reasons' counts of one run."""
+    failures = Counter(FAILURES[int(f)] for f in results["failure"])
     return {
         "success": round(float(np.mean(results["success"])), 4),
         "diverged": int(np.sum(results["diverged"])),
+        "failures": dict(sorted(failures.items())),
     }
 
 

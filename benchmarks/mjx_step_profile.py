@@ -25,7 +25,7 @@ tangential-force square root zero-safe (its derivative at 0 is infinite).
 
     python benchmarks/mjx_step_profile.py --out benchmarks/results/mjx_step_profile_cpu.json
 
-Figures: benchmarks/RESULTS.md, "MJX-JAX: the physics it runs".
+Figures: benchmarks/RESULTS.md, "mjx_physics.py".
 """
 
 from __future__ import annotations

@@ -25,8 +25,7 @@ def test_backends_agree_on_door_opener(door_opener):
     # jitted path users run) on a GPU, benchmarks/RESULTS.md
     picks = pp.generate_normal(door_opener, gripper, 16, seed=3)
     # both engines at the physics MJX-JAX runs (the differentiable physics); MJX's labels
-    # against C's at the default physics: benchmarks/RESULTS.md, "MJX-JAX: the physics it
-    # runs"
+    # against C's there and at the default physics: benchmarks/RESULTS.md, "mjx_physics.py"
     contact = mp.ContactParams.differentiable(mp.ContactParams(pad_collision="mean_radius"))
     scene = mp.build_scene(door_opener, gripper, contact, mp.SolverParams.differentiable())
     inputs = make_inputs(scene, SHORT, picks)

@@ -2,8 +2,8 @@
 what it says, and its forward-mode derivatives through a pick are finite.
 
 Its label agreement with MuJoCo C (at the same settings and at the default physics) is
-measured at full size in benchmarks/mjx_physics.py (benchmarks/RESULTS.md, "MJX-JAX:
-the physics it runs").
+measured at full size in benchmarks/mjx_physics.py (benchmarks/RESULTS.md,
+"mjx_physics.py").
 """
 
 import dataclasses
