@@ -638,11 +638,15 @@ def test_forward_mode_gradient_through_mjx(heavy_block, synthetic):
 
     rows = synthetic.take([0, len(synthetic) - 1])
     # MJX runs the differentiable physics alone (at the default's elliptic cones its
-    # forward-mode gradient is NaN): the jvp path refuses the defaults and says what to pass
+    # forward-mode gradient is NaN): a problem on it refuses the defaults when it is made,
+    # before anything runs, and says what to pass; the jvp path of a problem on another
+    # backend refuses them too
     default = mp.Settings(LIGHT, mp.ContactParams(), grasp=SHORT)
-    refused = cal.Problem(heavy_block, rows, ["pad_friction"], default, backend="mjx")
     with pytest.raises(mp.ConfigError, match="solver.cone = 'elliptic'.*pyramidal"):
-        refused.mjx_loss_and_grad(refused.space.theta([0.75]))
+        cal.Problem(heavy_block, rows, ["pad_friction"], default, backend="mjx")
+    on_c = cal.Problem(heavy_block, rows, ["pad_friction"], default, backend="mujoco")
+    with pytest.raises(mp.ConfigError, match="solver.cone = 'elliptic'.*pyramidal"):
+        on_c.mjx_loss_and_grad(on_c.space.theta([0.75]))
     # the pad box without the rim: the rim's pairs make MJX several times slower on a
     # CPU, and the gradient's plumbing, tested here, does not depend on the pads
     box = mp.ContactParams.differentiable(mp.ContactParams(pad_collision="mean_radius"))

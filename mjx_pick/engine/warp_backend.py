@@ -52,8 +52,8 @@ def check_warp() -> None:
     if problem:
         raise ConfigError(
             f"backend = 'mjx-warp' needs an NVIDIA GPU and warp-lang: {problem}. Install the GPU "
-            f"extra: {INSTALL_HINT}; or choose backend 'mjx' (MJX's JAX physics) or "
-            "'mujoco' (the C engine on CPU threads)"
+            f"extra: {INSTALL_HINT}; or choose backend 'mujoco' (the C engine on CPU "
+            "threads; for derivatives, 'mjx': MJX's JAX physics at the differentiable physics)"
         )
 
 
