@@ -19,6 +19,7 @@ from mjx_pick.core.config import to_toml
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine.backend import make_backend
 from mjx_pick.engine.inputs import make_inputs
+from mjx_pick.kernels import grasp as gk
 from mjx_pick.studies.evaluation import evaluate
 
 FAST = GraspConfig(close_timeout_s=0.3, lift_height_mm=5.0, hold_s=0.05)
@@ -34,6 +35,9 @@ def test_mjx_sharded_over_four_devices_matches_one_and_does_not_recompile(block,
     # what is tested here is the sharding, not the pads
     contact = mp.ContactParams.differentiable(mp.ContactParams(pad_collision="mean_radius"))
     scene = mp.build_scene(block, gripper, contact, mp.SolverParams.differentiable())
+    # the pads at this physics reach the force 0.27-0.36 s into a pick: a close timeout of
+    # 0.5 s keeps every held label off that threshold (FAST's 0.3 s flipped one)
+    grasp = dataclasses.replace(FAST, close_timeout_s=0.5)
     # pick-points well inside the pads' collision box: no label hangs on rounding (the
     # sharded program reduces in another order; a pad meeting the part at the box's edge
     # can flip between no contact and force not reached)
@@ -41,29 +45,38 @@ def test_mjx_sharded_over_four_devices_matches_one_and_does_not_recompile(block,
     checker = pp.FeasibilityChecker(block, gripper)
     picks = checker.batch(np.arange(16), x.ravel(), y.ravel(), np.zeros(16), "user")
     assert len(picks) == 16
-    sharded = make_backend("mjx", scene, FAST, batch_size=8)
+    first_inputs = make_inputs(scene, grasp, picks.take(slice(0, 8)))
+    # the part moved 0.2 m away from four of them (the pads close on air: no contact), so
+    # that each device's two picks -- held or not -- form a pattern of their own: a
+    # device's slice run elsewhere, or a slice's picks swapped, changes the labels
+    air = np.array([1, 2, 6, 7])  # devices' slices: (held, air) (air, held) (held, held) (air, air)
+    first_inputs.qpos0[air, scene.index.object_qpos] += 0.2
+    sharded = make_backend("mjx", scene, grasp, batch_size=8)
     assert sharded.sharding.num_devices == 4 and sharded.batch_size == 8
-    first, _ = sharded.run(make_inputs(scene, FAST, picks.take(slice(0, 8))))
-    n = count_compiles(lambda: sharded.run(make_inputs(scene, FAST, picks.take(slice(8, 16)))))
+    first, _ = sharded.run(first_inputs)
+    n = count_compiles(lambda: sharded.run(make_inputs(scene, grasp, picks.take(slice(8, 16)))))
     assert n == 0, f"{n} compilations on the second batch"
     # each device runs its own slice: no cross-device collective in the program (the
     # partitioner used to all-reduce the solver loop's test at every iteration)
     hlo = next(iter(sharded._compiled.values())).as_text()
     for op in ("all-reduce", "all-gather", "collective-permute", "all-to-all"):
         assert op not in hlo, f"{op} in the sharded rollout"
-    single = make_backend("mjx", scene, FAST, batch_size=8, devices=jax.local_devices()[:1])
-    alone, _ = single.run(make_inputs(scene, FAST, picks.take(slice(0, 8))))
+    single = make_backend("mjx", scene, grasp, batch_size=8, devices=jax.local_devices()[:1])
+    alone, _ = single.run(first_inputs)
+    held = np.setdiff1d(np.arange(8), air)
+    assert alone["success"][held].all() and (alone["failure"][air] == gk.Outcome.NO_CONTACT).all()
     for key in ("success", "failure"):
         np.testing.assert_array_equal(first[key], alone[key], err_msg=key)
     # not bitwise: the sharded program reduces in another order (float32), and contact
-    # dynamics amplify that; labels above are equal. The time the force is reached is
-    # read once per control tick: one pick reached it a tick later sharded (0.315 s
-    # against 0.310 s with the rimmed pads), so within one tick. Scores: 0.0166 apart
-    # at most on one 2-core machine, under 0.01 on another (XLA's CPU code differs by
-    # CPU): within 0.03, a tenth of one of eq. 2's three terms
-    tick_s = FAST.substeps(scene.solver) * scene.model.opt.timestep
-    np.testing.assert_allclose(first["t_reached_s"], alone["t_reached_s"], atol=tick_s * 1.01)
-    np.testing.assert_allclose(first["score"], alone["score"], atol=0.03)
+    # dynamics amplify that; labels above are equal. At this physics (pyramidal cones,
+    # MJX's collider making one edge contact on a flat pad) the force is reached a few
+    # control ticks apart and the scores move: on 16 held picks of this grid, measured up
+    # to 6 ticks and 0.11 apart (0.02 on these); the air picks, never touched, agree
+    tick_s = grasp.substeps(scene.solver) * scene.model.opt.timestep
+    np.testing.assert_allclose(first["t_reached_s"], alone["t_reached_s"], atol=8.01 * tick_s)
+    np.testing.assert_allclose(first["score"], alone["score"], atol=0.12)
+    lift = "lift_height_mm"
+    np.testing.assert_allclose(first[lift][air], alone[lift][air], atol=1e-3)
 
 
 def test_uneven_batch_rounds_up_to_devices(block):
