@@ -374,8 +374,10 @@ def sweep_problem(settings: Settings, name: str, values) -> str:
 
 
 def backend_choices() -> list[str]:
-    """The backend select's options: 'auto' and every backend of the registry."""
-    return list(registry.choices())
+    """The backend select's options: 'auto' and every backend of the registry that
+    labels pick-points at the page's settings. The differentiable backend is left out:
+    it runs one fixed physics, for derivatives, which the page never computes."""
+    return [c for c in registry.choices() if c != registry.differentiable()]
 
 
 # the CLI's advice in a refusal, as the page offers it (it has no flags, and never
