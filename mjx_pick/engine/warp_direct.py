@@ -545,12 +545,7 @@ class WarpBackend:
 
         n = len(inputs)
         self.fields = self._fields_for(inputs)
-        if record:
-            sizes = (n,)
-        else:
-            sizes = shrink_sizes(self.pool_size(n), self.shrink_levels, self.shrink_min_slots)
-        # every pool of the tail built (and captured) before the run: setup, not run time
-        family = [self._pool(size, self.n_ticks if record else 0, sizes) for size in sizes]
+        sizes, family = self._pool_family(n, record)
         pools = family[:1]
         t0 = time.perf_counter()
         dev = self.device_name
@@ -602,6 +597,16 @@ class WarpBackend:
         self.stats.n += n
         self.pool_stats.add(rounds, slot_ticks, pick_ticks, n, sum(counters))
         return picks, traces, diag
+
+    def _pool_family(self, n: int, record: bool) -> tuple[tuple[int, ...], list[_Pool]]:
+        """The slot counts of a run of n picks and their pools: the first, then each
+        level of the tail (record: one pool, a slot per pick). Every pool is built and
+        captured before the run, so that its cost counts as setup, not run time."""
+        if record:
+            sizes = (n,)
+        else:
+            sizes = shrink_sizes(self.pool_size(n), self.shrink_levels, self.shrink_min_slots)
+        return sizes, [self._pool(size, self.n_ticks if record else 0, sizes) for size in sizes]
 
     def _read_out(self, src: dict, out: _Outputs, recorded: _Pool | None):
         """The run's results from the device: (results, traces or None, Diagnostics) in
