@@ -591,11 +591,10 @@ class WarpBackend:
         with on_device(dev):
             wp.synchronize_device()
             counters = [p.counters() - c0 for p, c0 in zip(pools, counters0, strict=True)]
-            picks, traces, diag = self._read_out(src, out, pool if record else None)
-            pick_ticks = int(out.k.numpy().sum())
+            picks, traces, diag, k = self._read_out(src, out, pool if record else None)
         self.stats.run_s += time.perf_counter() - t0
         self.stats.n += n
-        self.pool_stats.add(rounds, slot_ticks, pick_ticks, n, sum(counters))
+        self.pool_stats.add(rounds, slot_ticks, int(k.sum()), n, sum(counters))
         return picks, traces, diag
 
     def _pool_family(self, n: int, record: bool) -> tuple[tuple[int, ...], list[_Pool]]:
@@ -609,8 +608,9 @@ class WarpBackend:
         return sizes, [self._pool(size, self.n_ticks if record else 0, sizes) for size in sizes]
 
     def _read_out(self, src: dict, out: _Outputs, recorded: _Pool | None):
-        """The run's results from the device: (results, traces or None, Diagnostics) in
-        pick-point order; traces from the recorded pool (one slot per pick)."""
+        """The run's results from the device: (results, traces or None, Diagnostics,
+        (N,) ticks each pick ran) in pick-point order; traces from the recorded pool
+        (one slot per pick)."""
         from mjx_pick.kernels import grasp_warp as gw
 
         n = out.k.shape[0]
@@ -621,7 +621,7 @@ class WarpBackend:
             trace = recorded.trace.numpy()[:n]
             traces = pad_traces(trace, k, out.phase.numpy().copy(), self.grasp)
         diag = Diagnostics(*(a.numpy().copy() for a in (out.overflow, out.nefc, out.nacon)))
-        return picks, traces, diag
+        return picks, traces, diag, k
 
     def _save_ended(self, pool: _Pool, out: _Outputs):
         """Slots whose pick has ended write it to its row of out. Returns a function

@@ -354,10 +354,7 @@ class Problem:
         The one simulation outside ``Runner.run``: ``jax.jacfwd`` needs the rollout in
         its trace (``simulator.differentiable_rollout`` says why)."""
         if self._jvp is None:
-            from mjx_pick.engine.mjx_backend import check_physics
-
-            # MJX's forward-mode derivatives are finite at the differentiable physics
-            check_physics(self.scene)
+            # refuses a scene of other physics (mjx_backend.jax_physics) before compiling
             roll = differentiable_rollout(self.scene, self.settings.grasp, self.record)
             inp = self.inputs
 
