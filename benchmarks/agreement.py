@@ -30,7 +30,7 @@ from mjx_pick.engine.runner import Runner
 from mjx_pick.kernels import grasp as gk
 
 
-def perturbed_success(scene, grasp, picks: pp.PickBatch, copies: int, seed: int) -> np.ndarray:
+def perturbed_success(scene, grasp, picks: pp.GraspBatch, copies: int, seed: int) -> np.ndarray:
     """Fraction of `copies` sub-mm perturbations of each pick that succeed (C engine)."""
     rng = np.random.default_rng(seed)
     n = len(picks)

@@ -226,7 +226,7 @@ def failure_picture(obj, table, failure: str, grasp, path: Path, gripper: str) -
 
 
 def table_picks(obj, gripper, grasp, table, mode: str, pick_id=None):
-    """The PickBatch of a results table's rows (x_mm, y_mm, yaw_deg; pick_id: the
+    """The GraspBatch of a results table's rows (x_mm, y_mm, yaw_deg; pick_id: the
     table's own unless given), through the public feasibility checker."""
     from mjx_pick.core import pickpoints as pp
 

@@ -34,7 +34,7 @@ _PUBLIC = {
     "Scene": "core.scene",
     "build_scene": "core.scene",
     "FeasibilityChecker": "core.pickpoints",
-    "PickBatch": "core.pickpoints",
+    "GraspBatch": "core.pickpoints",
     "PickConfig": "core.pickpoints",
     "generate_grid": "core.pickpoints",
     "generate_normal": "core.pickpoints",

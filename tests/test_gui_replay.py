@@ -35,7 +35,7 @@ def replay_run(server, door_opener):
     checker = pp.FeasibilityChecker(door_opener, gripper, pp.PickConfig(), FAST)
     held = checker(np.array([0.0]), np.array([0.0]), np.array([90.0]))
     assert pp.REASONS[int(held["reason"][0])] == "feasible"
-    picks = pp.PickBatch(
+    picks = pp.GraspBatch(
         pick_id=np.array([0, 1]),
         x_mm=np.array([0.0, 0.0]),
         y_mm=np.array([0.0, 80.0]),

@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pyarrow as pa
 
+from mjx_pick.core.grasps import GraspBatch
 from mjx_pick.core.gripper import GripperSpec
-from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.kernels import types as kt
 
 # the results table's columns, in order (dtype, description)
@@ -75,12 +75,13 @@ MARGINAL_BAND = 0.1
 
 
 def results_table(
-    picks: PickBatch, out: dict, gripper: GripperSpec, extra: dict | None = None
+    picks: GraspBatch, out: dict, gripper: GripperSpec, extra: dict | None = None
 ) -> pa.Table:
     """One row per pick-point: the pick's pose and every metric, named with units.
 
     gripper: the one that simulated them (its height compensation per pick). extra:
-    further (N,) columns (e.g. swept parameters), appended after COLUMNS.
+    further (N,) columns (e.g. swept parameters), appended after COLUMNS, and after the
+    pose columns of grasps that are not pick-points (``GraspBatch.pose_columns``).
     """
     # here, not at the top: the scene module loads MuJoCo, which reading tables back (a
     # report, the GUI) does not need
@@ -99,8 +100,9 @@ def results_table(
         name: pa.array(cols[name], type=_type(COLUMNS[name][0]), from_pandas=name in JUDGED_ONLY)
         for name in COLUMNS
     }
-    for name, values in (extra or {}).items():
-        arrays[name] = pa.array(np.asarray(values))
+    # grasps given as poses: their height, tilt and pose (none for pick-points)
+    for name, values in {**picks.pose_columns(math.nan), **(extra or {})}.items():
+        arrays[name] = pa.array(values if name == "grasp_pose" else np.asarray(values))
     return pa.table(arrays)
 
 

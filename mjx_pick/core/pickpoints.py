@@ -29,6 +29,7 @@ from mjx_pick.core.config import (
     check_range,
     setting,
 )
+from mjx_pick.core.grasps import GraspBatch, concat
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import ObjectModel, rasterize_window
 from mjx_pick.core.procedure import GraspConfig, pad_band_mm
@@ -183,71 +184,6 @@ class PickConfig:
         check_fields(self, "picks")
 
 
-@dataclasses.dataclass(frozen=True)
-class PickBatch:
-    """Feasible pick-points, one entry per pick (all arrays (N,)).
-
-    pick_id: index of the candidate in its generator's stream (stable across runs).
-    opening_mm: starting distance between the pads.
-    gap_left_mm / gap_right_mm: each pad's start distance from the object.
-    rejected: candidates dropped per reason; n_candidates: how many were checked.
-    """
-
-    pick_id: np.ndarray
-    x_mm: np.ndarray
-    y_mm: np.ndarray
-    yaw_deg: np.ndarray
-    opening_mm: np.ndarray
-    coverage: np.ndarray
-    gap_left_mm: np.ndarray
-    gap_right_mm: np.ndarray
-    rejected: dict
-    n_candidates: int
-    mode: str = "normal"
-
-    def __len__(self) -> int:
-        return len(self.pick_id)
-
-    def take(self, index) -> PickBatch:
-        """A sub-batch (index: slice, int array or bool mask)."""
-        arrays = {
-            f.name: getattr(self, f.name)[index]
-            for f in dataclasses.fields(self)
-            if isinstance(getattr(self, f.name), np.ndarray)
-        }
-        return dataclasses.replace(self, **arrays)
-
-    @property
-    def grasp_gap_mm(self) -> np.ndarray:
-        """(N,) mm: the gap the pads close to, the object's width between them."""
-        return self.opening_mm - self.gap_left_mm - self.gap_right_mm
-
-    def columns(self) -> dict:
-        """Per-pick columns for a results table."""
-        return {
-            "pick_id": self.pick_id,
-            "x_mm": self.x_mm,
-            "y_mm": self.y_mm,
-            "yaw_deg": self.yaw_deg,
-            "opening_mm": self.opening_mm,
-            "coverage": self.coverage,
-        }
-
-
-def concat(batches: list[PickBatch]) -> PickBatch:
-    """Join batches (rejection counts add up)."""
-    first = batches[0]
-    arrays = {
-        f.name: np.concatenate([getattr(b, f.name) for b in batches])
-        for f in dataclasses.fields(first)
-        if isinstance(getattr(first, f.name), np.ndarray)
-    }
-    rejected = {r: sum(b.rejected.get(r, 0) for b in batches) for r in REASONS[1:]}
-    return dataclasses.replace(
-        first, **arrays, rejected=rejected, n_candidates=sum(b.n_candidates for b in batches)
-    )
-
-
 class FeasibilityChecker:
     """The paper's three checks for one (object, gripper, settings), batched.
 
@@ -338,8 +274,8 @@ class FeasibilityChecker:
         """The x and y offset ranges in mm (defaults: half the object's length)."""
         return offset_ranges(self.object, self.config)
 
-    def batch(self, pick_id, x_mm, y_mm, yaw_deg, mode: str) -> PickBatch:
-        """Check candidates and keep the feasible ones as a PickBatch."""
+    def batch(self, pick_id, x_mm, y_mm, yaw_deg, mode: str) -> GraspBatch:
+        """Check candidates and keep the feasible ones as a GraspBatch."""
         return feasible_batch(pick_id, x_mm, y_mm, yaw_deg, self(x_mm, y_mm, yaw_deg), mode)
 
 
@@ -351,12 +287,12 @@ def offset_ranges(obj: ObjectModel, config: PickConfig) -> tuple[float, float]:
     return xr, yr
 
 
-def feasible_batch(pick_id, x_mm, y_mm, yaw_deg, res: dict, mode: str) -> PickBatch:
+def feasible_batch(pick_id, x_mm, y_mm, yaw_deg, res: dict, mode: str) -> GraspBatch:
     """The feasible candidates of a FeasibilityChecker result `res`, with the counts of
     the rejected ones."""
     ok = res["reason"] == fk.FEASIBLE
     counts = np.bincount(res["reason"], minlength=len(REASONS))
-    return PickBatch(
+    return GraspBatch(
         pick_id=np.asarray(pick_id, np.int64)[ok],
         x_mm=np.asarray(x_mm, float)[ok],
         y_mm=np.asarray(y_mm, float)[ok],
@@ -708,7 +644,7 @@ def candidate_blocks(checker: FeasibilityChecker, seed: int):
 
 
 def candidate_stream(checker: FeasibilityChecker, seed: int):
-    """Feasible PickBatches from the seeded stream of candidate blocks."""
+    """Feasible GraspBatches from the seeded stream of candidate blocks."""
     for ids, x, y, yaw in candidate_blocks(checker, seed):
         yield checker.batch(ids, x, y, yaw, mode="normal")
 
@@ -721,7 +657,7 @@ def generate_normal(
     config: PickConfig | None = None,
     grasp: GraspConfig | None = None,
     progress: Callable[[int, int, dict], None] | None = None,
-) -> PickBatch:
+) -> GraspBatch:
     """Normal mode: the first n feasible pick-points of the seeded candidate stream.
 
     A search that finds few feasible poses draws up to ``max_candidates``: it logs how
@@ -772,7 +708,7 @@ def generate_grid(
     yaw_step_deg: float,
     config: PickConfig | None = None,
     grasp: GraspConfig | None = None,
-) -> PickBatch:
+) -> GraspBatch:
     """Grid mode: every feasible pick of a systematic x, y, yaw grid (ranges as Normal)."""
     check_range("grid", "x_step_mm", x_step_mm, 0, lo_open=True)
     check_range("grid", "y_step_mm", y_step_mm, 0, lo_open=True)
@@ -802,14 +738,14 @@ def generate_grid(
 class OptimizationResult:
     """Optimization mode: every evaluated pick-point, its score, and whether K were found."""
 
-    picks: PickBatch
+    picks: GraspBatch
     scores: np.ndarray
     reached: bool
     k: int
     min_score: float
 
     @property
-    def best(self) -> PickBatch:
+    def best(self) -> GraspBatch:
         """The evaluated pick-points at or above the score threshold, best first."""
         order = np.argsort(-self.scores, kind="stable")
         order = order[self.scores[order] >= self.min_score]
@@ -819,7 +755,7 @@ class OptimizationResult:
 def optimize(
     obj: ObjectModel,
     gripper: GripperSpec,
-    score_fn: Callable[[PickBatch], np.ndarray],
+    score_fn: Callable[[GraspBatch], np.ndarray],
     k: int,
     min_score: float,
     max_n: int,
@@ -831,7 +767,7 @@ def optimize(
     """Optimization mode: evaluate feasible batches until k reach min_score or max_n are spent.
 
     Args:
-      score_fn: scores (N,) for a PickBatch -- the simulator in practice.
+      score_fn: scores (N,) for a GraspBatch -- the simulator in practice.
       k: pick-points wanted at or above min_score.
       max_n: most pick-points to evaluate.
       batch_size: pick-points per call of score_fn (a fixed shape: no recompiles).
@@ -840,7 +776,7 @@ def optimize(
     check_range("optimize", "max_n", max_n, 1)
     check_range("optimize", "batch_size", batch_size, 1)
     checker = FeasibilityChecker(obj, gripper, config, grasp)
-    pending: list[PickBatch] = []
+    pending: list[GraspBatch] = []
     evaluated, scores, good = [], [], 0
     stream = candidate_stream(checker, seed)
     drawn = 0
@@ -870,7 +806,7 @@ def optimize(
     return OptimizationResult(picks, np.concatenate(scores), good >= k, k, min_score)
 
 
-def _empty_message(obj, gripper, config, picks: PickBatch) -> str:
+def _empty_message(obj, gripper, config, picks: GraspBatch) -> str:
     """Why no candidate was feasible, in the user's words (:func:`why_none`)."""
     return (
         f"no feasible pick-point for {obj.name} with {gripper.name} after "

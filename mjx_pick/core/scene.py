@@ -14,7 +14,9 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
+from mjx_pick.core import grasps as grasp_math
 from mjx_pick.core import mjcf_gripper
+from mjx_pick.core.grasps import GraspBatch
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import MAX_HULL_VERTICES, ObjectModel
 from mjx_pick.core.physics import (
@@ -175,6 +177,16 @@ def _elliptic_box_mm(obj, gripper, width, height, r, lo, hi):
     return float(half_w), float(half_h), _box_offset_mm(obj, gripper, half_h, lo, hi)
 
 
+class Placement(NamedTuple):
+    """Where N grasps start (:meth:`Scene.placement`)."""
+
+    qpos: np.ndarray  # (N, nq)
+    # per-simulation model fields, MjModel name -> (N, *field shape): the gripper's tilt
+    # (body_quat, and the lift's jnt_axis kept on world z); empty for vertical grasps
+    model: dict
+    closing_axis: np.ndarray  # (N, 3) the gripper's closing axis (its x) in world axes
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Scene:
     """A compiled scene: the model, its MJCF text, the index, and what built it."""
@@ -209,37 +221,77 @@ class Scene:
         or an MJCF gripper's box pads; other MJCF pads keep their own geoms)."""
         return self.kinematics is None or self.kinematics.pad_frames is not None
 
-    def initial_qpos(self, x_m, y_m, yaw_rad, opening_m, grasp_gap_m=None) -> np.ndarray:
-        """Initial joint positions for picks (N,) arrays -> (N, nq).
+    @property
+    def grasp_height_mm(self) -> float:
+        """The pads' centre above the table at the grasp when the gripper is not raised
+        (lift 0), mm: a pick-point's grasp height (the procedure's)."""
+        return 1e3 * self._tcp_offset_z_m()
 
-        opening_m: the pads' starting gap. grasp_gap_m: the gap at which they will meet
-        the object (the object's width between them); an MJCF linkage starts raised by
-        its height compensation for that gap (None: the starting opening's).
+    def _tcp_offset_z_m(self) -> float:
+        """The pads' centre height at lift 0 in the compiled model, m (an MJCF gripper's
+        mount lies above it by its fully-open offset)."""
+        z = float(self.model.body_pos[self.index.gripper_body, 2])
+        if self.kinematics is not None:
+            z += float(self.kinematics.pad_centre_z[0])
+        return z
+
+    def placement(self, grasps: GraspBatch) -> Placement:
+        """Where N grasps start: the joint positions, and for grasps that are not
+        vertical the gripper's tilt as per-simulation model fields (docs/formats.md,
+        "Grasps").
+
+        The world's axes are the heading frame of each grasp: the gripper stays where
+        the model puts it, turned by the grasp's tilt about its own origin, and is moved
+        along world z by its lift joint (whose axis the tilt turns back to world z);
+        the object lies at its planar pose under the grasp centre, on the table. An
+        MJCF linkage starts raised along its approach by the height compensation for
+        the gap its pads close to (grasps' grasp_gap_mm), so that they grip at the
+        grasp centre. A pick-point (no tilt, no height) takes no model field, and its
+        joint positions are today's bit for bit.
         """
-        x_m, y_m, yaw_rad, opening_m = (
-            np.atleast_1d(np.asarray(a, float)) for a in (x_m, y_m, yaw_rad, opening_m)
-        )
-        n = len(x_m)
+        n = len(grasps)
         idx = self.index
         qpos = np.tile(self.model.qpos0, (n, 1))
-        o = idx.object_qpos
-        qpos[:, o] = x_m
-        qpos[:, o + 1] = y_m
-        qpos[:, o + 2] = 0.0  # object frame origin on the table
-        qpos[:, o + 3] = np.cos(yaw_rad / 2)
-        qpos[:, o + 4 : o + 6] = 0.0
-        qpos[:, o + 6] = np.sin(yaw_rad / 2)
+        opening_m = np.asarray(grasps.opening_mm, float) * 1e-3
+        gap_m = np.asarray(grasps.grasp_gap_mm, float) * 1e-3
         travel = 0.5 * (idx.stroke_m - opening_m)
-        qpos[:, idx.lift_qpos] = 0.0
-        if self.kinematics is None:
+        kin = self.kinematics
+        comp = np.zeros(n)
+        if kin is None:
             qpos[:, idx.finger_left_qpos] = travel
             qpos[:, idx.finger_right_qpos] = travel
-            return qpos
-        kin = self.kinematics
-        qpos[:, list(idx.gripper_qpos)] = kin.joint_positions(kin.travel_at_opening(opening_m))
-        gap = opening_m if grasp_gap_m is None else np.asarray(grasp_gap_m, float)
-        qpos[:, idx.lift_qpos] = kin.height_compensation_m(np.broadcast_to(gap, (n,)))
-        return qpos
+        else:
+            qpos[:, list(idx.gripper_qpos)] = kin.joint_positions(kin.travel_at_opening(opening_m))
+            comp = np.asarray(kin.height_compensation_m(gap_m), float).reshape(n)
+        # the grasp centre from the gripper's origin, gripper frame: the pads' centre at
+        # the gap they close to (below the mount of an MJCF gripper)
+        tcp = np.zeros((n, 3))
+        if kin is not None:
+            tcp[:, 2] = float(kin.pad_centre_z[0]) - comp
+        tilt = np.broadcast_to(np.eye(3), (n, 3, 3))
+        if grasps.tilt_quat is not None:
+            tilt = grasp_math.quat_to_mat(grasps.tilt_quat)
+        moved = np.einsum("nij,nj->ni", tilt, tcp)  # exactly tcp where there is no tilt
+        lift = comp - (moved[:, 2] - tcp[:, 2])
+        if grasps.height_mm is not None:
+            lift = lift + (np.asarray(grasps.height_mm, float) * 1e-3 - self._tcp_offset_z_m())
+        o = idx.object_qpos
+        yaw = np.deg2rad(np.asarray(grasps.yaw_deg, float))
+        qpos[:, o] = np.asarray(grasps.x_mm, float) * 1e-3 + moved[:, 0]
+        qpos[:, o + 1] = np.asarray(grasps.y_mm, float) * 1e-3 + moved[:, 1]
+        qpos[:, o + 2] = 0.0  # object frame origin on the table
+        qpos[:, o + 3] = np.cos(yaw / 2)
+        qpos[:, o + 4 : o + 6] = 0.0
+        qpos[:, o + 6] = np.sin(yaw / 2)
+        qpos[:, idx.lift_qpos] = lift
+        fields = {}
+        if grasps.tilt_quat is not None:
+            body_quat = np.tile(self.model.body_quat, (n, 1, 1))
+            body_quat[:, idx.gripper_body] = grasps.tilt_quat
+            axis = np.tile(self.model.jnt_axis, (n, 1, 1))
+            axis[:, self.model.joint("lift").id] = tilt[:, 2, :]  # S^T e_z
+            fields = {"body_quat": body_quat, "jnt_axis": axis}
+        return Placement(qpos, fields, np.ascontiguousarray(tilt[:, :, 0]))
 
     def pad_centre_z_m(self, data: mujoco.MjData) -> float:
         """Height of the pads' centre above the table in a simulation of this scene, m
@@ -718,7 +770,7 @@ def height_compensation_mm(gripper: GripperSpec, picks) -> np.ndarray:
     """(N,) mm: how far each pick starts the gripper raised so that its pads, travelling
     along their path as they close, meet the object at the grasp height (the paper's
     section 3.5) -- an MJCF linkage's, for the gap it closes to; 0 for a parallel jaw,
-    whose pads close level. picks: a PickBatch (its grasp_gap_mm)."""
+    whose pads close level. picks: a GraspBatch (its grasp_gap_mm)."""
     gap_m = np.asarray(picks.grasp_gap_mm, float) * 1e-3
     if gripper.mjcf is None:
         return np.zeros(len(gap_m))

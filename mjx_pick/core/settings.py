@@ -15,7 +15,7 @@ class Settings:
     """The settings one variant is simulated with.
 
     Evaluate, sweeps, gripper comparisons, design searches, robustness and calibration
-    all run (Settings, PickBatch) jobs; ``engine.inputs`` turns them into a scene and
+    all run (Settings, GraspBatch) jobs; ``engine.inputs`` turns them into a scene and
     each pick-point's inputs. The procedure's control period is checked against the
     solver's time step here, once, when the settings are made.
     """

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core.config import ConfigError
-from mjx_pick.core.pickpoints import PickBatch
+from mjx_pick.core.grasps import GraspBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine import interrupts, registry
@@ -168,12 +168,12 @@ class _Worker:
             self._locals[key] = runner.chunks(runner.make(scene, grasp), grasp)
         return self._locals[key]
 
-    def run_chunk(self, key: str, box: list, grasp: GraspConfig, k: int, picks: PickBatch):
+    def run_chunk(self, key: str, box: list, grasp: GraspConfig, k: int, picks: GraspBatch):
         """Chunk k (its pick-points) of the scene under key, simulated into result rows."""
         done = next(self._local(key, box, grasp).run({k: picks}))
         return dataclasses.replace(done, where=self.label)
 
-    def record(self, key: str, box: list, grasp: GraspConfig, picks: PickBatch) -> np.ndarray:
+    def record(self, key: str, box: list, grasp: GraspConfig, picks: GraspBatch) -> np.ndarray:
         """Traces (N, T, F) of picks."""
         return self._local(key, box, grasp).record(picks)
 
@@ -627,7 +627,7 @@ class _RayChunks:
     def device(self) -> str:
         return self.pool.device
 
-    def run(self, chunks: dict[int, PickBatch]) -> Iterator[ChunkDone]:
+    def run(self, chunks: dict[int, GraspBatch]) -> Iterator[ChunkDone]:
         """Simulate chunks on the cluster's actors, yielding each as it finishes."""
         key, box = self.pool.scene_box(self.scene)
         calls = {k: ("run_chunk", (key, box, self.grasp, k, sub)) for k, sub in chunks.items()}
@@ -635,7 +635,7 @@ class _RayChunks:
         for _, result in self.pool.map(calls, sizes):
             yield result
 
-    def record(self, picks: PickBatch) -> np.ndarray:
+    def record(self, picks: GraspBatch) -> np.ndarray:
         """Traces (N, T, F) of picks, simulated on one actor."""
         key, box = self.pool.scene_box(self.scene)
         return self.pool.call("record", (key, box, self.grasp, picks))

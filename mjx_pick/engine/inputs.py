@@ -13,9 +13,9 @@ from typing import NamedTuple
 import numpy as np
 
 from mjx_pick.core.config import ConfigError
+from mjx_pick.core.grasps import GraspBatch
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.physics import ContactParams, MujocoContact, SolverParams, mujoco_contact
-from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig, broadcast_params
 from mjx_pick.core.scene import Scene, build_scene
 from mjx_pick.core.settings import Settings
@@ -120,7 +120,7 @@ def scene_of(obj: ObjectModel, settings: Settings) -> Scene:
 
 
 def pick_inputs(
-    scene: Scene, settings: Settings, picks: PickBatch, overrides: dict | None = None
+    scene: Scene, settings: Settings, picks: GraspBatch, overrides: dict | None = None
 ) -> PickInputs:
     """picks' inputs under settings, on a scene of settings' structure
     (``Settings.structure``): the contact and controller values are settings' own, the
@@ -131,7 +131,7 @@ def pick_inputs(
 
 
 def make_inputs(
-    scene: Scene, grasp: GraspConfig, picks: PickBatch, overrides: dict | None = None
+    scene: Scene, grasp: GraspConfig, picks: GraspBatch, overrides: dict | None = None
 ) -> PickInputs:
     """picks' inputs on scene with its own contact values and grasp's controller;
     overrides maps a parameter to one value or (N,) values.
@@ -167,21 +167,16 @@ def contact_values(mjc: MujocoContact) -> dict:
     }
 
 
-def _inputs(scene: Scene, params, mjc: MujocoContact, picks: PickBatch, overrides) -> PickInputs:
+def _inputs(scene: Scene, params, mjc: MujocoContact, picks: GraspBatch, overrides) -> PickInputs:
     """The one conversion: picks' start poses, params broadcast with overrides, and
     mjc's contact values (with overrides) written into the scene's pair arrays."""
     overrides = dict(overrides or {})
     n = len(picks)
-    # the gap the pads close to (the object's width between them): the MJCF linkage's
-    # height compensation
-    grasp_gap_m = picks.grasp_gap_mm * 1e-3
-    qpos0 = scene.initial_qpos(
-        picks.x_mm * 1e-3,
-        picks.y_mm * 1e-3,
-        np.deg2rad(picks.yaw_deg),
-        picks.opening_mm * 1e-3,
-        grasp_gap_m,
-    ).astype(np.float32)
+    start = scene.placement(picks)
+    qpos0 = start.qpos.astype(np.float32)
+    if start.model:  # grasps that are not vertical: the kernels measure along their axis
+        for k, name in enumerate(("closing_axis_x", "closing_axis_y", "closing_axis_z")):
+            overrides.setdefault(name, start.closing_axis[:, k])
     given = {k: overrides.pop(k) for k in CONTACT_OVERRIDES if k in overrides}
     contact = contact_values(mjc)
     if "pad_friction" in given and "pad_torsion" not in given:
@@ -198,7 +193,8 @@ def _inputs(scene: Scene, params, mjc: MujocoContact, picks: PickBatch, override
     )
     if np.any(friction[..., 0] < 0) or np.any(~np.isfinite(friction)):
         raise ConfigError("friction overrides must be finite and >= 0")
-    return PickInputs(qpos0, broadcast_params(params, n, **overrides), friction, solref, solimp)
+    params = broadcast_params(params, n, **overrides)
+    return PickInputs(qpos0, params, friction, solref, solimp, dict(start.model))
 
 
 def set_contact(scene: Scene, friction, solref, solimp, values: dict, xp=np):

@@ -16,8 +16,8 @@ import numpy as np
 import pyarrow as pa
 
 from mjx_pick.core.config import ConfigError
+from mjx_pick.core.grasps import GraspBatch
 from mjx_pick.core.metrics import COLUMNS, results_table
-from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.engine import interrupts, registry
@@ -154,7 +154,7 @@ class Runner:
         return backend
 
     def chunks(self, backend: Backend, grasp: GraspConfig):
-        """What runs whole chunks of pick-points (:class:`PickBatch`) for
+        """What runs whole chunks of pick-points (:class:`GraspBatch`) for
         :func:`run_chunks` on backend (built by :meth:`make` for grasp): this process, or
         one chunk per call on a cluster's actors. It has ``name``, ``device``,
         ``batch_size``, ``run(chunks)`` (yielding each :class:`ChunkDone` as it
@@ -304,7 +304,7 @@ class _LocalChunks:
         self.name, self.device = backend.name, backend.device
         self.batch_size = int(backend.batch_size)
 
-    def run(self, chunks: dict[int, PickBatch]) -> Iterator[ChunkDone]:
+    def run(self, chunks: dict[int, GraspBatch]) -> Iterator[ChunkDone]:
         for k in sorted(chunks):
             sub = chunks[k]
             inputs = make_inputs(self.backend.scene, self.grasp, sub)
@@ -327,7 +327,7 @@ class _LocalChunks:
         """One call on prepared inputs, as one chunk (a cluster actor's piece of a run)."""
         return self.runner.run(self.backend, inputs, record=record, chunk_size=len(inputs) or 1)
 
-    def record(self, picks: PickBatch) -> np.ndarray:
+    def record(self, picks: GraspBatch) -> np.ndarray:
         inputs = make_inputs(self.backend.scene, self.grasp, picks)
         return self.runner.run(self.backend, inputs, record=True).traces
 
@@ -340,7 +340,7 @@ def chunk_name(k: int) -> str:
     return f"{k:06d}"
 
 
-def read_chunk(store: ChunkStore | None, k: int, picks: PickBatch) -> pa.Table | None:
+def read_chunk(store: ChunkStore | None, k: int, picks: GraspBatch) -> pa.Table | None:
     """Chunk k of a run from its store, or None when it is not there; checked against
     its pick-points."""
     if store is None:
@@ -377,7 +377,7 @@ def _distributed() -> bool:
 
 def run_chunks(
     chunks_of,
-    picks: PickBatch,
+    picks: GraspBatch,
     chunk_size: int,
     store: ChunkStore | None = None,
     on_progress: ProgressFn | None = None,

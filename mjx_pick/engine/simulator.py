@@ -10,8 +10,8 @@ import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 
+from mjx_pick.core.grasps import GraspBatch
 from mjx_pick.core.objects import ObjectModel
-from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
 from mjx_pick.core.settings import Settings
@@ -66,7 +66,7 @@ def showing_progress(
 
 
 class Simulator:
-    """Runs (Settings, PickBatch) jobs for one object, batching what can share a program.
+    """Runs (Settings, GraspBatch) jobs for one object, batching what can share a program.
 
     Jobs whose scenes share a compiled program (``variants.program_key``: contact and
     controller settings always; gripper variants of one model structure, their differing
@@ -154,7 +154,7 @@ class Simulator:
         return self._backends[key]
 
     def run(
-        self, jobs: list[tuple[Settings, PickBatch]], store: ChunkStore | None = None
+        self, jobs: list[tuple[Settings, GraspBatch]], store: ChunkStore | None = None
     ) -> list[dict]:
         """Per-job results (the dict of ``kernels.grasp.finalize``, (len(picks),) arrays).
 
@@ -200,7 +200,7 @@ class Simulator:
     def _run_program(
         self,
         program: tuple,
-        jobs: list[tuple[Settings, PickBatch]],
+        jobs: list[tuple[Settings, GraspBatch]],
         store: ChunkStore | None,
         progress: ProgressFn,
     ) -> tuple[dict, int]:
@@ -217,7 +217,7 @@ class Simulator:
         return out, len(inputs)
 
     def _program_inputs(
-        self, program: tuple, backend: Backend, jobs: list[tuple[Settings, PickBatch]]
+        self, program: tuple, backend: Backend, jobs: list[tuple[Settings, GraspBatch]]
     ) -> PickInputs:
         """The jobs' inputs, each from its own scene, as one batch: every variant's
         pick-points' start, contact and controller parameters and model fields."""

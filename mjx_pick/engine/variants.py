@@ -172,10 +172,11 @@ def varying_fields(base: mujoco.MjModel, models, carried: frozenset[str]) -> tup
 def with_model_fields(inputs: PickInputs, model: mujoco.MjModel, names) -> PickInputs:
     """inputs with every pick-point carrying model's values of the fields `names`:
     ``inputs.model[name]`` (N, *field shape), float64 as MuJoCo holds them (MJX and
-    Warp cast to their float32 on the device)."""
+    Warp cast to their float32 on the device). A field the inputs carry already (a
+    grasp's tilt, made from the same model) is kept."""
     n = len(inputs)
     fields = {}
     for f in names:
         value = model_value(model, f)
         fields[f] = np.broadcast_to(value, (n, *value.shape)).astype(np.float64)
-    return inputs.replace(model=fields)
+    return inputs.replace(model={**fields, **inputs.model})

@@ -41,7 +41,7 @@ def tick(
         return
     live[w] = 1
     p = params[w]
-    m = gw.measure(ad, dr, qpos[w], qvel[w], cfrc_ext[w])
+    m = gw.measure(p, ad, dr, qpos[w], qvel[w], cfrc_ext[w])
     s_next = gw.control_step(p, s, m)
     acc[w] = gw.accumulate(p, a, s, s_next, m, pos0[w], quat0[w])
     ctl[w] = s_next

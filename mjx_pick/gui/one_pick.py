@@ -22,7 +22,7 @@ def check_one_pick(obj, settings: Settings, x: float, y: float, yaw: float) -> d
     Returns:
       {"lines": markdown lines for the page (the check, the initial speed, the fingertip
       height and, when feasible, the height compensation), "batch": the feasible
-      PickBatch of one or None, "pose": PNG bytes of the pick-point in the gripper
+      GraspBatch of one or None, "pose": PNG bytes of the pick-point in the gripper
       frame (the part at its pose, the fingers at its opening or fully open)}.
     """
     from mjx_pick.core import pickpoints as pp

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_pick.core.grasps import GraspBatch
 from mjx_pick.core.objects import ObjectModel, segment_image
-from mjx_pick.core.pickpoints import PickBatch
 from mjx_pick.outputs import plots
 
 
@@ -64,7 +64,7 @@ def object_png(obj: ObjectModel, image: Path | None = None) -> bytes:
 
 
 def picks_png(
-    obj: ObjectModel, picks: PickBatch, gripper, pose: int | None = None
+    obj: ObjectModel, picks: GraspBatch, gripper, pose: int | None = None
 ) -> tuple[bytes, np.ndarray]:
     """Generated pick-points in the gripper frame (the frame of their values: where the
     object's centre lies under the gripper, its yaw), and the (N, 2) pixel position of

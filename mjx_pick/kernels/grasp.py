@@ -323,12 +323,13 @@ def finger_travel(ad: Addresses, qpos):
     return _interp(ql, d.q_left, d.travel_left), _interp(qr, d.q_right, d.travel_right)
 
 
-def measure(ad: Addresses, qpos, qvel, cfrc_ext) -> Measurement:
+def measure(p: GraspParams, ad: Addresses, qpos, qvel, cfrc_ext) -> Measurement:
     """Measurement from one simulation's qpos (nq,), qvel (nv,), cfrc_ext (nbody, 6).
 
     cfrc_ext rows are (torque, force) in world axes. The object pushes the left pad
-    towards -x and the right pad towards +x; the table force on the object is the
-    object's external force minus what the pads apply to it (Newton's third law).
+    against the closing axis (p's closing_axis_*) and the right pad along it; the table
+    force on the object is the object's external force minus what the pads apply to it
+    (Newton's third law).
     """
     f_obj = cfrc_ext[ad.object_body, 3:]
     f_left = cfrc_ext[ad.finger_left_body, 3:]
@@ -339,9 +340,10 @@ def measure(ad: Addresses, qpos, qvel, cfrc_ext) -> Measurement:
     if ad.drive is not None:
         slower = jnp.minimum(travel_left, travel_right)
         stiffness = _interp(slower, ad.drive.travel, ad.drive.stiffness_n_per_m)
+    axis = (p.closing_axis_x, p.closing_axis_y, p.closing_axis_z)
     return Measurement(
-        force_left=-f_left[0],
-        force_right=f_right[0],
+        force_left=-(f_left[0] * axis[0] + f_left[1] * axis[1] + f_left[2] * axis[2]),
+        force_right=f_right[0] * axis[0] + f_right[1] * axis[1] + f_right[2] * axis[2],
         force_table=f_obj[2] + f_left[2] + f_right[2],
         finger_left=travel_left,
         finger_right=travel_right,
@@ -378,7 +380,7 @@ def tick(p: GraspParams, ad: Addresses, s, a, qpos, qvel, cfrc_ext, pos0, quat0)
     Returns:
       (next ControlState, next Accumulators, ctrl (nu,), trace row (TRACE_FIELDS,)).
     """
-    m = measure(ad, qpos, qvel, cfrc_ext)
+    m = measure(p, ad, qpos, qvel, cfrc_ext)
     s_next = control_step(p, s, m)
     a_next = accumulate(p, a, s, s_next, m, pos0, quat0)
     row = jnp.stack(

@@ -219,6 +219,7 @@ def finger_travel_right(ad: Addresses, dr: Drive, q: float):
 
 @wp.func
 def measure(
+    p: Params,
     ad: Addresses,
     dr: Drive,
     qpos: wp.array(dtype=float),
@@ -232,8 +233,10 @@ def measure(
     f_right = cfrc_ext[ad.finger_right_body]
     o = ad.object_qpos
     m = Measurement()
-    m.force_left = -f_left[3]
-    m.force_right = f_right[3]
+    # along the closing axis (kernels.grasp.measure)
+    ax, ay, az = p.closing_axis_x, p.closing_axis_y, p.closing_axis_z
+    m.force_left = -(f_left[3] * ax + f_left[4] * ay + f_left[5] * az)
+    m.force_right = f_right[3] * ax + f_right[4] * ay + f_right[5] * az
     m.force_table = f_obj[5] + f_left[5] + f_right[5]
     m.finger_left = finger_travel_left(ad, dr, qpos[ad.finger_left_qpos])
     m.finger_right = finger_travel_right(ad, dr, qpos[ad.finger_right_qpos])

@@ -73,6 +73,11 @@ class GraspParams(NamedTuple):
     max_rotation_rad: jax.Array
     divergence_speed: jax.Array  # |qvel| above this (m/s or rad/s) is a blow-up
     dt: jax.Array  # control period, s
+    # the gripper's closing axis in world axes (a unit vector; its left pad moves along
+    # +axis): the pads' forces are measured along it. (1, 0, 0): a vertical grasp
+    closing_axis_x: jax.Array = 1.0
+    closing_axis_y: jax.Array = 0.0
+    closing_axis_z: jax.Array = 0.0
 
 
 class ControlState(NamedTuple):

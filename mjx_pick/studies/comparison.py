@@ -48,11 +48,11 @@ def shared_candidates(
     seed: int = 0,
     config: pp.PickConfig | None = None,
     grasp=None,
-) -> tuple[dict, list[pp.PickBatch], np.ndarray]:
+) -> tuple[dict, list[pp.GraspBatch], np.ndarray]:
     """The first n candidates of the seeded stream that some gripper can take.
 
     Returns:
-      candidates (x_mm, y_mm, yaw_deg, pick_id: (n,) each), per gripper the PickBatch of
+      candidates (x_mm, y_mm, yaw_deg, pick_id: (n,) each), per gripper the GraspBatch of
       its feasible candidates (pick_id = candidate id), and reasons (G, n) int.
     """
     check_range("compare", "n", n, 1, 1e8)

@@ -84,7 +84,7 @@ def user_picks(
     skip_infeasible: bool = False,
     pick_id=None,
     line=None,
-) -> pp.PickBatch:
+) -> pp.GraspBatch:
     """Check user pick-points. Infeasible ones are an error naming them and the reasons,
     or, with skip_infeasible, left out with a warning that names them. pick_id: each
     point's id (default: its index), kept through to the results so that they map back
@@ -124,7 +124,7 @@ class EvaluateRequest:
     """What :func:`evaluate` computes (how it runs: ``options.RunOptions``).
 
     Attributes:
-      picks: a PickBatch or a CSV path (x_mm, y_mm, yaw_deg) instead of generating n.
+      picks: a GraspBatch or a CSV path (x_mm, y_mm, yaw_deg) instead of generating n.
       contact, solver, grasp: settings (None: the paper's; a grasp left None is fitted
         to the gripper's ranges, ``GraspConfig.fitted_to``).
       n_traces: traces kept for the n best and n worst pick-points.
@@ -141,7 +141,7 @@ class EvaluateRequest:
         them) instead of refusing the file.
     """
 
-    picks: pp.PickBatch | str | Path | None = None
+    picks: pp.GraspBatch | str | Path | None = None
     contact: ContactParams | None = None
     solver: SolverParams | None = None
     grasp: GraspConfig | None = None
@@ -235,7 +235,7 @@ def _check(obj: ObjectModel, settings: Settings, req: EvaluateRequest, opts: Run
     """Every check of the inputs that can fail before a scene, a runner or a folder."""
     settings.grasp.check_gripper(settings.gripper)
     pp.check_raster(obj, opts.pick_config)
-    if not isinstance(req.picks, pp.PickBatch):  # a batch given was checked when drawn
+    if not isinstance(req.picks, pp.GraspBatch):  # a batch given was checked when drawn
         # a part wider than the stroke everywhere: refused now, not after a raster, a
         # scene and max_candidates draws that find no pick-point
         pp.check_stroke(obj, settings.gripper, opts.pick_config, settings.grasp)
@@ -253,8 +253,8 @@ def _check(obj: ObjectModel, settings: Settings, req: EvaluateRequest, opts: Run
 
 def _user_batch(obj, settings: Settings, req: EvaluateRequest, opts: RunOptions):
     """The user's pick-points file, read and checked before a simulator or a folder is
-    made (None: pick-points are drawn, or given as a PickBatch)."""
-    if req.picks is None or isinstance(req.picks, pp.PickBatch) or req.until is not None:
+    made (None: pick-points are drawn, or given as a GraspBatch)."""
+    if req.picks is None or isinstance(req.picks, pp.GraspBatch) or req.until is not None:
         return None
     rows = read_picks_csv(req.picks)
     return user_picks(
@@ -307,7 +307,7 @@ class _Context:
     backend: object
     scene: Scene
     costs: dict
-    user_batch: pp.PickBatch | None = None
+    user_batch: pp.GraspBatch | None = None
 
 
 def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
@@ -380,13 +380,13 @@ def _picks(ctx: _Context, req: _Request):
             req.obj, s.gripper, run.n, seed=run.seed, config=run.pick_config, grasp=s.grasp
         )
         return req, batch
-    if isinstance(what.picks, pp.PickBatch):
+    if isinstance(what.picks, pp.GraspBatch):
         return req, what.picks
     return req, ctx.user_batch  # read and checked before the scene was built
 
 
 def _evaluate_claimed(
-    ctx: _Context, req: _Request, picks_batch: pp.PickBatch | None, out_dir: Path | None, key: str
+    ctx: _Context, req: _Request, picks_batch: pp.GraspBatch | None, out_dir: Path | None, key: str
 ) -> Evaluation:
     """evaluate() once its inputs are checked and its folder (if any) claimed."""
     store = ChunkStore(out_dir, key, req.run.resume) if out_dir is not None else None
@@ -444,7 +444,7 @@ def _evaluate_claimed(
 
 
 def _chunk_size(
-    ctx: _Context, req: _Request, picks_batch: pp.PickBatch | None, store: ChunkStore | None
+    ctx: _Context, req: _Request, picks_batch: pp.GraspBatch | None, store: ChunkStore | None
 ) -> int:
     """Pick-points per chunk: the store's when resuming (chunk k on disk keeps its
     meaning), else the user's, else Optimization mode's batch, free device memory's
@@ -463,7 +463,7 @@ def _chunk_size(
 
 
 def _run_config(
-    ctx: _Context, req: _Request, picks_batch: pp.PickBatch | None, chunk: int, key: str
+    ctx: _Context, req: _Request, picks_batch: pp.GraspBatch | None, chunk: int, key: str
 ) -> dict:
     """The run's configuration as config.json holds it: settings, MuJoCo's contact
     parameters, pick-points, backend, device, batch and chunk size, versions."""
@@ -494,7 +494,7 @@ def _run_config(
 
 
 def _run_summary(
-    ctx: _Context, req: _Request, picks_batch: pp.PickBatch, table: pa.Table, wall_s: float
+    ctx: _Context, req: _Request, picks_batch: pp.GraspBatch, table: pa.Table, wall_s: float
 ) -> dict:
     """summary.json of the main run: counts and rates (``metrics.summarize``), eq. (1)'s
     F_Gmin (N), candidates, compile apart from run time (s), pick-points per second."""
@@ -529,7 +529,7 @@ def _run_summary(
 
 
 def _extra_passes(
-    ctx: _Context, req: _Request, picks_batch: pp.PickBatch, table: pa.Table, summary: dict
+    ctx: _Context, req: _Request, picks_batch: pp.GraspBatch, table: pa.Table, summary: dict
 ) -> pa.Table:
     """table with the columns of the extra passes asked for (minimum grip force, label
     stability, label convergence), their figures added to summary. They run through the
@@ -694,11 +694,22 @@ def _picks_source(picks) -> str:
     """What the pick-points come from, for the output folder's configuration hash."""
     if picks is None:
         return "generated"
-    if isinstance(picks, pp.PickBatch):
+    if isinstance(picks, pp.GraspBatch):
         data = np.stack([picks.x_mm, picks.y_mm, picks.yaw_deg]).astype(np.float64)
+        if not picks.is_pick_points:  # a grasp's pose and where it starts decide it too
+            data = np.concatenate(
+                [data, *(np.atleast_2d(np.asarray(a, float).T) for a in _pose_arrays(picks))]
+            )
         return "batch:" + config_hash(data.tobytes().hex())
     path = Path(picks)
     return "csv:" + (config_hash(path.read_text()) if path.is_file() else str(path))
+
+
+def _pose_arrays(grasps: pp.GraspBatch) -> list[np.ndarray]:
+    """The arrays that make grasps given as poses what they are beyond their planar part."""
+    tilt = grasps.tilt_quat if grasps.tilt_quat is not None else np.zeros((len(grasps), 0))
+    height = grasps.height_mm if grasps.height_mm is not None else np.zeros(0)
+    return [tilt, height, grasps.opening_mm, grasps.gap_left_mm, grasps.gap_right_mm]
 
 
 def _file_digest(path: str | Path) -> str:
@@ -769,7 +780,7 @@ def _simulate(chunks, picks, chunk: int, store, bar: bool, on_progress):
 
 def _optimize(chunks, chunk: int, store: ChunkStore | None, req: _Request):
     """Optimization mode: batches of chunk pick-points until req.what.until reach
-    req.what.min_score or req.what.max_n are spent; (PickBatch, results table of every simulated
+    req.what.min_score or req.what.max_n are spent; (GraspBatch, results table of every simulated
     pick).
 
     Batch j is chunk j of the run (the batches depend only on the seed and the batch
@@ -778,7 +789,7 @@ def _optimize(chunks, chunk: int, store: ChunkStore | None, req: _Request):
     """
     tables: list = []
 
-    def score_fn(b: pp.PickBatch) -> np.ndarray:
+    def score_fn(b: pp.GraspBatch) -> np.ndarray:
         j = len(tables)
         table = read_chunk(store, j, b)
         if table is None:
@@ -805,7 +816,7 @@ def _optimize(chunks, chunk: int, store: ChunkStore | None, req: _Request):
     return res.picks, pa.concat_tables(tables)
 
 
-def _traces(chunks, picks: pp.PickBatch, table: pa.Table, n: int):
+def _traces(chunks, picks: pp.GraspBatch, table: pa.Table, n: int):
     """Re-simulate the n best and n worst pick-points with recording on."""
     score = np.asarray(table["score"], float)
     order = np.argsort(np.where(np.isnan(score), -np.inf, score))

@@ -36,7 +36,7 @@ def write_picks(
     config: pp.PickConfig | None = None,
     out: str | Path,
     overwrite: bool = False,
-) -> pp.PickBatch:
+) -> pp.GraspBatch:
     """n feasible pick-points (``pickpoints.generate_normal``) written to out/:
     picks.csv (pick_id, x_mm, y_mm, yaw_deg, opening_mm, coverage), pick_0.png and
     candidates.png (candidates from the configured ranges, by rejection reason).

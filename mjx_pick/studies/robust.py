@@ -25,7 +25,7 @@ from mjx_pick.studies.options import RunOptions, split_fields
 from mjx_pick.studies.recorded import settings_changes, settings_of
 
 
-def perturb(picks: pp.PickBatch, m: int, sigma_xy_mm: float, sigma_yaw_deg: float, seed: int):
+def perturb(picks: pp.GraspBatch, m: int, sigma_xy_mm: float, sigma_yaw_deg: float, seed: int):
     """M real poses around each reported pose: (K*M,) x, y, yaw and the pick index."""
     rng = np.random.default_rng(seed)
     k = len(picks)
@@ -39,14 +39,14 @@ def perturb(picks: pp.PickBatch, m: int, sigma_xy_mm: float, sigma_yaw_deg: floa
 class Placements(NamedTuple):
     """M real poses around each of K reported ones (K*M draws, pick-major).
 
-    draws: the draws that are simulated (a PickBatch of ok.sum() entries, the fingers
+    draws: the draws that are simulated (a GraspBatch of ok.sum() entries, the fingers
     at each reported pose's planned opening); ok (K*M,): simulated (the rest fail as
     they are: a finger lands on the object, or nothing lies between the fingers);
     index (K*M,): the reported pick-point of each draw; reason (K*M,): the feasibility
     check's reason code (``pickpoints.REASONS``).
     """
 
-    draws: pp.PickBatch
+    draws: pp.GraspBatch
     ok: np.ndarray
     index: np.ndarray
     reason: np.ndarray
@@ -54,7 +54,7 @@ class Placements(NamedTuple):
 
 def placements(
     obj: ObjectModel,
-    picks: pp.PickBatch,
+    picks: pp.GraspBatch,
     base: Settings,
     m: int,
     sigma_xy_mm: float,
@@ -72,7 +72,7 @@ def placements(
     # the fingers is simulated like any other; one with a finger on the object or
     # nothing between the fingers fails as it is
     ok = (res["reason"] == pp.fk.FEASIBLE) | (res["reason"] == pp.fk.COVERAGE)
-    draws = pp.PickBatch(
+    draws = pp.GraspBatch(
         pick_id=np.arange(len(x))[ok],
         x_mm=x[ok],
         y_mm=y[ok],
@@ -111,7 +111,7 @@ class Perturbations:
 
 def robustness(
     obj: ObjectModel,
-    picks: pp.PickBatch,
+    picks: pp.GraspBatch,
     base: Settings | None = None,
     options: RunOptions | None = None,
     *,
@@ -162,7 +162,7 @@ def _request(
     return {**request, **more}
 
 
-def _digest(picks: pp.PickBatch) -> str:
+def _digest(picks: pp.GraspBatch) -> str:
     """The reported pick-points as part of a configuration key: ids, poses, openings."""
     h = hashlib.sha256()
     for a in (picks.pick_id, picks.x_mm, picks.y_mm, picks.yaw_deg, picks.opening_mm):
@@ -205,7 +205,7 @@ def _read_robust(out_dir: Path) -> pa.Table:
     return pq.read_table(out_dir / "robustness.parquet")
 
 
-def _robust_table(picks: pp.PickBatch, placed: Placements, out_d: dict, m: int) -> pa.Table:
+def _robust_table(picks: pp.GraspBatch, placed: Placements, out_d: dict, m: int) -> pa.Table:
     """One row per pick-point from its m draws' results (out_d: of the feasible draws):
     success probability with its Wilson 95 % interval, draws that landed on the object
     or missed it, mean score, rank; best first (probability, interval's low end, score)."""
@@ -271,7 +271,7 @@ class ForceSearch:
 
 def min_grip_force(
     obj: ObjectModel,
-    picks: pp.PickBatch,
+    picks: pp.GraspBatch,
     base: Settings | None = None,
     options: RunOptions | None = None,
     *,
@@ -392,7 +392,7 @@ def robust_best(
         return ranked
 
 
-def _best_picks(obj, base, sim, store, results, n, top_k, opts: RunOptions) -> pp.PickBatch:
+def _best_picks(obj, base, sim, store, results, n, top_k, opts: RunOptions) -> pp.GraspBatch:
     """The top_k best successful pick-points: of results (an evaluate table), or of n
     pick-points simulated through sim (chunks read from and saved to store)."""
     from mjx_pick.core.metrics import best_successes

@@ -310,7 +310,7 @@ def _settings(base: Settings, combo: dict) -> Settings:
 def _jobs(obj, settings: list[Settings], n, seed, pick_config) -> list[tuple]:
     """(settings, pick-points) per variant: the same pick-points for every variant of
     one gripper (drawn once per gripper)."""
-    picks_for: dict[GripperSpec, pp.PickBatch] = {}
+    picks_for: dict[GripperSpec, pp.GraspBatch] = {}
     for s in settings:
         if s.gripper not in picks_for:
             picks_for[s.gripper] = pp.generate_normal(

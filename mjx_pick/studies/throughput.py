@@ -47,7 +47,7 @@ def peak_bytes(backend=None) -> int | None:
     return None if not stats else int(stats.get("peak_bytes_in_use", 0))
 
 
-def tile_picks(picks: pp.PickBatch, n: int, offset: int) -> pp.PickBatch:
+def tile_picks(picks: pp.GraspBatch, n: int, offset: int) -> pp.GraspBatch:
     idx = (np.arange(n) + offset) % len(picks)
     return picks.take(idx)
 

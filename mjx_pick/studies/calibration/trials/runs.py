@@ -82,7 +82,7 @@ class Simulations:
         self.runner = Runner(backend, batch_size)
         self._backend = None
 
-    def run(self, picks: pp.PickBatch, values: list[dict]) -> dict[str, np.ndarray]:
+    def run(self, picks: pp.GraspBatch, values: list[dict]) -> dict[str, np.ndarray]:
         """Simulate every pick-point (N) under each parameter vector (V dicts, name ->
         natural value; {} is the base settings) in ONE runner call.
 
@@ -148,7 +148,7 @@ class Information(NamedTuple):
 
 def information(
     sims: Simulations,
-    picks: pp.PickBatch,
+    picks: pp.GraspBatch,
     nominal: dict,
     draws: list[dict],
     *,
