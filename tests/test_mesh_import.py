@@ -266,3 +266,99 @@ def test_a_band_cutting_one_solid_in_two_keeps_both_pieces(tmp_path, hull_pieces
     whole = checker([0.0], [0.0], [0.0])
     assert whole["reason"][0] == pp.fk.FEASIBLE
     assert whole["opening_mm"][0] >= 26.0
+
+
+# ------------------------------------------------- a given orientation, the file's frame
+
+
+def file_vertices_m(path, scale: float) -> np.ndarray:
+    """The file's own vertices (duplicates merged), scaled to metres: (V, 3)."""
+    return np.asarray(trimesh.load(str(path), force="mesh").vertices) * scale
+
+
+def maps_onto(transform: np.ndarray, source: np.ndarray, target: np.ndarray) -> float:
+    """Largest distance, m, from a target vertex to the nearest transformed source one."""
+    from scipy.spatial import cKDTree
+
+    moved = trimesh.transform_points(source, transform)
+    return float(cKDTree(moved).query(target)[0].max())
+
+
+LAY_FLAT = trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0])  # z up -> x
+
+
+@pytest.mark.parametrize("pose", ["as_given", "stable", LAY_FLAT[:3, :3], LAY_FLAT])
+def test_mesh_to_object_maps_the_files_vertices_onto_the_models(tmp_path, hull_pieces, pose):
+    # a grasp given in the mesh file's frame is mapped into the object frame with it
+    path = standing_box(tmp_path)
+    obj = mp.load_object(path, unit="mm", mass_g=50.0, pose=pose)
+    t = obj.mesh_to_object_m
+    assert t.shape == (4, 4) and t.dtype == np.float64
+    assert t[3] == pytest.approx([0, 0, 0, 1], abs=0)
+    assert t[:3, :3].T @ t[:3, :3] == pytest.approx(np.eye(3), abs=1e-12)
+    assert np.linalg.det(t[:3, :3]) == pytest.approx(1.0, abs=1e-12)
+    verts = file_vertices_m(path, 1e-3)
+    assert maps_onto(t, verts, np.asarray(obj.mesh.vertices)) < 1e-12
+    assert len(obj.mesh.vertices) == len(verts)  # no vertex added or lost
+    # set on the table, its centre of mass over the origin: the pose only turns it
+    assert obj.mesh.bounds[0, 2] == pytest.approx(0.0, abs=1e-12)
+    assert obj.com_m[:2] == pytest.approx([0.0, 0.0], abs=1e-12)
+    if not isinstance(pose, str):
+        assert t[:3, :3] == pytest.approx(LAY_FLAT[:3, :3], abs=1e-12)
+        assert obj.height_mm == pytest.approx(10.0 * np.cos(0.4) + 30 * np.sin(0.4), rel=1e-6)
+        assert "pose=[[" in obj.source
+    assert obj.summary()["mesh_to_object_m"] == t.tolist()
+
+
+def test_a_rotation_rounded_by_its_writer_is_made_rigid(tmp_path, hull_pieces):
+    rounded = np.round(trimesh.transformations.rotation_matrix(0.3, [1, 2, 3])[:3, :3], 4)
+    obj = mp.load_object(standing_box(tmp_path), unit="mm", mass_g=50.0, pose=rounded.tolist())
+    r = obj.mesh_to_object_m[:3, :3]
+    assert r.T @ r == pytest.approx(np.eye(3), abs=1e-12)
+    assert r == pytest.approx(rounded, abs=1e-4)
+
+
+@pytest.mark.parametrize(
+    "pose, said",
+    [
+        ("flat", r"object.pose = 'flat' is not allowed: not a pose's name"),
+        ([[1, 0], [0, 1]], r"its shape is \(2, 2\)"),
+        ([[1, 0, 0], [0, 1, 0], [0, 0, "x"]], "not a matrix of numbers"),
+        ([[1, 0, 0], [0, 1, 0], [0, 0, np.nan]], "a NaN or an infinity"),
+        (np.diag([1.0, 1.0, -1.0]), r"determinant is -1 \(a mirror image of the part\)"),
+        (np.diag([1.0, 1.0, 0.0]), r"determinant is 0 \(a singular matrix\)"),
+        (np.diag([1.01, 1.0, 1.0]), r"not orthonormal \(R\^T R is 0.0201 from the identity"),
+        ([[1, 0.01, 0], [0, 1, 0], [0, 0, 1]], r"not orthonormal .*a scale or shear"),
+        (np.eye(4) + np.eye(4, k=-3), r"its last row is \[1, 0, 0, 1\], not \[0, 0, 0, 1\]"),
+    ],
+)
+def test_a_pose_that_is_not_a_rotation_is_refused_before_any_load(tmp_path, pose, said):
+    missing = tmp_path / "never_read.stl"  # the pose is checked first
+    with pytest.raises(mp.ConfigError, match=said) as err:
+        mp.load_object(missing, unit="mm", mass_g=5.0, pose=pose)
+    assert "object.pose = " in str(err.value) and "3x3 rotation or 4x4" in str(err.value)
+    with pytest.raises(mp.ConfigError, match=said):
+        mp.object_from_mesh(missing, unit="mm", mass_g=5.0, pose=pose)
+
+
+def test_a_pose_for_an_image_is_refused():
+    with pytest.raises(mp.ConfigError, match="pose does not apply to it"):
+        mp.load_object("block", pose=np.eye(3))
+
+
+def test_mesh_to_object_is_part_of_the_cached_preparation(tmp_path, monkeypatch):
+    # the frame is stored with the geometry and read back with it: a second process
+    # (a cache hit) maps grasps as the first did; a given pose is part of the key
+    from mjx_pick.core import cache, objects
+
+    monkeypatch.setenv(cache.ENV_DIR, str(tmp_path / "cache"))
+    monkeypatch.setattr(
+        objects, "_coacd_pieces", lambda mesh, t: (np.asarray(mesh.convex_hull.vertices),)
+    )
+    path = standing_box(tmp_path)
+    first = mp.load_object(path, unit="mm", mass_g=50.0, pose=LAY_FLAT)
+    monkeypatch.setattr(objects, "_prepare_mesh", lambda *a: pytest.fail("not cached"))
+    again = mp.load_object(path, unit="mm", mass_g=50.0, pose=LAY_FLAT[:3, :3])
+    np.testing.assert_array_equal(again.mesh_to_object_m, first.mesh_to_object_m)
+    with pytest.raises(BaseException, match="not cached"):
+        mp.load_object(path, unit="mm", mass_g=50.0, pose=LAY_FLAT[:3, :3].T)

@@ -56,6 +56,12 @@ MAX_MESH_FILE_BYTES = 256 * 2**20
 # error (no solid is that light or that dense: the mass, the scale or the unit is wrong)
 DENSITY_PLAUSIBLE_KG_M3 = (50.0, 25_000.0)
 DENSITY_POSSIBLE_KG_M3 = (1.0, 1_000_000.0)
+# a mesh's resting pose by name; or a rotation (world <- mesh file), whose R^T R may differ
+# from the identity by a writer's rounding (ROTATION_ROUNDING: projected onto the nearest
+# rotation) but not by more (ROTATION_REFUSED: a scale, shear or a wrong matrix)
+POSE_NAMES = ("as_given", "stable")
+ROTATION_ROUNDING = 1e-6
+ROTATION_REFUSED = 1e-3
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -75,6 +81,10 @@ class ObjectModel:
         the grasp-height rule of the procedure (``mjx_pick.core.procedure.fingertip_height_mm``).
       material: the object's material name (recorded with results).
       source: where it came from (file path and import settings).
+      outline: a prism's outline its collision pieces were cut from, mm (else None).
+      mesh_to_object_m: a mesh's (4, 4) rigid transform from the file's frame, scaled
+        to metres, to the object frame: the file's vertices it maps onto ``mesh``'s.
+        None for a prism.
     """
 
     name: str
@@ -90,6 +100,9 @@ class ObjectModel:
     source: str = ""
     # prisms only: the outline the pieces were cut from (mm), and the thickness (m)
     outline: Polygon | None = None
+    # meshes only: (4, 4) rigid transform, object frame <- the mesh file's frame in metres
+    # (after the unit's scale); maps a grasp given in the file's frame into this one
+    mesh_to_object_m: np.ndarray | None = None
 
     def pad_pieces(self, finger_depth_mm: float, finger_width_mm: float) -> tuple[np.ndarray, ...]:
         """Collision pieces for the pads of a finger of this footprint (depth x width).
@@ -190,7 +203,7 @@ class ObjectModel:
 
     def summary(self) -> dict:
         """Plain-values description for config.json and reports."""
-        return {
+        out = {
             "name": self.name,
             "area_mm2": round(self.area_mm2, 3),
             "height_mm": self.height_mm,
@@ -204,6 +217,9 @@ class ObjectModel:
             # the silhouette, so that reports can draw it from config.json alone
             "outline_wkt": shapely.to_wkt(self.polygon, rounding_precision=4),
         }
+        if self.mesh_to_object_m is not None:  # a grasp in the file's frame maps with it
+            out["mesh_to_object_m"] = np.asarray(self.mesh_to_object_m).tolist()
+        return out
 
 
 # --------------------------------------------------------------------------- images
@@ -630,7 +646,7 @@ def object_from_mesh(
     unit: str,
     mass_g: float | None = None,
     density_kg_m3: float | None = None,
-    pose: str = "as_given",
+    pose: str | np.ndarray = "as_given",
     pick_height_mm: float | None = None,
     material: str = "pla",
     name: str | None = None,
@@ -643,8 +659,12 @@ def object_from_mesh(
       path: mesh file readable by trimesh.
       unit: "m" or "mm", the unit the file's coordinates are in (required).
       mass_g / density_kg_m3: one of them.
-      pose: "as_given" (keep the file's orientation, z up) or "stable" (the most
-        probable resting pose, trimesh.poses.compute_stable_poses).
+      pose: "as_given" (keep the file's orientation, z up), "stable" (the most
+        probable resting pose, trimesh.poses.compute_stable_poses), or the part's
+        orientation on the table: a (3, 3) rotation or (4, 4) rigid transform, world <-
+        mesh file frame (:func:`check_pose`; only its rotation is used). Either way the
+        part is set on the table with its centre of mass over the origin, and
+        ``mesh_to_object_m`` records the whole transform.
       pick_height_mm: fingertip height; default: the procedure's grasp-height rule.
       coacd_threshold: CoACD concavity threshold (smaller keeps finer concave detail).
       largest_body: a mesh of several disconnected bodies is refused (the outline,
@@ -653,7 +673,8 @@ def object_from_mesh(
     """
     path = Path(path)
     label = name or path.stem
-    _check_mesh_file(path, unit, pose)
+    pose = check_pose(pose)
+    _check_mesh_file(path, unit)
     prepared = _prepared_mesh(path, unit, pose, coacd_threshold, largest_body)
     dropped = prepared["dropped_note"].tobytes().decode()
     if dropped:  # bodies left out by largest_body: said on every load
@@ -668,22 +689,80 @@ def object_from_mesh(
     polygon = shapely.from_wkb(prepared["outline_wkb"].tobytes())
     ends = np.cumsum(prepared["piece_sizes"])[:-1]
     pieces = tuple(np.split(prepared["piece_vertices"], ends))
-    source = f"{path} (unit={unit}, pose={pose}{', largest_body' if largest_body else ''})"
-    return _finish(
+    shown = pose if isinstance(pose, str) else _matrix_text(pose)
+    source = f"{path} (unit={unit}, pose={shown}{', largest_body' if largest_body else ''})"
+    obj = _finish(
         label, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
     )
+    return dataclasses.replace(obj, mesh_to_object_m=prepared["mesh_to_object"].copy())
 
 
 MESH_SCALES = {"m": 1.0, "mm": 1e-3}
 
 
-def _check_mesh_file(path: Path, unit: str, pose: str) -> None:
-    """Refuse, before any load, a unit or pose that is not allowed and a mesh file that
-    is missing, too large or (by its header) holds too many triangles or is cut short."""
+def check_pose(pose) -> str | np.ndarray:
+    """A mesh's resting pose as :func:`object_from_mesh` takes it, checked: "as_given",
+    "stable", or a rotation -- returned as a (3, 3) float64 proper rotation, projected
+    onto the nearest one (SVD) where a writer's rounding left it up to ROTATION_REFUSED
+    from orthonormal.
+
+    Args:
+      pose: a name, or array-like (3, 3) rotation or (4, 4) rigid transform, world <-
+        mesh file frame (a 4x4's translation is not used: the part is set on the table).
+    """
+    if isinstance(pose, str):
+        if pose in POSE_NAMES:
+            return pose
+        raise _pose_error(repr(pose), "not a pose's name")
+    try:
+        m = np.array(pose, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise _pose_error(repr(pose), "not a matrix of numbers") from None
+    shown = _matrix_text(m) if m.ndim == 2 and m.size <= 16 else repr(pose)
+    if m.shape not in ((3, 3), (4, 4)):
+        raise _pose_error(shown, f"its shape is {m.shape}")
+    if not np.isfinite(m).all():
+        raise _pose_error(shown, "it holds a NaN or an infinity")
+    if m.shape == (4, 4) and np.abs(m[3] - [0.0, 0.0, 0.0, 1.0]).max() > ROTATION_ROUNDING:
+        raise _pose_error(shown, f"its last row is {_matrix_text(m[3])}, not [0, 0, 0, 1]")
+    r = m[:3, :3]
+    det = float(np.linalg.det(r))
+    if det <= 0:
+        what = "a mirror image of the part" if det < 0 else "a singular matrix"
+        raise _pose_error(shown, f"its rotation's determinant is {det:.6g} ({what}), not +1")
+    off = float(np.abs(r.T @ r - np.eye(3)).max())
+    if off > ROTATION_REFUSED:
+        raise _pose_error(
+            shown,
+            f"its rotation is not orthonormal (R^T R is {off:.3g} from the identity; "
+            f"allowed {ROTATION_REFUSED:g}: a scale or shear?)",
+        )
+    u, _, vt = np.linalg.svd(r)  # the nearest rotation: rounding removed, rigid
+    return u @ vt
+
+
+def _pose_error(shown: str, why: str) -> ConfigError:
+    return ConfigError(
+        f"object.pose = {shown} is not allowed: {why}; choose 'as_given', 'stable', or the "
+        "part's orientation as a 3x3 rotation or 4x4 rigid transform (world <- mesh file "
+        f"frame: orthonormal within {ROTATION_REFUSED:g}, determinant +1; a 4x4's last row "
+        "0 0 0 1)"
+    )
+
+
+def _matrix_text(m: np.ndarray) -> str:
+    """A small vector or matrix on one line, its numbers to 6 significant digits."""
+    m = np.asarray(m)
+    if m.ndim == 1:
+        return "[" + ", ".join(f"{float(v):.6g}" for v in m) + "]"
+    return "[" + ", ".join(_matrix_text(row) for row in m) + "]"
+
+
+def _check_mesh_file(path: Path, unit: str) -> None:
+    """Refuse, before any load, a unit that is not allowed and a mesh file that is
+    missing, too large or (by its header) holds too many triangles or is cut short."""
     if unit not in MESH_SCALES:
         raise ConfigError(f"object.unit = {unit!r} is not allowed: choose 'm' or 'mm'")
-    if pose not in ("as_given", "stable"):
-        raise ConfigError(f"object.pose = {pose!r} is not allowed: choose 'as_given' or 'stable'")
     if not path.is_file():
         raise ConfigError(f"mesh {str(path)!r} does not exist")
     size = path.stat().st_size
@@ -696,16 +775,19 @@ def _check_mesh_file(path: Path, unit: str, pose: str) -> None:
 
 
 def _prepared_mesh(
-    path: Path, unit: str, pose: str, coacd_threshold: float, largest_body: bool
+    path: Path, unit: str, pose: str | np.ndarray, coacd_threshold: float, largest_body: bool
 ) -> dict[str, np.ndarray]:
     """The mesh file's prepared geometry (:func:`_prepare_mesh`'s arrays), read from the
-    on-disk cache when this file was prepared alike before, else computed and stored."""
+    on-disk cache when this file was prepared alike before, else computed and stored.
+    pose: :func:`check_pose`'s."""
     # everything that decides the prepared geometry; mass and material are applied after
     key = {
+        # the arrays' layout: entries made before mesh_to_object was stored have none
+        "layout": 2,
         "file_sha256": cache.file_digest(path),
         "suffix": path.suffix.lower(),
         "unit": unit,
-        "pose": pose,
+        "pose": pose if isinstance(pose, str) else pose.tolist(),
         "coacd_threshold": float(coacd_threshold),
         "max_hull_vertices": MAX_HULL_VERTICES,
         "coacd": dict(COACD_SETTINGS),
@@ -749,12 +831,13 @@ def _check_mesh_header(path: Path, size: int) -> None:
 
 
 def _prepare_mesh(
-    path: Path, unit: str, pose: str, coacd_threshold: float, largest_body: bool
+    path: Path, unit: str, pose: str | np.ndarray, coacd_threshold: float, largest_body: bool
 ) -> dict:
     """A mesh file's geometry in the object frame: the cached part of object_from_mesh.
 
     Returns arrays: vertices (V, 3) m and faces (F, 3) of the watertight mesh, resting on
-    the table with its centre of mass over the origin; outline_wkb, the top-down outline
+    the table with its centre of mass over the origin; mesh_to_object (4, 4), the rigid
+    transform that took the file's vertices (m) there; outline_wkb, the top-down outline
     (mm) as WKB bytes; piece_vertices (sum V_i, 3) m and piece_sizes (P,), the convex
     collision pieces one after the other.
     """
@@ -779,11 +862,9 @@ def _prepare_mesh(
     if mesh.volume < 0:
         mesh.invert()
     mesh, dropped = _one_body(mesh, path, largest_body)
-    if pose == "stable":
-        transforms, _ = trimesh.poses.compute_stable_poses(mesh, n_samples=1, sigma=0.0)
-        mesh.apply_transform(transforms[0])
-    com = mesh.center_mass
-    mesh.apply_translation([-com[0], -com[1], -mesh.bounds[0, 2]])
+    # one transform, applied once: the file's vertices map onto the model's exactly
+    mesh_to_object = _resting_transform(mesh, pose)
+    mesh.apply_transform(mesh_to_object)
     _check_size_mm(
         f"mesh {str(path)!r} with unit={unit!r}",
         mesh.extents * 1e3,
@@ -796,12 +877,32 @@ def _prepare_mesh(
     return {
         "vertices": np.asarray(mesh.vertices, dtype=np.float64),
         "faces": np.asarray(mesh.faces, dtype=np.int64),
+        "mesh_to_object": mesh_to_object,
         "outline_wkb": np.frombuffer(shapely.to_wkb(polygon), np.uint8),
         "piece_vertices": np.concatenate(pieces).astype(np.float64),
         "piece_sizes": np.array([len(p) for p in pieces], np.int64),
         "dropped_note": np.frombuffer(dropped.encode(), np.uint8),
         "repair_note": np.frombuffer(repaired.encode(), np.uint8),
     }
+
+
+def _resting_transform(mesh: trimesh.Trimesh, pose: str | np.ndarray) -> np.ndarray:
+    """(4, 4) rigid transform, object frame <- mesh (m): the pose's turn (none, the most
+    stable resting pose, or the given rotation), then the shift that sets the turned
+    part on the table (z = 0) with its centre of mass over the origin."""
+    turn = np.eye(4)
+    if isinstance(pose, str):
+        if pose == "stable":
+            transforms, _ = trimesh.poses.compute_stable_poses(mesh, n_samples=1, sigma=0.0)
+            turn[:3, :3] = transforms[0][:3, :3]  # its translation is replaced below
+    else:
+        turn[:3, :3] = pose
+    turned = mesh.copy()
+    turned.apply_transform(turn)
+    com = turned.center_mass
+    shift = np.eye(4)
+    shift[:3, 3] = [-com[0], -com[1], -turned.bounds[0, 2]]
+    return shift @ turn
 
 
 def _closed_solid(mesh: trimesh.Trimesh, path: Path) -> str:
@@ -1128,7 +1229,7 @@ def load_object(
     mass_g: float | None = None,
     density_kg_m3: float | None = None,
     unit: str | None = None,
-    pose: str = "as_given",
+    pose: str | np.ndarray = "as_given",
     pick_height_mm: float | None = None,
     simplify_mm: float | None = None,
     material: str | None = None,
@@ -1219,6 +1320,7 @@ def _check_object_options(text: str, kind: str, options: dict) -> None:
     shipped asset). options: :func:`load_object`'s keywords by name."""
     for name in _OBJECT_NUMBERS:
         numbers.check_optional(name, options[name])
+    options["pose"] = check_pose(options["pose"])
     mass_g, density_kg_m3 = options["mass_g"], options["density_kg_m3"]
     if mass_g is not None and density_kg_m3 is not None:
         raise ConfigError(
@@ -1253,8 +1355,9 @@ def _unused_options(kind: str, options: dict) -> dict:
             "largest_body": largest_body,
         },
     }[kind]
-    if options["pose"] != "as_given" and kind != "a mesh":
-        unused["pose"] = options["pose"]
+    pose = options["pose"]
+    if not (isinstance(pose, str) and pose == "as_given") and kind != "a mesh":
+        unused["pose"] = "given"
     return unused
 
 
