@@ -59,6 +59,8 @@ def cmd_evaluate(args) -> int:
         stability_um=args.stability_um,
         step_check=args.step_check,
         skip_infeasible=args.skip_infeasible,
+        grasps=args.grasps,
+        depth_mm=args.depth_mm,
         fixed_costs=costs,
     )
     if ev.already_complete:

@@ -317,6 +317,21 @@ def _add_evaluate_output_args(ev: argparse.ArgumentParser) -> None:
         help="leave infeasible rows of --picks out (listed) instead of refusing the file",
     )
     ev.add_argument(
+        "--grasps",
+        default="topdown",
+        metavar="topdown|antipodal|FILE",
+        help="where the grasps come from: 'topdown' pick-points (default, the paper's), "
+        "'antipodal' grasps on the part's mesh (any approach from above), or a grasp file "
+        "(ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, a CSV of 4x4 poses): every "
+        "grasp in it, the infeasible left out (docs/formats.md)",
+    )
+    ev.add_argument(
+        "--depth-mm",
+        type=number("depth_mm", "--depth-mm"),
+        help="with --grasps FILE: the grasp centre's distance from the gripper's base along "
+        "the approach, where the file does not say (0: the poses are grasp centres)",
+    )
+    ev.add_argument(
         "--out", help="output folder (default: none: the summary is printed, nothing written)"
     )
     ev.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")

@@ -195,5 +195,3 @@ def rejected_words(rejected: dict) -> str:
     shown = sorted(((int(v), k) for k, v in rejected.items() if v), reverse=True)
     text = "; ".join(f"{v:,}: {REASON_WORDS.get(k, k)}" for v, k in shown)
     return text or "no antipodal pair within the stroke and the friction cone"
-
-

@@ -273,3 +273,41 @@ def from_poses(
         tilt_quat=d["tilt_quat"],
         height_mm=d["height_mm"],
     )
+
+
+# a rotation further than this from orthonormal (max |R^T R - I|) is not a rotation
+# rounded for a file: refused rather than projected
+ORTHONORMAL_TOL = 1e-3
+
+
+def rigid_poses(values, where: str, rows=None) -> np.ndarray:
+    """(N, 4, 4) rigid transforms from values (N, 16) or (N, 4, 4): each finite, its
+    last row 0 0 0 1, its rotation proper and orthonormal within ORTHONORMAL_TOL
+    (re-orthonormalised: files round their rotations), else a ConfigError naming
+    `where` and each bad row (rows: their names, default their indices)."""
+    from mjx_pick.core.config import ConfigError
+
+    t = np.asarray(values, float).reshape(-1, 4, 4).copy()
+    names = [str(r) for r in (range(len(t)) if rows is None else rows)]
+    bad: list[str] = []
+    finite = np.all(np.isfinite(t), axis=(1, 2))
+    bottom = np.all(np.abs(t[:, 3] - (0.0, 0.0, 0.0, 1.0)) < 1e-9, axis=1)
+    r = np.where(finite[:, None, None], t[:, :3, :3], np.eye(3))
+    error = np.abs(np.swapaxes(r, 1, 2) @ r - np.eye(3)).max(axis=(1, 2))
+    proper = np.linalg.det(r) > 0
+    for i in range(len(t)):
+        if not finite[i]:
+            bad.append(f"{names[i]}: not finite")
+        elif not bottom[i]:
+            bad.append(f"{names[i]}: its last row is {t[i, 3].tolist()}, not 0 0 0 1")
+        elif error[i] > ORTHONORMAL_TOL or not proper[i]:
+            what = "a reflection" if not proper[i] else f"{error[i]:.2g} from orthonormal"
+            bad.append(f"{names[i]}: its rotation is {what} (allowed {ORTHONORMAL_TOL:g})")
+    if bad:
+        more = f" (and {len(bad) - 5} more)" if len(bad) > 5 else ""
+        raise ConfigError(
+            f"{where}: {len(bad)} pose(s) are not rigid transforms: {'; '.join(bad[:5])}{more}"
+        )
+    u, _, vt = np.linalg.svd(t[:, :3, :3])
+    t[:, :3, :3] = u @ vt
+    return t

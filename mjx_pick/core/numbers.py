@@ -27,6 +27,7 @@ INPUTS: dict[str, Number] = {
     "min_score": Number(0, 1, doc="score a good pick-point reaches, eq. (2)"),
     "max_n": Number(1, 1e9, integer=True, unit="pick-points", doc="most simulated"),
     "stability_um": Number(0, 100, unit="um", doc="shift of the stability check (0: off)"),
+    "depth_mm": Number(0, 2000, unit="mm", doc="a grasp file's base-to-grasp-centre distance"),
     # sweep, compare, design
     "random": Number(1, 10_000, integer=True, unit="variants", doc="random variants"),
     "grid_points": Number(1, 1000, integer=True, unit="values", doc="values of a swept grid"),

@@ -17,6 +17,7 @@ import pyarrow as pa
 
 from mjx_pick.core import numbers
 from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.antipodal import AntipodalConfig
 from mjx_pick.core.config import (
     ConfigError,
     check_range,
@@ -55,6 +56,7 @@ from mjx_pick.outputs.rundir import (
     release,
     versions,
 )
+from mjx_pick.studies.grasp_sources import TOPDOWN, check_source, draw_grasps
 from mjx_pick.studies.options import RunOptions, split_fields
 from mjx_pick.studies.pickfiles import read_picks_csv
 from mjx_pick.studies.robust import min_grip_force
@@ -139,9 +141,17 @@ class EvaluateRequest:
         success_half_step, label_converged.
       skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
         them) instead of refusing the file.
+      grasps: where the grasps come from when picks is None (``grasp_sources``):
+        "topdown" (n pick-points, the paper's), "antipodal" (n antipodal grasps on the
+        part's mesh, ``antipodal`` their settings), or a grasp file (ACRONYM, GraspGen,
+        isaac_grasp, a CSV of poses: every grasp in it; depth_mm: the grasp centre's
+        distance from the base where the file does not say).
     """
 
     picks: pp.GraspBatch | str | Path | None = None
+    grasps: str = TOPDOWN
+    antipodal: AntipodalConfig | None = None
+    depth_mm: float | None = None
     contact: ContactParams | None = None
     solver: SolverParams | None = None
     grasp: GraspConfig | None = None
@@ -234,8 +244,21 @@ def _settings(gripper: GripperSpec, req: EvaluateRequest) -> Settings:
 def _check(obj: ObjectModel, settings: Settings, req: EvaluateRequest, opts: RunOptions) -> None:
     """Every check of the inputs that can fail before a scene, a runner or a folder."""
     settings.grasp.check_gripper(settings.gripper)
-    pp.check_raster(obj, opts.pick_config)
-    if not isinstance(req.picks, pp.GraspBatch):  # a batch given was checked when drawn
+    source = check_source(req.grasps, req.depth_mm)
+    if source != TOPDOWN:
+        if req.picks is not None:
+            raise ConfigError(
+                f"give pick-points (--picks) or grasps = {source!r} (--grasps), not both"
+            )
+        if req.until is not None:
+            raise ConfigError(
+                "Optimization mode (--until) draws top-down pick-points: leave out --until, "
+                f"or --grasps {source!r}"
+            )
+    else:
+        pp.check_raster(obj, opts.pick_config)
+    if source == TOPDOWN and not isinstance(req.picks, pp.GraspBatch):
+        # a batch given was checked when drawn
         # a part wider than the stroke everywhere: refused now, not after a raster, a
         # scene and max_candidates draws that find no pick-point
         pp.check_stroke(obj, settings.gripper, opts.pick_config, settings.grasp)
@@ -352,7 +375,10 @@ def _key_settings(ctx: _Context, req: _Request) -> dict:
         "grasp": s.grasp,
         "picks": run.pick_config,
         "source": _picks_source(what.picks),
-        "n": run.n if what.picks is None and what.until is None else None,
+        **_grasps_source(what),
+        "n": run.n
+        if what.picks is None and what.until is None and not Path(what.grasps).is_file()
+        else None,
         "seed": run.seed,
         "until": what.until,
         "min_score": what.min_score if what.until is not None else None,
@@ -376,8 +402,16 @@ def _picks(ctx: _Context, req: _Request):
         check_range("evaluate", "max_n", what.max_n, what.until, 10**9)
         return dataclasses.replace(req, what=what), None
     if what.picks is None:
-        batch = pp.generate_normal(
-            req.obj, s.gripper, run.n, seed=run.seed, config=run.pick_config, grasp=s.grasp
+        batch = draw_grasps(
+            req.obj,
+            s,
+            run.n,
+            run.seed,
+            run.pick_config,
+            what.grasps,
+            antipodal=what.antipodal,
+            depth_mm=what.depth_mm,
+            scene=ctx.scene,
         )
         return req, batch
     if isinstance(what.picks, pp.GraspBatch):
@@ -703,6 +737,16 @@ def _picks_source(picks) -> str:
         return "batch:" + config_hash(data.tobytes().hex())
     path = Path(picks)
     return "csv:" + (config_hash(path.read_text()) if path.is_file() else str(path))
+
+
+def _grasps_source(what: EvaluateRequest) -> dict:
+    """The grasp source's entries of the folder's configuration hash: none for top-down
+    pick-points (their runs' keys as before), the antipodal settings, or a file's digest."""
+    if what.grasps == TOPDOWN:
+        return {}
+    if what.grasps == "antipodal":
+        return {"grasps": {"antipodal": to_dict(what.antipodal or AntipodalConfig())}}
+    return {"grasps": {"file": _file_digest(what.grasps), "depth_mm": what.depth_mm}}
 
 
 def _pose_arrays(grasps: pp.GraspBatch) -> list[np.ndarray]:

@@ -22,7 +22,12 @@ __all__ = ["FORMATS", "export_labels", "read_labels"]
 
 # format name -> its module (SUFFIX, write, read); imported on use, so that the CLI's
 # parser lists the names without loading MuJoCo, h5py or YAML
-FORMATS = {"acronym": "acronym", "graspgen": "graspgen", "isaac-grasp": "isaac_grasp"}
+FORMATS = {
+    "acronym": "acronym",
+    "graspgen": "graspgen",
+    "isaac-grasp": "isaac_grasp",
+    "csv": "csv_poses",
+}
 FRAME = (
     "approach along +z, fingers close along x, origin at the gripper's base, the grasp "
     "centre depth_m along +z from it"

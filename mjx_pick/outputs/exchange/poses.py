@@ -12,12 +12,11 @@ import numpy as np
 import trimesh
 
 from mjx_pick.core.config import ConfigError
+from mjx_pick.core.grasps import GraspBatch, poses
 from mjx_pick.outputs.reporting.run import Run
 
 # the results table's columns a pose needs
 NEEDED = ("pick_id", "x_mm", "y_mm", "yaw_deg", "success", "score")
-# E = G turned half a turn about x
-G_TO_E = np.diag([1.0, -1.0, -1.0])
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -62,7 +61,15 @@ def pick_poses(run: Run, depth_mm: float | None = None) -> tuple[np.ndarray, np.
             "version, or damaged): evaluate again"
         )
     x, y, yaw = (np.asarray(table[c], float) for c in ("x_mm", "y_mm", "yaw_deg"))
-    z_tcp_mm = float(scene["fingertip_height_mm"]) + 0.5 * run.gripper.pad_height_mm
+    if "grasp_pose" in table.column_names:  # grasps given as poses: their grasp frames
+        centre = np.asarray(table["grasp_pose"].to_pylist(), float).reshape(-1, 4, 4)
+    else:  # pick-points: the vertical grasps at the run's grasp height
+        z_tcp_mm = float(scene["fingertip_height_mm"]) + 0.5 * run.gripper.pad_height_mm
+        n = len(x)
+        picks = GraspBatch(
+            table["pick_id"].to_numpy(), x, y, yaw, *(np.zeros(n) for _ in range(4)), {}, n
+        )
+        centre = poses(picks, z_tcp_mm)
     if depth_mm is not None:
         depth = np.full(len(x), float(depth_mm))
     elif run.gripper.mjcf is not None:
@@ -73,16 +80,8 @@ def pick_poses(run: Run, depth_mm: float | None = None) -> tuple[np.ndarray, np.
         depth = mount + comp
     else:
         depth = np.zeros(len(x))
-    c, s = np.cos(np.radians(-yaw)), np.sin(np.radians(-yaw))
-    rot = np.zeros((len(x), 3, 3))
-    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
-    rot[:, 2, 2] = 1.0  # Rz(-yaw): G's axes in the object's frame
-    offset = np.stack([x, y, np.zeros_like(x)], axis=1)
-    pos = -np.einsum("nij,nj->ni", rot, offset)
-    pos[:, 2] = z_tcp_mm + depth
-    out = np.tile(np.eye(4), (len(x), 1, 1))
-    out[:, :3, :3] = rot @ G_TO_E
-    out[:, :3, 3] = pos * 1e-3
+    out = centre.copy()  # the base lies depth behind the grasp centre along E's z
+    out[:, :3, 3] -= (depth * 1e-3)[:, None] * centre[:, :3, 2]
     return out, depth * 1e-3
 
 
