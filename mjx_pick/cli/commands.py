@@ -373,6 +373,58 @@ def cmd_export(args) -> int:
     return 0
 
 
+def cmd_validate(args) -> int:
+    from mjx_pick.cli.inputs import settings
+    from mjx_pick.studies.validation import read_trials, validate
+
+    trials = read_trials(args.trials)
+    contact, solver, (grasp, given), _ = settings(args)
+    v = validate(
+        trials,
+        run_options(args),
+        contact=contact,
+        solver=solver,
+        grasp=grasp if given else None,
+        keep_grasp=tuple(given),
+        unit=args.unit,
+    )
+    print_validation(v.report, args.out)
+    return 0
+
+
+def print_validation(r: dict, out) -> None:
+    """validate's figures: overall, per object, the checks' rejections."""
+
+    def figure(f: dict, name: str) -> str:
+        v, (lo, hi) = f[name]["value"], f[name]["ci95"]
+        if v is None:
+            return f"{name} -"
+        ci = "" if lo is None else f" ({lo:.2f}-{hi:.2f})"
+        return f"{name} {v:.3f}{ci}"
+
+    c = r["confusion"]
+    print(f"trials {r['n']} ({r['grasps']} grasps); real success rate {r['real_success_rate']:.3f}")
+    print("  " + ", ".join(figure(r, k) for k in ("accuracy", "precision", "recall", "f1")))
+    print(
+        f"  confusion: tp {c['tp']}, fp {c['fp']}, fn {c['fn']}, tn {c['tn']} (95 % intervals: "
+        "a bootstrap over grasps)"
+    )
+    for name, f in r["per_object"].items():
+        print(f"  {name}: n {f['n']}, " + ", ".join(figure(f, k) for k in ("accuracy", "f1")))
+    checks = r["checks"]
+    if checks["rejected_trials"]:
+        why = "; ".join(
+            f"{v['trials']} {k} ({v['held_on_the_robot']} held)"
+            for k, v in checks["by_reason"].items()
+        )
+        print(
+            f"  rejected by the checks: {checks['rejected_trials']} trials, "
+            f"{checks['rejected_that_held']} of them held on the robot: {why}"
+        )
+    if out:
+        print(f"results in {out}/ (validation.json, trials.parquet)")
+
+
 def print_summary(s: dict, out, total_s: float | None = None) -> None:
     """The evaluate summary's lines; total_s: the process's time so far, when known."""
     from mjx_pick.core.metrics import label_check_rows, rate_text

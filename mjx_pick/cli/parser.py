@@ -24,6 +24,7 @@ from mjx_pick.cli.commands import (
     cmd_trials_fit,
     cmd_trials_plan,
     cmd_trials_record,
+    cmd_validate,
     cmd_view,
 )
 from mjx_pick.cli.inputs import raise_problems
@@ -280,6 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
         _add_calibrate_parser,
         _add_report_parser,
         _add_export_parser,
+        _add_validate_parser,
         _add_listing_parsers,
         _add_cache_parser,
         _add_gui_parser,
@@ -718,6 +720,30 @@ def _add_export_parser(sub) -> None:
     )
     ep.add_argument("--overwrite", action="store_true", help="replace existing files")
     ep.set_defaults(func=cmd_export)
+
+
+def _add_validate_parser(sub) -> None:
+    """``mjx-pick validate``: labels against physical trials."""
+    va = sub.add_parser(
+        "validate",
+        help="simulate the grasp of every physical trial of a TRIALS.csv and hold the labels "
+        "against the real outcomes (accuracy, precision, recall, F1)",
+    )
+    va.add_argument(
+        "trials",
+        help="a TRIALS.csv: object, mass_g, gripper, object_pose, grasp_pose, depth_mm, "
+        "success, trial (docs/formats.md)",
+    )
+    va.add_argument("--out", help="output folder (validation.json, trials.parquet)")
+    _add_overwrite(va)
+    va.add_argument(
+        "--unit", choices=["m", "mm"], default="m", help="the length unit of the trials' meshes"
+    )
+    va.add_argument(
+        "--seed", type=number("seed", "--seed"), default=0, help="seed of the intervals' bootstrap"
+    )
+    _add_physics_args(va)
+    va.set_defaults(func=cmd_validate)
 
 
 def _add_listing_parsers(sub) -> None:

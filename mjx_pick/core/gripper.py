@@ -41,6 +41,17 @@ class GripperSpec:
         8.0, "mm", "pad thickness along the closing direction", lo=0, lo_open=True
     )
     pad_height_mm: float = setting(38.0, "mm", "pad height (vertical)", lo=0, lo_open=True)
+    # a grasp pose (a planner's, a data set's, a physical trial's) names the gripper's tool
+    # centre point; the simulation grips with the pads' centre: where one lies from the
+    # other (ABB's YuMi fingers: the tool tips 3.75 mm beyond the pads' centre)
+    tcp_offset_mm: float = setting(
+        0.0,
+        "mm",
+        "the tool centre point that grasp poses name, from the pads' centre along the "
+        "approach (+: towards the fingertips)",
+        lo=-1000,
+        hi=1000,
+    )
     force_min_n: float = setting(
         20.0, "N", "smallest grip force the gripper can be set to", lo=0, hi="force_max_n"
     )

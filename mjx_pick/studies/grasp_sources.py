@@ -103,7 +103,13 @@ def file_grasps(
     n = len(labels.transforms)
     if n == 0:
         raise ConfigError(f"grasps file {str(path)!r} holds no grasps")
-    centres = grasp_centres(labels.transforms, labels.depth_m, depth_mm, f"grasps file {path}")
+    centres = grasp_centres(
+        labels.transforms,
+        labels.depth_m,
+        depth_mm,
+        f"grasps file {path}",
+        scene.gripper.tcp_offset_mm,
+    )
     centres = to_object_frame(scene.object, centres, f"grasps file {path}")
     ids = labels.pick_id if labels.pick_id is not None else np.arange(n)
     batch = GraspChecker(scene, safety_zone_mm).batch(ids, centres, mode="file")
@@ -121,10 +127,14 @@ def file_grasps(
     return batch
 
 
-def grasp_centres(transforms, depth_m, depth_mm: float | None, where: str) -> np.ndarray:
-    """(N, 4, 4) grasp frames: the base poses transforms moved depth along their z (the
-    approach). depth_m: (N,) each grasp's own, m (None or NaN: none given); depth_mm:
-    the user's, for every grasp (wins). A grasp without either is an error."""
+def grasp_centres(
+    transforms, depth_m, depth_mm: float | None, where: str, tcp_offset_mm: float = 0.0
+) -> np.ndarray:
+    """(N, 4, 4) grasp frames, origin at the pads' centre: the base poses transforms
+    moved along their z (the approach) by depth to the tool centre point, less the
+    gripper's tcp_offset_mm (``GripperSpec``). depth_m: (N,) each grasp's own, m (None
+    or NaN: none given); depth_mm: the user's, for every grasp (wins). A grasp without
+    either is an error."""
     t = np.asarray(transforms, float)
     n = len(t)
     if depth_mm is not None:
@@ -138,7 +148,7 @@ def grasp_centres(transforms, depth_m, depth_mm: float | None, where: str) -> np
                 "(--depth-mm, depth_mm; 0 where the poses are the grasp centres)"
             )
     out = t.copy()
-    out[:, :3, 3] += depth[:, None] * t[:, :3, 2]
+    out[:, :3, 3] += (depth - float(tcp_offset_mm) * 1e-3)[:, None] * t[:, :3, 2]
     return out
 
 

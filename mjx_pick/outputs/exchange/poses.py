@@ -80,8 +80,14 @@ def pick_poses(run: Run, depth_mm: float | None = None) -> tuple[np.ndarray, np.
         depth = mount + comp
     else:
         depth = np.zeros(len(x))
-    out = centre.copy()  # the base lies depth behind the grasp centre along E's z
-    out[:, :3, 3] -= (depth * 1e-3)[:, None] * centre[:, :3, 2]
+    offset = float(run.gripper.tcp_offset_mm)
+    if depth_mm is None:  # the file's depth reaches the gripper's tool centre point
+        depth = depth + offset
+    # the base lies depth behind the tool centre point, which lies tcp_offset_mm beyond
+    # the grasp centre (the pads' centre) along E's z
+    behind = depth - offset
+    out = centre.copy()
+    out[:, :3, 3] -= (behind * 1e-3)[:, None] * centre[:, :3, 2]
     return out, depth * 1e-3
 
 

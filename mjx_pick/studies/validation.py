@@ -1,0 +1,513 @@
+"""Labels held against physical trials: each trial's grasp simulated, the confusion
+matrix and its figures with intervals, per object too.
+
+Details: docs/formats.md ("Physical trials") and docs/studies.md (validate).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from mjx_pick.core.config import ConfigError, to_dict, write_json, write_parquet
+from mjx_pick.core.grasp_checks import REASON_WORDS, REASONS, GraspChecker
+from mjx_pick.core.grasps import from_poses, rigid_poses
+from mjx_pick.core.gripper import GripperSpec, load_gripper, preset_names
+from mjx_pick.core.objects import ObjectModel, object_from_mesh
+from mjx_pick.core.physics import ContactParams, SolverParams
+from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.core.settings import Settings
+from mjx_pick.engine.inputs import scene_of
+from mjx_pick.outputs.rundir import claim, config_hash, fail, finish
+from mjx_pick.studies.grasp_sources import grasp_centres, to_object_frame
+from mjx_pick.studies.options import RunOptions
+
+REQUIRED = ("object", "mass_g", "gripper", "grasp_pose", "success", "trial")
+OPTIONAL = ("object_pose", "depth_mm")
+# resamples of the grasps for the intervals (a cluster bootstrap: a grasp's repeats
+# stay together, so that five tries of one grasp count as one grasp's evidence)
+BOOTSTRAP = 2000
+
+
+@dataclasses.dataclass(frozen=True)
+class Trials:
+    """Physical trials as a TRIALS.csv holds them, checked ((T,) arrays, T trials).
+
+    object, gripper: the mesh path (resolved) and the gripper (a preset name or a
+    resolved TOML path) of each trial; object_pose: (T, 4, 4), NaN where the file
+    leaves it to the mesh's most stable pose; grasp_pose: (T, 4, 4) the gripper's base
+    in the mesh's frame (E's axes, m); depth_mm: (T,) the grasp centre's distance from
+    it; success: (T,) bool; trial: (T,) ids; line: (T,) each trial's line in the file.
+    """
+
+    path: Path
+    object: tuple[str, ...]
+    mass_g: np.ndarray
+    gripper: tuple[str, ...]
+    object_pose: np.ndarray
+    grasp_pose: np.ndarray
+    depth_mm: np.ndarray
+    success: np.ndarray
+    trial: tuple[str, ...]
+    line: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.trial)
+
+    def groups(self) -> dict[tuple, np.ndarray]:
+        """Trials by what makes one scene: (object, mass, gripper, object pose) ->
+        their indices, in the file's order."""
+        out: dict[tuple, list[int]] = {}
+        for i in range(len(self)):
+            pose = tuple(np.round(self.object_pose[i].ravel(), 9))
+            key = (self.object[i], float(self.mass_g[i]), self.gripper[i], pose)
+            out.setdefault(key, []).append(i)
+        return {k: np.asarray(v) for k, v in out.items()}
+
+    def grasp_index(self) -> np.ndarray:
+        """(T,) the index of each trial's grasp: trials of one scene whose grasp pose and
+        depth agree (to a nanometre) are repeats of one grasp."""
+        keys: dict[tuple, int] = {}
+        out = np.zeros(len(self), np.int64)
+        for i in range(len(self)):
+            key = (
+                self.object[i],
+                float(self.mass_g[i]),
+                self.gripper[i],
+                tuple(np.round(self.object_pose[i].ravel(), 9)),
+                tuple(np.round(self.grasp_pose[i].ravel(), 9)),
+                round(float(self.depth_mm[i]), 6),
+            )
+            out[i] = keys.setdefault(key, len(keys))
+        return out
+
+
+def read_trials(path: str | Path) -> Trials:
+    """A TRIALS.csv, read and checked before any work: every error names the line and
+    the column (docs/formats.md gives the columns)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"trials file {str(path)!r} does not exist")
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"trials file {str(path)!r} is not UTF-8 text ({err.reason})") from None
+    rows = list(csv.DictReader(io.StringIO(text)))
+    if not rows:
+        raise ConfigError(f"trials file {path} holds no trials (a header and a row per trial)")
+    missing = [c for c in REQUIRED if c not in rows[0]]
+    if missing:
+        raise ConfigError(
+            f"trials file {path} has no column(s) {', '.join(missing)} (its columns: "
+            f"{', '.join(rows[0])}); a TRIALS.csv has {', '.join(REQUIRED + OPTIONAL)}"
+        )
+    base = path.parent
+    objects, grippers, trials = [], [], []
+    mass, success, depth, lines = [], [], [], []
+    obj_pose, grasp_pose = [], []
+    seen: dict[str, int] = {}
+
+    def where(line: int, column: str) -> str:
+        return f"{path} line {line}, column {column}"
+
+    for line, row in enumerate(rows, start=2):
+        cell = {k: (row.get(k) or "").strip() for k in REQUIRED + OPTIONAL}
+        mesh = base / cell["object"]
+        if not cell["object"] or not mesh.is_file():
+            raise ConfigError(
+                f"{where(line, 'object')}: {cell['object']!r} is not a mesh file "
+                f"(paths are relative to the CSV: {base})"
+            )
+        objects.append(str(mesh.resolve()))
+        mass.append(_number(cell["mass_g"], where(line, "mass_g"), lo_open=0.0))
+        grippers.append(_gripper(cell["gripper"], base, where(line, "gripper")))
+        if cell["success"] not in ("0", "1"):
+            raise ConfigError(f"{where(line, 'success')}: {cell['success']!r} is not 0 or 1")
+        success.append(cell["success"] == "1")
+        if not cell["trial"]:
+            raise ConfigError(f"{where(line, 'trial')}: empty: every trial needs an id")
+        if cell["trial"] in seen:
+            raise ConfigError(
+                f"{where(line, 'trial')}: {cell['trial']!r} is the id of line "
+                f"{seen[cell['trial']]} too: every trial's id must differ (repeats of one "
+                "grasp share its grasp_pose, not its id)"
+            )
+        seen[cell["trial"]] = line
+        trials.append(cell["trial"])
+        depth.append(
+            0.0 if not cell["depth_mm"] else _number(cell["depth_mm"], where(line, "depth_mm"), 0.0)
+        )
+        grasp_pose.append(_sixteen(cell["grasp_pose"], where(line, "grasp_pose")))
+        obj_pose.append(
+            _sixteen(cell["object_pose"], where(line, "object_pose"))
+            if cell["object_pose"]
+            else [np.nan] * 16
+        )
+        lines.append(line)
+    names = [f"line {n}" for n in lines]
+    grasp_t = rigid_poses(grasp_pose, f"{path}, column grasp_pose", names)
+    obj_t = np.asarray(obj_pose, float).reshape(-1, 4, 4)
+    given = ~np.isnan(obj_t).any(axis=(1, 2))
+    if given.any():
+        obj_t[given] = rigid_poses(
+            obj_t[given], f"{path}, column object_pose", [names[i] for i in np.flatnonzero(given)]
+        )
+    return Trials(
+        path=path,
+        object=tuple(objects),
+        mass_g=np.asarray(mass, float),
+        gripper=tuple(grippers),
+        object_pose=obj_t,
+        grasp_pose=grasp_t,
+        depth_mm=np.asarray(depth, float),
+        success=np.asarray(success, bool),
+        trial=tuple(trials),
+        line=np.asarray(lines),
+    )
+
+
+def _number(text: str, where: str, lo: float | None = None, lo_open: float | None = None):
+    try:
+        value = float(text)
+    except ValueError:
+        raise ConfigError(f"{where}: {text!r} is not a number") from None
+    if (
+        not np.isfinite(value)
+        or (lo is not None and value < lo)
+        or (lo_open is not None and value <= lo_open)
+    ):
+        bound = f">= {lo:g}" if lo is not None else f"> {lo_open:g}"
+        raise ConfigError(f"{where}: {text!r} is not allowed: a finite number {bound}")
+    return value
+
+
+def _sixteen(text: str, where: str) -> list[float]:
+    parts = text.split()
+    try:
+        values = [float(v) for v in parts]
+    except ValueError:
+        values = []
+    if len(values) != 16:
+        raise ConfigError(
+            f"{where}: {text!r} is not 16 numbers separated by spaces (a 4x4 pose, "
+            "row-major, metres)"
+        )
+    return values
+
+
+def _gripper(text: str, base: Path, where: str) -> str:
+    if text in preset_names():
+        return text
+    path = base / text
+    if text.endswith(".toml") and path.is_file():
+        return str(path.resolve())
+    raise ConfigError(
+        f"{where}: {text!r} is neither a gripper preset ({', '.join(preset_names())}) nor a "
+        f"gripper TOML beside the CSV ({base})"
+    )
+
+
+@dataclasses.dataclass
+class Validation:
+    """What validate produced: the figures (validation.json) and the per-trial table."""
+
+    report: dict
+    table: pa.Table
+    out_dir: Path | None
+
+
+def validate(
+    trials: str | Path | Trials,
+    options: RunOptions | None = None,
+    *,
+    contact: ContactParams | None = None,
+    solver: SolverParams | None = None,
+    grasp: GraspConfig | None = None,
+    keep_grasp: tuple[str, ...] | None = None,
+    unit: str = "m",
+    subset: np.ndarray | None = None,
+) -> Validation:
+    """Simulate the grasp of every physical trial and hold the labels against the real
+    outcomes (docs/formats.md, "Physical trials").
+
+    Each scene (object, mass, gripper, object pose) is prepared once and each grasp
+    simulated once (its repeats share the label); a grasp the checks reject
+    (``GraspChecker``) is a predicted failure, counted by reason. Figures: accuracy,
+    precision, recall and F1 over trials (a success is the positive class), each with a
+    95 % interval from a bootstrap over grasps; the confusion matrix; the same per
+    object; how many trials that held on the real robot the checks rejected, and why.
+
+    Args:
+      trials: a TRIALS.csv path, or Trials read from one.
+      options: how it runs (backend, batch size, seed of the bootstrap, out, overwrite).
+      contact, solver, grasp: the physics and procedure (None: the defaults); the
+        procedure's fields other than keep_grasp (None: all of a grasp given) are
+        fitted to each gripper's ranges, as evaluate does.
+      unit: the meshes' length unit.
+      subset: trial indices to use (a held-out split); None: all.
+    """
+    opts = options or RunOptions()
+    t = trials if isinstance(trials, Trials) else read_trials(trials)
+    index = np.arange(len(t)) if subset is None else np.asarray(subset)
+    settings_doc = {
+        "trials": config_hash(t.path.read_text(encoding="utf-8-sig")),
+        "subset": None if subset is None else [int(i) for i in index],
+        "contact": to_dict(contact or ContactParams()),
+        "solver": to_dict(solver or SolverParams()),
+        "grasp": to_dict(grasp) if grasp is not None else None,
+        "unit": unit,
+        "backend": opts.backend,
+        "seed": opts.seed,
+    }
+    key = config_hash(settings_doc)
+    out_dir = Path(opts.out) if opts.out is not None else None
+    if keep_grasp is None:
+        keep_grasp = () if grasp is None else tuple(f.name for f in dataclasses.fields(grasp))
+    # every input checked first
+    scenes = _prepare(t, index, contact, solver, grasp, keep_grasp, unit)
+    if out_dir is not None:
+        claim(out_dir, "validate", key, overwrite=opts.overwrite, settings=settings_doc)
+    try:
+        rows = _simulate(t, index, scenes, opts)
+        report = _report(t, index, rows, opts.seed)
+        report["settings"] = settings_doc
+        table = pa.table(rows)
+        if out_dir is not None:
+            write_parquet(out_dir / "trials.parquet", table)
+            write_json(out_dir / "validation.json", report)
+            finish(
+                out_dir,
+                command="validate",
+                config=settings_doc,
+                seed=opts.seed,
+                backend=opts.backend,
+            )
+        return Validation(report, table, out_dir)
+    except BaseException as err:
+        if out_dir is not None:
+            fail(out_dir, err, command="validate")
+        raise
+
+
+@dataclasses.dataclass
+class _Scene:
+    """One scene of the trials: its object, settings, compiled scene, the grasps of its
+    trials in the object frame and each trial's grasp."""
+
+    obj: ObjectModel
+    settings: Settings
+    scene: object
+    centres: np.ndarray  # (G, 4, 4) the scene's grasps in the object frame
+    grasp_of: np.ndarray  # (T_s,) each of its trials' grasp, 0..G-1
+    trials: np.ndarray  # (T_s,) its trials' indices in the file
+
+
+def _prepare(t: Trials, index, contact, solver, grasp, keep, unit) -> list[_Scene]:
+    """Every scene of the trials with its grasps, checked (a mesh, a gripper, a pose
+    that cannot be used is refused here, before any simulation)."""
+    out = []
+    grasp_ids = t.grasp_index()
+    chosen = set(int(i) for i in index)
+    for (mesh, mass_g, gripper_name, _), members in t.groups().items():
+        members = np.asarray([i for i in members if int(i) in chosen])
+        if not len(members):
+            continue
+        first = int(members[0])
+        pose = t.object_pose[first]
+        obj = object_from_mesh(
+            mesh, unit=unit, mass_g=mass_g, pose="stable" if np.isnan(pose).any() else pose
+        )
+        gripper = load_gripper(gripper_name)
+        settings = _settings(gripper, contact, solver, grasp, keep)
+        scene = scene_of(obj, settings)
+        ids, grasp_of = np.unique(grasp_ids[members], return_inverse=True)
+        firsts = [int(members[np.flatnonzero(grasp_of == k)[0]]) for k in range(len(ids))]
+        where = f"{t.path} (lines {t.line[members].min()}-{t.line[members].max()})"
+        centres = grasp_centres(
+            t.grasp_pose[firsts], t.depth_mm[firsts] * 1e-3, None, where, gripper.tcp_offset_mm
+        )
+        centres = to_object_frame(obj, centres, where)
+        out.append(_Scene(obj, settings, scene, centres, grasp_of, members))
+    return out
+
+
+def _settings(gripper: GripperSpec, contact, solver, grasp, keep) -> Settings:
+    """A scene's settings: the procedure's fields but keep fitted to the gripper
+    (evaluate's rule, ``Settings.on_gripper``)."""
+    settings, note = Settings(
+        contact=contact or ContactParams(),
+        solver=solver or SolverParams(),
+        grasp=grasp or GraspConfig(),
+    ).on_gripper(gripper, keep)
+    if note:
+        warnings.warn(note, stacklevel=3)
+    return settings
+
+
+def _simulate(t: Trials, index, scenes: list[_Scene], opts: RunOptions) -> dict:
+    """The per-trial table's columns: each trial with its grasp's check and label."""
+    from mjx_pick.studies.evaluation import evaluate
+
+    n = len(t)
+    sim = np.zeros(n, bool)
+    outcome = np.full(n, "", object)
+    score = np.full(n, np.nan)
+    grasp_col = np.full(n, -1, np.int64)
+    tilt = np.full(n, np.nan)
+    offset = 0
+    for sc in scenes:
+        checker = GraspChecker(sc.scene, opts.picks.safety_zone_mm)
+        res = checker(sc.centres)
+        ok = res["reason"] == 0
+        labels = np.zeros(len(sc.centres), bool)
+        what = np.array([f"rejected: {REASONS[r]}" for r in res["reason"]], object)
+        scores = np.full(len(sc.centres), np.nan)
+        if ok.any():
+            batch = from_poses(
+                sc.centres[ok],
+                np.flatnonzero(ok),
+                res["opening_mm"][ok],
+                res["gap_left_mm"][ok],
+                res["gap_right_mm"][ok],
+                res["coverage"][ok],
+                mode="trials",
+            )
+            ev = evaluate(
+                sc.obj,
+                sc.settings.gripper,
+                RunOptions(backend=opts.backend, batch_size=opts.batch_size),
+                picks=batch,
+                contact=sc.settings.contact,
+                solver=sc.settings.solver,
+                grasp=sc.settings.grasp,
+                n_traces=0,
+            )
+            labels[ok] = np.asarray(ev.table["success"], bool)
+            what[ok] = ev.table["failure"].to_pylist()
+            scores[ok] = np.asarray(ev.table["score"], float)
+        tilts = from_poses(sc.centres).tilt_quat
+        tilt_deg = np.rad2deg(2 * np.arccos(np.clip(np.abs(tilts[:, 0]), 0, 1)))
+        for k, i in enumerate(sc.trials):
+            g = sc.grasp_of[k]
+            sim[i], outcome[i], score[i] = labels[g], what[g], scores[g]
+            grasp_col[i], tilt[i] = offset + g, tilt_deg[g]
+        offset += len(sc.centres)
+    keep = np.asarray(index)
+    return {
+        "trial": [t.trial[i] for i in keep],
+        "line": t.line[keep],
+        "object": [Path(t.object[i]).name for i in keep],
+        "gripper": [Path(t.gripper[i]).stem for i in keep],
+        "grasp": grasp_col[keep],
+        "success": t.success[keep],
+        "sim_success": sim[keep],
+        "sim_outcome": list(outcome[keep]),
+        "score": score[keep],
+        "tilt_deg": tilt[keep],
+    }
+
+
+def confusion(real: np.ndarray, sim: np.ndarray) -> dict:
+    """tp, fp, fn, tn (success the positive class) and accuracy, precision, recall, F1
+    (None where undefined: no predicted or no real success)."""
+    real, sim = np.asarray(real, bool), np.asarray(sim, bool)
+    tp, fp = int(np.sum(real & sim)), int(np.sum(~real & sim))
+    fn, tn = int(np.sum(real & ~sim)), int(np.sum(~real & ~sim))
+    n = tp + fp + fn + tn
+    precision = tp / (tp + fp) if tp + fp else None
+    recall = tp / (tp + fn) if tp + fn else None
+    f1 = 2 * tp / (2 * tp + fp + fn) if tp else (0.0 if fp + fn else None)
+    return {
+        "tp": tp,
+        "fp": fp,
+        "fn": fn,
+        "tn": tn,
+        "accuracy": (tp + tn) / n if n else None,
+        "precision": precision,
+        "recall": recall,
+        "f1": f1,
+    }
+
+
+METRICS = ("accuracy", "precision", "recall", "f1")
+
+
+def figures(real, sim, grasp, seed: int = 0, resamples: int = BOOTSTRAP) -> dict:
+    """n, each of METRICS as {"value", "ci95": [lo, hi]} (a percentile bootstrap over
+    grasps: resampled with their repeats) and the confusion matrix."""
+    real, sim, grasp = np.asarray(real, bool), np.asarray(sim, bool), np.asarray(grasp)
+    point = confusion(real, sim)
+    ids, inverse = np.unique(grasp, return_inverse=True)
+    rng = np.random.default_rng(seed)
+    # per grasp: counts of each cell, then a resample is a weighted sum of grasps
+    cells = np.zeros((len(ids), 4))
+    for k, (r, s) in enumerate(zip(real, sim, strict=True)):
+        cells[inverse[k], _cell(r, s)] += 1
+    draws = rng.multinomial(len(ids), np.full(len(ids), 1 / len(ids)), size=resamples)
+    tp, fp, fn, tn = (draws @ cells).T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        boot = {
+            "accuracy": (tp + tn) / (tp + fp + fn + tn),
+            "precision": tp / (tp + fp),
+            "recall": tp / (tp + fn),
+            "f1": 2 * tp / (2 * tp + fp + fn),
+        }
+    out = {"n": int(len(real)), "grasps": int(len(ids))}
+    for name in METRICS:
+        values = boot[name][np.isfinite(boot[name])]
+        ci = (
+            [float(np.percentile(values, 2.5)), float(np.percentile(values, 97.5))]
+            if len(values)
+            else [None, None]
+        )
+        out[name] = {"value": point[name], "ci95": ci}
+    out["confusion"] = {k: point[k] for k in ("tp", "fp", "fn", "tn")}
+    out["real_success_rate"] = float(real.mean()) if len(real) else None
+    return out
+
+
+def _cell(real: bool, sim: bool) -> int:
+    """The confusion cell's column: tp 0, fp 1, fn 2, tn 3."""
+    return {(True, True): 0, (False, True): 1, (True, False): 2, (False, False): 3}[
+        (bool(real), bool(sim))
+    ]
+
+
+def _report(t: Trials, index, rows: dict, seed: int) -> dict:
+    """validation.json's figures: overall, per object, and the checks against the world."""
+    real, sim = np.asarray(rows["success"]), np.asarray(rows["sim_success"])
+    grasp = np.asarray(rows["grasp"])
+    report = figures(real, sim, grasp, seed)
+    objects = np.asarray(rows["object"], object)
+    report["per_object"] = {
+        str(o): figures(real[objects == o], sim[objects == o], grasp[objects == o], seed)
+        for o in sorted(set(objects))
+    }
+    outcome = np.asarray(rows["sim_outcome"], object)
+    rejected = np.array([str(v).startswith("rejected: ") for v in outcome])
+    reasons = {}
+    for r in REASONS[1:]:
+        mask = outcome == f"rejected: {r}"
+        if mask.any():
+            reasons[r] = {
+                "trials": int(mask.sum()),
+                "held_on_the_robot": int((mask & real).sum()),
+                "means": REASON_WORDS[r],
+            }
+    report["checks"] = {
+        "rejected_trials": int(rejected.sum()),
+        "rejected_that_held": int((rejected & real).sum()),
+        "by_reason": reasons,
+    }
+    failures = {}
+    for v in outcome[~rejected]:
+        failures[str(v)] = failures.get(str(v), 0) + 1
+    report["simulated_outcomes"] = failures
+    report["trials_file"] = str(t.path)
+    return report
