@@ -75,7 +75,7 @@ class GraspChecker:
         d = gm.decompose(poses_oe)
         reason[d["upward"]] = TABLE
         left, right, coverage = self._extent_mm(poses_oe)
-        reason[(reason == FEASIBLE) & ~np.isfinite(left)] = OFF_OBJECT
+        reason[(reason == FEASIBLE) & np.isnan(left)] = OFF_OBJECT
         half = 0.5 * self.stroke_mm
         reach = np.maximum(-left, right)
         reason[(reason == FEASIBLE) & (reach > half)] = TOO_WIDE
@@ -117,7 +117,8 @@ class GraspChecker:
     def _extent_mm(self, poses_oe: np.ndarray):
         """Where the pads meet the part along the closing axis, mm from the grasp centre:
         (left (N,), right (N,), coverage (N,)); left = min over the left pad's rays of
-        their first hit, right = max of the right pad's (NaN: none between the pads)."""
+        their first hit, right = max of the right pad's (NaN: none between the pads;
+        -inf, inf: the part reaches past a fully open pad)."""
         n = len(poses_oe)
         half = 0.5 * self.stroke_mm * 1e-3
         start = half + 1e-3  # just outside the fully open pads
@@ -130,17 +131,22 @@ class GraspChecker:
         k = len(face)
         mesh = self.scene.object.mesh
         out = []
+        buried = np.zeros(n, bool)  # a fully open pad's face lies inside the part
         for sign in (1.0, -1.0):  # from the left pad towards +x, then from the right
             origins = (on_face - sign * start * x_axis[:, None, :]).reshape(-1, 3)
             dirs = np.repeat(sign * x_axis, k, axis=0)
             hit = np.full(n * k, np.inf)
+            leaving = np.zeros(n * k, bool)
             if len(origins):
-                loc, ray, _ = mesh.ray.intersects_location(origins, dirs, multiple_hits=False)
+                loc, ray, tri = mesh.ray.intersects_location(origins, dirs, multiple_hits=False)
                 t = np.einsum("ij,ij->i", loc - origins[ray], dirs[ray])
                 hit[ray] = t
+                # a first hit on a face turned along the ray leaves the part: it started inside
+                leaving[ray] = np.einsum("ij,ij->i", mesh.face_normals[tri], dirs[ray]) > 0
+            buried |= leaving.reshape(n, k).any(axis=1)
             # each ray's first hit as a coordinate along x, kept when between the pads
             s = sign * (hit - start)
-            inside = np.isfinite(hit) & (np.abs(s) <= half)
+            inside = np.isfinite(hit) & (np.abs(s) <= half) & ~leaving
             out.append(np.where(inside, s, np.nan).reshape(n, k))
         s_left, s_right = out
         met = np.isfinite(s_left)
@@ -152,6 +158,8 @@ class GraspChecker:
                 right_met.any(1), np.nanmax(np.where(right_met, s_right, -np.inf), 1), np.nan
             )
         left = np.where(np.isfinite(right), left, np.nan)
+        # the part reaches past a fully open pad: wider than the stroke there
+        left, right = np.where(buried, -np.inf, left), np.where(buried, np.inf, right)
         return 1e3 * left, 1e3 * right, coverage
 
     # ----------------------------------------------------------------------- clearance
