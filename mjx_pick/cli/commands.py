@@ -226,7 +226,15 @@ def cmd_robust(args) -> int:
 
 def cmd_calibrate(args) -> int:
     from mjx_pick.studies import calibration as cal
+    from mjx_pick.studies.validation import is_trials_file
 
+    if is_trials_file(args.outcomes):
+        return _calibrate_trials(args)
+    if args.object is None:
+        raise ConfigError(
+            f"calibrate {args.outcomes}: give the object the outcomes were measured on "
+            "(mjx-pick calibrate OUTCOMES OBJECT ...); a TRIALS.csv names its own"
+        )
     obj, base, picks_cfg = base_settings(args)
     names = cal.canonical_params(args.params)
     problem, holdout = _calibration_problems(args, obj, base, picks_cfg, names)
@@ -238,6 +246,75 @@ def cmd_calibrate(args) -> int:
         f"results in {args.out}/ (contact.toml, calibration.json, loss.png, report.md); "
         f"use: mjx-pick evaluate ... --contact {args.out}/contact.toml"
     )
+    return 0
+
+
+def _calibrate_trials(args) -> int:
+    """calibrate on physical trials: fit on a split of the grasps, validate the rest at
+    the starting and at the fitted contact parameters (heldout.json)."""
+    import numpy as np
+
+    from mjx_pick.cli.inputs import settings
+    from mjx_pick.core.config import write_json
+    from mjx_pick.studies import calibration as cal
+    from mjx_pick.studies.options import RunOptions
+    from mjx_pick.studies.validation import (
+        read_trials,
+        split_by_grasp,
+        trial_outcomes,
+        validate,
+    )
+
+    if args.object is not None:
+        raise ConfigError(
+            f"{args.outcomes} is a TRIALS.csv, which names its object: leave out {args.object!r}"
+        )
+    trials = read_trials(args.outcomes)
+    contact, solver, (grasp, given), picks = settings(args)
+    train, test = split_by_grasp(trials, args.split, args.seed)
+    names = cal.canonical_params(args.params)
+    unit = args.unit or "m"
+    common = dict(grasp=grasp if given else None, keep_grasp=tuple(given), unit=unit)
+    common.update(contact=contact, solver=solver)
+    made = [
+        trial_outcomes(trials, rows, safety_zone_mm=picks.safety_zone_mm, **common)
+        for rows in (train, test)
+    ]
+    kw = dict(
+        temperature_mm=args.temperature_mm,
+        bounds=name_ranges(args.bounds, "--bounds"),
+        priors=name_ranges(args.prior, "--prior"),
+        replicates=1,
+        force_mismatch=args.force_mismatch,
+    )
+    backend = registry.differentiable() if args.estimator == "jvp" else args.backend
+    problem = cal.Problem(made[0][0], made[0][2], names, made[0][1], backend=backend, **kw)
+    holdout = cal.Problem(made[1][0], made[1][2], names, made[1][1], backend=args.backend, **kw)
+    res = _fit(args, problem, holdout)
+    _print_fit(res, names)
+    run = RunOptions(backend=args.backend, seed=args.seed)
+    before = validate(trials, run, subset=test, **common).report
+    common["contact"] = res.contact
+    after = validate(trials, run, subset=test, **common).report
+    split = {
+        "fraction": args.split,
+        "seed": args.seed,
+        "train_trials": len(train),
+        "test_trials": len(test),
+        "train_grasps": int(len(np.unique(trials.grasp_index()[train]))),
+        "test_grasps": int(len(np.unique(trials.grasp_index()[test]))),
+    }
+    doc = {"split": split, "fitted": res.values, "before": before, "after": after}
+    if args.out:
+        write_json(Path(args.out) / "heldout.json", doc)
+    for label, r in (("held out, before", before), ("held out, after", after)):
+        f, a = r["f1"], r["accuracy"]
+        print(
+            f"{label}: F1 {f['value']:.3f} ({f['ci95'][0]:.2f}-{f['ci95'][1]:.2f}), accuracy "
+            f"{a['value']:.3f} on {r['n']} trials ({r['grasps']} grasps)"
+        )
+    if args.out:
+        print(f"results in {args.out}/ (contact.toml, calibration.json, heldout.json)")
     return 0
 
 

@@ -90,13 +90,15 @@ class Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
 
 
-def _add_object_args(p: argparse.ArgumentParser) -> None:
-    """The object a command loads (``core.objects.load_object``) and how."""
+def _add_object_args(p: argparse.ArgumentParser, required: bool = True) -> None:
+    """The object a command loads (``core.objects.load_object``) and how (required:
+    False where a file names it, as calibrate's TRIALS.csv does)."""
     g = p.add_argument_group("object")
     g.add_argument(
         "object",
+        nargs=None if required else "?",
         help="a shipped asset name (mjx-pick assets), a top-down image (PNG/JPG) or a mesh "
-        "(STL/OBJ/PLY/GLB)",
+        "(STL/OBJ/PLY/GLB)" + ("" if required else "; none with a TRIALS.csv, which names it"),
     )
     _add_object_size_args(g)
     _add_mesh_args(g)
@@ -533,9 +535,18 @@ def _add_calibrate_parser(sub) -> None:
     """``mjx-pick calibrate``: fit contact parameters to measured outcomes."""
     cb = sub.add_parser("calibrate", help="fit contact parameters to measured outcomes")
     cb.add_argument(
-        "outcomes", help="measured outcomes CSV (format: mjx_pick/assets/outcomes/README.md)"
+        "outcomes",
+        help="measured outcomes CSV (format: mjx_pick/assets/outcomes/README.md), or physical "
+        "trials (a TRIALS.csv, docs/formats.md: its grasps split by --split)",
     )
-    _add_object_args(cb)
+    _add_object_args(cb, required=False)
+    cb.add_argument(
+        "--split",
+        type=float,
+        default=0.5,
+        help="with a TRIALS.csv: the share of its grasps fitted (split by grasp, seeded by "
+        "--seed); the rest are held out, validated before and after the fit",
+    )
     _add_gripper_args(cb)
     _add_physics_args(cb)
     _add_pick_args(cb)

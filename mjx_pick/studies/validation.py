@@ -17,7 +17,7 @@ import pyarrow as pa
 
 from mjx_pick.core.config import ConfigError, to_dict, write_json, write_parquet
 from mjx_pick.core.grasp_checks import REASON_WORDS, REASONS, GraspChecker
-from mjx_pick.core.grasps import from_poses, rigid_poses
+from mjx_pick.core.grasps import from_poses, rigid_poses, rz
 from mjx_pick.core.gripper import GripperSpec, load_gripper, preset_names
 from mjx_pick.core.objects import ObjectModel, object_from_mesh
 from mjx_pick.core.physics import ContactParams, SolverParams
@@ -86,6 +86,17 @@ class Trials:
             )
             out[i] = keys.setdefault(key, len(keys))
         return out
+
+
+def is_trials_file(path) -> bool:
+    """Whether path is a TRIALS.csv (its header names grasp_pose and success)."""
+    path = Path(path)
+    if path.suffix.lower() != ".csv" or not path.is_file():
+        return False
+    with path.open(encoding="utf-8-sig", errors="replace") as fh:
+        header = fh.readline()
+    columns = {c.strip() for c in header.split(",")}
+    return {"grasp_pose", "success"} <= columns
 
 
 def read_trials(path: str | Path) -> Trials:
@@ -306,12 +317,13 @@ class _Scene:
     centres: np.ndarray  # (G, 4, 4) the scene's grasps in the object frame
     grasp_of: np.ndarray  # (T_s,) each of its trials' grasp, 0..G-1
     trials: np.ndarray  # (T_s,) its trials' indices in the file
+    source: tuple = ()  # (mesh file, mass, gripper): what a scene sharing it must have
 
 
 def _prepare(t: Trials, index, contact, solver, grasp, keep, unit) -> list[_Scene]:
     """Every scene of the trials with its grasps, checked (a mesh, a gripper, a pose
     that cannot be used is refused here, before any simulation)."""
-    out = []
+    out: list[_Scene] = []
     grasp_ids = t.grasp_index()
     chosen = set(int(i) for i in index)
     for (mesh, mass_g, gripper_name, _), members in t.groups().items():
@@ -324,8 +336,6 @@ def _prepare(t: Trials, index, contact, solver, grasp, keep, unit) -> list[_Scen
             mesh, unit=unit, mass_g=mass_g, pose="stable" if np.isnan(pose).any() else pose
         )
         gripper = load_gripper(gripper_name)
-        settings = _settings(gripper, contact, solver, grasp, keep)
-        scene = scene_of(obj, settings)
         ids, grasp_of = np.unique(grasp_ids[members], return_inverse=True)
         firsts = [int(members[np.flatnonzero(grasp_of == k)[0]]) for k in range(len(ids))]
         where = f"{t.path} (lines {t.line[members].min()}-{t.line[members].max()})"
@@ -333,8 +343,62 @@ def _prepare(t: Trials, index, contact, solver, grasp, keep, unit) -> list[_Scen
             t.grasp_pose[firsts], t.depth_mm[firsts] * 1e-3, None, where, gripper.tcp_offset_mm
         )
         centres = to_object_frame(obj, centres, where)
-        out.append(_Scene(obj, settings, scene, centres, grasp_of, members))
+        same = _same_scene(out, mesh, mass_g, gripper_name, obj)
+        if same is not None:  # the part lies as in a scene already made, turned about z
+            sc, turn = same
+            moved = np.tile(np.eye(4), (len(centres), 1, 1))
+            moved[:, :3, :3] = rz(turn)
+            sc.grasp_of = np.concatenate([sc.grasp_of, grasp_of + len(sc.centres)])
+            sc.centres = np.concatenate([sc.centres, moved @ centres])
+            sc.trials = np.concatenate([sc.trials, members])
+            continue
+        settings = _settings(gripper, contact, solver, grasp, keep)
+        scene = scene_of(obj, settings)
+        out.append(
+            _Scene(obj, settings, scene, centres, grasp_of, members, (mesh, mass_g, gripper_name))
+        )
     return out
+
+
+# two posed parts are one solid when their vertices agree to this after a turn about z
+# (the trials' rotations are rounded in their files: micrometres at a part's size)
+SAME_SOLID_M = 1e-5
+
+
+def _same_scene(scenes: list[_Scene], mesh: str, mass_g: float, gripper: str, obj):
+    """(scene, yaw) of a scene already made whose part is obj's -- the same file, mass and
+    gripper, lying the same way up -- turned by yaw (rad) about the vertical; None if
+    there is none. A table is the same under any turn about the vertical, so such trials
+    share one scene (a cube on any face: one)."""
+    for sc in scenes:
+        if sc.source != (mesh, mass_g, gripper):
+            continue
+        turn = _turn_onto(sc.obj.mesh.vertices, obj.mesh.vertices, SAME_SOLID_M)
+        if turn is not None:
+            return sc, turn
+    return None
+
+
+def _turn_onto(target: np.ndarray, points: np.ndarray, tol: float) -> float | None:
+    """The turn about z (rad) that lays the point set `points` (V, 3) onto `target`
+    within tol, or None."""
+    from scipy.spatial import cKDTree
+
+    if target.shape != points.shape:
+        return None
+    tree = cKDTree(target)
+    radius = np.hypot(target[:, 0], target[:, 1])
+    a = int(np.argmax(radius))
+    r_p = np.hypot(points[:, 0], points[:, 1])
+    near = np.flatnonzero(
+        (np.abs(r_p - radius[a]) < tol) & (np.abs(points[:, 2] - target[a, 2]) < tol)
+    )
+    for b in near:
+        turn = np.arctan2(target[a, 1], target[a, 0]) - np.arctan2(points[b, 1], points[b, 0])
+        moved = points @ rz(turn).T
+        if np.all(tree.query(moved)[0] < tol):
+            return float(turn)
+    return None
 
 
 def _settings(gripper: GripperSpec, contact, solver, grasp, keep) -> Settings:
@@ -511,3 +575,77 @@ def _report(t: Trials, index, rows: dict, seed: int) -> dict:
     report["simulated_outcomes"] = failures
     report["trials_file"] = str(t.path)
     return report
+
+
+def split_by_grasp(
+    t: Trials, fraction: float = 0.5, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """(train, test) trial indices: the grasps shuffled (seeded) and split so that about
+    `fraction` of them train; a grasp's repeats stay on one side."""
+    if not 0.0 < fraction < 1.0:
+        raise ConfigError(f"split = {fraction!r} is not allowed: a fraction in (0, 1)")
+    grasp = t.grasp_index()
+    ids = np.unique(grasp)
+    if len(ids) < 2:
+        raise ConfigError(f"{t.path} holds {len(ids)} grasp: a split needs two or more")
+    order = np.random.default_rng(seed).permutation(ids)
+    n_train = min(max(1, round(fraction * len(ids))), len(ids) - 1)
+    train = np.isin(grasp, order[:n_train])
+    return np.flatnonzero(train), np.flatnonzero(~train)
+
+
+def trial_outcomes(
+    t: Trials,
+    subset,
+    contact: ContactParams | None = None,
+    solver: SolverParams | None = None,
+    grasp: GraspConfig | None = None,
+    keep_grasp: tuple[str, ...] = (),
+    unit: str = "m",
+    safety_zone_mm: float = 5.0,
+):
+    """The trials of subset as calibration's measured outcomes: (object, settings,
+    Outcomes with one row per feasible grasp -- its repeats' trials and successes --
+    and the grasps themselves). One scene only: a fit is of one part and gripper. Grasps
+    the checks reject are left out (no parameter changes a rejection)."""
+    from mjx_pick.studies.calibration.data import Outcomes
+
+    scenes = _prepare(t, np.asarray(subset), contact, solver, grasp, keep_grasp, unit)
+    if len(scenes) != 1:
+        raise ConfigError(
+            f"{t.path}: the trials chosen hold {len(scenes)} scenes (object, mass, gripper, "
+            "object pose): a fit is of one part and gripper; give a TRIALS.csv of one"
+        )
+    sc = scenes[0]
+    res = GraspChecker(sc.scene, safety_zone_mm)(sc.centres)
+    ok = res["reason"] == 0
+    if not ok.any():
+        raise ConfigError(f"{t.path}: none of the chosen trials' grasps is feasible")
+    batch = from_poses(
+        sc.centres[ok],
+        np.flatnonzero(ok),
+        res["opening_mm"][ok],
+        res["gap_left_mm"][ok],
+        res["gap_right_mm"][ok],
+        res["coverage"][ok],
+        mode="trials",
+    )
+    kept = np.flatnonzero(ok)
+    real = t.success[sc.trials]
+    trials = np.array([np.sum(sc.grasp_of == g) for g in kept], float)
+    successes = np.array([np.sum(real[sc.grasp_of == g]) for g in kept], float)
+    n = len(kept)
+    force = np.full(n, sc.settings.grasp.grip_force_n)
+    outcomes = Outcomes(
+        batch.x_mm,
+        batch.y_mm,
+        batch.yaw_deg,
+        force,
+        trials,
+        successes,
+        np.full(n, np.nan),
+        tuple([None] * n),
+        None,
+        batch,
+    )
+    return sc.obj, sc.settings, outcomes

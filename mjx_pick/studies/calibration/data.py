@@ -41,6 +41,9 @@ class Outcomes:
     traces: tuple
     # what the outcomes were measured with (provenance.read_measured), or None
     measured: dict | None = None
+    # the grasps tried, where they are poses (physical trials: ``validation.trial_outcomes``),
+    # already checked; None: the rows' pick-points (x_mm, y_mm, yaw_deg)
+    grasps: object = None
 
     def __len__(self) -> int:
         return len(self.x_mm)
@@ -52,7 +55,9 @@ class Outcomes:
             for f in dataclasses.fields(self)
             if isinstance(getattr(self, f.name), np.ndarray)
         }
-        return dataclasses.replace(self, **arrays, traces=tuple(self.traces[i] for i in index))
+        grasps = None if self.grasps is None else self.grasps.take(index)
+        traces = tuple(self.traces[i] for i in index)
+        return dataclasses.replace(self, **arrays, traces=traces, grasps=grasps)
 
     @property
     def fraction(self) -> np.ndarray:

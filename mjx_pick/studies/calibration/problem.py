@@ -152,11 +152,14 @@ class Problem:
             )
         g = s.gripper
         _check_grip_forces(outcomes, g)
-        checker = pp.FeasibilityChecker(obj, g, pick_config, s.grasp)
-        _check_feasible(checker, outcomes, g)
         check_range("calibrate", "replicates", replicates, 1, 64)
         check_range("calibrate", "replica_jitter_mm", replica_jitter_mm, 0, 5)
-        self._add_replicas(checker, replicates, replica_jitter_mm)
+        if outcomes.grasps is not None:  # grasps given as poses, checked where they were read
+            self._grasp_rows(outcomes.grasps)
+        else:
+            checker = pp.FeasibilityChecker(obj, g, pick_config, s.grasp)
+            _check_feasible(checker, outcomes, g)
+            self._add_replicas(checker, replicates, replica_jitter_mm)
         self.grip_force_n = outcomes.grip_force_n[self.row_of]  # (R + replicas,)
         self.scene = scene_of(obj, s)
         if backend == registry.differentiable():
@@ -190,6 +193,15 @@ class Problem:
         self.runner = Runner(backend, batch_size=max(256, len(self.row_of)))
         self._backend = None
         self._jvp = None
+
+    def _grasp_rows(self, grasps) -> None:
+        """The simulated rows of outcomes whose grasps are poses: one per row, no
+        replicas (row_of, traced_rows, replicates, picks)."""
+        n = len(self.outcomes)
+        self.replicates = 1
+        self.traced_rows = np.zeros(0, int)
+        self.row_of = np.arange(n)
+        self.picks = dataclasses.replace(grasps, pick_id=np.arange(n, dtype=np.int64))
 
     def _add_replicas(self, checker, replicates: int, replica_jitter_mm: float) -> None:
         """The simulated rows: every measured row, then K - 1 replicas of each row with
