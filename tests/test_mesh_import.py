@@ -573,10 +573,16 @@ def test_meshes_that_bound_no_solid_are_refused_by_name_before_any_work(tmp_path
     beside.apply_translation([0.0, 40.0, 0.0])
     trimesh.util.concatenate([box, inverted(beside)]).export(tmp_path / "beside.stl")
     trimesh.util.concatenate([box, inverted(crossing)]).export(tmp_path / "crossing.stl")
+    (tmp_path / "notes.stl").write_text("holes to drill: 4 x M6\n" * 100)
     cases = [
         ("two.obj", "a closed surface (1000 mm^3) faces the other way from the body of 6000"),
         ("beside.stl", "lies in no body: one of them is turned inside out"),
         ("crossing.stl", "two of its closed surfaces cross each other"),
+        (
+            "notes.stl",
+            "is not an STL: it holds text, and an ASCII STL begins with 'solid' "
+            "(this one begins 'holes to drill: 4 x M6')",
+        ),
     ]
     for name, said in cases:
         out = tmp_path / f"out-{name}"

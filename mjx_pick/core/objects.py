@@ -273,22 +273,37 @@ def segment_image(path: str | os.PathLike) -> np.ndarray:
 
 def _check_image_pixels(path: Path) -> None:
     """Refuse an image of more than MAX_IMAGE_PIXELS from its header, before decoding."""
-    from PIL import Image
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            with Image.open(path) as im:
-                w, h = im.size
-    except Image.DecompressionBombError:
-        w = h = math.inf
-    except Exception:  # noqa: BLE001 - unreadable headers are reported by the decoder
+    size = _image_size(path)
+    if size is None:  # unreadable headers are reported by the decoder
         return
+    w, h = size
     if w * h > MAX_IMAGE_PIXELS:
         raise ConfigError(
             f"image {str(path)!r} is {w} x {h} pixels: allowed at most "
             f"{MAX_IMAGE_PIXELS / 1e6:g} million; scale it down (and --px-per-mm with it)"
         )
+
+
+def _image_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) from an image file's header, or None where no reader of Pillow's
+    takes it. Read as Image.open reads it, less its decompression-bomb refusal, which
+    names no size (the size is what the caller refuses, in its own words)."""
+    from PIL import Image
+
+    Image.init()
+    with path.open("rb") as fh:
+        prefix = fh.read(16)
+        for fmt in Image.ID:
+            factory, accept = Image.OPEN[fmt]
+            if accept is not None and accept(prefix) is not True:
+                continue  # not this format (or a format's note on why not)
+            fh.seek(0)
+            try:
+                with factory(fh, str(path)) as im:
+                    return tuple(int(v) for v in im.size)
+            except Exception:  # noqa: BLE001 - a damaged header: the next reader, or None
+                continue
+    return None
 
 
 def _check_size_mm(what: str, extents_mm, hint: str) -> None:
@@ -844,7 +859,15 @@ def _check_mesh_header(path: Path, size: int) -> None:
     count = None
     if suffix == ".stl" and len(head) >= 84:
         n = int(np.frombuffer(head[80:84], "<u4")[0])
-        binary = not head[:5].lower().startswith(b"solid") or size == 84 + 50 * n
+        binary = not head.lstrip()[:5].lower().startswith(b"solid") or size == 84 + 50 * n
+        if binary and _is_text(head):
+            # a binary STL's count has NUL bytes below 16.7 million triangles, and its
+            # triangles' floats have more: this "count" is four letters of text
+            start = head[:40].decode("utf-8", "replace").split("\n")[0].strip()
+            raise ConfigError(
+                f"mesh {str(path)!r} is not an STL: it holds text, and an ASCII STL begins "
+                f"with 'solid' (this one begins {start!r}); export the mesh again as STL"
+            )
         if binary:
             if size < 84 + 50 * n:
                 raise ConfigError(
@@ -864,6 +887,18 @@ def _check_mesh_header(path: Path, size: int) -> None:
             "decimate it (e.g. MeshLab's quadric edge collapse, or trimesh's "
             "simplify_quadric_decimation) to a few ten thousand"
         )
+
+
+def _is_text(head: bytes) -> bool:
+    """Whether a file's first bytes are UTF-8 text (no NUL byte, no invalid sequence
+    except one a 4096-byte cut may have split)."""
+    if b"\0" in head:
+        return False
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as err:
+        return err.start >= len(head) - 3  # a character cut at the end
+    return True
 
 
 def _prepare_mesh(
