@@ -87,18 +87,18 @@ class Repair:
             "holes": self.holes,
             "turned": self.turned,
             "tool": self.tool,
-            "volume_mm3": round(self.volume_mm3, 6),
-            "volume_doubt_mm3": round(self.volume_doubt_mm3, 6),
-            "volume_doubt_pct": round(self.volume_doubt_pct, 6),
-            "mass_g": round(mass_kg * 1e3, 6),
-            "density_kg_m3": round(density, 6),
-            "com_doubt_mm": round(self.com_doubt_mm, 6),
-            "bounds_change_mm": round(self.bounds_change_mm, 6),
+            "volume_mm3": _sig(self.volume_mm3),
+            "volume_doubt_mm3": _sig(self.volume_doubt_mm3),
+            "volume_doubt_pct": _sig(self.volume_doubt_pct),
+            "mass_g": _sig(mass_kg * 1e3),
+            "density_kg_m3": _sig(density),
+            "com_doubt_mm": _sig(self.com_doubt_mm),
+            "bounds_change_mm": _sig(self.bounds_change_mm),
         }
         if density_given:
-            out["mass_doubt_g"] = round(density * self.volume_doubt_mm3 * 1e-6, 6)
+            out["mass_doubt_g"] = _sig(density * self.volume_doubt_mm3 * 1e-6)
         else:
-            out["density_doubt_kg_m3"] = round(density * self.volume_doubt_pct / 100.0, 6)
+            out["density_doubt_kg_m3"] = _sig(density * self.volume_doubt_pct / 100.0)
         return out
 
     def describe(self, density: float | None = None, density_given: bool = False) -> str:
@@ -129,6 +129,11 @@ class Repair:
             f"{text}, centre of mass within {self.com_doubt_mm:.3g} mm, bounds moved "
             f"{self.bounds_change_mm:.3g} mm"
         )
+
+
+def _sig(x: float) -> float:
+    """x as a plain float to 9 significant digits (a summary's figure)."""
+    return float(f"{float(x):.9g}")
 
 
 def _count(n: int, noun: str) -> str:
@@ -208,7 +213,9 @@ def repair(mesh: trimesh.Trimesh, path: Path) -> tuple[trimesh.Trimesh, Repair]:
     if not (fixed.is_watertight and fixed.is_winding_consistent and fixed.volume > 0):
         raise ConfigError(f"mesh {str(path)!r} is not a closed solid: {_open_edges(fixed)}")
     fixed.remove_unreferenced_vertices()
-    return fixed, _measured(v0, f0, fixed, turned, tool)
+    # no triangle taken out or added (turned at most): no face to compare, none changed
+    same = len(faces) == len(f0) and not tool
+    return fixed, _measured(v0, f0, fixed, turned, tool, same)
 
 
 def _without_void_faces(faces: np.ndarray) -> np.ndarray:
@@ -272,12 +279,13 @@ def _open_edges(mesh: trimesh.Trimesh) -> str:
 
 
 def _measured(
-    v0: np.ndarray, f0: np.ndarray, after: trimesh.Trimesh, turned: bool, tool: str
+    v0: np.ndarray, f0: np.ndarray, after: trimesh.Trimesh, turned: bool, tool: str, same: bool
 ) -> Repair:
     """Repair's figures: faces compared by their corners' coordinates (before: v0, f0;
-    after), the changed regions' hulls, the bounds of the faces' corners."""
+    after; same: the faces are known to be the same), the changed regions' hulls, the
+    bounds of the faces' corners."""
     volume = float(after.volume)
-    removed, added, regions = _changed_regions(v0, f0, after)
+    removed, added, regions = (0, 0, []) if same else _changed_regions(v0, f0, after)
     com = np.asarray(after.center_mass)
     doubt = com_doubt = 0.0
     holes = 0
@@ -307,30 +315,33 @@ def _changed_regions(
     v0: np.ndarray, f0: np.ndarray, after: trimesh.Trimesh
 ) -> tuple[int, int, list[tuple[np.ndarray, bool]]]:
     """(faces removed, faces added, regions): the triangles in one surface and not the
-    other, by their corners' coordinates (exact), grouped into regions that share a
+    other, by their corners' coordinates (exact; as multisets, so that copies of a
+    triangle taken out count and one kept does not), grouped into regions that share a
     corner; each region as its corners (K, 3) m and whether it holds an added one."""
-    import networkx as nx
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
 
-    def keys(v, f):
-        corner = [row.tobytes() for row in np.ascontiguousarray(v, np.float64)]
-        return [tuple(sorted((corner[a], corner[b], corner[c]))) for a, b, c in f]
-
-    from collections import Counter
-
-    # as multisets: copies of a triangle taken out count, one kept does not
-    before, now = Counter(keys(v0, f0)), Counter(keys(after.vertices, after.faces))
-    removed, added = before - now, now - before
-    if not removed and not added:
+    v1, f1 = np.asarray(after.vertices, np.float64), np.asarray(after.faces, np.int64)
+    corners, ids = np.unique(np.vstack([v0, v1]), axis=0, return_inverse=True)
+    ids = ids.ravel()
+    tris = np.vstack([np.sort(ids[: len(v0)][f0], axis=1), np.sort(ids[len(v0) :][f1], axis=1)])
+    kinds, group = np.unique(tris, axis=0, return_inverse=True)
+    group = group.ravel()
+    before = np.bincount(group[: len(f0)], minlength=len(kinds))
+    now = np.bincount(group[len(f0) :], minlength=len(kinds))
+    removed, added = np.maximum(before - now, 0), np.maximum(now - before, 0)
+    changed = np.flatnonzero(removed + added)
+    if not len(changed):
         return 0, 0, []
-    graph = nx.Graph()
-    for tri in [*removed, *added]:
-        graph.add_edges_from(((tri[0], tri[1]), (tri[1], tri[2])))
-    new = {c for tri in added for c in tri}
+    tri = kinds[changed]  # (C, 3) corner ids
+    edges = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]]])
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), (len(corners),) * 2)
+    _, label = connected_components(graph, directed=False)
     regions = []
-    for part in nx.connected_components(graph):
-        corners = np.array([np.frombuffer(c, np.float64) for c in part])
-        regions.append((corners, any(c in new for c in part)))
-    return sum(removed.values()), sum(added.values()), regions
+    for region in np.unique(label[tri[:, 0]]):
+        mine = label[tri[:, 0]] == region
+        regions.append((corners[np.unique(tri[mine])], bool(added[changed[mine]].any())))
+    return int(removed.sum()), int(added.sum()), regions
 
 
 def _hull_volume(points: np.ndarray) -> float:
