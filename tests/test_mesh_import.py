@@ -603,3 +603,22 @@ def test_meshes_that_bound_no_solid_are_refused_by_name_before_any_work(tmp_path
         )
         assert code == 2 and said in err and f"{name}" in err, err
         assert not out.exists()  # refused before any work
+
+
+def test_an_evaluate_run_records_the_repair_in_its_summary(tmp_path, hull_pieces):
+    # the "done when": a scan that was refused evaluates, its repair's figures in
+    # the run's summary.json and config (every study records the object's summary)
+    closed = ycb_mesh("011_banana")
+    a, b, c = closed.faces[10]
+    path = tmp_path / "scan.stl"
+    faces = np.vstack([closed.faces, [[a, c, b], [a, b, c]]])  # a fold on the surface
+    trimesh.Trimesh(closed.vertices, faces, process=False).export(path)
+    out = tmp_path / "run"
+    argv = ["evaluate", str(path), "--unit", "m", "--mass-g", "66", "--n", "2", "--traces", "0"]
+    argv += ["--backend", "mujoco", "--no-progress", "--lift-height-mm", "5", "--hold-s", "0.05"]
+    assert cli.main([*argv, "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["object_repair"]["faces_removed"] == 2
+    assert summary["object_repair"]["volume_doubt_mm3"] == 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["object"]["repair"] == summary["object_repair"]
