@@ -4,6 +4,7 @@ These paths need trimesh's optional imports (networkx, rtree), so they also chec
 the project declares them: CI installs the project into a fresh environment.
 """
 
+import json
 import math
 import tomllib
 from importlib import resources
@@ -362,3 +363,262 @@ def test_mesh_to_object_is_part_of_the_cached_preparation(tmp_path, monkeypatch)
     np.testing.assert_array_equal(again.mesh_to_object_m, first.mesh_to_object_m)
     with pytest.raises(BaseException, match="not cached"):
         mp.load_object(path, unit="mm", mass_g=50.0, pose=LAY_FLAT[:3, :3].T)
+
+
+# ------------------------------------------------------ repair: faithful, or refused
+
+
+def installed(*argv, timeout: float = 120):
+    """Run the installed ``mjx-pick`` as a user would: (returncode, stderr)."""
+    import shutil
+    import subprocess
+    import sys
+
+    cmd = (shutil.which("mjx-pick") or f"{sys.executable} -m mjx_pick.cli").split()
+    res = subprocess.run(
+        cmd + [str(a) for a in argv], capture_output=True, text=True, timeout=timeout
+    )
+    assert "Traceback" not in res.stderr, res.stderr[-3000:]
+    return res.returncode, res.stderr
+
+
+def ycb_mesh(name: str) -> trimesh.Trimesh:
+    with resources.as_file(YCB / ycb_manifest()[name]["file"]) as path:
+        return trimesh.load(str(path), force="mesh")
+
+
+def test_folded_and_degenerate_triangles_are_taken_out_exactly(tmp_path, hull_pieces):
+    # the YCB scans that public grasp sets use (gelatin box, mustard bottle, pear, power
+    # drill, tomato soup can) were refused as "not a closed solid": their decimation
+    # left triangles of no area (a corner repeated) and folds (a triangle and its
+    # reverse) on an otherwise closed surface. Neither bounds any volume: taken out,
+    # the solid is the file's to the last bit, and the summary says so.
+    closed = ycb_mesh("011_banana")
+    a, b, c = closed.faces[10]
+    faces = np.vstack([closed.faces, [[a, b, c], [a, c, b], [a, b, b], [c, c, a]]])
+    path = tmp_path / "scan.stl"
+    trimesh.Trimesh(closed.vertices, faces, process=False).export(path)
+    obj = mp.load_object(path, unit="m", mass_g=66.0)
+    closed.export(tmp_path / "closed.stl")
+    truth = mp.load_object(tmp_path / "closed.stl", unit="m", mass_g=66.0)
+    assert obj.mesh.volume == pytest.approx(truth.mesh.volume, rel=1e-12)
+    np.testing.assert_allclose(obj.inertia_kg_m2, truth.inertia_kg_m2, rtol=1e-9, atol=1e-15)
+    rep = obj.summary()["repair"]
+    # the fold's two copies of triangle 10 and the two degenerate ones; triangle 10 itself
+    # stays (three copies, one facing out more: one kept)
+    assert rep["faces_removed"] == 4 and rep["faces_added"] == 0
+    assert rep["volume_doubt_mm3"] == 0 and rep["com_doubt_mm"] == 0
+    assert rep["bounds_change_mm"] == 0 and rep["mass_g"] == pytest.approx(66.0)
+    assert maps_onto(obj.mesh_to_object_m, closed.vertices, np.asarray(obj.mesh.vertices)) < 1e-12
+
+
+def punched(mesh: trimesh.Trimesh, centre: np.ndarray, radius_m: float) -> trimesh.Trimesh:
+    """mesh less its triangles whose centre lies within radius_m of centre: a hole."""
+    keep = np.linalg.norm(mesh.triangles_center - centre, axis=1) > radius_m
+    out = trimesh.Trimesh(mesh.vertices, mesh.faces[keep], process=False)
+    out.remove_unreferenced_vertices()
+    assert not out.is_watertight
+    return out
+
+
+# (shipped mesh, triangle at the hole's centre, radius mm): holes in the side of a
+# curved scan, across a hammer's head and in the marker's cap, 4-10 mm across
+HOLES = [("011_banana", 100, 2.0), ("048_hammer", 700, 5.0), ("040_large_marker", 50, 3.0)]
+
+
+@pytest.mark.parametrize("name, face, radius_mm", HOLES)
+def test_a_hole_is_closed_within_the_tolerance_of_the_closed_original(
+    tmp_path, hull_pieces, name, face, radius_mm
+):
+    # the issue's test: holes punched at known places in closed shipped meshes, filled
+    # (MeshFix), compared with the original; the figures said bound the true change
+    closed = ycb_mesh(name)
+    holed = punched(closed, closed.triangles_center[face], radius_mm * 1e-3)
+    path = tmp_path / f"{name}.stl"
+    holed.export(path)
+    mass_g = ycb_manifest()[name]["mass_g"]
+    obj = mp.load_object(path, unit="m", mass_g=mass_g)
+    rep = obj.summary()["repair"]
+    assert rep["faces_added"] > 0 and rep["holes"] == 1 and rep["tool"] == "MeshFix"
+    true_dv_pct = 100 * abs(obj.mesh.volume - closed.volume) / closed.volume
+    turn = obj.mesh_to_object_m[:3, :3]  # the centre of mass, compared in the file's frame
+    com_file = turn.T @ (obj.com_m - obj.mesh_to_object_m[:3, 3])
+    true_dcom_mm = 1e3 * np.linalg.norm(com_file - closed.center_mass)
+    assert true_dv_pct <= 1.0 and true_dcom_mm <= 1.0  # within the default tolerance
+    assert true_dv_pct <= rep["volume_doubt_pct"] + 1e-9
+    assert true_dcom_mm <= rep["com_doubt_mm"] + 1e-9
+    assert rep["bounds_change_mm"] <= 1.0
+    # the frame is the file's: every vertex it kept maps onto the model's exactly
+    kept = maps_onto(np.linalg.inv(obj.mesh_to_object_m), obj.mesh.vertices, holed.vertices)
+    assert kept < 1e-12
+
+
+def test_a_hole_in_a_flat_face_is_closed_exactly(tmp_path, hull_pieces):
+    # a cylinder's cap is flat: the filled hole leaves nothing in doubt
+    cyl = trimesh.creation.cylinder(radius=15.0, height=30.0, sections=48)
+    top = np.flatnonzero(cyl.face_normals[:, 2] > 0.99)[:5]
+    path = tmp_path / "can.stl"
+    trimesh.Trimesh(cyl.vertices, np.delete(cyl.faces, top, axis=0), process=False).export(path)
+    obj = mp.load_object(path, unit="mm", density_kg_m3=1000.0)
+    assert obj.mesh.volume == pytest.approx(cyl.volume * 1e-9, rel=1e-9)
+    rep = obj.summary()["repair"]
+    assert rep["faces_added"] >= 5 and rep["volume_doubt_pct"] == pytest.approx(0, abs=1e-9)
+    assert rep["mass_doubt_g"] == pytest.approx(0, abs=1e-9)
+
+
+def two_faces_missing(tmp_path):
+    """The issue's box: 40 x 30 x 30 mm, 43.2 g at 1200 kg/m^3, missing the two triangles
+    on either side of one edge (two adjacent faces)."""
+    box = trimesh.creation.box([40.0, 30.0, 30.0])
+    pair = box.face_adjacency[np.isclose(box.face_adjacency_angles, np.pi / 2)][0]
+    path = tmp_path / "box.stl"
+    trimesh.Trimesh(box.vertices, np.delete(box.faces, pair, axis=0), process=False).export(path)
+    return path
+
+
+def test_a_box_missing_two_triangles_on_adjacent_faces_is_refused_with_its_numbers(tmp_path):
+    # repaired by trimesh's fill_holes into another solid (36.0 g: a corner cut off) under
+    # a warning with no numbers. Which diagonal closes the hole its rim cannot say: a
+    # sixth of the box is in doubt, beyond the tolerance, and the refusal says so
+    path = two_faces_missing(tmp_path)
+    argv = ["picks", path, "--unit", "mm", "--density-kg-m3", "1200", "--n", "2", "--no-cache"]
+    code, err = installed(*argv, "--out", tmp_path / "refused")
+    assert code == 2, err
+    assert f"mesh {str(path)!r} is not a closed solid" in err
+    assert "volume 16.7 % in doubt (allowed 1 %: --repair-volume-pct)" in err
+    assert "centre of mass within 4.86 mm (allowed 1 mm: --repair-com-mm)" in err
+    assert "mass 43.2 g +- 7.2 g at 1200 kg/m^3" in err
+    assert not (tmp_path / "refused").exists()  # before any work
+    # accepted at tolerances that allow it: MeshFix closes it as the box it was
+    loose = ["--repair-volume-pct", "20", "--repair-com-mm", "5"]
+    code, err = installed(*argv, *loose, "--out", tmp_path / "p")
+    assert code == 0, err
+    assert "2 triangles added to close 1 hole (MeshFix)" in err
+    obj = json.loads((tmp_path / "p" / "run.json").read_text())["config"]["object"]
+    assert obj["mass_g"] == pytest.approx(43.2, rel=1e-9)
+    assert obj["repair"]["mass_doubt_g"] == pytest.approx(7.2, rel=1e-6)
+
+
+def test_a_repair_beyond_the_tolerance_is_refused_from_the_cache_too(tmp_path, monkeypatch):
+    # the tolerance is no part of the cached preparation: a part prepared under a loose
+    # one is checked again under the next call's
+    from mjx_pick.core import cache, objects
+
+    monkeypatch.setenv(cache.ENV_DIR, str(tmp_path / "cache"))
+    monkeypatch.setattr(
+        objects, "_coacd_pieces", lambda mesh, t: (np.asarray(mesh.convex_hull.vertices),)
+    )
+    path = two_faces_missing(tmp_path)
+    loose = mp.load_object(path, unit="mm", mass_g=43.2, repair_volume_pct=20, repair_com_mm=5)
+    assert loose.summary()["repair"]["density_doubt_kg_m3"] == pytest.approx(200.0)
+    monkeypatch.setattr(objects, "_prepare_mesh", lambda *a: pytest.fail("not cached"))
+    with pytest.raises(mp.ConfigError, match=r"density 1200 \+- 200 kg/m\^3 of the given mass"):
+        mp.load_object(path, unit="mm", mass_g=43.2)
+
+
+def test_without_pymeshfix_a_hole_is_refused_naming_the_extra(tmp_path, monkeypatch, hull_pieces):
+    import builtins
+
+    real = builtins.__import__
+
+    def no_meshfix(name, *args, **kwargs):
+        if name == "pymeshfix":
+            raise ImportError(name)
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_meshfix)
+    with pytest.raises(
+        mp.ConfigError, match=r'4 edges bound a hole.*pip install "mjx-pick\[repair\]"'
+    ):
+        mp.load_object(two_faces_missing(tmp_path), unit="mm", mass_g=43.2)
+
+
+@pytest.mark.parametrize(
+    "argv, said",
+    [
+        (["--repair-volume-pct", "-1"], "--repair-volume-pct = -1.0 is out of range: allowed 0 <="),
+        (["--repair-com-mm", "nan"], "--repair-com-mm"),
+    ],
+)
+def test_a_repair_tolerance_is_checked_by_its_rule(tmp_path, capsys, argv, said):
+    path = standing_box(tmp_path)
+    code = cli.main(["picks", str(path), "--unit", "mm", "--mass-g", "5", *argv, "--out", "x"])
+    assert code == 2 and said in capsys.readouterr().err
+    with pytest.raises(mp.ConfigError, match="repair_bounds_mm does not apply"):
+        mp.load_object("block", repair_bounds_mm=2.0)
+
+
+# ----------------------------------------- meshes whose solid is not defined: refused
+
+
+def inverted(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    out = mesh.copy()
+    out.invert()
+    return out
+
+
+def test_meshes_that_bound_no_solid_are_refused_by_name_before_any_work(tmp_path):
+    # an OBJ of two bodies one of which is inside out (a QhullError traceback before) and a
+    # box plus an inside-out sphere beside it, with a density (MuJoCo's "inertia must
+    # satisfy A + B >= C"): accepted silently or a traceback, never the reason
+    bar = trimesh.creation.box([30.0, 20.0, 10.0])
+    cube = trimesh.creation.box([10.0, 10.0, 10.0])
+    cube.apply_translation([0.0, 30.0, 0.0])
+    (tmp_path / "two.obj").write_text(
+        trimesh.util.concatenate([bar, inverted(cube)]).export(file_type="obj")
+    )
+    box = trimesh.creation.box([20.0, 20.0, 20.0])
+    ball = trimesh.creation.icosphere(radius=15.0)
+    beside, crossing = ball.copy(), trimesh.creation.icosphere(radius=12.0)
+    beside.apply_translation([0.0, 40.0, 0.0])
+    trimesh.util.concatenate([box, inverted(beside)]).export(tmp_path / "beside.stl")
+    trimesh.util.concatenate([box, inverted(crossing)]).export(tmp_path / "crossing.stl")
+    (tmp_path / "notes.stl").write_text("holes to drill: 4 x M6\n" * 100)
+    cases = [
+        ("two.obj", "a closed surface (1000 mm^3) faces the other way from the body of 6000"),
+        ("beside.stl", "lies in no body: one of them is turned inside out"),
+        ("crossing.stl", "two of its closed surfaces cross each other"),
+        (
+            "notes.stl",
+            "is not an STL: it holds text, and an ASCII STL begins with 'solid' "
+            "(this one begins 'holes to drill: 4 x M6')",
+        ),
+    ]
+    for name, said in cases:
+        out = tmp_path / f"out-{name}"
+        code, err = installed(
+            "evaluate",
+            tmp_path / name,
+            "--unit",
+            "mm",
+            "--density-kg-m3",
+            "1000",
+            "--n",
+            "2",
+            "--backend",
+            "mujoco",
+            "--no-cache",
+            "--out",
+            out,
+        )
+        assert code == 2 and said in err and f"{name}" in err, err
+        assert not out.exists()  # refused before any work
+
+
+def test_an_evaluate_run_records_the_repair_in_its_summary(tmp_path, hull_pieces):
+    # the issue's "done when": a scan that was refused evaluates, its repair's figures in
+    # the run's summary.json and config (every study records the object's summary)
+    closed = ycb_mesh("011_banana")
+    a, b, c = closed.faces[10]
+    path = tmp_path / "scan.stl"
+    faces = np.vstack([closed.faces, [[a, c, b], [a, b, c]]])  # a fold on the surface
+    trimesh.Trimesh(closed.vertices, faces, process=False).export(path)
+    out = tmp_path / "run"
+    argv = ["evaluate", str(path), "--unit", "m", "--mass-g", "66", "--n", "2", "--traces", "0"]
+    argv += ["--backend", "mujoco", "--no-progress", "--lift-height-mm", "5", "--hold-s", "0.05"]
+    assert cli.main([*argv, "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["object_repair"]["faces_removed"] == 2
+    assert summary["object_repair"]["volume_doubt_mm3"] == 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["object"]["repair"] == summary["object_repair"]

@@ -271,6 +271,37 @@ def test_huge_image_is_refused_from_its_header(tmp_path, monkeypatch):
         mp.object_from_image(path, px_per_mm=10, thickness_mm=5, mass_g=1)
 
 
+def test_an_image_too_large_to_decode_is_refused_with_its_size(tmp_path):
+    # a 20000 x 20000 PNG was refused as "inf x inf pixels" (Pillow's decompression-bomb
+    # refusal names no size): the header's size is said, through the installed command
+    import shutil
+    import struct
+    import subprocess
+    import sys
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        crc = zlib.crc32(kind + data) & 0xFFFFFFFF
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
+
+    header = struct.pack(">IIBBBBB", 20000, 20000, 8, 0, 0, 0, 0)  # 8-bit gray
+    path = tmp_path / "scan.png"  # its header alone: no 400 MB to decode
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(bytes(64)))
+        + chunk(b"IEND", b"")
+    )
+    cmd = (shutil.which("mjx-pick") or f"{sys.executable} -m mjx_pick.cli").split()
+    argv = ["picks", str(path), "--px-per-mm", "10", "--thickness-mm", "5", "--mass-g", "10"]
+    res = subprocess.run(
+        cmd + argv + ["--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120
+    )
+    assert res.returncode == 2, res.stderr
+    assert "is 20000 x 20000 pixels: allowed at most 100 million" in res.stderr
+    assert not (tmp_path / "out").exists()
+
+
 def test_mesh_face_and_file_limits(tmp_path, monkeypatch):
     from mjx_pick.core import objects
 

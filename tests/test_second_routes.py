@@ -241,10 +241,12 @@ def test_a_mesh_repaired_on_import_is_right_or_refused_and_always_said(tmp_path)
     out = tmp_path / "picks"
     argv = ["picks", stl, "--unit", "mm", "--density-kg-m3", "1000", "--n", "2", "--out", out]
     res = cli(*argv, "--no-cache", check=True)
-    assert "was not a closed solid" in res.stderr and "check them" in res.stderr
+    assert "mesh flipped.stl repaired: triangles turned to face outward" in res.stderr
+    assert "mass 9 g +- 0 g at 1000 kg/m^3" in res.stderr
     obj = json.loads((out / "run.json").read_text())["config"]["object"]
     assert obj["mass_g"] == pytest.approx(9.0, rel=1e-6)  # not 4.5 g, nor shifted
     assert obj["bounds_mm"] == pytest.approx([-15.0, -10.0, 15.0, 10.0], abs=1e-6)
+    assert obj["repair"]["turned"] and obj["repair"]["volume_doubt_mm3"] == 0
 
 
 def test_a_mesh_file_too_big_or_cut_short_is_refused_from_its_header(tmp_path):

@@ -93,6 +93,9 @@ def object_of(args):
         simplify_mm=args.simplify_mm,
         material=args.material,
         largest_body=getattr(args, "largest_body", False),
+        repair_volume_pct=getattr(args, "repair_volume_pct", None),
+        repair_com_mm=getattr(args, "repair_com_mm", None),
+        repair_bounds_mm=getattr(args, "repair_bounds_mm", None),
     )
 
 

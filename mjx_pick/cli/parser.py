@@ -30,7 +30,7 @@ from mjx_pick.cli.commands import (
 from mjx_pick.cli.inputs import raise_problems
 from mjx_pick.cli.setting_flags import PHYSICS_FLAGS, PICK_FLAGS, add_setting_flags
 from mjx_pick.core.config import ConfigError
-from mjx_pick.core.numbers import INPUTS
+from mjx_pick.core.numbers import INPUTS, REPAIR_DEFAULTS
 from mjx_pick.engine import registry
 
 
@@ -164,6 +164,18 @@ def _add_mesh_args(g) -> None:
         action="store_true",
         help="a mesh of several disconnected bodies: keep the largest (default: refuse it)",
     )
+    for name, what in (
+        ("repair_volume_pct", "volume in doubt, %%"),
+        ("repair_com_mm", "centre-of-mass change, mm"),
+        ("repair_bounds_mm", "bounding-box change, mm"),
+    ):
+        flag = "--" + name.replace("_", "-")
+        g.add_argument(
+            flag,
+            type=number(name, flag),
+            help=f"a mesh that is not a closed solid is repaired within this {what} "
+            f"(default: {REPAIR_DEFAULTS[name]:g})",
+        )
 
 
 def _add_gripper_args(p: argparse.ArgumentParser) -> None:

@@ -26,7 +26,7 @@ DEFAULT_MAX_MB = 2048.0
 OBJECT_SHARE = 0.25  # of the size limit, for object results; the rest for JAX's programs
 FORMAT = 2  # of an entry's layout; a change makes older entries "another version"
 # libraries whose results an entry holds; a new version of one may change them
-LIBRARIES = ("mjx-pick", "numpy", "coacd", "trimesh", "shapely")
+LIBRARIES = ("mjx-pick", "numpy", "coacd", "trimesh", "shapely", "pymeshfix")
 _META = "__meta__"
 
 

@@ -14,6 +14,9 @@ from typing import Any
 from mjx_pick.core.config import Number
 
 SEED_MAX = 2**32 - 1  # JAX's and NumPy's generators take a 32-bit seed
+# a mesh repair's default tolerances (core.meshrepair.Tolerance): a scan's pin-holes and
+# folds change a part by far less; a guessed corner of a coarse CAD mesh by more
+REPAIR_DEFAULTS = {"repair_volume_pct": 1.0, "repair_com_mm": 1.0, "repair_bounds_mm": 1.0}
 
 INPUTS: dict[str, Number] = {
     # how a run runs
@@ -79,6 +82,10 @@ INPUTS: dict[str, Number] = {
     "density_kg_m3": Number(0, None, lo_open=True, unit="kg/m^3", doc="object density"),
     "pick_height_mm": Number(0, 2000, lo_open=True, unit="mm", doc="fingertip height"),
     "simplify_mm": Number(0, 5, unit="mm", doc="outline simplification"),
+    # how much a mesh's repair may change it (core.meshrepair.Tolerance; REPAIR_DEFAULTS)
+    "repair_volume_pct": Number(0, 100, unit="%", doc="a repair's volume in doubt"),
+    "repair_com_mm": Number(0, 1000, unit="mm", doc="a repair's centre-of-mass change"),
+    "repair_bounds_mm": Number(0, 1000, unit="mm", doc="a repair's bounds change"),
     # a pick-point given by the user (a picks CSV, a form)
     "x_mm": Number(-1000, 1000, unit="mm", doc="pick-point x offset"),
     "y_mm": Number(-1000, 1000, unit="mm", doc="pick-point y offset"),

@@ -20,7 +20,7 @@ import trimesh
 from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.polygon import orient
 
-from mjx_pick.core import cache, numbers
+from mjx_pick.core import cache, meshrepair, numbers
 from mjx_pick.core.config import ConfigError, PlausibilityWarning, check_range
 
 # what a slow preparation step is doing, said as it starts (the CLI shows it on stderr)
@@ -85,6 +85,9 @@ class ObjectModel:
       mesh_to_object_m: a mesh's (4, 4) rigid transform from the file's frame, scaled
         to metres, to the object frame: the file's vertices it maps onto ``mesh``'s.
         None for a prism.
+      repair: a mesh's repair figures (:meth:`meshrepair.Repair.figures`: faces taken
+        out and added, volume, mass or density and their doubt, centre of mass and
+        bounds change); None for a prism.
     """
 
     name: str
@@ -103,6 +106,8 @@ class ObjectModel:
     # meshes only: (4, 4) rigid transform, object frame <- the mesh file's frame in metres
     # (after the unit's scale); maps a grasp given in the file's frame into this one
     mesh_to_object_m: np.ndarray | None = None
+    # meshes only: what the import's repair changed (meshrepair.Repair.figures)
+    repair: dict | None = None
 
     def pad_pieces(self, finger_depth_mm: float, finger_width_mm: float) -> tuple[np.ndarray, ...]:
         """Collision pieces for the pads of a finger of this footprint (depth x width).
@@ -219,6 +224,8 @@ class ObjectModel:
         }
         if self.mesh_to_object_m is not None:  # a grasp in the file's frame maps with it
             out["mesh_to_object_m"] = np.asarray(self.mesh_to_object_m).tolist()
+        if self.repair is not None:
+            out["repair"] = dict(self.repair)
         return out
 
 
@@ -266,22 +273,37 @@ def segment_image(path: str | os.PathLike) -> np.ndarray:
 
 def _check_image_pixels(path: Path) -> None:
     """Refuse an image of more than MAX_IMAGE_PIXELS from its header, before decoding."""
-    from PIL import Image
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            with Image.open(path) as im:
-                w, h = im.size
-    except Image.DecompressionBombError:
-        w = h = math.inf
-    except Exception:  # noqa: BLE001 - unreadable headers are reported by the decoder
+    size = _image_size(path)
+    if size is None:  # unreadable headers are reported by the decoder
         return
+    w, h = size
     if w * h > MAX_IMAGE_PIXELS:
         raise ConfigError(
             f"image {str(path)!r} is {w} x {h} pixels: allowed at most "
             f"{MAX_IMAGE_PIXELS / 1e6:g} million; scale it down (and --px-per-mm with it)"
         )
+
+
+def _image_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) from an image file's header, or None where no reader of Pillow's
+    takes it. Read as Image.open reads it, less its decompression-bomb refusal, which
+    names no size (the size is what the caller refuses, in its own words)."""
+    from PIL import Image
+
+    Image.init()
+    with path.open("rb") as fh:
+        prefix = fh.read(16)
+        for fmt in Image.ID:
+            factory, accept = Image.OPEN[fmt]
+            if accept is not None and accept(prefix) is not True:
+                continue  # not this format (or a format's note on why not)
+            fh.seek(0)
+            try:
+                with factory(fh, str(path)) as im:
+                    return tuple(int(v) for v in im.size)
+            except Exception:  # noqa: BLE001 - a damaged header: the next reader, or None
+                continue
+    return None
 
 
 def _check_size_mm(what: str, extents_mm, hint: str) -> None:
@@ -652,6 +674,9 @@ def object_from_mesh(
     name: str | None = None,
     coacd_threshold: float = 0.04,
     largest_body: bool = False,
+    repair_volume_pct: float = meshrepair.VOLUME_PCT,
+    repair_com_mm: float = meshrepair.COM_MM,
+    repair_bounds_mm: float = meshrepair.BOUNDS_MM,
 ) -> ObjectModel:
     """An object from a mesh file (STL/OBJ/PLY/GLB), resting on the table.
 
@@ -670,22 +695,38 @@ def object_from_mesh(
       largest_body: a mesh of several disconnected bodies is refused (the outline,
         the feasibility checks and the physics must see the same solid); True keeps
         the largest body (with its inner voids) and drops the others with a warning.
+      repair_volume_pct / repair_com_mm / repair_bounds_mm: how much the repair of a
+        surface that is not a closed solid may change it (:class:`meshrepair.Tolerance`:
+        volume in doubt, %; centre of mass, mm; bounds, mm); beyond, it is refused.
     """
     path = Path(path)
     label = name or path.stem
     pose = check_pose(pose)
+    tolerance = meshrepair.Tolerance(repair_volume_pct, repair_com_mm, repair_bounds_mm)
     _check_mesh_file(path, unit)
-    prepared = _prepared_mesh(path, unit, pose, coacd_threshold, largest_body)
+    if mass_g is None and density_kg_m3 is None:  # before any work
+        raise ConfigError(f"object {label!r}: give mass_g or density_kg_m3")
+
+    def check(rep: meshrepair.Repair) -> None:  # before the decomposition, and when cached
+        v = rep.volume_mm3 * 1e-9
+        rho = density_kg_m3 if density_kg_m3 is not None else mass_g * 1e-3 / v
+        tolerance.check(path, rep, rho, density_kg_m3 is not None)
+
+    prepared = _prepared_mesh(path, unit, pose, coacd_threshold, largest_body, check)
+    rep = meshrepair.Repair.from_json(prepared["repair_json"].tobytes().decode())
+    check(rep)
     dropped = prepared["dropped_note"].tobytes().decode()
     if dropped:  # bodies left out by largest_body: said on every load
         warnings.warn(dropped, stacklevel=2)
-    repaired = prepared["repair_note"].tobytes().decode() if "repair_note" in prepared else ""
-    if repaired:  # a surface this import closed or turned: said on every load
-        warnings.warn(repaired, PlausibilityWarning, stacklevel=2)
     # rebuilt from the arrays whether they were read or computed: one path, same bits
     mesh = trimesh.Trimesh(prepared["vertices"], prepared["faces"], process=False)
     height_mm = float(mesh.bounds[1, 2] * 1e3)
     mass_kg = _mass_kg(label, mesh.volume, mass_g, density_kg_m3)
+    rho = mass_kg / mesh.volume
+    if rep.changed:  # said on every load, cached or not: the run's log has it
+        said = log.warning if rep.volume_doubt_mm3 or rep.bounds_change_mm else log.info
+        said("mesh %s repaired: %s", path.name, rep.describe(rho, density_kg_m3 is not None))
+    figures = rep.figures(mass_kg, rho, density_kg_m3 is not None)
     polygon = shapely.from_wkb(prepared["outline_wkb"].tobytes())
     ends = np.cumsum(prepared["piece_sizes"])[:-1]
     pieces = tuple(np.split(prepared["piece_vertices"], ends))
@@ -694,7 +735,9 @@ def object_from_mesh(
     obj = _finish(
         label, polygon, height_mm, mass_kg, mesh, pieces, pick_height_mm, material, source
     )
-    return dataclasses.replace(obj, mesh_to_object_m=prepared["mesh_to_object"].copy())
+    return dataclasses.replace(
+        obj, mesh_to_object_m=prepared["mesh_to_object"].copy(), repair=figures
+    )
 
 
 MESH_SCALES = {"m": 1.0, "mm": 1e-3}
@@ -775,15 +818,21 @@ def _check_mesh_file(path: Path, unit: str) -> None:
 
 
 def _prepared_mesh(
-    path: Path, unit: str, pose: str | np.ndarray, coacd_threshold: float, largest_body: bool
+    path: Path,
+    unit: str,
+    pose: str | np.ndarray,
+    coacd_threshold: float,
+    largest_body: bool,
+    check=lambda rep: None,
 ) -> dict[str, np.ndarray]:
     """The mesh file's prepared geometry (:func:`_prepare_mesh`'s arrays), read from the
     on-disk cache when this file was prepared alike before, else computed and stored.
-    pose: :func:`check_pose`'s."""
+    pose: :func:`check_pose`'s; check: refuses a repair (not part of the key: the
+    caller checks a cached one again)."""
     # everything that decides the prepared geometry; mass and material are applied after
     key = {
-        # the arrays' layout: entries made before mesh_to_object was stored have none
-        "layout": 2,
+        # the arrays' layout: older entries lack mesh_to_object (1) or repair_json (2)
+        "layout": 3,
         "file_sha256": cache.file_digest(path),
         "suffix": path.suffix.lower(),
         "unit": unit,
@@ -794,7 +843,9 @@ def _prepared_mesh(
         "largest_body": bool(largest_body),
     }
     return cache.memo(
-        "mesh", key, lambda: _prepare_mesh(path, unit, pose, coacd_threshold, largest_body)
+        "mesh",
+        key,
+        lambda: _prepare_mesh(path, unit, pose, coacd_threshold, largest_body, check),
     )
 
 
@@ -808,7 +859,15 @@ def _check_mesh_header(path: Path, size: int) -> None:
     count = None
     if suffix == ".stl" and len(head) >= 84:
         n = int(np.frombuffer(head[80:84], "<u4")[0])
-        binary = not head[:5].lower().startswith(b"solid") or size == 84 + 50 * n
+        binary = not head.lstrip()[:5].lower().startswith(b"solid") or size == 84 + 50 * n
+        if binary and _is_text(head):
+            # a binary STL's count has NUL bytes below 16.7 million triangles, and its
+            # triangles' floats have more: this "count" is four letters of text
+            start = head[:40].decode("utf-8", "replace").split("\n")[0].strip()
+            raise ConfigError(
+                f"mesh {str(path)!r} is not an STL: it holds text, and an ASCII STL begins "
+                f"with 'solid' (this one begins {start!r}); export the mesh again as STL"
+            )
         if binary:
             if size < 84 + 50 * n:
                 raise ConfigError(
@@ -830,14 +889,33 @@ def _check_mesh_header(path: Path, size: int) -> None:
         )
 
 
+def _is_text(head: bytes) -> bool:
+    """Whether a file's first bytes are UTF-8 text (no NUL byte, no invalid sequence
+    except one a 4096-byte cut may have split)."""
+    if b"\0" in head:
+        return False
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as err:
+        return err.start >= len(head) - 3  # a character cut at the end
+    return True
+
+
 def _prepare_mesh(
-    path: Path, unit: str, pose: str | np.ndarray, coacd_threshold: float, largest_body: bool
+    path: Path,
+    unit: str,
+    pose: str | np.ndarray,
+    coacd_threshold: float,
+    largest_body: bool,
+    check=lambda rep: None,
 ) -> dict:
     """A mesh file's geometry in the object frame: the cached part of object_from_mesh.
 
     Returns arrays: vertices (V, 3) m and faces (F, 3) of the watertight mesh, resting on
     the table with its centre of mass over the origin; mesh_to_object (4, 4), the rigid
-    transform that took the file's vertices (m) there; outline_wkb, the top-down outline
+    transform that took the file's vertices (m) there; repair_json, what the repair
+    changed (:class:`meshrepair.Repair`, refused by check before the decomposition
+    when beyond its tolerances); outline_wkb, the top-down outline
     (mm) as WKB bytes; piece_vertices (sum V_i, 3) m and piece_sizes (P,), the convex
     collision pieces one after the other.
     """
@@ -858,9 +936,8 @@ def _prepare_mesh(
             "trimesh's simplify_quadric_decimation) to a few ten thousand"
         )
     mesh.apply_scale(MESH_SCALES[unit])
-    repaired = _closed_solid(mesh, path)
-    if mesh.volume < 0:
-        mesh.invert()
+    mesh, rep = meshrepair.repair(mesh, path)
+    check(rep)
     mesh, dropped = _one_body(mesh, path, largest_body)
     # one transform, applied once: the file's vertices map onto the model's exactly
     mesh_to_object = _resting_transform(mesh, pose)
@@ -882,7 +959,7 @@ def _prepare_mesh(
         "piece_vertices": np.concatenate(pieces).astype(np.float64),
         "piece_sizes": np.array([len(p) for p in pieces], np.int64),
         "dropped_note": np.frombuffer(dropped.encode(), np.uint8),
-        "repair_note": np.frombuffer(repaired.encode(), np.uint8),
+        "repair_json": np.frombuffer(rep.to_json().encode(), np.uint8),
     }
 
 
@@ -905,52 +982,16 @@ def _resting_transform(mesh: trimesh.Trimesh, pose: str | np.ndarray) -> np.ndar
     return shift @ turn
 
 
-def _closed_solid(mesh: trimesh.Trimesh, path: Path) -> str:
-    """Make mesh (in place) a closed, consistently wound solid, or refuse it: a surface
-    with a hole or a triangle turned the wrong way has no volume, mass or centre of
-    mass to trust. Small repairs (trimesh's fill_holes, fix_winding) are kept only when
-    the result is a solid; then the returned note says what was repaired, for the
-    caller to warn with (a repair may guess a surface: check the mass and outline);
-    "" when nothing was."""
-    done = []
-    if not mesh.is_watertight:
-        before = len(mesh.faces)
-        mesh.fill_holes()
-        done.append(f"{len(mesh.faces) - before} triangles added to close its holes")
-    if mesh.is_watertight and not mesh.is_winding_consistent:
-        trimesh.repair.fix_winding(mesh)
-        done.append("triangles facing the wrong way turned")
-    if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume < 0:
-        mesh.invert()  # wound inside out: the same solid
-    if not (mesh.is_watertight and mesh.is_winding_consistent and mesh.is_volume):
-        raise ConfigError(
-            f"mesh {str(path)!r} is not a closed solid (a hole, or triangles facing "
-            "inconsistently), and could not be repaired: mass properties need a closed, "
-            "consistently wound surface (repair it, e.g. with MeshLab's 'close holes' and "
-            "'re-orient faces coherently')"
-        )
-    if not done:
-        return ""
-    return (
-        f"mesh {str(path)!r} was not a closed solid: {' and '.join(done)}; the mass, "
-        "centre of mass and outline follow from that repair -- check them, or repair the "
-        "file yourself"
-    )
-
-
 def _one_body(mesh: trimesh.Trimesh, path: Path, largest_body: bool) -> tuple[trimesh.Trimesh, str]:
     """(the mesh, "") if it is one connected solid; else an error naming its bodies, or,
     with largest_body, (the largest body and the voids inside it, the note that says
     what was dropped) -- a note the caller warns with on every load, cached or not.
 
-    A closed shell inside another with inward normals (negative volume) is a void of
-    the solid around it, not a body of its own: a hollow part is one body.
+    A closed shell inside a body with inward normals is a void of it, not a body of its
+    own: a hollow part is one body (``meshrepair.shells`` refuses shells that cross, a
+    body turned inside out and a body inside another).
     """
-    shells = mesh.split(only_watertight=False)
-    if len(shells) <= 1:
-        return mesh, ""
-    bodies = [s for s in shells if s.volume > 0]
-    voids = [s for s in shells if s.volume <= 0]
+    bodies, voids = meshrepair.shells(mesh, path)
     if len(bodies) <= 1:
         return mesh, ""
     bodies.sort(key=lambda s: s.volume, reverse=True)
@@ -1234,10 +1275,14 @@ def load_object(
     simplify_mm: float | None = None,
     material: str | None = None,
     largest_body: bool = False,
+    repair_volume_pct: float | None = None,
+    repair_com_mm: float | None = None,
+    repair_bounds_mm: float | None = None,
 ) -> ObjectModel:
     """An object from a shipped asset name, an image file or a mesh file (CLI entry).
     Every number is checked by its rule (``core.numbers``) and an option the source
-    does not use is refused, never dropped."""
+    does not use is refused, never dropped. pose and repair_*: a mesh's
+    (:func:`object_from_mesh`; None: the default tolerance)."""
     text = str(source)
     suffix = Path(text).suffix.lower()
     kind = "an image" if suffix in IMAGE_SUFFIXES else "a mesh" if suffix in MESH_SUFFIXES else ""
@@ -1251,6 +1296,9 @@ def load_object(
         "unit": unit,
         "pose": pose,
         "largest_body": largest_body,
+        "repair_volume_pct": repair_volume_pct,
+        "repair_com_mm": repair_com_mm,
+        "repair_bounds_mm": repair_bounds_mm,
     }
     _check_object_options(text, kind, options)
     return _load_checked_object(text, suffix, options, material)
@@ -1279,6 +1327,7 @@ def _load_checked_object(
     if suffix in MESH_SUFFIXES:
         if o["unit"] is None:
             raise ConfigError(f"mesh {text!r}: give its unit ('m' or 'mm', --unit)")
+        tolerance = {k: o[k] for k in _REPAIR_NUMBERS if o[k] is not None}
         return object_from_mesh(
             text,
             unit=o["unit"],
@@ -1286,6 +1335,7 @@ def _load_checked_object(
             density_kg_m3=o["density_kg_m3"],
             pose=o["pose"],
             largest_body=o["largest_body"],
+            **tolerance,
             **common,
         )
     if suffix == "" and text in asset_names():
@@ -1303,6 +1353,8 @@ def _load_checked_object(
     )
 
 
+# a mesh's repair tolerances (load_object's names: object_from_mesh's keywords)
+_REPAIR_NUMBERS = ("repair_volume_pct", "repair_com_mm", "repair_bounds_mm")
 # load_object's numbers, each checked by its rule (``core.numbers``)
 _OBJECT_NUMBERS = (
     "px_per_mm",
@@ -1311,6 +1363,7 @@ _OBJECT_NUMBERS = (
     "density_kg_m3",
     "pick_height_mm",
     "simplify_mm",
+    *_REPAIR_NUMBERS,
 )
 
 
@@ -1342,8 +1395,9 @@ def _check_object_options(text: str, kind: str, options: dict) -> None:
 def _unused_options(kind: str, options: dict) -> dict:
     """The options a source of this kind does not use, by name (None: not given)."""
     largest_body = options["largest_body"] or None
+    repair = {k: options[k] for k in _REPAIR_NUMBERS}
     unused = {
-        "an image": {"unit": options["unit"], "largest_body": largest_body},
+        "an image": {"unit": options["unit"], "largest_body": largest_body, **repair},
         "a mesh": {
             "px_per_mm": options["px_per_mm"],
             "thickness_mm": options["thickness_mm"],
@@ -1353,6 +1407,7 @@ def _unused_options(kind: str, options: dict) -> dict:
             "density_kg_m3": options["density_kg_m3"],
             "unit": options["unit"],
             "largest_body": largest_body,
+            **repair,
         },
     }[kind]
     pose = options["pose"]

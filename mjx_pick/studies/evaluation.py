@@ -538,6 +538,8 @@ def _run_summary(
     summary.update(
         {
             "object": req.obj.name,
+            # a mesh's repair figures (ObjectModel.repair; None for a prism)
+            "object_repair": req.obj.repair,
             "gripper": req.settings.gripper.name,
             "backend": ctx.chunks.name,
             "device": ctx.chunks.device,
