@@ -8,6 +8,7 @@ value and what is allowed, at construction time, before any simulation starts.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import math
 import os
@@ -362,14 +363,38 @@ def _dataclass_type(cls: type, key: str, ftype: Any) -> type | None:
     return resolved if dataclasses.is_dataclass(resolved) else None
 
 
-def read_toml(path: str | os.PathLike, what: str) -> dict:
-    """A TOML file's tables and keys; what names the file's kind in the error of a file
-    that is missing or not TOML."""
+def read_text(path: str | os.PathLike, what: str) -> str:
+    """The text of a file a user gives (a settings or gripper TOML, a CSV, an outcomes
+    record, a URDF): the one reader of them all. UTF-8, with or without the byte-order
+    mark Excel and Notepad write; what names the file's kind ("ContactParams", "picks
+    CSV") in the ConfigError of a file that is missing, unreadable or not UTF-8 text --
+    the last naming the line and the bytes, since a Latin-1 editor's 'f\xfcr' in a
+    comment looks fine to the person who typed it."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{what} file {str(path)!r} does not exist")
     try:
-        return tomllib.loads(path.read_text())
+        data = path.read_bytes()
+    except OSError as err:
+        raise ConfigError(f"{what} file {str(path)!r} cannot be read: {err.strerror}") from err
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = data[: err.start].count(b"\n") + 1
+        bad = data[err.start : err.end]
+        shown = " ".join(f"0x{b:02x}" for b in bad)
+        raise ConfigError(
+            f"{what} file {str(path)!r} is not UTF-8 text: line {line} holds the "
+            f"byte{'s' if len(bad) > 1 else ''} {shown} (saved as Latin-1 or another legacy "
+            "encoding?); save it as UTF-8"
+        ) from None
+
+
+def read_toml(path: str | os.PathLike, what: str) -> dict:
+    """A TOML file's tables and keys (read by :func:`read_text`); what names the file's
+    kind in the error of a file that is missing, not UTF-8 or not TOML."""
+    try:
+        return tomllib.loads(read_text(path, what))
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
 
@@ -382,32 +407,11 @@ def load_toml(cls: type[T], path: str | os.PathLike, *, table: str | None = None
     return from_mapping(cls, data, where=f"{Path(path).name}")
 
 
-class _CsvText:
-    """A user's CSV file opened for csv.DictReader: UTF-8 with or without the byte-order
-    mark that Excel writes; a file that is not UTF-8 text is a ConfigError naming it."""
-
-    def __init__(self, path: Path):
-        self.path = Path(path)
-
-    def __enter__(self):
-        self.fh = self.path.open(newline="", encoding="utf-8-sig")
-        return self
-
-    def __iter__(self):
-        try:
-            yield from self.fh
-        except UnicodeDecodeError as err:
-            raise ConfigError(f"{str(self.path)!r} is not UTF-8 text: {err}") from err
-
-    def __exit__(self, *exc):
-        self.fh.close()
-        return False
-
-
-def open_csv(path: str | os.PathLike) -> _CsvText:
-    """Open a user's CSV file (``with open_csv(p) as fh: csv.DictReader(fh)``): UTF-8,
-    an Excel byte-order mark accepted; undecodable bytes are a ConfigError."""
-    return _CsvText(Path(path))
+def open_csv(path: str | os.PathLike, what: str = "CSV") -> io.StringIO:
+    """A user's CSV file for csv.DictReader (``with open_csv(p) as fh: ...``), read by
+    :func:`read_text`: UTF-8, an Excel byte-order mark accepted, anything else a
+    ConfigError naming the file and the line."""
+    return io.StringIO(read_text(path, what), newline="")
 
 
 def to_dict(obj: Any) -> Any:
