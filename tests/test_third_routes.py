@@ -65,3 +65,166 @@ def test_an_outcomes_record_that_is_not_utf8_is_refused_by_name(tmp_path):
     res = cli(*argv, "--steps", "1", "--out", tmp_path / "never", *FAST[:3], check=False)
     assert "mine.toml' is not UTF-8 text: line 1 holds the byte 0xfc" in res.stderr
     assert not (tmp_path / "never").exists()
+
+
+# ------------------------------------------------ user text escaped wherever it goes
+# names the name rule lets through, each holding what one format or another reads as
+# markup: a double quote (XML, TOML), '<' and '&' (XML, HTML), an emoji (json.dumps
+# writes it as surrogate escapes TOML refuses), an apostrophe and '$' (a shell line)
+NAMES = ['grip "q"', "grip <a & b>", "grip 🤖", "it's $HOME"]
+
+
+def _gripper_file(folder: Path, name: str) -> Path:
+    quoted = name.replace("\\", "\\\\").replace('"', '\\"').replace("\t", "\\t")
+    f = folder / "gripper.toml"
+    f.write_text(f'base = "robotiq-2f85"\nname = "{quoted}"\n', "utf-8")
+    return f
+
+
+def _scene_model_name(run: Path) -> str:
+    """scene.xml parsed by a strict XML parser (a file that is not well-formed raises):
+    its model's name."""
+    import xml.etree.ElementTree as ET
+
+    return ET.parse(run / "scene.xml").getroot().get("model")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_a_gripper_name_of_any_character_reaches_the_model_intact(name, tmp_path):
+    out = tmp_path / "run"
+    argv = ["evaluate", "block", "--gripper-file", _gripper_file(tmp_path, name)]
+    cli(*argv, "--n", "2", "--traces", "0", "--out", out, *FAST, check=True)
+    assert _scene_model_name(out) == f"mjx_pick block {name}"
+
+
+@pytest.mark.parametrize("stem", ['bracket "v2"', "part <1> & 🤖"])
+def test_a_photo_or_mesh_named_with_markup_characters_is_simulated(stem, tmp_path):
+    import trimesh
+
+    photo = tmp_path / f"{stem}.png"
+    shutil.copy(SHIPPED / "objects" / "block.png", photo)
+    mesh = tmp_path / f"{stem}.stl"
+    trimesh.creation.box([30.0, 20.0, 15.0]).export(mesh)
+    for source, size in (
+        (photo, ["--px-per-mm", "10", "--thickness-mm", "20", "--mass-g", "43.2"]),
+        (mesh, ["--unit", "mm", "--mass-g", "9", "--no-cache"]),
+    ):
+        out = tmp_path / f"run-{source.suffix[1:]}"
+        cli("evaluate", source, *size, "--n", "2", "--traces", "0", "--out", out, *FAST, check=True)
+        assert _scene_model_name(out) == f"mjx_pick {stem} robotiq-2f85"
+
+
+def test_a_name_the_name_rule_refuses_is_refused_before_work(tmp_path):
+    photo = tmp_path / "line\nbreak.png"
+    shutil.copy(SHIPPED / "objects" / "block.png", photo)
+    size = ["--px-per-mm", "10", "--thickness-mm", "20", "--mass-g", "43.2"]
+    res = cli("evaluate", photo, *size, "--out", tmp_path / "never", *FAST, check=False)
+    assert "an object is named after its file" in res.stderr and "rename the file" in res.stderr
+    gripper = _gripper_file(tmp_path, "tab\there")
+    res = cli("evaluate", "block", "--gripper-file", gripper, "--out", tmp_path / "never", *FAST)
+    assert res.returncode == 2 and "gripper.name = 'tab\\there' is not allowed" in res.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_names_reach_toml_html_and_shell_lines_intact(tmp_path):
+    """A design's best_gripper.toml, a fit's contact.toml, a report's HTML and the
+    command line the CLI prints: each read back by its own format's parser."""
+    import html.parser
+    import shlex
+    import tomllib
+
+    name = 'grip "q" <&> 🤖'
+    design = tmp_path / "design"
+    argv = ["design", "block", "--gripper-file", _gripper_file(tmp_path, name)]
+    argv += ["--bound", "finger_width_mm=15:30", "--variants", "2", "--rounds", "1"]
+    cli(*argv, "--n", "4", "--out", design, *FAST, check=True)
+    best = tomllib.loads((design / "best_gripper.toml").read_text("utf-8"))
+    assert best["name"].startswith(name)
+
+    # a fit on an object whose name holds the same characters, into a folder with a space
+    photo = tmp_path / f"{name}.png"
+    shutil.copy(SHIPPED / "objects" / "block.png", photo)
+    rows = (SHIPPED / "outcomes" / "block_1kg_rg2.csv").read_text().splitlines()
+    (tmp_path / "mine.csv").write_text("\n".join(rows[:1] + rows[4:8]) + "\n")
+    fit = tmp_path / "my fit"
+    argv = ["calibrate", tmp_path / "mine.csv", photo, "--px-per-mm", "10"]
+    argv += ["--thickness-mm", "20", "--mass-g", "1000", "--gripper", "onrobot-rg2"]
+    argv += ["--estimator", "random", "--steps", "0", "--no-identify"]
+    res = cli(*argv, "--backend", "mujoco", "--no-progress", "--out", fit, check=True)
+    contact = tomllib.loads((fit / "contact.toml").read_text("utf-8"))
+    assert contact["fitted_for"]["object"] == name
+    command = res.stdout.split("use: ")[-1].strip()
+    assert shlex.split(command)[-1] == str(fit / "contact.toml")
+
+    # the report of a run with both names: its title as an HTML parser reads it
+    run = tmp_path / "run"
+    argv = ["evaluate", photo, "--px-per-mm", "10", "--thickness-mm", "20", "--mass-g", "43.2"]
+    argv += ["--gripper-file", tmp_path / "gripper.toml", "--n", "2", "--traces", "0"]
+    cli(*argv, "--out", run, *FAST, check=True)
+    cli("report", run, "--no-animations", "--no-progress", check=True)
+
+    class Title(html.parser.HTMLParser):
+        inside, text = False, ""
+
+        def handle_starttag(self, tag, attrs):
+            self.inside = tag == "title"
+
+        def handle_endtag(self, tag):
+            self.inside = False
+
+        def handle_data(self, data):
+            self.text += data if self.inside else ""
+
+    parser = Title()
+    parser.feed((run / "report.html").read_text("utf-8"))
+    assert parser.text == f"mjx_pick report: {name}"
+
+
+# every format's escape, read back by that format's own parser: text that reads as
+# markup, quoting or an escape in one format or another, and Unicode beyond the BMP
+AWKWARD = [
+    'a "b"',
+    "a 'b'",
+    "<tag attr='x'>",
+    "&amp; & &#10;",
+    "back\\slash \\n \\u0041",
+    "tab\there",
+    "new\nline",
+    "cr\rhere",
+    "del\x7f",
+    "emoji 🤖 and ✓",
+    "ümlaut Grüße",
+    "$HOME `id` $(id) ;|&",
+    "*?[]{}~",
+    "  spaces  ",
+    "",
+    "]]> --> <!--",
+    "\u2028line sep\u2029",
+    "right-to-left \u202e",
+    "zero\u200bwidth",
+    "a" * 300,
+]
+
+
+@pytest.mark.parametrize("text", AWKWARD)
+def test_each_escape_reads_back_in_its_own_format(text):
+    import html
+    import shlex
+    import tomllib
+    import xml.etree.ElementTree as ET
+
+    from mjx_pick.core.escape import html_text, shell_word, toml_string, xml_attr
+
+    assert ET.fromstring(f'<m a="{xml_attr(text)}"/>').get("a") == text
+    assert tomllib.loads(f"k = {toml_string(text)}")["k"] == text
+    assert html.unescape(html_text(text)) == text and "<" not in html_text(text)
+    assert shlex.split(f"cmd {shell_word(text)}") == ["cmd", text]
+
+
+def test_text_xml_cannot_hold_is_replaced_not_written_raw():
+    import xml.etree.ElementTree as ET
+
+    from mjx_pick.core.escape import xml_attr
+
+    text = "bell\x07 nul\x00 esc\x1b"
+    assert ET.fromstring(f'<m a="{xml_attr(text)}"/>').get("a") == "bell\ufffd nul\ufffd esc\ufffd"

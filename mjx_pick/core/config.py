@@ -19,6 +19,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
+from mjx_pick.core.escape import toml_string
+
 T = TypeVar("T")
 
 
@@ -437,37 +439,24 @@ def to_toml(obj: Any) -> str:
         if isinstance(value, dict):
             tables.append((key, value))
         else:
-            lines.append(f"{key} = {_toml_value(value)}")
+            lines.append(f"{key} = {toml_value(value)}")
     for name, table in tables:
         lines.append(f"\n[{name}]")
-        lines.extend(f"{k} = {_toml_value(v)}" for k, v in table.items() if v is not None)
+        lines.extend(f"{k} = {toml_value(v)}" for k, v in table.items() if v is not None)
     return "\n".join(lines) + "\n"
 
 
-def _toml_string(text: str) -> str:
-    """A TOML basic string: any Unicode as it is (json.dumps would write an emoji as two
-    surrogate escapes, which TOML refuses); quote, backslash and control characters
-    escaped."""
-
-    def esc(c: str) -> str:
-        if c in '"\\':
-            return "\\" + c
-        if ord(c) < 32 or ord(c) == 127:
-            return f"\\u{ord(c):04x}"
-        return c
-
-    return '"' + "".join(esc(c) for c in text) + '"'
-
-
-def _toml_value(value: Any) -> str:
+def toml_value(value: Any) -> str:
+    """A value as TOML (the subset this project writes: booleans, numbers, strings through
+    ``escape.toml_string``, lists of them)."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int | float):
         return repr(float(value)) if isinstance(value, float) else str(value)
     if isinstance(value, str):
-        return _toml_string(value)
+        return toml_string(value)
     if isinstance(value, list):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     if value is None:
         raise ConfigError("TOML cannot store None; leave the key out instead")
     raise TypeError(f"cannot write {type(value).__name__} to TOML")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import base64
 import contextlib
-import html
 import json
 import os
 from pathlib import Path
@@ -12,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core.config import ConfigError, write_atomic, write_json
+from mjx_pick.core.escape import html_text
 from mjx_pick.core.metrics import label_check_rows, rate_text
 from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.reporting.animation import animate, render_pool
@@ -190,7 +190,7 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, skipped, picks) -> 
     """report.html; templates: {paper: path}, skipped: {paper: why it was not written}."""
     s = run.summary
     rows = "".join(
-        f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>"
+        f"<tr><th>{html_text(str(k))}</th><td>{html_text(str(v))}</td></tr>"
         for k, v in (
             ("object / gripper", f"{s.get('object')} / {s.get('gripper')}"),
             ("backend / device", f"{s.get('backend')} / {s.get('device')}"),
@@ -205,15 +205,15 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, skipped, picks) -> 
     )
     img = lambda p, cap: (  # noqa: E731
         f'<figure><img src="{_embed(p, "image/png" if p.suffix == ".png" else "image/gif")}">'
-        f"<figcaption>{html.escape(cap)}</figcaption></figure>"
+        f"<figcaption>{html_text(cap)}</figcaption></figure>"
     )
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'>",
-        f"<title>mjx_pick report: {html.escape(str(s.get('object')))}</title>",
+        f"<title>mjx_pick report: {html_text(str(s.get('object')))}</title>",
         "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
         "img{max-width:100%}figure{display:inline-block;margin:6px}"
         "td,th{text-align:left;padding:2px 10px}</style></head><body>",
-        f"<h1>Pick-point report: {html.escape(str(s.get('object')))}</h1>",
+        f"<h1>Pick-point report: {html_text(str(s.get('object')))}</h1>",
         f"<table>{rows}</table>",
         "<h2>Pick-point maps</h2>",
         img(out_dir / "score_map.png", "pick-points by score"),
@@ -230,11 +230,11 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, skipped, picks) -> 
             for p in templates.values()
         ),
         *(
-            f"<li>{html.escape(paper)}: not written, {html.escape(why)}</li>"
+            f"<li>{html_text(paper)}: not written, {html_text(why)}</li>"
             for paper, why in skipped.items()
         ),
         "</ul><h2>Robot export</h2>",
-        f"<pre>{html.escape(json.dumps(picks, indent=1))}</pre>",
+        f"<pre>{html_text(json.dumps(picks, indent=1))}</pre>",
         "</body></html>",
     ]
     path = out_dir / "report.html"
