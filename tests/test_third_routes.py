@@ -228,3 +228,123 @@ def test_text_xml_cannot_hold_is_replaced_not_written_raw():
 
     text = "bell\x07 nul\x00 esc\x1b"
     assert ET.fromstring(f'<m a="{xml_attr(text)}"/>').get("a") == "bell\ufffd nul\ufffd esc\ufffd"
+
+
+# ------------------------------ only the files a run recorded writing are ever removed
+def _users_files(folder: Path) -> dict[Path, bytes]:
+    """A user's notes and photos put into a run folder; {path: content}."""
+    files = {folder / "notes.txt": b"cell 3: fixture moved"}
+    files[folder / "photos" / "cell.jpg"] = b"\xff\xd8"
+    files[folder / "cad" / "fixture.step"] = b"ISO-10303-21;"
+    for path, data in files.items():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    return files
+
+
+def _killed_before_its_first_chunk(out: Path) -> None:
+    """An evaluate run SIGKILLed once it claimed out and wrote its configuration, before
+    any chunk was saved."""
+    import os
+    import signal
+    import time
+
+    argv = ["evaluate", "block", "--n", "4000", "--chunk-size", "4000", "--out", out, *FAST]
+    proc = subprocess.Popen(MJX_PICK.split() + list(map(str, argv)), stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "scene.xml").is_file() and time.monotonic() < deadline:
+            assert proc.poll() is None, "the run ended before it could be killed"
+            time.sleep(0.02)
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait()
+    assert not list(out.glob("chunks/part-*"))
+
+
+def test_a_rerun_after_a_killed_run_keeps_the_files_the_user_added(tmp_path):
+    out = tmp_path / "proj"
+    _killed_before_its_first_chunk(out)
+    mine = _users_files(out)
+    res = cli("evaluate", "block", "--n", "8", "--seed", "5", "--out", out, *FAST, check=True)
+    assert "replacing the files of an unfinished" in res.stderr
+    assert "kept 3 file(s) no mjx-pick run recorded writing" in res.stderr
+    assert {p: p.read_bytes() for p in mine} == mine
+    assert (out / "results.parquet").is_file()
+
+
+def test_a_refused_command_writes_nothing_and_a_later_run_keeps_the_users_files(tmp_path):
+    work = tmp_path / "work"
+    work.mkdir()
+    argv = ["sweep", "block", "--param", "controller.force_n=20,300", "--n", "8", "--out", "."]
+    res = cli(*argv, *FAST, cwd=work, check=False)
+    assert "sweep variant grasp.grip_force_n=300" in res.stderr
+    assert sorted(work.iterdir()) == []  # no manifest, no lock file
+    mine = _users_files(work)
+    res = cli("evaluate", "block", "--n", "8", "--out", ".", *FAST, cwd=work, check=False)
+    assert "holds files that mjx-pick did not write (cad, notes.txt, photos)" in res.stderr
+    assert {p: p.read_bytes() for p in mine} == mine
+    assert sorted(p.name for p in work.iterdir()) == ["cad", "notes.txt", "photos"]
+
+
+def test_a_folder_of_foreign_files_gets_no_lock_file(tmp_path):
+    import os
+
+    etc = tmp_path / "etc"
+    etc.mkdir()
+    (etc / "passwd").write_text("root:x:0:0")
+    cli("evaluate", "block", "--n", "2", "--out", etc, *FAST, check=False)
+    assert sorted(p.name for p in etc.iterdir()) == ["passwd"]
+    if os.geteuid() == 0 and not Path("/.mjx_pick.lock").exists():  # root writes anywhere
+        try:
+            res = cli("evaluate", "block", "--n", "2", "--out", "/", *FAST, check=False)
+            assert "holds files that mjx-pick did not write" in res.stderr
+            assert not Path("/.mjx_pick.lock").exists()
+        finally:
+            Path("/.mjx_pick.lock").unlink(missing_ok=True)
+
+
+def test_overwrite_removes_the_runs_files_and_its_reports_not_the_users(tmp_path):
+    out = tmp_path / "run"
+    cli("evaluate", "block", "--n", "4", "--out", out, *FAST, check=True)
+    cli("report", out, "--no-animations", "--no-progress", check=True)
+    assert (out / "traces.parquet").is_file() and (out / "report.html").is_file()
+    mine = _users_files(out)
+    argv = ["evaluate", "block", "--n", "4", "--seed", "1", "--traces", "0", "--overwrite"]
+    res = cli(*argv, "--out", out, *FAST, check=True)
+    # the earlier run's traces and report are gone (no stale file beside new results)
+    assert not (out / "traces.parquet").exists() and not (out / "report.html").exists()
+    assert not list(out.glob("forces_*.png")) and not (out / "score_map.png").exists()
+    assert {p: p.read_bytes() for p in mine} == mine
+    assert "kept 3 file(s)" in res.stderr
+
+
+def test_a_folder_an_older_version_wrote_is_not_emptied_blind(tmp_path):
+    import json
+
+    out = tmp_path / "old"
+    out.mkdir()
+    manifest = {"command": "evaluate", "config_key": "k", "status": "failed"}
+    (out / "mjx_pick_run.json").write_text(json.dumps(manifest))
+    (out / "results.parquet").write_bytes(b"x")
+    res = cli("evaluate", "block", "--n", "2", "--overwrite", "--out", out, *FAST, check=False)
+    assert "did not record the files it wrote (results.parquet)" in res.stderr
+    assert (out / "results.parquet").read_bytes() == b"x"
+
+
+def test_a_journal_never_reaches_out_of_its_folder(tmp_path):
+    import json
+
+    from mjx_pick.outputs.rundir import JOURNAL, remove_recorded
+
+    outside = tmp_path / "outside.txt"
+    outside.write_text("keep")
+    run = tmp_path / "run"
+    (run / "sub").mkdir(parents=True)
+    (run / "link").symlink_to(tmp_path)
+    (run / "sub" / "own.txt").write_text("x")
+    entries = ["../outside.txt", str(outside), "link/outside.txt", "sub/own.txt", "", "/"]
+    (run / JOURNAL).write_text("".join(json.dumps(e) + "\n" for e in entries) + '"cut')
+    remove_recorded(run)
+    assert outside.read_text() == "keep"
+    assert not (run / "sub").exists()  # its one recorded file removed, then the folder

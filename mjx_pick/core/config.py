@@ -15,7 +15,7 @@ import os
 import re
 import tempfile
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -462,13 +462,29 @@ def toml_value(value: Any) -> str:
     raise TypeError(f"cannot write {type(value).__name__} to TOML")
 
 
+# Called with each path write_atomic is about to write, before any byte of it: how an
+# output folder records every file its run writes (``outputs.rundir``: the only files it
+# will ever remove), without this module knowing of output folders.
+_WRITE_OBSERVERS: list[Callable[[Path], None]] = []
+
+
+def observe_writes(observer: Callable[[Path], None]) -> None:
+    """Call observer(path) before each :func:`write_atomic` (once per observer)."""
+    if observer not in _WRITE_OBSERVERS:
+        _WRITE_OBSERVERS.append(observer)
+
+
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write a file so that readers see the old or the new content, never a partial one."""
+    """Write a file so that readers see the old or the new content, never a partial one.
+    An OSError names the file (a disk that fills raises one without a name)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    payload = data.encode() if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    for observe in _WRITE_OBSERVERS:
+        observe(path)
+    tmp = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        payload = data.encode() if isinstance(data, str) else data
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         with os.fdopen(fd, "wb") as fh:
             fh.write(payload)
             fh.flush()
@@ -477,8 +493,11 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual mode
         os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+    except BaseException as err:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
+        if isinstance(err, OSError) and err.filename is None:
+            err.filename = str(path)
         raise
     return path
 

@@ -19,6 +19,7 @@ from mjx_pick.outputs.reporting.figures import force_plot, maps
 from mjx_pick.outputs.reporting.robot import robot_picks
 from mjx_pick.outputs.reporting.run import Run, read_parquet
 from mjx_pick.outputs.reporting.template import PAPERS_MM, page_misfit, positioning_template
+from mjx_pick.outputs.rundir import record_file, recording, remove_recorded
 
 __all__ = ["report"]
 
@@ -60,7 +61,9 @@ def report(
     # template, the robot export, the page
     parts = len(traced) * (2 if animations else 1) + 1 + len(PAPERS_MM) + 2
     pool = render_pool() if animations and traced else contextlib.nullcontext()
-    with ProgressBar("report", "part", enabled=progress, total=parts) as bar, pool as child:
+    bar = ProgressBar("report", "part", enabled=progress, total=parts)
+    # the run's folder records the report's files: an --overwrite of the run removes them
+    with recording(out_dir), bar, pool as child:
         anim = (anim_every, anim_size, child) if animations else None
         forces, anims = _traced_parts(run, out_dir, traced, f_d, anim, bar)
         written["forces"] = [str(p) for p, _ in forces]
@@ -103,6 +106,8 @@ def _traced_parts(run: Run, out_dir: Path, traced, f_d: float, anim, bar) -> tup
         if anim is not None:
             anim_every, anim_size, child = anim
             g = out_dir / f"anim_{pid}.gif"
+            for written in (g, g.with_suffix(".mp4")):  # written in a render process
+                record_file(written)
             frames = animate(
                 run.path / "scene.xml", trace, g, anim_every, anim_size, run.gripper,
                 pool=child,
@@ -147,7 +152,7 @@ def _templates(run: Run, out_dir: Path, chosen: list, name: str, bar) -> tuple[d
         if misfit:
             # a part larger than the page: the rest of the report is still worth having
             skipped[paper] = misfit
-            (out_dir / f"template_{paper}.pdf").unlink(missing_ok=True)  # an earlier report's
+            remove_recorded(out_dir, f"template_{paper}.pdf")  # an earlier report's
             bar.advance()
             continue
         p = out_dir / f"template_{paper}.pdf"
