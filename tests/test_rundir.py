@@ -10,6 +10,7 @@ import pytest
 import mjx_pick as mp
 from mjx_pick.cli import main
 from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.config import write_atomic
 from mjx_pick.outputs.rundir import (
     MANIFEST,
     claim,
@@ -25,8 +26,9 @@ from mjx_pick.studies.sweeps import ParamSpec, sweep
 def test_claim_refuses_other_commands_and_configurations(tmp_path):
     out = tmp_path / "run"
     claim(out, "evaluate", "k1")
-    (out / "results.parquet").write_bytes(b"x")
+    write_atomic(out / "results.parquet", b"x")  # recorded: the run's own file
     finish(out)
+    (out / "notes.txt").write_text("mine")  # a user's, beside the results
     assert read_manifest(out)["status"] == "complete"
     claim(out, "evaluate", "k1")  # the same command and configuration: allowed
     with pytest.raises(mp.ConfigError, match=r"holds the results of `mjx-pick evaluate`"):
@@ -39,6 +41,7 @@ def test_claim_refuses_other_commands_and_configurations(tmp_path):
     # --overwrite empties it first
     claim(out, "sweep", "k2", overwrite=True)
     assert read_manifest(out)["command"] == "sweep" and not (out / "results.parquet").exists()
+    assert (out / "notes.txt").read_text() == "mine"  # only recorded files are removed
     with pytest.raises(mp.ConfigError, match="contradict"):
         claim(out, "sweep", "k2", overwrite=True, resume=True)
 
@@ -86,9 +89,10 @@ def test_sweep_into_an_evaluate_folder_is_refused_before_simulating(tmp_path, ca
 HOLDER = """
 import sys, time
 from mjx_pick.outputs.rundir import claim
+from mjx_pick.core.config import write_atomic
 out = claim(sys.argv[1], "evaluate", "k1")
-(out / "config.json").write_text("{}")
-(out / "scene.xml").write_text("<mujoco/>")
+write_atomic(out / "config.json", "{}")
+write_atomic(out / "scene.xml", "<mujoco/>")
 print("claimed", flush=True)
 time.sleep(120)
 """
@@ -152,12 +156,15 @@ def test_refusal_names_each_changed_setting_and_offers_a_new_folder(tmp_path):
 def test_a_failed_run_is_replaced_by_a_corrected_one(tmp_path):
     out = tmp_path / "run"
     claim(out, "evaluate", "k1")
-    (out / "config.json").write_text("{}")
+    write_atomic(out / "config.json", "{}")
     finish(out, "failed", message="no feasible pick-point")
+    (out / "photos").mkdir()
+    (out / "photos" / "cell.jpg").write_bytes(b"x")  # a user's, put there afterwards
     m = read_manifest(out)
     assert (m["status"], m["message"]) == ("failed", "no feasible pick-point")
     claim(out, "evaluate", "k2")  # no --overwrite needed: nothing finished is there
     assert read_manifest(out)["status"] == "running" and not (out / "config.json").exists()
+    assert (out / "photos" / "cell.jpg").is_file()  # never the run's: kept
 
 
 def test_end_claims_marks_unfinished_folders(tmp_path):

@@ -25,6 +25,7 @@ from mjx_pick.cli.inputs import (
     run_options,
 )
 from mjx_pick.core.config import ConfigError
+from mjx_pick.core.escape import shell_word
 from mjx_pick.engine import registry
 from mjx_pick.outputs.progress import echo
 
@@ -244,7 +245,7 @@ def cmd_calibrate(args) -> int:
     _print_fit(res, names)
     print(
         f"results in {args.out}/ (contact.toml, calibration.json, loss.png, report.md); "
-        f"use: mjx-pick evaluate ... --contact {args.out}/contact.toml"
+        f"use: mjx-pick evaluate ... --contact {shell_word(f'{args.out}/contact.toml')}"
     )
     return 0
 
@@ -765,7 +766,7 @@ def cmd_trials_plan(args) -> int:
     print(
         f"{rnd['simulations']} simulations. Print {args.out}/templates_round1.pdf at actual "
         f"size; try each page {args.repeats} times; write the successes in "
-        f"{args.out}/trials.csv (or: mjx-pick trials record {args.out})"
+        f"{args.out}/trials.csv (or: mjx-pick trials record {shell_word(args.out)})"
     )
     return 0
 

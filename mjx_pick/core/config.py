@@ -8,15 +8,18 @@ value and what is allowed, at construction time, before any simulation starts.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import math
 import os
 import re
 import tempfile
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
+
+from mjx_pick.core.escape import toml_string
 
 T = TypeVar("T")
 
@@ -362,14 +365,38 @@ def _dataclass_type(cls: type, key: str, ftype: Any) -> type | None:
     return resolved if dataclasses.is_dataclass(resolved) else None
 
 
-def read_toml(path: str | os.PathLike, what: str) -> dict:
-    """A TOML file's tables and keys; what names the file's kind in the error of a file
-    that is missing or not TOML."""
+def read_text(path: str | os.PathLike, what: str) -> str:
+    """The text of a file a user gives (a settings or gripper TOML, a CSV, an outcomes
+    record, a URDF): the one reader of them all. UTF-8, with or without the byte-order
+    mark Excel and Notepad write; what names the file's kind ("ContactParams", "picks
+    CSV") in the ConfigError of a file that is missing, unreadable or not UTF-8 text --
+    the last naming the line and the bytes, since a Latin-1 editor's 'f\xfcr' in a
+    comment looks fine to the person who typed it."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{what} file {str(path)!r} does not exist")
     try:
-        return tomllib.loads(path.read_text())
+        data = path.read_bytes()
+    except OSError as err:
+        raise ConfigError(f"{what} file {str(path)!r} cannot be read: {err.strerror}") from err
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = data[: err.start].count(b"\n") + 1
+        bad = data[err.start : err.end]
+        shown = " ".join(f"0x{b:02x}" for b in bad)
+        raise ConfigError(
+            f"{what} file {str(path)!r} is not UTF-8 text: line {line} holds the "
+            f"byte{'s' if len(bad) > 1 else ''} {shown} (saved as Latin-1 or another legacy "
+            "encoding?); save it as UTF-8"
+        ) from None
+
+
+def read_toml(path: str | os.PathLike, what: str) -> dict:
+    """A TOML file's tables and keys (read by :func:`read_text`); what names the file's
+    kind in the error of a file that is missing, not UTF-8 or not TOML."""
+    try:
+        return tomllib.loads(read_text(path, what))
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
 
@@ -382,32 +409,11 @@ def load_toml(cls: type[T], path: str | os.PathLike, *, table: str | None = None
     return from_mapping(cls, data, where=f"{Path(path).name}")
 
 
-class _CsvText:
-    """A user's CSV file opened for csv.DictReader: UTF-8 with or without the byte-order
-    mark that Excel writes; a file that is not UTF-8 text is a ConfigError naming it."""
-
-    def __init__(self, path: Path):
-        self.path = Path(path)
-
-    def __enter__(self):
-        self.fh = self.path.open(newline="", encoding="utf-8-sig")
-        return self
-
-    def __iter__(self):
-        try:
-            yield from self.fh
-        except UnicodeDecodeError as err:
-            raise ConfigError(f"{str(self.path)!r} is not UTF-8 text: {err}") from err
-
-    def __exit__(self, *exc):
-        self.fh.close()
-        return False
-
-
-def open_csv(path: str | os.PathLike) -> _CsvText:
-    """Open a user's CSV file (``with open_csv(p) as fh: csv.DictReader(fh)``): UTF-8,
-    an Excel byte-order mark accepted; undecodable bytes are a ConfigError."""
-    return _CsvText(Path(path))
+def open_csv(path: str | os.PathLike, what: str = "CSV") -> io.StringIO:
+    """A user's CSV file for csv.DictReader (``with open_csv(p) as fh: ...``), read by
+    :func:`read_text`: UTF-8, an Excel byte-order mark accepted, anything else a
+    ConfigError naming the file and the line."""
+    return io.StringIO(read_text(path, what), newline="")
 
 
 def to_dict(obj: Any) -> Any:
@@ -433,49 +439,52 @@ def to_toml(obj: Any) -> str:
         if isinstance(value, dict):
             tables.append((key, value))
         else:
-            lines.append(f"{key} = {_toml_value(value)}")
+            lines.append(f"{key} = {toml_value(value)}")
     for name, table in tables:
         lines.append(f"\n[{name}]")
-        lines.extend(f"{k} = {_toml_value(v)}" for k, v in table.items() if v is not None)
+        lines.extend(f"{k} = {toml_value(v)}" for k, v in table.items() if v is not None)
     return "\n".join(lines) + "\n"
 
 
-def _toml_string(text: str) -> str:
-    """A TOML basic string: any Unicode as it is (json.dumps would write an emoji as two
-    surrogate escapes, which TOML refuses); quote, backslash and control characters
-    escaped."""
-
-    def esc(c: str) -> str:
-        if c in '"\\':
-            return "\\" + c
-        if ord(c) < 32 or ord(c) == 127:
-            return f"\\u{ord(c):04x}"
-        return c
-
-    return '"' + "".join(esc(c) for c in text) + '"'
-
-
-def _toml_value(value: Any) -> str:
+def toml_value(value: Any) -> str:
+    """A value as TOML (the subset this project writes: booleans, numbers, strings through
+    ``escape.toml_string``, lists of them)."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int | float):
         return repr(float(value)) if isinstance(value, float) else str(value)
     if isinstance(value, str):
-        return _toml_string(value)
+        return toml_string(value)
     if isinstance(value, list):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     if value is None:
         raise ConfigError("TOML cannot store None; leave the key out instead")
     raise TypeError(f"cannot write {type(value).__name__} to TOML")
 
 
+# Called with each path write_atomic is about to write, before any byte of it: how an
+# output folder records every file its run writes (``outputs.rundir``: the only files it
+# will ever remove), without this module knowing of output folders.
+_WRITE_OBSERVERS: list[Callable[[Path], None]] = []
+
+
+def observe_writes(observer: Callable[[Path], None]) -> None:
+    """Call observer(path) before each :func:`write_atomic` (once per observer)."""
+    if observer not in _WRITE_OBSERVERS:
+        _WRITE_OBSERVERS.append(observer)
+
+
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write a file so that readers see the old or the new content, never a partial one."""
+    """Write a file so that readers see the old or the new content, never a partial one.
+    An OSError names the file (a disk that fills raises one without a name)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    payload = data.encode() if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    for observe in _WRITE_OBSERVERS:
+        observe(path)
+    tmp = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        payload = data.encode() if isinstance(data, str) else data
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         with os.fdopen(fd, "wb") as fh:
             fh.write(payload)
             fh.flush()
@@ -484,8 +493,11 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual mode
         os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+    except BaseException as err:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
+        if isinstance(err, OSError) and err.filename is None:
+            err.filename = str(path)
         raise
     return path
 

@@ -14,7 +14,14 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core import mjcf_gripper, urdf_gripper
-from mjx_pick.core.config import ConfigError, check_fields, check_name, from_mapping, setting
+from mjx_pick.core.config import (
+    ConfigError,
+    check_fields,
+    check_name,
+    from_mapping,
+    read_toml,
+    setting,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -167,12 +174,7 @@ def load_gripper(name_or_path: str | os.PathLike) -> GripperSpec:
 
 
 def _load_file(path: Path) -> GripperSpec:
-    if not path.is_file():
-        raise ConfigError(f"gripper file {str(path)!r} does not exist")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
+    data = read_toml(path, "gripper")
     return gripper_from_data(data, path.name, path.parent)
 
 

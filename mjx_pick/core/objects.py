@@ -21,7 +21,7 @@ from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.polygon import orient
 
 from mjx_pick.core import cache, meshrepair, numbers
-from mjx_pick.core.config import ConfigError, PlausibilityWarning, check_range
+from mjx_pick.core.config import ConfigError, PlausibilityWarning, check_name, check_range
 
 # what a slow preparation step is doing, said as it starts (the CLI shows it on stderr)
 log = logging.getLogger(__name__)
@@ -108,6 +108,9 @@ class ObjectModel:
     mesh_to_object_m: np.ndarray | None = None
     # meshes only: what the import's repair changed (meshrepair.Repair.figures)
     repair: dict | None = None
+
+    def __post_init__(self):
+        check_name("object", self.name)  # the one name rule, as a gripper's
 
     def pad_pieces(self, finger_depth_mm: float, finger_width_mm: float) -> tuple[np.ndarray, ...]:
         """Collision pieces for the pads of a finger of this footprint (depth x width).
@@ -433,6 +436,7 @@ def object_from_image(
     numbers.check("px_per_mm", px_per_mm)
     numbers.check("thickness_mm", thickness_mm)
     check_range("object", "simplify_mm", simplify_mm, 0, 5)
+    label = _label(name, Path(path))
     mask = segment_image(path)
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     px = (cols[-1] - cols[0] + 1, rows[-1] - rows[0] + 1)
@@ -442,7 +446,6 @@ def object_from_image(
         "check px_per_mm (--px-per-mm), the image's pixels per millimetre",
     )
     polygon = mask_to_polygon(mask, px_per_mm, simplify_mm)
-    label = name or Path(path).stem
     source = f"{path} (px_per_mm={px_per_mm:g}, simplify_mm={simplify_mm:g})"
     return object_from_polygon(
         polygon,
@@ -504,6 +507,21 @@ def _finger_may_enter(hole: Polygon, depth_mm: float, width_mm: float) -> bool:
         return False
     radius = shapely.maximum_inscribed_circle(hole, tolerance=0.05).length
     return 2.0 * radius >= depth_mm
+
+
+def _label(name: str | None, path: Path) -> str:
+    """An object's name: the one given, else its file's name without the suffix --
+    checked by the name rule now, before the file is read or prepared."""
+    if name is not None:
+        check_name("object", name)
+        return name
+    try:
+        check_name("object", path.stem)
+    except ConfigError as err:
+        raise ConfigError(
+            f"{str(path)!r}: an object is named after its file: {err}; rename the file"
+        ) from None
+    return path.stem
 
 
 def _mass_kg(name: str, volume_m3: float, mass_g: float | None, density: float | None) -> float:
@@ -700,7 +718,7 @@ def object_from_mesh(
         volume in doubt, %; centre of mass, mm; bounds, mm); beyond, it is refused.
     """
     path = Path(path)
-    label = name or path.stem
+    label = _label(name, path)
     pose = check_pose(pose)
     tolerance = meshrepair.Tolerance(repair_volume_pct, repair_com_mm, repair_bounds_mm)
     _check_mesh_file(path, unit)

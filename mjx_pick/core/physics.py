@@ -340,17 +340,11 @@ CONTACT_META_TABLES = ("fitted_for", "calibrated")
 def load_contact(path) -> tuple[ContactParams, dict]:
     """ContactParams from a TOML file, and its metadata tables (CONTACT_META_TABLES: what
     a calibration fitted them for and its other results; empty for a plain file)."""
-    import tomllib
     from pathlib import Path
 
-    from mjx_pick.core.config import from_mapping
+    from mjx_pick.core.config import from_mapping, read_toml
 
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"ContactParams file {str(path)!r} does not exist")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{str(path)!r} is not valid TOML: {err}") from err
+    data = read_toml(path, "ContactParams")
     meta = {k: data.pop(k) for k in CONTACT_META_TABLES if isinstance(data.get(k), dict)}
     return from_mapping(ContactParams, data, where=path.name), meta

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import html
 import re
 from pathlib import Path
 from typing import NamedTuple
@@ -16,6 +17,7 @@ import numpy as np
 
 from mjx_pick.core import grasps as grasp_math
 from mjx_pick.core import mjcf_gripper
+from mjx_pick.core.escape import xml_attr
 from mjx_pick.core.grasps import GraspBatch
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import MAX_HULL_VERTICES, ObjectModel
@@ -208,7 +210,7 @@ class Scene:
         bytes: what the model is, never where its files are installed (resume keys)."""
 
         def digest(m: re.Match) -> str:
-            path = Path(m[1])
+            path = Path(html.unescape(m[1]))  # the attribute's text: entities read back
             if not path.is_file():
                 return m[0]
             return f'file="sha256:{hashlib.sha256(path.read_bytes()).hexdigest()}"'
@@ -354,7 +356,8 @@ def scene_xml(
     pairs = _contact_pairs_xml(gripper, mjc, len(pad_pieces), pad_boxes_mm)
     table_size = _fmt([TABLE_HALF_SIZE_M, TABLE_HALF_SIZE_M, 0.01])
     gripper_body, actuators = _gripper_xml(gripper, kinematics, z_grip, pad_boxes_mm)
-    return f"""<mujoco model="mjx_pick {obj.name} {gripper.name}">
+    model = xml_attr(f"mjx_pick {obj.name} {gripper.name}")  # user names: any character
+    return f"""<mujoco model="{model}">
 {_options_xml(solver)}
   <default>
     <geom contype="0" conaffinity="0"/>

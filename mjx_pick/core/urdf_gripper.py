@@ -14,7 +14,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_pick.core.config import ConfigError, check_range
+from mjx_pick.core.config import ConfigError, check_range, read_text
 
 SERVO = "urdf_servo"  # the name of the actuator added on the joint
 _MOVING = ("revolute", "prismatic")
@@ -186,9 +186,10 @@ class _Robot:
     @classmethod
     def read(cls, file: str) -> _Robot:
         path = Path(file)
+        text = read_text(path, "[urdf] file")
         try:
-            root = _parse(path.read_text(encoding="utf-8-sig"))
-        except (ET.ParseError, OSError, UnicodeDecodeError) as err:
+            root = _parse(text)
+        except ET.ParseError as err:
             raise ConfigError(f"gripper.urdf.file = {file!r} is not an XML file: {err}") from err
         if root.tag != "robot":
             raise ConfigError(

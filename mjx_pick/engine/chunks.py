@@ -5,10 +5,8 @@ Details: docs/engine.md (engine/chunks.py).
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
-import shutil
 import sys
 from pathlib import Path
 
@@ -25,6 +23,7 @@ from mjx_pick.outputs.rundir import (
     flat_settings,
     is_complete,
     read_manifest,
+    remove_recorded,
     result_versions,
     what_changed,
 )
@@ -56,6 +55,7 @@ class ChunkStore:
         settings: dict | None = None,
     ):
         self.dir = self.folder(out_dir, command)
+        self.out_dir = Path(out_dir)
         self.key = key
         self.settings = flat_settings(settings) if settings is not None else None
         has_chunks = any(self.dir.glob("part-*.parquet"))
@@ -150,11 +150,9 @@ class ChunkStore:
         return BackendChunks(self, h.hexdigest()[:16], np.asarray(rows))
 
     def remove(self) -> None:
-        """Drop the chunks once the run's outputs are written (they hold every row)."""
-        shutil.rmtree(self.dir, ignore_errors=True)
-        if self.dir.name != "chunks":  # a joined command's: chunks/ goes once it is empty
-            with contextlib.suppress(OSError):
-                self.dir.parent.rmdir()
+        """Drop the chunks once the run's outputs are written (they hold every row): the
+        files the run recorded writing there, and chunks/ where that empties it."""
+        remove_recorded(self.out_dir, self.dir.relative_to(self.out_dir).as_posix() + "/")
 
 
 class BackendChunks:
@@ -227,7 +225,7 @@ def open_store(
     claim(out, command, key, resume=resume, overwrite=overwrite, joins=joins, settings=request)
     joined = (read_manifest(out) or {}).get("command") != command
     if joined and overwrite:
-        shutil.rmtree(ChunkStore.folder(out, command), ignore_errors=True)
+        remove_recorded(out, f"chunks/{command}/")
     own = command if joined else None
     return ChunkStore(out, key, resume, command=own, settings=request), False
 

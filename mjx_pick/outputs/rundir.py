@@ -6,6 +6,7 @@ Details: docs/outputs.md (outputs/rundir.py).
 from __future__ import annotations
 
 import atexit
+import contextlib
 import dataclasses
 import datetime
 import hashlib
@@ -16,10 +17,11 @@ import shutil
 import socket
 import sys
 import tempfile
+import threading
 from importlib import metadata
 from pathlib import Path
 
-from mjx_pick.core.config import ConfigError, to_dict, write_json
+from mjx_pick.core.config import ConfigError, observe_writes, to_dict, write_json
 
 try:
     import fcntl
@@ -29,6 +31,9 @@ except ImportError:  # no flock (Windows): folders are claimed without a lock
 MANIFEST = "mjx_pick_run.json"
 LOCK = ".mjx_pick.lock"  # the advisory lock of a folder being written (see claim)
 RUN = "run.json"  # the run's metadata (see finish)
+# every file the runs in a folder wrote, one JSON string a line, relative to the folder
+# (a trailing '/': a folder a run owns whole): the only files mjx-pick ever removes
+JOURNAL = ".mjx_pick_files"
 
 
 def config_hash(config) -> str:
@@ -66,9 +71,23 @@ def portable_object(summary: dict) -> dict:
     return {k: v for k, v in summary.items() if k != "source"}
 
 
+def check_out(out) -> None:
+    """Refuse an output folder given as empty text (an unset shell variable in ``--out
+    "$DIR"``), which would otherwise be the current folder."""
+    if out is not None and not str(out).strip():
+        raise ConfigError(
+            f"--out {str(out)!r}: empty; give a folder (an unset variable? to write into the "
+            "current folder, say --out .)"
+        )
+
+
 def _usable(path: Path) -> None:
     if path.exists() and not path.is_dir():
         raise ConfigError(f"--out {path}: is a file, not a folder")
+    if path.is_dir() and read_manifest(path) is None:
+        # refused before the folder's lock file or a probe is made in it: a refused
+        # command writes nothing (--out / or --out /etc, as root, are left as they were)
+        _refuse_foreign(path)
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -89,10 +108,13 @@ class _Held:
     own: bool  # False: joined another command's folder (its manifest is not ours)
     settings: dict | None = None  # a joined command's settings (flat), for its record
     key: str | None = None  # a joined command's configuration key, for its record
+    recorded: set[str] = dataclasses.field(default_factory=set)  # in its journal already
 
 
 _held: dict[Path, _Held] = {}
 _atexit_registered = False
+_recorders: dict[Path, set[str]] = {}  # folders written without a claim (see recording)
+_journal_lock = threading.Lock()  # a run's chunks may be saved from several threads
 
 
 def _now() -> str:
@@ -165,7 +187,8 @@ def _lock(path: Path, command: str, own: bool) -> bool:
         }
         os.ftruncate(fd, 0)
         os.pwrite(fd, json.dumps(record).encode(), 0)
-    _held[key] = _Held(fd, command, own)
+    _held[key] = _Held(fd, command, own, recorded=set(_journal(path) or ()))
+    observe_writes(record_file)
     global _atexit_registered
     if not _atexit_registered:
         atexit.register(end_claims, "failed", "the process ended before the run finished")
@@ -279,12 +302,164 @@ def what_changed(old: dict, settings: dict | None) -> str:
     return f" -- changed: {shown}"
 
 
-def _remove_contents(path: Path) -> None:
-    """Empty a folder this project wrote (its lock and other dot files stay)."""
-    for p in path.iterdir():
-        if p.name.startswith("."):
+def record_file(path: str | os.PathLike, *, whole: bool = False) -> None:
+    """Record that this process is about to write path, in the journal of each folder
+    it claimed (or records for, :func:`recording`) that holds it: before the first byte
+    (a run killed mid-write has recorded its file). ``config.write_atomic`` calls it for
+    every file; a writer of its own (orbax's checkpoints) records its folder, whole."""
+    if not _held and not _recorders:
+        return
+    path = Path(path)
+    target = Path(os.path.abspath(path.parent)).resolve() / path.name
+    folders = [(k, h.recorded) for k, h in _held.items()] + list(_recorders.items())
+    for folder, seen in folders:
+        try:
+            rel = target.relative_to(folder).as_posix()
+        except ValueError:
             continue
-        shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+        if rel in (".", JOURNAL, LOCK):
+            continue
+        rel += "/" if whole else ""
+        with _journal_lock:
+            if rel not in seen:
+                with open(folder / JOURNAL, "a", encoding="utf-8") as fh:
+                    fh.write(json.dumps(rel) + "\n")
+                seen.add(rel)
+
+
+@contextlib.contextmanager
+def recording(folder: str | os.PathLike):
+    """Record the files written into folder meanwhile in its journal, as a claim does,
+    without claiming it: ``report`` adds its pages to a run's folder, and a later
+    --overwrite of that run removes them with the run's own files. Nothing is recorded
+    for a folder no run owns (no manifest)."""
+    key = Path(folder).resolve()
+    if read_manifest(key) is None or key in _recorders or key in _held:
+        yield
+        return
+    _recorders[key] = set(_journal(key) or ())
+    observe_writes(record_file)
+    try:
+        yield
+    finally:
+        _recorders.pop(key, None)
+
+
+def _journal(path: Path) -> list[str] | None:
+    """The entries of path's journal (None: it has none, an older mjx-pick wrote it)."""
+    try:
+        lines = (path / JOURNAL).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return None
+    entries = []
+    for line in lines:
+        try:
+            entry = json.loads(line)
+        except ValueError:  # a line cut short by a kill: its file was never begun
+            continue
+        if isinstance(entry, str):
+            entries.append(entry)
+    return entries
+
+
+def _inside(path: Path, rel: str) -> Path | None:
+    """path / rel where that is inside path, its links followed (a journal entry never
+    reaches out of its folder: no '..', no link to elsewhere); else None."""
+    if not rel.strip("/") or ".." in Path(rel).parts or Path(rel).is_absolute():
+        return None
+    target = path / rel.rstrip("/")
+    try:
+        target.parent.resolve().relative_to(path.resolve())
+    except (ValueError, OSError):
+        return None
+    return target
+
+
+def remove_recorded(path: str | os.PathLike, under: str = "") -> None:
+    """Remove the files the runs in path recorded writing -- all, those in the folder
+    `under` ('/'-terminated) or the one file `under` -- and then the folders that held
+    them wherever that leaves them empty. Nothing else is ever removed: a file a user
+    put beside them stays."""
+    path = Path(path)
+
+    def chosen(entry: str) -> bool:
+        return entry == under or (under.endswith("/") or not under) and entry.startswith(under)
+
+    with _journal_lock:
+        entries = _journal(path) or []
+        gone = [e for e in entries if chosen(e)]
+        for rel in gone:
+            target = _inside(path, rel)
+            if target is None:
+                continue
+            if rel.endswith("/") and target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target, ignore_errors=True)
+            elif target.is_symlink() or target.is_file():
+                target.unlink(missing_ok=True)
+        parents = {p for rel in gone if (t := _inside(path, rel)) for p in t.parents}
+        for folder in sorted(parents, key=lambda p: len(p.parts), reverse=True):
+            if folder != path and path in folder.parents:
+                with contextlib.suppress(OSError):
+                    folder.rmdir()  # only where empty: a user's file inside keeps it
+        kept = [e for e in entries if not chosen(e)]
+        if (path / JOURNAL).exists():
+            text = "".join(json.dumps(e) + "\n" for e in kept)
+            (path / JOURNAL).write_text(text, encoding="utf-8")
+        for held in [*(h.recorded for k, h in _held.items() if k == path.resolve())]:
+            held.difference_update(gone)
+
+
+def _unrecorded(path: Path) -> list[str]:
+    """The names at path's top that no run recorded writing (dot files and the folder's
+    own manifest and run records aside)."""
+    entries = _journal(path) or []
+    tops = {e.split("/", 1)[0] for e in entries}
+    return sorted(
+        p.name + ("/" if p.is_dir() else "")
+        for p in path.iterdir()
+        if not p.name.startswith(".")
+        and p.name not in tops
+        and not (p.name in (MANIFEST, RUN) or (p.name.startswith("run-") and p.suffix == ".json"))
+    )
+
+
+def _shown(names: list[str]) -> str:
+    return ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+
+
+def _refuse_foreign(path: Path) -> None:
+    """Refuse a folder without a manifest that holds files (mjx-pick wrote none of them)."""
+    others = [p.name for p in path.iterdir() if not p.name.startswith(".")]
+    if others:
+        raise ConfigError(
+            f"--out {path}: the folder holds files that mjx-pick did not write "
+            f"({_shown(sorted(others))}); choose an empty or new folder"
+        )
+
+
+def remove_run(path: str | os.PathLike) -> None:
+    """Remove the files path's earlier run recorded writing, before a new run takes
+    the folder; said on stderr: what is kept (files no run recorded). A folder an older
+    mjx-pick wrote (no journal) is refused: which of its files that run wrote is not known."""
+    path = Path(path)
+    if _journal(path) is None:
+        unknown = _unrecorded(path)
+        if unknown:
+            raise ConfigError(
+                f"--out {path}: holds files of a run by an earlier mjx-pick, which did not "
+                f"record the files it wrote ({_shown(unknown)}); mjx-pick removes only files "
+                "a run recorded: move them away yourself, or choose another --out"
+            )
+    remove_recorded(path)
+    for name in (MANIFEST, RUN):  # the folder's own record: rundir's, written while held
+        (path / name).unlink(missing_ok=True)
+    kept = _unrecorded(path)
+    if kept:
+        print(
+            f"mjx-pick: {path}: kept {len(kept)} file(s) no mjx-pick run recorded writing "
+            f"({_shown(kept)})",
+            file=sys.stderr,
+        )
 
 
 def claim(
@@ -318,6 +493,7 @@ def claim(
     """
     if resume and overwrite:
         raise ConfigError("--resume and --overwrite contradict each other: choose one")
+    check_out(out)
     path = Path(out)
     _usable(path)
     old = read_manifest(path)
@@ -365,17 +541,12 @@ def _decide(path, command, key, old, joined, taken, resume, overwrite, flat) -> 
     finished there -- a run that failed or died (says "running" under a free lock)
     before it saved a chunk. Finished chunks and complete results are never deleted
     without ``overwrite``: another configuration is refused, naming what changed."""
-    others = [p for p in path.iterdir() if p.name != MANIFEST and not p.name.startswith(".")]
-    if old is None and others:
-        raise ConfigError(
-            f"--out {path}: the folder holds files that mjx-pick did not write; choose an "
-            "empty or new folder"
-        )
     if old is None:
+        _refuse_foreign(path)  # again, under the lock
         return
     if overwrite:
         if not joined:  # a joined command's own files are replaced by that command
-            _remove_contents(path)
+            remove_run(path)
         return
     if joined:
         old = _joined_record(path, command)
@@ -393,13 +564,14 @@ def _decide(path, command, key, old, joined, taken, resume, overwrite, flat) -> 
     abandoned = status == "failed" or (status == "running" and taken)
     if abandoned and not n_chunks:
         why = old.get("message") or "it was stopped before it finished"
+        if not joined:
+            remove_run(path)
         print(
             f"mjx-pick: {path}: replacing the files of an unfinished `mjx-pick "
-            f"{old.get('command')}` run that saved no results ({status}: {why})",
+            f"{old.get('command')}` run that saved no results ({status}: {why}), those it "
+            "recorded writing",
             file=sys.stderr,
         )
-        if not joined:
-            _remove_contents(path)
         return
     if status == "complete":
         kept = " (complete)"

@@ -114,7 +114,7 @@ def read_picks_csv(path: str | Path) -> UserPicks:
     if not path.is_file():
         raise ConfigError(f"picks file {str(path)!r} does not exist")
     allowed = PICK_COLUMNS + OPTIONAL_COLUMNS
-    with open_csv(path) as fh:
+    with open_csv(path, "picks") as fh:
         reader = csv.DictReader(fh)
         found = [c.strip() if isinstance(c, str) else c for c in reader.fieldnames or []]
         reader.fieldnames = found

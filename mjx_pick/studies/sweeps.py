@@ -215,16 +215,22 @@ def variants(params: list[ParamSpec], random: int | None = None, seed: int = 0) 
     ]
 
 
-def _refuse_narrow(obj, combos: list[dict], settings: list, pick_config) -> None:
-    """Refuse a sweep one of whose variants no pick-point can fit (``stroke_refusal``),
-    naming the variant: found now, not after drawing max_candidates for it."""
+def _refuse_impossible(obj, combos: list[dict], settings: list, pick_config) -> None:
+    """Refuse a sweep one of whose variants its gripper cannot run (a grip force or
+    closing speed outside the gripper's range, ``check_gripper``) or no pick-point can
+    fit (``stroke_refusal``), naming the variant: found now, before the folder is
+    claimed -- not by the simulator after it, nor after drawing max_candidates."""
     seen: dict = {}
     for combo, s in zip(combos, settings, strict=True):
+        values = ", ".join(f"{k}={v:g}" for k, v in combo.items())
+        try:
+            s.grasp.check_gripper(s.gripper)
+        except ConfigError as err:
+            raise ConfigError(f"sweep variant {values}: {err}") from None
         key = (s.gripper, s.grasp)
         if key not in seen:
             seen[key] = pp.stroke_refusal(obj, s.gripper, pick_config, s.grasp)
         if seen[key] is not None:
-            values = ", ".join(f"{k}={v:g}" for k, v in combo.items())
             raise ConfigError(f"sweep variant {values}: {seen[key]}")
 
 
@@ -270,7 +276,7 @@ def sweep(
     request.update(picks=to_dict(pick_config))
     combos = variants(params, random, seed)
     settings = [_settings(base, combo) for combo in combos]
-    _refuse_narrow(obj, combos, settings, pick_config)  # before any draw or folder
+    _refuse_impossible(obj, combos, settings, pick_config)  # before any draw or folder
     numbers.check("sweep_simulations", len(combos) * n, "variants x pick-points")
     with opts.opening("sweep", obj, request, simulator) as study:
         if study.complete:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pick.core.config import ConfigError
+from mjx_pick.core.config import ConfigError, read_text
 from mjx_pick.outputs.exchange.poses import GraspLabels
 
 SUFFIX = ".json"
@@ -37,13 +37,14 @@ def write(labels: GraspLabels, extra: dict) -> str:
 
 def read(path: Path) -> GraspLabels:
     """A GraspGen grasp file by its published fields (mjx_pick's extras where present)."""
+    text = read_text(path, "GraspGen JSON")  # outside the try: its ConfigError is a ValueError
     try:
-        doc = json.loads(Path(path).read_text())
+        doc = json.loads(text)
         obj, grasps = doc["object"], doc["grasps"]
         transforms = np.asarray(grasps["transforms"], float)
         success = np.asarray(grasps["object_in_gripper"], bool)
         file, scale = obj["file"], float(obj["scale"])
-    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as err:
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
         raise ConfigError(f"{path} is not a GraspGen grasp file: {err!r}") from err
     ours = doc.get("mjx_pick") or {}
     score = ours.get("score")

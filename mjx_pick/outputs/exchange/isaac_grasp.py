@@ -9,7 +9,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from mjx_pick.core.config import ConfigError
+from mjx_pick.core.config import ConfigError, read_text
 from mjx_pick.outputs.exchange.poses import GraspLabels
 
 SUFFIX = ".yaml"
@@ -54,8 +54,8 @@ def read(path: Path) -> GraspLabels:
     """An isaac_grasp file by its published fields: success where mjx_pick's extra says
     so, else confidence > 0."""
     try:
-        doc = yaml.safe_load(Path(path).read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        doc = yaml.safe_load(read_text(path, "isaac_grasp YAML"))
+    except yaml.YAMLError as err:
         raise ConfigError(f"{path} is not a YAML file: {err}") from err
     if not isinstance(doc, dict) or doc.get("format") != "isaac_grasp" or "grasps" not in doc:
         raise ConfigError(f"{path} is not an isaac_grasp file (format: isaac_grasp, grasps)")

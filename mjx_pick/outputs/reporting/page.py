@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import base64
 import contextlib
-import html
 import json
 import os
 from pathlib import Path
@@ -12,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core.config import ConfigError, write_atomic, write_json
+from mjx_pick.core.escape import html_text
 from mjx_pick.core.metrics import label_check_rows, rate_text
 from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.reporting.animation import animate, render_pool
@@ -19,6 +19,7 @@ from mjx_pick.outputs.reporting.figures import force_plot, maps
 from mjx_pick.outputs.reporting.robot import robot_picks
 from mjx_pick.outputs.reporting.run import Run, read_parquet
 from mjx_pick.outputs.reporting.template import PAPERS_MM, page_misfit, positioning_template
+from mjx_pick.outputs.rundir import record_file, recording, remove_recorded
 
 __all__ = ["report"]
 
@@ -60,7 +61,9 @@ def report(
     # template, the robot export, the page
     parts = len(traced) * (2 if animations else 1) + 1 + len(PAPERS_MM) + 2
     pool = render_pool() if animations and traced else contextlib.nullcontext()
-    with ProgressBar("report", "part", enabled=progress, total=parts) as bar, pool as child:
+    bar = ProgressBar("report", "part", enabled=progress, total=parts)
+    # the run's folder records the report's files: an --overwrite of the run removes them
+    with recording(out_dir), bar, pool as child:
         anim = (anim_every, anim_size, child) if animations else None
         forces, anims = _traced_parts(run, out_dir, traced, f_d, anim, bar)
         written["forces"] = [str(p) for p, _ in forces]
@@ -103,6 +106,8 @@ def _traced_parts(run: Run, out_dir: Path, traced, f_d: float, anim, bar) -> tup
         if anim is not None:
             anim_every, anim_size, child = anim
             g = out_dir / f"anim_{pid}.gif"
+            for written in (g, g.with_suffix(".mp4")):  # written in a render process
+                record_file(written)
             frames = animate(
                 run.path / "scene.xml", trace, g, anim_every, anim_size, run.gripper,
                 pool=child,
@@ -147,7 +152,7 @@ def _templates(run: Run, out_dir: Path, chosen: list, name: str, bar) -> tuple[d
         if misfit:
             # a part larger than the page: the rest of the report is still worth having
             skipped[paper] = misfit
-            (out_dir / f"template_{paper}.pdf").unlink(missing_ok=True)  # an earlier report's
+            remove_recorded(out_dir, f"template_{paper}.pdf")  # an earlier report's
             bar.advance()
             continue
         p = out_dir / f"template_{paper}.pdf"
@@ -190,7 +195,7 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, skipped, picks) -> 
     """report.html; templates: {paper: path}, skipped: {paper: why it was not written}."""
     s = run.summary
     rows = "".join(
-        f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>"
+        f"<tr><th>{html_text(str(k))}</th><td>{html_text(str(v))}</td></tr>"
         for k, v in (
             ("object / gripper", f"{s.get('object')} / {s.get('gripper')}"),
             ("backend / device", f"{s.get('backend')} / {s.get('device')}"),
@@ -205,15 +210,15 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, skipped, picks) -> 
     )
     img = lambda p, cap: (  # noqa: E731
         f'<figure><img src="{_embed(p, "image/png" if p.suffix == ".png" else "image/gif")}">'
-        f"<figcaption>{html.escape(cap)}</figcaption></figure>"
+        f"<figcaption>{html_text(cap)}</figcaption></figure>"
     )
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'>",
-        f"<title>mjx_pick report: {html.escape(str(s.get('object')))}</title>",
+        f"<title>mjx_pick report: {html_text(str(s.get('object')))}</title>",
         "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
         "img{max-width:100%}figure{display:inline-block;margin:6px}"
         "td,th{text-align:left;padding:2px 10px}</style></head><body>",
-        f"<h1>Pick-point report: {html.escape(str(s.get('object')))}</h1>",
+        f"<h1>Pick-point report: {html_text(str(s.get('object')))}</h1>",
         f"<table>{rows}</table>",
         "<h2>Pick-point maps</h2>",
         img(out_dir / "score_map.png", "pick-points by score"),
@@ -230,11 +235,11 @@ def _html(run: Run, out_dir: Path, forces, anims, templates, skipped, picks) -> 
             for p in templates.values()
         ),
         *(
-            f"<li>{html.escape(paper)}: not written, {html.escape(why)}</li>"
+            f"<li>{html_text(paper)}: not written, {html_text(why)}</li>"
             for paper, why in skipped.items()
         ),
         "</ul><h2>Robot export</h2>",
-        f"<pre>{html.escape(json.dumps(picks, indent=1))}</pre>",
+        f"<pre>{html_text(json.dumps(picks, indent=1))}</pre>",
         "</body></html>",
     ]
     path = out_dir / "report.html"

@@ -104,7 +104,7 @@ def read_outcomes(path: str | Path) -> Outcomes:
             f"outcomes file {str(path)!r} does not exist (shipped examples: "
             f"{', '.join(example_outcomes())})"
         )
-    with open_csv(path) as fh:
+    with open_csv(path, "outcomes") as fh:
         reader = csv.DictReader(fh)
         header = reader.fieldnames or []
         missing = [c for c in REQUIRED if c not in header]
@@ -188,7 +188,7 @@ def read_trace(path: Path, where: str, allowed: tuple[str, ...]) -> dict[str, np
     """A trace CSV: t_s plus columns of `allowed`; {kind: (K, 2) (t_s, value)}."""
     if not path.is_file():
         raise ConfigError(f"{where}: {str(path)!r} does not exist")
-    with open_csv(path) as fh:
+    with open_csv(path, f"{where}: trace") as fh:
         reader = csv.DictReader(fh)
         header = [h.strip() for h in (reader.fieldnames or [])]
         rows = list(reader)

@@ -7,7 +7,6 @@ from __future__ import annotations
 import dataclasses
 import io
 import math
-import shutil
 import time
 from pathlib import Path
 
@@ -17,7 +16,7 @@ from mjx_pick.core.config import ConfigError, check_range, to_dict
 from mjx_pick.core.physics import ContactParams
 from mjx_pick.engine import registry
 from mjx_pick.outputs.progress import ProgressBar
-from mjx_pick.outputs.rundir import claim, config_hash, finish
+from mjx_pick.outputs.rundir import claim, config_hash, finish, record_file, remove_recorded
 from mjx_pick.studies.calibration import estimators as E
 from mjx_pick.studies.calibration.identify import (
     at_bound,
@@ -282,6 +281,7 @@ def _open_fit(problem, out_dir: Path | None, resume: bool, state, **fit):
     request.update(samples=fit["samples"], sigma=fit["sigma"], seed=fit["seed"])
     request.update(noise=to_dict(problem.noise), bounds=[space.lo.tolist(), space.hi.tolist()])
     claim(out_dir, "calibrate", config_hash(request), resume=resume, settings=request)
+    record_file(out_dir / "checkpoint", whole=True)  # orbax writes it: the folder is the fit's
     ckpt = _Checkpoints(out_dir / "checkpoint")
     saved = ckpt.latest() if resume else None
     if saved is not None:
@@ -333,7 +333,7 @@ def _write_fit(result, problem, out_dir: Path, request: dict, estimator: str, wa
         meta.update(backend=registry.differentiable(), device=f"{d.platform}:{d.device_kind}")
     finish(out_dir, command="calibrate", config=request, **meta)
     # the fit is complete and written: its checkpoints served only a resume
-    shutil.rmtree(out_dir / "checkpoint", ignore_errors=True)
+    remove_recorded(out_dir, "checkpoint/")
 
 
 def _finish(

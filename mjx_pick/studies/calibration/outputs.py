@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pick.core.config import to_dict, to_toml, write_atomic, write_json
+from mjx_pick.core.config import to_dict, to_toml, toml_value, write_atomic, write_json
 
 # procedure settings that do not change what the contact parameters mean
 _PROCEDURE_FREE = ("grip_force_n",)
@@ -93,28 +93,16 @@ def contact_toml(result, problem) -> str:
     meta = fitted_for(problem)
     proc = meta.pop("procedure")
     lines = ["", "[fitted_for]"]
-    lines += [f"{k} = {_value(v)}" for k, v in meta.items()]
+    lines += [f"{k} = {toml_value(v)}" for k, v in meta.items()]
     lines += ["", "[fitted_for.procedure]"]
-    lines += [f"{k} = {_value(v)}" for k, v in proc.items() if v is not None]
+    lines += [f"{k} = {toml_value(v)}" for k, v in proc.items() if v is not None]
     lines += ["", "[calibrated]"]
-    lines.append(f"parameters = {_value(list(problem.names))}")
-    lines.append(f"not_identified = {_value(list(result.not_identified))}")
+    lines.append(f"parameters = {toml_value(list(problem.names))}")
+    lines.append(f"not_identified = {toml_value(list(result.not_identified))}")
     if "force_offset_n" in result.values:
         # not a contact parameter: the gripper squeezes F_d + this when set to F_d
         lines.append(f"force_offset_n = {result.values['force_offset_n']!r}")
     return text + "\n".join(lines) + "\n"
-
-
-def _value(v) -> str:
-    import json
-
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int | float):
-        return repr(v)
-    if isinstance(v, list | tuple):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    return json.dumps(str(v))
 
 
 def write_result(result, problem, out_dir: Path) -> None:

@@ -7,10 +7,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from pathlib import Path
 
-from mjx_pick.core.config import ConfigError
+from mjx_pick.core.config import ConfigError, read_toml
 from mjx_pick.core.procedure import GraspConfig
 
 KEYS = ("object", "mass_g", "gripper", "synthetic", "grasp")
@@ -22,10 +21,7 @@ def read_measured(csv_path: str | Path) -> dict | None:
     path = Path(csv_path).with_suffix(".toml")
     if not path.is_file():
         return None
-    try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as err:
-        raise ConfigError(f"{path.name}: unreadable ({err})") from err
+    data = read_toml(path, "outcomes record")
     unknown = [k for k in data if k not in KEYS]
     if unknown:
         raise ConfigError(f"{path.name}: unknown key(s) {', '.join(unknown)}; allowed: {KEYS}")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +18,7 @@ from mjx_pick.core.metrics import mcnemar_p
 from mjx_pick.core.objects import ObjectModel, check_same_object
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.kernels import types as kt
-from mjx_pick.outputs.rundir import read_manifest
+from mjx_pick.outputs.rundir import read_manifest, remove_run
 from mjx_pick.studies.calibration.identify import Z95
 from mjx_pick.studies.calibration.parameters import (
     canonical_params,
@@ -238,7 +237,7 @@ def _fit_folder(folder: Path, last: int, overwrite: bool, resume: bool) -> Path:
             )
         if (read_manifest(out_dir) or {}).get("command") != "calibrate":
             raise ConfigError(f"{out_dir} was not written by a fit: move it away first")
-        shutil.rmtree(out_dir)
+        remove_run(out_dir)  # the files that fit recorded writing
     return out_dir
 
 

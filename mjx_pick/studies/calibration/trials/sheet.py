@@ -85,7 +85,7 @@ def read_sheet(folder) -> tuple[list[str], list[dict]]:
     path = Path(folder) / SHEET
     if not path.is_file():
         raise ConfigError(f"{path} does not exist (the trials folder lost its sheet)")
-    with open_csv(path) as fh:
+    with open_csv(path, "trials sheet") as fh:
         reader = csv.DictReader(fh)
         header = [h.strip() for h in (reader.fieldnames or [])]
         rows = [{(k or "").strip(): (v or "").strip() for k, v in r.items()} for r in reader]

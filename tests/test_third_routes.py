@@ -1,0 +1,350 @@
+"""Nothing silent, third routes: each class of wrong answer closed once for every route
+-- one reader of a user's text files, user text escaped wherever it is written, only a
+run's own recorded files ever removed, nothing written by a refused command, no number
+silently changed, an estimate before a long job. Each test drives the installed
+``mjx-pick`` command the way a user would."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+MJX_PICK = shutil.which("mjx-pick") or f"{sys.executable} -m mjx_pick.cli"
+FAST = ["--backend", "mujoco", "--no-progress", "--lift-height-mm", "5", "--hold-s", "0.05"]
+SHIPPED = Path(__file__).resolve().parents[1] / "mjx_pick" / "assets"
+
+
+def cli(*argv, check: bool | None = None, timeout: float = 300, cwd=None, **kw):
+    """Run the installed command; check=True: it must succeed, False: it must fail
+    (refused with a message, never a traceback)."""
+    cmd = MJX_PICK.split() + [str(a) for a in argv]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd, **kw)
+    if check is True:
+        assert res.returncode == 0, res.stderr[-3000:]
+    if check is False:
+        assert res.returncode != 0, res.stdout[-2000:]
+        assert "Traceback" not in res.stderr, res.stderr[-3000:]
+    return res
+
+
+# ------------------------------------------------------------ one reader of text files
+LATIN1 = "# Reibung f\xfcr Gummi\n".encode("latin-1")
+
+
+@pytest.mark.parametrize(
+    "flag, body",
+    [
+        ("--contact", b"pad_friction = 0.9\n"),
+        ("--solver", b"timestep_s = 0.001\n"),
+        ("--grasp", b"hold_s = 0.1\n"),
+        ("--gripper-file", b'base = "robotiq-2f85"\nname = "g"\n'),
+        ("--picks", b"x_mm,y_mm,yaw_deg\n0,0,0\n"),
+    ],
+)
+def test_a_settings_file_that_is_not_utf8_is_refused_by_name(flag, body, tmp_path):
+    suffix = ".csv" if flag == "--picks" else ".toml"
+    f = tmp_path / f"latin{suffix}"
+    f.write_bytes(body + LATIN1 if suffix == ".csv" else LATIN1 + body)
+    res = cli("evaluate", "block", flag, f, "--n", "2", "--out", tmp_path / "never", *FAST)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-2000:]
+    assert f"{str(f)!r} is not UTF-8 text: line " in res.stderr
+    assert "0xfc" in res.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_an_outcomes_record_that_is_not_utf8_is_refused_by_name(tmp_path):
+    csv = tmp_path / "mine.csv"
+    shutil.copy(SHIPPED / "outcomes" / "block_1kg_rg2.csv", csv)
+    record = (SHIPPED / "outcomes" / "block_1kg_rg2.toml").read_bytes()
+    (tmp_path / "mine.toml").write_bytes(LATIN1 + record)
+    argv = ["calibrate", csv, "block", "--mass-g", "1000", "--gripper", "onrobot-rg2"]
+    res = cli(*argv, "--steps", "1", "--out", tmp_path / "never", *FAST[:3], check=False)
+    assert "mine.toml' is not UTF-8 text: line 1 holds the byte 0xfc" in res.stderr
+    assert not (tmp_path / "never").exists()
+
+
+# ------------------------------------------------ user text escaped wherever it goes
+# names the name rule lets through, each holding what one format or another reads as
+# markup: a double quote (XML, TOML), '<' and '&' (XML, HTML), an emoji (json.dumps
+# writes it as surrogate escapes TOML refuses), an apostrophe and '$' (a shell line)
+NAMES = ['grip "q"', "grip <a & b>", "grip 🤖", "it's $HOME"]
+
+
+def _gripper_file(folder: Path, name: str) -> Path:
+    quoted = name.replace("\\", "\\\\").replace('"', '\\"').replace("\t", "\\t")
+    f = folder / "gripper.toml"
+    f.write_text(f'base = "robotiq-2f85"\nname = "{quoted}"\n', "utf-8")
+    return f
+
+
+def _scene_model_name(run: Path) -> str:
+    """scene.xml parsed by a strict XML parser (a file that is not well-formed raises):
+    its model's name."""
+    import xml.etree.ElementTree as ET
+
+    return ET.parse(run / "scene.xml").getroot().get("model")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_a_gripper_name_of_any_character_reaches_the_model_intact(name, tmp_path):
+    out = tmp_path / "run"
+    argv = ["evaluate", "block", "--gripper-file", _gripper_file(tmp_path, name)]
+    cli(*argv, "--n", "2", "--traces", "0", "--out", out, *FAST, check=True)
+    assert _scene_model_name(out) == f"mjx_pick block {name}"
+
+
+@pytest.mark.parametrize("stem", ['bracket "v2"', "part <1> & 🤖"])
+def test_a_photo_or_mesh_named_with_markup_characters_is_simulated(stem, tmp_path):
+    import trimesh
+
+    photo = tmp_path / f"{stem}.png"
+    shutil.copy(SHIPPED / "objects" / "block.png", photo)
+    mesh = tmp_path / f"{stem}.stl"
+    trimesh.creation.box([30.0, 20.0, 15.0]).export(mesh)
+    for source, size in (
+        (photo, ["--px-per-mm", "10", "--thickness-mm", "20", "--mass-g", "43.2"]),
+        (mesh, ["--unit", "mm", "--mass-g", "9", "--no-cache"]),
+    ):
+        out = tmp_path / f"run-{source.suffix[1:]}"
+        cli("evaluate", source, *size, "--n", "2", "--traces", "0", "--out", out, *FAST, check=True)
+        assert _scene_model_name(out) == f"mjx_pick {stem} robotiq-2f85"
+
+
+def test_a_name_the_name_rule_refuses_is_refused_before_work(tmp_path):
+    photo = tmp_path / "line\nbreak.png"
+    shutil.copy(SHIPPED / "objects" / "block.png", photo)
+    size = ["--px-per-mm", "10", "--thickness-mm", "20", "--mass-g", "43.2"]
+    res = cli("evaluate", photo, *size, "--out", tmp_path / "never", *FAST, check=False)
+    assert "an object is named after its file" in res.stderr and "rename the file" in res.stderr
+    gripper = _gripper_file(tmp_path, "tab\there")
+    res = cli("evaluate", "block", "--gripper-file", gripper, "--out", tmp_path / "never", *FAST)
+    assert res.returncode == 2 and "gripper.name = 'tab\\there' is not allowed" in res.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_names_reach_toml_html_and_shell_lines_intact(tmp_path):
+    """A design's best_gripper.toml, a fit's contact.toml, a report's HTML and the
+    command line the CLI prints: each read back by its own format's parser."""
+    import html.parser
+    import shlex
+    import tomllib
+
+    name = 'grip "q" <&> 🤖'
+    design = tmp_path / "design"
+    argv = ["design", "block", "--gripper-file", _gripper_file(tmp_path, name)]
+    argv += ["--bound", "finger_width_mm=15:30", "--variants", "2", "--rounds", "1"]
+    cli(*argv, "--n", "4", "--out", design, *FAST, check=True)
+    best = tomllib.loads((design / "best_gripper.toml").read_text("utf-8"))
+    assert best["name"].startswith(name)
+
+    # a fit on an object whose name holds the same characters, into a folder with a space
+    photo = tmp_path / f"{name}.png"
+    shutil.copy(SHIPPED / "objects" / "block.png", photo)
+    rows = (SHIPPED / "outcomes" / "block_1kg_rg2.csv").read_text().splitlines()
+    (tmp_path / "mine.csv").write_text("\n".join(rows[:1] + rows[4:8]) + "\n")
+    fit = tmp_path / "my fit"
+    argv = ["calibrate", tmp_path / "mine.csv", photo, "--px-per-mm", "10"]
+    argv += ["--thickness-mm", "20", "--mass-g", "1000", "--gripper", "onrobot-rg2"]
+    argv += ["--estimator", "random", "--steps", "0", "--no-identify"]
+    res = cli(*argv, "--backend", "mujoco", "--no-progress", "--out", fit, check=True)
+    contact = tomllib.loads((fit / "contact.toml").read_text("utf-8"))
+    assert contact["fitted_for"]["object"] == name
+    command = res.stdout.split("use: ")[-1].strip()
+    assert shlex.split(command)[-1] == str(fit / "contact.toml")
+
+    # the report of a run with both names: its title as an HTML parser reads it
+    run = tmp_path / "run"
+    argv = ["evaluate", photo, "--px-per-mm", "10", "--thickness-mm", "20", "--mass-g", "43.2"]
+    argv += ["--gripper-file", tmp_path / "gripper.toml", "--n", "2", "--traces", "0"]
+    cli(*argv, "--out", run, *FAST, check=True)
+    cli("report", run, "--no-animations", "--no-progress", check=True)
+
+    class Title(html.parser.HTMLParser):
+        inside, text = False, ""
+
+        def handle_starttag(self, tag, attrs):
+            self.inside = tag == "title"
+
+        def handle_endtag(self, tag):
+            self.inside = False
+
+        def handle_data(self, data):
+            self.text += data if self.inside else ""
+
+    parser = Title()
+    parser.feed((run / "report.html").read_text("utf-8"))
+    assert parser.text == f"mjx_pick report: {name}"
+
+
+# every format's escape, read back by that format's own parser: text that reads as
+# markup, quoting or an escape in one format or another, and Unicode beyond the BMP
+AWKWARD = [
+    'a "b"',
+    "a 'b'",
+    "<tag attr='x'>",
+    "&amp; & &#10;",
+    "back\\slash \\n \\u0041",
+    "tab\there",
+    "new\nline",
+    "cr\rhere",
+    "del\x7f",
+    "emoji 🤖 and ✓",
+    "ümlaut Grüße",
+    "$HOME `id` $(id) ;|&",
+    "*?[]{}~",
+    "  spaces  ",
+    "",
+    "]]> --> <!--",
+    "\u2028line sep\u2029",
+    "right-to-left \u202e",
+    "zero\u200bwidth",
+    "a" * 300,
+]
+
+
+@pytest.mark.parametrize("text", AWKWARD)
+def test_each_escape_reads_back_in_its_own_format(text):
+    import html
+    import shlex
+    import tomllib
+    import xml.etree.ElementTree as ET
+
+    from mjx_pick.core.escape import html_text, shell_word, toml_string, xml_attr
+
+    assert ET.fromstring(f'<m a="{xml_attr(text)}"/>').get("a") == text
+    assert tomllib.loads(f"k = {toml_string(text)}")["k"] == text
+    assert html.unescape(html_text(text)) == text and "<" not in html_text(text)
+    assert shlex.split(f"cmd {shell_word(text)}") == ["cmd", text]
+
+
+def test_text_xml_cannot_hold_is_replaced_not_written_raw():
+    import xml.etree.ElementTree as ET
+
+    from mjx_pick.core.escape import xml_attr
+
+    text = "bell\x07 nul\x00 esc\x1b"
+    assert ET.fromstring(f'<m a="{xml_attr(text)}"/>').get("a") == "bell\ufffd nul\ufffd esc\ufffd"
+
+
+# ------------------------------ only the files a run recorded writing are ever removed
+def _users_files(folder: Path) -> dict[Path, bytes]:
+    """A user's notes and photos put into a run folder; {path: content}."""
+    files = {folder / "notes.txt": b"cell 3: fixture moved"}
+    files[folder / "photos" / "cell.jpg"] = b"\xff\xd8"
+    files[folder / "cad" / "fixture.step"] = b"ISO-10303-21;"
+    for path, data in files.items():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    return files
+
+
+def _killed_before_its_first_chunk(out: Path) -> None:
+    """An evaluate run SIGKILLed once it claimed out and wrote its configuration, before
+    any chunk was saved."""
+    import os
+    import signal
+    import time
+
+    argv = ["evaluate", "block", "--n", "4000", "--chunk-size", "4000", "--out", out, *FAST]
+    proc = subprocess.Popen(MJX_PICK.split() + list(map(str, argv)), stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "scene.xml").is_file() and time.monotonic() < deadline:
+            assert proc.poll() is None, "the run ended before it could be killed"
+            time.sleep(0.02)
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait()
+    assert not list(out.glob("chunks/part-*"))
+
+
+def test_a_rerun_after_a_killed_run_keeps_the_files_the_user_added(tmp_path):
+    out = tmp_path / "proj"
+    _killed_before_its_first_chunk(out)
+    mine = _users_files(out)
+    res = cli("evaluate", "block", "--n", "8", "--seed", "5", "--out", out, *FAST, check=True)
+    assert "replacing the files of an unfinished" in res.stderr
+    assert "kept 3 file(s) no mjx-pick run recorded writing" in res.stderr
+    assert {p: p.read_bytes() for p in mine} == mine
+    assert (out / "results.parquet").is_file()
+
+
+def test_a_refused_command_writes_nothing_and_a_later_run_keeps_the_users_files(tmp_path):
+    work = tmp_path / "work"
+    work.mkdir()
+    argv = ["sweep", "block", "--param", "controller.force_n=20,300", "--n", "8", "--out", "."]
+    res = cli(*argv, *FAST, cwd=work, check=False)
+    assert "sweep variant grasp.grip_force_n=300" in res.stderr
+    assert sorted(work.iterdir()) == []  # no manifest, no lock file
+    mine = _users_files(work)
+    res = cli("evaluate", "block", "--n", "8", "--out", ".", *FAST, cwd=work, check=False)
+    assert "holds files that mjx-pick did not write (cad, notes.txt, photos)" in res.stderr
+    assert {p: p.read_bytes() for p in mine} == mine
+    assert sorted(p.name for p in work.iterdir()) == ["cad", "notes.txt", "photos"]
+
+
+def test_a_folder_of_foreign_files_gets_no_lock_file(tmp_path):
+    import os
+
+    etc = tmp_path / "etc"
+    etc.mkdir()
+    (etc / "passwd").write_text("root:x:0:0")
+    cli("evaluate", "block", "--n", "2", "--out", etc, *FAST, check=False)
+    assert sorted(p.name for p in etc.iterdir()) == ["passwd"]
+    if os.geteuid() == 0 and not Path("/.mjx_pick.lock").exists():  # root writes anywhere
+        try:
+            res = cli("evaluate", "block", "--n", "2", "--out", "/", *FAST, check=False)
+            assert "holds files that mjx-pick did not write" in res.stderr
+            assert not Path("/.mjx_pick.lock").exists()
+        finally:
+            Path("/.mjx_pick.lock").unlink(missing_ok=True)
+
+
+def test_overwrite_removes_the_runs_files_and_its_reports_not_the_users(tmp_path):
+    out = tmp_path / "run"
+    cli("evaluate", "block", "--n", "4", "--out", out, *FAST, check=True)
+    cli("report", out, "--no-animations", "--no-progress", check=True)
+    assert (out / "traces.parquet").is_file() and (out / "report.html").is_file()
+    mine = _users_files(out)
+    argv = ["evaluate", "block", "--n", "4", "--seed", "1", "--traces", "0", "--overwrite"]
+    res = cli(*argv, "--out", out, *FAST, check=True)
+    # the earlier run's traces and report are gone (no stale file beside new results)
+    assert not (out / "traces.parquet").exists() and not (out / "report.html").exists()
+    assert not list(out.glob("forces_*.png")) and not (out / "score_map.png").exists()
+    assert {p: p.read_bytes() for p in mine} == mine
+    assert "kept 3 file(s)" in res.stderr
+
+
+def test_a_folder_an_older_version_wrote_is_not_emptied_blind(tmp_path):
+    import json
+
+    out = tmp_path / "old"
+    out.mkdir()
+    manifest = {"command": "evaluate", "config_key": "k", "status": "failed"}
+    (out / "mjx_pick_run.json").write_text(json.dumps(manifest))
+    (out / "results.parquet").write_bytes(b"x")
+    res = cli("evaluate", "block", "--n", "2", "--overwrite", "--out", out, *FAST, check=False)
+    assert "did not record the files it wrote (results.parquet)" in res.stderr
+    assert (out / "results.parquet").read_bytes() == b"x"
+
+
+def test_a_journal_never_reaches_out_of_its_folder(tmp_path):
+    import json
+
+    from mjx_pick.outputs.rundir import JOURNAL, remove_recorded
+
+    outside = tmp_path / "outside.txt"
+    outside.write_text("keep")
+    run = tmp_path / "run"
+    (run / "sub").mkdir(parents=True)
+    (run / "link").symlink_to(tmp_path)
+    (run / "sub" / "own.txt").write_text("x")
+    entries = ["../outside.txt", str(outside), "link/outside.txt", "sub/own.txt", "", "/"]
+    (run / JOURNAL).write_text("".join(json.dumps(e) + "\n" for e in entries) + '"cut')
+    remove_recorded(run)
+    assert outside.read_text() == "keep"
+    assert not (run / "sub").exists()  # its one recorded file removed, then the folder
