@@ -67,7 +67,7 @@ class SweepTab:
         whole = [int(v) if float(v).is_integer() else v for v in (start, end, step)]
         self.start.value, self.end.value, self.step.value = whole
         for w in (self.start, self.end, self.step):
-            w.props(f"step={step:g}")
+            w.props["step"] = step  # a number, as every numeric prop (never a string)
         self.estimate()
 
     def estimate(self, _=None) -> None:
