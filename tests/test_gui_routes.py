@@ -261,3 +261,38 @@ def test_a_long_pick_point_search_shows_its_progress_and_stops(page):
     assert "the object fills too little of the region between the pads" in warned, warned
     assert "lower the minimum coverage, now 0.71" in warned
     assert "wider than the stroke" not in warned and "larger stroke" not in warned
+
+
+def field_message(page, label: str):
+    """The messages line Quasar shows under the (visible) field labelled label."""
+    field = page.locator("label.q-field").filter(visible=True)
+    return field.filter(has=page.get_by_label(label, exact=True)).locator(".q-field__messages")
+
+
+def test_tab_3s_traces_and_chunk_size_keep_the_number_rule(page):
+    """Traced best and worst -1 or 2.5, a chunk of 0, -3 or 2.5 pick-points: refused
+    under the field in its words, the value left as typed, no run -- never changed to
+    0, 1 or 2 and started. An empty chunk size is the page's own choice."""
+    from playwright.sync_api import expect
+
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 3)
+    page.get_by_label("run folder name").fill("numbers")
+    for label, value, rule in (
+        ("traced best and worst (force plots)", "-1", "a whole number from 0 to 10,000"),
+        ("traced best and worst (force plots)", "2.5", "a whole number from 0 to 10,000"),
+        ("pick-points per saved chunk", "0", "a whole number from 1 to 100,000,000, or empty"),
+        ("pick-points per saved chunk", "-3", "a whole number from 1 to 100,000,000, or empty"),
+        ("pick-points per saved chunk", "2.5", "a whole number from 1 to 100,000,000, or empty"),
+    ):
+        number(page, label, value)
+        page.get_by_test_id("start-batch").click()
+        expect(field_message(page, label)).to_have_text(rule, timeout=10_000)
+        expect(page.get_by_label(label, exact=True)).to_have_value(value)
+        assert not page.get_by_test_id("job-title").is_visible()
+        number(page, label, 1)  # the message goes with the next check
+    page.get_by_label("pick-points per saved chunk", exact=True).fill("")
+    page.get_by_test_id("start-batch").click()
+    status = wait_job(page, "evaluate numbers")
+    assert status.startswith("complete, 3/3"), status

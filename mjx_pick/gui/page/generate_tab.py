@@ -22,6 +22,7 @@ from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
     SearchProgress,
     checked,
+    checked_or_empty,
     error_label,
     need_object,
     run_folder,
@@ -213,14 +214,15 @@ class GenerateTab:
             return
         settings = self.form.read()
         numbers = self.pick_numbers()
+        # each by its one rule (core.numbers), as the CLI checks --traces and
+        # --chunk-size: a value out of it is refused under its field, never changed
+        traces = checked(self.traces, "n_traces")
+        chunk_ok, chunk = checked_or_empty(self.chunk, "chunk_size")
         out = run_folder(self.state, self.run_name, resume=bool(self.resume.value))
-        if settings is None or numbers is None or out is None:
+        if settings is None or numbers is None or out is None or traces is None or not chunk_ok:
             return
         n, seed = numbers
-        traces = int(self.traces.value or 0)
-        if self.chunk.value:
-            chunk = int(self.chunk.value)
-        else:  # the bar moves every 2 % of the pick-points the run will simulate
+        if chunk is None:  # the bar moves every 2 % of the pick-points the run will simulate
             obj = self.state.obj
             drawn = self.drawn_for
             if drawn is not None and drawn[0] is obj and drawn[1:] == (settings, n, seed):
@@ -250,8 +252,8 @@ class GenerateTab:
             return
         flags = self.form.cli_flags(settings, self.state.workdir, out)
         argv = ["evaluate", *self.state.obj_args, *flags]
-        argv += ["--n", str(n), "--seed", str(seed), "--traces", str(max(traces, 0))]
-        argv += ["--chunk-size", str(max(1, chunk)), "--no-progress", "--out", str(out)]
+        argv += ["--n", str(n), "--seed", str(seed), "--traces", str(traces)]
+        argv += ["--chunk-size", str(chunk), "--no-progress", "--out", str(out)]
         if self.checks.value:
             argv += ["--step-check", "--stability-um", "1"]
         if self.resume.value:

@@ -129,6 +129,20 @@ def checked(widget, name: str) -> int | float | None:
         return None
 
 
+def checked_or_empty(widget, name: str) -> tuple[bool, int | float | None]:
+    """A number field that may be left empty (the run then chooses, e.g. the chunk
+    size), checked by the same rule: (True, None) when empty, (True, value) when it
+    keeps the rule, (False, None) with the rule under the field otherwise."""
+    if widget.value is None or widget.value == "":
+        widget.error = None
+        return True, None
+    value = checked(widget, name)
+    if value is None:
+        widget.error += ", or empty"
+        return False, None
+    return True, value
+
+
 def rule_words(rule) -> str:
     """What a number field takes, in the page's words: 'a whole number from 1 to 1,000'."""
     kind = "a whole number" if rule.integer else "a number"
