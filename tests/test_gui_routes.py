@@ -296,3 +296,70 @@ def test_tab_3s_traces_and_chunk_size_keep_the_number_rule(page):
     page.get_by_test_id("start-batch").click()
     status = wait_job(page, "evaluate numbers")
     assert status.startswith("complete, 3/3"), status
+
+
+def small_run(out, block) -> None:
+    """An evaluate folder of two pick-points of the block (the library, no page)."""
+    import mjx_pick as mp
+    from mjx_pick.core.procedure import GraspConfig
+
+    grasp = GraspConfig(close_timeout_s=1.0, lift_height_mm=5.0, hold_s=0.05)
+    gripper = mp.load_gripper("robotiq-2f85")
+    mp.evaluate(block, gripper, n=2, grasp=grasp, backend="mujoco", out=out, n_traces=1)
+
+
+def test_no_file_is_read_listed_or_served_through_a_link_out_of_the_work_folder(
+    page, server, tmp_path, block
+):
+    """Links in the work folder: a report file that leads to /etc/passwd is not served
+    (the refusal names it), a run folder holding a link out is not opened, a link to a
+    run folder outside is neither listed nor opened -- each said by its name."""
+    from playwright.sync_api import expect
+
+    _, work = server
+    secret = tmp_path / "secret.txt"
+    secret.write_text("not for the browser\n")
+    run = work / "linked-files"
+    small_run(run, block)
+    (run / "report.html").write_text("<html>the run's report</html>")
+    outside = tmp_path / "outside-run"
+    small_run(outside, block)
+    (work / "linked-run").symlink_to(outside, target_is_directory=True)
+
+    downloads = []
+    page.on("download", lambda d: downloads.append(d.suggested_filename))
+    page.get_by_text("4 Analyze results").click()
+    page.get_by_test_id("run-dir").fill("linked-files")
+    page.get_by_test_id("open-run").click()
+    report = page.get_by_test_id("download-report.html")
+    report.wait_for()
+    # made after the run was opened: the file is checked when it is asked for
+    (run / "report.html").unlink()
+    (run / "report.html").symlink_to("/etc/passwd")
+    report.click()
+    error = page.get_by_test_id("analyze-error")
+    error.filter(has_text="leads outside the work folder").wait_for(timeout=10_000)
+    assert error.inner_text().startswith("linked-files/report.html: a link that leads outside")
+    assert "to /etc/passwd" in error.inner_text()
+    page.wait_for_timeout(1000)
+    assert not downloads
+
+    # a run folder that holds a link out is not opened: its tables and scene are not read
+    (run / "report.html").unlink()
+    (run / "summary.json").rename(run / "summary-real.json")
+    (run / "summary.json").symlink_to(secret)
+    page.get_by_test_id("open-run").click()
+    error.filter(has_text="linked-files/summary.json: a link that leads outside").wait_for()
+    assert "not for the browser" not in page.locator("body").inner_text()
+
+    # a run folder outside, reached through a link: not listed, not opened
+    page.get_by_test_id("run-dir").fill("linked-run")
+    page.get_by_test_id("open-run").click()
+    error.filter(has_text="linked-run: only run folders inside the work folder").wait_for()
+    page.get_by_label("runs in the work folder", exact=True).click()
+    options = page.get_by_role("option").all_inner_texts()
+    assert not [o for o in options if "linked-run" in o], options
+    page.keyboard.press("Escape")
+    expect(page.get_by_test_id("runs-unlisted")).to_contain_text(
+        "linked-run: a link that leads outside the work folder"
+    )

@@ -22,14 +22,22 @@ OUTCOMES_MAX_BYTES = 5 * 2**20
 UPLOAD_TYPES = IMAGE_SUFFIXES + MESH_SUFFIXES
 
 
-def save_upload(data: bytes, name: str, folder: Path) -> Path:
-    """An uploaded file under folder, atomically; never replaces another file's content."""
+def save_upload(data: bytes, name: str, folder: Path, workdir: Path | None = None) -> Path:
+    """An uploaded file under folder, atomically; never replaces another file's content,
+    and never reads one a link leads to outside workdir (default: folder) -- that name
+    is passed over."""
+    from mjx_pick.gui.workfolder import confined, inside
+
+    workdir = folder if workdir is None else workdir
+    confined(folder, workdir)  # the uploads folder itself: never one a link leads out
     stem = re.sub(r"[^A-Za-z0-9._-]+", "_", Path(name).stem)[:60] or "upload"
     suffix = Path(name).suffix.lower()
     for k in range(1000):
         path = folder / (f"{stem}{suffix}" if k == 0 else f"{stem}-{k + 1}{suffix}")
-        if not path.exists():
+        if not path.exists() and not path.is_symlink():
             return write_atomic(path, data)
+        if inside(path, workdir) is None:  # a link out: neither read nor replaced
+            continue
         if path.read_bytes() == data:
             return path  # the same file uploaded again
     raise ConfigError(f"too many uploads named {name!r} in {folder}")

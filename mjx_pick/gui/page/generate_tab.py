@@ -6,7 +6,6 @@ a cancelled run is set up to be resumed, a complete one is opened in tab 4.
 
 from __future__ import annotations
 
-import json
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -15,7 +14,7 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.pickpoints import rejected_text
-from mjx_pick.gui import jobs, views
+from mjx_pick.gui import jobs, views, workfolder
 from mjx_pick.gui.formatting import MAP_HELP, fmt, md_text, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
@@ -110,7 +109,6 @@ class GenerateTab:
         when it starts: a stopped run has one), into this page: tab 2's fields, the
         pick-points, the seed and the name, resume ticked -- so that it can be continued
         after a reload, or a run repeated."""
-        from mjx_pick.outputs.rundir import read_manifest
         from mjx_pick.studies.recorded import settings_of
 
         self.error.set_text("")
@@ -121,7 +119,7 @@ class GenerateTab:
             return
         self.run_name.error = None
         try:
-            config = json.loads(config_path.read_text())
+            config = workfolder.read_json(config_path, self.state.workdir)
             settings, picks = settings_of(config, f"run {folder.name}")
         except (ValueError, ConfigError) as err:
             self.error.set_text(f"{folder.name}: its settings cannot be read ({err})")
@@ -130,7 +128,7 @@ class GenerateTab:
         if config.get("n") is not None:
             self.n.value = int(config["n"])
         self.seed.value = int(config.get("seed") or 0)
-        done = (read_manifest(folder) or {}).get("status")
+        done = (workfolder.manifest(folder, self.state.workdir) or {}).get("status")
         self.resume.value = done != "complete"
         obj = (config.get("object") or {}).get("name")
         if self.state.obj is None or self.state.obj.name != obj:
@@ -280,7 +278,7 @@ class GenerateTab:
 
         self.resume.value = False
         self.run_name.value = f"evaluate-{stamp()}"  # this name is taken now
-        s = json.loads((out / "summary.json").read_text())
+        s = workfolder.read_json(out / "summary.json", self.state.workdir)
         checks = "".join(
             f" {s[key]} of {s['n']} labels {what}."
             for key, what in (

@@ -129,7 +129,9 @@ class ImportTab:
             self.forget_upload()
             return
         try:
-            self.upload_path = await run.io_bound(save_upload, data, name, self.state.uploads)
+            self.upload_path = await run.io_bound(
+                save_upload, data, name, self.state.uploads, self.state.workdir
+            )
         except (OSError, ConfigError) as err:
             self.upload_error.set_text(f"{name}: cannot be stored ({err})")
             self.forget_upload()

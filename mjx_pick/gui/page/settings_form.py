@@ -158,5 +158,5 @@ class SettingsForm:
     def cli_flags(self, settings: forms.Settings, workdir: Path, out: Path) -> list[str]:
         """The CLI flags of a run into out: its settings written under workdir/inputs/."""
         folder = workdir / "inputs" / out.name
-        paths = forms.write_inputs(settings, folder)
+        paths = forms.write_inputs(settings, folder, workdir)
         return forms.cli_flags(settings, paths) + ["--backend", self.backend.value]
