@@ -184,9 +184,14 @@ def test_gripper_toml_and_outcomes_uploads_are_checked_before_they_are_read():
 
     assert check_toml_upload("g.toml", b'name = "g"') == ""
     assert "not a .toml file" in check_toml_upload("g.txt", b"")
-    assert "larger than 64 KB" in check_toml_upload("g.toml", b"#" * (64 * 2**10 + 1))
+    assert "g.toml: 65,537 bytes is too large (at most 65,536 bytes)" in check_toml_upload(
+        "g.toml", b"#" * (64 * 2**10 + 1)
+    )
     assert check_outcomes_upload("o.csv", b"x_mm,y_mm\n") == ""
-    assert "not a .csv file of at most 5 MB" in check_outcomes_upload("o.xlsx", b"")
+    assert "o.xlsx: not a .csv file" in check_outcomes_upload("o.xlsx", b"")
+    assert "o.csv: 6 MB is too large (at most 5 MB)" in check_outcomes_upload(
+        "o.csv", b"x" * 6 * 2**20
+    )
     assert "not a UTF-8 text file" in check_outcomes_upload("o.csv", b"\xff\xfe\x00")
 
 

@@ -363,3 +363,53 @@ def test_no_file_is_read_listed_or_served_through_a_link_out_of_the_work_folder(
     expect(page.get_by_test_id("runs-unlisted")).to_contain_text(
         "linked-run: a link that leads outside the work folder"
     )
+
+
+def test_a_file_the_browser_refuses_replaces_the_upload_before_it(page, tmp_path):
+    """An SVG or a 60 MB mesh, refused by the browser itself (the upload's accept and
+    size): said by its name and why, it stays said, and Import takes no earlier upload
+    in its place; so for an outcomes CSV before a calibration."""
+    from playwright.sync_api import expect
+
+    page.get_by_text("1 Import object model").click()
+    upload_object(page, BLOCK)
+    page.get_by_text("uploaded block.png").wait_for()
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+    refused = page.get_by_test_id("upload-error")
+    svg = tmp_path / "drawing.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg"/>')
+    big = tmp_path / "big.stl"
+    with big.open("wb") as fh:
+        fh.truncate(60 * 2**20)
+    for path, why in (
+        (svg, "drawing.svg: not an image (.png, "),
+        (big, "big.stl: 60 MB is too large (at most 50 MB)"),
+    ):
+        upload_object(page, path)
+        expect(refused).to_contain_text(why, timeout=30_000)
+        expect(page.get_by_test_id("object-info")).to_have_text("No object imported.")
+        page.get_by_test_id("import").click()
+        page.get_by_test_id("import-error").filter(has_text="upload an image").wait_for()
+        expect(refused).to_contain_text(why)  # still said
+        expect(page.get_by_test_id("object-info")).to_have_text("No object imported.")
+
+    import_shipped(page)  # a shipped object: another choice, the refusal is history
+    expect(refused).to_have_text("")
+    page.get_by_text("Studies", exact=True).click()
+    page.get_by_text("Calibrate contact parameters").click()
+    outcomes = BLOCK.parents[1] / "outcomes" / "block_1kg_rg2.csv"
+    csv_upload = page.get_by_test_id("outcomes-upload").locator("input[type=file]")
+    csv_upload.set_input_files(str(outcomes))
+    page.get_by_test_id("calibrate-info").filter(has_text="24 tested pick-points").wait_for()
+    sheet = tmp_path / "outcomes.xlsx"
+    sheet.write_bytes(b"PK\x03\x04 a spreadsheet")
+    csv_upload.set_input_files(str(sheet))
+    csv_refused = page.get_by_test_id("outcomes-error")
+    expect(csv_refused).to_have_text("outcomes.xlsx: not a .csv file", timeout=30_000)
+    expect(page.get_by_test_id("calibrate-info")).to_have_text("")
+    page.get_by_label("run folder name").filter(visible=True).last.fill("no-outcomes")
+    page.get_by_test_id("start-calibrate").click()
+    page.get_by_test_id("calibrate-error").filter(has_text="upload an outcomes CSV").wait_for()
+    expect(csv_refused).to_have_text("outcomes.xlsx: not a .csv file")
+    assert not page.get_by_test_id("job-title").is_visible()

@@ -29,7 +29,12 @@ from mjx_pick.gui.page.widgets import (
     upload,
 )
 from mjx_pick.gui.state import PageState
-from mjx_pick.gui.uploads import OUTCOMES_MAX_BYTES, check_outcomes_upload, save_upload
+from mjx_pick.gui.uploads import (
+    OUTCOMES_MAX_BYTES,
+    check_outcomes_upload,
+    outcomes_refused,
+    save_upload,
+)
 
 
 class StudiesTab:
@@ -202,11 +207,11 @@ class CalibrationStudy:
                     ".csv",
                     OUTCOMES_MAX_BYTES,
                     self.on_upload,
-                    lambda: self.error.set_text(
-                        f"file refused: a .csv file of at most {OUTCOMES_MAX_BYTES // 2**20} MB"
-                    ),
+                    self.refuse_upload,
+                    outcomes_refused,
                     "outcomes-upload",
                 ).classes("w-full")
+                self.upload_error = error_label().props('data-testid="outcomes-error"')
                 self.params = ui.select(
                     list(FITTABLE),
                     value=["pad_friction"],
@@ -230,13 +235,13 @@ class CalibrationStudy:
     async def on_upload(self, e) -> None:
         from mjx_pick.studies.calibration import read_outcomes
 
-        self.error.set_text("")
+        self.upload_error.set_text("")
         name = e.file.name
         data = await e.file.read()
         self.upload.reset()
         problem = check_outcomes_upload(name, data)
         if problem:
-            self.error.set_text(problem)
+            self.refuse_upload(problem)
             return
         try:
             path = await run.io_bound(
@@ -244,13 +249,21 @@ class CalibrationStudy:
             )
             outcomes = await run.io_bound(read_outcomes, str(path))
         except ConfigError as err:
-            self.error.set_text(str(err))
+            self.refuse_upload(str(err))
             return
         self.outcomes_path = path
         self.info.set_content(
             f"outcomes: {md_text(name)}, {len(outcomes)} tested pick-points "
             f"({int(np.sum(outcomes.trials))} trials)"
         )
+
+    def refuse_upload(self, why: str) -> None:
+        """An outcomes file refused (by the browser or here): said until the next
+        upload, and it replaces the one before -- a calibration never runs on the
+        earlier file."""
+        self.upload_error.set_text(why)
+        self.outcomes_path = None
+        self.info.set_content("")
 
     def start(self) -> None:
         self.error.set_text("")
