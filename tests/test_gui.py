@@ -467,7 +467,7 @@ def test_bad_inputs_are_shown_in_the_page(page, server, tmp_path):
     text = tmp_path / "notes.txt"
     text.write_text("not an object")
     upload.set_input_files(str(text))
-    page.get_by_test_id("upload-error").filter(has_text="file refused").wait_for()
+    page.get_by_test_id("upload-error").filter(has_text="notes.txt: not an image").wait_for()
     fake = tmp_path / "photo.png"
     fake.write_bytes(b"this is not a PNG" * 10)
     upload.set_input_files(str(fake))

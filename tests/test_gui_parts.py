@@ -184,9 +184,14 @@ def test_gripper_toml_and_outcomes_uploads_are_checked_before_they_are_read():
 
     assert check_toml_upload("g.toml", b'name = "g"') == ""
     assert "not a .toml file" in check_toml_upload("g.txt", b"")
-    assert "larger than 64 KB" in check_toml_upload("g.toml", b"#" * (64 * 2**10 + 1))
+    assert "g.toml: 65,537 bytes is too large (at most 65,536 bytes)" in check_toml_upload(
+        "g.toml", b"#" * (64 * 2**10 + 1)
+    )
     assert check_outcomes_upload("o.csv", b"x_mm,y_mm\n") == ""
-    assert "not a .csv file of at most 5 MB" in check_outcomes_upload("o.xlsx", b"")
+    assert "o.xlsx: not a .csv file" in check_outcomes_upload("o.xlsx", b"")
+    assert "o.csv: 6 MB is too large (at most 5 MB)" in check_outcomes_upload(
+        "o.csv", b"x" * 6 * 2**20
+    )
     assert "not a UTF-8 text file" in check_outcomes_upload("o.csv", b"\xff\xfe\x00")
 
 
@@ -728,3 +733,92 @@ def test_a_studys_run_counts_its_simulations(tmp_path):
     (out / "mjx_pick_run.json").write_text(json.dumps(manifest))
     (recovered,) = jobs.recovered_runs(tmp_path)
     assert recovered.poll().total == 30 and recovered.unit == "simulations"
+
+
+def test_every_file_the_page_reads_resolves_inside_the_work_folder(tmp_path):
+    """One check (workfolder.confined) for every file the page reads, lists or serves:
+    links followed -- absolute, relative, chained, through a folder -- it lies inside
+    the work folder, or it is refused by its name and where it leads; the routes built
+    on it (a run folder's tree, the runs a restarted server lists, a job's progress and
+    log, an upload's and a run's inputs' stored files) never read through a link out."""
+    from mjx_pick.gui import workfolder
+    from mjx_pick.gui.workfolder import OutsideWorkFolder, check_tree, confined
+
+    work, away = tmp_path / "work", tmp_path / "away"
+    (work / "run").mkdir(parents=True)
+    away.mkdir()
+    (away / "secret").write_text("secret")
+    (work / "run" / "ok.txt").write_text("ok")
+    links = {
+        "abs": away / "secret",  # absolute
+        "rel": Path("..") / ".." / "away" / "secret",  # relative, up and out
+        "etc": Path("/etc/passwd"),
+        "dangling": away / "none",  # does not exist: where it leads still counts
+        "hop": Path("abs"),  # a chain: a link inside to a link out
+        "inner": Path("ok.txt"),  # inside: allowed
+        "dir": away,  # a folder
+    }
+    for name, target in links.items():
+        (work / "run" / name).symlink_to(target)
+    for name in ("abs", "rel", "etc", "dangling", "hop", "dir"):
+        with pytest.raises(OutsideWorkFolder) as err:
+            confined(work / "run" / name, work)
+        assert str(err.value).startswith(f"run/{name}: a link that leads outside the work folder")
+        with pytest.raises(OutsideWorkFolder):
+            workfolder.read_bytes(f"run/{name}", work)  # relative: from the work folder
+    assert workfolder.read_text(work / "run" / "inner", work) == "ok"
+    assert confined(work, work) == work.resolve()
+    for outside in ("/etc", "..", str(away), "run/../.."):
+        assert workfolder.inside(outside, work) is None
+    with pytest.raises(OutsideWorkFolder, match="run/abs"):
+        check_tree(work / "run", work)
+    # a folder whose link leads inside, holding a link out: found through it
+    (work / "run2" / "deep").mkdir(parents=True)
+    (work / "run2" / "deep" / "out").symlink_to(away / "secret")
+    (work / "run3").mkdir()
+    (work / "run3" / "via").symlink_to(work / "run2", target_is_directory=True)
+    with pytest.raises(OutsideWorkFolder, match="run3/via/deep/out"):
+        check_tree(work / "run3", work)
+    (work / "run3" / "loop").symlink_to(work / "run3", target_is_directory=True)
+    (work / "run2" / "deep" / "out").unlink()
+    assert check_tree(work / "run3", work) == (work / "run3").resolve()  # loops end
+
+    # the runs a restarted server lists: a run folder reached through a link out is not
+    manifest = {"command": "evaluate", "status": "complete", "started": "2026-11-24T01:00:00"}
+    (away / "run-out").mkdir()
+    (away / "run-out" / "mjx_pick_run.json").write_text(json.dumps(manifest))
+    (work / "run-out").symlink_to(away / "run-out", target_is_directory=True)
+    (work / "run-in").mkdir()
+    (work / "run-in" / "mjx_pick_run.json").symlink_to(away / "run-out" / "mjx_pick_run.json")
+    folders, left_out = workfolder.run_folders(work)
+    assert work / "run-out" not in folders and any(s.startswith("run-out: ") for s in left_out)
+    assert workfolder.manifest(work / "run-in", work) is None  # its manifest leads out
+    assert jobs.recovered_runs(work) == []
+
+    # a job's progress and log: never read through a link out
+    (work / "logs").mkdir()
+    (work / "logs" / "j.log").symlink_to(away / "secret")
+    (work / "j").mkdir()
+    (work / "j" / "config.json").symlink_to(away / "config.json")
+    (away / "config.json").write_text(json.dumps({"n": 99, "chunk_size": 1}))
+    job = jobs.Job(["evaluate"], work / "logs" / "j.log", work / "j", 4, 2)
+    job._proc = jobs.FolderRun(work / "j", work)
+    assert job.poll().total == 4 and "secret" not in job.error_message(1)
+
+    # stored files: an upload or a run's settings never read or written through a link
+    uploads = work / "inputs" / "uploads"
+    uploads.mkdir(parents=True)
+    (uploads / "part.png").symlink_to(away / "secret")
+    stored = save_upload(b"secret", "part.png", uploads, work)
+    assert stored == uploads / "part-2.png" and stored.read_bytes() == b"secret"
+    (work / "inputs" / "elsewhere").symlink_to(away, target_is_directory=True)
+    with pytest.raises(OutsideWorkFolder):
+        save_upload(b"x", "a.png", work / "inputs" / "elsewhere", work)
+    settings, _ = forms.build(values(), load_gripper("robotiq-2f85"))
+    (work / "inputs" / "r").mkdir()
+    (work / "inputs" / "r" / "grasp.toml").symlink_to(away / "grasp.toml")
+    paths = forms.write_inputs(settings, work / "inputs" / "r", work)
+    assert paths["grasp"] == work / "inputs" / "r-2" / "grasp.toml"
+    assert not (away / "grasp.toml").exists()
+    paths = forms.write_inputs(settings, work / "inputs" / "elsewhere", work)
+    assert paths["grasp"].parent == work / "inputs" / "elsewhere-2"

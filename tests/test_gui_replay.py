@@ -188,3 +188,77 @@ def test_a_failed_pick_point_is_drawn_in_the_failure_colour(page, replay_run):
     np.testing.assert_allclose(
         shown["object"][0], [trace[f"object_{c}_m"][0] for c in "xyz"], atol=PAGE_TOL_M
     )
+
+
+def test_the_slider_follows_a_mouse_click_and_a_drag(page, replay_run):
+    """The time slider as a user moves it, with the mouse: a click on its track sets
+    the time there and a drag follows the pointer -- no error in the page (its min,
+    max and step reach Quasar as numbers), and the page still answers after the drag."""
+    from playwright.sync_api import expect
+
+    errors = []
+    page.on("pageerror", lambda err: errors.append(str(err)))
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    received = []  # the sizes of the server's messages to the page
+
+    def websocket(ws) -> None:
+        ws.on("framereceived", lambda f: received.append(len(f)))
+
+    page.on("websocket", websocket)
+    page.reload()
+    run = replay_run
+    trace = run.trace(0)
+    t = trace["t_s"]
+    open_and_select(page, run, 1)
+    clock = page.get_by_test_id("replay-clock")
+    clock.filter(has_text="t = 0.000 s").wait_for()
+    slider = page.get_by_test_id("replay-time")
+    slider.scroll_into_view_if_needed()  # the mouse reaches only what the window shows
+    box = slider.bounding_box()
+    y = box["y"] + box["height"] / 2
+
+    def at(fraction: float) -> float:
+        return box["x"] + fraction * box["width"]
+
+    def now() -> float:
+        return float(slider.get_attribute("aria-valuenow"))
+
+    # a click halfway along the track: the time there, within a row
+    page.mouse.click(at(0.5), y)
+    page.wait_for_function(
+        "(el) => Number(el.getAttribute('aria-valuenow')) > 0",
+        arg=slider.element_handle(),
+        timeout=10_000,
+    )
+    assert now() == pytest.approx(0.5 * float(t[-1]), abs=0.05 * float(t[-1]))
+    k = int(np.argmin(np.abs(t - now())))
+    clock.filter(has_text=f"t = {t[k]:.3f} s").wait_for()
+    np.testing.assert_allclose(
+        bodies(page)["object"][0], [trace[f"object_{c}_m"][k] for c in "xyz"], atol=PAGE_TOL_M
+    )
+
+    # a drag from a quarter to four fifths, in small moves as a hand makes them
+    received.clear()
+    page.mouse.move(at(0.25), y)
+    page.mouse.down()
+    for i in range(1, 31):
+        page.mouse.move(at(0.25 + 0.55 * i / 30), y)
+    page.mouse.up()
+    page.wait_for_function(
+        "([el, v]) => Math.abs(Number(el.getAttribute('aria-valuenow')) - v) < 0.05 * v",
+        arg=[slider.element_handle(), 0.8 * float(t[-1])],
+        timeout=10_000,
+    )
+    k = int(np.argmin(np.abs(t - now())))
+    clock.filter(has_text=f"t = {t[k]:.3f} s").wait_for(timeout=10_000)
+    np.testing.assert_allclose(
+        bodies(page)["object"][0], [trace[f"object_{c}_m"][k] for c in "xyz"], atol=PAGE_TOL_M
+    )
+    # each move answered by a few bytes (the clock), never the force chart's options
+    assert received and max(received) < 10_000, sorted(received)[-3:]
+    # the page answers: play runs the slider to the trace's end, a tab opens
+    page.get_by_test_id("replay-play").click(timeout=10_000)
+    expect(slider).to_have_attribute("aria-valuenow", f"{round(float(t[-1]), 6)}", timeout=10_000)
+    page.get_by_text("1 Import object model").click(timeout=10_000)
+    expect(page.get_by_test_id("import")).to_be_visible(timeout=10_000)
+    assert not errors, errors

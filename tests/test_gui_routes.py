@@ -261,3 +261,155 @@ def test_a_long_pick_point_search_shows_its_progress_and_stops(page):
     assert "the object fills too little of the region between the pads" in warned, warned
     assert "lower the minimum coverage, now 0.71" in warned
     assert "wider than the stroke" not in warned and "larger stroke" not in warned
+
+
+def field_message(page, label: str):
+    """The messages line Quasar shows under the (visible) field labelled label."""
+    field = page.locator("label.q-field").filter(visible=True)
+    return field.filter(has=page.get_by_label(label, exact=True)).locator(".q-field__messages")
+
+
+def test_tab_3s_traces_and_chunk_size_keep_the_number_rule(page):
+    """Traced best and worst -1 or 2.5, a chunk of 0, -3 or 2.5 pick-points: refused
+    under the field in its words, the value left as typed, no run -- never changed to
+    0, 1 or 2 and started. An empty chunk size is the page's own choice."""
+    from playwright.sync_api import expect
+
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 3)
+    page.get_by_label("run folder name").fill("numbers")
+    for label, value, rule in (
+        ("traced best and worst (force plots)", "-1", "a whole number from 0 to 10,000"),
+        ("traced best and worst (force plots)", "2.5", "a whole number from 0 to 10,000"),
+        ("pick-points per saved chunk", "0", "a whole number from 1 to 100,000,000, or empty"),
+        ("pick-points per saved chunk", "-3", "a whole number from 1 to 100,000,000, or empty"),
+        ("pick-points per saved chunk", "2.5", "a whole number from 1 to 100,000,000, or empty"),
+    ):
+        number(page, label, value)
+        page.get_by_test_id("start-batch").click()
+        expect(field_message(page, label)).to_have_text(rule, timeout=10_000)
+        expect(page.get_by_label(label, exact=True)).to_have_value(value)
+        assert not page.get_by_test_id("job-title").is_visible()
+        number(page, label, 1)  # the message goes with the next check
+    page.get_by_label("pick-points per saved chunk", exact=True).fill("")
+    page.get_by_test_id("start-batch").click()
+    status = wait_job(page, "evaluate numbers")
+    assert status.startswith("complete, 3/3"), status
+
+
+def small_run(out, block) -> None:
+    """An evaluate folder of two pick-points of the block (the library, no page)."""
+    import mjx_pick as mp
+    from mjx_pick.core.procedure import GraspConfig
+
+    grasp = GraspConfig(close_timeout_s=1.0, lift_height_mm=5.0, hold_s=0.05)
+    gripper = mp.load_gripper("robotiq-2f85")
+    mp.evaluate(block, gripper, n=2, grasp=grasp, backend="mujoco", out=out, n_traces=1)
+
+
+def test_no_file_is_read_listed_or_served_through_a_link_out_of_the_work_folder(
+    page, server, tmp_path, block
+):
+    """Links in the work folder: a report file that leads to /etc/passwd is not served
+    (the refusal names it), a run folder holding a link out is not opened, a link to a
+    run folder outside is neither listed nor opened -- each said by its name."""
+    from playwright.sync_api import expect
+
+    _, work = server
+    secret = tmp_path / "secret.txt"
+    secret.write_text("not for the browser\n")
+    run = work / "linked-files"
+    small_run(run, block)
+    (run / "report.html").write_text("<html>the run's report</html>")
+    outside = tmp_path / "outside-run"
+    small_run(outside, block)
+    (work / "linked-run").symlink_to(outside, target_is_directory=True)
+
+    downloads = []
+    page.on("download", lambda d: downloads.append(d.suggested_filename))
+    page.get_by_text("4 Analyze results").click()
+    page.get_by_test_id("run-dir").fill("linked-files")
+    page.get_by_test_id("open-run").click()
+    report = page.get_by_test_id("download-report.html")
+    report.wait_for()
+    # made after the run was opened: the file is checked when it is asked for
+    (run / "report.html").unlink()
+    (run / "report.html").symlink_to("/etc/passwd")
+    report.click()
+    error = page.get_by_test_id("analyze-error")
+    error.filter(has_text="leads outside the work folder").wait_for(timeout=10_000)
+    assert error.inner_text().startswith("linked-files/report.html: a link that leads outside")
+    assert "to /etc/passwd" in error.inner_text()
+    page.wait_for_timeout(1000)
+    assert not downloads
+
+    # a run folder that holds a link out is not opened: its tables and scene are not read
+    (run / "report.html").unlink()
+    (run / "summary.json").rename(run / "summary-real.json")
+    (run / "summary.json").symlink_to(secret)
+    page.get_by_test_id("open-run").click()
+    error.filter(has_text="linked-files/summary.json: a link that leads outside").wait_for()
+    assert "not for the browser" not in page.locator("body").inner_text()
+
+    # a run folder outside, reached through a link: not listed, not opened
+    page.get_by_test_id("run-dir").fill("linked-run")
+    page.get_by_test_id("open-run").click()
+    error.filter(has_text="linked-run: only run folders inside the work folder").wait_for()
+    page.get_by_label("runs in the work folder", exact=True).click()
+    options = page.get_by_role("option").all_inner_texts()
+    assert not [o for o in options if "linked-run" in o], options
+    page.keyboard.press("Escape")
+    expect(page.get_by_test_id("runs-unlisted")).to_contain_text(
+        "linked-run: a link that leads outside the work folder"
+    )
+
+
+def test_a_file_the_browser_refuses_replaces_the_upload_before_it(page, tmp_path):
+    """An SVG or a 60 MB mesh, refused by the browser itself (the upload's accept and
+    size): said by its name and why, it stays said, and Import takes no earlier upload
+    in its place; so for an outcomes CSV before a calibration."""
+    from playwright.sync_api import expect
+
+    page.get_by_text("1 Import object model").click()
+    upload_object(page, BLOCK)
+    page.get_by_text("uploaded block.png").wait_for()
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+    refused = page.get_by_test_id("upload-error")
+    svg = tmp_path / "drawing.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg"/>')
+    big = tmp_path / "big.stl"
+    with big.open("wb") as fh:
+        fh.truncate(60 * 2**20)
+    for path, why in (
+        (svg, "drawing.svg: not an image (.png, "),
+        (big, "big.stl: 60 MB is too large (at most 50 MB)"),
+    ):
+        upload_object(page, path)
+        expect(refused).to_contain_text(why, timeout=30_000)
+        expect(page.get_by_test_id("object-info")).to_have_text("No object imported.")
+        page.get_by_test_id("import").click()
+        page.get_by_test_id("import-error").filter(has_text="upload an image").wait_for()
+        expect(refused).to_contain_text(why)  # still said
+        expect(page.get_by_test_id("object-info")).to_have_text("No object imported.")
+
+    import_shipped(page)  # a shipped object: another choice, the refusal is history
+    expect(refused).to_have_text("")
+    page.get_by_text("Studies", exact=True).click()
+    page.get_by_text("Calibrate contact parameters").click()
+    outcomes = BLOCK.parents[1] / "outcomes" / "block_1kg_rg2.csv"
+    csv_upload = page.get_by_test_id("outcomes-upload").locator("input[type=file]")
+    csv_upload.set_input_files(str(outcomes))
+    page.get_by_test_id("calibrate-info").filter(has_text="24 tested pick-points").wait_for()
+    sheet = tmp_path / "outcomes.xlsx"
+    sheet.write_bytes(b"PK\x03\x04 a spreadsheet")
+    csv_upload.set_input_files(str(sheet))
+    csv_refused = page.get_by_test_id("outcomes-error")
+    expect(csv_refused).to_have_text("outcomes.xlsx: not a .csv file", timeout=30_000)
+    expect(page.get_by_test_id("calibrate-info")).to_have_text("")
+    page.get_by_label("run folder name").filter(visible=True).last.fill("no-outcomes")
+    page.get_by_test_id("start-calibrate").click()
+    page.get_by_test_id("calibrate-error").filter(has_text="upload an outcomes CSV").wait_for()
+    expect(csv_refused).to_have_text("outcomes.xlsx: not a .csv file")
+    assert not page.get_by_test_id("job-title").is_visible()

@@ -205,6 +205,7 @@ GUI_LEVELS = {
         "one_pick",
         "worker",
         "replay3d",
+        "workfolder",
     ),
     "page parts": (
         "page",

@@ -230,16 +230,24 @@ def gripper_from_toml(text: str, where: str = "gripper TOML") -> GripperSpec:
     return gripper_from_data(data, where, Path.cwd())
 
 
-def write_inputs(settings: Settings, folder: Path) -> dict[str, Path]:
+def write_inputs(settings: Settings, folder: Path, workdir: Path | None = None) -> dict[str, Path]:
     """The settings as the TOML files the CLI reads (--gripper-file, --grasp, --contact).
 
     Files that a run already reads are never replaced: when folder holds other
-    settings, they go to folder-2, folder-3, ...
+    settings, they go to folder-2, folder-3, ... -- as when one of them is a link (it
+    is never read or written through: it may lead outside the work folder), or the
+    folder itself leads outside workdir (default: folder's parent's parent, the work
+    folder of ``WORKDIR/inputs/<run>``).
     """
+    from mjx_pick.gui.workfolder import inside
+
+    workdir = Path(folder).parent.parent if workdir is None else workdir
     texts = {name: to_toml(getattr(settings, name)) for name in ("gripper", "grasp", "contact")}
     for k in range(1, 1000):
         where = folder if k == 1 else folder.with_name(f"{folder.name}-{k}")
         paths = {name: where / f"{name}.toml" for name in texts}
+        if inside(where, workdir) is None or any(p.is_symlink() for p in paths.values()):
+            continue
         if all(not p.exists() or p.read_text() == texts[n] for n, p in paths.items()):
             for name, path in paths.items():
                 if not path.exists():

@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from mjx_pick.engine.registry import AUTO, Impl
+from mjx_pick.gui import workfolder
 from mjx_pick.gui.formatting import library_of, unexpected_text
 
 CANCEL_GRACE_S = 15.0  # after a SIGINT, how long a run may take to write and stop
@@ -464,6 +465,12 @@ class Job:
         """The same run typed at a shell."""
         return shlex.join(["mjx-pick", *self.argv])
 
+    @property
+    def workdir(self) -> Path:
+        """The work folder it runs in: its log is ``logs/<name>.log`` there, and the
+        page reads its files only inside it (:mod:`mjx_pick.gui.workfolder`)."""
+        return self.log.parent.parent
+
     def start(self, workers: Workers | None = None) -> Job:
         """Start the run -- in a warm worker of workers when one serves it, else in a
         process of its own; its log never replaces another run's (a taken name gets -2,
@@ -586,7 +593,7 @@ class Job:
         chunks); rate: pick-points per second of simulation -- the summary's once the run
         is complete, before that the same measured between finished chunks (the first
         chunk, which includes compiling, only starts the clock)."""
-        config = _read_json(self.out / "config.json") if self.out is not None else None
+        config = self._read_json("config.json")
         total, chunk = self.total, self.chunk
         if config is not None and config.get("n"):
             total, chunk = int(config["n"]), int(config.get("chunk_size") or chunk)
@@ -599,7 +606,7 @@ class Job:
             message = "simulating the first chunk (compiling first)"
         rate = None
         if complete:
-            summary = _read_json(self.out / "summary.json") or {}
+            summary = self._read_json("summary.json") or {}
             rate = summary.get("picks_per_s")
             self._done = total
         else:
@@ -628,10 +635,17 @@ class Job:
         return tuple(seen)
 
     def _log_text(self) -> str:
+        """Its log ('' while there is none, or where a link leads it outside)."""
         try:
-            return self.log.read_text(errors="replace")
-        except OSError:
+            return workfolder.read_text(self.log, self.workdir)
+        except (OSError, ValueError):
             return ""
+
+    def _read_json(self, name: str) -> dict | None:
+        """A JSON file of its folder, or None (none yet, not whole, or outside)."""
+        if self.out is None:
+            return None
+        return workfolder.json_or_none(self.out / name, self.workdir)
 
     def error_message(self, code: int) -> str:
         """One line for the page: the CLI's own error line, else the exception's."""
@@ -662,24 +676,22 @@ class FolderRun:
     previous server's worker or child that is still going), else the exit code its
     manifest's status stands for."""
 
-    def __init__(self, out: Path):
-        self.out = Path(out)
+    def __init__(self, out: Path, workdir: Path):
+        self.out, self.workdir = Path(out), Path(workdir)
         self.pid: int | None = None
         self._code: int | None = None  # once ended, it stays so (the page polls often)
 
     def poll(self) -> int | None:
-        from mjx_pick.outputs.rundir import lock_holder, read_manifest
-
         if self._code is not None:
             return self._code
-        holder = lock_holder(self.out)
+        holder = workfolder.lock_holder(self.out, self.workdir)
         if holder is not None:
             # a process of this machine can be signalled; another host's (a work folder
             # on a shared disk) only watched
             here = holder.get("host") in (None, socket.gethostname())
             self.pid = holder.get("pid") if here else None
             return None
-        status = (read_manifest(self.out) or {}).get("status")
+        status = (workfolder.manifest(self.out, self.workdir) or {}).get("status")
         self._code = EXIT_OF_STATUS.get(status, 1)  # "failed", or "running" and dead
         return self._code
 
@@ -706,34 +718,31 @@ def recovered_runs(workdir: Path) -> list[Job]:
     """A job for each run folder of the work folder (a folder with an mjx-pick
     manifest), oldest first: its command line from its log's first line (``logs/<folder
     name>.log``, as the GUI writes it), its state and progress from its folder."""
-    from mjx_pick.outputs.rundir import read_manifest
-
     workdir = Path(workdir)
     found = []
-    if not workdir.is_dir():
-        return []
-    for folder in workdir.iterdir():
-        manifest = read_manifest(folder) if folder.is_dir() else None
+    folders, _ = workfolder.run_folders(workdir)  # never one a link leads outside
+    for folder in folders:
+        manifest = workfolder.manifest(folder, workdir)
         if not manifest or not manifest.get("command"):
             continue
         log = workdir / "logs" / f"{folder.name}.log"
         argv = [manifest["command"], "--out", str(folder)]
         try:
-            first = log.read_text(errors="replace").split("\n", 1)[0]
+            first = workfolder.read_text(log, workdir).split("\n", 1)[0]
             if first.startswith("$ mjx-pick "):
                 argv = shlex.split(first[len("$ mjx-pick ") :])
         except (OSError, ValueError):
             pass
         total = chunk = None
         if manifest["command"] == "evaluate":
-            config = _read_json(folder / "config.json") or {}
+            config = workfolder.json_or_none(folder / "config.json", workdir) or {}
             total, chunk = config.get("n"), config.get("chunk_size")
         if manifest["command"] in STUDY_COMMANDS:
             job = study_job(argv, log, folder)
         else:
             job = Job(argv, log, folder, total, chunk)
         job.title = f"{manifest['command']} {folder.name}"
-        job._proc = FolderRun(folder)
+        job._proc = FolderRun(folder, workdir)
         started, finished = _wall(manifest.get("started")), _wall(manifest.get("finished"))
         job._t0 = time.monotonic() - (time.time() - started if started else 0.0)
         if started and finished and manifest.get("status") != "running":
@@ -809,14 +818,6 @@ def _crash(lines: list[str]) -> tuple[str, str] | None:
         "an exception",
     )
     return (library_of(frames[-1]) if frames else "Python"), kind
-
-
-def _read_json(path: Path) -> dict | None:
-    """A JSON file the run writes atomically, or None while it is not there."""
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
 
 
 def _mtimes(files: list[Path]) -> list[float]:

@@ -14,6 +14,8 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from mjx_pick.gui import workfolder
+
 if TYPE_CHECKING:
     from mjx_pick.core.objects import ObjectModel
     from mjx_pick.outputs.reporting import Run
@@ -66,10 +68,7 @@ class PageState:
         text = (text or "").strip()
         if not text:
             return None
-        root = self.workdir.resolve()
-        path = Path(text)
-        path = (path if path.is_absolute() else root / path).resolve()
-        return path if path == root or root in path.parents else None
+        return workfolder.inside(text, self.workdir)
 
     def run_folder(self, name: str) -> Path | None:
         """The output folder of a run named name, or None if the name is not allowed."""

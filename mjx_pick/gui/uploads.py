@@ -22,32 +22,49 @@ OUTCOMES_MAX_BYTES = 5 * 2**20
 UPLOAD_TYPES = IMAGE_SUFFIXES + MESH_SUFFIXES
 
 
-def save_upload(data: bytes, name: str, folder: Path) -> Path:
-    """An uploaded file under folder, atomically; never replaces another file's content."""
+def save_upload(data: bytes, name: str, folder: Path, workdir: Path | None = None) -> Path:
+    """An uploaded file under folder, atomically; never replaces another file's content,
+    and never reads one a link leads to outside workdir (default: folder) -- that name
+    is passed over."""
+    from mjx_pick.gui.workfolder import confined, inside
+
+    workdir = folder if workdir is None else workdir
+    confined(folder, workdir)  # the uploads folder itself: never one a link leads out
     stem = re.sub(r"[^A-Za-z0-9._-]+", "_", Path(name).stem)[:60] or "upload"
     suffix = Path(name).suffix.lower()
     for k in range(1000):
         path = folder / (f"{stem}{suffix}" if k == 0 else f"{stem}-{k + 1}{suffix}")
-        if not path.exists():
+        if not path.exists() and not path.is_symlink():
             return write_atomic(path, data)
+        if inside(path, workdir) is None:  # a link out: neither read nor replaced
+            continue
         if path.read_bytes() == data:
             return path  # the same file uploaded again
     raise ConfigError(f"too many uploads named {name!r} in {folder}")
 
 
-def object_refused() -> str:
-    """What the page says when the browser refuses an object file (type or size)."""
-    return (
-        "file refused: upload an image ("
-        + ", ".join(IMAGE_SUFFIXES)
-        + f", up to {IMAGE_MAX_BYTES // 2**20} MB) or a mesh ("
-        + ", ".join(MESH_SUFFIXES)
-        + f", up to {MESH_MAX_BYTES // 2**20} MB)"
-    )
+def _too_large(name: str, size: int, limit: int) -> str:
+    said, most = _megabytes(size), _megabytes(limit)
+    (a, unit), (b, limit_unit) = said.split(), most.split()
+    if unit == limit_unit and float(a) <= float(b):  # rounded to the limit: in bytes
+        said, most = f"{size:,} bytes", f"{limit:,} bytes"
+    return f"{name}: {said} is too large (at most {most})"
 
 
-def check_upload(name: str, size: int, data: bytes | None = None) -> str:
-    """Why an uploaded object file is refused ('' when it is accepted)."""
+def _megabytes(size: int) -> str:
+    """A file size as the page writes it: '60.0 MB', '64 KB'."""
+    if size >= 2**20:
+        return f"{size / 2**20:.1f} MB" if size % 2**20 else f"{size // 2**20} MB"
+    return f"{size / 2**10:.1f} KB" if size % 2**10 else f"{size // 2**10} KB"
+
+
+# Each upload's refusal of a file by its name and size: what the server says after it
+# received the file, and what the page says for a file the browser refused to send (by
+# the same limits, given to it as `accept` and the largest size): one rule, one message
+
+
+def object_refused(name: str, size: int) -> str:
+    """Why an object file (image or mesh) is refused by its type or size ('' if not)."""
     suffix = Path(name).suffix.lower()
     if suffix not in UPLOAD_TYPES:
         return (
@@ -56,9 +73,18 @@ def check_upload(name: str, size: int, data: bytes | None = None) -> str:
         )
     limit = IMAGE_MAX_BYTES if suffix in IMAGE_SUFFIXES else MESH_MAX_BYTES
     if size > limit:
-        return f"{name}: {size / 2**20:.1f} MB is too large (at most {limit // 2**20} MB)"
+        return _too_large(name, size, limit)
     if size == 0:
         return f"{name}: the file is empty"
+    return ""
+
+
+def check_upload(name: str, size: int, data: bytes | None = None) -> str:
+    """Why an uploaded object file is refused ('' when it is accepted)."""
+    problem = object_refused(name, size)
+    if problem:
+        return problem
+    suffix = Path(name).suffix.lower()
     if data is not None and suffix in IMAGE_SUFFIXES:
         import cv2
 
@@ -68,21 +94,48 @@ def check_upload(name: str, size: int, data: bytes | None = None) -> str:
     return ""
 
 
-def check_toml_upload(name: str, data: bytes) -> str:
-    """Why an uploaded gripper TOML is refused before it is parsed ('' when accepted)."""
+def toml_refused(name: str, size: int) -> str:
+    """Why a gripper TOML is refused by its name or size ('' if not)."""
     if not name.lower().endswith(".toml"):
         return f"{name}: not a .toml file"
-    if len(data) > TOML_MAX_BYTES:
-        return f"{name}: larger than {TOML_MAX_BYTES // 2**10} KB"
+    if size > TOML_MAX_BYTES:
+        return _too_large(name, size, TOML_MAX_BYTES)
+    return ""
+
+
+def check_toml_upload(name: str, data: bytes) -> str:
+    """Why an uploaded gripper TOML is refused before it is parsed ('' when accepted)."""
+    return toml_refused(name, len(data))
+
+
+def outcomes_refused(name: str, size: int) -> str:
+    """Why an outcomes CSV is refused by its name or size ('' if not)."""
+    if not name.lower().endswith(".csv"):
+        return f"{name}: not a .csv file"
+    if size > OUTCOMES_MAX_BYTES:
+        return _too_large(name, size, OUTCOMES_MAX_BYTES)
     return ""
 
 
 def check_outcomes_upload(name: str, data: bytes) -> str:
     """Why an uploaded outcomes CSV is refused before it is read ('' when accepted)."""
-    if not name.lower().endswith(".csv") or len(data) > OUTCOMES_MAX_BYTES:
-        return f"{name}: not a .csv file of at most {OUTCOMES_MAX_BYTES // 2**20} MB"
+    problem = outcomes_refused(name, len(data))
+    if problem:
+        return problem
     try:
         data.decode("utf-8")
     except UnicodeDecodeError:
         return f"{name}: not a UTF-8 text file"
     return ""
+
+
+def browser_refused(files: list[dict], refused) -> str:
+    """What the page says of files the browser refused to send (QUploader's
+    ``rejected``: each {name, size, reason}): each by its name and why, by the upload's
+    own rule refused(name, size) -- the reason the browser gave only where the rule
+    finds none."""
+    said = []
+    for f in files or [{}]:
+        name, size = str(f.get("name") or "the file"), int(f.get("size") or 0)
+        said.append(refused(name, size) or f"{name}: refused by the browser ({f.get('reason')})")
+    return "; ".join(said)

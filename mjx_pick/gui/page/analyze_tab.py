@@ -15,7 +15,7 @@ import numpy as np
 from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
-from mjx_pick.gui import jobs, views
+from mjx_pick.gui import jobs, views, workfolder
 from mjx_pick.gui.formatting import (
     FRAME_NAME,
     MAP_HELP,
@@ -27,7 +27,7 @@ from mjx_pick.gui.formatting import (
 from mjx_pick.gui.one_pick import simulate_untraced
 from mjx_pick.gui.page.job_panel import POLL_S, JobPanel
 from mjx_pick.gui.page.replay_view import ReplayView
-from mjx_pick.gui.page.widgets import checked, error_label, show_picture
+from mjx_pick.gui.page.widgets import checked, error_label, show_picture, warning_label
 from mjx_pick.gui.state import PageState
 
 TABLE_COLUMNS = (
@@ -69,6 +69,7 @@ class AnalyzeTab:
                 [], label="runs in the work folder", on_change=self.on_known_run
             ).classes("w-72")
             ui.button(icon="refresh", on_click=self.refresh_runs).props("flat")
+        self.unlisted = warning_label("runs-unlisted")  # folders the list leaves out
         self.error = error_label().props('data-testid="analyze-error"')
         self.run_info = ui.label("").props('data-testid="run-info"')
         with ui.row().classes("w-full no-wrap items-start"):
@@ -131,17 +132,17 @@ class AnalyzeTab:
         self.refresh_runs()
 
     def refresh_runs(self) -> None:
-        """The evaluate folders in the work folder, for the chooser."""
-        from mjx_pick.outputs.rundir import read_manifest
-
-        names = []
+        """The evaluate folders in the work folder, for the chooser; a folder reached
+        through a link that leads outside it is not read, and said."""
         workdir = self.state.workdir
-        if workdir.is_dir():
-            for p in sorted(workdir.iterdir()):
-                m = read_manifest(p) if p.is_dir() else None
-                if m and m.get("command") == "evaluate":
-                    names.append(str(p))
+        folders, left_out = workfolder.run_folders(workdir)
+        names = [
+            str(p)
+            for p in folders
+            if (workfolder.manifest(p, workdir) or {}).get("command") == "evaluate"
+        ]
         self.known_runs.set_options(names)
+        self.unlisted.set_text("not listed: " + "; ".join(left_out) if left_out else "")
 
     def on_known_run(self, _=None) -> None:
         if self.known_runs.value:
@@ -172,6 +173,8 @@ class AnalyzeTab:
             self.awaited = path
             return
         try:
+            # every file the run's tables, traces, scene and downloads come from: inside
+            workfolder.check_tree(path, self.state.workdir)
             opened = Run.load(path)
         except ConfigError as err:
             self.error.set_text(str(err))
@@ -219,17 +222,16 @@ class AnalyzeTab:
 
     def unfinished(self, path: Path) -> str:
         """Why an evaluate folder has no results to open yet ('' if it may have)."""
-        from mjx_pick.outputs.rundir import lock_holder, read_manifest
-
+        workdir = self.state.workdir
         job = self.panel.runs.writing(path)
         if job is not None:
             p = job.poll()
             count = f" ({p.done}/{p.total} {p.unit})" if p.done is not None else ""
             return f"{path.name} is still running{count}: it opens here when it is complete"
-        m = read_manifest(path) or {}
+        m = workfolder.manifest(path, workdir) or {}
         if m.get("command") != "evaluate" or (path / "results.parquet").is_file():
             return ""
-        if m.get("status") == "running" and lock_holder(path) is not None:
+        if m.get("status") == "running" and workfolder.lock_holder(path, workdir) is not None:
             return (
                 f"{path.name} is still running in another process: it opens here when it "
                 "is complete"
@@ -391,8 +393,19 @@ class AnalyzeTab:
                 path = opened.path / name
                 if path.is_file():
                     ui.button(
-                        label, icon="download", on_click=lambda p=path: ui.download.file(p)
+                        label, icon="download", on_click=lambda p=path: self.download(p)
                     ).props(f'outline data-testid="download-{name}"')
+
+    def download(self, path: Path) -> None:
+        """A file of the open run, sent to the browser -- checked when asked for (a
+        link made since the run was opened is refused too), the file it resolves to."""
+        self.error.set_text("")
+        try:
+            real = workfolder.confined(path, self.state.workdir)
+        except workfolder.OutsideWorkFolder as err:
+            self.error.set_text(str(err))
+            return
+        ui.download.file(real, filename=path.name)
 
 
 def ranked_rows(opened) -> list[dict]:

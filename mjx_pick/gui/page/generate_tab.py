@@ -6,7 +6,6 @@ a cancelled run is set up to be resumed, a complete one is opened in tab 4.
 
 from __future__ import annotations
 
-import json
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -15,13 +14,14 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.pickpoints import rejected_text
-from mjx_pick.gui import jobs, views
+from mjx_pick.gui import jobs, views, workfolder
 from mjx_pick.gui.formatting import MAP_HELP, fmt, md_text, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
     SearchProgress,
     checked,
+    checked_or_empty,
     error_label,
     need_object,
     run_folder,
@@ -109,7 +109,6 @@ class GenerateTab:
         when it starts: a stopped run has one), into this page: tab 2's fields, the
         pick-points, the seed and the name, resume ticked -- so that it can be continued
         after a reload, or a run repeated."""
-        from mjx_pick.outputs.rundir import read_manifest
         from mjx_pick.studies.recorded import settings_of
 
         self.error.set_text("")
@@ -120,7 +119,7 @@ class GenerateTab:
             return
         self.run_name.error = None
         try:
-            config = json.loads(config_path.read_text())
+            config = workfolder.read_json(config_path, self.state.workdir)
             settings, picks = settings_of(config, f"run {folder.name}")
         except (ValueError, ConfigError) as err:
             self.error.set_text(f"{folder.name}: its settings cannot be read ({err})")
@@ -129,7 +128,7 @@ class GenerateTab:
         if config.get("n") is not None:
             self.n.value = int(config["n"])
         self.seed.value = int(config.get("seed") or 0)
-        done = (read_manifest(folder) or {}).get("status")
+        done = (workfolder.manifest(folder, self.state.workdir) or {}).get("status")
         self.resume.value = done != "complete"
         obj = (config.get("object") or {}).get("name")
         if self.state.obj is None or self.state.obj.name != obj:
@@ -213,14 +212,15 @@ class GenerateTab:
             return
         settings = self.form.read()
         numbers = self.pick_numbers()
+        # each by its one rule (core.numbers), as the CLI checks --traces and
+        # --chunk-size: a value out of it is refused under its field, never changed
+        traces = checked(self.traces, "n_traces")
+        chunk_ok, chunk = checked_or_empty(self.chunk, "chunk_size")
         out = run_folder(self.state, self.run_name, resume=bool(self.resume.value))
-        if settings is None or numbers is None or out is None:
+        if settings is None or numbers is None or out is None or traces is None or not chunk_ok:
             return
         n, seed = numbers
-        traces = int(self.traces.value or 0)
-        if self.chunk.value:
-            chunk = int(self.chunk.value)
-        else:  # the bar moves every 2 % of the pick-points the run will simulate
+        if chunk is None:  # the bar moves every 2 % of the pick-points the run will simulate
             obj = self.state.obj
             drawn = self.drawn_for
             if drawn is not None and drawn[0] is obj and drawn[1:] == (settings, n, seed):
@@ -250,8 +250,8 @@ class GenerateTab:
             return
         flags = self.form.cli_flags(settings, self.state.workdir, out)
         argv = ["evaluate", *self.state.obj_args, *flags]
-        argv += ["--n", str(n), "--seed", str(seed), "--traces", str(max(traces, 0))]
-        argv += ["--chunk-size", str(max(1, chunk)), "--no-progress", "--out", str(out)]
+        argv += ["--n", str(n), "--seed", str(seed), "--traces", str(traces)]
+        argv += ["--chunk-size", str(chunk), "--no-progress", "--out", str(out)]
         if self.checks.value:
             argv += ["--step-check", "--stability-um", "1"]
         if self.resume.value:
@@ -278,7 +278,7 @@ class GenerateTab:
 
         self.resume.value = False
         self.run_name.value = f"evaluate-{stamp()}"  # this name is taken now
-        s = json.loads((out / "summary.json").read_text())
+        s = workfolder.read_json(out / "summary.json", self.state.workdir)
         checks = "".join(
             f" {s[key]} of {s['n']} labels {what}."
             for key, what in (

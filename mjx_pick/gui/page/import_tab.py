@@ -77,7 +77,8 @@ class ImportTab:
                     ",".join(UPLOAD_TYPES),
                     MESH_MAX_BYTES,
                     self.on_upload,
-                    lambda: self.upload_error.set_text(object_refused()),
+                    self.refuse_upload,
+                    object_refused,
                     "object-upload",
                 ).classes("w-full")
                 self.upload_error = error_label().props('data-testid="upload-error"')
@@ -125,14 +126,14 @@ class ImportTab:
         self.upload.reset()  # a corrected file of the same name may follow
         problem = check_upload(name, len(data), data)
         if problem:
-            self.upload_error.set_text(problem)
-            self.forget_upload()
+            self.refuse_upload(problem)
             return
         try:
-            self.upload_path = await run.io_bound(save_upload, data, name, self.state.uploads)
+            self.upload_path = await run.io_bound(
+                save_upload, data, name, self.state.uploads, self.state.workdir
+            )
         except (OSError, ConfigError) as err:
-            self.upload_error.set_text(f"{name}: cannot be stored ({err})")
-            self.forget_upload()
+            self.refuse_upload(f"{name}: cannot be stored ({err})")
             return
         self.asset.value = UPLOADED
         self.show_mesh_fields(Path(name).suffix.lower() in MESH_SUFFIXES)
@@ -141,11 +142,16 @@ class ImportTab:
             f"uploaded {name}: set its scale, thickness and mass, then Import object"
         )
 
-    def forget_upload(self) -> None:
-        """A refused upload replaces the one before it: Import must not take the earlier
-        file, and no later tab runs on the object imported from it."""
+    def refuse_upload(self, why: str) -> None:
+        """A file refused -- by the browser (its type or size) or here: said by its name
+        and why until another file or object is chosen, and it replaces the upload
+        before it: Import takes the refused file, that is nothing, never the earlier
+        file, and no later tab runs on the object imported from that."""
+        from_upload = self.asset.value == UPLOADED
+        self.upload_error.set_text(why)
         self.upload_path = None
-        if self.asset.value == UPLOADED and self.state.obj is not None:
+        self.asset.value = UPLOADED
+        if from_upload and self.state.obj is not None:
             self.forget_object()
 
     def show_mesh_fields(self, mesh: bool) -> None:

@@ -144,7 +144,10 @@ class ReplayView:
         self.chart.options.update(views.force_chart(trace, grip_force_n))
         self.chart.update()
         start, end = _seconds(t[0]), _seconds(t[-1])
-        self.time.props(f"min={start} max={end} step={_step(t)}")
+        # numbers, not a props string: Quasar computes the value of a click or a drag from
+        # them, and a string min makes that arithmetic a concatenation ("toFixed is not a
+        # function", the slider dead to the mouse)
+        self.time.props.update(min=start, max=end, step=_step(t))
         self.time.set_value(start)
         self.bodies.set_track(track, start)
         self.outcome.set_text(
@@ -165,7 +168,11 @@ class ReplayView:
         k = row_at(self.trace["t_s"], float(e.value))
         self.show_clock(k)
         t = float(self.trace["t_s"][k])
-        self.chart.options["series"][0]["markLine"]["data"] = [{"xAxis": round(t, 4)}]
+        # the server's copy of the marker (for a chart that mounts again), not sent: the
+        # browser moved it already (replay3d.js), and sending the chart's whole options on
+        # every move of a drag (about 100 kB each, 20 a second) froze the page
+        with self.chart.props.suspend_updates():
+            self.chart.options["series"][0]["markLine"]["data"] = [{"xAxis": round(t, 4)}]
         if self.playing_since is not None:
             self.bodies.show_time(float(e.value))
 

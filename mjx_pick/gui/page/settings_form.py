@@ -15,7 +15,7 @@ from nicegui import ui
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import forms, jobs
 from mjx_pick.gui.page.widgets import error_label, upload
-from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload
+from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload, toml_refused
 
 PRESET = "robotiq-2f85"  # the gripper the page starts with
 
@@ -48,9 +48,8 @@ class SettingsForm:
                 ".toml",
                 TOML_MAX_BYTES,
                 self.on_gripper_toml,
-                lambda: self.toml_error.set_text(
-                    f"file refused: a .toml file of at most {TOML_MAX_BYTES // 2**10} KB"
-                ),
+                self.refuse_toml,
+                toml_refused,
                 "gripper-upload",
             ).classes("w-72")
             self.toml_error = error_label().props('data-testid="toml-error"')
@@ -99,19 +98,24 @@ class SettingsForm:
         self.toml_upload.reset()  # a corrected file of the same name may follow
         problem = check_toml_upload(name, data)
         if problem:
-            self.toml_error.set_text(problem)
+            self.refuse_toml(problem)
             return
         try:
             gripper = forms.gripper_from_toml(data.decode("utf-8"), where=name)
         except UnicodeDecodeError:
-            self.toml_error.set_text(f"{name}: not a UTF-8 text file")
+            self.refuse_toml(f"{name}: not a UTF-8 text file")
             return
         except ConfigError as err:
-            self.toml_error.set_text(str(err))
+            self.refuse_toml(str(err))
             return
         self.base_gripper = gripper
         self.fill(gripper)
         self.toml_error.set_text("")
+
+    def refuse_toml(self, why: str) -> None:
+        """A gripper TOML refused (by the browser or here): why, and that the fields
+        keep the gripper they show -- a refused file changes nothing."""
+        self.toml_error.set_text(f"{why} (the gripper in use stays {self.base_gripper.name})")
 
     def restore(self, before: SettingsForm) -> None:
         """The settings of this browser tab's page before a reload."""
@@ -158,5 +162,5 @@ class SettingsForm:
     def cli_flags(self, settings: forms.Settings, workdir: Path, out: Path) -> list[str]:
         """The CLI flags of a run into out: its settings written under workdir/inputs/."""
         folder = workdir / "inputs" / out.name
-        paths = forms.write_inputs(settings, folder)
+        paths = forms.write_inputs(settings, folder, workdir)
         return forms.cli_flags(settings, paths) + ["--backend", self.backend.value]

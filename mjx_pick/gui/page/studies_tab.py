@@ -8,14 +8,13 @@ parameters can be put into tab 2's form.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
-from mjx_pick.gui import jobs
+from mjx_pick.gui import jobs, workfolder
 from mjx_pick.gui.formatting import fmt, md_text, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
@@ -30,7 +29,12 @@ from mjx_pick.gui.page.widgets import (
     upload,
 )
 from mjx_pick.gui.state import PageState
-from mjx_pick.gui.uploads import OUTCOMES_MAX_BYTES, check_outcomes_upload, save_upload
+from mjx_pick.gui.uploads import (
+    OUTCOMES_MAX_BYTES,
+    check_outcomes_upload,
+    outcomes_refused,
+    save_upload,
+)
 
 
 class StudiesTab:
@@ -106,11 +110,12 @@ class CompareStudy:
             self.name.value = f"compare-{stamp()}"  # this name is taken now
             from mjx_pick.studies.comparison import unequal_forces
 
-            rows = json.loads((job.out / "ranking.json").read_text())
+            workdir = self.state.workdir
+            rows = workfolder.read_json(job.out / "ranking.json", workdir)
             keys = ["rank", "gripper", "success_rate", "success_ci", "score_mean"]
             show_rows(self.table, rows, keys + ["grip_force_n", "feasible", "p_vs_best"])
             self.note.set_text(unequal_forces(rows))
-            show_picture(self.image, (job.out / "maps.png").read_bytes())
+            show_picture(self.image, workfolder.read_bytes(job.out / "maps.png", workdir))
 
 
 class RobustStudy:
@@ -176,7 +181,7 @@ class RobustStudy:
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         if progress.state == "complete":
-            rows = json.loads((job.out / "robustness.json").read_text())["ranking"]
+            rows = workfolder.read_json(job.out / "robustness.json", self.state.workdir)["ranking"]
             keys = ["rank", "pick_id", "x_mm", "y_mm", "yaw_deg", "robust_p"]
             show_rows(self.table, rows, keys + ["robust_ci_low", "landed"])
 
@@ -202,11 +207,11 @@ class CalibrationStudy:
                     ".csv",
                     OUTCOMES_MAX_BYTES,
                     self.on_upload,
-                    lambda: self.error.set_text(
-                        f"file refused: a .csv file of at most {OUTCOMES_MAX_BYTES // 2**20} MB"
-                    ),
+                    self.refuse_upload,
+                    outcomes_refused,
                     "outcomes-upload",
                 ).classes("w-full")
+                self.upload_error = error_label().props('data-testid="outcomes-error"')
                 self.params = ui.select(
                     list(FITTABLE),
                     value=["pad_friction"],
@@ -230,25 +235,35 @@ class CalibrationStudy:
     async def on_upload(self, e) -> None:
         from mjx_pick.studies.calibration import read_outcomes
 
-        self.error.set_text("")
+        self.upload_error.set_text("")
         name = e.file.name
         data = await e.file.read()
         self.upload.reset()
         problem = check_outcomes_upload(name, data)
         if problem:
-            self.error.set_text(problem)
+            self.refuse_upload(problem)
             return
-        path = await run.io_bound(save_upload, data, name, self.state.uploads)
         try:
+            path = await run.io_bound(
+                save_upload, data, name, self.state.uploads, self.state.workdir
+            )
             outcomes = await run.io_bound(read_outcomes, str(path))
         except ConfigError as err:
-            self.error.set_text(str(err))
+            self.refuse_upload(str(err))
             return
         self.outcomes_path = path
         self.info.set_content(
             f"outcomes: {md_text(name)}, {len(outcomes)} tested pick-points "
             f"({int(np.sum(outcomes.trials))} trials)"
         )
+
+    def refuse_upload(self, why: str) -> None:
+        """An outcomes file refused (by the browser or here): said until the next
+        upload, and it replaces the one before -- a calibration never runs on the
+        earlier file."""
+        self.upload_error.set_text(why)
+        self.outcomes_path = None
+        self.info.set_content("")
 
     def start(self) -> None:
         self.error.set_text("")
@@ -286,14 +301,15 @@ class CalibrationStudy:
 
     def show(self, out: Path) -> None:
         """A complete calibration: initial -> fitted values, the loss plot, Use button."""
-        c = json.loads((out / "calibration.json").read_text())
+        workdir = self.state.workdir
+        c = workfolder.read_json(out / "calibration.json", workdir)
         lines = [f"**{out.name}**: fitted contact parameters (`{out / 'contact.toml'}`)", ""]
         lines += [
             f"- `{k}`: {fmt(c['initial'][k], 4)} -> **{fmt(c['fitted'][k], 4)}**"
             for k in c["parameters"]
         ]
         self.info.set_content("\n".join(lines))
-        show_picture(self.image, (out / "loss.png").read_bytes())
+        show_picture(self.image, workfolder.read_bytes(out / "loss.png", workdir))
         self.fitted_contact = out / "contact.toml"
         self.use.set_visibility(True)
 
@@ -302,7 +318,7 @@ class CalibrationStudy:
         from mjx_pick.core.physics import load_contact
 
         try:
-            contact, _ = load_contact(self.fitted_contact)
+            contact, _ = load_contact(workfolder.confined(self.fitted_contact, self.state.workdir))
         except ConfigError as err:
             self.error.set_text(str(err))
             return

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from nicegui import ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
-from mjx_pick.gui import forms, jobs
+from mjx_pick.gui import forms, jobs, workfolder
 from mjx_pick.gui.formatting import column_label, fmt, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
@@ -67,7 +66,7 @@ class SweepTab:
         whole = [int(v) if float(v).is_integer() else v for v in (start, end, step)]
         self.start.value, self.end.value, self.step.value = whole
         for w in (self.start, self.end, self.step):
-            w.props(f"step={step:g}")
+            w.props["step"] = step  # a number, as every numeric prop (never a string)
         self.estimate()
 
     def estimate(self, _=None) -> None:
@@ -130,7 +129,7 @@ class SweepTab:
 
     def show(self, out: Path) -> None:
         """A complete sweep: one row per value, and its plot."""
-        variants = json.loads((out / "variants.json").read_text())
+        variants = workfolder.read_json(out / "variants.json", self.state.workdir)
         keys = [k for k in variants[0] if k not in ("success_ci", "score_ci")]
         labels = forms.sweep_labels()
         self.table.columns = [
@@ -138,4 +137,4 @@ class SweepTab:
         ]
         self.table.rows = [{k: fmt(v[k]) for k in keys} for v in variants]
         self.table.update()
-        show_picture(self.image, (out / "sweep.png").read_bytes())
+        show_picture(self.image, workfolder.read_bytes(out / "sweep.png", self.state.workdir))

@@ -11,6 +11,7 @@ from mjx_pick.core.numbers import INPUTS
 from mjx_pick.gui.formatting import column_label, fmt_cell, page_text
 from mjx_pick.gui.search import Search, SearchStopped
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
+from mjx_pick.gui.uploads import browser_refused
 from mjx_pick.gui.views import data_uri
 
 
@@ -88,17 +89,22 @@ class SearchProgress:
             self.line.set_text("")
 
 
-def upload(label: str, accept: str, max_bytes: int, on_upload, on_rejected, testid: str):
+def upload(label: str, accept: str, max_bytes: int, on_upload, on_rejected, refused, testid: str):
     """A file upload sent as soon as it is chosen: accept lists the file types
-    (".csv", ".png,.stl"), max_bytes the largest file; on_rejected runs for a file
-    refused by either (the caller says why, under the widget)."""
-    return ui.upload(
-        label=label,
-        auto_upload=True,
-        max_file_size=max_bytes,
-        on_upload=on_upload,
-        on_rejected=on_rejected,
+    (".csv", ".png,.stl"), max_bytes the largest file. A file the browser refuses by
+    either is said by the upload's own rule, refused(name, size) -- its name and why, as
+    the server would say it -- in on_rejected(text)."""
+    widget = ui.upload(
+        label=label, auto_upload=True, max_file_size=max_bytes, on_upload=on_upload
     ).props(f'accept="{accept}" data-testid="{testid}"')
+    widget.on(
+        "rejected",
+        lambda e: on_rejected(browser_refused(e.args, refused)),
+        # QUploader's entries hold the File: only its name, size and the failed check
+        js_handler="(entries) => emit(entries.map((e) => ({name: e.file.name, "
+        "size: e.file.size, reason: e.failedPropValidation})))",
+    )
+    return widget
 
 
 def picture(classes: str = "w-full max-w-2xl") -> ui.image:
@@ -127,6 +133,20 @@ def checked(widget, name: str) -> int | float | None:
     except ConfigError:
         widget.error = rule_words(rule)
         return None
+
+
+def checked_or_empty(widget, name: str) -> tuple[bool, int | float | None]:
+    """A number field that may be left empty (the run then chooses, e.g. the chunk
+    size), checked by the same rule: (True, None) when empty, (True, value) when it
+    keeps the rule, (False, None) with the rule under the field otherwise."""
+    if widget.value is None or widget.value == "":
+        widget.error = None
+        return True, None
+    value = checked(widget, name)
+    if value is None:
+        widget.error += ", or empty"
+        return False, None
+    return True, value
 
 
 def rule_words(rule) -> str:
