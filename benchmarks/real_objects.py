@@ -298,6 +298,7 @@ def run_object(
     margin_bands: tuple[float, ...] = (),
     tables: str = "",
     step_check: bool = False,
+    grasps: str = "topdown",
 ) -> dict:
     """One object on each backend (the first is the reference for label agreement)."""
     t0 = time.perf_counter()
@@ -309,6 +310,7 @@ def run_object(
         "gripper": gripper,
         "mass_g": round(obj.mass_kg * 1e3, 2),
         "height_mm": round(obj.height_mm, 2),
+        "grasps": grasps,
     }
     labels, stable, certain_on, converged = {}, {}, {}, {}
     clear = {band: {} for band in margin_bands}
@@ -324,6 +326,7 @@ def run_object(
             backend=backend,
             stability_um=stability_um,
             step_check=step_check,
+            grasps=grasps,
         )
         if tables:
             from pyarrow import parquet
@@ -416,6 +419,9 @@ def main() -> None:
     )
     ap.add_argument("--tables", default="", help="folder for each backend's results tables")
     ap.add_argument("--step-check", action="store_true", help="label_converged (half step)")
+    ap.add_argument(
+        "--grasps", default="topdown", help="topdown pick-points or antipodal grasps (evaluate's)"
+    )
     ap.add_argument("--no-multiccd", action="store_true", help="one contact per pair (diagnostic)")
     ap.add_argument(
         "--sphere-pads",
@@ -457,6 +463,7 @@ def run(args) -> None:
             bands,
             args.tables,
             args.step_check,
+            args.grasps,
         )
         rows.append(row)
         c = row[backends[0]]

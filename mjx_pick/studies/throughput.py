@@ -126,12 +126,14 @@ class RunSpec:
     solver: tuple = ()  # SolverParams fields replaced for this run (iterations, ...)
     contact: tuple = ()  # ContactParams fields replaced for this run (pad_collision)
     devices: int | None = None  # the first this many local devices (default: the backend's)
+    grasps: str = "topdown"  # the shared set drawn from: top-down pick-points or antipodal
 
     @property
     def label(self) -> str:
         opts = "".join(f",{k}={v}" for k, v in self.options + self.solver + self.contact)
         gpus = f",devices={self.devices}" if self.devices else ""
-        return f"{self.backend}{opts}{gpus}"
+        kind = f",grasps={self.grasps}" if self.grasps != "topdown" else ""
+        return f"{self.backend}{opts}{gpus}{kind}"
 
     @classmethod
     def parse(cls, text: str) -> RunSpec:
@@ -140,7 +142,8 @@ class RunSpec:
         Keys: n, batch, warmup, devices (ints); the backend's options that read from
         text (``registry.BackendEntry.options``), and rows (Warp's constraint rows per
         simulation; contacts sized as usual); solver settings iterations,
-        ls_iterations, tolerance, timestep_s; the contact setting pad_collision."""
+        ls_iterations, tolerance, timestep_s; the contact setting pad_collision; grasps
+        (topdown or antipodal: the shared set the run takes its first n of)."""
         name, *parts = text.split(":")
         parsers = {o.name: o.parse for o in registry.entry(name).options if o.parse}
         parsers["rows"] = int  # becomes Warp's buffers (backend_options)
@@ -160,6 +163,10 @@ class RunSpec:
                 solver.append((key, float(value)))
             elif key in ("pad_collision",):
                 contact.append((key, value))
+            elif key == "grasps":
+                if value not in ("topdown", "antipodal"):
+                    raise ValueError(f"run {text!r}: grasps={value!r}: topdown or antipodal")
+                fields[key] = value
             else:
                 raise ValueError(f"run {text!r}: unknown key {key!r}")
         if "n" not in fields:
@@ -202,26 +209,36 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
     """
     plan_jax([r.backend for r in runs])
     obj = load_object(obj_name)
-    n_max = max(r.n for r in runs)
-    with warnings.catch_warnings():  # fewer feasible than asked: repeated below
-        warnings.simplefilter("ignore", UserWarning)
-        picks = pp.generate_normal(obj, gripper, n_max, seed=seed, grasp=grasp)
-    distinct = len(picks)
-    if distinct < n_max:
-        # the generator stops at its candidate limit: repeat the set (each pick-point is
-        # simulated on its own, so a repeat costs what a new one would)
-        picks = tile_picks(picks, n_max, 0)
-    scenes: dict = {}  # per solver and contact variant: (scene, inputs)
+    sets: dict = {}  # per grasp source: (the shared set, its distinct grasps)
+
+    def shared(kind: str):
+        if kind not in sets:
+            n_max = max(r.n for r in runs if r.grasps == kind)
+            with warnings.catch_warnings():  # fewer feasible than asked: repeated below
+                warnings.simplefilter("ignore", UserWarning)
+                if kind == "antipodal":
+                    from mjx_pick.core.antipodal import generate_antipodal
+
+                    base = scene_of(obj, Settings(gripper, ContactParams(), solver, grasp))
+                    picks = generate_antipodal(base, n_max, seed=seed)
+                else:
+                    picks = pp.generate_normal(obj, gripper, n_max, seed=seed, grasp=grasp)
+            # the generator stops at its candidate limit: repeat the set (each is
+            # simulated on its own, so a repeat costs what a new one would)
+            sets[kind] = (tile_picks(picks, n_max, 0) if len(picks) < n_max else picks, len(picks))
+        return sets[kind]
+
+    scenes: dict = {}  # per solver and contact variant and grasp source: (scene, inputs)
 
     def scene_for(spec: RunSpec):
         own = registry.entry(spec.backend).differentiable  # MJX-JAX: its own physics
-        key = (spec.solver, spec.contact, own)
+        key = (spec.solver, spec.contact, own, spec.grasps)
         if key not in scenes:
             variant = dataclasses.replace(solver, **dict(spec.solver))
             contact = ContactParams(**dict(spec.contact))
             variant, contact = _physics_of(spec.backend, variant, contact)
             scene = scene_of(obj, Settings(gripper, contact, variant, grasp))
-            scenes[key] = (scene, make_inputs(scene, grasp, picks))
+            scenes[key] = (scene, make_inputs(scene, grasp, shared(spec.grasps)[0]))
         return scenes[key]
 
     c_results: dict[tuple, dict] = {}  # MuJoCo C's results per contact variant
@@ -234,17 +251,18 @@ def side_by_side(obj_name, gripper, runs: list[RunSpec], grasp, solver, seed=0, 
         n = min(spec.n, len(inputs))
         timing, out, backend = _timed_run(spec, scene, inputs.take(slice(0, n)), grasp)
         if spec.backend == first:
-            c_results.setdefault(spec.contact, out)
+            c_results.setdefault((spec.contact, spec.grasps), out)
             reference = None
         else:
-            reference = c_results.get(spec.contact)
+            reference = c_results.get((spec.contact, spec.grasps))
         row = {
             "object": obj_name,
             "run": spec.label,
             "backend": backend.name,
             "device": backend.device,
             "n": n,
-            "distinct_picks": min(n, distinct),
+            "grasps": spec.grasps,
+            "distinct_picks": min(n, shared(spec.grasps)[1]),
         }
         row.update(_run_fields(backend, out, n, timing))
         row.update(_buffer_fields(backend, n))
