@@ -52,6 +52,7 @@ FILE_SECONDS = {
     "tests/test_gui_replay.py": 50,
     "notebooks/throughput.ipynb": 40,
     "notebooks/calibration.ipynb": 30,
+    "tests/test_mesh_import.py": 40,
     "tests/test_trials.py": 25,
     "tests/test_pinned.py": 25,
     "tests/test_simulation.py": 20,

@@ -485,8 +485,8 @@ def test_a_box_missing_two_triangles_on_adjacent_faces_is_refused_with_its_numbe
     code, err = installed(*argv, "--out", tmp_path / "refused")
     assert code == 2, err
     assert f"mesh {str(path)!r} is not a closed solid" in err
-    assert "volume 16.7 % in doubt (allowed 1 %: --repair-volume-pct)" in err
-    assert "centre of mass within 4.86 mm (allowed 1 mm: --repair-com-mm)" in err
+    assert "volume 16.7 % in doubt (allowed: repair_volume_pct = 1 %, --repair-volume-pct)" in err
+    assert "centre of mass within 4.86 mm (allowed: repair_com_mm = 1 mm, --repair-com-mm)" in err
     assert "mass 43.2 g +- 7.2 g at 1200 kg/m^3" in err
     assert not (tmp_path / "refused").exists()  # before any work
     # accepted at tolerances that allow it: MeshFix closes it as the box it was

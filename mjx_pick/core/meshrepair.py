@@ -164,18 +164,18 @@ class Tolerance:
         over = []
         if rep.volume_doubt_pct > self.volume_pct:
             over.append(
-                f"volume {rep.volume_doubt_pct:.3g} % in doubt (allowed {self.volume_pct:g} %: "
-                "--repair-volume-pct)"
+                f"volume {rep.volume_doubt_pct:.3g} % in doubt (allowed: repair_volume_pct = "
+                f"{self.volume_pct:g} %, --repair-volume-pct)"
             )
         if rep.com_doubt_mm > self.com_mm:
             over.append(
-                f"centre of mass within {rep.com_doubt_mm:.3g} mm (allowed {self.com_mm:g} mm: "
-                "--repair-com-mm)"
+                f"centre of mass within {rep.com_doubt_mm:.3g} mm (allowed: repair_com_mm = "
+                f"{self.com_mm:g} mm, --repair-com-mm)"
             )
         if rep.bounds_change_mm > self.bounds_mm:
             over.append(
-                f"bounds moved {rep.bounds_change_mm:.3g} mm (allowed {self.bounds_mm:g} mm: "
-                "--repair-bounds-mm)"
+                f"bounds moved {rep.bounds_change_mm:.3g} mm (allowed: repair_bounds_mm = "
+                f"{self.bounds_mm:g} mm, --repair-bounds-mm)"
             )
         if over:
             raise ConfigError(

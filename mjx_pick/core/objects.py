@@ -298,10 +298,10 @@ def _image_size(path: Path) -> tuple[int, int] | None:
         prefix = fh.read(16)
         for fmt in Image.ID:
             factory, accept = Image.OPEN[fmt]
-            if accept is not None and accept(prefix) is not True:
-                continue  # not this format (or a format's note on why not)
-            fh.seek(0)
             try:
+                if accept is not None and accept(prefix) is not True:
+                    continue  # not this format (or a format's note on why not)
+                fh.seek(0)
                 with factory(fh, str(path)) as im:
                     return tuple(int(v) for v in im.size)
             except Exception:  # noqa: BLE001 - a damaged header: the next reader, or None
