@@ -42,7 +42,7 @@ FILE_SECONDS = {
     "tests/test_gui.py": 160,
     "tests/test_backends.py": 140,
     "tests/test_variants.py": 115,
-    "tests/test_warp_direct.py": 110,
+    "tests/test_warp_direct.py": 170,
     "tests/test_physics.py": 85,
     "tests/test_cluster.py": 75,
     "tests/test_scale.py": 75,
