@@ -33,6 +33,10 @@ from mjx_pick.outputs.progress import echo
 def cmd_evaluate(args) -> int:
     t0 = time.perf_counter()
     from mjx_pick.studies.evaluation import evaluate
+    from mjx_pick.studies.object_sets import is_object_set
+
+    if is_object_set(args.object):
+        return _evaluate_set(args)
 
     t1 = time.perf_counter()
     obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
@@ -68,6 +72,47 @@ def cmd_evaluate(args) -> int:
         print(f"{args.out} holds this run complete: nothing to resume, nothing simulated")
     total = process_age_s() if before is not None else None
     print_summary(ev.summary, args.out, total)
+    return 0
+
+
+def _evaluate_set(args) -> int:
+    """evaluate on a folder of meshes or a manifest: each part into OUT/objects/<part>/."""
+    from mjx_pick.cli.inputs import DEFAULT_GRIPPER, settings
+    from mjx_pick.core.gripper import load_gripper
+    from mjx_pick.core.metrics import rate_text
+    from mjx_pick.studies.object_sets import evaluate_set, read_parts
+
+    parts = read_parts(
+        args.object,
+        mass_g=args.mass_g,
+        density_kg_m3=args.density_kg_m3,
+        unit=args.unit,
+        pose=args.pose,
+    )
+    gripper = load_gripper(args.gripper_file or args.gripper or DEFAULT_GRIPPER)
+    contact, solver, (grasp, given), picks_cfg = settings(args)
+    grasp, note = grasp.fitted_to(gripper, keep=given)
+    if note:
+        print(f"mjx-pick: note: {note}", file=sys.stderr)
+    res = evaluate_set(
+        parts,
+        gripper,
+        run_options(args, picks_cfg),
+        contact=contact,
+        solver=solver,
+        grasp=grasp,
+        n_traces=args.traces,
+        grasps=args.grasps,
+        depth_mm=args.depth_mm,
+        chunk_size=args.chunk_size,
+    )
+    for name, s in res.summaries.items():
+        print(f"{name}: {rate_text(s['successes'], s['n'])}")
+    if args.out:
+        print(
+            f"results in {args.out}/ (results.parquet: every part's rows, an object column; "
+            f"summary.json; objects/<part>/: each part's run folder)"
+        )
     return 0
 
 
@@ -447,6 +492,11 @@ def cmd_export(args) -> int:
     written = export_labels(
         args.run, args.format, args.out, depth_mm=args.depth_mm, overwrite=args.overwrite
     )
+    if "labels" not in written:  # a set of parts: a file per part
+        for name, path in written.items():
+            if not name.endswith("_mesh"):
+                print(f"{args.format}: {path} (object mesh: {written[name + '_mesh']})")
+        return 0
     print(f"{args.format}: {written['labels']} (object mesh: {written['mesh']})")
     return 0
 

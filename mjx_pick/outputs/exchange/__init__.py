@@ -73,8 +73,11 @@ def export_labels(
     """
     from mjx_pick.outputs.exchange.poses import object_mesh, pick_poses
     from mjx_pick.outputs.reporting.run import Run
+    from mjx_pick.outputs.rundir import read_manifest
 
     module = _format(fmt)
+    if (read_manifest(run_dir) or {}).get("command") == "evaluate-set":
+        return _export_set(run_dir, fmt, out, depth_mm, overwrite)
     if depth_mm is not None:
         check_range("export", "depth_mm", depth_mm, 0, 2000)
     path = Path(out) if out is not None else default_path(run_dir, fmt)
@@ -91,6 +94,22 @@ def export_labels(
     write_atomic(mesh_path, object_mesh(run).export(file_type="obj"))
     write_atomic(path, module.write(labels, extra))
     return {"labels": path, "mesh": mesh_path}
+
+
+def _export_set(run_dir, fmt: str, out, depth_mm, overwrite: bool) -> dict[str, Path]:
+    """A set of parts' labels: each part's file in its own run folder (objects/<part>/),
+    beside its mesh. {"<part>": the file, "<part>_mesh": its mesh}."""
+    if out is not None:
+        raise ConfigError(
+            f"{run_dir} holds a set of parts: each part's labels go into its own folder "
+            "(objects/<part>/); leave out --out"
+        )
+    written = {}
+    folder = Path(run_dir) / "objects"
+    for part in sorted(p for p in folder.iterdir() if p.is_dir()):
+        files = export_labels(part, fmt, depth_mm=depth_mm, overwrite=overwrite)
+        written[part.name], written[f"{part.name}_mesh"] = files["labels"], files["mesh"]
+    return written
 
 
 def _grasp_labels(run, transforms, depth_m, mesh_name: str) -> GraspLabels:
