@@ -64,8 +64,6 @@ def cmd_evaluate(args) -> int:
         stability_um=args.stability_um,
         step_check=args.step_check,
         skip_infeasible=args.skip_infeasible,
-        grasps=args.grasps,
-        depth_mm=args.depth_mm,
         fixed_costs=costs,
     )
     if ev.already_complete:
@@ -102,8 +100,6 @@ def _evaluate_set(args) -> int:
         solver=solver,
         grasp=grasp,
         n_traces=args.traces,
-        grasps=args.grasps,
-        depth_mm=args.depth_mm,
         chunk_size=args.chunk_size,
     )
     for name, s in res.summaries.items():

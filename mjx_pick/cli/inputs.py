@@ -166,6 +166,8 @@ def run_options(args, picks_cfg=None):
         "resume": getattr(args, "resume", False),
         "ray": getattr(args, "ray", None),
         "progress": not getattr(args, "no_progress", True),
+        "grasps": getattr(args, "grasps", None) or "topdown",
+        "depth_mm": getattr(args, "depth_mm", None),
     }
     return RunOptions(**given)
 

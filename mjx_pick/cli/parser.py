@@ -314,11 +314,31 @@ def _add_evaluate_parser(sub) -> None:
     _add_physics_args(ev)
     _add_pick_args(ev)
     _add_evaluate_output_args(ev)
+    _add_grasp_source(ev)
     _add_optimization_args(ev)
     _add_progress(ev)
     _add_ray(ev)
     _add_evaluate_checks(ev)
     ev.set_defaults(func=cmd_evaluate)
+
+
+def _add_grasp_source(p: argparse.ArgumentParser) -> None:
+    """Where a study's grasps come from (``studies.grasp_sources``)."""
+    p.add_argument(
+        "--grasps",
+        default="topdown",
+        metavar="topdown|antipodal|FILE",
+        help="where the grasps come from: 'topdown' pick-points (default, the paper's), "
+        "'antipodal' grasps on the part's mesh (any approach from above), or a grasp file "
+        "(ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, a CSV of 4x4 poses): every "
+        "grasp in it, the infeasible left out (docs/formats.md)",
+    )
+    p.add_argument(
+        "--depth-mm",
+        type=number("depth_mm", "--depth-mm"),
+        help="with --grasps FILE: the grasp centre's distance from the gripper's base along "
+        "the approach, where the file does not say (0: the poses are grasp centres)",
+    )
 
 
 def _add_evaluate_output_args(ev: argparse.ArgumentParser) -> None:
@@ -331,21 +351,6 @@ def _add_evaluate_output_args(ev: argparse.ArgumentParser) -> None:
         "--skip-infeasible",
         action="store_true",
         help="leave infeasible rows of --picks out (listed) instead of refusing the file",
-    )
-    ev.add_argument(
-        "--grasps",
-        default="topdown",
-        metavar="topdown|antipodal|FILE",
-        help="where the grasps come from: 'topdown' pick-points (default, the paper's), "
-        "'antipodal' grasps on the part's mesh (any approach from above), or a grasp file "
-        "(ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, a CSV of 4x4 poses): every "
-        "grasp in it, the infeasible left out (docs/formats.md)",
-    )
-    ev.add_argument(
-        "--depth-mm",
-        type=number("depth_mm", "--depth-mm"),
-        help="with --grasps FILE: the grasp centre's distance from the gripper's base along "
-        "the approach, where the file does not say (0: the poses are grasp centres)",
     )
     ev.add_argument(
         "--out", help="output folder (default: none: the summary is printed, nothing written)"
@@ -441,6 +446,7 @@ def _add_sweep_parser(sub) -> None:
         metavar="K",
         help="K random variants within the LO:HI ranges (default: the grid)",
     )
+    _add_grasp_source(sw)
     _add_resume(sw)
     _add_ray(sw)
     sw.set_defaults(func=cmd_sweep, n=200)

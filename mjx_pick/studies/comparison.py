@@ -133,6 +133,7 @@ def compare(
     chunks of a study that runs this comparison as one of its steps (design), used
     without out."""
     opts = RunOptions.of(options, **run)
+    opts.topdown_only("compare")  # its candidates are shared pick-points (shared_candidates)
     if rank_by not in ("success", "score"):
         raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
     if len(grippers) < 1:
@@ -410,6 +411,7 @@ def design_search(
     open; backend, batch_size and ray are then its own).
     """
     req, opts = split_fields(DesignRequest, request, options, fields)
+    opts.topdown_only("design")  # its rounds compare grippers on shared pick-points
     n, seed, pick_config = opts.n_or(64), opts.seed, opts.pick_config
     base = base or Settings()
     req.check(n)

@@ -141,17 +141,12 @@ class EvaluateRequest:
         success_half_step, label_converged.
       skip_infeasible: leave infeasible rows of a picks CSV out (with a warning naming
         them) instead of refusing the file.
-      grasps: where the grasps come from when picks is None (``grasp_sources``):
-        "topdown" (n pick-points, the paper's), "antipodal" (n antipodal grasps on the
-        part's mesh, ``antipodal`` their settings), or a grasp file (ACRONYM, GraspGen,
-        isaac_grasp, a CSV of poses: every grasp in it; depth_mm: the grasp centre's
-        distance from the base where the file does not say).
+
+    Where the grasps come from when picks is None is the run options' (``RunOptions``:
+    grasps, antipodal, depth_mm).
     """
 
     picks: pp.GraspBatch | str | Path | None = None
-    grasps: str = TOPDOWN
-    antipodal: AntipodalConfig | None = None
-    depth_mm: float | None = None
     contact: ContactParams | None = None
     solver: SolverParams | None = None
     grasp: GraspConfig | None = None
@@ -244,7 +239,7 @@ def _settings(gripper: GripperSpec, req: EvaluateRequest) -> Settings:
 def _check(obj: ObjectModel, settings: Settings, req: EvaluateRequest, opts: RunOptions) -> None:
     """Every check of the inputs that can fail before a scene, a runner or a folder."""
     settings.grasp.check_gripper(settings.gripper)
-    source = check_source(req.grasps, req.depth_mm)
+    source = check_source(opts.grasps, opts.depth_mm)
     if source != TOPDOWN:
         if req.picks is not None:
             raise ConfigError(
@@ -375,9 +370,9 @@ def _key_settings(ctx: _Context, req: _Request) -> dict:
         "grasp": s.grasp,
         "picks": run.pick_config,
         "source": _picks_source(what.picks),
-        **_grasps_source(what),
+        **_grasps_source(run),
         "n": run.n
-        if what.picks is None and what.until is None and not Path(what.grasps).is_file()
+        if what.picks is None and what.until is None and not Path(run.grasps).is_file()
         else None,
         "seed": run.seed,
         "until": what.until,
@@ -408,9 +403,9 @@ def _picks(ctx: _Context, req: _Request):
             run.n,
             run.seed,
             run.pick_config,
-            what.grasps,
-            antipodal=what.antipodal,
-            depth_mm=what.depth_mm,
+            run.grasps,
+            antipodal=run.antipodal,
+            depth_mm=run.depth_mm,
             scene=ctx.scene,
         )
         return req, batch
@@ -741,14 +736,14 @@ def _picks_source(picks) -> str:
     return "csv:" + (config_hash(path.read_text()) if path.is_file() else str(path))
 
 
-def _grasps_source(what: EvaluateRequest) -> dict:
+def _grasps_source(run: RunOptions) -> dict:
     """The grasp source's entries of the folder's configuration hash: none for top-down
     pick-points (their runs' keys as before), the antipodal settings, or a file's digest."""
-    if what.grasps == TOPDOWN:
+    if run.grasps == TOPDOWN:
         return {}
-    if what.grasps == "antipodal":
-        return {"grasps": {"antipodal": to_dict(what.antipodal or AntipodalConfig())}}
-    return {"grasps": {"file": _file_digest(what.grasps), "depth_mm": what.depth_mm}}
+    if run.grasps == "antipodal":
+        return {"grasps": {"antipodal": to_dict(run.antipodal or AntipodalConfig())}}
+    return {"grasps": {"file": _file_digest(run.grasps), "depth_mm": run.depth_mm}}
 
 
 def _pose_arrays(grasps: pp.GraspBatch) -> list[np.ndarray]:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from mjx_pick.core import numbers
 from mjx_pick.core import pickpoints as pp
+from mjx_pick.core.antipodal import AntipodalConfig
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.engine.chunks import ChunkStore, open_store
@@ -41,6 +42,10 @@ class RunOptions:
     cancel: a threading.Event; once set, the run stops before its next chunk.
     on_cluster_event: with ray, called with each ``cluster.ClusterEvent``.
     fixed_costs: seconds spent before the call, by name, first in the summary's ``time_s``.
+    grasps: where a study's grasps come from (``grasp_sources``): "topdown" (n
+      pick-points, the paper's), "antipodal" (n antipodal grasps on the part's mesh,
+      ``antipodal`` their settings), or a grasp file (every grasp in it; depth_mm: the
+      tool centre point's distance from the base where the file does not say).
     """
 
     n: int | None = None
@@ -59,6 +64,18 @@ class RunOptions:
     cancel: threading.Event | None = None
     on_cluster_event: Callable | None = None
     fixed_costs: dict | None = None
+    grasps: str = "topdown"
+    antipodal: AntipodalConfig | None = None
+    depth_mm: float | None = None
+
+    def topdown_only(self, study: str) -> None:
+        """Refuse grasps other than top-down pick-points for a study that draws its own
+        around pick-points (before any work)."""
+        if self.grasps != "topdown":
+            raise ConfigError(
+                f"{study} takes top-down pick-points (grasps = 'topdown'); grasps = "
+                f"{self.grasps!r} runs through evaluate, sweep, validate and calibrate"
+            )
 
     def __post_init__(self):
         # the one rule of each number (core.numbers), as the CLI and the GUI check it

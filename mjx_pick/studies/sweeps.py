@@ -281,7 +281,7 @@ def sweep(
     with opts.opening("sweep", obj, request, simulator) as study:
         if study.complete:
             return _read_sweep(study.out_dir)
-        jobs = _jobs(obj, settings, n, seed, pick_config)
+        jobs = _jobs(obj, settings, n, seed, pick_config, opts)
         sim = study.sim
         before, t0 = sim.runner.timing, time.perf_counter()
         desc = f"sweep: {len(jobs)} variants ({sim.runner.backend_name})"
@@ -313,14 +313,23 @@ def _settings(base: Settings, combo: dict) -> Settings:
     return s
 
 
-def _jobs(obj, settings: list[Settings], n, seed, pick_config) -> list[tuple]:
-    """(settings, pick-points) per variant: the same pick-points for every variant of
-    one gripper (drawn once per gripper)."""
+def _jobs(obj, settings: list[Settings], n, seed, pick_config, opts) -> list[tuple]:
+    """(settings, grasps) per variant: the same grasps for every variant of one gripper
+    (drawn once per gripper, from opts' grasp source: ``grasp_sources``)."""
+    from mjx_pick.studies.grasp_sources import draw_grasps
+
     picks_for: dict[GripperSpec, pp.GraspBatch] = {}
     for s in settings:
         if s.gripper not in picks_for:
-            picks_for[s.gripper] = pp.generate_normal(
-                obj, s.gripper, n, seed, pick_config, grasp=s.grasp
+            picks_for[s.gripper] = draw_grasps(
+                obj,
+                s,
+                n,
+                seed,
+                pick_config,
+                opts.grasps,
+                antipodal=opts.antipodal,
+                depth_mm=opts.depth_mm,
             )
     return [(s, picks_for[s.gripper]) for s in settings]
 

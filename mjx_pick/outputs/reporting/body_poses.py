@@ -25,7 +25,9 @@ class TracePose:
 
     An MJCF gripper (gripper.mjcf) is posed from the traced pad travel through its
     measured close (``mjx_pick.core.mjcf_gripper``); a parametric gripper from its two
-    finger slides.
+    finger slides. A trace with ``gripper_tilt_wxyz`` (a grasp turned from vertical)
+    turns the model's gripper as the simulation did (model's body_quat and the lift's
+    jnt_axis are set: pass a model of the trace's own).
     """
 
     def __init__(self, model, trace: dict, gripper: GripperSpec | None = None):
@@ -37,6 +39,9 @@ class TracePose:
         self.adr = {
             j: int(model.jnt_qposadr[model.joint(j).id]) for j in ("object", "lift", *fingers)
         }
+        tilt = trace.get("gripper_tilt_wxyz")
+        if tilt is not None:  # a grasp turned from vertical: the gripper as it was placed
+            _tilt_gripper(model, np.asarray(tilt, float))
         self.links = []
         if self.linkage:
             self.links = [
@@ -65,6 +70,15 @@ class TracePose:
         else:
             data.qpos[adr["finger_left"]] = tr["finger_left_m"][k]
             data.qpos[adr["finger_right"]] = tr["finger_right_m"][k]
+
+
+def _tilt_gripper(model, tilt_wxyz: np.ndarray) -> None:
+    """model's gripper turned by tilt (w, x, y, z) about its origin, its lift kept on the
+    world's z (``Scene.placement``)."""
+    from mjx_pick.core.grasps import quat_to_mat
+
+    model.body_quat[model.body("gripper").id] = tilt_wxyz
+    model.jnt_axis[model.joint("lift").id] = quat_to_mat(tilt_wxyz)[2]
 
 
 @dataclasses.dataclass(frozen=True)

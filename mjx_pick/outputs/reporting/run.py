@@ -83,14 +83,21 @@ class Run:
         )
 
     def trace(self, pick_id: int) -> dict[str, np.ndarray]:
-        """One pick-point's trace: TRACE_FIELDS columns (T,), phase as names."""
+        """One pick-point's trace: TRACE_FIELDS columns (T,), phase as names; for a grasp
+        given as a pose, ``gripper_tilt_wxyz`` (4,) too (``core.grasps``)."""
         if self.traces is None:
             raise ConfigError(f"{self.path} has no traces.parquet (evaluate with n_traces > 0)")
         ids = np.asarray(self.traces["pick_id"])
         rows = self.traces.filter(pa.array(ids == pick_id))
         if rows.num_rows == 0:
             raise ConfigError(f"pick-point {pick_id} was not traced in {self.path}")
-        return {name: np.asarray(rows[name]) for name in rows.column_names}
+        trace = {name: np.asarray(rows[name]) for name in rows.column_names}
+        if "grasp_pose" in self.table.column_names:  # a grasp given as a pose: its tilt
+            from mjx_pick.core.grasps import decompose
+
+            pose = np.asarray(self.row(pick_id)["grasp_pose"], float).reshape(1, 4, 4)
+            trace["gripper_tilt_wxyz"] = decompose(pose)["tilt_quat"][0]
+        return trace
 
     def traced(self) -> list[tuple[int, str]]:
         """(pick_id, 'best' | 'worst') of every traced pick-point, best first."""
