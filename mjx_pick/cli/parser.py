@@ -560,10 +560,11 @@ def _add_calibrate_parser(sub) -> None:
     _add_object_args(cb, required=False)
     cb.add_argument(
         "--split",
-        type=float,
+        type=number("split", "--split"),
         default=0.5,
-        help="with a TRIALS.csv: the share of its grasps fitted (split by grasp, seeded by "
-        "--seed); the rest are held out, validated before and after the fit",
+        help="with a TRIALS.csv: the fraction of its grasps fitted (split by grasp, seeded "
+        "by --seed); the rest are held out, validated before and after the fit "
+        "(default: 0.5)",
     )
     _add_gripper_args(cb)
     _add_physics_args(cb)

@@ -46,6 +46,7 @@ INPUTS: dict[str, Number] = {
     "sigma_yaw_deg": Number(0, 180, unit="deg", doc="vision error of yaw"),
     # calibrate
     "steps": Number(0, 1_000_000, integer=True, unit="steps", doc="estimator steps"),
+    "split": Number(0, 1, lo_open=True, hi_open=True, doc="fraction of the trials' grasps fitted"),
     "budget": Number(1, 1e12, integer=True, unit="simulations", doc="simulation budget"),
     "lr": Number(0, 10, lo_open=True, doc="Adam step in the bounded space"),
     "samples": Number(1, 10_000, integer=True, doc="quadrature node pairs"),
