@@ -331,7 +331,7 @@ def _add_grasp_source(p: argparse.ArgumentParser) -> None:
         help="where the grasps come from: 'topdown' pick-points (default, the paper's), "
         "'antipodal' grasps on the part's mesh (any approach from above), or a grasp file "
         "(ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, a CSV of 4x4 poses): every "
-        "grasp in it, the infeasible left out (docs/formats.md)",
+        "grasp in it, the infeasible left out (docs/formats.md) (default: topdown)",
     )
     p.add_argument(
         "--depth-mm",
