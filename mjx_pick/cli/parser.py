@@ -535,6 +535,7 @@ def _add_robust_parser(sub) -> None:
     )
     _add_resume(rb)
     _add_ray(rb)
+    _add_grasp_source(rb)
     rb.set_defaults(func=cmd_robust, n=200)
 
 

@@ -92,6 +92,37 @@ class GraspChecker:
             "coverage": coverage,
         }
 
+    def at_opening(self, poses_oe: np.ndarray, opening_mm) -> dict[str, np.ndarray]:
+        """Check grasp frames (N, 4, 4) with the fingers at given start openings (N,) mm
+        -- a plan made for another pose, as robustness draws them: no speed rule; the
+        part reaching past a finger's start, or a finger touching the part, is
+        ``collision`` (the finger lands on it).
+
+        Returns reason (N,), gap_left_mm, gap_right_mm, coverage (N,) as ``__call__``.
+        """
+        poses_oe = np.asarray(poses_oe, float)
+        opening = np.broadcast_to(np.asarray(opening_mm, float), (len(poses_oe),))
+        reason = np.full(len(poses_oe), FEASIBLE, np.int64)
+        d = gm.decompose(poses_oe)
+        reason[d["upward"]] = TABLE
+        left, right, coverage = self._extent_mm(poses_oe)
+        reason[(reason == FEASIBLE) & np.isnan(left)] = OFF_OBJECT
+        reach = np.maximum(-left, right)
+        reason[(reason == FEASIBLE) & (reach > 0.5 * opening)] = COLLISION
+        for i in np.flatnonzero(reason == FEASIBLE):
+            one = {k: v[i : i + 1] for k, v in d.items() if k != "upward"}
+            self._place(one, opening[i], right[i] - left[i])
+            if self._touching([self.table_geom]):
+                reason[i] = TABLE
+            elif self._touching(self.part_geoms):
+                reason[i] = COLLISION
+        return {
+            "reason": reason,
+            "gap_left_mm": 0.5 * opening + left,
+            "gap_right_mm": 0.5 * opening - right,
+            "coverage": coverage,
+        }
+
     def batch(self, pick_id, poses_oe: np.ndarray, mode: str) -> GraspBatch:
         """The feasible grasps of poses_oe (N, 4, 4) as a GraspBatch, with the counts of
         the rejected ones (by REASONS name)."""

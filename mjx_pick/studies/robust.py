@@ -63,8 +63,12 @@ def placements(
     pick_config: pp.PickConfig | None = None,
 ) -> Placements:
     """Real poses around each reported pick-point, checked with the fingers at the
-    opening planned for the reported pose (see the module docstring)."""
+    opening planned for the reported pose (see the module docstring). Grasps given as
+    poses keep their tilt and height; their planar part is perturbed and the 6-DoF
+    checks (``GraspChecker.at_opening``) say which draws land or miss."""
     x, y, yaw, idx = perturb(picks, m, sigma_xy_mm, sigma_yaw_deg, seed)
+    if not picks.is_pick_points:
+        return _grasp_placements(obj, picks, base, x, y, yaw, idx)
     checker = pp.FeasibilityChecker(obj, base.gripper, pick_config, base.grasp)
     planned = picks.opening_mm[idx]
     res = checker(x, y, yaw, opening_mm=planned)
@@ -86,6 +90,34 @@ def placements(
         mode="robustness",
     )
     return Placements(draws, ok, idx, np.asarray(res["reason"]))
+
+
+def _grasp_placements(obj, picks: pp.GraspBatch, base: Settings, x, y, yaw, idx) -> Placements:
+    """placements of grasps given as poses: the draws' planar parts x, y, yaw (K*M,),
+    each keeping its grasp's tilt and height; reasons in ``pickpoints.REASONS`` codes (a
+    finger on the part or the table: CLEARANCE; nothing between the pads: OFF_OBJECT)."""
+    from mjx_pick.core import grasp_checks as gc
+    from mjx_pick.core.grasps import poses
+    from mjx_pick.engine.inputs import scene_of
+
+    planned = picks.opening_mm[idx]
+    moved = dataclasses.replace(
+        picks.take(idx), x_mm=x, y_mm=y, yaw_deg=yaw, pick_id=np.arange(len(x))
+    )
+    res = gc.GraspChecker(scene_of(obj, base)).at_opening(poses(moved, np.nan), planned)
+    code = {gc.FEASIBLE: pp.fk.FEASIBLE, gc.OFF_OBJECT: pp.fk.OFF_OBJECT}
+    reason = np.array([code.get(int(r), pp.fk.CLEARANCE) for r in res["reason"]])
+    ok = reason == pp.fk.FEASIBLE
+    draws = dataclasses.replace(
+        moved.take(ok),
+        gap_left_mm=res["gap_left_mm"][ok],
+        gap_right_mm=res["gap_right_mm"][ok],
+        coverage=res["coverage"][ok],
+        rejected={},
+        n_candidates=len(x),
+        mode="robustness",
+    )
+    return Placements(draws, ok, idx, reason)
 
 
 def check_draws(m: int, sigma_xy_mm: float, sigma_yaw_deg: float) -> None:
@@ -167,6 +199,9 @@ def _digest(picks: pp.GraspBatch) -> str:
     h = hashlib.sha256()
     for a in (picks.pick_id, picks.x_mm, picks.y_mm, picks.yaw_deg, picks.opening_mm):
         h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    for a in (picks.tilt_quat, picks.height_mm):  # grasps given as poses
+        if a is not None:
+            h.update(np.ascontiguousarray(a, dtype=float).tobytes())
     return h.hexdigest()[:16]
 
 
@@ -247,6 +282,9 @@ def _robust_table(picks: pp.GraspBatch, placed: Placements, out_d: dict, m: int)
 
 # the RunOptions fields robustness uses (it takes its pick-points: no n)
 _ROBUST_FIELDS = (
+    "grasps",
+    "antipodal",
+    "depth_mm",
     "seed",
     "pick_config",
     "backend",
@@ -395,20 +433,35 @@ def robust_best(
 def _best_picks(obj, base, sim, store, results, n, top_k, opts: RunOptions) -> pp.GraspBatch:
     """The top_k best successful pick-points: of results (an evaluate table), or of n
     pick-points simulated through sim (chunks read from and saved to store)."""
+    from mjx_pick.core.grasp_checks import GraspChecker
+    from mjx_pick.core.grasps import poses
     from mjx_pick.core.metrics import best_successes
+    from mjx_pick.engine.inputs import scene_of
+    from mjx_pick.studies.grasp_sources import draw_grasps
 
+    given = None  # grasps given as poses: (N, 4, 4) frames
     if results is not None:
         table = results
         x, y, yaw, ids = (np.asarray(table[c]) for c in ("x_mm", "y_mm", "yaw_deg", "pick_id"))
         success, score = np.asarray(table["success"]), np.asarray(table["score"], float)
+        if "grasp_pose" in table.column_names:
+            given = np.asarray(table["grasp_pose"].to_pylist(), float).reshape(-1, 4, 4)
     else:
-        picks = pp.generate_normal(obj, base.gripper, n, opts.seed, opts.picks, base.grasp)
+        picks = draw_grasps(
+            obj, base, n, opts.seed, opts.picks, opts.grasps,
+            antipodal=opts.antipodal, depth_mm=opts.depth_mm,
+        )  # fmt: skip
         (out,) = sim.run([(base, picks)], store)
         x, y, yaw, ids = picks.x_mm, picks.y_mm, picks.yaw_deg, picks.pick_id
         success, score = out["success"], out["score"]
+        if not picks.is_pick_points:
+            given = poses(picks, np.nan)
     top = best_successes(success, score, top_k)
     if len(top) == 0:
         raise ConfigError("no successful pick-point to test: evaluate more pick-points first")
+    if given is not None:
+        checker = GraspChecker(scene_of(obj, base), opts.picks.safety_zone_mm)
+        return checker.batch(ids[top], given[top], "robustness")
     checker = pp.FeasibilityChecker(obj, base.gripper, opts.picks, base.grasp)
     return checker.batch(ids[top], x[top], y[top], yaw[top], "robustness")
 
