@@ -51,8 +51,8 @@ def test_every_bad_field_gets_its_own_message():
     )
     assert settings is None
     assert set(errors) == {"gripper.stroke_mm", "picks.min_coverage", "grasp.kp_mm_s_per_n"}
-    assert "stroke_mm = -5.0 is out of range" in errors["gripper.stroke_mm"]
-    assert "min_coverage = 1.5 is out of range" in errors["picks.min_coverage"]
+    assert "stroke width (mm) = -5.0 is out of range" in errors["gripper.stroke_mm"]
+    assert "minimum coverage = 1.5 is out of range" in errors["picks.min_coverage"]
     assert errors["grasp.kp_mm_s_per_n"] == "P gain is required"
 
 
@@ -346,14 +346,13 @@ def test_a_sweep_value_outside_its_range_is_refused_before_the_run():
     assert "grip force F_d = 500" in problem and "robotiq-2f85" in problem
 
 
-def test_messages_use_the_forms_words_with_the_details_after():
+def test_messages_use_the_forms_words_and_only_them():
     g = load_gripper("robotiq-2f85")
     _, errors = forms.build(values(gripper__stroke_mm=-5.0, contact__pad_friction=0.0), g)
-    words, details = errors["gripper.stroke_mm"].split("\n")
-    assert words == (
+    # no details line with the library's own text: its keys are the program's words
+    assert errors["gripper.stroke_mm"] == (
         "stroke width (mm) = -5.0 is out of range: allowed 0 < stroke width (mm) <= 1000"
     )
-    assert details.startswith("(details: gripper[robotiq-2f85].stroke_mm = -5.0")
     assert errors["contact.pad_friction"].startswith("pad friction = 0.0 is out of range")
     assert forms.user_words("P gain is required") == "P gain is required"
     from mjx_pick.gui.formatting import column_label
@@ -618,7 +617,8 @@ def test_a_refused_folder_is_explained_in_the_pages_words(tmp_path):
     shown = page_advice(str(err.value))
     assert "--out" not in shown and "--overwrite" not in shown and "--resume" not in shown
     assert "sha256" not in shown and "model: its content changed" in shown
-    assert "seed: 0 -> 1" in shown and "'resume' ticked" in shown and "run folder name" in shown
+    assert "seed: 0 -> 1" in shown and "run folder name" in shown
+    assert "'Load this run folder's settings' in tab 3" in shown
 
 
 def test_a_crashed_run_says_what_failed_and_where_its_log_is(tmp_path):

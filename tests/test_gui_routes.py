@@ -413,3 +413,64 @@ def test_a_file_the_browser_refuses_replaces_the_upload_before_it(page, tmp_path
     page.get_by_test_id("calibrate-error").filter(has_text="upload an outcomes CSV").wait_for()
     expect(csv_refused).to_have_text("outcomes.xlsx: not a .csv file")
     assert not page.get_by_test_id("job-title").is_visible()
+
+
+def test_a_reload_shows_a_stopped_run_as_its_folder_records_it_and_start_resumes(page, server):
+    """A run of 40 pick-points, seed 7, 2 traced, chunks of 2, cancelled; each reload
+    shows tab 3 as the run's folder records it -- not the page's defaults -- and its
+    time as it ran, not growing; a change is refused in the page's words; Start then
+    continues it to its end."""
+    from playwright.sync_api import expect
+
+    url, work = server
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+    page.get_by_text("3 Generate input data").click()
+    recorded = {
+        "pick-points": "40",
+        "seed": "7",
+        "traced best and worst (force plots)": "2",
+        "pick-points per saved chunk": "2",
+    }
+    for label, value in recorded.items():
+        number(page, label, value)
+    page.get_by_label("run folder name").fill("reloaded")
+    page.get_by_test_id("start-batch").click()
+    status = page.get_by_test_id("job-status")
+    status.filter(has_text=re.compile(r"^running, ([2-9]|[1-3]\d)/40 pick-points")).wait_for(
+        timeout=TIMEOUT_MS
+    )
+    page.get_by_role("button", name="Cancel").click()
+    ended = wait_job(page, "evaluate reloaded")
+    assert ended.startswith("cancelled"), ended
+    took = re.search(r", (\d+) s,", ended).group(1)
+
+    for _ in range(2):  # each reload: the same record, the same time
+        page.wait_for_timeout(2500)
+        page.reload()
+        page.get_by_test_id("job-title").filter(has_text="evaluate reloaded").wait_for()
+        expect(status).to_contain_text(f", {took} s,")
+        page.get_by_text("3 Generate input data").click()
+        for label, value in recorded.items():
+            expect(page.get_by_label(label, exact=True)).to_have_value(value)
+        expect(page.get_by_label("run folder name")).to_have_value("reloaded")
+        resume = page.get_by_role("checkbox", name="resume an interrupted run of this folder")
+        expect(resume).to_be_checked()
+
+    # another seed: the CLI's refusal in the page's words -- no key, no flag
+    number(page, "seed", 8)
+    page.get_by_test_id("start-batch").click()
+    status.filter(has_text=re.compile(r"^failed")).wait_for(timeout=TIMEOUT_MS)
+    refused = status.inner_text()
+    assert "changed: seed: 7 -> 8" in refused, refused
+    assert not re.search(r"--[a-z]|\bn:|mjx-pick|details", refused), refused
+    assert "'Load this run folder's settings' in tab 3" in refused, refused
+    page.get_by_test_id("load-run").click()
+    expect(page.get_by_label("seed", exact=True)).to_have_value("7")
+    page.get_by_test_id("start-batch").click()
+    page.get_by_test_id("job-status").filter(has_text="running").wait_for()
+    done = wait_job(page, "evaluate reloaded")
+    assert done.startswith("complete, 40/40"), done
+    assert (work / "reloaded" / "results.parquet").is_file()

@@ -21,7 +21,7 @@ from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.pickpoints import PickConfig
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine import registry
-from mjx_pick.gui.formatting import page_text
+from mjx_pick.gui.formatting import key_words, page_text
 
 SECTIONS = {
     "gripper": GripperSpec,
@@ -119,26 +119,124 @@ def defaults(gripper: GripperSpec, **others) -> dict[str, float]:
     return {f.key: float(getattr(objs[f.section], f.name)) for f in SETTINGS_FIELDS}
 
 
+# a settings key in a library's message: section.field (gripper[name].field), or a form
+# field's bare name
 _INTERNAL = re.compile(
-    r"(?:gripper\[[^\]]*\]|grasp|picks|contact)\.(\w+)|\b("
+    r"\b(gripper\[[^\]]*\]|gripper|grasp|picks|contact|solver)\.(\w+)|\b("
     + "|".join(f.name for f in SETTINGS_FIELDS)
     + r")\b"
 )
 
 
+def setting_words(section: str, name: str) -> str:
+    """A setting in the page's words: a form field's label and unit, else its section,
+    meaning and unit (``sweep_labels``), else the key in words."""
+    key = f"{section.split('[', 1)[0]}.{name}"
+    form = next((f for f in SETTINGS_FIELDS if f.key == key), None)
+    if form is not None:
+        return f"{form.label} ({form.unit})" if form.unit else form.label
+    return sweep_labels().get(key) or key_words(key)
+
+
 def user_words(message: str) -> str:
     """A settings error in the form's words: each internal field name (``contact.pad_friction``,
-    ``gripper[robotiq-2f85].stroke_mm``, ``stroke_mm``) becomes its label and unit; the
-    message as the library wrote it follows as a details line."""
+    ``gripper[robotiq-2f85].stroke_mm``, ``stroke_mm``) becomes its label and unit --
+    the library's own text is not added: its keys are the program's words."""
     labels = {f.name: f"{f.label} ({f.unit})" if f.unit else f.label for f in SETTINGS_FIELDS}
 
     def label(m: re.Match) -> str:
-        name = m.group(1) or m.group(2)
-        return labels.get(name, m.group(0))
+        if m.group(3):
+            return labels[m.group(3)]
+        return setting_words(m.group(1), m.group(2))
 
-    message = page_text(message)
-    words = _INTERNAL.sub(label, message)
-    return words if words == message else f"{words}\n(details: {message})"
+    return _INTERNAL.sub(label, page_text(message))
+
+
+# the CLI's flags as the page names the control that sets them (a CLI message may name
+# one; the page has no flags). Flags the page has no control for are said as the CLI's
+# option in words, never as a flag.
+FLAG_WORDS = {
+    "--n": "pick-points (tab 3)",
+    "--seed": "seed (tab 3)",
+    "--traces": "traced best and worst (tab 3)",
+    "--chunk-size": "pick-points per saved chunk (tab 3)",
+    "--out": "run folder name",
+    "--resume": "'resume' ticked (tab 3)",
+    "--step-check": "'check each label' (tab 3)",
+    "--stability-um": "'check each label' (tab 3)",
+    "--backend": "backend (tab 2)",
+    "--gripper-file": "gripper (tab 2)",
+    "--grasp": "procedure settings (tab 2)",
+    "--contact": "contact settings (tab 2)",
+    "--safety-zone-mm": "safety zone (mm) (tab 2)",
+    "--min-coverage": "minimum coverage (tab 2)",
+    "--mass-g": "mass (g) (tab 1)",
+    "--px-per-mm": "image scale (px per mm) (tab 1)",
+    "--thickness-mm": "thickness (mm) (tab 1)",
+    "--unit": "mesh unit (tab 1)",
+    "--largest-body": "'largest body only' (tab 1)",
+    "--top-k": "top pick-points (Studies)",
+    "--m": "perturbed draws each (Studies)",
+    "--steps": "optimiser steps (Studies)",
+    "--params": "parameters to fit (Studies)",
+    "--grippers": "presets (Studies)",
+    "--param": "parameter (Parameter sweep)",
+}
+_FLAG = re.compile(r"(?<![\w-])(--[a-z][a-z0-9-]*)(?: \(\w+=\w+\))?")
+# a recorded run's settings that changed (rundir.what_changed): "changed: a: 1 -> 2; ..."
+_CHANGED = re.compile(r"(changed: )(.*?)(?=\.(?: |$)|$)")
+_CHANGED_KEY = re.compile(r"(^|; )([\w.\[\]-]+)(: )")
+_PROGRAM = (  # the CLI's names of its own runs, as the page says them
+    (
+        re.compile(r"holds `mjx-pick (\w+)` results of another configuration"),
+        r"holds the results of {} run with other settings",
+    ),
+    (re.compile(r"`mjx-pick (\w+)`"), r"{} run"),
+)
+# a program's key left in a message (a recorded field, a library's argument): a
+# lower-case name with underscores that ends in a unit or is one of key_words' own --
+# never a file's name (a dot, a slash or a quote beside it) or other user text
+_KEY = re.compile(r"(?<![\w./'\"`-])([a-z][a-z0-9]*(?:_[a-z0-9]+)+)(?![\w/'\"`-]|\.\w)")
+
+
+def page_words(message: str) -> str:
+    """Any message for the page -- a library's, the CLI's, a check's -- in the page's
+    words: no path of the software's files (``page_text``), the CLI's advice as the
+    page's controls (``page_advice``), each setting and recorded key by its label or in
+    words (``user_words``, ``key_words``), each CLI flag by the control that sets it."""
+    text = user_words(page_advice(message))
+
+    def changed(m: re.Match) -> str:
+        keys = _CHANGED_KEY.sub(
+            lambda k: k.group(1) + _recorded_words(k.group(2)) + k.group(3), m.group(2)
+        )
+        return m.group(1) + keys
+
+    text = _CHANGED.sub(changed, text)
+    for pattern, words in _PROGRAM:
+        text = pattern.sub(lambda m, w=words: w.format(_article(m.group(1))), text)
+    text = _KEY.sub(lambda m: key_words(m.group(1)) if _is_key(m.group(1)) else m.group(1), text)
+    return _FLAG.sub(
+        lambda m: FLAG_WORDS.get(m.group(1), key_words(m.group(1)[2:].replace("-", "_"))), text
+    )
+
+
+def _article(word: str) -> str:
+    return ("an " if word[:1] in "aeiou" else "a ") + word
+
+
+def _is_key(name: str) -> bool:
+    """Whether a name with underscores is a program's key (its unit in its name, or a
+    key with words of its own), not a word a user chose."""
+    return key_words(name) != name.replace("_", " ")
+
+
+def _recorded_words(key: str) -> str:
+    """A key of a run's recorded settings (rundir's manifest) in words."""
+    section, _, name = key.partition(".")
+    if name and section.split("[", 1)[0] in (*SECTIONS, "solver"):
+        return setting_words(section, name)
+    return key_words(key)
 
 
 def field_of(message: str, section: str) -> str | None:
@@ -394,8 +492,8 @@ _PAGE_ADVICE = (
     (
         "Keep them: continue it with its settings and --resume, or write elsewhere with "
         "--out NEW; --overwrite deletes them",
-        "Keep them: continue it with the same settings and 'resume' ticked, or choose "
-        "another run folder name",
+        "Keep them: continue it with its own settings ('Load this run folder's settings' "
+        "in tab 3, then Start), or choose another run folder name",
     ),
     (
         "Keep them: write elsewhere with --out NEW; --overwrite deletes them",
@@ -414,6 +512,11 @@ _PAGE_ADVICE = (
     (
         "pass --resume to continue it, or choose another --out",
         "tick 'resume' to continue it, or choose another run folder name",
+    ),
+    (
+        "give the object (and --mass-g ...) it was made with",
+        "import the object it was made with in tab 1 (its file or shipped object, scale, "
+        "thickness and mass)",
     ),
     ("choose another --out or pass --overwrite", "choose another run folder name"),
     ("choose another --out", "choose another run folder name"),

@@ -24,6 +24,7 @@ from mjx_pick.gui.formatting import (
     fmt,
     md_text,
 )
+from mjx_pick.gui.forms import page_words
 from mjx_pick.gui.one_pick import simulate_untraced
 from mjx_pick.gui.page.job_panel import POLL_S, JobPanel
 from mjx_pick.gui.page.replay_view import ReplayView
@@ -345,7 +346,9 @@ class AnalyzeTab:
             trace, again = await run.io_bound(simulate_untraced, opened, self.state.obj, pid)
         except ConfigError as err:
             self.detail.set_content(
-                "\n".join(lines) + note + f"it cannot be simulated here: {md_text(err)}"
+                "\n".join(lines)
+                + note
+                + f"it cannot be simulated here: {md_text(page_words(str(err)))}"
             )
             return None
         self.simulated[key] = trace

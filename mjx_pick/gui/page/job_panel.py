@@ -32,6 +32,9 @@ class JobPanel:
         # what each command's end draws, by command: a run re-attached after a reload
         # is drawn by this page's tabs, not by the page that started it
         self.handlers: dict[str, Callable[[jobs.Job, jobs.Progress], None]] = {}
+        # what each command's tab shows of a run this page did not start (one re-attached
+        # after a reload, or chosen in the runs list): its numbers as its folder records
+        self.shown: dict[str, Callable[[jobs.Job], None]] = {}
         with ui.card().classes("w-full") as card:
             with ui.row().classes("items-center w-full"):
                 self.title = ui.label("").classes("font-bold").props('data-testid="job-title"')
@@ -73,9 +76,18 @@ class JobPanel:
             " 500);</script>"
         )
 
-    def handle(self, command: str, ended: Callable[[jobs.Job, jobs.Progress], None]) -> None:
-        """ended(job, progress) draws the results of a run of command when it ends."""
+    def handle(
+        self,
+        command: str,
+        ended: Callable[[jobs.Job, jobs.Progress], None],
+        shown: Callable[[jobs.Job], None] | None = None,
+    ) -> None:
+        """ended(job, progress) draws the results of a run of command when it ends;
+        shown(job) fills the tab from a run of command the panel shows without this page
+        having started it (after a reload, or chosen in the runs list)."""
         self.handlers[command] = ended
+        if shown is not None:
+            self.shown[command] = shown
 
     def busy(self, where: ui.label) -> bool:
         """True (and says so in where) while a run is current: no second run starts.
@@ -114,8 +126,16 @@ class JobPanel:
         self.owner = owner
         job = self.runs.last_of(owner)
         if job is not None and self.job is None:
-            self._show(job, None)
-            self.poll()
+            self._show_other(job)
+
+    def _show_other(self, job: jobs.Job) -> None:
+        """A run this page did not start, shown: its tab filled from its record, then its
+        state (and, if it ended, its results)."""
+        self._show(job, None)
+        shown = self.shown.get(job.argv[0] if job.argv else "")
+        if shown is not None:
+            shown(job)
+        self.poll()
 
     def _show(self, job: jobs.Job, on_end) -> None:
         self.job = job
@@ -158,8 +178,7 @@ class JobPanel:
         if self.job is not None and self.job is not job:
             ui.notify("a run is current: wait for it or cancel it", type="warning")
         elif self.job is None:
-            self._show(job, None)
-            self.poll()
+            self._show_other(job)
 
     def poll(self) -> None:
         """Show the run's progress; when it has ended, free the panel and call on_end."""

@@ -8,7 +8,8 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
-from mjx_pick.gui.formatting import column_label, fmt_cell, page_text
+from mjx_pick.gui.formatting import column_label, fmt_cell
+from mjx_pick.gui.forms import page_words
 from mjx_pick.gui.search import Search, SearchStopped
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
 from mjx_pick.gui.uploads import browser_refused
@@ -17,10 +18,11 @@ from mjx_pick.gui.views import data_uri
 
 class MessageLabel(ui.label):
     """A label that shows messages (errors, warnings, a run's state): every text set
-    on it passes ``page_text``, so no path of the software's own files reaches the page."""
+    on it passes ``forms.page_words`` -- no path of the software's own files, no key,
+    flag or advice of the program's reaches the page, whichever library wrote it."""
 
     def set_text(self, text: str) -> None:
-        super().set_text(page_text(text) if text else text)
+        super().set_text(page_words(text) if text else text)
 
 
 def error_label() -> MessageLabel:
