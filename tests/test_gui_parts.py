@@ -822,3 +822,34 @@ def test_every_file_the_page_reads_resolves_inside_the_work_folder(tmp_path):
     assert not (away / "grasp.toml").exists()
     paths = forms.write_inputs(settings, work / "inputs" / "elsewhere", work)
     assert paths["grasp"].parent == work / "inputs" / "elsewhere-2"
+
+
+def test_the_sweeps_picture_names_its_parameter_in_the_pages_words(block, tmp_path, monkeypatch):
+    """The page draws a sweep's picture with each parameter's axis in words
+    (forms.sweep_labels), not the key its command took (contact.pad_friction)."""
+    import matplotlib.axes
+
+    import mjx_pick as mp
+    from mjx_pick.core.procedure import GraspConfig
+    from mjx_pick.gui import views
+    from mjx_pick.studies.sweeps import ParamSpec
+
+    grasp = GraspConfig(close_timeout_s=1.0, lift_height_mm=5.0, hold_s=0.05)
+    out = tmp_path / "work" / "sweep"
+    mp.sweep(
+        block,
+        [ParamSpec.parse("contact.pad_friction=0.5,0.8")],
+        mp.Settings(grasp=grasp),
+        n=1,
+        out=out,
+        backend="mujoco",
+    )
+    said = []
+    real = matplotlib.axes.Axes.set_xlabel
+    monkeypatch.setattr(
+        matplotlib.axes.Axes,
+        "set_xlabel",
+        lambda ax, label, *a, **k: said.append(label) or real(ax, label, *a, **k),
+    )
+    png = views.sweep_png(out, tmp_path / "work", forms.sweep_labels())
+    assert png.startswith(b"\x89PNG") and set(said) == {"pad friction"}, said

@@ -121,6 +121,9 @@ def test_compare_says_when_grippers_ran_at_different_forces(page, server):
     page.get_by_test_id("start-compare").click()
     status = wait_job(page, "compare forces")
     assert re.match(r"complete, (\d+)/\1 simulations", status), status  # a count
+    # the table's headings in words with their units, no key ("grip force n" once)
+    heads = page.get_by_test_id("compare-table").locator("th").all_inner_texts()
+    assert "grip force (N)" in heads and not [h for h in heads if "_" in h], heads
     note = page.get_by_test_id("compare-note")
     note.filter(has_text="different grip forces").wait_for()
     assert "onrobot-rg2 at 40 N" in note.inner_text()
@@ -298,14 +301,15 @@ def test_tab_3s_traces_and_chunk_size_keep_the_number_rule(page):
     assert status.startswith("complete, 3/3"), status
 
 
-def small_run(out, block) -> None:
-    """An evaluate folder of two pick-points of the block (the library, no page)."""
+def small_run(out, block, n: int = 2) -> None:
+    """An evaluate folder of n pick-points of the block (the library, no page), its
+    best and worst traced."""
     import mjx_pick as mp
     from mjx_pick.core.procedure import GraspConfig
 
     grasp = GraspConfig(close_timeout_s=1.0, lift_height_mm=5.0, hold_s=0.05)
     gripper = mp.load_gripper("robotiq-2f85")
-    mp.evaluate(block, gripper, n=2, grasp=grasp, backend="mujoco", out=out, n_traces=1)
+    mp.evaluate(block, gripper, n=n, grasp=grasp, backend="mujoco", out=out, n_traces=1)
 
 
 def test_no_file_is_read_listed_or_served_through_a_link_out_of_the_work_folder(
@@ -474,3 +478,75 @@ def test_a_reload_shows_a_stopped_run_as_its_folder_records_it_and_start_resumes
     done = wait_job(page, "evaluate reloaded")
     assert done.startswith("complete, 40/40"), done
     assert (work / "reloaded" / "results.parquet").is_file()
+
+
+def two_bodies_obj(path) -> None:
+    """An OBJ of two disjoint 20 mm cubes (a mesh of several bodies)."""
+    import trimesh
+
+    a = trimesh.creation.box((20, 20, 20))
+    b = trimesh.creation.box((20, 20, 20))
+    b.apply_translation((60, 0, 0))
+    trimesh.util.concatenate([a, b]).export(path)
+
+
+def test_messages_speak_the_pages_words_not_the_programs(page, server, block, tmp_path):
+    """Refusals that named a flag the page has not (--largest-body), a key
+    (grasp.grip_force_n, mass_g), a backend this machine cannot run, an outcome's label
+    (no_contact): each in the page's words, and the page has the control it names."""
+    from playwright.sync_api import expect
+
+    from mjx_pick.gui import forms
+
+    program = re.compile(r"--[a-z]|\b[a-z]+_[a-z_]+\b|details|pip install")
+    # a mesh of two bodies: the refusal names the page's box, which takes it
+    mesh = tmp_path / "two_cubes.obj"
+    two_bodies_obj(mesh)
+    upload_object(page, mesh)
+    page.get_by_text("uploaded two_cubes.obj").wait_for()
+    page.get_by_test_id("import").click()
+    error = page.get_by_test_id("import-error")
+    error.filter(has_text="disconnected bodies").wait_for(timeout=60_000)
+    assert "'largest body only' ticked (tab 1)" in error.inner_text(), error.inner_text()
+    assert not program.search(error.inner_text().replace("two_cubes.obj", "")), error.inner_text()
+    page.get_by_test_id("largest-body").click()
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+
+    # a setting out of the gripper's range: its label, not its key, no details line
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "grip force F_d (N)", 300)
+    page.get_by_test_id("test-pick").click()
+    said = field_message(page, "grip force F_d (N)")
+    said.filter(has_text="out of range").wait_for()
+    assert not program.search(said.inner_text()), said.inner_text()
+    # only backends this machine runs are offered; the others said with why
+    page.get_by_label("backend", exact=True).click()
+    offered = page.get_by_role("option").all_inner_texts()
+    page.keyboard.press("Escape")
+    assert offered == forms.backend_choices(), offered
+    for name, why in forms.backend_problems().items():
+        assert name not in offered
+        expect(page.get_by_test_id("backend-note")).to_contain_text(f"{name} ({why})")
+
+    # tab 4: an untraced pick of a run of another object (mass); outcomes in words
+    small_run(server[1] / "other-mass", block, n=3)
+    import_shipped(page)  # the block, 43.2 g: the run's is 43.2 g too; now another mass
+    number(page, "mass (g)", 1000)
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="mass 1000.0 g").wait_for()
+    page.get_by_text("4 Analyze results").click()
+    page.get_by_test_id("run-dir").fill("other-mass")
+    page.get_by_test_id("open-run").click()
+    rows = page.get_by_test_id("picks-table").locator("tbody tr")
+    expect(rows).to_have_count(3)
+    outcomes = [r.locator("td").nth(8).inner_text() for r in rows.all()]
+    assert outcomes and not [o for o in outcomes if "_" in o], outcomes
+    untraced = rows.filter(has_not_text="yes").first
+    untraced.locator(".q-checkbox").click()
+    detail = page.get_by_test_id("pick-detail")
+    detail.filter(has_text="cannot be simulated here").wait_for()
+    text = detail.inner_text()
+    assert "they differ in mass (g)" in text, text
+    assert "import the object it was made with in tab 1" in text, text
+    assert not re.search(r"--[a-z]|mass_g|outline_wkt|height_mm", text), text

@@ -174,7 +174,7 @@ FLAG_WORDS = {
     "--px-per-mm": "image scale (px per mm) (tab 1)",
     "--thickness-mm": "thickness (mm) (tab 1)",
     "--unit": "mesh unit (tab 1)",
-    "--largest-body": "'largest body only' (tab 1)",
+    "--largest-body": "'largest body only' ticked (tab 1)",
     "--top-k": "top pick-points (Studies)",
     "--m": "perturbed draws each (Studies)",
     "--steps": "optimiser steps (Studies)",
@@ -193,6 +193,17 @@ _PROGRAM = (  # the CLI's names of its own runs, as the page says them
     ),
     (re.compile(r"`mjx-pick (\w+)`"), r"{} run"),
 )
+# an install command in a message (the CLI's advice to its user): the page's user may not
+# be who installs the software
+_PIP = re.compile(r"""pip install (?:"[^"]*"|'[^']*'|\S+)(?: \([^)]*\))?""")
+
+
+def _install_words(m: re.Match) -> str:
+    extra = re.search(r"\[(\w+)\]", m.group(0))
+    what = f"mjx-pick's {extra.group(1)} extra" if extra else "the software it names"
+    return f"{what}, installed on this machine by whoever installs its software"
+
+
 # a program's key left in a message (a recorded field, a library's argument): a
 # lower-case name with underscores that ends in a unit or is one of key_words' own --
 # never a file's name (a dot, a slash or a quote beside it) or other user text
@@ -216,6 +227,7 @@ def page_words(message: str) -> str:
     for pattern, words in _PROGRAM:
         text = pattern.sub(lambda m, w=words: w.format(_article(m.group(1))), text)
     text = _KEY.sub(lambda m: key_words(m.group(1)) if _is_key(m.group(1)) else m.group(1), text)
+    text = _PIP.sub(_install_words, text)
     return _FLAG.sub(
         lambda m: FLAG_WORDS.get(m.group(1), key_words(m.group(1)[2:].replace("-", "_"))), text
     )
@@ -481,9 +493,43 @@ def sweep_problem(settings: Settings, name: str, values) -> str:
 
 def backend_choices() -> list[str]:
     """The backend select's options: 'auto' and every backend of the registry that
-    labels pick-points at the page's settings. The differentiable backend is left out:
-    it runs one fixed physics, for derivatives, which the page never computes."""
-    return [c for c in registry.choices() if c != registry.differentiable()]
+    labels pick-points at the page's settings and can run on this machine
+    (:func:`backend_problems`). The differentiable backend is left out: it runs one
+    fixed physics, for derivatives, which the page never computes."""
+    return [
+        c
+        for c in registry.choices()
+        if c != registry.differentiable() and c not in backend_problems()
+    ]
+
+
+@functools.cache
+def backend_problems() -> dict[str, str]:
+    """{backend: why it cannot run on this machine} for each backend of the registry
+    that cannot (a choice that would fail seconds after its start is not offered).
+    Asked without starting JAX's GPU platform in the server (it would take most of a
+    GPU's memory): a backend that needs an NVIDIA GPU where there is none, else the
+    registry's own check of a backend whose check starts no JAX on its devices."""
+    from mjx_pick.engine.devices import nvidia_gpu_count
+
+    gpus = nvidia_gpu_count()
+    problems = {}
+    for name, e in registry.ENTRIES.items():
+        if e.device is registry.Device.NVIDIA_GPU and not gpus:
+            problems[name] = "no NVIDIA GPU on this machine"
+        elif e.problem is not None and e.jax is not registry.Jax.DEVICES:
+            why = registry.problem(e)
+            if why:
+                problems[name] = why
+    return problems
+
+
+def backend_note() -> str:
+    """What the page says of the backends it does not offer here, and why ('' if none)."""
+    left = {k: v for k, v in backend_problems().items() if k != registry.differentiable()}
+    if not left:
+        return ""
+    return "not on this machine: " + "; ".join(f"{k} ({why})" for k, why in left.items())
 
 
 # the CLI's advice in a refusal, as the page offers it (it has no flags, and never

@@ -42,6 +42,9 @@ class SettingsForm:
                 forms.backend_choices(), value=jobs.DEFAULT_BACKEND, label="backend"
             )
             self.backend.classes("w-40")
+            ui.label(forms.backend_note()).classes("text-xs max-w-xs").props(
+                'data-testid="backend-note"'
+            )
         with ui.row().classes("items-center"):
             self.toml_upload = upload(
                 "or load a gripper TOML",
@@ -139,6 +142,12 @@ class SettingsForm:
             self.inputs[key].error = None
         if backend in (self.backend.options or []):
             self.backend.value = backend
+        elif backend is not None:  # said, never silently another one
+            why = forms.backend_problems().get(backend, "not offered by the page")
+            self.settings_error.set_text(
+                f"the run ran on backend {backend}, which cannot run here ({why}): the "
+                f"backend stays {self.backend.value}"
+            )
 
     def adopt_contact(self, contact) -> None:
         """Fitted contact parameters (the calibration study) for every later run."""
