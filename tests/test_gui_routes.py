@@ -550,3 +550,29 @@ def test_messages_speak_the_pages_words_not_the_programs(page, server, block, tm
     assert "they differ in mass (g)" in text, text
     assert "import the object it was made with in tab 1" in text, text
     assert not re.search(r"--[a-z]|mass_g|outline_wkt|height_mm", text), text
+
+
+def test_a_search_that_finds_nothing_says_why_truly_and_ends_its_line(page):
+    """Minimum coverage 0.99 on the 40 mm block, 85 mm stroke: no pose is feasible.
+    The refusal says why in true words (the fingers cannot reach around an off-centre
+    part -- the part is not wider than the stroke), and the search's line says it ended
+    -- not "0 of 50 feasible so far" as if it still ran."""
+    from playwright.sync_api import expect
+
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "minimum coverage", 0.99)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 50)
+    page.get_by_test_id("generate").click()
+    error = page.get_by_test_id("generate-error")
+    error.filter(has_text="no feasible pick-point").wait_for(timeout=TIMEOUT_MS)
+    said = error.inner_text()
+    assert "the object fills too little of the region between the pads" in said, said
+    assert "cannot reach around the part at that offset" in said, said
+    assert "wider than the stroke" not in said, said
+    line = page.get_by_test_id("picks-search")
+    expect(line).to_contain_text("the search ended after 1,003,520 (all it draws, at most")
+    assert "0 of 50 feasible" in line.inner_text()
+    assert "so far" not in line.inner_text()
+    expect(page.get_by_test_id("picks-search-stop")).to_be_hidden()

@@ -68,6 +68,9 @@ class SearchProgress:
         except SearchStopped:
             self.line.set_text(search.stopped_text())
             return None
+        except Exception:  # it ended (no feasible pick-point, ...): said so, not "so far"
+            self.line.set_text(search.ended_text())
+            raise
         finally:
             self.timer.deactivate()
             self.running_row.set_visibility(False)
