@@ -252,13 +252,14 @@ def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
     panel.where = _Shown()
     ended = []
     job = jobs.Job(["--version"], tmp_path / "version.log")
-    panel.start("version", job, ended.append)
+    panel.start("version", job, _Shown(), ended.append)
     job.wait(120)
     assert not job.running
     where = _Shown()
     assert panel.busy(where) and "in progress" in where.text
     with pytest.raises(RuntimeError, match="a run is current"):
-        panel.start("second", jobs.Job(["--version"], tmp_path / "second.log"), ended.append)
+        second = jobs.Job(["--version"], tmp_path / "second.log")
+        panel.start("second", second, _Shown(), ended.append)
     panel.poll()
     assert [p.state for p in ended] == ["complete"]
     assert panel.status.text.startswith("complete")
@@ -853,3 +854,30 @@ def test_the_sweeps_picture_names_its_parameter_in_the_pages_words(block, tmp_pa
     )
     png = views.sweep_png(out, tmp_path / "work", forms.sweep_labels())
     assert png.startswith(b"\x89PNG") and set(said) == {"pad friction"}, said
+
+
+def test_two_runs_never_write_one_folder_at_once(tmp_path):
+    """A run's folder taken by a running run of this server (any browser tab's) is
+    refused as the second starts -- said with whose run it is -- also a report into a
+    run's folder; a run that ended frees it."""
+
+    class Running:  # a process that runs until told
+        pid, code = 1, None
+
+        def poll(self):
+            return self.code
+
+    runs = jobs.Runs()
+    out = tmp_path / "twin"
+    first = jobs.Job(["evaluate", "--out", str(out)], tmp_path / "logs" / "twin.log", out)
+    first.title, first._proc = "evaluate twin", Running()
+    runs.add(first, "tab-a")
+    second = jobs.Job(["evaluate"], tmp_path / "logs" / "twin.log", tmp_path / "." / "twin")
+    said = runs.taken(second, "tab-b")
+    assert said.startswith("twin: 'evaluate twin' (another browser tab's) is writing"), said
+    assert "this browser tab's" in runs.taken(second, "tab-a")
+    report = jobs.report_job(out, 3, False, tmp_path / "logs" / "twin-report.log")
+    assert "is writing this folder now" in runs.taken(report, "tab-b")
+    assert runs.taken(jobs.Job(["evaluate"], tmp_path / "x.log", tmp_path / "other"), None) == ""
+    first._proc.code = 0  # it ended: the folder is free (the CLI says what it holds)
+    assert runs.taken(second, "tab-b") == ""

@@ -6,9 +6,18 @@ from __future__ import annotations
 
 import json
 import re
+import time
 
 import test_gui
-from test_gui import BLOCK, TIMEOUT_MS, import_shipped, number, start_short_batch, wait_job
+from test_gui import (
+    BLOCK,
+    TIMEOUT_MS,
+    import_shipped,
+    number,
+    shown_field_messages,
+    start_short_batch,
+    wait_job,
+)
 
 from mjx_pick.gui.app import TABS
 
@@ -576,3 +585,50 @@ def test_a_search_that_finds_nothing_says_why_truly_and_ends_its_line(page):
     assert "0 of 50 feasible" in line.inner_text()
     assert "so far" not in line.inner_text()
     expect(page.get_by_test_id("picks-search-stop")).to_be_hidden()
+
+
+def test_two_browser_tabs_starting_one_run_name_at_once_start_it_once(page, server, browser):
+    """Two browser tabs click Start with the same run name at the same moment (each then
+    counts its pick-points for the progress bar): one runs, the other is refused at
+    once in its own words -- never both "running", the second showing the first's
+    progress until its process finds the folder locked."""
+    from playwright.sync_api import expect
+
+    url, work = server
+    other = browser.new_context(viewport={"width": 1500, "height": 1000}).new_page()
+    try:
+        other.goto(url)
+        tabs = (page, other)
+        for pg in tabs:
+            import_shipped(pg)
+            pg.get_by_text("2 Set gripper parameters").click()
+            number(pg, "lift height (mm)", 5)
+            number(pg, "hold (s)", 0.05)
+            pg.get_by_text("3 Generate input data").click()
+            number(pg, "pick-points", 4)
+            pg.get_by_label("run folder name").fill("twin")
+        at = 1000 * time.time() + 1500  # one moment for both clicks, in each page's clock
+        click = """(t) => setTimeout(
+            () => document.querySelector('[data-testid="start-batch"]').click(),
+            t - Date.now())"""
+        for pg in tabs:
+            pg.evaluate(click, at)
+        ran, refused = [], []
+        deadline = time.monotonic() + TIMEOUT_MS / 1000
+        while len(ran) + len(refused) < 2 and time.monotonic() < deadline:
+            ran = [pg for pg in tabs if pg.get_by_test_id("job-title").is_visible()]
+            refused = [
+                pg
+                for pg in tabs
+                if "is writing this folder now" in pg.get_by_test_id("generate-error").inner_text()
+                or "already exists" in " ".join(shown_field_messages(pg))
+            ]
+            time.sleep(0.2)
+        assert len(ran) == 1 and len(refused) == 1 and ran != refused, (ran, refused)
+        assert wait_job(ran[0], "evaluate twin").startswith("complete, 4/4")
+        expect(refused[0].get_by_test_id("job-title")).to_be_hidden()
+        said = refused[0].get_by_test_id("generate-error").inner_text()
+        assert not said or "(another browser tab's) is writing this folder now" in said, said
+        assert len(list((work / "logs").glob("twin*.log"))) == 1  # one run, one log
+    finally:
+        other.context.close()

@@ -392,6 +392,25 @@ class Runs:
         mine = [j for j in self._jobs if owner is not None and j.owner == owner]
         return mine[-1] if mine else None
 
+    def taken(self, job: Job, owner: str | None) -> str:
+        """Why job cannot start now ('' if it can): a run of this server, of this or
+        another browser tab, writes the folder it would write. Asked as it starts, in
+        the server's one event loop: two tabs that checked a run name at the same moment
+        (each waiting for its pick-point count meanwhile) cannot both start it -- the
+        second would show the first's progress until its own process found the folder
+        locked."""
+        if job.writes is None:
+            return ""
+        folder = job.writes.resolve()
+        for other in reversed(self._jobs):
+            if other.running and other.writes is not None and other.writes.resolve() == folder:
+                whose = "this" if owner is not None and other.owner == owner else "another"
+                return (
+                    f"{job.writes.name}: '{other.title}' ({whose} browser tab's) is writing "
+                    "this folder now: wait for it to end, or choose another run folder name"
+                )
+        return ""
+
     def writing(self, folder: Path) -> Job | None:
         """The run of this server still writing folder, if any."""
         folder = Path(folder).resolve()
@@ -448,6 +467,7 @@ class Job:
         self.unit = unit
         self.log = Path(log)
         self.out = Path(out) if out is not None else None
+        self.writes = self.out  # the folder it writes (a report: its run's, not its own)
         self.total = total
         self.chunk = chunk
         self._proc: subprocess.Popen | WorkerRun | None = None
@@ -818,7 +838,9 @@ def report_job(run: Path, n: int, animations: bool, log: Path) -> Job:
     argv = ["report", str(run), "--n", str(int(n))]
     if not animations:
         argv.append("--no-animations")
-    return Job(argv, log, unit="parts of the report", counted=REPORT_PARTS)
+    job = Job(argv, log, unit="parts of the report", counted=REPORT_PARTS)
+    job.writes = Path(run)  # its pages go into the run's folder: one writer at a time
+    return job
 
 
 def unused_path(path: Path) -> Path:

@@ -379,7 +379,7 @@ class AnalyzeTab:
             return
         log = self.state.log(f"{opened.path.name}-report")
         job = jobs.report_job(opened.path, n, bool(self.export_anim.value), log)
-        self.panel.start(f"report {opened.path.name}", job)
+        self.panel.start(f"report {opened.path.name}", job, self.error)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         """A report ended: its run open here (also after a reload), with its downloads."""

@@ -290,7 +290,7 @@ class GenerateTab:
         self.run_summary.set_content("")
 
         job = jobs.Job(argv, self.state.log(out.name), out, n, chunk)
-        self.panel.start(f"evaluate {out.name}", job)
+        self.panel.start(f"evaluate {out.name}", job, self.error)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         """An evaluate run ended (also one started before a reload of the page)."""

@@ -107,18 +107,26 @@ class JobPanel:
         self,
         title: str,
         job: jobs.Job,
+        where: ui.label,
         on_end: Callable[[jobs.Progress], None] | None = None,
-    ) -> None:
+    ) -> bool:
         """Start job and show it; when the panel sees it end it calls on_end(progress),
-        or the handler of its command (:meth:`handle`)."""
+        or the handler of its command (:meth:`handle`). False, and why in where, when a
+        run of this server (any browser tab's) writes its folder now (``Runs.taken``)."""
         if self.job is not None:  # callers check busy() first
             raise RuntimeError(f"a run is current ({self.title.text}): cannot start {title}")
+        taken = self.runs.taken(job, self.owner)
+        if taken:
+            log.info("refused %r (tab %s): %s", title, self.owner, taken)
+            where.set_text(taken)
+            return False
         job.title = title
         log.info("starting %r (tab %s): %s", title, self.owner, job.command_line)
         job.start(self.runs.workers)
         self.runs.add(job, self.owner)
         self._show(job, on_end)
         self.status.set_text("starting ...")
+        return True
 
     def reattach(self, owner: str) -> None:
         """This browser tab's id: show the run it started before a reload, if any (a

@@ -120,7 +120,7 @@ class SweepTab:
         argv += ["--param", param, "--n", str(int(n)), "--out", str(out)]
 
         job = jobs.study_job(argv, self.state.log(out.name), out)
-        self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job)
+        self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job, self.error)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         if progress.state == "complete":
