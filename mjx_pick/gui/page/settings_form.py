@@ -14,7 +14,7 @@ from nicegui import ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import forms, jobs
-from mjx_pick.gui.page.widgets import error_label, upload
+from mjx_pick.gui.page.widgets import error_label, file_error_label, upload
 from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload, toml_refused
 
 PRESET = "robotiq-2f85"  # the gripper the page starts with
@@ -55,7 +55,7 @@ class SettingsForm:
                 toml_refused,
                 "gripper-upload",
             ).classes("w-72")
-            self.toml_error = error_label().props('data-testid="toml-error"')
+            self.toml_error = file_error_label().props('data-testid="toml-error"')
         self.settings_error = error_label().props('data-testid="settings-error"')
         for title, group in (
             ("Gripper", forms.GRIPPER_FIELDS),

@@ -8,7 +8,7 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
-from mjx_pick.gui.formatting import column_label, fmt_cell
+from mjx_pick.gui.formatting import column_label, fmt_cell, page_text
 from mjx_pick.gui.forms import page_words
 from mjx_pick.gui.search import Search, SearchStopped
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
@@ -28,6 +28,20 @@ class MessageLabel(ui.label):
 def error_label() -> MessageLabel:
     """A red line for a message that belongs to no single field."""
     return MessageLabel("").classes("text-negative text-sm").props('role="alert"')
+
+
+class FileMessageLabel(ui.label):
+    """A label for what is wrong inside a file the user wrote (a gripper TOML): its keys
+    are the user's own words there (``stroke_mm = -5`` on its line), so only the
+    software's paths are taken out (``page_text``), never the file's keys."""
+
+    def set_text(self, text: str) -> None:
+        super().set_text(page_text(text) if text else text)
+
+
+def file_error_label() -> FileMessageLabel:
+    """A red line for what is wrong inside a file the user wrote."""
+    return FileMessageLabel("").classes("text-negative text-sm").props('role="alert"')
 
 
 def warning_label(testid: str) -> MessageLabel:
