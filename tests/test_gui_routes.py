@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import re
 import time
+from pathlib import Path
 
 import test_gui
 from test_gui import (
@@ -346,6 +347,11 @@ def test_no_file_is_read_listed_or_served_through_a_link_out_of_the_work_folder(
     page.get_by_test_id("open-run").click()
     report = page.get_by_test_id("download-report.html")
     report.wait_for()
+    with page.expect_download() as got:  # a file inside: served, its own bytes
+        report.click()
+    assert got.value.suggested_filename == "report.html"
+    assert Path(got.value.path()).read_bytes() == b"<html>the run's report</html>"
+    downloads.clear()
     # made after the run was opened: the file is checked when it is asked for
     (run / "report.html").unlink()
     (run / "report.html").symlink_to("/etc/passwd")

@@ -404,14 +404,18 @@ class AnalyzeTab:
 
     def download(self, path: Path) -> None:
         """A file of the open run, sent to the browser -- checked when asked for (a
-        link made since the run was opened is refused too), the file it resolves to."""
+        link made since the run was opened is refused too) and read then: its bytes go,
+        not a route to its path that a link made later could redirect."""
         self.error.set_text("")
         try:
-            real = workfolder.confined(path, self.state.workdir)
+            data = workfolder.read_bytes(path, self.state.workdir)
         except workfolder.OutsideWorkFolder as err:
             self.error.set_text(str(err))
             return
-        ui.download.file(real, filename=path.name)
+        except OSError as err:
+            self.error.set_text(f"{self.state.where(path)}: cannot be read ({err.strerror})")
+            return
+        ui.download.content(data, path.name)
 
 
 def ranked_rows(opened) -> list[dict]:
