@@ -21,7 +21,8 @@ from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.pickpoints import PickConfig
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine import registry
-from mjx_pick.gui.formatting import key_words, page_text
+from mjx_pick.gui.formatting import key_words, outcome_words, page_text
+from mjx_pick.kernels.types import FAILURES
 
 SECTIONS = {
     "gripper": GripperSpec,
@@ -128,6 +129,10 @@ _INTERNAL = re.compile(
 )
 
 
+# a gripper as a library's message names it, "gripper[robotiq-2f85]"
+_GRIPPER = re.compile(r"\bgripper\[([^\]]*)\]")
+
+
 def setting_words(section: str, name: str) -> str:
     """A setting in the page's words: a form field's label and unit, else its section,
     meaning and unit (``sweep_labels``), else the key in words."""
@@ -149,7 +154,8 @@ def user_words(message: str) -> str:
             return labels[m.group(3)]
         return setting_words(m.group(1), m.group(2))
 
-    return _INTERNAL.sub(label, page_text(message))
+    words = _INTERNAL.sub(label, page_text(message))
+    return _GRIPPER.sub(r"gripper \1", words)  # gripper[robotiq-2f85]: the program's
 
 
 # the CLI's flags as the page names the control that sets them (a CLI message may name
@@ -181,7 +187,11 @@ FLAG_WORDS = {
     "--params": "parameters to fit (Studies)",
     "--grippers": "presets (Studies)",
     "--param": "parameter (Parameter sweep)",
+    "--results": "the run open in tab 4 (its folder)",
 }
+# a flag in brackets after the words it stands for ("check mass_g (--mass-g)"): the
+# words are said already
+_FLAG_AFTER = re.compile(r" \((?:--[a-z][a-z0-9-]*(?: or |, )?)+\)")
 _FLAG = re.compile(r"(?<![\w-])(--[a-z][a-z0-9-]*)(?: \(\w+=\w+\))?")
 # a recorded run's settings that changed (rundir.what_changed): "changed: a: 1 -> 2; ..."
 _CHANGED = re.compile(r"(changed: )(.*?)(?=\.(?: |$)|$)")
@@ -193,6 +203,8 @@ _PROGRAM = (  # the CLI's names of its own runs, as the page says them
     ),
     (re.compile(r"`mjx-pick (\w+)`"), r"{} run"),
 )
+# "--results runs/do is of object ...": the run a study reads, by its folder
+_RESULTS = re.compile(r"--results (\S+)")
 # an install command in a message (the CLI's advice to its user): the page's user may not
 # be who installs the software
 _PIP = re.compile(r"""pip install (?:"[^"]*"|'[^']*'|\S+)(?: \([^)]*\))?""")
@@ -202,6 +214,10 @@ def _install_words(m: re.Match) -> str:
     extra = re.search(r"\[(\w+)\]", m.group(0))
     what = f"mjx-pick's {extra.group(1)} extra" if extra else "the software it names"
     return f"{what}, installed on this machine by whoever installs its software"
+
+
+# an outcome's label (the results' failure column: force_not_reached), also in quotes
+_OUTCOME = re.compile(r"\b(?:" + "|".join(o for o in FAILURES if "_" in o) + r")\b")
 
 
 # a program's key left in a message (a recorded field, a library's argument): a
@@ -215,7 +231,7 @@ def page_words(message: str) -> str:
     words: no path of the software's files (``page_text``), the CLI's advice as the
     page's controls (``page_advice``), each setting and recorded key by its label or in
     words (``user_words``, ``key_words``), each CLI flag by the control that sets it."""
-    text = user_words(page_advice(message))
+    text = user_words(page_advice(_RESULTS.sub(r"the run \1", _FLAG_AFTER.sub("", message))))
 
     def changed(m: re.Match) -> str:
         keys = _CHANGED_KEY.sub(
@@ -228,6 +244,7 @@ def page_words(message: str) -> str:
         text = pattern.sub(lambda m, w=words: w.format(_article(m.group(1))), text)
     text = _KEY.sub(lambda m: key_words(m.group(1)) if _is_key(m.group(1)) else m.group(1), text)
     text = _PIP.sub(_install_words, text)
+    text = _OUTCOME.sub(lambda m: outcome_words(m.group(0)), text)
     return _FLAG.sub(
         lambda m: FLAG_WORDS.get(m.group(1), key_words(m.group(1)[2:].replace("-", "_"))), text
     )
@@ -565,6 +582,7 @@ _PAGE_ADVICE = (
         "thickness and mass)",
     ),
     ("choose another --out or pass --overwrite", "choose another run folder name"),
+    ("leave out --resume to start one there", "untick 'resume' to start one there"),
     ("choose another --out", "choose another run folder name"),
     ("--out NEW", "another run folder name"),
 )
@@ -577,4 +595,6 @@ def page_advice(message: str) -> str:
         message = message.replace(cli, page)
     if message.startswith("--out "):  # the folder a refusal names first
         message = "run folder " + message.removeprefix("--out ")
+    if message.startswith("--resume: "):  # resume asked for where nothing can resume
+        message = "'resume' is ticked, but run folder " + message.removeprefix("--resume: ")
     return message
