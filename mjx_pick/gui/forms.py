@@ -524,16 +524,17 @@ def backend_choices() -> list[str]:
 def backend_problems() -> dict[str, str]:
     """{backend: why it cannot run on this machine} for each backend of the registry
     that cannot (a choice that would fail seconds after its start is not offered).
-    Asked without starting JAX's GPU platform in the server (it would take most of a
-    GPU's memory): a backend that needs an NVIDIA GPU where there is none, else the
-    registry's own check of a backend whose check starts no JAX on its devices."""
-    from mjx_pick.engine.devices import nvidia_gpu_count
+    Asked without starting a GPU runtime in the server (JAX's would take most of a
+    GPU's memory, Warp's a context): a backend that needs an NVIDIA GPU is left out
+    where no NVIDIA driver is loaded; any other by the registry's own check."""
+    from mjx_pick.engine.devices import nvidia_driver_present
 
-    gpus = nvidia_gpu_count()
+    driver = nvidia_driver_present()
     problems = {}
     for name, e in registry.ENTRIES.items():
-        if e.device is registry.Device.NVIDIA_GPU and not gpus:
-            problems[name] = "no NVIDIA GPU on this machine"
+        if e.device is registry.Device.NVIDIA_GPU:
+            if not driver:
+                problems[name] = "no NVIDIA GPU on this machine"
         elif e.problem is not None and e.jax is not registry.Jax.DEVICES:
             why = registry.problem(e)
             if why:
