@@ -51,8 +51,8 @@ def test_every_bad_field_gets_its_own_message():
     )
     assert settings is None
     assert set(errors) == {"gripper.stroke_mm", "picks.min_coverage", "grasp.kp_mm_s_per_n"}
-    assert "stroke_mm = -5.0 is out of range" in errors["gripper.stroke_mm"]
-    assert "min_coverage = 1.5 is out of range" in errors["picks.min_coverage"]
+    assert "stroke width (mm) = -5.0 is out of range" in errors["gripper.stroke_mm"]
+    assert "minimum coverage = 1.5 is out of range" in errors["picks.min_coverage"]
     assert errors["grasp.kp_mm_s_per_n"] == "P gain is required"
 
 
@@ -252,13 +252,14 @@ def test_a_run_stays_current_until_the_panel_has_shown_its_end(tmp_path):
     panel.where = _Shown()
     ended = []
     job = jobs.Job(["--version"], tmp_path / "version.log")
-    panel.start("version", job, ended.append)
+    panel.start("version", job, _Shown(), ended.append)
     job.wait(120)
     assert not job.running
     where = _Shown()
     assert panel.busy(where) and "in progress" in where.text
     with pytest.raises(RuntimeError, match="a run is current"):
-        panel.start("second", jobs.Job(["--version"], tmp_path / "second.log"), ended.append)
+        second = jobs.Job(["--version"], tmp_path / "second.log")
+        panel.start("second", second, _Shown(), ended.append)
     panel.poll()
     assert [p.state for p in ended] == ["complete"]
     assert panel.status.text.startswith("complete")
@@ -346,14 +347,13 @@ def test_a_sweep_value_outside_its_range_is_refused_before_the_run():
     assert "grip force F_d = 500" in problem and "robotiq-2f85" in problem
 
 
-def test_messages_use_the_forms_words_with_the_details_after():
+def test_messages_use_the_forms_words_and_only_them():
     g = load_gripper("robotiq-2f85")
     _, errors = forms.build(values(gripper__stroke_mm=-5.0, contact__pad_friction=0.0), g)
-    words, details = errors["gripper.stroke_mm"].split("\n")
-    assert words == (
+    # no details line with the library's own text: its keys are the program's words
+    assert errors["gripper.stroke_mm"] == (
         "stroke width (mm) = -5.0 is out of range: allowed 0 < stroke width (mm) <= 1000"
     )
-    assert details.startswith("(details: gripper[robotiq-2f85].stroke_mm = -5.0")
     assert errors["contact.pad_friction"].startswith("pad friction = 0.0 is out of range")
     assert forms.user_words("P gain is required") == "P gain is required"
     from mjx_pick.gui.formatting import column_label
@@ -618,7 +618,8 @@ def test_a_refused_folder_is_explained_in_the_pages_words(tmp_path):
     shown = page_advice(str(err.value))
     assert "--out" not in shown and "--overwrite" not in shown and "--resume" not in shown
     assert "sha256" not in shown and "model: its content changed" in shown
-    assert "seed: 0 -> 1" in shown and "'resume' ticked" in shown and "run folder name" in shown
+    assert "seed: 0 -> 1" in shown and "run folder name" in shown
+    assert "'Load this run folder's settings' in tab 3" in shown
 
 
 def test_a_crashed_run_says_what_failed_and_where_its_log_is(tmp_path):
@@ -822,3 +823,61 @@ def test_every_file_the_page_reads_resolves_inside_the_work_folder(tmp_path):
     assert not (away / "grasp.toml").exists()
     paths = forms.write_inputs(settings, work / "inputs" / "elsewhere", work)
     assert paths["grasp"].parent == work / "inputs" / "elsewhere-2"
+
+
+def test_the_sweeps_picture_names_its_parameter_in_the_pages_words(block, tmp_path, monkeypatch):
+    """The page draws a sweep's picture with each parameter's axis in words
+    (forms.sweep_labels), not the key its command took (contact.pad_friction)."""
+    import matplotlib.axes
+
+    import mjx_pick as mp
+    from mjx_pick.core.procedure import GraspConfig
+    from mjx_pick.gui import views
+    from mjx_pick.studies.sweeps import ParamSpec
+
+    grasp = GraspConfig(close_timeout_s=1.0, lift_height_mm=5.0, hold_s=0.05)
+    out = tmp_path / "work" / "sweep"
+    mp.sweep(
+        block,
+        [ParamSpec.parse("contact.pad_friction=0.5,0.8")],
+        mp.Settings(grasp=grasp),
+        n=1,
+        out=out,
+        backend="mujoco",
+    )
+    said = []
+    real = matplotlib.axes.Axes.set_xlabel
+    monkeypatch.setattr(
+        matplotlib.axes.Axes,
+        "set_xlabel",
+        lambda ax, label, *a, **k: said.append(label) or real(ax, label, *a, **k),
+    )
+    png = views.sweep_png(out, tmp_path / "work", forms.sweep_labels())
+    assert png.startswith(b"\x89PNG") and set(said) == {"pad friction"}, said
+
+
+def test_two_runs_never_write_one_folder_at_once(tmp_path):
+    """A run's folder taken by a running run of this server (any browser tab's) is
+    refused as the second starts -- said with whose run it is -- also a report into a
+    run's folder; a run that ended frees it."""
+
+    class Running:  # a process that runs until told
+        pid, code = 1, None
+
+        def poll(self):
+            return self.code
+
+    runs = jobs.Runs()
+    out = tmp_path / "twin"
+    first = jobs.Job(["evaluate", "--out", str(out)], tmp_path / "logs" / "twin.log", out)
+    first.title, first._proc = "evaluate twin", Running()
+    runs.add(first, "tab-a")
+    second = jobs.Job(["evaluate"], tmp_path / "logs" / "twin.log", tmp_path / "." / "twin")
+    said = runs.taken(second, "tab-b")
+    assert said.startswith("twin: 'evaluate twin' (another browser tab's) is writing"), said
+    assert "this browser tab's" in runs.taken(second, "tab-a")
+    report = jobs.report_job(out, 3, False, tmp_path / "logs" / "twin-report.log")
+    assert "is writing this folder now" in runs.taken(report, "tab-b")
+    assert runs.taken(jobs.Job(["evaluate"], tmp_path / "x.log", tmp_path / "other"), None) == ""
+    first._proc.code = 0  # it ended: the folder is free (the CLI says what it holds)
+    assert runs.taken(second, "tab-b") == ""

@@ -173,7 +173,8 @@ def test_play_advances_time_and_pause_stops_it(page, replay_run):
 def test_a_failed_pick_point_is_drawn_in_the_failure_colour(page, replay_run):
     run = replay_run
     open_and_select(page, run, 2)
-    page.get_by_test_id("replay-outcome").filter(has_text="outcome: no_contact").wait_for()
+    # the outcome in words, not the results label no_contact
+    page.get_by_test_id("replay-outcome").filter(has_text="outcome: no contact").wait_for()
     page.wait_for_function(
         """([id, colour]) => {
             const root = window['scene_' + id]?.getObjectByName('pick-replay');

@@ -6,9 +6,19 @@ from __future__ import annotations
 
 import json
 import re
+import time
+from pathlib import Path
 
 import test_gui
-from test_gui import BLOCK, TIMEOUT_MS, import_shipped, number, start_short_batch, wait_job
+from test_gui import (
+    BLOCK,
+    TIMEOUT_MS,
+    import_shipped,
+    number,
+    shown_field_messages,
+    start_short_batch,
+    wait_job,
+)
 
 from mjx_pick.gui.app import TABS
 
@@ -121,6 +131,9 @@ def test_compare_says_when_grippers_ran_at_different_forces(page, server):
     page.get_by_test_id("start-compare").click()
     status = wait_job(page, "compare forces")
     assert re.match(r"complete, (\d+)/\1 simulations", status), status  # a count
+    # the table's headings in words with their units, no key ("grip force n" once)
+    heads = page.get_by_test_id("compare-table").locator("th").all_inner_texts()
+    assert "grip force (N)" in heads and not [h for h in heads if "_" in h], heads
     note = page.get_by_test_id("compare-note")
     note.filter(has_text="different grip forces").wait_for()
     assert "onrobot-rg2 at 40 N" in note.inner_text()
@@ -298,14 +311,15 @@ def test_tab_3s_traces_and_chunk_size_keep_the_number_rule(page):
     assert status.startswith("complete, 3/3"), status
 
 
-def small_run(out, block) -> None:
-    """An evaluate folder of two pick-points of the block (the library, no page)."""
+def small_run(out, block, n: int = 2) -> None:
+    """An evaluate folder of n pick-points of the block (the library, no page), its
+    best and worst traced."""
     import mjx_pick as mp
     from mjx_pick.core.procedure import GraspConfig
 
     grasp = GraspConfig(close_timeout_s=1.0, lift_height_mm=5.0, hold_s=0.05)
     gripper = mp.load_gripper("robotiq-2f85")
-    mp.evaluate(block, gripper, n=2, grasp=grasp, backend="mujoco", out=out, n_traces=1)
+    mp.evaluate(block, gripper, n=n, grasp=grasp, backend="mujoco", out=out, n_traces=1)
 
 
 def test_no_file_is_read_listed_or_served_through_a_link_out_of_the_work_folder(
@@ -333,6 +347,11 @@ def test_no_file_is_read_listed_or_served_through_a_link_out_of_the_work_folder(
     page.get_by_test_id("open-run").click()
     report = page.get_by_test_id("download-report.html")
     report.wait_for()
+    with page.expect_download() as got:  # a file inside: served, its own bytes
+        report.click()
+    assert got.value.suggested_filename == "report.html"
+    assert Path(got.value.path()).read_bytes() == b"<html>the run's report</html>"
+    downloads.clear()
     # made after the run was opened: the file is checked when it is asked for
     (run / "report.html").unlink()
     (run / "report.html").symlink_to("/etc/passwd")
@@ -413,3 +432,209 @@ def test_a_file_the_browser_refuses_replaces_the_upload_before_it(page, tmp_path
     page.get_by_test_id("calibrate-error").filter(has_text="upload an outcomes CSV").wait_for()
     expect(csv_refused).to_have_text("outcomes.xlsx: not a .csv file")
     assert not page.get_by_test_id("job-title").is_visible()
+
+
+def test_a_reload_shows_a_stopped_run_as_its_folder_records_it_and_start_resumes(page, server):
+    """A run of 40 pick-points, seed 7, 2 traced, chunks of 2, cancelled; each reload
+    shows tab 3 as the run's folder records it -- not the page's defaults -- and its
+    time as it ran, not growing; a change is refused in the page's words; Start then
+    continues it to its end."""
+    from playwright.sync_api import expect
+
+    url, work = server
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "lift height (mm)", 20)
+    number(page, "hold (s)", 0.1)
+    page.get_by_text("3 Generate input data").click()
+    recorded = {
+        "pick-points": "40",
+        "seed": "7",
+        "traced best and worst (force plots)": "2",
+        "pick-points per saved chunk": "2",
+    }
+    for label, value in recorded.items():
+        number(page, label, value)
+    page.get_by_label("run folder name").fill("reloaded")
+    page.get_by_test_id("start-batch").click()
+    status = page.get_by_test_id("job-status")
+    status.filter(has_text=re.compile(r"^running, ([2-9]|[1-3]\d)/40 pick-points")).wait_for(
+        timeout=TIMEOUT_MS
+    )
+    page.get_by_role("button", name="Cancel").click()
+    ended = wait_job(page, "evaluate reloaded")
+    assert ended.startswith("cancelled"), ended
+    took = re.search(r", (\d+) s,", ended).group(1)
+
+    for _ in range(2):  # each reload: the same record, the same time
+        page.wait_for_timeout(2500)
+        page.reload()
+        page.get_by_test_id("job-title").filter(has_text="evaluate reloaded").wait_for()
+        expect(status).to_contain_text(f", {took} s,")
+        page.get_by_text("3 Generate input data").click()
+        for label, value in recorded.items():
+            expect(page.get_by_label(label, exact=True)).to_have_value(value)
+        expect(page.get_by_label("run folder name")).to_have_value("reloaded")
+        resume = page.get_by_role("checkbox", name="resume an interrupted run of this folder")
+        expect(resume).to_be_checked()
+
+    # another seed: the CLI's refusal in the page's words -- no key, no flag
+    number(page, "seed", 8)
+    page.get_by_test_id("start-batch").click()
+    status.filter(has_text=re.compile(r"^failed")).wait_for(timeout=TIMEOUT_MS)
+    refused = status.inner_text()
+    assert "changed: seed: 7 -> 8" in refused, refused
+    assert not re.search(r"--[a-z]|\bn:|mjx-pick|details", refused), refused
+    assert "'Load this run folder's settings' in tab 3" in refused, refused
+    page.get_by_test_id("load-run").click()
+    expect(page.get_by_label("seed", exact=True)).to_have_value("7")
+    page.get_by_test_id("start-batch").click()
+    page.get_by_test_id("job-status").filter(has_text="running").wait_for()
+    done = wait_job(page, "evaluate reloaded")
+    assert done.startswith("complete, 40/40"), done
+    assert (work / "reloaded" / "results.parquet").is_file()
+
+
+def two_bodies_obj(path) -> None:
+    """An OBJ of two disjoint 20 mm cubes (a mesh of several bodies)."""
+    import trimesh
+
+    a = trimesh.creation.box((20, 20, 20))
+    b = trimesh.creation.box((20, 20, 20))
+    b.apply_translation((60, 0, 0))
+    trimesh.util.concatenate([a, b]).export(path)
+
+
+def test_messages_speak_the_pages_words_not_the_programs(page, server, block, tmp_path):
+    """Refusals that named a flag the page has not (--largest-body), a key
+    (grasp.grip_force_n, mass_g), a backend this machine cannot run, an outcome's label
+    (no_contact): each in the page's words, and the page has the control it names."""
+    from playwright.sync_api import expect
+
+    from mjx_pick.gui import forms
+
+    program = re.compile(r"--[a-z]|\b[a-z]+_[a-z_]+\b|details|pip install")
+    # a mesh of two bodies: the refusal names the page's box, which takes it
+    mesh = tmp_path / "two_cubes.obj"
+    two_bodies_obj(mesh)
+    upload_object(page, mesh)
+    page.get_by_text("uploaded two_cubes.obj").wait_for()
+    page.get_by_test_id("import").click()
+    error = page.get_by_test_id("import-error")
+    error.filter(has_text="disconnected bodies").wait_for(timeout=60_000)
+    assert "'largest body only' ticked (tab 1)" in error.inner_text(), error.inner_text()
+    assert not program.search(error.inner_text().replace("two_cubes.obj", "")), error.inner_text()
+    page.get_by_test_id("largest-body").click()
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="outline").wait_for(timeout=60_000)
+
+    # a setting out of the gripper's range: its label, not its key, no details line
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "grip force F_d (N)", 300)
+    page.get_by_test_id("test-pick").click()
+    said = field_message(page, "grip force F_d (N)")
+    said.filter(has_text="out of range").wait_for()
+    assert not program.search(said.inner_text()), said.inner_text()
+    # only backends this machine runs are offered; the others said with why
+    page.get_by_label("backend", exact=True).click()
+    offered = page.get_by_role("option").all_inner_texts()
+    page.keyboard.press("Escape")
+    assert offered == forms.backend_choices(), offered
+    for name, why in forms.backend_problems().items():
+        assert name not in offered
+        expect(page.get_by_test_id("backend-note")).to_contain_text(f"{name} ({why})")
+
+    # tab 4: an untraced pick of a run of another object (mass); outcomes in words
+    small_run(server[1] / "other-mass", block, n=3)
+    import_shipped(page)  # the block, 43.2 g: the run's is 43.2 g too; now another mass
+    number(page, "mass (g)", 1000)
+    page.get_by_test_id("import").click()
+    page.get_by_test_id("object-info").filter(has_text="mass 1000.0 g").wait_for()
+    page.get_by_text("4 Analyze results").click()
+    page.get_by_test_id("run-dir").fill("other-mass")
+    page.get_by_test_id("open-run").click()
+    rows = page.get_by_test_id("picks-table").locator("tbody tr")
+    expect(rows).to_have_count(3)
+    outcomes = [r.locator("td").nth(8).inner_text() for r in rows.all()]
+    assert outcomes and not [o for o in outcomes if "_" in o], outcomes
+    untraced = rows.filter(has_not_text="yes").first
+    untraced.locator(".q-checkbox").click()
+    detail = page.get_by_test_id("pick-detail")
+    detail.filter(has_text="cannot be simulated here").wait_for()
+    text = detail.inner_text()
+    assert "they differ in mass (g)" in text, text
+    assert "import the object it was made with in tab 1" in text, text
+    assert not re.search(r"--[a-z]|mass_g|outline_wkt|height_mm", text), text
+
+
+def test_a_search_that_finds_nothing_says_why_truly_and_ends_its_line(page):
+    """Minimum coverage 0.99 on the 40 mm block, 85 mm stroke: no pose is feasible.
+    The refusal says why in true words (the fingers cannot reach around an off-centre
+    part -- the part is not wider than the stroke), and the search's line says it ended
+    -- not "0 of 50 feasible so far" as if it still ran."""
+    from playwright.sync_api import expect
+
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "minimum coverage", 0.99)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 50)
+    page.get_by_test_id("generate").click()
+    error = page.get_by_test_id("generate-error")
+    error.filter(has_text="no feasible pick-point").wait_for(timeout=TIMEOUT_MS)
+    said = error.inner_text()
+    assert "the object fills too little of the region between the pads" in said, said
+    assert "cannot reach around the part at that offset" in said, said
+    assert "wider than the stroke" not in said, said
+    line = page.get_by_test_id("picks-search")
+    expect(line).to_contain_text("the search ended after 1,003,520 (all it draws, at most")
+    assert "0 of 50 feasible" in line.inner_text()
+    assert "so far" not in line.inner_text()
+    expect(page.get_by_test_id("picks-search-stop")).to_be_hidden()
+
+
+def test_two_browser_tabs_starting_one_run_name_at_once_start_it_once(page, server, browser):
+    """Two browser tabs click Start with the same run name at the same moment (each then
+    counts its pick-points for the progress bar): one runs, the other is refused at
+    once in its own words -- never both "running", the second showing the first's
+    progress until its process finds the folder locked."""
+    from playwright.sync_api import expect
+
+    url, work = server
+    other = browser.new_context(viewport={"width": 1500, "height": 1000}).new_page()
+    try:
+        other.goto(url)
+        tabs = (page, other)
+        for pg in tabs:
+            import_shipped(pg)
+            pg.get_by_text("2 Set gripper parameters").click()
+            number(pg, "lift height (mm)", 5)
+            number(pg, "hold (s)", 0.05)
+            pg.get_by_text("3 Generate input data").click()
+            number(pg, "pick-points", 4)
+            pg.get_by_label("run folder name").fill("twin")
+        at = 1000 * time.time() + 1500  # one moment for both clicks, in each page's clock
+        click = """(t) => setTimeout(
+            () => document.querySelector('[data-testid="start-batch"]').click(),
+            t - Date.now())"""
+        for pg in tabs:
+            pg.evaluate(click, at)
+        ran, refused = [], []
+        deadline = time.monotonic() + TIMEOUT_MS / 1000
+        while len(ran) + len(refused) < 2 and time.monotonic() < deadline:
+            ran = [pg for pg in tabs if pg.get_by_test_id("job-title").is_visible()]
+            refused = [
+                pg
+                for pg in tabs
+                if "is writing this folder now" in pg.get_by_test_id("generate-error").inner_text()
+                or "already exists" in " ".join(shown_field_messages(pg))
+            ]
+            time.sleep(0.2)
+        assert len(ran) == 1 and len(refused) == 1 and ran != refused, (ran, refused)
+        assert wait_job(ran[0], "evaluate twin").startswith("complete, 4/4")
+        expect(refused[0].get_by_test_id("job-title")).to_be_hidden()
+        said = refused[0].get_by_test_id("generate-error").inner_text()
+        assert not said or "(another browser tab's) is writing this folder now" in said, said
+        assert len(list((work / "logs").glob("twin*.log"))) == 1  # one run, one log
+    finally:
+        other.context.close()

@@ -42,7 +42,10 @@ REASONS = fk.REASONS
 REASON_WORDS = {
     "feasible": "feasible",
     "off_object": "the gripper misses the object",
-    "too_wide": "the part is wider than the stroke, with a safety zone each side",
+    # the fingers open symmetrically about the gripper's centre: an off-centre part
+    # narrower than the stroke is rejected so too, so never say "wider than the stroke"
+    "too_wide": "the open fingers cannot reach around the part at that offset (it "
+    "reaches farther than half the stroke, less a safety zone, from the gripper's centre)",
     "clearance": "a finger lands on the object",
     "coverage": "the object fills too little of the region between the pads",
     "pad_path": "the linkage's near pad rides over the part while closing",
@@ -95,8 +98,9 @@ def why_rejected(rejected: dict, gripper, config) -> str:
     )
     advice = {
         "off_object": "the offset ranges miss the object: narrow the x and y offset ranges",
-        "too_wide": f"use a gripper with a larger stroke, now {gripper.stroke_mm:g} mm, or a "
-        f"smaller safety zone, now {config.safety_zone_mm:g} mm{raised}",
+        "too_wide": f"a gripper with a larger stroke, now {gripper.stroke_mm:g} mm, or a "
+        f"smaller safety zone, now {config.safety_zone_mm:g} mm, opens around more of them"
+        f"{raised}",
         "clearance": "use a larger stroke, or a smaller safety zone",
         "coverage": f"lower the minimum coverage, now {config.min_coverage:g}; default "
         f"{default.min_coverage:g}",

@@ -10,7 +10,7 @@ import subprocess
 import uuid
 from pathlib import Path
 
-from mjx_pick.gui import jobs
+from mjx_pick.gui import forms, jobs
 from mjx_pick.gui.formatting import raised_in, unexpected_text
 from mjx_pick.gui.state import PageState, server_log
 
@@ -134,6 +134,7 @@ def serve(host: str, port: int, workdir: Path, show: bool) -> None:
     log_to_file(workdir)
     # server-side: they outlive the page (a reload finds them); the simulation commands
     # run in warm workers, the default backend's started now so a first job may find it
+    forms.backend_problems()  # asked once, before the first page needs the backends
     workers = jobs.Workers(workdir / "logs")
     workers.prepare(jobs.DEFAULT_BACKEND)
     runs = jobs.Runs(workers)

@@ -54,8 +54,71 @@ def compensation_text(mm: float) -> str:
 
 
 def column_label(key: str) -> str:
-    """A result column's heading: its label, else the key with spaces."""
-    return COLUMN_LABELS.get(key, key.replace("_", " "))
+    """A result column's heading: its label, else the key in words (:func:`key_words`)."""
+    return COLUMN_LABELS.get(key) or key_words(key)
+
+
+# a key's unit suffix (the project's naming convention: the unit in the name) in words,
+# longest first
+_UNITS = (
+    ("_n_per_mm", "N/mm"),
+    ("_ns_per_mm", "N s/mm"),
+    ("_mm_s_per_n", "mm/s per N"),
+    ("_kg_m3", "kg/m³"),
+    ("_mm_s", "mm/s"),
+    ("_mm2", "mm²"),
+    ("_mm", "mm"),
+    ("_deg", "deg"),
+    ("_um", "µm"),
+    ("_kg", "kg"),
+    ("_g", "g"),
+    ("_n", "N"),
+    ("_s", "s"),
+)
+# keys that read wrong with their underscores as spaces
+_KEY_WORDS = {
+    "n": "pick-points",
+    "n_traces": "traced best and worst",
+    "chunk_size": "pick-points per saved chunk",
+    "batch_size": "batch size",
+    "step_check": "check each label",
+    "stability_um": "check each label (the part moved, µm)",
+    "model": "the simulated scene",
+    "source": "the pick-points",
+    "min_force": "minimum force search",
+    "outline_wkt": "outline",
+    "area_mm2": "outline area (mm²)",
+    "height_mm": "thickness (mm)",
+    "pick_height_mm": "fingertip height (mm)",
+    "n_holes": "holes",
+    "n_collision_pieces": "collision pieces",
+    "bounds_mm": "extent (mm)",
+    "max_n": "most pick-points",
+    "min_score": "score of a good pick-point",
+    "until": "good pick-points wanted",
+}
+
+
+def key_words(key: str) -> str:
+    """A key of the program (a result column, a recorded setting, a JSON field) in the
+    page's words: its own words where it has them, else its name with spaces and its
+    unit in brackets (grip_force_n -> "grip force (N)"); a section before a dot said
+    first ("object.mass_g" -> "object mass (g)")."""
+    section, _, name = key.rpartition(".")
+    if name in _KEY_WORDS:
+        words = _KEY_WORDS[name]
+    else:
+        suffix, unit = next(((x, u) for x, u in _UNITS if name.endswith(x)), ("", ""))
+        stem = name[: len(name) - len(suffix)] or name
+        words = stem.replace("_", " ") + (f" ({unit})" if stem != name else "")
+    if section:
+        words = f"{section.rsplit('.', 1)[-1].split('[', 1)[0]} {words}"
+    return words
+
+
+def outcome_words(label: str) -> str:
+    """A pick's outcome (the results' ``failure`` label, force_not_reached) in words."""
+    return label.replace("_", " ")
 
 
 def stamp() -> str:

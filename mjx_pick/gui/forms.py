@@ -21,7 +21,8 @@ from mjx_pick.core.physics import ContactParams
 from mjx_pick.core.pickpoints import PickConfig
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.engine import registry
-from mjx_pick.gui.formatting import page_text
+from mjx_pick.gui.formatting import key_words, outcome_words, page_text
+from mjx_pick.kernels.types import FAILURES
 
 SECTIONS = {
     "gripper": GripperSpec,
@@ -119,26 +120,152 @@ def defaults(gripper: GripperSpec, **others) -> dict[str, float]:
     return {f.key: float(getattr(objs[f.section], f.name)) for f in SETTINGS_FIELDS}
 
 
+# a settings key in a library's message: section.field (gripper[name].field), or a form
+# field's bare name
 _INTERNAL = re.compile(
-    r"(?:gripper\[[^\]]*\]|grasp|picks|contact)\.(\w+)|\b("
+    r"\b(gripper\[[^\]]*\]|gripper|grasp|picks|contact|solver)\.(\w+)|\b("
     + "|".join(f.name for f in SETTINGS_FIELDS)
     + r")\b"
 )
 
 
+# a gripper as a library's message names it, "gripper[robotiq-2f85]"
+_GRIPPER = re.compile(r"\bgripper\[([^\]]*)\]")
+
+
+def setting_words(section: str, name: str) -> str:
+    """A setting in the page's words: a form field's label and unit, else its section,
+    meaning and unit (``sweep_labels``), else the key in words."""
+    key = f"{section.split('[', 1)[0]}.{name}"
+    form = next((f for f in SETTINGS_FIELDS if f.key == key), None)
+    if form is not None:
+        return f"{form.label} ({form.unit})" if form.unit else form.label
+    return sweep_labels().get(key) or key_words(key)
+
+
 def user_words(message: str) -> str:
     """A settings error in the form's words: each internal field name (``contact.pad_friction``,
-    ``gripper[robotiq-2f85].stroke_mm``, ``stroke_mm``) becomes its label and unit; the
-    message as the library wrote it follows as a details line."""
+    ``gripper[robotiq-2f85].stroke_mm``, ``stroke_mm``) becomes its label and unit --
+    the library's own text is not added: its keys are the program's words."""
     labels = {f.name: f"{f.label} ({f.unit})" if f.unit else f.label for f in SETTINGS_FIELDS}
 
     def label(m: re.Match) -> str:
-        name = m.group(1) or m.group(2)
-        return labels.get(name, m.group(0))
+        if m.group(3):
+            return labels[m.group(3)]
+        return setting_words(m.group(1), m.group(2))
 
-    message = page_text(message)
-    words = _INTERNAL.sub(label, message)
-    return words if words == message else f"{words}\n(details: {message})"
+    words = _INTERNAL.sub(label, page_text(message))
+    return _GRIPPER.sub(r"gripper \1", words)  # gripper[robotiq-2f85]: the program's
+
+
+# the CLI's flags as the page names the control that sets them (a CLI message may name
+# one; the page has no flags). Flags the page has no control for are said as the CLI's
+# option in words, never as a flag.
+FLAG_WORDS = {
+    "--n": "pick-points (tab 3)",
+    "--seed": "seed (tab 3)",
+    "--traces": "traced best and worst (tab 3)",
+    "--chunk-size": "pick-points per saved chunk (tab 3)",
+    "--out": "run folder name",
+    "--resume": "'resume' ticked (tab 3)",
+    "--step-check": "'check each label' (tab 3)",
+    "--stability-um": "'check each label' (tab 3)",
+    "--backend": "backend (tab 2)",
+    "--gripper-file": "gripper (tab 2)",
+    "--grasp": "procedure settings (tab 2)",
+    "--contact": "contact settings (tab 2)",
+    "--safety-zone-mm": "safety zone (mm) (tab 2)",
+    "--min-coverage": "minimum coverage (tab 2)",
+    "--mass-g": "mass (g) (tab 1)",
+    "--px-per-mm": "image scale (px per mm) (tab 1)",
+    "--thickness-mm": "thickness (mm) (tab 1)",
+    "--unit": "mesh unit (tab 1)",
+    "--largest-body": "'largest body only' ticked (tab 1)",
+    "--top-k": "top pick-points (Studies)",
+    "--m": "perturbed draws each (Studies)",
+    "--steps": "optimiser steps (Studies)",
+    "--params": "parameters to fit (Studies)",
+    "--grippers": "presets (Studies)",
+    "--param": "parameter (Parameter sweep)",
+    "--results": "the run open in tab 4 (its folder)",
+}
+# a flag in brackets after the words it stands for ("check mass_g (--mass-g)"): the
+# words are said already
+_FLAG_AFTER = re.compile(r" \((?:--[a-z][a-z0-9-]*(?: or |, )?)+\)")
+_FLAG = re.compile(r"(?<![\w-])(--[a-z][a-z0-9-]*)(?: \(\w+=\w+\))?")
+# a recorded run's settings that changed (rundir.what_changed): "changed: a: 1 -> 2; ..."
+_CHANGED = re.compile(r"(changed: )(.*?)(?=\.(?: |$)|$)")
+_CHANGED_KEY = re.compile(r"(^|; )([\w.\[\]-]+)(: )")
+_PROGRAM = (  # the CLI's names of its own runs, as the page says them
+    (
+        re.compile(r"holds `mjx-pick (\w+)` results of another configuration"),
+        r"holds the results of {} run with other settings",
+    ),
+    (re.compile(r"`mjx-pick (\w+)`"), r"{} run"),
+)
+# "--results runs/do is of object ...": the run a study reads, by its folder
+_RESULTS = re.compile(r"--results (\S+)")
+# an install command in a message (the CLI's advice to its user): the page's user may not
+# be who installs the software
+_PIP = re.compile(r"""pip install (?:"[^"]*"|'[^']*'|\S+)(?: \([^)]*\))?""")
+
+
+def _install_words(m: re.Match) -> str:
+    extra = re.search(r"\[(\w+)\]", m.group(0))
+    what = f"mjx-pick's {extra.group(1)} extra" if extra else "the software it names"
+    return f"{what}, installed on this machine by whoever installs its software"
+
+
+# an outcome's label (the results' failure column: force_not_reached), also in quotes
+_OUTCOME = re.compile(r"\b(?:" + "|".join(o for o in FAILURES if "_" in o) + r")\b")
+
+
+# a program's key left in a message (a recorded field, a library's argument): a
+# lower-case name with underscores that ends in a unit or is one of key_words' own --
+# never a file's name (a dot, a slash or a quote beside it) or other user text
+_KEY = re.compile(r"(?<![\w./'\"`-])([a-z][a-z0-9]*(?:_[a-z0-9]+)+)(?![\w/'\"`-]|\.\w)")
+
+
+def page_words(message: str) -> str:
+    """Any message for the page -- a library's, the CLI's, a check's -- in the page's
+    words: no path of the software's files (``page_text``), the CLI's advice as the
+    page's controls (``page_advice``), each setting and recorded key by its label or in
+    words (``user_words``, ``key_words``), each CLI flag by the control that sets it."""
+    text = user_words(page_advice(_RESULTS.sub(r"the run \1", _FLAG_AFTER.sub("", message))))
+
+    def changed(m: re.Match) -> str:
+        keys = _CHANGED_KEY.sub(
+            lambda k: k.group(1) + _recorded_words(k.group(2)) + k.group(3), m.group(2)
+        )
+        return m.group(1) + keys
+
+    text = _CHANGED.sub(changed, text)
+    for pattern, words in _PROGRAM:
+        text = pattern.sub(lambda m, w=words: w.format(_article(m.group(1))), text)
+    text = _KEY.sub(lambda m: key_words(m.group(1)) if _is_key(m.group(1)) else m.group(1), text)
+    text = _PIP.sub(_install_words, text)
+    text = _OUTCOME.sub(lambda m: outcome_words(m.group(0)), text)
+    return _FLAG.sub(
+        lambda m: FLAG_WORDS.get(m.group(1), key_words(m.group(1)[2:].replace("-", "_"))), text
+    )
+
+
+def _article(word: str) -> str:
+    return ("an " if word[:1] in "aeiou" else "a ") + word
+
+
+def _is_key(name: str) -> bool:
+    """Whether a name with underscores is a program's key (its unit in its name, or a
+    key with words of its own), not a word a user chose."""
+    return key_words(name) != name.replace("_", " ")
+
+
+def _recorded_words(key: str) -> str:
+    """A key of a run's recorded settings (rundir's manifest) in words."""
+    section, _, name = key.partition(".")
+    if name and section.split("[", 1)[0] in (*SECTIONS, "solver"):
+        return setting_words(section, name)
+    return key_words(key)
 
 
 def field_of(message: str, section: str) -> str | None:
@@ -383,9 +510,44 @@ def sweep_problem(settings: Settings, name: str, values) -> str:
 
 def backend_choices() -> list[str]:
     """The backend select's options: 'auto' and every backend of the registry that
-    labels pick-points at the page's settings. The differentiable backend is left out:
-    it runs one fixed physics, for derivatives, which the page never computes."""
-    return [c for c in registry.choices() if c != registry.differentiable()]
+    labels pick-points at the page's settings and can run on this machine
+    (:func:`backend_problems`). The differentiable backend is left out: it runs one
+    fixed physics, for derivatives, which the page never computes."""
+    return [
+        c
+        for c in registry.choices()
+        if c != registry.differentiable() and c not in backend_problems()
+    ]
+
+
+@functools.cache
+def backend_problems() -> dict[str, str]:
+    """{backend: why it cannot run on this machine} for each backend of the registry
+    that cannot (a choice that would fail seconds after its start is not offered).
+    Asked without starting a GPU runtime in the server (JAX's would take most of a
+    GPU's memory, Warp's a context): a backend that needs an NVIDIA GPU is left out
+    where no NVIDIA driver is loaded; any other by the registry's own check."""
+    from mjx_pick.engine.devices import nvidia_driver_present
+
+    driver = nvidia_driver_present()
+    problems = {}
+    for name, e in registry.ENTRIES.items():
+        if e.device is registry.Device.NVIDIA_GPU:
+            if not driver:
+                problems[name] = "no NVIDIA GPU on this machine"
+        elif e.problem is not None and e.jax is not registry.Jax.DEVICES:
+            why = registry.problem(e)
+            if why:
+                problems[name] = why
+    return problems
+
+
+def backend_note() -> str:
+    """What the page says of the backends it does not offer here, and why ('' if none)."""
+    left = {k: v for k, v in backend_problems().items() if k != registry.differentiable()}
+    if not left:
+        return ""
+    return "not on this machine: " + "; ".join(f"{k} ({why})" for k, why in left.items())
 
 
 # the CLI's advice in a refusal, as the page offers it (it has no flags, and never
@@ -394,8 +556,8 @@ _PAGE_ADVICE = (
     (
         "Keep them: continue it with its settings and --resume, or write elsewhere with "
         "--out NEW; --overwrite deletes them",
-        "Keep them: continue it with the same settings and 'resume' ticked, or choose "
-        "another run folder name",
+        "Keep them: continue it with its own settings ('Load this run folder's settings' "
+        "in tab 3, then Start), or choose another run folder name",
     ),
     (
         "Keep them: write elsewhere with --out NEW; --overwrite deletes them",
@@ -415,7 +577,13 @@ _PAGE_ADVICE = (
         "pass --resume to continue it, or choose another --out",
         "tick 'resume' to continue it, or choose another run folder name",
     ),
+    (
+        "give the object (and --mass-g ...) it was made with",
+        "import the object it was made with in tab 1 (its file or shipped object, scale, "
+        "thickness and mass)",
+    ),
     ("choose another --out or pass --overwrite", "choose another run folder name"),
+    ("leave out --resume to start one there", "untick 'resume' to start one there"),
     ("choose another --out", "choose another run folder name"),
     ("--out NEW", "another run folder name"),
 )
@@ -428,4 +596,6 @@ def page_advice(message: str) -> str:
         message = message.replace(cli, page)
     if message.startswith("--out "):  # the folder a refusal names first
         message = "run folder " + message.removeprefix("--out ")
+    if message.startswith("--resume: "):  # resume asked for where nothing can resume
+        message = "'resume' is ticked, but run folder " + message.removeprefix("--resume: ")
     return message

@@ -392,6 +392,25 @@ class Runs:
         mine = [j for j in self._jobs if owner is not None and j.owner == owner]
         return mine[-1] if mine else None
 
+    def taken(self, job: Job, owner: str | None) -> str:
+        """Why job cannot start now ('' if it can): a run of this server, of this or
+        another browser tab, writes the folder it would write. Asked as it starts, in
+        the server's one event loop: two tabs that checked a run name at the same moment
+        (each waiting for its pick-point count meanwhile) cannot both start it -- the
+        second would show the first's progress until its own process found the folder
+        locked."""
+        if job.writes is None:
+            return ""
+        folder = job.writes.resolve()
+        for other in reversed(self._jobs):
+            if other.running and other.writes is not None and other.writes.resolve() == folder:
+                whose = "this" if owner is not None and other.owner == owner else "another"
+                return (
+                    f"{job.writes.name}: '{other.title}' ({whose} browser tab's) is writing "
+                    "this folder now: wait for it to end, or choose another run folder name"
+                )
+        return ""
+
     def writing(self, folder: Path) -> Job | None:
         """The run of this server still writing folder, if any."""
         folder = Path(folder).resolve()
@@ -448,10 +467,12 @@ class Job:
         self.unit = unit
         self.log = Path(log)
         self.out = Path(out) if out is not None else None
+        self.writes = self.out  # the folder it writes (a report: its run's, not its own)
         self.total = total
         self.chunk = chunk
         self._proc: subprocess.Popen | WorkerRun | None = None
         self._t0 = 0.0
+        self._started_wall: float | None = None  # when it started, s since the epoch
         self._cancelled_at: float | None = None
         self._chunks_before: set[str] = set()
         self._done = 0  # the most pick-points seen done: a count never goes back
@@ -478,6 +499,7 @@ class Job:
         self.log = unused_path(self.log)
         self._chunks_before = {f.name for f in self._chunks()}
         self._t0 = time.monotonic()
+        self._started_wall = time.time()
         with self.log.open("wb") as fh:
             fh.write(f"$ {self.command_line}\n".encode())
         worker = workers.take(self.argv) if workers is not None else None
@@ -538,6 +560,23 @@ class Job:
     def wait(self, timeout: float | None = None) -> int:
         return self._proc.wait(timeout)
 
+    def _ran_s(self, seen_s: float) -> float:
+        """How long a run that has ended ran, as its folder records it: from its start
+        to its manifest's finish, else to its log's last write -- never to the moment a
+        page first polled it after its end (a page reloaded long after saw it grow:
+        59 s, then 199 s); seen_s (start to now) where neither says more."""
+        from mjx_pick.outputs.rundir import MANIFEST
+
+        if self._started_wall is None:
+            return seen_s
+        end = _wall((self._read_json(MANIFEST) or {}).get("finished"))
+        if end is None or end < self._started_wall:
+            try:
+                end = workfolder.confined(self.log, self.workdir).stat().st_mtime
+            except (OSError, ValueError):
+                return seen_s
+        return min(seen_s, max(0.0, end - self._started_wall))
+
     def _chunks(self) -> list[Path]:
         if self.out is None:
             return []
@@ -551,6 +590,8 @@ class Job:
             if now - self._cancelled_at > CANCEL_GRACE_S:
                 self._proc.kill()
         code = self._proc.poll() if self._proc is not None else None
+        if code is not None and self.elapsed_s is None:  # ended: its duration, once
+            self.elapsed_s = elapsed = self._ran_s(now - self._t0)
         done = rate = eta = None
         total = self.total
         message = ""
@@ -649,7 +690,7 @@ class Job:
 
     def error_message(self, code: int) -> str:
         """One line for the page: the CLI's own error line, else the exception's."""
-        from mjx_pick.gui.forms import page_advice, user_words
+        from mjx_pick.gui.forms import page_words
 
         # paths inside the work folder as the page names them (relative to it)
         work = f"{self.log.parent.parent}/"
@@ -657,7 +698,7 @@ class Job:
         log = f"{self.log.relative_to(self.log.parent.parent)} in the work folder"
         for line in reversed(lines):
             if "error: " in line and line.startswith("mjx-pick"):
-                return user_words(page_advice(line.split("error: ", 1)[1].strip()))
+                return page_words(line.split("error: ", 1)[1].strip())
         crashed = _crash(lines)
         if crashed is not None:  # what failed and where, never the traceback's text
             library, kind = crashed
@@ -726,13 +767,7 @@ def recovered_runs(workdir: Path) -> list[Job]:
         if not manifest or not manifest.get("command"):
             continue
         log = workdir / "logs" / f"{folder.name}.log"
-        argv = [manifest["command"], "--out", str(folder)]
-        try:
-            first = workfolder.read_text(log, workdir).split("\n", 1)[0]
-            if first.startswith("$ mjx-pick "):
-                argv = shlex.split(first[len("$ mjx-pick ") :])
-        except (OSError, ValueError):
-            pass
+        argv = recorded_argv(log, workdir) or [manifest["command"], "--out", str(folder)]
         total = chunk = None
         if manifest["command"] == "evaluate":
             config = workfolder.json_or_none(folder / "config.json", workdir) or {}
@@ -745,12 +780,31 @@ def recovered_runs(workdir: Path) -> list[Job]:
         job._proc = FolderRun(folder, workdir)
         started, finished = _wall(manifest.get("started")), _wall(manifest.get("finished"))
         job._t0 = time.monotonic() - (time.time() - started if started else 0.0)
+        job._started_wall = started
         if started and finished and manifest.get("status") != "running":
             job.elapsed_s = max(0.0, finished - started)  # ended: its own duration
         if manifest.get("status") in ("interrupted", "cancelled", "terminated"):
             job._cancelled_at = job._t0  # shown as cancelled, what finished kept
         found.append((manifest.get("started") or "", job))
     return [job for _, job in sorted(found, key=lambda sj: sj[0])]
+
+
+def recorded_argv(log: Path, workdir: Path) -> list[str] | None:
+    """The CLI arguments a run of the page was started with: its log's first line
+    (``$ mjx-pick ...``, as :meth:`Job.start` writes it), or None."""
+    try:
+        first = workfolder.read_text(log, workdir).split("\n", 1)[0]
+        if first.startswith("$ mjx-pick "):
+            return shlex.split(first[len("$ mjx-pick ") :])
+    except (OSError, ValueError):
+        pass
+    return None
+
+
+def flag_value(argv: list[str], flag: str) -> str | None:
+    """The value given to flag in argv (``--n 40``), or None."""
+    i = len(argv) - 1 - argv[::-1].index(flag) if flag in argv else None
+    return argv[i + 1] if i is not None and i + 1 < len(argv) else None
 
 
 def _wall(stamp: str | None) -> float | None:
@@ -784,7 +838,9 @@ def report_job(run: Path, n: int, animations: bool, log: Path) -> Job:
     argv = ["report", str(run), "--n", str(int(n))]
     if not animations:
         argv.append("--no-animations")
-    return Job(argv, log, unit="parts of the report", counted=REPORT_PARTS)
+    job = Job(argv, log, unit="parts of the report", counted=REPORT_PARTS)
+    job.writes = Path(run)  # its pages go into the run's folder: one writer at a time
+    return job
 
 
 def unused_path(path: Path) -> Path:

@@ -11,8 +11,8 @@ import numpy as np
 
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.gui import views
-from mjx_pick.gui.formatting import compensation_text, fmt
-from mjx_pick.gui.forms import Settings
+from mjx_pick.gui.formatting import compensation_text, fmt, outcome_words
+from mjx_pick.gui.forms import Settings, backend_problems
 
 
 def check_one_pick(obj, settings: Settings, x: float, y: float, yaw: float) -> dict:
@@ -93,7 +93,7 @@ def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, b
     trace = {name: np.asarray(ev.traces[name]) for name in ev.traces.column_names}
     head += [
         f"- score (eq. 2): **{fmt(r['score'])}**, success: **{r['success']}**, outcome: "
-        f"{r['failure']}",
+        f"{outcome_words(r['failure'])}",
         f"- `t_grasp` {fmt(r['t_grasp'])}, `phi_max` {fmt(r['phi_max_deg'], 1)} deg, "
         f"`t_grasp_nc` {fmt(r['t_grasp_nc'])}",
         f"- `F_Gmin`, eq. (1): {fmt(ev.summary['f_gmin_n'])} N at `F_d` = "
@@ -103,7 +103,7 @@ def simulate_one_pick(obj, settings: Settings, x: float, y: float, yaw: float, b
     return {"text": "\n".join(head), "plot": plot, "pose": checked["pose"]}
 
 
-def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict]:
+def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict, str]:
     """A pick-point of an evaluate run that the run did not trace, simulated now with
     its trace recorded, for tab 4's force plot and replay.
 
@@ -113,9 +113,12 @@ def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict]:
     outline, not the object itself). Same settings, same backend: the same simulation
     as the run's, up to the float rounding of another batch size.
 
+    A run made on a backend this machine cannot run (a GPU run opened on a CPU
+    machine) is simulated on 'auto' here, and the note says so.
+
     Returns:
       (trace: {column: array} as ``Run.trace`` gives, row: the new simulation's
-      results row).
+      results row, note: '' or what differs from the run's own simulation).
     """
     from mjx_pick.core import pickpoints as pp
     from mjx_pick.core.objects import check_same_object
@@ -126,6 +129,10 @@ def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict]:
     check_same_object(config.get("object") or {}, obj, f"run {run.path.name}")
     settings, pick_config = settings_of(config, f"{run.path.name}/config.json")
     row = run.row(pick_id)
+    backend, note = config.get("backend") or AUTO, ""
+    problem = backend_problems().get(backend)
+    if problem:  # said, never the run's refusal with its install advice
+        backend, note = AUTO, f"on {AUTO}: the run's backend {backend} cannot run here ({problem})"
     checker = pp.FeasibilityChecker(obj, settings.gripper, pick_config, settings.grasp)
     batch = checker.batch(
         np.array([pick_id]),
@@ -142,9 +149,9 @@ def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict]:
         solver=settings.solver,
         grasp=settings.grasp,
         pick_config=pick_config,
-        backend=config.get("backend") or AUTO,
+        backend=backend,
         n_traces=1,
     )
     again = {k: ev.table[k][0].as_py() for k in ev.table.column_names}
     trace = {name: np.asarray(ev.traces[name]) for name in ev.traces.column_names}
-    return trace, again
+    return trace, again, note

@@ -57,6 +57,21 @@ class Search:
             f"{rejected_text(self.rejected)})"
         )
 
+    def ended_text(self) -> str:
+        """What the page says once a search ended without its pick-points (the caller
+        says why): how far it got -- never its last "so far" line, as if it still ran."""
+        return (
+            f"the search ended after {self._checked()} candidate poses: {self.found:,} of "
+            f"{self.wanted:,} feasible (rejected: {rejected_text(self.rejected)})"
+        )
+
+    def _checked(self) -> str:
+        """The candidates checked, against the most it draws (whole blocks: the last
+        may pass it)."""
+        if self.drawn >= self.most:
+            return f"{self.drawn:,} (all it draws, at most {self.most:,} rounded up to a block)"
+        return f"{self.drawn:,} of at most {self.most:,}"
+
     def stopped_text(self) -> str:
         """What the page says after a stop."""
         return (

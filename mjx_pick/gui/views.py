@@ -163,3 +163,19 @@ def force_chart(trace: dict, grip_force_n: float) -> dict:
         "yAxis": {"type": "value", "name": f"force, N (F_d = {grip_force_n:g} N)"},
         "series": lines,
     }
+
+
+def sweep_png(out: Path, workdir: Path, labels: dict[str, str]) -> bytes:
+    """A sweep folder's picture as ``sweep.png`` draws it, each parameter's axis in the
+    page's words (labels: {key: words}, ``forms.sweep_labels``) -- the CLI's picture
+    names the keys its command line took. Its files read inside workdir only."""
+    import pyarrow.parquet as pq
+
+    from mjx_pick.gui import workfolder
+    from mjx_pick.studies.sweeps import plot_sweep
+
+    config = workfolder.read_json(out / "config.json", workdir)
+    summaries = workfolder.read_json(out / "variants.json", workdir)
+    table = pq.read_table(workfolder.confined(out / "results.parquet", workdir))
+    names = [p["name"] for p in config.get("params", [])]
+    return _render(lambda path: plot_sweep(summaries, table, names, path, labels))

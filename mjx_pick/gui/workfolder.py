@@ -74,13 +74,18 @@ def check_tree(folder: str | os.PathLike, workdir: str | os.PathLike) -> Path:
 
 
 def read_bytes(path: str | os.PathLike, workdir: str | os.PathLike) -> bytes:
-    """A file of the work folder, checked by :func:`confined` first."""
-    return confined(path, workdir).read_bytes()
+    """A file of the work folder, checked by :func:`confined` first, then read from the
+    path it resolved to without following a link there: one made between the check and
+    the read is refused (OSError), not followed."""
+    real = confined(path, workdir)
+    fd = os.open(real, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+    with os.fdopen(fd, "rb") as fh:
+        return fh.read()
 
 
 def read_text(path: str | os.PathLike, workdir: str | os.PathLike) -> str:
     """A text file of the work folder (UTF-8, undecodable bytes replaced), checked."""
-    return confined(path, workdir).read_text(encoding="utf-8", errors="replace")
+    return read_bytes(path, workdir).decode("utf-8", errors="replace")
 
 
 def read_json(path: str | os.PathLike, workdir: str | os.PathLike):

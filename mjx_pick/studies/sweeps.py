@@ -399,8 +399,11 @@ def marginal(table: pa.Table, name: str) -> list[dict]:
     ]
 
 
-def plot_sweep(summaries: list[dict], table: pa.Table, names: list[str], path) -> None:
-    """Success rate (Wilson 95%) and mean score (95%) against each parameter, PNG."""
+def plot_sweep(
+    summaries: list[dict], table: pa.Table, names: list[str], path, labels: dict | None = None
+) -> None:
+    """Success rate (Wilson 95%) and mean score (95%) against each parameter, PNG;
+    labels: each parameter's axis label (default: its name, as the command took it)."""
     from mjx_pick.outputs.plots import new_figure, save_png
 
     fig, axes = new_figure(len(names), 2, figsize=(9, 3.2 * len(names)), squeeze=False)
@@ -419,7 +422,7 @@ def plot_sweep(summaries: list[dict], table: pa.Table, names: list[str], path) -
                 ax.errorbar(x, y, yerr=[y - lo, hi - y], fmt="o", ms=3, alpha=0.6)
             else:
                 ax.errorbar(x, y, yerr=[y - lo, hi - y], fmt="o-", capsize=3)
-            ax.set_xlabel(name)
+            ax.set_xlabel((labels or {}).get(name, name))
             ax.set_ylabel(label)
             ax.set_ylim(-0.02, 1.02)
             ax.grid(alpha=0.3)

@@ -23,7 +23,9 @@ from mjx_pick.gui.formatting import (
     compensation_text,
     fmt,
     md_text,
+    outcome_words,
 )
+from mjx_pick.gui.forms import page_words
 from mjx_pick.gui.one_pick import simulate_untraced
 from mjx_pick.gui.page.job_panel import POLL_S, JobPanel
 from mjx_pick.gui.page.replay_view import ReplayView
@@ -279,7 +281,7 @@ class AnalyzeTab:
             f"({FRAME_NAME}), opening {full['opening_mm']:.1f} mm",
             "",
             f"- score (eq. 2): **{fmt(full['score'])}**, success: **{full['success']}**, "
-            f"outcome: {full['failure']}",
+            f"outcome: {outcome_words(full['failure'])}",
             f"- `t_grasp`: {fmt(full['t_grasp'])} (grip force held, fraction of the window)",
             f"- `phi_max`: {fmt(full['phi_max_deg'], 1)} deg (largest rotation)",
             f"- `t_grasp_nc`: {fmt(full['t_grasp_nc'])} (off the table, fraction)",
@@ -308,14 +310,14 @@ class AnalyzeTab:
                 opened.gripper,
                 trace,
                 f_d,
-                full["failure"],
+                outcome_words(full["failure"]),
                 not full["success"],
             )
         except (OSError, ValueError) as err:  # scene.xml missing or damaged: keep the plot
             self.error.set_text(f"{opened.path.name}: no 3-D replay ({err})")
         if self.shown != (opened, pid):
             return
-        title = f"pick {pid}: score {fmt(full['score'])}, {full['failure']}"
+        title = f"pick {pid}: score {fmt(full['score'])}, {outcome_words(full['failure'])}"
         png = await run.io_bound(views.force_png, trace, f_d, title)
         if self.shown == (opened, pid):
             show_picture(self.force_image, png)
@@ -342,10 +344,14 @@ class AnalyzeTab:
             return None
         self.detail.set_content("\n".join(lines) + note + "simulating it now ...")
         try:
-            trace, again = await run.io_bound(simulate_untraced, opened, self.state.obj, pid)
+            trace, again, differs = await run.io_bound(
+                simulate_untraced, opened, self.state.obj, pid
+            )
         except ConfigError as err:
             self.detail.set_content(
-                "\n".join(lines) + note + f"it cannot be simulated here: {md_text(err)}"
+                "\n".join(lines)
+                + note
+                + f"it cannot be simulated here: {md_text(page_words(str(err)))}"
             )
             return None
         self.simulated[key] = trace
@@ -355,7 +361,7 @@ class AnalyzeTab:
             "\n".join(lines)
             + note
             + f"simulated now with the run's settings (score {fmt(again['score'])}, "
-            f"{again['failure']})."
+            f"{outcome_words(again['failure'])})" + (f", {md_text(differs)}." if differs else ".")
         )
         return trace
 
@@ -373,7 +379,7 @@ class AnalyzeTab:
             return
         log = self.state.log(f"{opened.path.name}-report")
         job = jobs.report_job(opened.path, n, bool(self.export_anim.value), log)
-        self.panel.start(f"report {opened.path.name}", job)
+        self.panel.start(f"report {opened.path.name}", job, self.error)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         """A report ended: its run open here (also after a reload), with its downloads."""
@@ -398,14 +404,18 @@ class AnalyzeTab:
 
     def download(self, path: Path) -> None:
         """A file of the open run, sent to the browser -- checked when asked for (a
-        link made since the run was opened is refused too), the file it resolves to."""
+        link made since the run was opened is refused too) and read then: its bytes go,
+        not a route to its path that a link made later could redirect."""
         self.error.set_text("")
         try:
-            real = workfolder.confined(path, self.state.workdir)
+            data = workfolder.read_bytes(path, self.state.workdir)
         except workfolder.OutsideWorkFolder as err:
             self.error.set_text(str(err))
             return
-        ui.download.file(real, filename=path.name)
+        except OSError as err:
+            self.error.set_text(f"{self.state.where(path)}: cannot be read ({err.strerror})")
+            return
+        ui.download.content(data, path.name)
 
 
 def ranked_rows(opened) -> list[dict]:
@@ -422,5 +432,7 @@ def ranked_rows(opened) -> list[dict]:
                 row[k] = None if math.isnan(v) else round(v, 3)
         row["rank"] = rank
         row["traced"] = "yes" if row["pick_id"] in traced else ""
+        if row.get("failure") is not None:  # the outcome in words, not its label
+            row["failure"] = outcome_words(row["failure"])
         rows.append(row)
     return rows

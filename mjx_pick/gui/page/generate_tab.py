@@ -59,7 +59,7 @@ class GenerateTab:
         on_pick(x, y, yaw, what): a pick-point clicked on the map (for tab 2's test)."""
         self.state, self.form, self.panel = state, form, panel
         self.on_complete, self.on_pick = on_complete, on_pick
-        panel.handle("evaluate", self.ended)
+        panel.handle("evaluate", self.ended, self.shown)
         self.picks = None  # the pick-points drawn on the map, and where
         self.pixels = None
         self.drawn_for = None  # (object, settings, n, seed) of the map's pick-points
@@ -107,32 +107,63 @@ class GenerateTab:
     def load_run_settings(self) -> None:
         """The settings a run in the work folder was made with (its config.json, written
         when it starts: a stopped run has one), into this page: tab 2's fields, the
-        pick-points, the seed and the name, resume ticked -- so that it can be continued
-        after a reload, or a run repeated."""
-        from mjx_pick.studies.recorded import settings_of
-
+        pick-points, the seed, the traces, the chunk size and the name, resume ticked --
+        so that it can be continued after a reload, or a run repeated."""
         self.error.set_text("")
         folder = self.state.run_folder(self.run_name.value or "")
-        config_path = folder / "config.json" if folder is not None else None
-        if config_path is None or not config_path.is_file():
+        if folder is None or not (folder / "config.json").is_file():
             self.run_name.error = "no run of this name in the work folder"
             return
         self.run_name.error = None
-        try:
-            config = workfolder.read_json(config_path, self.state.workdir)
-            settings, picks = settings_of(config, f"run {folder.name}")
-        except (ValueError, ConfigError) as err:
-            self.error.set_text(f"{folder.name}: its settings cannot be read ({err})")
-            return
-        self.form.adopt_run(settings, picks, config.get("backend"))
-        if config.get("n") is not None:
-            self.n.value = int(config["n"])
-        self.seed.value = int(config.get("seed") or 0)
-        done = (workfolder.manifest(folder, self.state.workdir) or {}).get("status")
-        self.resume.value = done != "complete"
+        argv = jobs.recorded_argv(self.state.log(folder.name), self.state.workdir)
+        if self.show_recorded(folder, argv or [], settings=True):
+            done = (workfolder.manifest(folder, self.state.workdir) or {}).get("status")
+            self.resume.value = done != "complete"
+
+    def show_recorded(self, folder: Path, argv: list[str], settings: bool = False) -> bool:
+        """Tab 3 as a run's folder records it: its pick-points and seed as its run key
+        holds them (what a resume compares: the number asked for, not the feasible
+        count), its traces, chunk size and label checks from its command line (argv:
+        the CLI arguments it was started with) or its config; with settings, tab 2's
+        fields too (its config.json). False (and why, in the tab) when they cannot be
+        read."""
+        from mjx_pick.studies.recorded import settings_of
+
+        workdir = self.state.workdir
+        recorded = (workfolder.manifest(folder, workdir) or {}).get("settings") or {}
+        config = workfolder.json_or_none(folder / "config.json", workdir) or {}
+        if settings:
+            try:
+                if not config:
+                    workfolder.read_json(folder / "config.json", workdir)  # says why
+                run_settings, picks = settings_of(config, f"run {folder.name}")
+            except (OSError, ValueError) as err:  # ConfigError and OutsideWorkFolder too
+                self.error.set_text(f"{folder.name}: its settings cannot be read ({err})")
+                return False
+            self.form.adopt_run(run_settings, picks, config.get("backend"))
+        numbers = {
+            self.n: recorded.get("n") or jobs.flag_value(argv, "--n") or config.get("n"),
+            self.seed: recorded.get("seed", jobs.flag_value(argv, "--seed")),
+            self.traces: jobs.flag_value(argv, "--traces"),
+            self.chunk: jobs.flag_value(argv, "--chunk-size") or config.get("chunk_size"),
+        }
+        for widget, value in numbers.items():
+            if value is not None:
+                widget.value = int(value)
+        self.checks.value = bool(recorded.get("step_check", "--step-check" in argv))
+        self.run_name.value = folder.name
+        self.run_name.error = None
         obj = (config.get("object") or {}).get("name")
-        if self.state.obj is None or self.state.obj.name != obj:
+        if obj is not None and (self.state.obj is None or self.state.obj.name != obj):
             self.error.set_text(f"{folder.name} is a run of {obj}: import it in tab 1")
+        return True
+
+    def shown(self, job: jobs.Job) -> None:
+        """An evaluate run the panel shows that this page did not start (after a reload,
+        or chosen in the runs list): tab 3 shows its numbers and name as its folder
+        records them, so that Start continues it where it can be continued."""
+        if job.out is not None:
+            self.show_recorded(job.out, job.argv)
 
     def pick_numbers(self) -> tuple[int, int] | None:
         n = checked(self.n, "n")
@@ -259,13 +290,13 @@ class GenerateTab:
         self.run_summary.set_content("")
 
         job = jobs.Job(argv, self.state.log(out.name), out, n, chunk)
-        self.panel.start(f"evaluate {out.name}", job)
+        self.panel.start(f"evaluate {out.name}", job, self.error)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         """An evaluate run ended (also one started before a reload of the page)."""
         out = job.out
-        if progress.state == "cancelled":  # ready to continue: same folder, resume
-            self.run_name.value = out.name
+        if progress.state == "cancelled":  # ready to continue: same folder, its settings
+            self.show_recorded(out, job.argv, settings=True)
             self.resume.value = True
             self.run_summary.set_content(
                 f"**{md_text(out.name)}**: cancelled; its finished chunks are kept. Start the "

@@ -92,7 +92,13 @@ class ImportTab:
                 self.thickness = ui.number("thickness (mm)", value=20.0, step=1)
                 self.mass = ui.number("mass (g)", value=43.2, step=1)
                 self.unit = ui.select(["mm", "m"], value="mm", label="mesh unit").classes("w-40")
-                self.unit.set_visibility(False)  # shown for an uploaded mesh only
+                # a mesh of several disconnected bodies is refused unless this is ticked
+                # (the library's largest_body, the CLI's --largest-body): the refusal
+                # names this box, so the page must have it
+                self.largest = ui.checkbox("largest body only (a mesh of several bodies)")
+                self.largest.props('data-testid="largest-body"')
+                for w in (self.unit, self.largest):
+                    w.set_visibility(False)  # shown for an uploaded mesh only
                 self.on_asset()
                 ui.button("Import object", on_click=self.import_object).props(
                     'data-testid="import"'
@@ -157,6 +163,7 @@ class ImportTab:
     def show_mesh_fields(self, mesh: bool) -> None:
         """A mesh has a unit; an image has a scale and a thickness."""
         self.unit.set_visibility(mesh)
+        self.largest.set_visibility(mesh)
         self.px_per_mm.set_visibility(not mesh)
         self.thickness.set_visibility(not mesh)
 
@@ -196,6 +203,9 @@ class ImportTab:
         if is_mesh:
             kwargs["unit"] = self.unit.value
             args += ["--unit", self.unit.value]
+            if self.largest.value:
+                kwargs["largest_body"] = True
+                args.append("--largest-body")
             image = None
         else:
             kwargs["px_per_mm"] = float(values["px_per_mm"])

@@ -32,6 +32,9 @@ class JobPanel:
         # what each command's end draws, by command: a run re-attached after a reload
         # is drawn by this page's tabs, not by the page that started it
         self.handlers: dict[str, Callable[[jobs.Job, jobs.Progress], None]] = {}
+        # what each command's tab shows of a run this page did not start (one re-attached
+        # after a reload, or chosen in the runs list): its numbers as its folder records
+        self.shown: dict[str, Callable[[jobs.Job], None]] = {}
         with ui.card().classes("w-full") as card:
             with ui.row().classes("items-center w-full"):
                 self.title = ui.label("").classes("font-bold").props('data-testid="job-title"')
@@ -73,9 +76,18 @@ class JobPanel:
             " 500);</script>"
         )
 
-    def handle(self, command: str, ended: Callable[[jobs.Job, jobs.Progress], None]) -> None:
-        """ended(job, progress) draws the results of a run of command when it ends."""
+    def handle(
+        self,
+        command: str,
+        ended: Callable[[jobs.Job, jobs.Progress], None],
+        shown: Callable[[jobs.Job], None] | None = None,
+    ) -> None:
+        """ended(job, progress) draws the results of a run of command when it ends;
+        shown(job) fills the tab from a run of command the panel shows without this page
+        having started it (after a reload, or chosen in the runs list)."""
         self.handlers[command] = ended
+        if shown is not None:
+            self.shown[command] = shown
 
     def busy(self, where: ui.label) -> bool:
         """True (and says so in where) while a run is current: no second run starts.
@@ -95,18 +107,26 @@ class JobPanel:
         self,
         title: str,
         job: jobs.Job,
+        where: ui.label,
         on_end: Callable[[jobs.Progress], None] | None = None,
-    ) -> None:
+    ) -> bool:
         """Start job and show it; when the panel sees it end it calls on_end(progress),
-        or the handler of its command (:meth:`handle`)."""
+        or the handler of its command (:meth:`handle`). False, and why in where, when a
+        run of this server (any browser tab's) writes its folder now (``Runs.taken``)."""
         if self.job is not None:  # callers check busy() first
             raise RuntimeError(f"a run is current ({self.title.text}): cannot start {title}")
+        taken = self.runs.taken(job, self.owner)
+        if taken:
+            log.info("refused %r (tab %s): %s", title, self.owner, taken)
+            where.set_text(taken)
+            return False
         job.title = title
         log.info("starting %r (tab %s): %s", title, self.owner, job.command_line)
         job.start(self.runs.workers)
         self.runs.add(job, self.owner)
         self._show(job, on_end)
         self.status.set_text("starting ...")
+        return True
 
     def reattach(self, owner: str) -> None:
         """This browser tab's id: show the run it started before a reload, if any (a
@@ -114,8 +134,16 @@ class JobPanel:
         self.owner = owner
         job = self.runs.last_of(owner)
         if job is not None and self.job is None:
-            self._show(job, None)
-            self.poll()
+            self._show_other(job)
+
+    def _show_other(self, job: jobs.Job) -> None:
+        """A run this page did not start, shown: its tab filled from its record, then its
+        state (and, if it ended, its results)."""
+        self._show(job, None)
+        shown = self.shown.get(job.argv[0] if job.argv else "")
+        if shown is not None:
+            shown(job)
+        self.poll()
 
     def _show(self, job: jobs.Job, on_end) -> None:
         self.job = job
@@ -158,8 +186,7 @@ class JobPanel:
         if self.job is not None and self.job is not job:
             ui.notify("a run is current: wait for it or cancel it", type="warning")
         elif self.job is None:
-            self._show(job, None)
-            self.poll()
+            self._show_other(job)
 
     def poll(self) -> None:
         """Show the run's progress; when it has ended, free the panel and call on_end."""

@@ -14,7 +14,7 @@ from nicegui import ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import forms, jobs
-from mjx_pick.gui.page.widgets import error_label, upload
+from mjx_pick.gui.page.widgets import error_label, file_error_label, upload
 from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload, toml_refused
 
 PRESET = "robotiq-2f85"  # the gripper the page starts with
@@ -42,6 +42,9 @@ class SettingsForm:
                 forms.backend_choices(), value=jobs.DEFAULT_BACKEND, label="backend"
             )
             self.backend.classes("w-40")
+            ui.label(forms.backend_note()).classes("text-xs max-w-xs").props(
+                'data-testid="backend-note"'
+            )
         with ui.row().classes("items-center"):
             self.toml_upload = upload(
                 "or load a gripper TOML",
@@ -52,7 +55,7 @@ class SettingsForm:
                 toml_refused,
                 "gripper-upload",
             ).classes("w-72")
-            self.toml_error = error_label().props('data-testid="toml-error"')
+            self.toml_error = file_error_label().props('data-testid="toml-error"')
         self.settings_error = error_label().props('data-testid="settings-error"')
         for title, group in (
             ("Gripper", forms.GRIPPER_FIELDS),
@@ -139,6 +142,12 @@ class SettingsForm:
             self.inputs[key].error = None
         if backend in (self.backend.options or []):
             self.backend.value = backend
+        elif backend is not None:  # said, never silently another one
+            why = forms.backend_problems().get(backend, "not offered by the page")
+            self.settings_error.set_text(
+                f"the run ran on backend {backend}, which cannot run here ({why}): the "
+                f"backend stays {self.backend.value}"
+            )
 
     def adopt_contact(self, contact) -> None:
         """Fitted contact parameters (the calibration study) for every later run."""

@@ -103,7 +103,7 @@ class CompareStudy:
         argv += ["--n", str(n), "--rank-by", self.rank.value, "--out", str(out)]
 
         job = jobs.study_job(argv, self.state.log(out.name), out)
-        self.panel.start(f"compare {out.name} ({len(names)} grippers x {n})", job)
+        self.panel.start(f"compare {out.name} ({len(names)} grippers x {n})", job, self.error)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         if progress.state == "complete":
@@ -177,7 +177,7 @@ class RobustStudy:
         argv += ["--out", str(out), "--resume"]
 
         job = jobs.study_job(argv, self.state.log(f"{out.name}-robust"), out)
-        self.panel.start(f"robust {out.name} (top {k} x {m} draws)", job)
+        self.panel.start(f"robust {out.name} (top {k} x {m} draws)", job, self.error)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         if progress.state == "complete":
@@ -292,7 +292,7 @@ class CalibrationStudy:
             steps_logged=r"(?m)^step\s+(\d+)\s",
             unit="steps",
         )
-        self.panel.start(f"calibrate {out.name} ({steps} steps)", job)
+        self.panel.start(f"calibrate {out.name} ({steps} steps)", job, self.error)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         if progress.state == "complete":

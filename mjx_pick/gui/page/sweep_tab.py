@@ -8,7 +8,7 @@ from nicegui import ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
-from mjx_pick.gui import forms, jobs, workfolder
+from mjx_pick.gui import forms, jobs, views, workfolder
 from mjx_pick.gui.formatting import column_label, fmt, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
@@ -120,7 +120,7 @@ class SweepTab:
         argv += ["--param", param, "--n", str(int(n)), "--out", str(out)]
 
         job = jobs.study_job(argv, self.state.log(out.name), out)
-        self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job)
+        self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job, self.error)
 
     def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
         if progress.state == "complete":
@@ -137,4 +137,4 @@ class SweepTab:
         ]
         self.table.rows = [{k: fmt(v[k]) for k in keys} for v in variants]
         self.table.update()
-        show_picture(self.image, workfolder.read_bytes(out / "sweep.png", self.state.workdir))
+        show_picture(self.image, views.sweep_png(out, self.state.workdir, labels))

@@ -9,6 +9,7 @@ from nicegui import run, ui
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
 from mjx_pick.gui.formatting import column_label, fmt_cell, page_text
+from mjx_pick.gui.forms import page_words
 from mjx_pick.gui.search import Search, SearchStopped
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
 from mjx_pick.gui.uploads import browser_refused
@@ -17,15 +18,30 @@ from mjx_pick.gui.views import data_uri
 
 class MessageLabel(ui.label):
     """A label that shows messages (errors, warnings, a run's state): every text set
-    on it passes ``page_text``, so no path of the software's own files reaches the page."""
+    on it passes ``forms.page_words`` -- no path of the software's own files, no key,
+    flag or advice of the program's reaches the page, whichever library wrote it."""
 
     def set_text(self, text: str) -> None:
-        super().set_text(page_text(text) if text else text)
+        super().set_text(page_words(text) if text else text)
 
 
 def error_label() -> MessageLabel:
     """A red line for a message that belongs to no single field."""
     return MessageLabel("").classes("text-negative text-sm").props('role="alert"')
+
+
+class FileMessageLabel(ui.label):
+    """A label for what is wrong inside a file the user wrote (a gripper TOML): its keys
+    are the user's own words there (``stroke_mm = -5`` on its line), so only the
+    software's paths are taken out (``page_text``), never the file's keys."""
+
+    def set_text(self, text: str) -> None:
+        super().set_text(page_text(text) if text else text)
+
+
+def file_error_label() -> FileMessageLabel:
+    """A red line for what is wrong inside a file the user wrote."""
+    return FileMessageLabel("").classes("text-negative text-sm").props('role="alert"')
 
 
 def warning_label(testid: str) -> MessageLabel:
@@ -66,6 +82,9 @@ class SearchProgress:
         except SearchStopped:
             self.line.set_text(search.stopped_text())
             return None
+        except Exception:  # it ended (no feasible pick-point, ...): said so, not "so far"
+            self.line.set_text(search.ended_text())
+            raise
         finally:
             self.timer.deactivate()
             self.running_row.set_visibility(False)
