@@ -278,3 +278,23 @@ def test_a_folder_of_parts_runs_as_one_job_and_exports_per_part(tmp_path):
     assert exp.returncode == 0, exp.stderr[-3000:]
     assert (out / "objects" / "bar" / "grasps_csv.csv").is_file()
     assert (out / "objects" / "peg" / "grasps_csv_object.obj").is_file()
+
+
+def test_robust_ranks_grasps_given_as_poses(tmp_path, block_scene):
+    """robust on an antipodal run: its best grasps, their planar part perturbed, their
+    tilt kept (the draws checked by the 6-DoF checks), ranked."""
+    from mjx_pick.core.settings import Settings
+    from mjx_pick.studies.robust import robust_best
+
+    run = tmp_path / "r"
+    evaluate(block_scene.object, "robotiq-2f85", n=3, grasps="antipodal", backend="mujoco",
+             out=run, n_traces=0, **FAST)  # fmt: skip
+    base = Settings(load_gripper("robotiq-2f85"), grasp=FAST["grasp"])
+    ranked = robust_best(
+        block_scene.object, base, results=run, top_k=2, m=2, sigma_xy_mm=1.0, backend="mujoco"
+    )
+    assert ranked.num_rows == 2 and set(ranked["trials"].to_pylist()) == {2}
+    ids = set(ranked["pick_id"].to_pylist())
+    import pyarrow.parquet as pq
+
+    assert ids <= set(pq.read_table(run / "results.parquet")["pick_id"].to_pylist())
