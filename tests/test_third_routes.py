@@ -348,3 +348,101 @@ def test_a_journal_never_reaches_out_of_its_folder(tmp_path):
     remove_recorded(run)
     assert outside.read_text() == "keep"
     assert not (run / "sub").exists()  # its one recorded file removed, then the folder
+
+
+# ------------------------------------------ nothing silently ignored, capped or redrawn
+@pytest.fixture(scope="module")
+def picks_file(tmp_path_factory) -> Path:
+    f = tmp_path_factory.mktemp("picks") / "mine.csv"
+    f.write_text("x_mm,y_mm,yaw_deg\n0,0,0\n0,0,90\n1,0,0\n0,1,90\n")
+    return f
+
+
+@pytest.mark.parametrize(
+    "argv, said",
+    [
+        (["evaluate", "block", "--out", ""], "--out '': empty"),
+        (["picks", "block", "--out", " "], "--out ' ': empty"),
+        (["sweep", "block", "--param", "contact.pad_friction=0.5,0.9", "--out", ""], "empty"),
+        (["evaluate", "block", "--picks", "PICKS", "--n", "500"], "--n 500 with the pick-points"),
+        (
+            ["evaluate", "block", "--picks", "PICKS", "--until", "2", "--max", "16"],
+            "it cannot take the pick-points given (--picks)",
+        ),
+        (["evaluate", "block", "--until", "2", "--n", "50"], "--n 50 with --until 2"),
+        (["evaluate", "block", "--max", "16"], "--max 16 bounds Optimization mode only"),
+        (["evaluate", "block", "--skip-infeasible"], "--skip-infeasible applies to a picks"),
+        (
+            ["evaluate", "block", "--fingertip-clearance-mm", "100"],
+            "fingertip_clearance_mm = 100 is above a quarter of object 'block''s height "
+            "(20 mm): allowed at most 5 mm",
+        ),
+        (["sweep", "block", "--param", "grasp.fingertip_clearance_mm=1,8"], "=8: grasp.finger"),
+        (["evaluate", "block", "--lift-height-mm", "0.001"], "allowed lift_height_mm >= 5"),
+        (["design", "block", "--bound", "finger_width_mm=-10:40"], "finger_width_mm = -10.0 is"),
+        (["design", "block", "--bound", "stroke_mm=50:5000"], "stroke_mm = 5000.0 is out of"),
+    ],
+)
+def test_an_input_the_run_would_ignore_cap_or_redraw_is_refused(argv, said, picks_file, tmp_path):
+    argv = [picks_file if a == "PICKS" else a for a in argv]
+    extra = [] if "--out" in argv else ["--out", tmp_path / "never"]
+    if argv[0] != "picks":  # the simulating commands' fast settings, unless the case's own
+        extra += FAST[:3] + ([] if "--lift-height-mm" in argv else FAST[3:])
+    res = cli(*argv, *extra, cwd=tmp_path, check=False)
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert said in res.stderr, res.stderr[-2000:]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [], "a refused command wrote"
+
+
+def test_a_design_of_more_variants_than_its_bounds_hold_says_so_in_one_line(tmp_path):
+    argv = ["design", "block", "--variants", "10000", "--bound", "finger_width_mm=10:40"]
+    res = cli(*argv, "--out", tmp_path / "never", *FAST, check=False)
+    assert "could draw only 301 distinct valid gripper variants" in res.stderr
+    assert len(res.stderr) < 2000
+
+
+# --------------------------------------- refused before writing; messages from what ran
+@pytest.fixture(scope="module")
+def untraced_run(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
+    out = tmp_path_factory.mktemp("untraced") / "run"
+    res = cli("evaluate", "block", "--n", "4", "--traces", "0", "--out", out, *FAST, check=True)
+    return out, res
+
+
+def test_a_run_without_traces_does_not_say_it_wrote_them(untraced_run):
+    out, res = untraced_run
+    assert not (out / "traces.parquet").exists()
+    last = res.stdout.strip().splitlines()[-1]
+    assert last.startswith(f"results in {out}/") and "traces" not in last
+
+
+@pytest.mark.parametrize("frame", ["nan,0,0,0,0,0", "0,0,inf,0,0,0", "1,2,3", "0,0,0,0,0,0,0"])
+def test_a_report_refuses_its_frame_before_writing_anything(frame, untraced_run, tmp_path):
+    run, _ = untraced_run
+    before = sorted(p.name for p in run.iterdir())
+    res = cli("report", run, "--frame", frame, "--out", tmp_path / "rep", "--no-progress")
+    assert res.returncode == 2 and "must be 6 finite numbers" in res.stderr, res.stderr[-2000:]
+    assert not (tmp_path / "rep").exists()
+    res = cli("report", run, "--frame", frame, "--no-progress", check=False)  # into the run
+    assert sorted(p.name for p in run.iterdir()) == before
+
+
+def test_a_fit_says_where_its_value_and_its_interval_lie_not_one_for_the_other(tmp_path):
+    # one success at 14 N: any friction from the lower bound 0.05 up holds it, so the
+    # interval spans the bounds; the value (the start, 0.86: no step) is on neither
+    rows = (SHIPPED / "outcomes" / "block_1kg_rg2.csv").read_text().splitlines()
+    csv = tmp_path / "one.csv"
+    csv.write_text("\n".join([rows[0], rows[12]]) + "\n")
+    argv = ["calibrate", csv, "block", "--mass-g", "1000", "--gripper", "onrobot-rg2"]
+    argv += ["--steps", "0", "--backend", "mujoco", "--no-progress"]
+    res = cli(*argv, "--out", tmp_path / "fit", check=True)
+    line = next(t for t in res.stdout.splitlines() if t.startswith("pad_friction:"))
+    assert "fit at its" not in line
+    assert "its 95 % interval reaches its lower bound 0.05 and upper bound 2" in line
+    assert "no estimator step was taken (--steps 0)" in res.stdout
+    # without the check, the fit's record says that nothing was checked
+    res = cli(*argv, "--no-identify", "--out", tmp_path / "quick", check=True)
+    toml = (tmp_path / "quick" / "contact.toml").read_text()
+    assert "not_identified = []" in toml and "identifiability_checked = false" in toml
+    assert "identifiability not checked" in res.stdout
+    assert "identifiability_checked = true" in (tmp_path / "fit" / "contact.toml").read_text()

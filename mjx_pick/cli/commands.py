@@ -65,7 +65,7 @@ def cmd_evaluate(args) -> int:
     if ev.already_complete:
         print(f"{args.out} holds this run complete: nothing to resume, nothing simulated")
     total = process_age_s() if before is not None else None
-    print_summary(ev.summary, args.out, total)
+    print_summary(ev.summary, args.out, total, traced=ev.traces is not None)
     return 0
 
 
@@ -232,6 +232,8 @@ def cmd_calibrate(args) -> int:
     for note in problem.notes:  # said before the fit, and again in report.md
         print(f"mjx-pick: note: {note}", file=sys.stderr)
     res = _fit(args, problem, holdout)
+    if not res.history:  # said from what happened: no step, so no fit
+        print("mjx-pick: note: no estimator step was taken (--steps 0): the values are the start's")
     _print_fit(res, names)
     print(
         f"results in {args.out}/ (contact.toml, calibration.json, loss.png, report.md); "
@@ -303,23 +305,25 @@ def _fit(args, problem, holdout):
 def _print_fit(res, names) -> None:
     """Each parameter's start -> fit with its interval and identifiability, and the
     held-out accuracy before and after."""
+    from mjx_pick.studies.calibration.outputs import bound_words
+
     ident = res.identifiability or {}
     for name in names:
         info = ident.get(name)
+        words = bound_words(info) if info else ""  # what is true of its bounds, or ""
         where = ""
         if info and info.get("interval") is None:  # --no-identify: only the bound is known
-            if info.get("at_bound"):
+            if words:
                 where = (
-                    f"  fit at its {info['at_bound']} bound: NOT identified (the bound stopped "
-                    "the search), kept at its start"
+                    f"  {words}: NOT identified (the bound stopped the search), kept at its start"
                 )
             else:
-                where = "  (no interval: --no-identify)"
+                where = "  (no interval: --no-identify, identifiability not checked)"
         elif info:
             lo, hi = info["interval"]
             where = f"  (95 % {lo:.4g}-{hi:.4g})"
-            if info.get("at_bound"):
-                where += f"  fit at its {info['at_bound']} bound"
+            if words:
+                where += f"  {words}"
             if not info["identified"] and res.values[name] == res.initial[name]:
                 where += "  NOT identified: kept at its start"
             elif not info["identified"]:
@@ -372,8 +376,9 @@ def cmd_export(args) -> int:
     return 0
 
 
-def print_summary(s: dict, out, total_s: float | None = None) -> None:
-    """The evaluate summary's lines; total_s: the process's time so far, when known."""
+def print_summary(s: dict, out, total_s: float | None = None, traced: bool = True) -> None:
+    """The evaluate summary's lines; total_s: the process's time so far, when known;
+    traced: whether the run wrote traces.parquet (not with --traces 0)."""
     from mjx_pick.core.metrics import label_check_rows, rate_text
     from mjx_pick.kernels.types import SUCCESS
 
@@ -413,7 +418,8 @@ def print_summary(s: dict, out, total_s: float | None = None) -> None:
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
     if out:
-        print(f"results in {out}/ (results.parquet, summary.json, config.json, traces.parquet)")
+        files = ["results.parquet", "summary.json", "config.json"] + ["traces.parquet"] * traced
+        print(f"results in {out}/ ({', '.join(files)})")
 
 
 def cmd_picks(args) -> int:

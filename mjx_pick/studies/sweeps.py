@@ -29,7 +29,7 @@ from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.metrics import rate_summary, results_table
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.physics import ContactParams, SolverParams
-from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.core.procedure import GraspConfig, check_clearance
 from mjx_pick.core.settings import Settings
 from mjx_pick.engine.simulator import Simulator, showing_progress
 from mjx_pick.outputs.rundir import portable_object
@@ -225,6 +225,7 @@ def _refuse_impossible(obj, combos: list[dict], settings: list, pick_config) -> 
         values = ", ".join(f"{k}={v:g}" for k, v in combo.items())
         try:
             s.grasp.check_gripper(s.gripper)
+            check_clearance(obj, s.grasp)
         except ConfigError as err:
             raise ConfigError(f"sweep variant {values}: {err}") from None
         key = (s.gripper, s.grasp)
