@@ -446,3 +446,89 @@ def test_a_fit_says_where_its_value_and_its_interval_lie_not_one_for_the_other(t
     assert "not_identified = []" in toml and "identifiability_checked = false" in toml
     assert "identifiability not checked" in res.stdout
     assert "identifiability_checked = true" in (tmp_path / "fit" / "contact.toml").read_text()
+
+
+# ------------------------------------------------- an estimate before any long job
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["evaluate", "block", "--n", "100000000"],
+        ["evaluate", "block", "--picks", "MILLION"],
+        ["evaluate", "block", "--until", "50", "--max", "10000000"],
+        ["evaluate", "block", "--n", "5000", "--min-force"],
+        ["sweep", "block", "--param", "contact.pad_friction=0.2:1:5", "--n", "1000000"],
+        ["compare", "block", "--grippers", "robotiq-2f85,onrobot-rg2", "--n", "1000000"],
+        ["robust", "block", "--n", "64", "--top-k", "16", "--m", "100000"],
+        ["design", "block", "--bound", "finger_width_mm=10:40", "--variants", "300"],
+        ["design", "block", "--bound", "finger_width_mm=10:40", "--rounds", "20"],
+    ],
+)
+def test_a_long_job_says_how_long_and_waits_for_yes(argv, tmp_path, tmp_path_factory):
+    if "MILLION" in argv:
+        rows = tmp_path_factory.mktemp("million") / "million.csv"
+        body = "".join(f"{i % 7},{i % 5},{i % 360}\n" for i in range(1_000_000))
+        rows.write_text("x_mm,y_mm,yaw_deg\n" + body)
+        argv = [rows if a == "MILLION" else a for a in argv]
+    res = cli(*argv, "--out", tmp_path / "never", "--backend", "mujoco", "--no-progress")
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-2000:]
+    assert "would take about" in res.stderr and "pass --yes to start it" in res.stderr
+    assert "a second: mujoco on" in res.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_yes_starts_a_long_job_and_says_its_estimate_first(tmp_path):
+    import time
+
+    argv = ["evaluate", "block", "--n", "100000", "--yes", "--backend", "mujoco"]
+    proc = subprocess.Popen(
+        MJX_PICK.split() + argv + ["--no-progress"], stderr=subprocess.PIPE, text=True
+    )
+    try:
+        deadline, seen = time.monotonic() + 60, ""
+        while "started (--yes)" not in seen and time.monotonic() < deadline:
+            seen += proc.stderr.readline()
+        assert "this evaluate: about" in seen and "started (--yes)" in seen, seen
+    finally:
+        proc.kill()
+        proc.wait()
+        proc.stderr.close()
+
+
+def test_the_counted_simulations_are_those_a_study_runs(tmp_path):
+    """duration.count against what the studies report having simulated."""
+    import json
+
+    from mjx_pick.studies import duration
+
+    out = tmp_path / "design"
+    argv = ["design", "block", "--bound", "finger_width_mm=15:30", "--variants", "4"]
+    cli(*argv, "--rounds", "2", "--n", "4", "--out", out, *FAST, check=True)
+    rollouts = json.loads((out / "design.json").read_text())["rollouts"]
+    # the most it runs: a variant's infeasible pick-points of the shared set are not run
+    most = duration.count("design", variants=4, rounds=2, n=4)
+    assert 0.75 * most <= rollouts <= most
+    assert duration.count("evaluate", n=8, step_check=True, stability_um=1.0) == 8 * 4
+    assert duration.count("robust", top_k=3, m=5, n=None) == 15
+
+
+def test_a_log_shows_progress_at_the_first_work_and_every_minute(monkeypatch):
+    import io
+
+    from mjx_pick.outputs import progress
+
+    now = [0.0]
+    monkeypatch.setattr(progress.time, "monotonic", lambda: now[0])
+    sink = io.StringIO()  # not a terminal: lines
+    with progress.ProgressBar("robust", "sim", file=sink) as bar:
+        bar(0, 1_000_000)
+        now[0] = 5.0
+        bar(1024, 1_000_000)  # the first chunk: said at once, not at 10 %
+        now[0] = 30.0
+        bar(2048, 1_000_000)  # within the minute: quiet
+        now[0] = 70.0
+        bar(3072, 1_000_000)  # a minute after the last line
+    lines = sink.getvalue().splitlines()
+    assert [ln.split(" sim")[0] for ln in lines] == [
+        "robust:   0% 1024/1000000",
+        "robust:   0% 3072/1000000",
+    ]

@@ -30,6 +30,19 @@ from mjx_pick.engine import registry
 from mjx_pick.outputs.progress import echo
 
 
+def confirm_duration(args, what: str, simulations: int, grasp=None, solver=None, backend=None):
+    """Before any simulation: a run estimated longer than a few minutes on this machine
+    (``studies.duration``) is refused unless --yes, saying how long; with --yes, the
+    estimate is said as it starts."""
+    from mjx_pick.studies import duration
+
+    backend = backend or getattr(args, "backend", registry.AUTO)
+    est = duration.estimate(simulations, grasp, solver, backend, ray=getattr(args, "ray", None))
+    line = duration.refuse_long(est, what, args.yes)
+    if line:
+        print(f"mjx-pick: {line}", file=sys.stderr)
+
+
 def cmd_evaluate(args) -> int:
     t0 = time.perf_counter()
     from mjx_pick.studies.evaluation import evaluate
@@ -37,6 +50,10 @@ def cmd_evaluate(args) -> int:
     t1 = time.perf_counter()
     obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
     check_contact_file(args, obj, gripper, grasp, solver)
+    size = dict(n=args.n, picks=args.picks, until=args.until, max_n=args.max)
+    size.update(min_force=args.min_force, stability_um=args.stability_um)
+    count = _count("evaluate", size, step_check=args.step_check)
+    confirm_duration(args, "this evaluate", count, grasp, solver)
     # what the run cannot see: imports (the CLI's and the study's) and object preparation
     before = getattr(args, "started_s", None)
     costs = {
@@ -69,6 +86,13 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def _count(study: str, sizes: dict, **more) -> int:
+    """The simulations a study's sizes make (``duration.count``)."""
+    from mjx_pick.studies import duration
+
+    return duration.count(study, **sizes, **more)
+
+
 def _print_rows(rows: list[dict], keys: list[str]) -> None:
     width = {k: max(len(k), *(len(_fmt(r.get(k))) for r in rows)) for k in keys}
     print("  ".join(f"{k:<{width[k]}}" for k in keys))
@@ -98,6 +122,8 @@ def cmd_sweep(args) -> int:
         "simulated)",
         sys.stderr,
     )
+    sims = _count("sweep", {"variants": count, "n": args.n})
+    confirm_duration(args, "this sweep", sims, base.grasp, base.solver)
     res = sweep(
         obj,
         params,
@@ -133,9 +159,12 @@ def cmd_compare(args) -> int:
     from mjx_pick.studies.comparison import compare, unequal_forces
 
     obj, base, picks_cfg = base_settings(args)
+    chosen = grippers(args.grippers)
+    sims = _count("compare", {"variants": len(chosen), "n": args.n})
+    confirm_duration(args, "this comparison", sims, base.grasp, base.solver)
     res = compare(
         obj,
-        grippers(args.grippers),
+        chosen,
         base,
         run_options(args, picks_cfg),
         rank_by=args.rank_by,
@@ -168,6 +197,8 @@ def cmd_design(args) -> int:
 
     obj, base, picks_cfg = base_settings(args)
     bounds = design_bounds(args.bound or [])
+    sizes = {"variants": args.variants, "rounds": args.rounds, "n": args.n}
+    confirm_duration(args, "this design search", _count("design", sizes), base.grasp, base.solver)
     res = design_search(
         obj,
         bounds,
@@ -202,6 +233,9 @@ def cmd_robust(args) -> int:
             picks_cfg = None
         if args.results and not given(args, SETTINGS_FLAGS):
             base = None
+    sizes = {"top_k": args.top_k, "m": args.m, "n": None if args.results else args.n}
+    grasp, solver = (base.grasp, base.solver) if base is not None else (None, None)
+    confirm_duration(args, "this robustness study", _count("robust", sizes), grasp, solver)
     if args.out and args.results and Path(args.out).resolve() == Path(args.results).resolve():
         print(f"mjx-pick: robust adds robustness.parquet and robustness.json to {args.out}")
     table = robust_best(
@@ -231,6 +265,11 @@ def cmd_calibrate(args) -> int:
     problem, holdout = _calibration_problems(args, obj, base, picks_cfg, names)
     for note in problem.notes:  # said before the fit, and again in report.md
         print(f"mjx-pick: note: {note}", file=sys.stderr)
+    rows = len(problem.row_of) + (len(holdout.row_of) if holdout is not None else 0)
+    sizes = {"steps": args.steps, "vectors": _vectors_per_step(args, len(names)), "rows": rows}
+    backend = registry.differentiable() if args.estimator == "jvp" else args.backend
+    s = problem.settings
+    confirm_duration(args, "this fit", _count("calibrate", sizes), s.grasp, s.solver, backend)
     res = _fit(args, problem, holdout)
     if not res.history:  # said from what happened: no step, so no fit
         print("mjx-pick: note: no estimator step was taken (--steps 0): the values are the start's")
@@ -240,6 +279,21 @@ def cmd_calibrate(args) -> int:
         f"use: mjx-pick evaluate ... --contact {shell_word(f'{args.out}/contact.toml')}"
     )
     return 0
+
+
+def _vectors_per_step(args, params: int) -> int:
+    """The parameter vectors an estimator simulates a step (``calibration.estimators``):
+    CMA-ES its population (4 + 3 ln P, at least 8), the smoothed gradient its
+    quadrature (1 + 2 samples P), random search its batch of 16, Levenberg-Marquardt a
+    finite-difference Jacobian (P + 1), forward mode one."""
+    import math
+
+    return {
+        "cma": max(8, 4 + int(3 * math.log(max(params, 1)))),
+        "smoothed": 1 + 2 * args.samples * params,
+        "random": 16,
+        "lsq": params + 1,
+    }.get(args.estimator, 1)
 
 
 def _calibration_problems(args, obj, base, picks_cfg, names):

@@ -244,6 +244,15 @@ def _add_progress(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_yes(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--yes",
+        action="store_true",
+        help="start a run estimated to take longer than a few minutes on this machine "
+        "(without it, such a run is refused, saying how long it would take)",
+    )
+
+
 def _add_ray(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--ray",
@@ -324,6 +333,7 @@ def _add_evaluate_parser(sub) -> None:
     _add_evaluate_output_args(ev)
     _add_optimization_args(ev)
     _add_progress(ev)
+    _add_yes(ev)
     _add_ray(ev)
     _add_evaluate_checks(ev)
     ev.set_defaults(func=cmd_evaluate)
@@ -419,6 +429,7 @@ def _study_parser(sub, name: str, help_text: str) -> argparse.ArgumentParser:
     )
     _add_overwrite(p)
     _add_progress(p)
+    _add_yes(p)
     return p
 
 
@@ -602,6 +613,7 @@ def _add_calibrate_parser(sub) -> None:
         help="output folder (contact.toml, loss.png, report.md, ...)",
     )
     _add_progress(cb)
+    _add_yes(cb)
     cb.set_defaults(func=cmd_calibrate)
 
 
