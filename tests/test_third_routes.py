@@ -532,3 +532,57 @@ def test_a_log_shows_progress_at_the_first_work_and_every_minute(monkeypatch):
         "robust:   0% 1024/1000000",
         "robust:   0% 3072/1000000",
     ]
+
+
+# ------------------------------------------------ what a user reads: no internals shown
+def test_a_warning_is_one_line_without_its_source(tmp_path):
+    argv = ["evaluate", "block", "--mass-g", "1000", "--gripper", "onrobot-rg2", "--n", "2"]
+    res = cli(*argv, "--traces", "0", *FAST, check=True)
+    assert "mjx-pick: warning: object 'block': mass_g = 1000" in res.stderr
+    assert ".py:" not in res.stderr and "return object_from_polygon" not in res.stderr
+
+
+def test_no_word_of_warp_where_warp_is_not_used_nor_of_the_display(tmp_path):
+    broken = tmp_path / "site" / "warp"
+    broken.mkdir(parents=True)
+    (broken / "__init__.py").write_text("raise ImportError('no warp on this machine')\n")
+    import os
+
+    env = {
+        **os.environ,
+        "PYTHONPATH": f"{broken.parent}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+    }
+    # MJX's JAX physics (refused here for its settings, after MJX was imported)
+    res = cli("evaluate", "block", "--backend", "mjx", "--n", "2", env=env, check=False)
+    assert "mjx-pick: error:" in res.stderr  # the settings it refuses, as ever
+    assert "Failed to import" not in res.stdout + res.stderr
+    # a pick-point flag's type imports MuJoCo while parsing: the display choice came first
+    res = cli("evaluate", "block", "--safety-zone-mm", "0", "--n", "2", *FAST, check=True)
+    assert "use_offscreen_rendering" not in res.stderr
+
+
+def test_a_urdf_grippers_error_names_its_urdf_key(tmp_path):
+    shipped = SHIPPED / "grippers" / "robotiq-2f85-urdf.toml"
+    text = shipped.read_text().replace('file = "', f'file = "{shipped.parent}/', 1)
+    flipped = tmp_path / "flipped.toml"
+    flipped.write_text(
+        text.replace("mount_quat = [0.0, 1.0, 0.0, 0.0]", "mount_quat = [1, 0, 0, 0]")
+    )
+    res = cli("evaluate", "block", "--gripper-file", flipped, "--n", "2", *FAST, check=False)
+    assert "[urdf] mount_quat: the pads must hang below the mount" in res.stderr
+    assert "gripper.mjcf" not in res.stderr
+
+
+def test_a_full_disk_names_the_file_it_could_not_write(tmp_path):
+    import resource
+    import signal
+
+    def small_files():  # files of at most 20 kB: as a disk that fills, EFBIG not ENOSPC
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, 20_000))
+
+    out = tmp_path / "run"
+    argv = ["evaluate", "block", "--n", "8", "--out", out, *FAST]
+    res = cli(*argv, preexec_fn=small_files, check=False)
+    assert res.returncode == 1, res.stderr[-2000:]
+    assert f"mjx-pick: error: {out}/" in res.stderr and "File too large" in res.stderr
