@@ -49,7 +49,8 @@ def test_a_settings_file_that_is_not_utf8_is_refused_by_name(flag, body, tmp_pat
     suffix = ".csv" if flag == "--picks" else ".toml"
     f = tmp_path / f"latin{suffix}"
     f.write_bytes(body + LATIN1 if suffix == ".csv" else LATIN1 + body)
-    res = cli("evaluate", "block", flag, f, "--n", "2", "--out", tmp_path / "never", *FAST)
+    size = [] if flag == "--picks" else ["--n", "2"]
+    res = cli("evaluate", "block", flag, f, *size, "--out", tmp_path / "never", *FAST)
     assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-2000:]
     assert f"{str(f)!r} is not UTF-8 text: line " in res.stderr
     assert "0xfc" in res.stderr

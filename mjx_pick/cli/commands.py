@@ -34,8 +34,10 @@ def confirm_duration(args, what: str, simulations: int, grasp=None, solver=None,
     """Before any simulation: a run estimated longer than a few minutes on this machine
     (``studies.duration``) is refused unless --yes, saying how long; with --yes, the
     estimate is said as it starts."""
+    from mjx_pick.outputs.rundir import check_folder
     from mjx_pick.studies import duration
 
+    check_folder(getattr(args, "out", None))  # a folder it cannot use: said first
     backend = backend or getattr(args, "backend", registry.AUTO)
     est = duration.estimate(simulations, grasp, solver, backend, ray=getattr(args, "ray", None))
     line = duration.refuse_long(est, what, args.yes)
@@ -193,10 +195,11 @@ def cmd_compare(args) -> int:
 
 
 def cmd_design(args) -> int:
-    from mjx_pick.studies.comparison import design_search
+    from mjx_pick.studies.comparison import design_search, sample_variants
 
     obj, base, picks_cfg = base_settings(args)
     bounds = design_bounds(args.bound or [])
+    sample_variants(base.gripper, bounds, args.variants, args.seed)  # bounds refused first
     sizes = {"variants": args.variants, "rounds": args.rounds, "n": args.n}
     confirm_duration(args, "this design search", _count("design", sizes), base.grasp, base.solver)
     res = design_search(
@@ -224,6 +227,9 @@ def cmd_design(args) -> int:
 
 def cmd_robust(args) -> int:
     from mjx_pick.studies.robust import robust_best
+
+    if args.n is None and not args.results:
+        args.n = 200  # the pick-points it ranks (with --results: the run's own)
 
     if args.results and not given(args, SETTINGS_FLAGS + PICK_FLAGS):
         obj, base, picks_cfg = object_of(args), None, None  # the run's own settings

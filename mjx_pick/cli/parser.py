@@ -416,14 +416,17 @@ def _add_evaluate_checks(ev: argparse.ArgumentParser) -> None:
     )
 
 
-def _study_parser(sub, name: str, help_text: str) -> argparse.ArgumentParser:
+def _study_parser(
+    sub, name: str, help_text: str, n_help: str | None = None
+) -> argparse.ArgumentParser:
     """A study's parser (sweep, compare, design, robust) with the options they share:
-    object, gripper, physics, pick-points, --out, --overwrite, --no-progress."""
+    object, gripper, physics, pick-points, --out, --overwrite, --no-progress (n_help:
+    as _add_pick_args')."""
     p = sub.add_parser(name, help=help_text)
     _add_object_args(p)
     _add_gripper_args(p)
     _add_physics_args(p)
-    _add_pick_args(p)
+    _add_pick_args(p, n_help)
     p.add_argument(
         "--out", type=path_of("--out"), help="output folder (default: none: nothing written)"
     )
@@ -507,7 +510,10 @@ def _add_design_parser(sub) -> None:
 def _add_robust_parser(sub) -> None:
     """``mjx-pick robust``."""
     rb = _study_parser(
-        sub, "robust", "robust success probability of the top pick-points under vision error"
+        sub,
+        "robust",
+        "robust success probability of the top pick-points under vision error",
+        "pick-points simulated first, to rank (default: 200; not with --results)",
     )
     rb.add_argument(
         "--results",
@@ -537,7 +543,7 @@ def _add_robust_parser(sub) -> None:
     )
     _add_resume(rb)
     _add_ray(rb)
-    rb.set_defaults(func=cmd_robust, n=200)
+    rb.set_defaults(func=cmd_robust)
 
 
 def _add_picks_parser(sub) -> None:

@@ -276,7 +276,7 @@ def sweep(
     request.update(params=to_dict(params), n=n, seed=seed, random=random)
     request.update(picks=to_dict(pick_config))
     combos = variants(params, random, seed)
-    settings = [_settings(base, combo) for combo in combos]
+    settings = [_variant_settings(base, combo) for combo in combos]
     _refuse_impossible(obj, combos, settings, pick_config)  # before any draw or folder
     numbers.check("sweep_simulations", len(combos) * n, "variants x pick-points")
     with opts.opening("sweep", obj, request, simulator) as study:
@@ -304,6 +304,16 @@ def sweep(
             _write_sweep(study.out_dir, {**config, **meta}, table, summaries, params)
             study.close(config, meta)
         return SweepResult(table, summaries, timing, study.out_dir)
+
+
+def _variant_settings(base: Settings, combo: dict) -> Settings:
+    """A variant's settings (:func:`_settings`); a value its settings refuse is a
+    ConfigError naming the variant as well as the field."""
+    try:
+        return _settings(base, combo)
+    except ConfigError as err:
+        values = ", ".join(f"{k}={v:g}" for k, v in combo.items())
+        raise ConfigError(f"sweep variant {values}: {err}") from None
 
 
 def _settings(base: Settings, combo: dict) -> Settings:
