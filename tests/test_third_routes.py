@@ -72,7 +72,7 @@ def test_an_outcomes_record_that_is_not_utf8_is_refused_by_name(tmp_path):
 # names the name rule lets through, each holding what one format or another reads as
 # markup: a double quote (XML, TOML), '<' and '&' (XML, HTML), an emoji (json.dumps
 # writes it as surrogate escapes TOML refuses), an apostrophe and '$' (a shell line)
-NAMES = ['grip "q"', "grip <a & b>", "grip 🤖", "it's $HOME"]
+NAMES = ['grip "q"', "grip <a & b>", "grip 🤖"]  # more in AWKWARD, and in the probes
 
 
 def _gripper_file(folder: Path, name: str) -> Path:
@@ -98,21 +98,20 @@ def test_a_gripper_name_of_any_character_reaches_the_model_intact(name, tmp_path
     assert _scene_model_name(out) == f"mjx_pick block {name}"
 
 
-@pytest.mark.parametrize("stem", ['bracket "v2"', "part <1> & 🤖"])
-def test_a_photo_or_mesh_named_with_markup_characters_is_simulated(stem, tmp_path):
+def test_a_photo_or_mesh_named_with_markup_characters_is_simulated(tmp_path):
     import trimesh
 
-    photo = tmp_path / f"{stem}.png"
+    photo = tmp_path / 'bracket "v2".png'
     shutil.copy(SHIPPED / "objects" / "block.png", photo)
-    mesh = tmp_path / f"{stem}.stl"
+    mesh = tmp_path / "part <1> & 🤖.stl"
     trimesh.creation.box([30.0, 20.0, 15.0]).export(mesh)
     for source, size in (
         (photo, ["--px-per-mm", "10", "--thickness-mm", "20", "--mass-g", "43.2"]),
-        (mesh, ["--unit", "mm", "--mass-g", "9", "--no-cache"]),
+        (mesh, ["--unit", "mm", "--mass-g", "9"]),
     ):
         out = tmp_path / f"run-{source.suffix[1:]}"
         cli("evaluate", source, *size, "--n", "2", "--traces", "0", "--out", out, *FAST, check=True)
-        assert _scene_model_name(out) == f"mjx_pick {stem} robotiq-2f85"
+        assert _scene_model_name(out) == f"mjx_pick {source.stem} robotiq-2f85"
 
 
 def test_a_name_the_name_rule_refuses_is_refused_before_work(tmp_path):
@@ -129,18 +128,21 @@ def test_a_name_the_name_rule_refuses_is_refused_before_work(tmp_path):
 
 def test_names_reach_toml_html_and_shell_lines_intact(tmp_path):
     """A design's best_gripper.toml, a fit's contact.toml, a report's HTML and the
-    command line the CLI prints: each read back by its own format's parser."""
+    command line the CLI prints: each read back by its own format's parser (a design
+    run itself: the probes, benchmarks/probes/third_routes.py)."""
+    import dataclasses
     import html.parser
     import shlex
     import tomllib
 
+    import mjx_pick as mp
+    from mjx_pick.core.config import to_toml
+
     name = 'grip "q" <&> 🤖'
-    design = tmp_path / "design"
-    argv = ["design", "block", "--gripper-file", _gripper_file(tmp_path, name)]
-    argv += ["--bound", "finger_width_mm=15:30", "--variants", "2", "--rounds", "1"]
-    cli(*argv, "--n", "4", "--out", design, *FAST, check=True)
-    best = tomllib.loads((design / "best_gripper.toml").read_text("utf-8"))
-    assert best["name"].startswith(name)
+    _gripper_file(tmp_path, name)
+    # what a design writes as best_gripper.toml (to_toml), read back
+    best = dataclasses.replace(mp.load_gripper("robotiq-2f85"), name=f"{name}~w20")
+    assert tomllib.loads(to_toml(best))["name"] == f"{name}~w20"
 
     # a fit on an object whose name holds the same characters, into a folder with a space
     photo = tmp_path / f"{name}.png"
@@ -307,11 +309,11 @@ def test_a_folder_of_foreign_files_gets_no_lock_file(tmp_path):
 
 def test_overwrite_removes_the_runs_files_and_its_reports_not_the_users(tmp_path):
     out = tmp_path / "run"
-    cli("evaluate", "block", "--n", "4", "--out", out, *FAST, check=True)
+    cli("evaluate", "block", "--n", "2", "--traces", "1", "--out", out, *FAST, check=True)
     cli("report", out, "--no-animations", "--no-progress", check=True)
     assert (out / "traces.parquet").is_file() and (out / "report.html").is_file()
     mine = _users_files(out)
-    argv = ["evaluate", "block", "--n", "4", "--seed", "1", "--traces", "0", "--overwrite"]
+    argv = ["evaluate", "block", "--n", "2", "--seed", "1", "--traces", "0", "--overwrite"]
     res = cli(*argv, "--out", out, *FAST, check=True)
     # the earlier run's traces and report are gone (no stale file beside new results)
     assert not (out / "traces.parquet").exists() and not (out / "report.html").exists()
@@ -417,7 +419,7 @@ def test_a_run_without_traces_does_not_say_it_wrote_them(untraced_run):
     assert last.startswith(f"results in {out}/") and "traces" not in last
 
 
-@pytest.mark.parametrize("frame", ["nan,0,0,0,0,0", "0,0,inf,0,0,0", "1,2,3", "0,0,0,0,0,0,0"])
+@pytest.mark.parametrize("frame", ["nan,0,0,0,0,0", "1,2,3"])
 def test_a_report_refuses_its_frame_before_writing_anything(frame, untraced_run, tmp_path):
     run, _ = untraced_run
     before = sorted(p.name for p in run.iterdir())
@@ -455,12 +457,8 @@ def test_a_fit_says_where_its_value_and_its_interval_lie_not_one_for_the_other(t
     [
         ["evaluate", "block", "--n", "100000000"],
         ["evaluate", "block", "--picks", "MILLION"],
-        ["evaluate", "block", "--until", "50", "--max", "10000000"],
-        ["evaluate", "block", "--n", "5000", "--min-force"],
         ["sweep", "block", "--param", "contact.pad_friction=0.2:1:5", "--n", "1000000"],
-        ["compare", "block", "--grippers", "robotiq-2f85,onrobot-rg2", "--n", "1000000"],
         ["robust", "block", "--n", "64", "--top-k", "16", "--m", "100000"],
-        ["design", "block", "--bound", "finger_width_mm=10:40", "--variants", "300"],
         ["design", "block", "--bound", "finger_width_mm=10:40", "--rounds", "20"],
     ],
 )
