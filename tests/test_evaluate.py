@@ -177,7 +177,6 @@ def test_cli_bad_settings(capsys):
 def test_optimization_mode_stops_at_k(tmp_path, block):
     ev = evaluate(
         block,
-        n=0 or 1,
         grasp=FAST,
         backend="mujoco",
         batch_size=8,

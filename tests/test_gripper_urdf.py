@@ -146,7 +146,7 @@ def test_mimic_from_the_toml_replaces_the_urdfs_own(tmp_path, pair):
 @pytest.mark.parametrize(
     ("edit", "joint", "extra", "message"),
     [
-        (None, "finger_joint2", "", r"urdf.joint = 'finger_joint2': the URDF has no joint"),
+        (None, "finger_joint2", "", r"\[urdf\] joint = 'finger_joint2': the URDF has no joint"),
         (None, "left_outer_finger_joint", "", r"is a fixed joint: the servo drives a revolute"),
         (
             lambda t: t.replace('lower="0" upper="0.8"', ""),
@@ -179,7 +179,7 @@ def test_a_wrong_urdf_or_table_names_what_is_missing(tmp_path, edit, joint, extr
 
 
 def test_a_missing_urdf_file_and_a_missing_setting_are_named(tmp_path):
-    with pytest.raises(ConfigError, match=r"urdf.file = 'nowhere.urdf': no such file"):
+    with pytest.raises(ConfigError, match=r"\[urdf\] file = 'nowhere.urdf': no such file"):
         mp.load_gripper(gripper_file(tmp_path, file="nowhere.urdf"))
     text = TABLE.format(file=SHIPPED, joint="finger_joint", extra="").replace(
         "drive_armature = 0.005\n", ""

@@ -215,7 +215,7 @@ def test_a_fit_without_intervals_still_says_what_it_could_not_check(tmp_path):
     argv += ["--no-identify", "--backend", "mujoco", "--no-progress", "--out", out]
     res = cli(*argv, check=True)
     assert "note: the outcomes have no record" in res.stderr
-    assert "fit at its lower bound: NOT identified" in res.stdout
+    assert "fit at its lower bound 0.3: NOT identified" in res.stdout
     toml = (out / "contact.toml").read_text()
     assert 'not_identified = ["pad_friction"]' in toml
     report = (out / "report.md").read_text()

@@ -49,7 +49,8 @@ def test_a_settings_file_that_is_not_utf8_is_refused_by_name(flag, body, tmp_pat
     suffix = ".csv" if flag == "--picks" else ".toml"
     f = tmp_path / f"latin{suffix}"
     f.write_bytes(body + LATIN1 if suffix == ".csv" else LATIN1 + body)
-    res = cli("evaluate", "block", flag, f, "--n", "2", "--out", tmp_path / "never", *FAST)
+    size = [] if flag == "--picks" else ["--n", "2"]
+    res = cli("evaluate", "block", flag, f, *size, "--out", tmp_path / "never", *FAST)
     assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-2000:]
     assert f"{str(f)!r} is not UTF-8 text: line " in res.stderr
     assert "0xfc" in res.stderr
@@ -71,7 +72,7 @@ def test_an_outcomes_record_that_is_not_utf8_is_refused_by_name(tmp_path):
 # names the name rule lets through, each holding what one format or another reads as
 # markup: a double quote (XML, TOML), '<' and '&' (XML, HTML), an emoji (json.dumps
 # writes it as surrogate escapes TOML refuses), an apostrophe and '$' (a shell line)
-NAMES = ['grip "q"', "grip <a & b>", "grip 🤖", "it's $HOME"]
+NAMES = ['grip "q"', "grip <a & b>", "grip 🤖"]  # more in AWKWARD, and in the probes
 
 
 def _gripper_file(folder: Path, name: str) -> Path:
@@ -97,21 +98,20 @@ def test_a_gripper_name_of_any_character_reaches_the_model_intact(name, tmp_path
     assert _scene_model_name(out) == f"mjx_pick block {name}"
 
 
-@pytest.mark.parametrize("stem", ['bracket "v2"', "part <1> & 🤖"])
-def test_a_photo_or_mesh_named_with_markup_characters_is_simulated(stem, tmp_path):
+def test_a_photo_or_mesh_named_with_markup_characters_is_simulated(tmp_path):
     import trimesh
 
-    photo = tmp_path / f"{stem}.png"
+    photo = tmp_path / 'bracket "v2".png'
     shutil.copy(SHIPPED / "objects" / "block.png", photo)
-    mesh = tmp_path / f"{stem}.stl"
+    mesh = tmp_path / "part <1> & 🤖.stl"
     trimesh.creation.box([30.0, 20.0, 15.0]).export(mesh)
     for source, size in (
         (photo, ["--px-per-mm", "10", "--thickness-mm", "20", "--mass-g", "43.2"]),
-        (mesh, ["--unit", "mm", "--mass-g", "9", "--no-cache"]),
+        (mesh, ["--unit", "mm", "--mass-g", "9"]),
     ):
         out = tmp_path / f"run-{source.suffix[1:]}"
         cli("evaluate", source, *size, "--n", "2", "--traces", "0", "--out", out, *FAST, check=True)
-        assert _scene_model_name(out) == f"mjx_pick {stem} robotiq-2f85"
+        assert _scene_model_name(out) == f"mjx_pick {source.stem} robotiq-2f85"
 
 
 def test_a_name_the_name_rule_refuses_is_refused_before_work(tmp_path):
@@ -128,18 +128,21 @@ def test_a_name_the_name_rule_refuses_is_refused_before_work(tmp_path):
 
 def test_names_reach_toml_html_and_shell_lines_intact(tmp_path):
     """A design's best_gripper.toml, a fit's contact.toml, a report's HTML and the
-    command line the CLI prints: each read back by its own format's parser."""
+    command line the CLI prints: each read back by its own format's parser (a design
+    run itself: the probes, benchmarks/probes/third_routes.py)."""
+    import dataclasses
     import html.parser
     import shlex
     import tomllib
 
+    import mjx_pick as mp
+    from mjx_pick.core.config import to_toml
+
     name = 'grip "q" <&> 🤖'
-    design = tmp_path / "design"
-    argv = ["design", "block", "--gripper-file", _gripper_file(tmp_path, name)]
-    argv += ["--bound", "finger_width_mm=15:30", "--variants", "2", "--rounds", "1"]
-    cli(*argv, "--n", "4", "--out", design, *FAST, check=True)
-    best = tomllib.loads((design / "best_gripper.toml").read_text("utf-8"))
-    assert best["name"].startswith(name)
+    _gripper_file(tmp_path, name)
+    # what a design writes as best_gripper.toml (to_toml), read back
+    best = dataclasses.replace(mp.load_gripper("robotiq-2f85"), name=f"{name}~w20")
+    assert tomllib.loads(to_toml(best))["name"] == f"{name}~w20"
 
     # a fit on an object whose name holds the same characters, into a folder with a space
     photo = tmp_path / f"{name}.png"
@@ -306,11 +309,11 @@ def test_a_folder_of_foreign_files_gets_no_lock_file(tmp_path):
 
 def test_overwrite_removes_the_runs_files_and_its_reports_not_the_users(tmp_path):
     out = tmp_path / "run"
-    cli("evaluate", "block", "--n", "4", "--out", out, *FAST, check=True)
+    cli("evaluate", "block", "--n", "2", "--traces", "1", "--out", out, *FAST, check=True)
     cli("report", out, "--no-animations", "--no-progress", check=True)
     assert (out / "traces.parquet").is_file() and (out / "report.html").is_file()
     mine = _users_files(out)
-    argv = ["evaluate", "block", "--n", "4", "--seed", "1", "--traces", "0", "--overwrite"]
+    argv = ["evaluate", "block", "--n", "2", "--seed", "1", "--traces", "0", "--overwrite"]
     res = cli(*argv, "--out", out, *FAST, check=True)
     # the earlier run's traces and report are gone (no stale file beside new results)
     assert not (out / "traces.parquet").exists() and not (out / "report.html").exists()
@@ -348,3 +351,237 @@ def test_a_journal_never_reaches_out_of_its_folder(tmp_path):
     remove_recorded(run)
     assert outside.read_text() == "keep"
     assert not (run / "sub").exists()  # its one recorded file removed, then the folder
+
+
+# ------------------------------------------ nothing silently ignored, capped or redrawn
+@pytest.fixture(scope="module")
+def picks_file(tmp_path_factory) -> Path:
+    f = tmp_path_factory.mktemp("picks") / "mine.csv"
+    f.write_text("x_mm,y_mm,yaw_deg\n0,0,0\n0,0,90\n1,0,0\n0,1,90\n")
+    return f
+
+
+@pytest.mark.parametrize(
+    "argv, said",
+    [
+        (["evaluate", "block", "--out", ""], "--out '': empty"),
+        (["picks", "block", "--out", " "], "--out ' ': empty"),
+        (["sweep", "block", "--param", "contact.pad_friction=0.5,0.9", "--out", ""], "empty"),
+        (["evaluate", "block", "--picks", "PICKS", "--n", "500"], "--n 500 with the pick-points"),
+        (
+            ["evaluate", "block", "--picks", "PICKS", "--until", "2", "--max", "16"],
+            "it cannot take the pick-points given (--picks)",
+        ),
+        (["evaluate", "block", "--until", "2", "--n", "50"], "--n 50 with --until 2"),
+        (["evaluate", "block", "--max", "16"], "--max 16 bounds Optimization mode only"),
+        (["evaluate", "block", "--skip-infeasible"], "--skip-infeasible applies to a picks"),
+        (
+            ["evaluate", "block", "--fingertip-clearance-mm", "100"],
+            "fingertip_clearance_mm = 100 is above a quarter of object 'block''s height "
+            "(20 mm): allowed at most 5 mm",
+        ),
+        (["sweep", "block", "--param", "grasp.fingertip_clearance_mm=1,8"], "=8: grasp.finger"),
+        (["evaluate", "block", "--lift-height-mm", "0.001"], "allowed lift_height_mm >= 5"),
+        (["design", "block", "--bound", "finger_width_mm=-10:40"], "finger_width_mm = -10.0 is"),
+        (["design", "block", "--bound", "stroke_mm=50:5000"], "stroke_mm = 5000.0 is out of"),
+    ],
+)
+def test_an_input_the_run_would_ignore_cap_or_redraw_is_refused(argv, said, picks_file, tmp_path):
+    argv = [picks_file if a == "PICKS" else a for a in argv]
+    extra = [] if "--out" in argv else ["--out", tmp_path / "never"]
+    if argv[0] != "picks":  # the simulating commands' fast settings, unless the case's own
+        extra += FAST[:3] + ([] if "--lift-height-mm" in argv else FAST[3:])
+    res = cli(*argv, *extra, cwd=tmp_path, check=False)
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert said in res.stderr, res.stderr[-2000:]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [], "a refused command wrote"
+
+
+def test_a_design_of_more_variants_than_its_bounds_hold_says_so_in_one_line(tmp_path):
+    argv = ["design", "block", "--variants", "10000", "--bound", "finger_width_mm=10:40"]
+    res = cli(*argv, "--out", tmp_path / "never", *FAST, check=False)
+    assert "could draw only 301 distinct valid gripper variants" in res.stderr
+    assert len(res.stderr) < 2000
+
+
+# --------------------------------------- refused before writing; messages from what ran
+@pytest.fixture(scope="module")
+def untraced_run(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
+    out = tmp_path_factory.mktemp("untraced") / "run"
+    res = cli("evaluate", "block", "--n", "4", "--traces", "0", "--out", out, *FAST, check=True)
+    return out, res
+
+
+def test_a_run_without_traces_does_not_say_it_wrote_them(untraced_run):
+    out, res = untraced_run
+    assert not (out / "traces.parquet").exists()
+    last = res.stdout.strip().splitlines()[-1]
+    assert last.startswith(f"results in {out}/") and "traces" not in last
+
+
+@pytest.mark.parametrize("frame", ["nan,0,0,0,0,0", "1,2,3"])
+def test_a_report_refuses_its_frame_before_writing_anything(frame, untraced_run, tmp_path):
+    run, _ = untraced_run
+    before = sorted(p.name for p in run.iterdir())
+    res = cli("report", run, "--frame", frame, "--out", tmp_path / "rep", "--no-progress")
+    assert res.returncode == 2 and "must be 6 finite numbers" in res.stderr, res.stderr[-2000:]
+    assert not (tmp_path / "rep").exists()
+    res = cli("report", run, "--frame", frame, "--no-progress", check=False)  # into the run
+    assert sorted(p.name for p in run.iterdir()) == before
+
+
+def test_a_fit_says_where_its_value_and_its_interval_lie_not_one_for_the_other(tmp_path):
+    # one success at 14 N: any friction from the lower bound 0.05 up holds it, so the
+    # interval spans the bounds; the value (the start, 0.86: no step) is on neither
+    rows = (SHIPPED / "outcomes" / "block_1kg_rg2.csv").read_text().splitlines()
+    csv = tmp_path / "one.csv"
+    csv.write_text("\n".join([rows[0], rows[12]]) + "\n")
+    argv = ["calibrate", csv, "block", "--mass-g", "1000", "--gripper", "onrobot-rg2"]
+    argv += ["--steps", "0", "--backend", "mujoco", "--no-progress"]
+    res = cli(*argv, "--out", tmp_path / "fit", check=True)
+    line = next(t for t in res.stdout.splitlines() if t.startswith("pad_friction:"))
+    assert "fit at its" not in line
+    assert "its 95 % interval reaches its lower bound 0.05 and upper bound 2" in line
+    assert "no estimator step was taken (--steps 0)" in res.stdout
+    # without the check, the fit's record says that nothing was checked
+    res = cli(*argv, "--no-identify", "--out", tmp_path / "quick", check=True)
+    toml = (tmp_path / "quick" / "contact.toml").read_text()
+    assert "not_identified = []" in toml and "identifiability_checked = false" in toml
+    assert "identifiability not checked" in res.stdout
+    assert "identifiability_checked = true" in (tmp_path / "fit" / "contact.toml").read_text()
+
+
+# ------------------------------------------------- an estimate before any long job
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["evaluate", "block", "--n", "100000000"],
+        ["evaluate", "block", "--picks", "MILLION"],
+        ["sweep", "block", "--param", "contact.pad_friction=0.2:1:5", "--n", "1000000"],
+        ["robust", "block", "--n", "64", "--top-k", "16", "--m", "100000"],
+        ["design", "block", "--bound", "finger_width_mm=10:40", "--rounds", "20"],
+    ],
+)
+def test_a_long_job_says_how_long_and_waits_for_yes(argv, tmp_path, tmp_path_factory):
+    if "MILLION" in argv:
+        rows = tmp_path_factory.mktemp("million") / "million.csv"
+        body = "".join(f"{i % 7},{i % 5},{i % 360}\n" for i in range(1_000_000))
+        rows.write_text("x_mm,y_mm,yaw_deg\n" + body)
+        argv = [rows if a == "MILLION" else a for a in argv]
+    res = cli(*argv, "--out", tmp_path / "never", "--backend", "mujoco", "--no-progress")
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-2000:]
+    assert "would take about" in res.stderr and "pass --yes to start it" in res.stderr
+    assert "a second: mujoco on" in res.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_yes_starts_a_long_job_and_says_its_estimate_first(tmp_path):
+    import time
+
+    argv = ["evaluate", "block", "--n", "100000", "--yes", "--backend", "mujoco"]
+    proc = subprocess.Popen(
+        MJX_PICK.split() + argv + ["--no-progress"], stderr=subprocess.PIPE, text=True
+    )
+    try:
+        deadline, seen = time.monotonic() + 60, ""
+        while "started (--yes)" not in seen and time.monotonic() < deadline:
+            seen += proc.stderr.readline()
+        assert "this evaluate: about" in seen and "started (--yes)" in seen, seen
+    finally:
+        proc.kill()
+        proc.wait()
+        proc.stderr.close()
+
+
+def test_the_counted_simulations_are_those_a_study_runs(tmp_path):
+    """duration.count against what the studies report having simulated."""
+    import json
+
+    from mjx_pick.studies import duration
+
+    out = tmp_path / "design"
+    argv = ["design", "block", "--bound", "finger_width_mm=15:30", "--variants", "4"]
+    cli(*argv, "--rounds", "2", "--n", "4", "--out", out, *FAST, check=True)
+    rollouts = json.loads((out / "design.json").read_text())["rollouts"]
+    # the most it runs: a variant's infeasible pick-points of the shared set are not run
+    most = duration.count("design", variants=4, rounds=2, n=4)
+    assert 0.75 * most <= rollouts <= most
+    assert duration.count("evaluate", n=8, step_check=True, stability_um=1.0) == 8 * 4
+    assert duration.count("robust", top_k=3, m=5, n=None) == 15
+
+
+def test_a_log_shows_progress_at_the_first_work_and_every_minute(monkeypatch):
+    import io
+
+    from mjx_pick.outputs import progress
+
+    now = [0.0]
+    monkeypatch.setattr(progress.time, "monotonic", lambda: now[0])
+    sink = io.StringIO()  # not a terminal: lines
+    with progress.ProgressBar("robust", "sim", file=sink) as bar:
+        bar(0, 1_000_000)
+        now[0] = 5.0
+        bar(1024, 1_000_000)  # the first chunk: said at once, not at 10 %
+        now[0] = 30.0
+        bar(2048, 1_000_000)  # within the minute: quiet
+        now[0] = 70.0
+        bar(3072, 1_000_000)  # a minute after the last line
+    lines = sink.getvalue().splitlines()
+    assert [ln.split(" sim")[0] for ln in lines] == [
+        "robust:   0% 1024/1000000",
+        "robust:   0% 3072/1000000",
+    ]
+
+
+# ------------------------------------------------ what a user reads: no internals shown
+def test_a_warning_is_one_line_without_its_source(tmp_path):
+    argv = ["evaluate", "block", "--mass-g", "1000", "--gripper", "onrobot-rg2", "--n", "2"]
+    res = cli(*argv, "--traces", "0", *FAST, check=True)
+    assert "mjx-pick: warning: object 'block': mass_g = 1000" in res.stderr
+    assert ".py:" not in res.stderr and "return object_from_polygon" not in res.stderr
+
+
+def test_no_word_of_warp_where_warp_is_not_used_nor_of_the_display(tmp_path):
+    broken = tmp_path / "site" / "warp"
+    broken.mkdir(parents=True)
+    (broken / "__init__.py").write_text("raise ImportError('no warp on this machine')\n")
+    import os
+
+    env = {
+        **os.environ,
+        "PYTHONPATH": f"{broken.parent}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+    }
+    # MJX's JAX physics (refused here for its settings, after MJX was imported)
+    res = cli("evaluate", "block", "--backend", "mjx", "--n", "2", env=env, check=False)
+    assert "mjx-pick: error:" in res.stderr  # the settings it refuses, as ever
+    assert "Failed to import" not in res.stdout + res.stderr
+    # a pick-point flag's type imports MuJoCo while parsing: the display choice came first
+    res = cli("evaluate", "block", "--safety-zone-mm", "0", "--n", "2", *FAST, check=True)
+    assert "use_offscreen_rendering" not in res.stderr
+
+
+def test_a_urdf_grippers_error_names_its_urdf_key(tmp_path):
+    shipped = SHIPPED / "grippers" / "robotiq-2f85-urdf.toml"
+    text = shipped.read_text().replace('file = "', f'file = "{shipped.parent}/', 1)
+    flipped = tmp_path / "flipped.toml"
+    flipped.write_text(
+        text.replace("mount_quat = [0.0, 1.0, 0.0, 0.0]", "mount_quat = [1, 0, 0, 0]")
+    )
+    res = cli("evaluate", "block", "--gripper-file", flipped, "--n", "2", *FAST, check=False)
+    assert "[urdf] mount_quat: the pads must hang below the mount" in res.stderr
+    assert "gripper.mjcf" not in res.stderr
+
+
+def test_a_full_disk_names_the_file_it_could_not_write(tmp_path):
+    import resource
+    import signal
+
+    def small_files():  # files of at most 20 kB: as a disk that fills, EFBIG not ENOSPC
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, 20_000))
+
+    out = tmp_path / "run"
+    argv = ["evaluate", "block", "--n", "8", "--out", out, *FAST]
+    res = cli(*argv, preexec_fn=small_files, check=False)
+    assert res.returncode == 1, res.stderr[-2000:]
+    assert f"mjx-pick: error: {out}/" in res.stderr and "File too large" in res.stderr

@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import os
 import sys
+import warnings
 
 from mjx_pick.cli.clock import process_age_s
 from mjx_pick.cli.parser import build_parser, refused
@@ -45,11 +46,22 @@ def show_steps() -> None:
         logger.setLevel(logging.INFO)
 
 
+def _warning_line(message, category, filename, lineno, line=None) -> str:
+    """A Python warning as the CLI says it: one line, no source file or line of code
+    (a user reads the message; its origin is the package's business). A warning from
+    another library names its kind."""
+    kind = "" if issubclass(category, UserWarning) else f"{category.__name__}: "
+    return f"mjx-pick: warning: {kind}{message}\n"
+
+
 def main(argv: list[str] | None = None) -> int:
+    # before anything imports MuJoCo -- parsing a settings flag imports its settings
+    # module, and some import MuJoCo: animations on a headless host
+    use_offscreen_rendering()
+    warnings.formatwarning = _warning_line
     args = build_parser().parse_args(argv)
     args.started_s = process_age_s()  # the interpreter's start and the CLI's imports
     show_steps()
-    use_offscreen_rendering()  # before anything imports MuJoCo: animations on a headless host
     if getattr(args, "no_cache", False):
         # the one switch the cache reads; child processes (GUI jobs, local Ray) inherit it
         os.environ[cache.ENV_SWITCH] = "0"

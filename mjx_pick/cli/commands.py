@@ -30,6 +30,21 @@ from mjx_pick.engine import registry
 from mjx_pick.outputs.progress import echo
 
 
+def confirm_duration(args, what: str, simulations: int, grasp=None, solver=None, backend=None):
+    """Before any simulation: a run estimated longer than a few minutes on this machine
+    (``studies.duration``) is refused unless --yes, saying how long; with --yes, the
+    estimate is said as it starts."""
+    from mjx_pick.outputs.rundir import check_folder
+    from mjx_pick.studies import duration
+
+    check_folder(getattr(args, "out", None))  # a folder it cannot use: said first
+    backend = backend or getattr(args, "backend", registry.AUTO)
+    est = duration.estimate(simulations, grasp, solver, backend, ray=getattr(args, "ray", None))
+    line = duration.refuse_long(est, what, args.yes)
+    if line:
+        print(f"mjx-pick: {line}", file=sys.stderr)
+
+
 def cmd_evaluate(args) -> int:
     t0 = time.perf_counter()
     from mjx_pick.studies.evaluation import evaluate
@@ -41,6 +56,10 @@ def cmd_evaluate(args) -> int:
     t1 = time.perf_counter()
     obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
     check_contact_file(args, obj, gripper, grasp, solver)
+    size = dict(n=args.n, picks=args.picks, until=args.until, max_n=args.max)
+    size.update(min_force=args.min_force, stability_um=args.stability_um)
+    count = _count("evaluate", size, step_check=args.step_check)
+    confirm_duration(args, "this evaluate", count, grasp, solver)
     # what the run cannot see: imports (the CLI's and the study's) and object preparation
     before = getattr(args, "started_s", None)
     costs = {
@@ -69,7 +88,7 @@ def cmd_evaluate(args) -> int:
     if ev.already_complete:
         print(f"{args.out} holds this run complete: nothing to resume, nothing simulated")
     total = process_age_s() if before is not None else None
-    print_summary(ev.summary, args.out, total)
+    print_summary(ev.summary, args.out, total, traced=ev.traces is not None)
     return 0
 
 
@@ -92,6 +111,8 @@ def _evaluate_set(args) -> int:
     grasp, note = grasp.fitted_to(gripper, keep=given)
     if note:
         print(f"mjx-pick: note: {note}", file=sys.stderr)
+    each = _count("evaluate", dict(n=args.n, picks=None, until=None, max_n=None))
+    confirm_duration(args, f"this evaluate of {len(parts)} parts", each * len(parts), grasp, solver)
     res = evaluate_set(
         parts,
         gripper,
@@ -110,6 +131,13 @@ def _evaluate_set(args) -> int:
             f"summary.json; objects/<part>/: each part's run folder)"
         )
     return 0
+
+
+def _count(study: str, sizes: dict, **more) -> int:
+    """The simulations a study's sizes make (``duration.count``)."""
+    from mjx_pick.studies import duration
+
+    return duration.count(study, **sizes, **more)
 
 
 def _print_rows(rows: list[dict], keys: list[str]) -> None:
@@ -141,6 +169,8 @@ def cmd_sweep(args) -> int:
         "simulated)",
         sys.stderr,
     )
+    sims = _count("sweep", {"variants": count, "n": args.n})
+    confirm_duration(args, "this sweep", sims, base.grasp, base.solver)
     res = sweep(
         obj,
         params,
@@ -176,9 +206,12 @@ def cmd_compare(args) -> int:
     from mjx_pick.studies.comparison import compare, unequal_forces
 
     obj, base, picks_cfg = base_settings(args)
+    chosen = grippers(args.grippers)
+    sims = _count("compare", {"variants": len(chosen), "n": args.n})
+    confirm_duration(args, "this comparison", sims, base.grasp, base.solver)
     res = compare(
         obj,
-        grippers(args.grippers),
+        chosen,
         base,
         run_options(args, picks_cfg),
         rank_by=args.rank_by,
@@ -207,10 +240,13 @@ def cmd_compare(args) -> int:
 
 
 def cmd_design(args) -> int:
-    from mjx_pick.studies.comparison import design_search
+    from mjx_pick.studies.comparison import design_search, sample_variants
 
     obj, base, picks_cfg = base_settings(args)
     bounds = design_bounds(args.bound or [])
+    sample_variants(base.gripper, bounds, args.variants, args.seed)  # bounds refused first
+    sizes = {"variants": args.variants, "rounds": args.rounds, "n": args.n}
+    confirm_duration(args, "this design search", _count("design", sizes), base.grasp, base.solver)
     res = design_search(
         obj,
         bounds,
@@ -237,6 +273,9 @@ def cmd_design(args) -> int:
 def cmd_robust(args) -> int:
     from mjx_pick.studies.robust import robust_best
 
+    if args.n is None and not args.results:
+        args.n = 200  # the pick-points it ranks (with --results: the run's own)
+
     if args.results and not given(args, SETTINGS_FLAGS + PICK_FLAGS):
         obj, base, picks_cfg = object_of(args), None, None  # the run's own settings
     else:
@@ -245,6 +284,9 @@ def cmd_robust(args) -> int:
             picks_cfg = None
         if args.results and not given(args, SETTINGS_FLAGS):
             base = None
+    sizes = {"top_k": args.top_k, "m": args.m, "n": None if args.results else args.n}
+    grasp, solver = (base.grasp, base.solver) if base is not None else (None, None)
+    confirm_duration(args, "this robustness study", _count("robust", sizes), grasp, solver)
     if args.out and args.results and Path(args.out).resolve() == Path(args.results).resolve():
         print(f"mjx-pick: robust adds robustness.parquet and robustness.json to {args.out}")
     table = robust_best(
@@ -282,7 +324,14 @@ def cmd_calibrate(args) -> int:
     problem, holdout = _calibration_problems(args, obj, base, picks_cfg, names)
     for note in problem.notes:  # said before the fit, and again in report.md
         print(f"mjx-pick: note: {note}", file=sys.stderr)
+    rows = len(problem.row_of) + (len(holdout.row_of) if holdout is not None else 0)
+    sizes = {"steps": args.steps, "vectors": _vectors_per_step(args, len(names)), "rows": rows}
+    backend = registry.differentiable() if args.estimator == "jvp" else args.backend
+    s = problem.settings
+    confirm_duration(args, "this fit", _count("calibrate", sizes), s.grasp, s.solver, backend)
     res = _fit(args, problem, holdout)
+    if not res.history:  # said from what happened: no step, so no fit
+        print("mjx-pick: note: no estimator step was taken (--steps 0): the values are the start's")
     _print_fit(res, names)
     print(
         f"results in {args.out}/ (contact.toml, calibration.json, loss.png, report.md); "
@@ -360,6 +409,21 @@ def _calibrate_trials(args) -> int:
     return 0
 
 
+def _vectors_per_step(args, params: int) -> int:
+    """The parameter vectors an estimator simulates a step (``calibration.estimators``):
+    CMA-ES its population (4 + 3 ln P, at least 8), the smoothed gradient its
+    quadrature (1 + 2 samples P), random search its batch of 16, Levenberg-Marquardt a
+    finite-difference Jacobian (P + 1), forward mode one."""
+    import math
+
+    return {
+        "cma": max(8, 4 + int(3 * math.log(max(params, 1)))),
+        "smoothed": 1 + 2 * args.samples * params,
+        "random": 16,
+        "lsq": params + 1,
+    }.get(args.estimator, 1)
+
+
 def _calibration_problems(args, obj, base, picks_cfg, names):
     """The fit's problem on --outcomes, and the held-out one on --holdout (or None)."""
     from mjx_pick.studies import calibration as cal
@@ -423,23 +487,25 @@ def _fit(args, problem, holdout):
 def _print_fit(res, names) -> None:
     """Each parameter's start -> fit with its interval and identifiability, and the
     held-out accuracy before and after."""
+    from mjx_pick.studies.calibration.outputs import bound_words
+
     ident = res.identifiability or {}
     for name in names:
         info = ident.get(name)
+        words = bound_words(info) if info else ""  # what is true of its bounds, or ""
         where = ""
         if info and info.get("interval") is None:  # --no-identify: only the bound is known
-            if info.get("at_bound"):
+            if words:
                 where = (
-                    f"  fit at its {info['at_bound']} bound: NOT identified (the bound stopped "
-                    "the search), kept at its start"
+                    f"  {words}: NOT identified (the bound stopped the search), kept at its start"
                 )
             else:
-                where = "  (no interval: --no-identify)"
+                where = "  (no interval: --no-identify, identifiability not checked)"
         elif info:
             lo, hi = info["interval"]
             where = f"  (95 % {lo:.4g}-{hi:.4g})"
-            if info.get("at_bound"):
-                where += f"  fit at its {info['at_bound']} bound"
+            if words:
+                where += f"  {words}"
             if not info["identified"] and res.values[name] == res.initial[name]:
                 where += "  NOT identified: kept at its start"
             elif not info["identified"]:
@@ -503,6 +569,8 @@ def cmd_validate(args) -> int:
 
     trials = read_trials(args.trials)
     contact, solver, (grasp, given), _ = settings(args)
+    grasps = len(set(trials.grasp_index().tolist()))  # each grasp simulated once
+    confirm_duration(args, "this validate", grasps, grasp, solver)
     v = validate(
         trials,
         run_options(args),
@@ -549,8 +617,9 @@ def print_validation(r: dict, out) -> None:
         print(f"results in {out}/ (validation.json, trials.parquet)")
 
 
-def print_summary(s: dict, out, total_s: float | None = None) -> None:
-    """The evaluate summary's lines; total_s: the process's time so far, when known."""
+def print_summary(s: dict, out, total_s: float | None = None, traced: bool = True) -> None:
+    """The evaluate summary's lines; total_s: the process's time so far, when known;
+    traced: whether the run wrote traces.parquet (not with --traces 0)."""
     from mjx_pick.core.metrics import label_check_rows, rate_text
     from mjx_pick.kernels.types import SUCCESS
 
@@ -590,7 +659,8 @@ def print_summary(s: dict, out, total_s: float | None = None) -> None:
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
     if out:
-        print(f"results in {out}/ (results.parquet, summary.json, config.json, traces.parquet)")
+        files = ["results.parquet", "summary.json", "config.json"] + ["traces.parquet"] * traced
+        print(f"results in {out}/ ({', '.join(files)})")
 
 
 def cmd_picks(args) -> int:

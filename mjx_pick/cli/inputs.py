@@ -69,8 +69,11 @@ def inputs_of(args):
     problem reported together. A procedure value set by neither a flag nor --grasp
     (the grip force, the closing speed) is fitted into the gripper's range
     (``GraspConfig.fitted_to``), with a note on stderr."""
+    from mjx_pick.core.procedure import check_clearance
+
     both, four = each_checked(lambda: objects(args), lambda: settings(args))
     contact, solver, (grasp, given), picks = four
+    check_clearance(both[0], grasp)  # every study: before any work
     grasp, note = grasp.fitted_to(both[1], keep=given)
     if note:
         print(f"mjx-pick: note: {note}", file=sys.stderr)

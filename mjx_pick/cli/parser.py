@@ -60,6 +60,25 @@ def number(name: str, flag: str):
     return parse
 
 
+def path_of(flag: str):
+    """An argparse type for a path flag (--out): its text, or :class:`Refused` where it
+    is empty -- an unset variable in ``--out "$DIR"`` would otherwise write into the
+    current folder."""
+
+    def parse(text: str):
+        if text.strip():
+            return text
+        bad = Refused(text)
+        bad.problem = (
+            f"{flag} {text!r}: empty; give a folder or file (an unset variable? the current "
+            "folder is --out .)"
+        )
+        return bad
+
+    parse.__name__ = "path"
+    return parse
+
+
 def refused(args: argparse.Namespace) -> None:
     """Raise one ConfigError naming every number of the command line that its rule
     refused (nothing when none was)."""
@@ -216,10 +235,15 @@ def _add_physics_args(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_pick_args(p: argparse.ArgumentParser) -> None:
+def _add_pick_args(p: argparse.ArgumentParser, n_help: str | None = None) -> None:
+    """The pick-point options; n_help: --n's help where it has no default of its own
+    (evaluate: its default depends on --picks)."""
     g = p.add_argument_group("pick-points")
     g.add_argument(
-        "--n", type=number("n", "--n"), default=1000, help="pick-points to generate (Normal mode)"
+        "--n",
+        type=number("n", "--n"),
+        default=None if n_help else 1000,
+        help=n_help or "pick-points to generate (Normal mode)",
     )
     g.add_argument(
         "--seed", type=number("seed", "--seed"), default=0, help="seed: same seed, same pick-points"
@@ -232,6 +256,15 @@ def _add_progress(p: argparse.ArgumentParser) -> None:
         "--no-progress",
         action="store_true",
         help="no progress bar (on stderr; without a terminal: a line every 10 percent)",
+    )
+
+
+def _add_yes(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--yes",
+        action="store_true",
+        help="start a run estimated to take longer than a few minutes on this machine "
+        "(without it, such a run is refused, saying how long it would take)",
     )
 
 
@@ -312,11 +345,12 @@ def _add_evaluate_parser(sub) -> None:
     _add_object_args(ev)
     _add_gripper_args(ev)
     _add_physics_args(ev)
-    _add_pick_args(ev)
+    _add_pick_args(ev, "pick-points to generate (Normal mode) (default: 1000; not with --picks)")
     _add_evaluate_output_args(ev)
     _add_grasp_source(ev)
     _add_optimization_args(ev)
     _add_progress(ev)
+    _add_yes(ev)
     _add_ray(ev)
     _add_evaluate_checks(ev)
     ev.set_defaults(func=cmd_evaluate)
@@ -353,7 +387,9 @@ def _add_evaluate_output_args(ev: argparse.ArgumentParser) -> None:
         help="leave infeasible rows of --picks out (listed) instead of refusing the file",
     )
     ev.add_argument(
-        "--out", help="output folder (default: none: the summary is printed, nothing written)"
+        "--out",
+        type=path_of("--out"),
+        help="output folder (default: none: the summary is printed, nothing written)",
     )
     ev.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
     _add_overwrite(ev)
@@ -416,17 +452,23 @@ def _add_evaluate_checks(ev: argparse.ArgumentParser) -> None:
     )
 
 
-def _study_parser(sub, name: str, help_text: str) -> argparse.ArgumentParser:
+def _study_parser(
+    sub, name: str, help_text: str, n_help: str | None = None
+) -> argparse.ArgumentParser:
     """A study's parser (sweep, compare, design, robust) with the options they share:
-    object, gripper, physics, pick-points, --out, --overwrite, --no-progress."""
+    object, gripper, physics, pick-points, --out, --overwrite, --no-progress (n_help:
+    as _add_pick_args')."""
     p = sub.add_parser(name, help=help_text)
     _add_object_args(p)
     _add_gripper_args(p)
     _add_physics_args(p)
-    _add_pick_args(p)
-    p.add_argument("--out", help="output folder (default: none: nothing written)")
+    _add_pick_args(p, n_help)
+    p.add_argument(
+        "--out", type=path_of("--out"), help="output folder (default: none: nothing written)"
+    )
     _add_overwrite(p)
     _add_progress(p)
+    _add_yes(p)
     return p
 
 
@@ -505,7 +547,10 @@ def _add_design_parser(sub) -> None:
 def _add_robust_parser(sub) -> None:
     """``mjx-pick robust``."""
     rb = _study_parser(
-        sub, "robust", "robust success probability of the top pick-points under vision error"
+        sub,
+        "robust",
+        "robust success probability of the top pick-points under vision error",
+        "pick-points simulated first, to rank (default: 200; not with --results)",
     )
     rb.add_argument(
         "--results",
@@ -536,7 +581,7 @@ def _add_robust_parser(sub) -> None:
     _add_resume(rb)
     _add_ray(rb)
     _add_grasp_source(rb)
-    rb.set_defaults(func=cmd_robust, n=200)
+    rb.set_defaults(func=cmd_robust)
 
 
 def _add_picks_parser(sub) -> None:
@@ -545,7 +590,9 @@ def _add_picks_parser(sub) -> None:
     _add_object_args(pk)
     _add_gripper_args(pk)
     _add_pick_args(pk)
-    pk.add_argument("--out", required=True, help="output folder (picks.csv and pictures)")
+    pk.add_argument(
+        "--out", type=path_of("--out"), required=True, help="output folder (picks.csv and pictures)"
+    )
     _add_overwrite(pk)
     pk.set_defaults(func=cmd_picks)
 
@@ -614,9 +661,13 @@ def _add_calibrate_parser(sub) -> None:
         "--resume", action="store_true", help="continue an interrupted fit from its checkpoint"
     )
     cb.add_argument(
-        "--out", required=True, help="output folder (contact.toml, loss.png, report.md, ...)"
+        "--out",
+        type=path_of("--out"),
+        required=True,
+        help="output folder (contact.toml, loss.png, report.md, ...)",
     )
     _add_progress(cb)
+    _add_yes(cb)
     cb.set_defaults(func=cmd_calibrate)
 
 
@@ -698,7 +749,9 @@ def _add_report_parser(sub) -> None:
     """``mjx-pick report``."""
     rp = sub.add_parser("report", help="plots, maps, animations, 1:1 template, robot export, HTML")
     rp.add_argument("run", help="an evaluate output folder")
-    rp.add_argument("--out", help="write here (default: into the run folder)")
+    rp.add_argument(
+        "--out", type=path_of("--out"), help="write here (default: into the run folder)"
+    )
     rp.add_argument(
         "--n",
         type=number("report_n", "--n"),
@@ -740,6 +793,7 @@ def _add_export_parser(sub) -> None:
     ep.add_argument("--format", required=True, choices=list(FORMATS), help="the grasp file format")
     ep.add_argument(
         "--out",
+        type=path_of("--out"),
         help="the file to write (default: RUN/grasps_<format>.h5|.json|.yaml); the object's "
         "mesh goes beside it as <stem>_object.obj",
     )
@@ -774,6 +828,7 @@ def _add_validate_parser(sub) -> None:
         "--seed", type=number("seed", "--seed"), default=0, help="seed of the intervals' bootstrap"
     )
     _add_physics_args(va)
+    _add_yes(va)
     va.set_defaults(func=cmd_validate)
 
 
@@ -893,7 +948,7 @@ def _add_trials_plan_parser(steps) -> None:
         type=number("batch_size", "--batch-size"),
         help="simulations per backend call",
     )
-    pl.add_argument("--out", required=True, help="the trials folder")
+    pl.add_argument("--out", type=path_of("--out"), required=True, help="the trials folder")
     _add_overwrite(pl)
     pl.set_defaults(func=cmd_trials_plan)
 

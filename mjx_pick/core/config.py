@@ -226,6 +226,20 @@ def check_fields(obj: Any, owner: str) -> None:
         check_range(owner, f.name, value, lo, hi, lo_open=lo_open, hi_open=hi_open, integer=integer)
 
 
+def check_field(obj: Any, name: str, value: Any, owner: str) -> None:
+    """value checked against field `name` of settings dataclass obj as declared
+    (:func:`setting`), a bound that names another field read from obj: what
+    ``dataclasses.replace(obj, name=value)`` would refuse for the field itself (a search
+    bound, a sweep's values, checked before any variant is drawn)."""
+    f = next(f for f in dataclasses.fields(obj) if f.name == name)
+    if f.metadata.get("range") is None:
+        return
+    lo, hi, lo_open, hi_open = f.metadata["range"]
+    integer = bool(f.metadata.get("integer"))
+    lo, hi = _bound(obj, lo), _bound(obj, hi)
+    check_range(owner, name, value, lo, hi, lo_open=lo_open, hi_open=hi_open, integer=integer)
+
+
 def range_text(rng: tuple | None) -> str:
     """A field's allowed range in words: "0 < x <= 5", "x >= 1", "any"."""
     if rng is None:

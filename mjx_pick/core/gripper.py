@@ -273,11 +273,15 @@ def mjcf_gripper_spec(data: dict, path: Path, folder: Path | None = None) -> Gri
     where = f"{path.name} [{kind}]"
     if kind == "urdf":
         urdf = from_mapping(urdf_gripper.UrdfGripper, table, where=where)
-        mjcf = mjcf_gripper.from_urdf(urdf, folder)
+        try:
+            mjcf = mjcf_gripper.from_urdf(urdf, folder)
+            kin = mjcf_gripper.characterise(mjcf)
+        except ConfigError as err:  # said in the words of the user's [urdf] table
+            raise ConfigError(mjcf_gripper.in_urdf_words(str(err), urdf)) from None
     else:
         mjcf = from_mapping(mjcf_gripper.MjcfGripper, table, where=where)
         mjcf = mjcf_gripper.resolve(mjcf, folder)
-    kin = mjcf_gripper.characterise(mjcf)
+        kin = mjcf_gripper.characterise(mjcf)
     spec = from_mapping(GripperSpec, data, where=path.name)
     return dataclasses.replace(spec, mjcf=mjcf, **measured_fields(kin))
 

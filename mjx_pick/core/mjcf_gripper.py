@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import re
 from pathlib import Path
 from typing import NamedTuple
 
@@ -209,6 +210,33 @@ def from_urdf(urdf: urdf_gripper.UrdfGripper, base_dir: Path) -> MjcfGripper:
         link_contacts=urdf.link_contacts,
         urdf=urdf,
     )
+
+
+# each MjcfGripper field a URDF gripper's TOML sets under its own key ([urdf])
+URDF_KEYS = {
+    "file": "file",
+    "mount_body": "mount_link",
+    "mount_quat": "mount_quat",
+    "pad_left_geoms": "pad_left_links",
+    "pad_right_geoms": "pad_right_links",
+    "actuator": "joint",
+    "link_contacts": "link_contacts",
+}
+
+
+def in_urdf_words(text: str, urdf) -> str:
+    """An MJCF gripper's error as a URDF gripper's TOML names things: its [urdf] keys
+    (``gripper.mjcf.mount_quat`` is ``[urdf] mount_quat``), never the MJCF fields the
+    URDF import made, of which a user's file says nothing."""
+
+    def key(m: re.Match) -> str:
+        field = m[1]
+        if field in URDF_KEYS:
+            return f"[urdf] {URDF_KEYS[field]}"
+        return f"[urdf] file {urdf.file!r}'s model (its {field}, made by the URDF import)"
+
+    text = re.sub(r"gripper\.mjcf\.file = '[^']*'", f"[urdf] file = {urdf.file!r}", text)
+    return re.sub(r"gripper\.mjcf\.(\w+)", key, text).replace("gripper.mjcf:", "[urdf]:")
 
 
 def resolve(mjcf: MjcfGripper, base_dir: Path) -> MjcfGripper:

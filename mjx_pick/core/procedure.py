@@ -26,6 +26,16 @@ if TYPE_CHECKING:  # annotations only: the procedure's module stays light to imp
 G = 9.81
 
 
+# The smallest sag, mm, a lifted part may show before it counts as not lifted:
+# (1 - success_height_fraction) x lift_height_mm, i.e. a lift of at least 5 mm at the
+# default fraction 0.9. Below it the label measures the pads' give and the table
+# contact's reach, not the grasp. Measured 2026-11-28 (MuJoCo C, robotiq-2f85 at the
+# default contact, 8 pick-points each): the 43 g block succeeds 3/8 at a 0.2 mm lift
+# and 8/8 at 0.5 mm; the 123 g disc 0/8 at 0.5 mm and 8/8 at 1 mm (a sag of 0.05-0.1 mm
+# decides them); this floor is five times that.
+LIFT_TOLERANCE_MM = 0.5
+
+
 @dataclasses.dataclass(frozen=True)
 class GraspConfig:
     """Controller and phase settings of one simulated pick."""
@@ -165,6 +175,23 @@ class GraspConfig:
     def __post_init__(self):
         o = "grasp"
         check_fields(self, o)
+        self._check_lift_tolerance()
+
+    def _check_lift_tolerance(self) -> None:
+        """A lift whose success tolerance, (1 - success_height_fraction) x lift height, is
+        below LIFT_TOLERANCE_MM labels the pads' give and the table contact's reach, not
+        the grasp (a 0.001 mm lift fails every pick-point): refused, naming the lift
+        that would do."""
+        tolerance = (1.0 - self.success_height_fraction) * self.lift_height_mm
+        if tolerance < LIFT_TOLERANCE_MM * (1 - 1e-9):  # 0.1 x 5 mm is 0.4999...  in floats
+            need = LIFT_TOLERANCE_MM / (1.0 - self.success_height_fraction)
+            raise ConfigError(
+                f"grasp.lift_height_mm = {self.lift_height_mm:g} with success_height_fraction "
+                f"= {self.success_height_fraction:g} leaves a lifted part {tolerance:.3g} mm "
+                f"of sag before it counts as dropped, below {LIFT_TOLERANCE_MM:g} mm: a label "
+                "would measure the pads' give and the table contact, not the grasp; allowed "
+                f"lift_height_mm >= {need:.3g} at this fraction"
+            )
 
     @property
     def duration_s(self) -> float:
@@ -287,6 +314,25 @@ def fingertip_height_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConf
     # cover a thin part's mid-height (a 3 mm plate is gripped from 0.75 mm up)
     clearance = min(grasp.fingertip_clearance_mm, 0.25 * obj.height_mm)
     return max(clearance, half - 0.5 * gripper.pad_height_mm)
+
+
+def check_clearance(obj: ObjectModel, grasp: GraspConfig) -> None:
+    """Refuse a fingertip clearance that :func:`fingertip_height_mm` would lower without
+    a word: one above a quarter of the object's height (the rule's cap) where the rule
+    applies (grasp_height mid_band, no pick height of the object's own). The default
+    is left to the rule, which lowers it for thin parts by design (docs/physics.md);
+    a value the user chose is refused, naming what is allowed."""
+    value = grasp.fingertip_clearance_mm
+    if obj.pick_height_mm is not None or grasp.grasp_height != "mid_band":
+        return
+    cap = 0.25 * obj.height_mm
+    if value > cap and value != _DEFAULTS["fingertip_clearance_mm"]:
+        raise ConfigError(
+            f"grasp.fingertip_clearance_mm = {value:g} is above a quarter of object "
+            f"{obj.name!r}'s height ({obj.height_mm:g} mm): allowed at most {cap:g} mm, so "
+            "that the pads still cover its mid-height; lower it, or give the fingertips' "
+            "height itself (--pick-height-mm)"
+        )
 
 
 def pad_band_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConfig):

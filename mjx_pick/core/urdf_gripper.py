@@ -103,7 +103,7 @@ def resolve(urdf: UrdfGripper, base_dir: Path) -> UrdfGripper:
     if not path.is_absolute():
         path = (base_dir / path).resolve()
     if not path.is_file():
-        raise ConfigError(f"gripper.urdf.file = {urdf.file!r}: no such file ({path})")
+        raise ConfigError(f"[urdf] file = {urdf.file!r}: no such file ({path})")
     urdf = dataclasses.replace(urdf, file=str(path))
     _Robot.read(urdf.file).check(urdf)
     return urdf
@@ -135,13 +135,13 @@ def model_spec(urdf: UrdfGripper) -> mujoco.MjSpec:
     try:
         spec = mujoco.MjSpec.from_string(robot.mujoco_text())
     except Exception as err:  # noqa: BLE001 - MuJoCo's parse errors are ValueErrors
-        raise ConfigError(f"gripper.urdf.file = {urdf.file!r} does not load: {err}") from err
+        raise ConfigError(f"[urdf] file = {urdf.file!r} does not load: {err}") from err
     for body in spec.bodies:
         geoms = list(body.geoms)
         want = len(robot.collisions(body.name)) if body.name in robot.links else 0
         if len(geoms) != want:
             raise ConfigError(
-                f"gripper.urdf.file = {urdf.file!r}: MuJoCo made {len(geoms)} geom(s) of link "
+                f"[urdf] file = {urdf.file!r}: MuJoCo made {len(geoms)} geom(s) of link "
                 f"{body.name!r}, whose URDF has {want} collision element(s)"
             )
         for k, geom in enumerate(geoms):
@@ -190,10 +190,10 @@ class _Robot:
         try:
             root = _parse(text)
         except ET.ParseError as err:
-            raise ConfigError(f"gripper.urdf.file = {file!r} is not an XML file: {err}") from err
+            raise ConfigError(f"[urdf] file = {file!r} is not an XML file: {err}") from err
         if root.tag != "robot":
             raise ConfigError(
-                f"gripper.urdf.file = {file!r} is not a URDF: its root element is "
+                f"[urdf] file = {file!r} is not a URDF: its root element is "
                 f"<{root.tag}>, not <robot>"
             )
         return cls(path, root)
@@ -207,7 +207,7 @@ class _Robot:
         roots = [name for name in self.links if name not in children]
         if len(roots) != 1:
             raise ConfigError(
-                f"gripper.urdf.file = {str(self.path)!r} has {len(roots)} root links "
+                f"[urdf] file = {str(self.path)!r} has {len(roots)} root links "
                 f"({', '.join(roots) or 'none'}); name the gripper's with mount_link"
             )
         return roots[0]
@@ -221,7 +221,7 @@ class _Robot:
             lo_f = hi_f = math.nan
         if not (math.isfinite(lo_f) and math.isfinite(hi_f) and lo_f < hi_f):
             raise ConfigError(
-                f"gripper.urdf.joint = {joint!r} has no <limit lower=... upper=...> with "
+                f"[urdf] joint = {joint!r} has no <limit lower=... upper=...> with "
                 f"lower < upper (lower={lo}, upper={hi}): its range is the servo's control range"
             )
         return lo_f, hi_f
@@ -234,7 +234,7 @@ class _Robot:
                     raise _missing("link", field, link, self.links)
                 if not self.collisions(link):
                     raise ConfigError(
-                        f"gripper.urdf.{field}: link {link!r} has no <collision> geometry; "
+                        f"[urdf] {field}: link {link!r} has no <collision> geometry; "
                         "the pads touch the object through their collision geoms"
                     )
         if urdf.mount_link and urdf.mount_link not in self.links:
@@ -244,7 +244,7 @@ class _Robot:
         kind = self.joints[urdf.joint].get("type")
         if kind not in _MOVING:
             raise ConfigError(
-                f"gripper.urdf.joint = {urdf.joint!r} is a {kind} joint: the servo drives a "
+                f"[urdf] joint = {urdf.joint!r} is a {kind} joint: the servo drives a "
                 "revolute or prismatic joint"
             )
         self.limits(urdf.joint)
@@ -253,7 +253,7 @@ class _Robot:
                 raise _missing("joint", f"mimic.{follower}", follower, self.joints)
             if self.joints[follower].get("type") not in _MOVING:
                 raise ConfigError(
-                    f"gripper.urdf.mimic.{follower}: joint {follower!r} is a "
+                    f"[urdf] mimic.{follower}: joint {follower!r} is a "
                     f"{self.joints[follower].get('type')} joint, not revolute or prismatic"
                 )
         for link, element in self.links.items():
@@ -277,7 +277,7 @@ class _Robot:
             where = str(path)
         if path is None or not path.is_file():
             raise ConfigError(
-                f"gripper.urdf.file = {str(self.path)!r}: link {link!r}'s collision mesh "
+                f"[urdf] file = {str(self.path)!r}: link {link!r}'s collision mesh "
                 f"{filename!r} is missing ({where})"
             )
         return path.resolve()
@@ -327,6 +327,6 @@ def _missing(kind: str, field: str, name: str, known) -> ConfigError:
     names = sorted(n for n in known if n)
     shown = ", ".join(names[:30]) + (" ..." if len(names) > 30 else "")
     return ConfigError(
-        f"gripper.urdf.{field} = {name!r}: the URDF has no {kind} of that name; "
+        f"[urdf] {field} = {name!r}: the URDF has no {kind} of that name; "
         f"its {kind}s: {shown or '(none)'}"
     )

@@ -19,7 +19,6 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
-from mujoco import mjx
 
 from mjx_pick.core import cache
 from mjx_pick.core.config import ConfigError
@@ -40,6 +39,27 @@ from mjx_pick.kernels import grasp as gk
 # with full-precision products, without changing the process-wide default (a user's own
 # JAX code keeps its setting)
 MATMUL_PRECISION = os.environ.get("MJX_PICK_MATMUL", "highest")
+
+
+def _import_mjx():
+    """``mujoco.mjx``, imported without the lines it prints when warp-lang does not load
+    ("Failed to import warp: ..."): MJX's JAX physics, what this backend runs, never
+    uses Warp, and a run on it has nothing to do with them (the Warp backends say why
+    they cannot run themselves, ``devices.warp_problem``). Anything else it prints is
+    passed on."""
+    import contextlib
+    import io
+
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        from mujoco import mjx
+    for line in printed.getvalue().splitlines():
+        if not line.startswith(("Failed to import warp", "Failed to import mujoco_warp")):
+            print(line)
+    return mjx
+
+
+mjx = _import_mjx()
 
 
 def _precise(fn):

@@ -71,6 +71,22 @@ class BatchRule:
 
 
 @dataclasses.dataclass(frozen=True)
+class Rate:
+    """What one pick-point costs a backend, measured: wall seconds on one unit (a CPU
+    thread, a GPU, a JAX device) per second the pick simulates, at the default time
+    step (``studies.duration`` estimates a run's time from it).
+
+    source: where and when it was measured. full_length: every pick runs the
+    procedure's whole length (no pick ends early). gpu_per_sim_s: a JAX backend's
+    figure on an NVIDIA GPU (per_sim_s: on the CPU)."""
+
+    per_sim_s: float
+    source: str
+    full_length: bool = False
+    gpu_per_sim_s: float | None = None
+
+
+@dataclasses.dataclass(frozen=True)
 class Option:
     """A keyword option of a backend's factory.
 
@@ -116,6 +132,8 @@ class BackendEntry:
         are not counted from the batch).
       cuda_devices: its devices are CUDA ordinals ('cuda:0', ...), not JAX devices.
       note: said when a user chooses it by name (a limit to know).
+      rate: its measured cost per pick-point (:class:`Rate`), from which a run's time
+        is estimated before it starts; None: not measured (no estimate is given).
     """
 
     name: str
@@ -134,6 +152,7 @@ class BackendEntry:
     stops_finished: bool = False
     cuda_devices: bool = False
     note: str = ""
+    rate: Rate | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "name", str(self.name))  # an Impl as its plain name
@@ -166,6 +185,9 @@ ENTRIES: dict[str, BackendEntry] = {
             problem="mjx_pick.engine.warp_direct:warp_problem",
             model_fields="mjx_pick.engine.warp_direct:model_fields",
             cuda_devices=True,
+            # 1,569-1,611 door-opener picks/s on one H100 at the default procedure (1.6
+            # simulated s a pick, duration.expected_pick_s): 1 / (1,590 x 1.6)
+            rate=Rate(3.93e-4, "benchmarks/RESULTS.md, throughput.py, H100, 2026-11-27"),
         ),
         BackendEntry(
             Impl.MJX_WARP,
@@ -182,6 +204,8 @@ ENTRIES: dict[str, BackendEntry] = {
             problem="mjx_pick.engine.devices:warp_problem",
             model_fields="mjx_pick.engine.variants:mjx_warp_fields",
             jax=Jax.DEVICES,
+            # 1,546 door-opener picks/s on one H100 (1.6 simulated s a pick)
+            rate=Rate(4.04e-4, "benchmarks/RESULTS.md, throughput.py, H100, 2026-11-27"),
         ),
         BackendEntry(
             Impl.MJX,
@@ -194,6 +218,17 @@ ENTRIES: dict[str, BackendEntry] = {
             model_fields="mjx_pick.engine.variants:mjx_fields",
             jax=Jax.DEVICES,
             differentiable=True,
+            # every pick its full 2.63 simulated s: 0.85-2.86 s a pick on a 2-core CPU
+            # at the differentiable physics (mean 1.74 / 2.63); on an H100 110 picks/s
+            # (the old pyramidal physics, 10 iterations: the differentiable one's 20 cost
+            # more, so the GPU figure is a floor)
+            rate=Rate(
+                0.66,
+                "benchmarks/RESULTS.md, mjx_physics.py (2-core CPU, 2026-11-27) and "
+                "throughput.py (H100, 2026-11-22)",
+                full_length=True,
+                gpu_per_sim_s=3.5e-3,
+            ),
             note="MJX's JAX physics, kept for derivatives: it runs the differentiable "
             f"physics alone ({differentiable_physics()}) and refuses other settings, saying "
             "what to pass; its labels are not MuJoCo C's at the default physics: for labels "
@@ -211,6 +246,16 @@ ENTRIES: dict[str, BackendEntry] = {
             jax=Jax.CPU,
             reference=True,
             stops_finished=True,
+            # 0.030 CPU s per simulated s of a pick (the block and the door opener,
+            # default and short procedure, benchmarks/duration_rates.py on the 2-core dev
+            # machine, 2026-11-28), at 0.55 of each thread busy (157-166 door-opener
+            # picks/s on 16 threads of an H100 host, RESULTS.md: 0.055 CPU s a pick):
+            # 0.030 / 0.55 wall s per thread
+            rate=Rate(
+                0.054,
+                "benchmarks/duration_rates.py (2-core CPU, 2026-11-28) and RESULTS.md "
+                "throughput.py (16 threads, 2026-11-27)",
+            ),
         ),
     )
 }

@@ -11,6 +11,9 @@ from typing import IO
 
 __all__ = ["ProgressBar", "echo"]
 
+# without a terminal (a log): a progress line at least this often while work is done
+LINE_EVERY_S = 60.0
+
 
 class ProgressBar:
     """A progress display that is also an engine progress callback.
@@ -50,6 +53,7 @@ class ProgressBar:
         self._tqdm = None
         self._printed: tuple[int, int | None] | None = None  # line mode: the last line
         self._next_tenth = 1
+        self._last_line = self._t0
         if enabled and _is_terminal(self.file):
             from tqdm import tqdm
 
@@ -95,13 +99,18 @@ class ProgressBar:
                 self._tqdm.refresh()
             self._tqdm.update(done - self._tqdm.n)
             return
-        # line mode: a line each time another tenth is done (every run's end included)
+        # line mode: a line each time another tenth is done (every run's end included),
+        # and -- so that a log of a long run is never silent for long -- at the first
+        # work done and at least every LINE_EVERY_S seconds
+        since = time.monotonic() - self._last_line
+        due = done > 0 and (self._printed is None or since >= LINE_EVERY_S)
         if total:
             tenth = int(10 * done / total) if done < total else 10
-            if tenth >= self._next_tenth:
-                self._next_tenth = tenth + 1 if done < total else 1
+            if tenth >= self._next_tenth or due:
+                if tenth >= self._next_tenth:
+                    self._next_tenth = tenth + 1 if done < total else 1
                 self._line()
-        elif done and self._printed is None:
+        elif due:
             self._line()
 
     def _line(self) -> None:
@@ -119,6 +128,7 @@ class ProgressBar:
             flush=True,
         )
         self._printed = (done, total)
+        self._last_line = time.monotonic()
 
     def close(self) -> None:
         """End the display: the final state, shown once."""

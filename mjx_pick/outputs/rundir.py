@@ -81,13 +81,23 @@ def check_out(out) -> None:
         )
 
 
-def _usable(path: Path) -> None:
+def check_folder(out) -> None:
+    """The checks of an output folder that write nothing: not empty text, not a file,
+    not a folder of files mjx-pick did not write. ``claim`` makes them first (a
+    refused command leaves nothing behind: no lock file in --out / or /etc); an
+    interface may make them before other questions (how long a run will take)."""
+    if out is None:
+        return
+    check_out(out)
+    path = Path(out)
     if path.exists() and not path.is_dir():
         raise ConfigError(f"--out {path}: is a file, not a folder")
     if path.is_dir() and read_manifest(path) is None:
-        # refused before the folder's lock file or a probe is made in it: a refused
-        # command writes nothing (--out / or --out /etc, as root, are left as they were)
         _refuse_foreign(path)
+
+
+def _usable(path: Path) -> None:
+    check_folder(path)
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:

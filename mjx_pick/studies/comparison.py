@@ -5,6 +5,7 @@ Details: docs/studies.md (studies/comparison.py).
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import math
 import time
@@ -14,7 +15,14 @@ import numpy as np
 import pyarrow as pa
 
 from mjx_pick.core import pickpoints as pp
-from mjx_pick.core.config import ConfigError, check_range, to_dict, write_json, write_parquet
+from mjx_pick.core.config import (
+    ConfigError,
+    check_field,
+    check_range,
+    to_dict,
+    write_json,
+    write_parquet,
+)
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.metrics import mcnemar_p, rate_summary, results_table
 from mjx_pick.core.objects import ObjectModel
@@ -138,9 +146,12 @@ def compare(
         raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
     if len(grippers) < 1:
         raise ConfigError("compare needs at least one gripper")
-    names = [g.name for g in grippers]
-    if len(set(names)) != len(names):
-        raise ConfigError(f"gripper names must differ: {names}")
+    count = collections.Counter(g.name for g in grippers)
+    repeated = sorted(n for n, c in count.items() if c > 1)
+    if repeated:
+        shown = ", ".join(f"{n!r} ({count[n]} times)" for n in repeated[:5])
+        more = f" and {len(repeated) - 5} more" if len(repeated) > 5 else ""
+        raise ConfigError(f"gripper names must differ: {shown}{more}")
     base = base or Settings()
     n, seed, pick_config = opts.n_or(200), opts.seed, opts.picks
     pp.check_raster(obj, pick_config)  # before the stroke checks
@@ -336,25 +347,38 @@ def sample_variants(
             )
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ConfigError(f"design bound {name} = {lo:g}:{hi:g} must have lo < hi")
+        for end in (lo, hi):  # a bound outside the field's range: refused as a flag is
+            try:
+                check_field(gripper, name, end, "gripper")
+            except ConfigError as err:
+                raise ConfigError(f"design bound {name}={lo:g}:{hi:g}: {err}") from None
     if not bounds:
         raise ConfigError("a design search needs at least one bound (e.g. finger_width_mm=10:40)")
     check_range("design", "variants", k, 1, 10_000)
     sampler = qmc.LatinHypercube(d=len(bounds), seed=seed)
     lo = np.array([b[0] for b in bounds.values()])
     hi = np.array([b[1] for b in bounds.values()])
-    out, tries = [], 0
+    out, names, tries = [], set(), 0
     while len(out) < k and tries < 20 * k:
         u = sampler.random(k - len(out))
         tries += len(u)
         for row in lo + u * (hi - lo):
             values = {name: float(round(v, 1)) for name, v in zip(bounds, row, strict=True)}
             label = "-".join(f"{_short(n)}{v:g}" for n, v in values.items())
+            if label in names:  # the same design, rounded: drawn again
+                continue
             try:
                 out.append(dataclasses.replace(gripper, name=f"{gripper.name}~{label}", **values))
             except ConfigError:
                 continue  # e.g. fingers that cannot fit the stroke: draw again
+            names.add(label)
     if len(out) < k:
-        raise ConfigError(f"could draw only {len(out)} valid gripper variants within {bounds}")
+        shown = ", ".join(f"{n}={a:g}:{b:g}" for n, (a, b) in bounds.items())
+        raise ConfigError(
+            f"design: could draw only {len(out)} distinct valid gripper variants within "
+            f"{shown} (each value rounded to 0.1 of its unit) of the {k} asked for: ask for "
+            "fewer (--variants) or widen the bounds"
+        )
     return out
 
 

@@ -30,7 +30,7 @@ from mjx_pick.core.gripper import GripperSpec, load_gripper
 from mjx_pick.core.metrics import summarize
 from mjx_pick.core.objects import ObjectModel, load_object
 from mjx_pick.core.physics import ContactParams, SolverParams
-from mjx_pick.core.procedure import GraspConfig, min_grasp_force_n
+from mjx_pick.core.procedure import GraspConfig, check_clearance, min_grasp_force_n
 from mjx_pick.core.scene import Scene
 from mjx_pick.core.settings import Settings
 from mjx_pick.engine import interrupts
@@ -181,6 +181,7 @@ def evaluate(
         options or request).
     """
     req, opts = split_fields(EvaluateRequest, request, options, fields)
+    _refuse_unused(req, opts)  # before n takes its default
     opts = dataclasses.replace(opts, n=opts.n_or(1000), pick_config=opts.picks)
     t_object, given = time.perf_counter(), isinstance(obj, ObjectModel)
     obj, gripper = _resolve(obj, gripper)
@@ -206,6 +207,37 @@ def evaluate(
         return _evaluate(ctx, _Request(obj, settings, req, opts))
     finally:
         runner.close()
+
+
+def _refuse_unused(req: EvaluateRequest, opts: RunOptions) -> None:
+    """Refuse a combination whose one part the run would ignore: n with given
+    pick-points (their rows are the run) or in Optimization mode (until and max_n
+    decide its size), given pick-points in Optimization mode (it draws its own until
+    `until` reach min_score), max_n without until, skip_infeasible without a picks
+    file (each named as the CLI's flag)."""
+    given = req.picks is not None
+    what = "the pick-points given (--picks)"
+    problems = []
+    if given and opts.n is not None:
+        problems.append(f"--n {opts.n} with {what}: the run is their rows; leave out --n")
+    elif req.until is not None and opts.n is not None:
+        problems.append(
+            f"--n {opts.n} with --until {req.until}: Optimization mode simulates until "
+            f"{req.until} pick-points reach --min-score, at most --max; leave out --n"
+        )
+    if given and req.until is not None:
+        problems.append(
+            f"--until {req.until} (Optimization mode) draws its own pick-points until "
+            f"{req.until} reach --min-score: it cannot take {what}; leave out one of them"
+        )
+    if req.max_n is not None and req.until is None:
+        problems.append(f"--max {req.max_n} bounds Optimization mode only: give --until K too")
+    if req.skip_infeasible and not isinstance(req.picks, str | Path):
+        problems.append("--skip-infeasible applies to a picks file (--picks FILE) only")
+    if len(problems) == 1:
+        raise ConfigError(problems[0])
+    if problems:
+        raise ConfigError(f"{len(problems)} problems: " + "; ".join(problems))
 
 
 def _numbers(req: EvaluateRequest) -> EvaluateRequest:
@@ -239,6 +271,7 @@ def _settings(gripper: GripperSpec, req: EvaluateRequest) -> Settings:
 def _check(obj: ObjectModel, settings: Settings, req: EvaluateRequest, opts: RunOptions) -> None:
     """Every check of the inputs that can fail before a scene, a runner or a folder."""
     settings.grasp.check_gripper(settings.gripper)
+    check_clearance(obj, settings.grasp)
     source = check_source(opts.grasps, opts.depth_mm)
     if source != TOPDOWN:
         if req.picks is not None:

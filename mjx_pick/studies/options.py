@@ -19,7 +19,7 @@ from mjx_pick.core.objects import ObjectModel
 from mjx_pick.engine.chunks import ChunkStore, open_store
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.simulator import Simulator, marking_stops, study_simulator
-from mjx_pick.outputs.rundir import finish, release
+from mjx_pick.outputs.rundir import check_out, finish, release
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,6 +82,7 @@ class RunOptions:
         for name in ("n", "seed", "batch_size", "chunk_size"):
             value = numbers.check_optional(name, getattr(self, name))
             object.__setattr__(self, name, value)
+        check_out(self.out)  # out="" is no folder (the current one would be written)
 
     @classmethod
     def of(cls, options: RunOptions | None = None, /, **fields) -> RunOptions:

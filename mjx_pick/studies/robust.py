@@ -405,6 +405,11 @@ def robust_best(
     """
     req, opts = split_fields(RobustBest, request, options, fields)
     opts.only("robust", "n", *_ROBUST_FIELDS)
+    if req.results is not None and opts.n is not None:  # ignored otherwise, without a word
+        raise ConfigError(
+            f"--n {opts.n} with --results {req.results}: the pick-points ranked are that "
+            "run's; leave out --n (or --results, to simulate n pick-points first)"
+        )
     n, results, top_k = opts.n_or(1000), req.results, req.top_k
     req.check()
     check_range("robust", "top_k", top_k, 1, 100_000)

@@ -29,7 +29,7 @@ from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.metrics import rate_summary, results_table
 from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.physics import ContactParams, SolverParams
-from mjx_pick.core.procedure import GraspConfig
+from mjx_pick.core.procedure import GraspConfig, check_clearance
 from mjx_pick.core.settings import Settings
 from mjx_pick.engine.simulator import Simulator, showing_progress
 from mjx_pick.outputs.rundir import portable_object
@@ -225,6 +225,7 @@ def _refuse_impossible(obj, combos: list[dict], settings: list, pick_config) -> 
         values = ", ".join(f"{k}={v:g}" for k, v in combo.items())
         try:
             s.grasp.check_gripper(s.gripper)
+            check_clearance(obj, s.grasp)
         except ConfigError as err:
             raise ConfigError(f"sweep variant {values}: {err}") from None
         key = (s.gripper, s.grasp)
@@ -275,7 +276,7 @@ def sweep(
     request.update(params=to_dict(params), n=n, seed=seed, random=random)
     request.update(picks=to_dict(pick_config))
     combos = variants(params, random, seed)
-    settings = [_settings(base, combo) for combo in combos]
+    settings = [_variant_settings(base, combo) for combo in combos]
     _refuse_impossible(obj, combos, settings, pick_config)  # before any draw or folder
     numbers.check("sweep_simulations", len(combos) * n, "variants x pick-points")
     with opts.opening("sweep", obj, request, simulator) as study:
@@ -303,6 +304,16 @@ def sweep(
             _write_sweep(study.out_dir, {**config, **meta}, table, summaries, params)
             study.close(config, meta)
         return SweepResult(table, summaries, timing, study.out_dir)
+
+
+def _variant_settings(base: Settings, combo: dict) -> Settings:
+    """A variant's settings (:func:`_settings`); a value its settings refuse is a
+    ConfigError naming the variant as well as the field."""
+    try:
+        return _settings(base, combo)
+    except ConfigError as err:
+        values = ", ".join(f"{k}={v:g}" for k, v in combo.items())
+        raise ConfigError(f"sweep variant {values}: {err}") from None
 
 
 def _settings(base: Settings, combo: dict) -> Settings:

@@ -10,16 +10,17 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_pick.core import numbers
 from mjx_pick.core.config import ConfigError, write_atomic, write_json
 from mjx_pick.core.escape import html_text
 from mjx_pick.core.metrics import label_check_rows, rate_text
 from mjx_pick.outputs.progress import ProgressBar
 from mjx_pick.outputs.reporting.animation import animate, render_pool
 from mjx_pick.outputs.reporting.figures import force_plot, maps
-from mjx_pick.outputs.reporting.robot import robot_picks
+from mjx_pick.outputs.reporting.robot import frame_matrix, robot_picks
 from mjx_pick.outputs.reporting.run import Run, read_parquet
 from mjx_pick.outputs.reporting.template import PAPERS_MM, page_misfit, positioning_template
-from mjx_pick.outputs.rundir import record_file, recording, remove_recorded
+from mjx_pick.outputs.rundir import check_out, record_file, recording, remove_recorded
 
 __all__ = ["report"]
 
@@ -48,6 +49,12 @@ def report(
     every anim_every control ticks, each view anim_size = (width, height) pixels.
     progress: a progress bar of the report's parts on stderr.
     """
+    # every input checked before the first file is written (a bad frame once refused
+    # only after the figures and the PDF)
+    check_out(out)
+    if frame is not None:
+        frame_matrix(frame)
+    n, k = numbers.check("report_n", n, "--n"), numbers.check("report_k", k, "--k")
     run = Run.load(run_dir)
     if anim_every < 1:
         raise ConfigError(f"--anim-every {anim_every}: allowed >= 1 (control ticks per frame)")

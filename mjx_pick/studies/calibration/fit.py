@@ -20,6 +20,7 @@ from mjx_pick.outputs.rundir import claim, config_hash, finish, record_file, rem
 from mjx_pick.studies.calibration import estimators as E
 from mjx_pick.studies.calibration.identify import (
     at_bound,
+    bound_facts,
     data_nll,
     identifiability,
     theta_of_z,
@@ -370,6 +371,7 @@ def _finish(
         for i, n in enumerate(problem.names):
             side = at_bound(space, z, i)
             ident[n] = {"identified": None, "at_bound": side, "interval": None}
+            ident[n].update(bound_facts(space, z, i))
             if side is not None:
                 ident[n]["written"] = values[n] = initial[n]
         lost = tuple(n for n in problem.names if ident[n]["at_bound"])

@@ -80,12 +80,35 @@ def identifiability(
 
 def _mark_at_bound(out: dict, space, z0: np.ndarray) -> None:
     """Sets each parameter's 'at_bound' in out (in place) and withdraws 'identified'
-    where the optimum z0 (P,) is pressed on a bound: not fitted."""
+    where the optimum z0 (P,) is pressed on a bound or its interval is cut by one: not
+    fitted. What a message may say of it (:func:`bound_facts`) apart: whether the
+    optimum itself lies on the bound, or only its interval reaches it."""
     for i, name in enumerate(space.names):
         side = at_bound(space, z0, i, out[name]["half_width_z"])
         out[name]["at_bound"] = side
+        out[name].update(bound_facts(space, z0, i, out[name].get("interval")))
         if side is not None:
             out[name]["identified"] = False
+
+
+def bound_facts(space, z, i: int, interval=None) -> dict:
+    """What is true of parameter i and its bounds, for messages: its bounds (natural
+    units), the bound its value z[i] lies on ('on_bound': 'lower', 'upper' or None) and
+    the bounds its 95 % interval reaches ('interval_reaches': a list, empty without an
+    interval)."""
+    lo, hi = float(space.lo[i]), float(space.hi[i])
+    reaches = []
+    if interval is not None:
+        close = 1e-3 * (hi - lo)
+        reaches = [
+            s
+            for s, hit in (
+                ("lower", interval[0] <= lo + close),
+                ("upper", interval[1] >= hi - close),
+            )
+            if hit
+        ]
+    return {"bounds": [lo, hi], "on_bound": at_bound(space, z, i), "interval_reaches": reaches}
 
 
 def _correlation(jac: np.ndarray) -> list:

@@ -99,6 +99,10 @@ def contact_toml(result, problem) -> str:
     lines += ["", "[calibrated]"]
     lines.append(f"parameters = {toml_value(list(problem.names))}")
     lines.append(f"not_identified = {toml_value(list(result.not_identified))}")
+    # without the check (--no-identify) an empty list above says nothing: said so here
+    ident = result.identifiability or {}
+    checked = all((ident.get(n) or {}).get("interval") is not None for n in problem.names)
+    lines.append(f"identifiability_checked = {toml_value(checked)}")
     if "force_offset_n" in result.values:
         # not a contact parameter: the gripper squeezes F_d + this when set to F_d
         lines.append(f"force_offset_n = {result.values['force_offset_n']!r}")
@@ -193,13 +197,31 @@ def _loss_plot(result, path: Path) -> None:
     save_png(fig, path)
 
 
+def bound_words(info: dict) -> str:
+    """What a parameter's identifiability entry says of its bounds, in words computed
+    from where its value and its interval lie ("" where neither touches one): the
+    optimum ON a bound, or only its 95 % interval reaching one -- never the first for
+    the second (a start of 0.86 is not "at its lower bound" 0.05 because its
+    interval is wide)."""
+    lo, hi = info.get("bounds") or (None, None)
+    value_of = {"lower": lo, "upper": hi}
+    side = info.get("on_bound")
+    if side is not None:
+        return f"fit at its {side} bound {value_of[side]:.4g}"
+    reaches = info.get("interval_reaches") or []
+    if reaches:
+        ends = " and ".join(f"{s} bound {value_of[s]:.4g}" for s in reaches)
+        return f"its 95 % interval reaches its {ends}"
+    return ""
+
+
 def what_was_written(result, name: str) -> str:
     """One sentence: the value written for a parameter the data did not identify, and
     why that one (its start, or its interval's end; at a bound without intervals)."""
     info = (result.identifiability or {}).get(name, {})
     start, written = result.initial[name], result.values[name]
-    side = info.get("at_bound")
-    bound = f"its optimum lies on its {side} bound; " if side else ""
+    words = bound_words(info)
+    bound = f"{words}; " if words else ""
     if abs(written - start) <= 1e-12 * max(1.0, abs(start)):
         return f"{name}: {bound}kept at its starting value {start:.4g}"
     return (
@@ -244,6 +266,10 @@ def report_md(result, problem) -> str:
             "grip force; or the optimum lies on a bound, which stopped the search there. "
             "Measure what moves them (traces, other grip forces) to fit them.",
         ]
+    if any((ident.get(n) or {}).get("interval") is None for n in problem.names):
+        lines += ["", "Identifiability was not checked (--no-identify): no interval."]
+    if not result.history:
+        lines += ["", "No estimator step was taken (0 steps): the values are the start's."]
     if getattr(problem, "notes", None):
         lines += ["", "Notes:"] + [f"- {note}" for note in problem.notes]
     if result.history:
