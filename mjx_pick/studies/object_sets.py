@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from mjx_pick.core.config import ConfigError, write_json, write_parquet
+from mjx_pick.core.config import ConfigError, read_text, write_json, write_parquet
 from mjx_pick.core.gripper import GripperSpec, load_gripper
 from mjx_pick.core.objects import MESH_SUFFIXES, load_object
 from mjx_pick.outputs.rundir import claim, config_hash, fail, finish
@@ -92,7 +92,7 @@ def read_parts(
 
 
 def _manifest(path: Path, unit: str | None) -> list[Part]:
-    text = path.read_bytes().decode("utf-8-sig", errors="strict")
+    text = read_text(path, "parts manifest")
     rows = list(csv.DictReader(io.StringIO(text)))
     if not rows:
         raise ConfigError(f"manifest {path} names no part (a header and a row per part)")

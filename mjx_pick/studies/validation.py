@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from mjx_pick.core.config import ConfigError, to_dict, write_json, write_parquet
+from mjx_pick.core.config import ConfigError, read_text, to_dict, write_json, write_parquet
 from mjx_pick.core.grasp_checks import REASON_WORDS, REASONS, GraspChecker
 from mjx_pick.core.grasps import from_poses, rigid_poses, rz
 from mjx_pick.core.gripper import GripperSpec, load_gripper, preset_names
@@ -103,12 +103,7 @@ def read_trials(path: str | Path) -> Trials:
     """A TRIALS.csv, read and checked before any work: every error names the line and
     the column (docs/formats.md gives the columns)."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"trials file {str(path)!r} does not exist")
-    try:
-        text = path.read_bytes().decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise ConfigError(f"trials file {str(path)!r} is not UTF-8 text ({err.reason})") from None
+    text = read_text(path, "trials")  # the one reader of a user's text files
     rows = list(csv.DictReader(io.StringIO(text)))
     if not rows:
         raise ConfigError(f"trials file {path} holds no trials (a header and a row per trial)")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_pick.core.config import ConfigError
+from mjx_pick.core.config import ConfigError, read_text
 from mjx_pick.core.grasps import rigid_poses
 from mjx_pick.outputs.exchange.poses import GraspLabels
 
@@ -39,7 +39,7 @@ def write(labels: GraspLabels, extra: dict) -> str:
 
 def read(path: Path) -> GraspLabels:
     """A CSV of grasp poses; every error names the row and the column."""
-    text = Path(path).read_text(encoding="utf-8-sig")
+    text = read_text(path, "grasp poses CSV")
     rows = list(csv.DictReader(io.StringIO(text)))
     if not rows:
         raise ConfigError(f"{path} holds no grasp rows (a header and one row per grasp)")
