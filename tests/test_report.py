@@ -288,7 +288,11 @@ def test_a_part_larger_than_the_page_skips_its_template_and_reports_the_rest(tmp
     bar = mp.object_from_polygon(box(-115, -10, 115, 10), thickness_mm=10, mass_g=60)
     out = tmp_path / "bar"
     mp.evaluate(bar, n=2, seed=0, grasp=FAST, backend="mujoco", out=out, n_traces=1)
-    (out / "template_a4.pdf").write_bytes(b"an earlier report's")
+    from mjx_pick.core.config import write_atomic
+    from mjx_pick.outputs.rundir import recording
+
+    with recording(out):  # an earlier report's, recorded as a report records its files
+        write_atomic(out / "template_a4.pdf", b"an earlier report's")
     assert main(["report", str(out), "--no-animations"]) == 0
     text = capsys.readouterr().out
     assert "templates: none" in text

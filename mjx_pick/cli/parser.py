@@ -255,7 +255,8 @@ def _add_progress(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-progress",
         action="store_true",
-        help="no progress bar (on stderr; without a terminal: a line every 10 percent)",
+        help="no progress bar (on stderr; without a terminal: a line at the first work done, "
+        "then every 10 percent and at least every minute)",
     )
 
 
