@@ -7,9 +7,18 @@ then the same part again) and once with ``--no-cache`` (today's cost without it)
 * ``photo``: the shipped door-opener photo object, ``--n-photo`` picks;
 * ``sweep``: 8 finger widths x ``--n-sweep`` picks (``sweep --param gripper.finger_width_mm``);
 * ``design``: ``design door_opener --bound finger_width_mm=10:40``, design's defaults
-  otherwise (12 variants, 3 rounds).
+  otherwise (12 variants, 3 rounds);
+* ``linkage``: the door opener with the robotiq-2f85-linkage MJCF gripper, ``--n-linkage``
+  picks (its quasi-static close: computed, or read from the cache);
+* ``session``: the mesh case's command answered twice in ONE new process, through
+  ``mjx_pick.Session`` (a warm process): "first" and "second" are its two calls (the
+  same command), each call's wall time and breakdown; the process's own wall time and
+  import beside them. Its "second" against the mesh case's "second" (a new process for
+  a part seen before) is what a warm process saves; with both, the two tables are
+  compared too.
 
-``--runs`` picks which of the three runs to make (a GPU call's time is short).
+``--runs`` picks which of the three runs to make (a GPU call's time is short; the
+session case makes its one process for "first" or "second").
 
 It also checks that the cache changes no result: the mesh case's ``results.parquet``
 with and without the cache must be the same table. Writes one JSON under
@@ -49,6 +58,25 @@ def run(cmd: list[str], env: dict) -> dict:
     return {"wall_s": round(wall, 2), "tail": done.stdout.strip().splitlines()[-3:]}
 
 
+# the session case's process: the mesh command answered twice through one Session
+SESSION = """
+import json, sys, time
+t0 = time.perf_counter()
+import mjx_pick as mp
+imported = time.perf_counter() - t0
+backend, mesh, mass_g, n, out = sys.argv[1:6]
+calls = {}
+with mp.Session(backend) as s:
+    for label in ("first", "second"):
+        t = time.perf_counter()
+        part = s.object(mesh, unit="m", mass_g=float(mass_g))  # read once, then kept
+        costs = {"object_s": time.perf_counter() - t}
+        ev = s.evaluate(part, n=int(n), out=f"{out}_{label}", fixed_costs=costs)
+        calls[label] = {"wall_s": round(time.perf_counter() - t, 2), "time_s": ev.summary["time_s"]}
+print(json.dumps({"import_s": round(imported, 2), "calls": calls}))
+"""
+
+
 def breakdown(out: Path) -> dict | None:
     """evaluate's fixed-cost breakdown (summary.json), or a sweep's timing (config.json:
     compile and run seconds, scenes built, compiled programs)."""
@@ -67,7 +95,10 @@ def main() -> None:
     ap.add_argument("--n-mesh", type=int, default=1024)
     ap.add_argument("--n-photo", type=int, default=200)
     ap.add_argument("--n-sweep", type=int, default=512)
-    ap.add_argument("--cases", default="mesh,photo,sweep", help="of mesh,photo,sweep,design")
+    ap.add_argument("--n-linkage", type=int, default=64)
+    ap.add_argument(
+        "--cases", default="mesh,photo,sweep", help="of mesh,photo,sweep,design,linkage,session"
+    )
     ap.add_argument(
         "--runs", default="no_cache,first,second", help="which of no_cache,first,second"
     )
@@ -105,6 +136,14 @@ def main() -> None:
             "--n",
             str(args.n_sweep),
         ],
+        "linkage": [
+            "evaluate",
+            "door_opener",
+            "--gripper",
+            "robotiq-2f85-linkage",
+            "--n",
+            str(args.n_linkage),
+        ],
     }
     record = {
         "date": datetime.date.today().isoformat(),
@@ -119,6 +158,9 @@ def main() -> None:
     }
     for name in args.cases.split(","):
         shutil.rmtree(work / "cache", ignore_errors=True)  # a part never seen
+        if name == "session":
+            record["cases"][name] = session_case(cli, args, mesh, work, env)
+            continue
         rows = {}
         runs = {"no_cache": ["--no-cache"], "first": [], "second": []}
         for label, extra in ((k, runs[k]) for k in args.runs.split(",")):
@@ -129,17 +171,45 @@ def main() -> None:
             print(name, label, rows[label]["wall_s"], "s", rows[label]["time_s"], flush=True)
         rows["command"] = " ".join(["mjx-pick", *cases[name], *common])
         record["cases"][name] = rows
-    if "mesh" in record["cases"] and {"no_cache", "second"} <= set(args.runs.split(",")):
-        import pyarrow.parquet as pq
+    import pyarrow.parquet as pq
 
+    if "mesh" in record["cases"] and {"no_cache", "second"} <= set(args.runs.split(",")):
         a = pq.read_table(work / "mesh_no_cache" / "results.parquet")
         b = pq.read_table(work / "mesh_second" / "results.parquet")
         record["mesh_tables_equal"] = bool(a.equals(b))
         print("mesh results.parquet equal with and without the cache:", a.equals(b))
+    both = [work / "mesh_second" / "results.parquet", work / "session_second" / "results.parquet"]
+    if all(f.is_file() for f in both):
+        equal = pq.read_table(both[0]).equals(pq.read_table(both[1]))
+        record["session_tables_equal"] = bool(equal)
+        print("mesh results.parquet equal from a new process and a session's second call:", equal)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(record, indent=2) + "\n")
     shutil.rmtree(work, ignore_errors=True)
     print(f"written {args.out}")
+
+
+def session_case(cli: list[str], args, mesh: str, work: Path, env: dict) -> dict:
+    """The session case: one new process answering the mesh command twice through
+    ``mjx_pick.Session`` (its calls' wall times and breakdowns, the process's wall)."""
+    cmd = [sys.executable, "-c", SESSION, args.backend, mesh, str(args.mass_g)]
+    cmd += [str(args.n_mesh), str(work / "session")]
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT)
+    wall = time.perf_counter() - t0
+    if done.returncode != 0:
+        sys.stderr.write(done.stdout + done.stderr)
+        raise SystemExit("failed: the session case")
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    rows = {"process_wall_s": round(wall, 2), "import_s": out["import_s"], **out["calls"]}
+    for label, call in out["calls"].items():
+        print("session", label, call["wall_s"], "s", call["time_s"], flush=True)
+    print("session process", rows["process_wall_s"], "s", flush=True)
+    rows["command"] = (
+        f"mjx_pick.Session({args.backend!r}): evaluate({mesh}, unit='m', "
+        f"mass_g={args.mass_g:g}, n={args.n_mesh}) twice in one process"
+    )
+    return rows
 
 
 if __name__ == "__main__":

@@ -50,6 +50,7 @@ _PUBLIC = {
     "Evaluation": "studies.evaluation",
     "EvaluateRequest": "studies.evaluation",
     "evaluate": "studies.evaluation",
+    "Session": "studies.session",
     "ParamSpec": "studies.sweeps",
     "sweep": "studies.sweeps",
     "compare": "studies.comparison",

@@ -54,6 +54,8 @@ FILE_SECONDS = {
     "notebooks/throughput.ipynb": 40,
     "notebooks/calibration.ipynb": 30,
     "tests/test_mesh_import.py": 40,
+    "tests/test_cache.py": 45,
+    "tests/test_session.py": 30,
     "tests/test_trials.py": 25,
     "tests/test_pinned.py": 25,
     "tests/test_simulation.py": 20,

@@ -276,3 +276,113 @@ def test_the_engine_turns_on_the_compilation_cache_unless_bypassed(cache_dir, sw
         assert lines[1:] == [str(cache_dir / "jax"), "True"]
     else:
         assert lines[1] == "None"
+
+
+# ------------------------------------------------------------ an MJCF gripper's close
+
+LINKAGE = "robotiq-2f85-linkage"
+
+
+def same_fields(a, b) -> None:
+    """Two dataclass values equal field by field, arrays bit for bit (dtype and shape too)."""
+    import dataclasses
+
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and x.shape == y.shape, f.name
+            assert np.array_equal(x, y, equal_nan=True), f.name
+        else:
+            assert type(x) is type(y) and x == y, f.name
+
+
+def model_values(m) -> dict:
+    """Every array and number of a compiled MjModel and of its option, statistic and
+    visual structs, by name."""
+    out = {}
+    groups = [("", m)] + [(f"{g}.", getattr(m, g)) for g in ("opt", "stat", "vis")]
+    for prefix, obj in groups:
+        for name in dir(obj):
+            value = getattr(obj, name) if not name.startswith("_") else None
+            if isinstance(value, np.ndarray | int | float):
+                out[prefix + name] = np.asarray(value)
+    return out
+
+
+def same_model(a, b) -> None:
+    va, vb = model_values(a), model_values(b)
+    assert va.keys() == vb.keys()
+    differ = [k for k in va if not np.array_equal(va[k], vb[k], equal_nan=va[k].dtype.kind == "f")]
+    assert not differ, differ
+
+
+def test_an_mjcf_grippers_close_is_read_back_bit_for_bit(cache_dir, monkeypatch):
+    """The linkage's quasi-static close (seconds of MuJoCo C steps in every process that
+    loads it) is computed once and then read from the cache: its Kinematics, the scene
+    built on it (model arrays, index, MJCF text) and a short run's labels are those of
+    a close computed without the cache."""
+    import mjx_pick as mp
+    from mjx_pick.core import mjcf_gripper
+    from mjx_pick.engine.backend import make_backend
+    from mjx_pick.engine.inputs import make_inputs
+
+    monkeypatch.setenv(cache.ENV_SWITCH, "0")
+    mjcf_gripper.characterise.cache_clear()
+    grasp = mp.GraspConfig(close_timeout_s=1.0, lift_height_mm=30.0, hold_s=0.3)
+    block = mp.load_object("block")
+    gripper = mp.load_gripper(LINKAGE)
+
+    def scene_and_labels():
+        scene = mp.build_scene(block, gripper, None, None, grasp)
+        checker = mp.FeasibilityChecker(block, gripper, grasp=grasp)
+        picks = checker.batch(
+            np.arange(2), np.zeros(2), np.array([0.0, 2.0]), np.zeros(2), mode="user"
+        )
+        backend = make_backend("mujoco", scene, grasp, batch_size=2)
+        out, _ = backend.run(make_inputs(scene, grasp, picks))
+        return scene, out
+
+    computed = mjcf_gripper.characterise(gripper.mjcf)
+    fresh, fresh_out = scene_and_labels()
+    assert not cache_dir.exists()  # bypassed: nothing written
+    monkeypatch.delenv(cache.ENV_SWITCH)
+    calls = []
+    real = mjcf_gripper._close
+    monkeypatch.setattr(mjcf_gripper, "_close", lambda *a: calls.append(1) or real(*a))
+    mjcf_gripper.characterise.cache_clear()
+    same_fields(computed, mjcf_gripper.characterise(gripper.mjcf))
+    assert len(calls) == 1
+    mjcf_gripper.characterise.cache_clear()  # a new process, as far as the close goes
+    read = mjcf_gripper.characterise(gripper.mjcf)
+    assert len(calls) == 1, "the second close was computed again"
+    same_fields(computed, read)
+    assert computed.drive_map() == read.drive_map()
+    scene, out = scene_and_labels()
+    assert len(calls) == 1
+    same_model(fresh.model, scene.model)
+    assert scene.index == fresh.index and scene.xml == fresh.xml
+    assert out.keys() == fresh_out.keys()
+    for k in out:
+        assert np.array_equal(out[k], fresh_out[k], equal_nan=True), k
+
+
+def test_a_changed_gripper_is_another_close_and_a_corrupt_one_is_recomputed(cache_dir, monkeypatch):
+    import dataclasses
+
+    import mjx_pick as mp
+    from mjx_pick.core import mjcf_gripper
+
+    mjcf = mp.load_gripper(LINKAGE).mjcf
+    stiffer = dataclasses.replace(mjcf, actuator_kp=2.0 * (mjcf.actuator_kp or 1.0))
+    mjcf_gripper.characterise.cache_clear()
+    mjcf_gripper.characterise(mjcf)
+    mjcf_gripper.characterise(stiffer)
+    entries = sorted((cache_dir / "objects").glob("gripper_close-*.npz"))
+    assert len(entries) == 2  # the servo's override is part of the compiled model
+    good = mjcf_gripper.characterise(mjcf)
+    for entry in entries:
+        entry.write_bytes(b"not a zip file")
+    mjcf_gripper.characterise.cache_clear()
+    with pytest.warns(cache.CacheWarning, match="unreadable"):
+        again = mjcf_gripper.characterise(mjcf)
+    same_fields(good, again)

@@ -1,4 +1,4 @@
-"""An on-disk cache of pure, expensive results: object preparation across processes.
+"""An on-disk cache of pure, expensive results (object and gripper preparation).
 
 Details: docs/model.md (core/cache.py).
 """
@@ -96,6 +96,30 @@ def digest(*parts: bytes | str | np.ndarray) -> str:
             p = p.encode()
         h.update(len(p).to_bytes(8, "little"))
         h.update(p)
+    return h.hexdigest()
+
+
+def code_digest(*modules: str) -> str:
+    """sha256 of the named modules' source files (``"mjx_pick.core.scene"``): the code that
+    computes an entry, for its key. This package's version changes with a release, not
+    with an edit; an entry whose code was edited since it was written is then never found.
+    A module without a readable source file is named by its name alone."""
+    return _code_digest(tuple(sorted(modules)))
+
+
+@functools.cache
+def _code_digest(modules: tuple[str, ...]) -> str:
+    import importlib.util
+
+    h = hashlib.sha256()
+    for name in modules:
+        h.update(name.encode())
+        spec = importlib.util.find_spec(name)
+        origin = spec.origin if spec is not None else None
+        try:
+            h.update(Path(origin).read_bytes() if origin else b"")
+        except OSError:
+            pass
     return h.hexdigest()
 
 

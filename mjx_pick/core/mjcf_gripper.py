@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import re
 from pathlib import Path
 from typing import NamedTuple
@@ -14,7 +15,7 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
-from mjx_pick.core import urdf_gripper
+from mjx_pick.core import cache, urdf_gripper
 from mjx_pick.core.config import ConfigError, check_range, from_mapping
 from mjx_pick.kernels.types import DriveMap
 
@@ -512,8 +513,64 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
     N_SAMPLES steps, SETTLE_STEPS physics steps each (no gravity, no object): the
     linkage's own loop constraints and springs set every joint. Raises ConfigError
     naming the field when the model lacks what a two-finger gripper needs.
+
+    The close is a pure function of the compiled gripper, the names of its pads and
+    actuator and this module's code: it is kept in the on-disk cache
+    (``mjx_pick.core.cache``) under a digest of the compiled model in MuJoCo's binary
+    form (every file, include and override it was made from), and a later process
+    reads it back bit for bit instead of closing the gripper again.
     """
     m = _bench_model(mjcf)
+    key = {
+        "model_sha256": cache.digest(_model_bytes(m)),
+        "actuator": mjcf.actuator,
+        "pad_left_geoms": list(mjcf.pad_left_geoms),
+        "pad_right_geoms": list(mjcf.pad_right_geoms),
+        "n_samples": N_SAMPLES,
+        "settle_steps": SETTLE_STEPS,
+        "code_sha256": cache.code_digest(__name__),
+        "mujoco": mujoco.__version__,
+    }
+    arrays = cache.memo("gripper_close", key, lambda: _kinematics_arrays(_close(m, mjcf)))
+    return _kinematics_of(arrays)
+
+
+def _model_bytes(m: mujoco.MjModel) -> np.ndarray:
+    """The compiled model in MuJoCo's binary format (uint8): the same bytes for the same
+    model in every process."""
+    buf = np.empty(mujoco.mj_sizeModel(m), np.uint8)
+    mujoco.mj_saveModel(m, None, buf)
+    return buf
+
+
+def _kinematics_arrays(kin: Kinematics) -> dict[str, np.ndarray]:
+    """kin as named arrays for the cache: its arrays as they are, every other field
+    (floats, names, pad frames) in one JSON text, which reads a float back exactly."""
+    arrays, rest = {}, {}
+    for f in dataclasses.fields(kin):
+        value = getattr(kin, f.name)
+        if isinstance(value, np.ndarray):
+            arrays[f.name] = value
+        else:
+            rest[f.name] = value
+    arrays["fields_json"] = np.frombuffer(json.dumps(rest).encode(), np.uint8)
+    return arrays
+
+
+def _kinematics_of(arrays: dict[str, np.ndarray]) -> Kinematics:
+    """The Kinematics of :func:`_kinematics_arrays`' arrays (computed or read back)."""
+    rest = json.loads(arrays["fields_json"].tobytes())
+    frames = rest.pop("pad_frames")
+    if frames is not None:
+        frames = tuple(PadFrame(tuple(c), tuple(q)) for c, q in frames)
+    for name in ("joint_names", "finger_joints", "pad_bodies"):
+        rest[name] = tuple(rest[name])
+    named = {f.name for f in dataclasses.fields(Kinematics)} - set(rest) - {"pad_frames"}
+    return Kinematics(**{n: arrays[n] for n in named}, **rest, pad_frames=frames)
+
+
+def _close(m: mujoco.MjModel, mjcf: MjcfGripper) -> Kinematics:
+    """:func:`characterise`'s close on the gripper's bench model m."""
     d = mujoco.MjData(m)
     a = m.actuator(PREFIX + mjcf.actuator).id
     _check_position_servo(m, a, mjcf.actuator)

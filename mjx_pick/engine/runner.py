@@ -17,6 +17,7 @@ import pyarrow as pa
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.grasps import GraspBatch
+from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.metrics import COLUMNS, results_table
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.scene import Scene
@@ -128,6 +129,9 @@ class Runner:
         self.nthread, self.devices, self.options = nthread, devices, options
         self.cluster = cluster
         self.backends: list[Backend] = []  # every backend this runner ran, in order built
+        # what describe() counts from: a warm runner's caller (evaluate on a Session's
+        # simulator) marks its start, leaving earlier calls' compiles and runs out
+        self.since = Timing()
         self.rollouts = 0  # pick-point simulations run so far
 
     def close(self) -> None:
@@ -153,16 +157,30 @@ class Runner:
         self.backends.append(backend)
         return backend
 
-    def chunks(self, backend: Backend, grasp: GraspConfig):
+    def chunks(
+        self,
+        backend: Backend,
+        grasp: GraspConfig,
+        inputs: Callable[[GraspBatch], PickInputs] | None = None,
+        gripper: GripperSpec | None = None,
+    ):
         """What runs whole chunks of pick-points (:class:`GraspBatch`) for
         :func:`run_chunks` on backend (built by :meth:`make` for grasp): this process, or
         one chunk per call on a cluster's actors. It has ``name``, ``device``,
         ``batch_size``, ``run(chunks)`` (yielding each :class:`ChunkDone` as it
         finishes, in any order), ``record(picks)`` (traces (N, T, F)) and
-        ``describe(wall_s)`` (as :meth:`describe`)."""
+        ``describe(wall_s)`` (as :meth:`describe`).
+
+        inputs, gripper: picks -> their inputs, and the gripper that simulates them (the
+        results' height compensation), where the backend also serves other settings of
+        its program (``Simulator.chunks``); default: ``make_inputs`` on the backend's
+        scene and grasp, and that scene's gripper. In this process only.
+        """
         if self.cluster is not None:
+            if inputs is not None or gripper is not None:
+                raise ValueError("a cluster's chunks make their inputs on its actors")
             return self.cluster.chunks(backend.scene, grasp)
-        return _LocalChunks(self, backend, grasp)
+        return _LocalChunks(self, backend, grasp, inputs, gripper)
 
     def adopt(self, backend: Backend) -> None:
         """Count a backend built by another runner (one runner's run shared by a study)."""
@@ -179,10 +197,11 @@ class Runner:
 
     def describe(self, wall_s: float | None = None) -> dict:
         """What ran, for a run's metadata (``rundir.finish``): backend, device and
-        timing (compile_s, run_s: summed over this runner's backends; simulations: the
-        pick-point simulations run; wall_s: the caller's, when given)."""
+        timing (compile_s, run_s: summed over this runner's backends since
+        :attr:`since`; simulations: the pick-point simulations run; wall_s: the
+        caller's, when given)."""
         first = self.backends[0] if self.backends else None
-        t = self.timing
+        t = self.timing - self.since
         timing = {"compile_s": round(t.compile_s, 3), "run_s": round(t.run_s, 3)}
         timing["simulations"] = int(t.n)
         if wall_s is not None:
@@ -299,15 +318,24 @@ class _LocalChunks:
     (:meth:`Runner.chunks`). Cancellation is the runner's: its event is checked before
     every chunk."""
 
-    def __init__(self, runner: Runner, backend: Backend, grasp: GraspConfig):
+    def __init__(
+        self,
+        runner: Runner,
+        backend: Backend,
+        grasp: GraspConfig,
+        inputs: Callable[[GraspBatch], PickInputs] | None = None,
+        gripper: GripperSpec | None = None,
+    ):
         self.runner, self.backend, self.grasp = runner, backend, grasp
         self.name, self.device = backend.name, backend.device
         self.batch_size = int(backend.batch_size)
+        self.inputs = inputs or (lambda picks: make_inputs(backend.scene, grasp, picks))
+        self.gripper = gripper or backend.scene.gripper
 
     def run(self, chunks: dict[int, GraspBatch]) -> Iterator[ChunkDone]:
         for k in sorted(chunks):
             sub = chunks[k]
-            inputs = make_inputs(self.backend.scene, self.grasp, sub)
+            inputs = self.inputs(sub)
             self.runner.check_cancel()
             # one chunk per runner call: progress is reported by the caller, in its terms
             out = self.runner.run(
@@ -316,7 +344,7 @@ class _LocalChunks:
             t = out.timing
             yield ChunkDone(
                 k,
-                results_table(sub, out.results, self.backend.scene.gripper),
+                results_table(sub, out.results, self.gripper),
                 t.run_s,
                 t.compile_s,
                 t.wall_s,
@@ -328,8 +356,7 @@ class _LocalChunks:
         return self.runner.run(self.backend, inputs, record=record, chunk_size=len(inputs) or 1)
 
     def record(self, picks: GraspBatch) -> np.ndarray:
-        inputs = make_inputs(self.backend.scene, self.grasp, picks)
-        return self.runner.run(self.backend, inputs, record=True).traces
+        return self.runner.run(self.backend, self.inputs(picks), record=True).traces
 
     def describe(self, wall_s: float | None = None) -> dict:
         return self.runner.describe(wall_s)

@@ -18,7 +18,7 @@ from mjx_pick.core.settings import Settings
 from mjx_pick.engine import interrupts
 from mjx_pick.engine.backend import Backend
 from mjx_pick.engine.chunks import ChunkStore, row_digests
-from mjx_pick.engine.inputs import PickInputs, pick_inputs, scene_of
+from mjx_pick.engine.inputs import PickInputs, pick_inputs, scene_contact, scene_of
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import Cancelled, ProgressFn, Runner
 from mjx_pick.engine.variants import (
@@ -104,6 +104,7 @@ class Simulator:
         self.backend_name = self.runner.backend_name
         self.batch_size = self.runner.batch_size
         self._scenes: dict[tuple, Scene] = {}  # Settings.structure() -> its scene
+        self._exact: dict[Settings, Scene] = {}  # Settings -> their own scene
         self._keys: dict[tuple, tuple] = {}  # Settings.structure() -> program_key
         self._backends: dict[tuple, Backend] = {}  # program_key -> backend
         # program_key -> the model fields its runs carry so far: a set that only grows,
@@ -132,11 +133,29 @@ class Simulator:
         self.runner.adopt(backend)
 
     def scene(self, settings: Settings) -> Scene:
-        """settings' own compiled scene (cached by ``Settings.structure``)."""
+        """The compiled scene of settings' model structure (cached by
+        ``Settings.structure``: the first scene of that structure, whose contact-pair
+        values may be other settings'; :meth:`inputs` writes settings' own)."""
         key = settings.structure()
         if key not in self._scenes:
             self._scenes[key] = scene_of(self.object, settings)
         return self._scenes[key]
+
+    def exact_scene(self, settings: Settings) -> Scene:
+        """settings' own scene, their contact values in its pairs (cached by settings):
+        what an evaluation records (its scene.xml, its resume key). The first of its
+        structure is also :meth:`scene`'s."""
+        if settings not in self._exact:
+            # a scene is its structure's and its MuJoCo contact values (docs/engine.md):
+            # settings that differ only in the controller or the phases share one
+            scene = self._scenes.get(settings.structure())
+            if scene is None or scene.contact != scene_contact(
+                scene, settings.contact, settings.solver
+            ):
+                scene = scene_of(self.object, settings)
+            self._exact[settings] = scene
+            self._scenes.setdefault(settings.structure(), scene)
+        return self._exact[settings]
 
     def _program(self, settings: Settings) -> tuple:
         key = settings.structure()
@@ -152,6 +171,25 @@ class Simulator:
         if key not in self._backends:
             self._backends[key] = self.runner.make(self.scene(settings), settings.grasp)
         return self._backends[key]
+
+    def inputs(self, settings: Settings, picks: GraspBatch) -> PickInputs:
+        """picks' inputs under settings for their program's backend (:meth:`backend`):
+        the start, contact and controller values of settings, and the model fields in
+        which their scene differs from the backend's (carried per pick-point)."""
+        program = self._program(settings)
+        return self._program_inputs(program, self.backend(settings), [(settings, picks)])
+
+    def chunks(self, settings: Settings):
+        """What runs an evaluation's chunks under settings on their program's backend
+        (``Runner.chunks``, in this process): chunk by chunk, each pick-point's inputs
+        :meth:`inputs`', the results' gripper settings'."""
+        backend = self.backend(settings)
+        return self.runner.chunks(
+            backend,
+            settings.grasp,
+            lambda picks: self.inputs(settings, picks),
+            settings.gripper,
+        )
 
     def run(
         self, jobs: list[tuple[Settings, GraspBatch]], store: ChunkStore | None = None

@@ -36,6 +36,7 @@ from mjx_pick.core.settings import Settings
 from mjx_pick.engine import interrupts
 from mjx_pick.engine.chunks import ChunkStore
 from mjx_pick.engine.inputs import scene_of
+from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import (
     Cancelled,
     Runner,
@@ -166,6 +167,7 @@ def evaluate(
     options: RunOptions | None = None,
     *,
     request: EvaluateRequest | None = None,
+    simulator: Simulator | None = None,
     **fields,
 ) -> Evaluation:
     """Simulate pick-points of an object with a gripper; see the module docstring.
@@ -177,6 +179,10 @@ def evaluate(
         out, resume, chunk_size, cancel, ...).
       request: what it computes (:class:`EvaluateRequest`: picks, settings, traces,
         Optimization mode, extra checks).
+      simulator: run on this simulator of obj (its object, runner and backend), left
+        open: the scenes and backends it keeps serve later calls (a warm process,
+        ``studies.session.Session``). None: a runner of this call's own, closed when it
+        ends.
       fields: fields of either, by name (a keyword overrides the same field given in
         options or request).
     """
@@ -191,22 +197,59 @@ def evaluate(
     req = _numbers(req)
     settings = _settings(gripper, req)
     _check(obj, settings, req, opts)
+    if simulator is not None:
+        _check_simulator(simulator, obj, opts)
     user_batch = _user_batch(obj, settings, req, opts)
     t_scene = time.perf_counter()
-    scene = scene_of(obj, settings)
-    runner = _runner(opts)
+    if simulator is None:
+        scene, runner = scene_of(obj, settings), _runner(opts)
+    else:
+        scene, runner = simulator.exact_scene(settings), simulator.runner
+    kept = runner.cancel, runner.since
+    if simulator is not None:  # this call's cancel event and timing, on the caller's runner
+        runner.cancel, runner.since = opts.cancel, runner.timing
+    compiled = runner.timing.compile_s
     try:
-        made = runner.make(scene, settings.grasp)
+        if simulator is None:
+            made = runner.make(scene, settings.grasp)
+            chunks = runner.chunks(made, settings.grasp)
+        else:  # the backend of settings' program, built by an earlier call or now
+            made, chunks = simulator.backend(settings), simulator.chunks(settings)
         # the run's fixed costs, seconds: filled in as they are paid (summary "time_s");
         # scene: the MjModel and the backend that holds it, less what the backend counted
         # as compile time while it was made (a Warp backend's buffer sizing, its kernels)
         costs = {k: float(v) for k, v in fixed_costs.items()}
-        costs["scene_s"] = time.perf_counter() - t_scene - made.stats.compile_s
-        chunks = runner.chunks(made, settings.grasp)
-        ctx = _Context(chunks, runner, made, scene, costs, user_batch)
+        made_compile = runner.timing.compile_s - compiled
+        costs["scene_s"] = time.perf_counter() - t_scene - made_compile
+        ctx = _Context(chunks, runner, made, scene, costs, user_batch, simulator)
         return _evaluate(ctx, _Request(obj, settings, req, opts))
     finally:
-        runner.close()
+        runner.cancel, runner.since = kept
+        if simulator is None:
+            runner.close()
+
+
+def _check_simulator(simulator: Simulator, obj: ObjectModel, opts: RunOptions) -> None:
+    """A run on a caller's simulator: of this object, on its backend and batch size, in
+    this process (ConfigError naming what differs)."""
+    if simulator.object is not obj:
+        raise ConfigError(
+            f"the simulator simulates {simulator.object.name!r}, not {obj.name!r}: give its "
+            "object (simulator.object) or a simulator of this one"
+        )
+    wanted = {"backend": (opts.backend, AUTO), "batch_size": (opts.batch_size, None)}
+    for name, (value, default) in wanted.items():
+        own = getattr(simulator.runner, "backend_name" if name == "backend" else name)
+        if value != default and value != own:
+            raise ConfigError(
+                f"{name} = {value!r}: this run's simulator runs {name} {own!r}; leave "
+                f"{name} out, or run on a simulator (a Session) made with {name} {value!r}"
+            )
+    if opts.ray is not None:
+        raise ConfigError(
+            "ray: a run on a simulator of this process (a Session) does not run on a Ray "
+            "cluster; leave out ray, or evaluate without a simulator"
+        )
 
 
 def _refuse_unused(req: EvaluateRequest, opts: RunOptions) -> None:
@@ -359,6 +402,7 @@ class _Context:
     scene: Scene
     costs: dict
     user_batch: pp.GraspBatch | None = None
+    simulator: Simulator | None = None  # a caller's, kept open (a Session's)
 
 
 def _evaluate(ctx: _Context, req: _Request) -> Evaluation:
@@ -604,8 +648,10 @@ def _extra_passes(
     settings = Settings(
         req.settings.gripper, req.settings.contact, req.settings.solver, req.settings.grasp
     )
-    sim = Simulator(req.obj, runner=ctx.runner)
-    sim.adopt(settings, ctx.backend)
+    sim = ctx.simulator  # a caller's: its backend of settings' program is ctx.backend
+    if sim is None:
+        sim = Simulator(req.obj, runner=ctx.runner)
+        sim.adopt(settings, ctx.backend)
     if req.what.min_force:
         t1 = time.perf_counter()
         with showing_progress(
