@@ -132,8 +132,11 @@ def test_every_shipped_asset_fits_every_preset_without_a_word(asset):
     for name in preset_names():
         with warnings.catch_warnings():
             warnings.simplefilter("error", PlausibilityWarning)  # shown only, elsewhere
-            # None: the whole part fits between the pads at enough yaws to say nothing
-            assert pp.check_stroke(obj, load_gripper(name)) is None, (asset, name)
+            # None: the whole part fits between the pads at enough yaws to say nothing;
+            # else its sections fit at enough yaws (a 50 mm stroke takes the door opener
+            # across, not whole): no refusal, no warning either way
+            fit = pp.check_stroke(obj, load_gripper(name))
+            assert fit is None or fit.fits >= pp.STROKE_FEW_YAWS, (asset, name)
 
 
 def test_the_gui_checks_with_the_same_function_before_sampling(tmp_path, no_work, monkeypatch):
