@@ -126,23 +126,7 @@ class GraspChecker:
     def batch(self, pick_id, poses_oe: np.ndarray, mode: str) -> GraspBatch:
         """The feasible grasps of poses_oe (N, 4, 4) as a GraspBatch, with the counts of
         the rejected ones (by REASONS name)."""
-        res = self(poses_oe)
-        ok = res["reason"] == FEASIBLE
-        counts = np.bincount(res["reason"], minlength=len(REASONS))
-        if ok.any():
-            batch = gm.from_poses(
-                poses_oe[ok],
-                np.asarray(pick_id)[ok],
-                res["opening_mm"][ok],
-                res["gap_left_mm"][ok],
-                res["gap_right_mm"][ok],
-                res["coverage"][ok],
-                mode=mode,
-            )
-        else:
-            batch = gm.from_poses(np.zeros((0, 4, 4)), np.zeros(0, np.int64), mode=mode)
-        rejected = {REASONS[i]: int(counts[i]) for i in range(1, len(REASONS))}
-        return dataclasses.replace(batch, rejected=rejected, n_candidates=len(ok))
+        return feasible_batch(pick_id, poses_oe, self(poses_oe), mode)
 
     # ----------------------------------------------------------------- the part's extent
     def _extent_mm(self, poses_oe: np.ndarray):
@@ -253,6 +237,27 @@ class GraspChecker:
                 if mujoco.mj_geomDistance(m, d, int(a), int(b), 0.01, None) < -TOUCH_M:
                     return True
         return False
+
+
+def feasible_batch(pick_id, poses_oe: np.ndarray, res: dict, mode: str) -> GraspBatch:
+    """The feasible grasps of poses_oe (N, 4, 4) by the checks' result res
+    (``GraspChecker.__call__``) as a GraspBatch, the rejected counted by REASONS name."""
+    ok = res["reason"] == FEASIBLE
+    counts = np.bincount(res["reason"], minlength=len(REASONS))
+    if ok.any():
+        batch = gm.from_poses(
+            np.asarray(poses_oe)[ok],
+            np.asarray(pick_id)[ok],
+            res["opening_mm"][ok],
+            res["gap_left_mm"][ok],
+            res["gap_right_mm"][ok],
+            res["coverage"][ok],
+            mode=mode,
+        )
+    else:
+        batch = gm.from_poses(np.zeros((0, 4, 4)), np.zeros(0, np.int64), mode=mode)
+    rejected = {REASONS[i]: int(counts[i]) for i in range(1, len(REASONS))}
+    return dataclasses.replace(batch, rejected=rejected, n_candidates=len(ok))
 
 
 def gripper_geoms(scene: Scene) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 import pyarrow as pa
 
 from mjx_pick.core.config import ConfigError, read_text, to_dict, write_json, write_parquet
-from mjx_pick.core.grasp_checks import REASON_WORDS, REASONS, GraspChecker
+from mjx_pick.core.grasp_checks import REASON_WORDS, REASONS, GraspChecker, feasible_batch
 from mjx_pick.core.grasps import from_poses, rigid_poses, rz
 from mjx_pick.core.gripper import GripperSpec, load_gripper, preset_names
 from mjx_pick.core.objects import ObjectModel, object_from_mesh
@@ -428,15 +428,7 @@ def _simulate(t: Trials, index, scenes: list[_Scene], opts: RunOptions) -> dict:
         what = np.array([f"rejected: {REASONS[r]}" for r in res["reason"]], object)
         scores = np.full(len(sc.centres), np.nan)
         if ok.any():
-            batch = from_poses(
-                sc.centres[ok],
-                np.flatnonzero(ok),
-                res["opening_mm"][ok],
-                res["gap_left_mm"][ok],
-                res["gap_right_mm"][ok],
-                res["coverage"][ok],
-                mode="trials",
-            )
+            batch = feasible_batch(np.arange(len(ok)), sc.centres, res, "trials")
             ev = evaluate(
                 sc.obj,
                 sc.settings.gripper,
@@ -616,15 +608,7 @@ def trial_outcomes(
     ok = res["reason"] == 0
     if not ok.any():
         raise ConfigError(f"{t.path}: none of the chosen trials' grasps is feasible")
-    batch = from_poses(
-        sc.centres[ok],
-        np.flatnonzero(ok),
-        res["opening_mm"][ok],
-        res["gap_left_mm"][ok],
-        res["gap_right_mm"][ok],
-        res["coverage"][ok],
-        mode="trials",
-    )
+    batch = feasible_batch(np.arange(len(ok)), sc.centres, res, "trials")
     kept = np.flatnonzero(ok)
     real = t.success[sc.trials]
     trials = np.array([np.sum(sc.grasp_of == g) for g in kept], float)
