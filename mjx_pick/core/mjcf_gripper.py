@@ -529,7 +529,7 @@ def characterise(mjcf: MjcfGripper) -> Kinematics:
         "n_samples": N_SAMPLES,
         "settle_steps": SETTLE_STEPS,
         "code_sha256": cache.code_digest(__name__),
-        "mujoco": mujoco.__version__,
+        "mujoco_version": mujoco.__version__,
     }
     arrays = cache.memo("gripper_close", key, lambda: _kinematics_arrays(_close(m, mjcf)))
     return _kinematics_of(arrays)
