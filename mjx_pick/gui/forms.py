@@ -582,6 +582,9 @@ _PAGE_ADVICE = (
         "import the object it was made with in tab 1 (its file or shipped object, scale, "
         "thickness and mass)",
     ),
+    # a run estimated longer than a few minutes (studies.duration.refuse_long): the page
+    # asks before it starts, and passes --yes once the user confirms
+    ("pass --yes to start it, or make it smaller", "start it anyway, or make it smaller"),
     ("choose another --out or pass --overwrite", "choose another run folder name"),
     ("leave out --resume to start one there", "untick 'resume' to start one there"),
     ("choose another --out", "choose another run folder name"),

@@ -82,7 +82,7 @@ class CompareStudy:
                 )
                 self.image = picture("w-full max-w-3xl")
 
-    def start(self) -> None:
+    async def start(self) -> None:
         self.error.set_text("")
         self.note.set_text("")
         if self.panel.busy(self.error) or not need_object(self.state, self.error):
@@ -99,8 +99,14 @@ class CompareStudy:
         if len(names) < 2:
             self.error.set_text("choose at least two grippers")
             return
+        sizes = {"variants": len(names), "n": n}
+        backend = self.form.backend.value
+        refusal = jobs.long_run("compare", "this comparison", backend, settings.grasp, **sizes)
+        yes = await self.panel.confirmed(refusal, self.error)
+        if yes is None or self.panel.busy(self.error):  # another start while it asked
+            return
         argv = ["compare", *self.state.obj_args, *flags, "--grippers", ",".join(names)]
-        argv += ["--n", str(n), "--rank-by", self.rank.value, "--out", str(out)]
+        argv += ["--n", str(n), "--rank-by", self.rank.value, "--out", str(out), *yes]
 
         job = jobs.study_job(argv, self.state.log(out.name), out)
         self.panel.start(f"compare {out.name} ({len(names)} grippers x {n})", job, self.error)
@@ -139,7 +145,7 @@ class RobustStudy:
                     'dense data-testid="robust-table"'
                 )
 
-    def start(self) -> None:
+    async def start(self) -> None:
         self.error.set_text("")
         if self.panel.busy(self.error) or not need_object(self.state, self.error):
             return
@@ -167,6 +173,13 @@ class RobustStudy:
                 f"object and set that gripper (now {obj.name} / {settings.gripper.name})"
             )
             return
+        sizes = {"top_k": k, "m": m, "n": None}  # ranked from the run's results
+        backend = self.form.backend.value
+        what = "this robustness study"
+        refusal = jobs.long_run("robust", what, backend, settings.grasp, **sizes)
+        yes = await self.panel.confirmed(refusal, self.error)
+        if yes is None or self.panel.busy(self.error):  # another start while it asked
+            return
         out = opened.path
         argv = ["robust", *self.state.obj_args]
         argv += self.form.cli_flags(settings, self.state.workdir, out)
@@ -174,7 +187,7 @@ class RobustStudy:
         argv += ["--sigma-xy-mm", repr(float(sig[0])), "--sigma-yaw-deg", repr(float(sig[1]))]
         # robust keeps its chunks in the run's folder: a cancelled one started again
         # continues, and one complete with these settings is read back
-        argv += ["--out", str(out), "--resume"]
+        argv += ["--out", str(out), "--resume", *yes]
 
         job = jobs.study_job(argv, self.state.log(f"{out.name}-robust"), out)
         self.panel.start(f"robust {out.name} (top {k} x {m} draws)", job, self.error)

@@ -108,6 +108,33 @@ class SearchProgress:
             self.line.set_text("")
 
 
+class StartQuestion:
+    """A dialog that asks before a long run starts: the estimate in the page's words
+    and two buttons, "Start it" and "Not now" (closing it is "not now")."""
+
+    def __init__(self) -> None:
+        with ui.dialog().props('persistent data-testid="long-run-dialog"') as self.dialog:
+            with ui.card().classes("max-w-xl"):
+                ui.label("A long run").classes("font-bold")
+                self.text = (
+                    MessageLabel("").classes("text-sm").props('data-testid="long-run-question"')
+                )
+                with ui.row().classes("w-full justify-end"):
+                    ui.button("Not now", on_click=lambda: self.dialog.submit(False)).props(
+                        'flat data-testid="long-run-no"'
+                    )
+                    ui.button("Start it", on_click=lambda: self.dialog.submit(True)).props(
+                        'data-testid="long-run-yes"'
+                    )
+
+    async def ask(self, refusal: str) -> bool:
+        """Whether the user starts the run refusal describes (its estimate, as
+        ``studies.duration.refuse_long`` says it)."""
+        self.text.set_text(refusal[:1].upper() + refusal[1:])  # MessageLabel: page's words
+        self.dialog.open()
+        return bool(await self.dialog)
+
+
 def upload(label: str, accept: str, max_bytes: int, on_upload, on_rejected, refused, testid: str):
     """A file upload sent as soon as it is chosen: accept lists the file types
     (".csv", ".png,.stl"), max_bytes the largest file. A file the browser refuses by
