@@ -881,3 +881,23 @@ def test_two_runs_never_write_one_folder_at_once(tmp_path):
     assert runs.taken(jobs.Job(["evaluate"], tmp_path / "x.log", tmp_path / "other"), None) == ""
     first._proc.code = 0  # it ended: the folder is free (the CLI says what it holds)
     assert runs.taken(second, "tab-b") == ""
+
+
+def test_a_run_refused_as_long_is_the_pages_own_estimate_and_starts_again_with_yes(tmp_path):
+    """The CLI refuses an evaluate of a million pick-points unasked (studies.duration);
+    the page reads that refusal (and would have said the same words itself: one
+    estimate), and starts the same run again with --yes, its first log gone."""
+    out = tmp_path / "long"
+    argv = ["evaluate", "block", "--n", "1000000", "--backend", "mujoco", "--out", str(out)]
+    job = jobs.Job(argv, tmp_path / "logs" / "long.log", out, 1_000_000, 1000)
+    job.start().wait(120)
+    refused = job.refused_as_long()
+    assert refused == jobs.long_run("evaluate", "this evaluate", "mujoco", n=1_000_000)
+    assert "would take about" in refused and not out.exists()  # before any work
+    assert forms.page_words(refused).endswith("start it anyway, or make it smaller")
+    again = job.again("--yes")
+    assert again.argv == [*argv, "--yes"] and again.out == out
+    assert (again.total, again.chunk, again.asked_log) == (1_000_000, 1000, job.log)
+    assert again.refused_as_long() == ""  # not started yet, and never with --yes
+    job.discard_log()
+    assert not job.log.exists()
