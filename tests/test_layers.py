@@ -206,6 +206,7 @@ GUI_LEVELS = {
         "worker",
         "replay3d",
         "workfolder",
+        "grasp_input",
     ),
     "page parts": (
         "page",

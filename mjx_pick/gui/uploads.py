@@ -19,6 +19,7 @@ IMAGE_MAX_BYTES = 20 * 2**20
 MESH_MAX_BYTES = 50 * 2**20  # also the browser's limit for an object upload
 TOML_MAX_BYTES = 64 * 2**10
 OUTCOMES_MAX_BYTES = 5 * 2**20
+GRASPS_MAX_BYTES = 50 * 2**20  # a grasp file (ACRONYM's HDF5 of 2,000 grasps: ~1 MB)
 UPLOAD_TYPES = IMAGE_SUFFIXES + MESH_SUFFIXES
 
 
@@ -126,6 +127,23 @@ def check_outcomes_upload(name: str, data: bytes) -> str:
         data.decode("utf-8")
     except UnicodeDecodeError:
         return f"{name}: not a UTF-8 text file"
+    return ""
+
+
+def grasps_refused(name: str, size: int) -> str:
+    """Why a grasp file is refused by its name or size ('' if not): the formats the
+    library reads, by suffix (``gui.grasp_input.FILE_SUFFIXES``)."""
+    from mjx_pick.gui.grasp_input import FILE_SUFFIXES
+
+    if Path(name).suffix.lower() not in FILE_SUFFIXES:
+        return (
+            f"{name}: not a grasp file (ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, "
+            "a CSV of poses .csv)"
+        )
+    if size > GRASPS_MAX_BYTES:
+        return _too_large(name, size, GRASPS_MAX_BYTES)
+    if size == 0:
+        return f"{name}: the file is empty"
     return ""
 
 
