@@ -736,6 +736,15 @@ def test_grasps_antipodal_and_from_a_file_run_through_the_cli(page, server, tmp_
     assert again["pick_id"].to_pylist() == drawn["pick_id"].to_pylist()
     assert again["success"].to_pylist() == drawn["success"].to_pylist()
     np.testing.assert_allclose(again["tilt_deg"], drawn["tilt_deg"], atol=1e-6)
+    # a run's grasps come back with its settings: the antipodal count, then the file
+    page.get_by_label("run folder name").fill("antipodal")
+    page.get_by_test_id("load-run").click()
+    expect(page.get_by_label("grasps from", exact=True)).to_have_value(SOURCES["antipodal"])
+    expect(page.get_by_label("grasps", exact=True)).to_have_value("3")
+    page.get_by_label("run folder name").fill("from-file")
+    page.get_by_test_id("load-run").click()
+    expect(page.get_by_label("grasps from", exact=True)).to_have_value(SOURCES["file"])
+    info.filter(has_text="grasps.csv: the run's grasp file").wait_for()
 
 
 def test_a_long_run_is_asked_about_before_it_starts(page, server):
