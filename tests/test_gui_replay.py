@@ -404,6 +404,15 @@ def test_a_grasp_run_shows_its_grasps_and_the_replay_turns_the_gripper(page, gra
     saved = info.value.path()
     labels = read_labels(Path(saved).rename(Path(saved).with_suffix(".json")))
     assert len(labels.transforms) == 3
+    # the report: its page offered, never its template or robot pick-points, and why
+    test_gui.number(page, "n best and n worst", 1)
+    page.get_by_test_id("export").click()
+    assert test_gui.wait_job(page, f"report {run.path.name}").startswith("complete")
+    page.get_by_test_id("download-report.html").wait_for()
+    page.get_by_test_id("downloads-note").filter(has_text="without its tilt").wait_for()
+    assert (run.path / "template_a4.pdf").is_file()  # written by the report, not offered
+    assert not page.get_by_test_id("download-template_a4.pdf").count()
+    assert not page.get_by_test_id("download-robot_picks.json").count()
 
 
 def ranked_ids(run: Run) -> list[int]:
