@@ -777,3 +777,89 @@ def test_a_long_run_is_asked_about_before_it_starts(page, server):
     page.get_by_text("Cancel", exact=True).click()
     status = wait_job(page, "evaluate long")
     assert status.startswith("cancelled"), status
+
+
+def trials_zip(path: Path, rows: list[tuple[float, str, str]], extra: dict | None = None) -> Path:
+    """A zip of a TRIALS.csv and its mesh, a 30 mm cube (3 g, abb-yumi-smart, resting
+    on a face): rows (grasp centre's x offset in mm, success, trial id) of vertical grasps
+    through the cube's centre; extra: {member name: bytes} added."""
+    import zipfile
+
+    import trimesh
+
+    grasp = np.diag([1.0, -1.0, -1.0, 1.0])  # E's axes: approach +z (down), closing along x
+    lines = ["object,mass_g,gripper,object_pose,grasp_pose,depth_mm,success,trial"]
+    for x_mm, success, trial in rows:
+        pose = grasp.copy()
+        pose[0, 3] = x_mm * 1e-3
+        cells = " ".join(f"{v:g}" for v in pose.ravel())
+        lines.append(f"cube.obj,3,abb-yumi-smart,,{cells},0,{success},{trial}")
+    cube = trimesh.creation.box((0.03, 0.03, 0.03)).export(file_type="obj")
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("cube_trials/TRIALS.csv", "\n".join(lines) + "\n")
+        z.writestr("cube_trials/cube.obj", cube)
+        for name, data in (extra or {}).items():
+            z.writestr(name, data)
+    return path
+
+
+def test_validate_on_uploaded_trials_shows_its_figures(page, server, tmp_path):
+    """Physical trials in the Studies tab: a zip whose member would land outside its
+    folder refused before anything is written, a CSV naming a mesh outside the work
+    folder refused; then a zip of a TRIALS.csv and its cube (three trials of one grasp
+    through the cube, one grasp beside it) validated through the CLI child, and
+    validation.json's figures shown: the four with their intervals, the confusion
+    matrix, per object, the checks' rejection."""
+    import json
+
+    from playwright.sync_api import expect
+
+    _, work = server
+    page.get_by_text("Studies", exact=True).click()
+    page.get_by_text("Validate against physical trials").click()
+    upload = page.get_by_test_id("trials-upload").locator("input[type=file]")
+    error = page.get_by_test_id("trials-error")
+    rows = [(0.0, "1", "a0"), (0.0, "1", "a1"), (0.0, "0", "a2"), (60.0, "0", "b0")]
+    upload.set_input_files(str(trials_zip(tmp_path / "evil.zip", rows, {"../evil.txt": b"x"})))
+    error.filter(has_text="evil.zip: '../evil.txt' would be written outside").wait_for()
+    assert not (work / "inputs" / "trials").exists()  # nothing unpacked
+    # a TRIALS.csv in the work folder that names a mesh outside it: never read
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    (outside / "far.obj").write_text("v 0 0 0\n")
+    mine = work / "mine"
+    mine.mkdir()
+    pose = " ".join(f"{v:g}" for v in np.diag([1.0, -1.0, -1.0, 1.0]).ravel())
+    text = "object,mass_g,gripper,grasp_pose,success,trial\n"
+    text += f"{outside / 'far.obj'},3,abb-yumi-smart,{pose},1,t\n"
+    (mine / "TRIALS.csv").write_text(text)
+    page.get_by_label("or a TRIALS.csv in the work folder").fill("mine/TRIALS.csv")
+    page.get_by_test_id("trials-use").click()
+    error.filter(has_text="its mesh far.obj lies outside the work folder").wait_for()
+
+    upload.set_input_files(str(trials_zip(tmp_path / "cube.zip", rows)))
+    info = page.get_by_test_id("trials-info")
+    info.filter(has_text="cube.zip: TRIALS.csv: 4 trials of 2 grasps on cube.obj").wait_for()
+    expect(error).to_have_text("")
+    page.get_by_label("run folder name").filter(visible=True).last.fill("validated")
+    page.get_by_test_id("start-validate").click()
+    status = wait_job(page, "validate validated")
+    assert status.startswith("complete"), status
+    report = json.loads((work / "validated" / "validation.json").read_text())
+    c = report["confusion"]
+    assert c["tp"] + c["fp"] + c["fn"] + c["tn"] == 4
+    assert report["checks"]["rejected_trials"] == 1  # the grasp beside the cube
+    figures = page.get_by_test_id("validate-figures").locator("tbody tr")
+    expect(figures).to_have_count(4)
+    f1 = report["f1"]
+    expect(figures.nth(3)).to_contain_text(f"{f1['value']:.3f}")
+    lo, hi = f1["ci95"]
+    expect(figures.nth(3)).to_contain_text(f"{lo:.3f}-{hi:.3f}")
+    confusion = page.get_by_test_id("validate-confusion").locator("tbody tr")
+    assert confusion.nth(0).inner_text().split()[-2:] == [str(c["tp"]), str(c["fn"])]
+    assert confusion.nth(1).inner_text().split()[-2:] == [str(c["fp"]), str(c["tn"])]
+    expect(page.get_by_test_id("validate-objects").locator("tbody tr")).to_have_count(1)
+    checks = page.get_by_test_id("validate-checks")
+    expect(checks).to_contain_text("The checks rejected 1 trial before simulating it")
+    expect(checks).to_contain_text("1: nothing lies between the pads (0 held on the robot)")
+    test_gui.shot(page, "validate")

@@ -207,6 +207,7 @@ GUI_LEVELS = {
         "replay3d",
         "workfolder",
         "grasp_input",
+        "trials_input",
     ),
     "page parts": (
         "page",

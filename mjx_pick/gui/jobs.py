@@ -80,7 +80,7 @@ assert _WORKER_FROM_PACKAGE != _CLI_FROM_PACKAGE
 # the commands a worker runs: the simulation commands, whose fixed costs it saves. Not
 # `report` (its cost is rendering, not compiling; its GL contexts are better ended with
 # a process) nor `calibrate` (its derivative programs are large and used once).
-WARM_COMMANDS = ("evaluate", "sweep", "compare", "robust")
+WARM_COMMANDS = ("evaluate", "sweep", "compare", "robust", "validate")
 DEFAULT_BACKEND = Impl.MUJOCO.value  # the settings form's; its worker is started with the server
 # a worker whose resident memory grew by more than this since its first job is replaced
 # before its next job (a leak in a library must not grow the machine's memory job after
