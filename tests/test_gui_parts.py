@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -901,3 +902,58 @@ def test_a_run_refused_as_long_is_the_pages_own_estimate_and_starts_again_with_y
     assert again.refused_as_long() == ""  # not started yet, and never with --yes
     job.discard_log()
     assert not job.log.exists()
+
+
+def test_a_trials_zip_is_checked_member_by_member_before_anything_is_written(tmp_path):
+    """uploads.store_trials: a member that would leave its folder (absolute, '..', a
+    drive), a link, none or two TRIALS.csv files, too many files: refused naming it,
+    nothing written; a good zip unpacked beside an earlier one, never over it."""
+    import stat
+    import zipfile
+
+    from mjx_pick.gui.uploads import store_trials
+
+    header = b"object,mass_g,gripper,grasp_pose,success,trial\n"
+
+    def zipped(members: dict, link: str | None = None) -> bytes:
+        path = tmp_path / "t.zip"
+        with zipfile.ZipFile(path, "w") as z:
+            for name, data in members.items():
+                z.writestr(name, data)
+            if link is not None:
+                info = zipfile.ZipInfo(link)
+                info.external_attr = (stat.S_IFLNK | 0o777) << 16
+                z.writestr(info, "/etc/passwd")
+        return path.read_bytes()
+
+    work = tmp_path / "work"
+    folder = work / "inputs" / "trials"
+    good = {"set/TRIALS.csv": header, "set/cube.obj": b"v 0 0 0\n"}
+    for members, link, said in (
+        ({**good, "/abs.obj": b"x"}, None, "'/abs.obj' would be written outside"),
+        ({**good, "set/../../up.obj": b"x"}, None, "'set/../../up.obj' would be written"),
+        ({**good, "C:/x.obj": b"x"}, None, "'C:/x.obj' would be written outside"),
+        (good, "set/mesh.obj", "'set/mesh.obj' is a link"),
+        ({"set/cube.obj": b"v"}, None, "holds 0 TRIALS.csv files (none)"),
+        ({**good, "b.csv": header}, None, "holds 2 TRIALS.csv files"),
+        ({f"f{k}.obj": b"" for k in range(2001)} | good, None, "2,003 files"),
+    ):
+        with pytest.raises(ConfigError, match=re.escape(said)):
+            store_trials(zipped(members, link), "t.zip", folder, work)
+        assert not folder.exists() or not any(folder.iterdir())
+    with pytest.raises(ConfigError, match="cannot be read as a zip file"):
+        store_trials(b"not a zip", "t.zip", folder, work)
+    first = store_trials(zipped(good), "t.zip", folder, work)
+    second = store_trials(zipped(good), "t.zip", folder, work)
+    assert first == folder / "t" / "set" / "TRIALS.csv" and first.read_bytes() == header
+    assert second == folder / "t-2" / "set" / "TRIALS.csv"
+
+
+def test_a_files_own_words_stay_and_the_programs_become_the_pages():
+    """forms.file_words: a file's columns and keys kept, a CLI flag said as the page's
+    control (a file never holds one)."""
+    said = forms.file_words(
+        "g.csv line 3, column depth_mm: 'x' is not a number; give it (--depth-mm)"
+    )
+    assert said == "g.csv line 3, column depth_mm: 'x' is not a number; give it"
+    assert "grasp depth (mm) (tab 3)" in forms.file_words("use --depth-mm here")

@@ -8,8 +8,8 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
-from mjx_pick.gui.formatting import column_label, fmt_cell, page_text
-from mjx_pick.gui.forms import page_words
+from mjx_pick.gui.formatting import column_label, fmt_cell
+from mjx_pick.gui.forms import file_words, page_words
 from mjx_pick.gui.search import Search, SearchStopped
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
 from mjx_pick.gui.uploads import browser_refused
@@ -31,12 +31,13 @@ def error_label() -> MessageLabel:
 
 
 class FileMessageLabel(ui.label):
-    """A label for what is wrong inside a file the user wrote (a gripper TOML): its keys
-    are the user's own words there (``stroke_mm = -5`` on its line), so only the
-    software's paths are taken out (``page_text``), never the file's keys."""
+    """A label for what is wrong inside a file the user wrote (a gripper TOML, a grasp
+    file, trials): its keys and columns are the user's own words there (``stroke_mm =
+    -5`` on its line), so they stay; the software's paths, the CLI's flags and advice
+    become the page's (``forms.file_words``)."""
 
     def set_text(self, text: str) -> None:
-        super().set_text(page_text(text) if text else text)
+        super().set_text(file_words(text) if text else text)
 
 
 def file_error_label() -> FileMessageLabel:
