@@ -454,7 +454,8 @@ class GenerateTab:
         argv += yes
         self.run_summary.set_content("")
 
-        job = jobs.Job(argv, self.state.log(out.name), out, n, chunk)
+        unit = "pick-points" if source == TOPDOWN else "grasps"
+        job = jobs.Job(argv, self.state.log(out.name), out, n, chunk, unit=unit)
         self.panel.start(f"evaluate {out.name}", job, self.error)
 
     async def file_grasps(self, obj, settings, depth_mm: float | None) -> int | None:
