@@ -957,3 +957,18 @@ def test_a_files_own_words_stay_and_the_programs_become_the_pages():
     )
     assert said == "g.csv line 3, column depth_mm: 'x' is not a number; give it"
     assert "grasp depth (mm) (tab 3)" in forms.file_words("use --depth-mm here")
+
+
+def test_the_page_never_counts_gpus_itself(monkeypatch):
+    """Where an NVIDIA driver is loaded, the page's estimate of a GPU backend's (or
+    'auto''s) run is left to the run's own process -- counting GPUs starts Warp's CUDA
+    runtime, which the server never does; the CLI refuses a long one and the page asks
+    then. A CPU backend is estimated in the page as before."""
+    from mjx_pick.engine import devices, registry
+
+    monkeypatch.setattr(devices, "nvidia_driver_present", lambda: True)
+    monkeypatch.setattr(devices, "nvidia_gpu_count", lambda: pytest.fail("GPUs counted"))
+    gpu = [n for n, e in registry.ENTRIES.items() if e.device is registry.Device.NVIDIA_GPU]
+    for backend in [registry.AUTO, *gpu]:
+        assert jobs.long_run("evaluate", "this evaluate", backend, n=10**8) == ""
+    assert "would take" in jobs.long_run("evaluate", "this evaluate", "mujoco", n=10**8)

@@ -866,8 +866,15 @@ def long_run(study: str, what: str, backend: str, grasp=None, **sizes) -> str:
     on backend, on this machine -- refuse_long's words, which the CLI would refuse the
     same run with unless --yes."""
     from mjx_pick.core.config import ConfigError
+    from mjx_pick.engine import devices, registry
     from mjx_pick.studies import duration
 
+    gpu = backend == AUTO or registry.ENTRIES[backend].device is registry.Device.NVIDIA_GPU
+    if gpu and devices.nvidia_driver_present():
+        # counting this machine's GPUs (or resolving 'auto' there) starts Warp's CUDA
+        # runtime, which the server never does: the run's own process estimates, and a
+        # run it refuses as long is asked about then (JobPanel, LONG_REFUSAL)
+        return ""
     est = duration.estimate(duration.count(study, **sizes), grasp, None, backend)
     try:
         duration.refuse_long(est, what, yes=False)

@@ -158,18 +158,20 @@ class GenerateTab:
         self.n.props(f'label="{"grasps" if source == ANTIPODAL else "pick-points"}"')
         self.generate_button.set_visibility(source == TOPDOWN)
         self.forget_map()
+        from mjx_pick.core.antipodal import AntipodalConfig
+
+        tilt = AntipodalConfig().max_tilt_deg  # the run's (the page sets none of its own)
         self.source_note.set_text(
             {
                 TOPDOWN: "",
                 ANTIPODAL: "The run draws this many antipodal grasps on the part's surface "
                 "(a photo's part: its outline extruded to its thickness), each approaching "
-                "from above, tilted up to 60 deg, checked for the real gripper. Tab 4 "
-                "shows them with their tilt and height; no map here (it draws top-down "
+                f"from above, tilted up to {tilt:g} deg, checked for the real gripper. Tab "
+                "4 shows them with their tilt and height; no map here (it draws top-down "
                 "pick-points).",
                 FILE: "Every grasp of the file is simulated, those the gripper cannot do "
                 "left out and counted by reason: its poses are the gripper's base in the "
-                "frame of tab 1's mesh file, in metres. Tab 4 shows them with their tilt "
-                "and height.",
+                "frame of tab 1's mesh file. Tab 4 shows them with their tilt and height.",
             }[source]
         )
 

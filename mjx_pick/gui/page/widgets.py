@@ -111,7 +111,8 @@ class SearchProgress:
 
 class StartQuestion:
     """A dialog that asks before a long run starts: the estimate in the page's words
-    and two buttons, "Start it" and "Not now" (closing it is "not now")."""
+    and two buttons, "Start it" and "Not now" (persistent: only they close it, so that
+    no answer is taken from a stray click or key)."""
 
     def __init__(self) -> None:
         with ui.dialog().props('persistent data-testid="long-run-dialog"') as self.dialog:
