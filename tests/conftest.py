@@ -50,7 +50,8 @@ FILE_SECONDS = {
     "tests/test_gripper_mjcf.py": 65,
     "tests/test_gui_parts.py": 65,
     "tests/test_readme.py": 60,
-    "tests/test_gui_replay.py": 50,
+    "tests/test_gui_routes.py": 150,  # 20 Chromium tests (measured alone, 2026-11-28)
+    "tests/test_gui_replay.py": 80,  # with the tilted grasp run's replay
     "notebooks/throughput.ipynb": 40,
     "notebooks/calibration.ipynb": 30,
     "tests/test_mesh_import.py": 40,

@@ -202,6 +202,20 @@ def test_a_trials_file_without_success_is_refused(tmp_path):
         read_trials(path)
 
 
+def test_repeats_of_a_grasp_on_a_part_at_its_stable_pose_are_one_grasp(tmp_path):
+    """Trials that leave object_pose empty (the mesh's most stable pose): one scene,
+    and a grasp's repeats one grasp -- as with the pose given."""
+    from mjx_pick.studies.validation import read_trials
+
+    far = _vertical([10.0], [0.0], [0.0])[0]
+    other = {"grasp_pose": " ".join(f"{v:g}" for v in far.ravel())}
+    for pose in ("", " ".join(f"{v:g}" for v in np.eye(4).ravel())):
+        rows = [{"object_pose": pose}, {"object_pose": pose}, {**other, "object_pose": pose}]
+        trials = read_trials(_trials_csv(tmp_path, rows))
+        assert trials.grasp_index().tolist() == [0, 0, 1], pose
+        assert len(trials.groups()) == 1, pose
+
+
 def test_validation_figures_follow_the_confusion_matrix():
     from mjx_pick.studies.validation import figures
 

@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -881,3 +882,93 @@ def test_two_runs_never_write_one_folder_at_once(tmp_path):
     assert runs.taken(jobs.Job(["evaluate"], tmp_path / "x.log", tmp_path / "other"), None) == ""
     first._proc.code = 0  # it ended: the folder is free (the CLI says what it holds)
     assert runs.taken(second, "tab-b") == ""
+
+
+def test_a_run_refused_as_long_is_the_pages_own_estimate_and_starts_again_with_yes(tmp_path):
+    """The CLI refuses an evaluate of a million pick-points unasked (studies.duration);
+    the page reads that refusal (and would have said the same words itself: one
+    estimate), and starts the same run again with --yes, its first log gone."""
+    out = tmp_path / "long"
+    argv = ["evaluate", "block", "--n", "1000000", "--backend", "mujoco", "--out", str(out)]
+    job = jobs.Job(argv, tmp_path / "logs" / "long.log", out, 1_000_000, 1000)
+    job.start().wait(120)
+    refused = job.refused_as_long()
+    assert refused == jobs.long_run("evaluate", "this evaluate", "mujoco", n=1_000_000)
+    assert "would take about" in refused and not out.exists()  # before any work
+    assert forms.page_words(refused).endswith("start it anyway, or make it smaller")
+    again = job.again("--yes")
+    assert again.argv == [*argv, "--yes"] and again.out == out
+    assert (again.total, again.chunk, again.asked_log) == (1_000_000, 1000, job.log)
+    assert again.refused_as_long() == ""  # not started yet, and never with --yes
+    job.discard_log()
+    assert not job.log.exists()
+
+
+def test_a_trials_zip_is_checked_member_by_member_before_anything_is_written(tmp_path):
+    """uploads.store_trials: a member that would leave its folder (absolute, '..', a
+    drive), a link, none or two TRIALS.csv files, too many files: refused naming it,
+    nothing written; a good zip unpacked beside an earlier one, never over it."""
+    import stat
+    import zipfile
+
+    from mjx_pick.gui.uploads import store_trials
+
+    header = b"object,mass_g,gripper,grasp_pose,success,trial\n"
+
+    def zipped(members: dict, link: str | None = None) -> bytes:
+        path = tmp_path / "t.zip"
+        with zipfile.ZipFile(path, "w") as z:
+            for name, data in members.items():
+                z.writestr(name, data)
+            if link is not None:
+                info = zipfile.ZipInfo(link)
+                info.external_attr = (stat.S_IFLNK | 0o777) << 16
+                z.writestr(info, "/etc/passwd")
+        return path.read_bytes()
+
+    work = tmp_path / "work"
+    folder = work / "inputs" / "trials"
+    good = {"set/TRIALS.csv": header, "set/cube.obj": b"v 0 0 0\n"}
+    for members, link, said in (
+        ({**good, "/abs.obj": b"x"}, None, "'/abs.obj' would be written outside"),
+        ({**good, "set/../../up.obj": b"x"}, None, "'set/../../up.obj' would be written"),
+        ({**good, "C:/x.obj": b"x"}, None, "'C:/x.obj' would be written outside"),
+        (good, "set/mesh.obj", "'set/mesh.obj' is a link"),
+        ({"set/cube.obj": b"v"}, None, "holds 0 TRIALS.csv files (none)"),
+        ({**good, "b.csv": header}, None, "holds 2 TRIALS.csv files"),
+        ({f"f{k}.obj": b"" for k in range(2001)} | good, None, "2,003 files"),
+    ):
+        with pytest.raises(ConfigError, match=re.escape(said)):
+            store_trials(zipped(members, link), "t.zip", folder, work)
+        assert not folder.exists() or not any(folder.iterdir())
+    with pytest.raises(ConfigError, match="cannot be read as a zip file"):
+        store_trials(b"not a zip", "t.zip", folder, work)
+    first = store_trials(zipped(good), "t.zip", folder, work)
+    second = store_trials(zipped(good), "t.zip", folder, work)
+    assert first == folder / "t" / "set" / "TRIALS.csv" and first.read_bytes() == header
+    assert second == folder / "t-2" / "set" / "TRIALS.csv"
+
+
+def test_a_files_own_words_stay_and_the_programs_become_the_pages():
+    """forms.file_words: a file's columns and keys kept, a CLI flag said as the page's
+    control (a file never holds one)."""
+    said = forms.file_words(
+        "g.csv line 3, column depth_mm: 'x' is not a number; give it (--depth-mm)"
+    )
+    assert said == "g.csv line 3, column depth_mm: 'x' is not a number; give it"
+    assert "grasp depth (mm) (tab 3)" in forms.file_words("use --depth-mm here")
+
+
+def test_the_page_never_counts_gpus_itself(monkeypatch):
+    """Where an NVIDIA driver is loaded, the page's estimate of a GPU backend's (or
+    'auto''s) run is left to the run's own process -- counting GPUs starts Warp's CUDA
+    runtime, which the server never does; the CLI refuses a long one and the page asks
+    then. A CPU backend is estimated in the page as before."""
+    from mjx_pick.engine import devices, registry
+
+    monkeypatch.setattr(devices, "nvidia_driver_present", lambda: True)
+    monkeypatch.setattr(devices, "nvidia_gpu_count", lambda: pytest.fail("GPUs counted"))
+    gpu = [n for n, e in registry.ENTRIES.items() if e.device is registry.Device.NVIDIA_GPU]
+    for backend in [registry.AUTO, *gpu]:
+        assert jobs.long_run("evaluate", "this evaluate", backend, n=10**8) == ""
+    assert "would take" in jobs.long_run("evaluate", "this evaluate", "mujoco", n=10**8)

@@ -6,6 +6,7 @@ browser, page) is tests/test_gui.py's."""
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -263,3 +264,159 @@ def test_the_slider_follows_a_mouse_click_and_a_drag(page, replay_run):
     page.get_by_text("1 Import object model").click(timeout=10_000)
     expect(page.get_by_test_id("import")).to_be_visible(timeout=10_000)
     assert not errors, errors
+
+
+@pytest.fixture(scope="module")
+def grasp_run(server, block):
+    """An evaluate folder of three antipodal grasps on the block (grasps given as poses,
+    tilted), its best and worst traced: one is simulated on demand in the page."""
+    _, work = server
+    out = work / "grasp-run"
+    mp.evaluate(
+        block, "robotiq-2f85", n=3, grasps="antipodal", grasp=FAST, backend="mujoco", out=out,
+        n_traces=1,
+    )  # fmt: skip
+    run = Run.load(out)
+    assert {"tilt_deg", "height_mm", "grasp_pose"} <= set(run.table.column_names)
+    return run
+
+
+def quaternions(pg) -> dict:
+    """{body name: its quaternion (w, x, y, z)} of the replay in the page."""
+    scene = pg.get_by_test_id("replay-scene").get_attribute("id")
+    xyzw = pg.evaluate(
+        """(id) => Object.fromEntries(window['scene_' + id].getObjectByName('pick-replay')
+            .children.map((b) => [b.name, b.quaternion.toArray()]))""",
+        scene,
+    )
+    return {name: np.array([q[3], q[0], q[1], q[2]]) for name, q in xyzw.items()}
+
+
+def tilt_of(quat_wxyz) -> float:
+    """The angle between a body's z axis (the gripper's up) and the world's, deg."""
+    w, x, y, z = quat_wxyz
+    return float(np.degrees(np.arccos(np.clip(1 - 2 * (x * x + y * y), -1, 1))))
+
+
+def test_a_grasp_run_shows_its_grasps_and_the_replay_turns_the_gripper(page, grasp_run):
+    """Tab 4 on a run of grasps given as poses: each grasp's tilt and height in the
+    table, no pick-point map (a vertical approach) but why, the report's vertical-only
+    files not offered; the replay's gripper turned by the grasp's own tilt (the page's
+    three.js bodies against the trace's kinematics), lifted straight up; a grasp the run
+    did not trace simulated as the same pose; its grasps exported as a grasp file."""
+    from mjx_pick.gui.replay3d import SceneReplay
+    from mjx_pick.outputs.reporting.body_poses import body_track
+
+    run = grasp_run
+    test_gui.import_shipped(page)  # the run's object: its untraced grasp is simulated here
+    page.get_by_text("4 Analyze results").click()
+    page.get_by_test_id("run-dir").fill(str(run.path))
+    page.get_by_test_id("open-run").click()
+    rows = page.get_by_test_id("picks-table").locator("tbody tr")
+    rows.first.wait_for()
+    heads = page.get_by_test_id("picks-table").locator("th").all_inner_texts()
+    heads = [h.removesuffix("arrow_upward") for h in heads]  # the sort icon's name
+    assert "tilt from vertical (deg)" in heads and "grasp centre above the table (mm)" in heads
+    assert "3 grasps" in page.get_by_test_id("run-info").inner_text()
+    page.get_by_test_id("map-note").filter(has_text="Grasps given as poses: tilted").wait_for()
+    assert not page.get_by_test_id("score-map").is_visible()
+
+    ranked = ranked_ids(run)
+    traced = {pid for pid, _ in run.traced()}
+    rank = max(
+        (r for r, pid in enumerate(ranked, 1) if pid in traced),
+        key=lambda r: run.row(ranked[r - 1])["tilt_deg"],
+    )  # the most tilted of the traced grasps
+    pid = ranked[rank - 1]
+    tilt = run.row(pid)["tilt_deg"]
+    assert tilt > 5.0, tilt  # a grasp that is not a pick-point
+    rows.nth(rank - 1).locator(".q-checkbox").click()  # with the mouse, as a user selects
+    detail = page.get_by_test_id("pick-detail")
+    detail.filter(has_text=f"grasp {pid} (rank {rank}): approach tilted {tilt:.1f} deg").wait_for()
+    page.get_by_test_id("replay-outcome").filter(has_text=f"tilted {tilt:.1f} deg").wait_for()
+    scene = page.get_by_test_id("replay-scene").get_attribute("id")
+    page.wait_for_function(
+        "(id) => window['scene_' + id]?.getObjectByName('pick-replay')?.children.length === 5",
+        arg=scene,
+    )
+    # the page's bodies are the trace's kinematics with the gripper turned as simulated
+    trace = run.trace(pid)
+    replay = SceneReplay(run.path / "scene.xml", run.gripper)
+    track = body_track(replay.model, trace, replay.shapes, run.gripper)
+    gripper = track.bodies.index("gripper")
+    shown = quaternions(page)["gripper"]
+    assert tilt_of(shown) == pytest.approx(tilt, abs=0.05)
+    np.testing.assert_allclose(
+        np.abs(shown @ track.quat_wxyz[0, gripper]), 1.0, atol=1e-5
+    )  # the same rotation (q and -q alike)
+    start = np.array(bodies(page)["gripper"][0])
+    np.testing.assert_allclose(start, track.position_m[0, gripper], atol=PAGE_TOL_M)
+    # the slider dragged past its end with the mouse: the last row, the gripper lifted
+    # straight up, still tilted
+    slider = page.get_by_test_id("replay-time")
+    slider.scroll_into_view_if_needed()
+    box = slider.bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.move(box["x"] + box["width"] / 2, y)
+    page.mouse.down()
+    for i in range(1, 11):
+        page.mouse.move(box["x"] + box["width"] * (0.5 + 0.06 * i), y)
+    page.mouse.up()
+    t = trace["t_s"]
+    page.get_by_test_id("replay-clock").filter(has_text=f"t = {t[-1]:.3f} s").wait_for()
+    lifted = trace["lift_m"][-1] - trace["lift_m"][0]
+    end = np.array(bodies(page)["gripper"][0])
+    np.testing.assert_allclose(end - start, [0, 0, lifted], atol=PAGE_TOL_M)
+    assert tilt_of(quaternions(page)["gripper"]) == pytest.approx(tilt, abs=0.05)
+    test_gui.shot(page, "replay_3d_tilted")
+
+    # a grasp the run did not trace: simulated now as the same pose, the gripper tilted
+    rank = next(r for r, p in enumerate(ranked, 1) if p not in traced)
+    pid = ranked[rank - 1]
+    rows.nth(rank - 1).locator(".q-checkbox").click()
+    detail.filter(has_text="simulated now with the run's settings").wait_for(
+        timeout=test_gui.TIMEOUT_MS
+    )
+    assert f"score {run.row(pid)['score']:.3f}" in detail.inner_text()
+    page.get_by_test_id("replay-outcome").filter(
+        has_text=f"tilted {run.row(pid)['tilt_deg']:.1f} deg"
+    ).wait_for()
+    page.wait_for_function(
+        """([id, tilt]) => {
+            const g = window['scene_' + id]?.getObjectByName('pick-replay')
+                ?.getObjectByName('gripper');
+            if (!g) return false;
+            const up = new g.up.constructor(0, 0, 1).applyQuaternion(g.quaternion);
+            return Math.abs(Math.acos(Math.min(1, up.z)) * 180 / Math.PI - tilt) < 0.05;
+        }""",
+        arg=[scene, run.row(pid)["tilt_deg"]],
+    )
+
+    # the grasps as a grasp file (the report's template and robot pick-points are for a
+    # vertical approach): exported, offered for download, read back
+    page.get_by_test_id("export-grasps").click()
+    assert test_gui.wait_job(page, f"export {run.path.name} (graspgen)").startswith("complete")
+    button = page.get_by_test_id("download-grasps_graspgen.json")
+    with page.expect_download() as info:
+        button.click()
+    from mjx_pick.outputs.exchange import read_labels
+
+    saved = info.value.path()
+    labels = read_labels(Path(saved).rename(Path(saved).with_suffix(".json")))
+    assert len(labels.transforms) == 3
+    # the report: its page offered, never its template or robot pick-points, and why
+    test_gui.number(page, "n best and n worst", 1)
+    page.get_by_test_id("export").click()
+    assert test_gui.wait_job(page, f"report {run.path.name}").startswith("complete")
+    page.get_by_test_id("download-report.html").wait_for()
+    page.get_by_test_id("downloads-note").filter(has_text="without its tilt").wait_for()
+    assert (run.path / "template_a4.pdf").is_file()  # written by the report, not offered
+    assert not page.get_by_test_id("download-template_a4.pdf").count()
+    assert not page.get_by_test_id("download-robot_picks.json").count()
+
+
+def ranked_ids(run: Run) -> list[int]:
+    """The run's pick ids best score first, as the table ranks them."""
+    score = np.asarray(run.table["score"], float)
+    order = np.argsort(np.where(np.isnan(score), -np.inf, -score), kind="stable")
+    return [int(run.table["pick_id"][int(i)].as_py()) for i in order]

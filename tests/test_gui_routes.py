@@ -9,10 +9,12 @@ import re
 import time
 from pathlib import Path
 
+import numpy as np
 import test_gui
 from test_gui import (
     BLOCK,
     TIMEOUT_MS,
+    choose,
     import_shipped,
     number,
     shown_field_messages,
@@ -638,3 +640,226 @@ def test_two_browser_tabs_starting_one_run_name_at_once_start_it_once(page, serv
         assert len(list((work / "logs").glob("twin*.log"))) == 1  # one run, one log
     finally:
         other.context.close()
+
+
+def grasp_rows(path: Path) -> list[dict]:
+    """The rows of a CSV of grasp poses (``export --format csv``)."""
+    import csv
+
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def write_grasps(path: Path, rows: list[dict], columns: list[str]) -> Path:
+    lines = [",".join(columns)] + [",".join(r[c] for c in columns) for r in rows]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def upload_grasps(page, path: Path) -> None:
+    page.get_by_test_id("grasps-upload").locator("input[type=file]").set_input_files(str(path))
+
+
+def test_grasps_antipodal_and_from_a_file_run_through_the_cli(page, server, tmp_path):
+    """Tab 3's grasp sources, chosen with the mouse: antipodal grasps on the block run
+    as ``evaluate --grasps antipodal`` (no map: it draws top-down pick-points); its
+    grasps exported as a CSV of poses and uploaded -- a text file, a file in another
+    unit and one without its depth refused first, each in the page's words -- run as
+    ``evaluate --grasps FILE``: the same grasps, the same labels."""
+    import pyarrow.parquet as pq
+    from playwright.sync_api import expect
+
+    from mjx_pick.gui.grasp_input import SOURCES
+    from mjx_pick.outputs.exchange import export_labels
+
+    _, work = server
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "lift height (mm)", 5)
+    number(page, "hold (s)", 0.05)
+    page.get_by_text("3 Generate input data").click()
+    choose(page, "grasps from", SOURCES["antipodal"])
+    expect(page.get_by_test_id("generate")).to_be_hidden()  # the map is of pick-points
+    page.get_by_test_id("grasp-source-note").filter(has_text="antipodal grasps").wait_for()
+    number(page, "grasps", 3)  # the count, named for what it counts
+    number(page, "traced best and worst (force plots)", 0)
+    page.get_by_label("run folder name").fill("antipodal")
+    page.get_by_test_id("start-batch").click()
+    status = wait_job(page, "evaluate antipodal")
+    assert status.startswith("complete, 3/3"), status
+    shown = page.locator("code").filter(has_text="mjx-pick evaluate").first.inner_text()
+    assert "--grasps antipodal --n 3" in shown, shown
+    drawn = pq.read_table(work / "antipodal" / "results.parquet")
+    assert drawn.num_rows == 3 and max(drawn["tilt_deg"].to_pylist()) > 1.0
+
+    written = export_labels(work / "antipodal", "csv", tmp_path / "grasps.csv")
+    rows = grasp_rows(written["labels"])
+    choose(page, "grasps from", SOURCES["file"])
+    expect(page.get_by_label("grasps", exact=True)).to_be_hidden()  # the file's count
+    # a file of another kind: said by its name, by the upload's own rule
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not grasps")
+    upload_grasps(page, notes)
+    page.get_by_test_id("grasps-file-error").filter(has_text="notes.txt: not a grasp").wait_for()
+    # poses in mm read as metres: refused before any work, the distance named
+    far = [dict(r) for r in rows]
+    for r in far:
+        pose = [float(v) for v in r["grasp_pose"].split()]
+        for i in (3, 7, 11):
+            pose[i] *= 1000.0
+        r["grasp_pose"] = " ".join(f"{v:.9g}" for v in pose)
+    upload_grasps(page, write_grasps(tmp_path / "in_mm.csv", far, ["grasp_pose", "depth_mm"]))
+    page.get_by_test_id("grasps-file-info").filter(has_text="in_mm.csv: 3 grasps").wait_for()
+    page.get_by_label("run folder name").fill("from-file")
+    page.get_by_test_id("start-batch").click()
+    error = page.get_by_test_id("grasps-file-error")
+    error.filter(has_text="in_mm.csv: 3 of 3 grasp centres lie more than 200 mm").wait_for()
+    assert "unit or frame disagrees" in error.inner_text()
+    assert str(work) not in error.inner_text()  # the file by its name, not where it is kept
+    # no depth in the file, none given: asked for under its field
+    upload_grasps(page, write_grasps(tmp_path / "no_depth.csv", rows, ["grasp_pose"]))
+    info = page.get_by_test_id("grasps-file-info")
+    info.filter(has_text="3 without a depth: give the grasp depth below").wait_for()
+    page.get_by_test_id("start-batch").click()
+    message = field_message(page, "grasp depth (mm): base to grasp centre")
+    expect(message).to_contain_text("3 of the 3 grasps of no_depth.csv do not say")
+    assert not page.get_by_test_id("job-title").filter(has_text="from-file").count()
+    # the exported file: every grasp simulated as the antipodal run simulated it
+    upload_grasps(page, written["labels"])
+    info.filter(has_text="grasps.csv: 3 grasps (each gives its depth)").wait_for()
+    page.get_by_test_id("start-batch").click()
+    status = wait_job(page, "evaluate from-file")
+    assert status.startswith("complete, 3/3"), status
+    shown = page.locator("code").filter(has_text="mjx-pick evaluate").first.inner_text()
+    assert "--grasps" in shown and "grasps.csv" in shown and "--n " not in shown, shown
+    again = pq.read_table(work / "from-file" / "results.parquet")
+    assert again["pick_id"].to_pylist() == drawn["pick_id"].to_pylist()
+    assert again["success"].to_pylist() == drawn["success"].to_pylist()
+    np.testing.assert_allclose(again["tilt_deg"], drawn["tilt_deg"], atol=1e-6)
+    # a run's grasps come back with its settings: the antipodal count, then the file
+    page.get_by_label("run folder name").fill("antipodal")
+    page.get_by_test_id("load-run").click()
+    expect(page.get_by_label("grasps from", exact=True)).to_have_value(SOURCES["antipodal"])
+    expect(page.get_by_label("grasps", exact=True)).to_have_value("3")
+    page.get_by_label("run folder name").fill("from-file")
+    page.get_by_test_id("load-run").click()
+    expect(page.get_by_label("grasps from", exact=True)).to_have_value(SOURCES["file"])
+    info.filter(has_text="grasps.csv: the run's grasp file").wait_for()
+
+
+def test_a_long_run_is_asked_about_before_it_starts(page, server):
+    """A run estimated longer than a few minutes on this machine (studies.duration, the
+    CLI's estimate) is said in a dialog before anything starts: 'Not now' starts
+    nothing and leaves its name free; 'Start it' starts it with --yes (cancelled here)."""
+    from playwright.sync_api import expect
+
+    _, work = server
+    import_shipped(page)
+    page.get_by_text("3 Generate input data").click()
+    number(page, "pick-points", 1_000_000)  # hours on any machine of a few cores
+    page.get_by_label("run folder name").fill("long")
+    page.get_by_test_id("start-batch").click()
+    question = page.get_by_test_id("long-run-question")
+    question.filter(has_text="This evaluate would take about").wait_for()
+    assert "1,000,000 simulations" in question.inner_text()
+    assert "--yes" not in question.inner_text()  # the page's words: start it, or smaller
+    test_gui.shot(page, "long_run_question")
+    page.get_by_test_id("long-run-no").click()
+    page.get_by_test_id("generate-error").filter(has_text="not started: this evaluate").wait_for()
+    expect(page.get_by_test_id("job-title")).to_be_hidden()
+    assert not (work / "long").exists() and not (work / "logs" / "long.log").exists()
+    page.get_by_test_id("start-batch").click()
+    question.filter(has_text="This evaluate would take about").wait_for()
+    page.get_by_test_id("long-run-yes").click()
+    page.get_by_test_id("job-title").filter(has_text="evaluate long").wait_for()
+    shown = page.locator("code").filter(has_text="mjx-pick evaluate").first.inner_text()
+    assert shown.rstrip().endswith("--yes"), shown
+    page.get_by_text("Cancel", exact=True).click()
+    status = wait_job(page, "evaluate long")
+    assert status.startswith("cancelled"), status
+
+
+def trials_zip(path: Path, rows: list[tuple[float, str, str]], extra: dict | None = None) -> Path:
+    """A zip of a TRIALS.csv and its mesh, a 30 mm cube (3 g, abb-yumi-smart, resting
+    on a face): rows (grasp centre's x offset in mm, success, trial id) of vertical grasps
+    through the cube's centre; extra: {member name: bytes} added."""
+    import zipfile
+
+    import trimesh
+
+    grasp = np.diag([1.0, -1.0, -1.0, 1.0])  # E's axes: approach +z (down), closing along x
+    lines = ["object,mass_g,gripper,object_pose,grasp_pose,depth_mm,success,trial"]
+    for x_mm, success, trial in rows:
+        pose = grasp.copy()
+        pose[0, 3] = x_mm * 1e-3
+        cells = " ".join(f"{v:g}" for v in pose.ravel())
+        lines.append(f"cube.obj,3,abb-yumi-smart,,{cells},0,{success},{trial}")
+    cube = trimesh.creation.box((0.03, 0.03, 0.03)).export(file_type="obj")
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("cube_trials/TRIALS.csv", "\n".join(lines) + "\n")
+        z.writestr("cube_trials/cube.obj", cube)
+        for name, data in (extra or {}).items():
+            z.writestr(name, data)
+    return path
+
+
+def test_validate_on_uploaded_trials_shows_its_figures(page, server, tmp_path):
+    """Physical trials in the Studies tab: a zip whose member would land outside its
+    folder refused before anything is written, a CSV naming a mesh outside the work
+    folder refused; then a zip of a TRIALS.csv and its cube (three trials of one grasp
+    through the cube, one grasp beside it) validated through the CLI child, and
+    validation.json's figures shown: the four with their intervals, the confusion
+    matrix, per object, the checks' rejection."""
+    import json
+
+    from playwright.sync_api import expect
+
+    _, work = server
+    page.get_by_text("Studies", exact=True).click()
+    page.get_by_text("Validate against physical trials").click()
+    upload = page.get_by_test_id("trials-upload").locator("input[type=file]")
+    error = page.get_by_test_id("trials-error")
+    rows = [(0.0, "1", "a0"), (0.0, "1", "a1"), (0.0, "0", "a2"), (60.0, "0", "b0")]
+    upload.set_input_files(str(trials_zip(tmp_path / "evil.zip", rows, {"../evil.txt": b"x"})))
+    error.filter(has_text="evil.zip: '../evil.txt' would be written outside").wait_for()
+    assert not (work / "inputs" / "trials").exists()  # nothing unpacked
+    # a TRIALS.csv in the work folder that names a mesh outside it: never read
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    (outside / "far.obj").write_text("v 0 0 0\n")
+    mine = work / "mine"
+    mine.mkdir()
+    pose = " ".join(f"{v:g}" for v in np.diag([1.0, -1.0, -1.0, 1.0]).ravel())
+    text = "object,mass_g,gripper,grasp_pose,success,trial\n"
+    text += f"{outside / 'far.obj'},3,abb-yumi-smart,{pose},1,t\n"
+    (mine / "TRIALS.csv").write_text(text)
+    page.get_by_label("or a TRIALS.csv in the work folder").fill("mine/TRIALS.csv")
+    page.get_by_test_id("trials-use").click()
+    error.filter(has_text="its mesh far.obj lies outside the work folder").wait_for()
+
+    upload.set_input_files(str(trials_zip(tmp_path / "cube.zip", rows)))
+    info = page.get_by_test_id("trials-info")
+    info.filter(has_text="cube.zip: TRIALS.csv: 4 trials of 2 grasps on cube.obj").wait_for()
+    expect(error).to_have_text("")
+    page.get_by_label("run folder name").filter(visible=True).last.fill("validated")
+    page.get_by_test_id("start-validate").click()
+    status = wait_job(page, "validate validated")
+    assert status.startswith("complete"), status
+    report = json.loads((work / "validated" / "validation.json").read_text())
+    c = report["confusion"]
+    assert c["tp"] + c["fp"] + c["fn"] + c["tn"] == 4
+    assert report["checks"]["rejected_trials"] == 1  # the grasp beside the cube
+    figures = page.get_by_test_id("validate-figures").locator("tbody tr")
+    expect(figures).to_have_count(4)
+    f1 = report["f1"]
+    expect(figures.nth(3)).to_contain_text(f"{f1['value']:.3f}")
+    lo, hi = f1["ci95"]
+    expect(figures.nth(3)).to_contain_text(f"{lo:.3f}-{hi:.3f}")
+    confusion = page.get_by_test_id("validate-confusion").locator("tbody tr")
+    assert confusion.nth(0).inner_text().split()[-2:] == [str(c["tp"]), str(c["fn"])]
+    assert confusion.nth(1).inner_text().split()[-2:] == [str(c["fp"]), str(c["tn"])]
+    expect(page.get_by_test_id("validate-objects").locator("tbody tr")).to_have_count(1)
+    checks = page.get_by_test_id("validate-checks")
+    expect(checks).to_contain_text("The checks rejected 1 trial before simulating it")
+    expect(checks).to_contain_text("1: nothing lies between the pads (0 held on the robot)")
+    test_gui.shot(page, "validate")

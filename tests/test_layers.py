@@ -206,6 +206,8 @@ GUI_LEVELS = {
         "worker",
         "replay3d",
         "workfolder",
+        "grasp_input",
+        "trials_input",
     ),
     "page parts": (
         "page",

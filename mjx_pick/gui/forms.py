@@ -188,6 +188,8 @@ FLAG_WORDS = {
     "--grippers": "presets (Studies)",
     "--param": "parameter (Parameter sweep)",
     "--results": "the run open in tab 4 (its folder)",
+    "--grasps": "grasps from (tab 3)",
+    "--depth-mm": "grasp depth (mm) (tab 3)",
 }
 # a flag in brackets after the words it stands for ("check mass_g (--mass-g)"): the
 # words are said already
@@ -245,6 +247,18 @@ def page_words(message: str) -> str:
     text = _KEY.sub(lambda m: key_words(m.group(1)) if _is_key(m.group(1)) else m.group(1), text)
     text = _PIP.sub(_install_words, text)
     text = _OUTCOME.sub(lambda m: outcome_words(m.group(0)), text)
+    return _FLAG.sub(
+        lambda m: FLAG_WORDS.get(m.group(1), key_words(m.group(1)[2:].replace("-", "_"))), text
+    )
+
+
+def file_words(message: str) -> str:
+    """A message about what is wrong inside a file the user wrote (a gripper TOML, a
+    grasp file, a TRIALS.csv) in the page's words, its keys and columns kept -- they
+    are the user's own words there (``column depth_mm``, ``stroke_mm = -5``): no path
+    of the software's files, the CLI's advice and flags as the page's controls (a CLI
+    flag is never a file's word)."""
+    text = page_advice(_FLAG_AFTER.sub("", page_text(message)))
     return _FLAG.sub(
         lambda m: FLAG_WORDS.get(m.group(1), key_words(m.group(1)[2:].replace("-", "_"))), text
     )
@@ -582,6 +596,9 @@ _PAGE_ADVICE = (
         "import the object it was made with in tab 1 (its file or shipped object, scale, "
         "thickness and mass)",
     ),
+    # a run estimated longer than a few minutes (studies.duration.refuse_long): the page
+    # asks before it starts, and passes --yes once the user confirms
+    ("pass --yes to start it, or make it smaller", "start it anyway, or make it smaller"),
     ("choose another --out or pass --overwrite", "choose another run folder name"),
     ("leave out --resume to start one there", "untick 'resume' to start one there"),
     ("choose another --out", "choose another run folder name"),

@@ -80,7 +80,7 @@ assert _WORKER_FROM_PACKAGE != _CLI_FROM_PACKAGE
 # the commands a worker runs: the simulation commands, whose fixed costs it saves. Not
 # `report` (its cost is rendering, not compiling; its GL contexts are better ended with
 # a process) nor `calibrate` (its derivative programs are large and used once).
-WARM_COMMANDS = ("evaluate", "sweep", "compare", "robust")
+WARM_COMMANDS = ("evaluate", "sweep", "compare", "robust", "validate")
 DEFAULT_BACKEND = Impl.MUJOCO.value  # the settings form's; its worker is started with the server
 # a worker whose resident memory grew by more than this since its first job is replaced
 # before its next job (a leak in a library must not grow the machine's memory job after
@@ -384,6 +384,12 @@ class Runs:
         job.owner = owner
         self._jobs.append(job)
 
+    def forget(self, job: Job) -> None:
+        """A run that never started (the CLI refused it as long, before any work, and
+        the page asks instead): no longer listed."""
+        if job in self._jobs:
+            self._jobs.remove(job)
+
     def __iter__(self):
         return iter(list(self._jobs))
 
@@ -462,6 +468,7 @@ class Job:
         and 2 are the units done and in all in the run's progress lines (the CLI's
         progress bar in a log: "report:  40% 4/10 part ...")."""
         self.argv = list(argv)
+        self.asked_log = Path(log)  # the log's name as asked (a taken one gets -2, -3)
         self.steps_logged = re.compile(steps_logged) if steps_logged else None
         self.counted = re.compile(counted) if counted else None
         self.unit = unit
@@ -480,6 +487,32 @@ class Job:
         self.elapsed_s: float | None = None  # a run that ended before this server started
         self.notes: tuple[str, ...] = ()  # the warm workers' news when it started
         self.owner: str | None = None  # the browser tab that started it
+
+    def again(self, *extra: str) -> Job:
+        """This run once more, with extra CLI arguments (``--yes`` once a long run is
+        confirmed): the same folder, count and progress; its log beside this one's."""
+        job = Job(self.argv + list(extra), self.asked_log, self.out, self.total, self.chunk)
+        job.steps_logged, job.counted, job.unit = self.steps_logged, self.counted, self.unit
+        job.writes = self.writes
+        return job
+
+    def refused_as_long(self) -> str:
+        """The CLI's refusal of this run as too long to start unasked (its estimate,
+        ``studies.duration.refuse_long``), when that is how it ended; else ''. A run
+        given --yes is never refused so."""
+        if "--yes" in self.argv or self._proc is None or self._proc.poll() in (None, 0):
+            return ""
+        found = LONG_REFUSAL.findall(self._log_text())
+        return found[-1].strip() if found else ""
+
+    def discard_log(self) -> None:
+        """Remove this run's log: a run the CLI refused before any work (as long, and the
+        page asks instead) leaves no trace that would take its name (a run's name is its
+        log's and its folder's, and a taken one is refused)."""
+        try:
+            workfolder.confined(self.log, self.workdir).unlink(missing_ok=True)
+        except (OSError, ValueError):  # outside the work folder (a link): left alone
+            pass
 
     @property
     def command_line(self) -> str:
@@ -815,6 +848,39 @@ def _wall(stamp: str | None) -> float | None:
         return datetime.datetime.fromisoformat(stamp).timestamp() if stamp else None
     except ValueError:
         return None
+
+
+# The CLI's refusal of a run estimated longer than a few minutes on this machine
+# (studies.duration.refuse_long): "<what> would take about 8 min (...) on this machine;
+# pass --yes to start it, or make it smaller". The page asks instead (JobPanel), and
+# passes --yes once the user confirms.
+LONG_REFUSAL = re.compile(
+    r"(?m)^mjx-pick: error: (.+ would take .+ on this machine; pass --yes .*)$"
+)
+
+
+def long_run(study: str, what: str, backend: str, grasp=None, **sizes) -> str:
+    """Why a run of the page is asked about before it starts ('' when it is not): the
+    one estimate every interface asks (``studies.duration``: count, estimate,
+    refuse_long) of study with sizes (``duration.count``'s) and the procedure grasp
+    on backend, on this machine -- refuse_long's words, which the CLI would refuse the
+    same run with unless --yes."""
+    from mjx_pick.core.config import ConfigError
+    from mjx_pick.engine import devices, registry
+    from mjx_pick.studies import duration
+
+    gpu = backend == AUTO or registry.ENTRIES[backend].device is registry.Device.NVIDIA_GPU
+    if gpu and devices.nvidia_driver_present():
+        # counting this machine's GPUs (or resolving 'auto' there) starts Warp's CUDA
+        # runtime, which the server never does: the run's own process estimates, and a
+        # run it refuses as long is asked about then (JobPanel, LONG_REFUSAL)
+        return ""
+    est = duration.estimate(duration.count(study, **sizes), grasp, None, backend)
+    try:
+        duration.refuse_long(est, what, yes=False)
+    except ConfigError as err:
+        return str(err)
+    return ""
 
 
 # the report's progress lines in its log (outputs.progress.ProgressBar's line mode)

@@ -133,14 +133,18 @@ def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict, str]:
     problem = backend_problems().get(backend)
     if problem:  # said, never the run's refusal with its install advice
         backend, note = AUTO, f"on {AUTO}: the run's backend {backend} cannot run here ({problem})"
-    checker = pp.FeasibilityChecker(obj, settings.gripper, pick_config, settings.grasp)
-    batch = checker.batch(
-        np.array([pick_id]),
-        np.array([row["x_mm"]]),
-        np.array([row["y_mm"]]),
-        np.array([row["yaw_deg"]]),
-        "user",
-    )
+    pose = row.get("grasp_pose")
+    if pose is not None:  # a grasp given as a pose: the pose, tilt and height as the run's
+        batch = _posed(obj, settings, pick_config, pick_id, np.asarray(pose, float))
+    else:
+        checker = pp.FeasibilityChecker(obj, settings.gripper, pick_config, settings.grasp)
+        batch = checker.batch(
+            np.array([pick_id]),
+            np.array([row["x_mm"]]),
+            np.array([row["y_mm"]]),
+            np.array([row["yaw_deg"]]),
+            "user",
+        )
     ev = evaluate(
         obj,
         settings.gripper,
@@ -154,4 +158,25 @@ def simulate_untraced(run, obj, pick_id: int) -> tuple[dict, dict, str]:
     )
     again = {k: ev.table[k][0].as_py() for k in ev.table.column_names}
     trace = {name: np.asarray(ev.traces[name]) for name in ev.traces.column_names}
+    if pose is not None:  # as Run.trace gives a traced grasp's: the replay turns the gripper
+        from mjx_pick.core.grasps import decompose
+
+        trace["gripper_tilt_wxyz"] = decompose(np.reshape(pose, (1, 4, 4)))["tilt_quat"][0]
     return trace, again, note
+
+
+def _posed(obj, settings, pick_config, pick_id: int, pose: np.ndarray):
+    """The one grasp of a run given as a pose (its results' ``grasp_pose``: the grasp
+    frame in the object frame), checked by the 6-DoF checks as the run checked it (the
+    start opening by the same rule): a GraspBatch of one, or ConfigError saying why the
+    grasp cannot be simulated here."""
+    from mjx_pick.core.config import ConfigError
+    from mjx_pick.core.grasp_checks import REASON_WORDS, GraspChecker
+    from mjx_pick.engine.inputs import scene_of
+
+    checker = GraspChecker(scene_of(obj, settings), pick_config.safety_zone_mm)
+    batch = checker.batch(np.array([pick_id]), pose.reshape(1, 4, 4), "user")
+    if len(batch) == 0:
+        why = ", ".join(REASON_WORDS.get(k, k) for k, v in batch.rejected.items() if v)
+        raise ConfigError(f"grasp {pick_id} is not feasible with the page's object: {why}")
+    return batch

@@ -19,6 +19,10 @@ IMAGE_MAX_BYTES = 20 * 2**20
 MESH_MAX_BYTES = 50 * 2**20  # also the browser's limit for an object upload
 TOML_MAX_BYTES = 64 * 2**10
 OUTCOMES_MAX_BYTES = 5 * 2**20
+GRASPS_MAX_BYTES = 50 * 2**20  # a grasp file (ACRONYM's HDF5 of 2,000 grasps: ~1 MB)
+TRIALS_MAX_BYTES = 50 * 2**20  # a zip of a TRIALS.csv, its meshes and gripper TOMLs
+TRIALS_MAX_UNPACKED = 500 * 2**20  # what such a zip may hold unpacked (a zip bomb is not)
+TRIALS_MAX_FILES = 2000
 UPLOAD_TYPES = IMAGE_SUFFIXES + MESH_SUFFIXES
 
 
@@ -127,6 +131,107 @@ def check_outcomes_upload(name: str, data: bytes) -> str:
     except UnicodeDecodeError:
         return f"{name}: not a UTF-8 text file"
     return ""
+
+
+def grasps_refused(name: str, size: int) -> str:
+    """Why a grasp file is refused by its name or size ('' if not): the formats the
+    library reads, by suffix (``gui.grasp_input.FILE_SUFFIXES``)."""
+    from mjx_pick.gui.grasp_input import FILE_SUFFIXES
+
+    if Path(name).suffix.lower() not in FILE_SUFFIXES:
+        return (
+            f"{name}: not a grasp file (ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, "
+            "a CSV of poses .csv)"
+        )
+    if size > GRASPS_MAX_BYTES:
+        return _too_large(name, size, GRASPS_MAX_BYTES)
+    if size == 0:
+        return f"{name}: the file is empty"
+    return ""
+
+
+def trials_refused(name: str, size: int) -> str:
+    """Why an upload of physical trials is refused by its name or size ('' if not): a
+    zip of a TRIALS.csv with the meshes and gripper TOMLs it names, beside it as the
+    CSV names them."""
+    if not name.lower().endswith(".zip"):
+        return (
+            f"{name}: not a .zip file (a zip of a TRIALS.csv with the meshes and gripper "
+            "files it names)"
+        )
+    if size > TRIALS_MAX_BYTES:
+        return _too_large(name, size, TRIALS_MAX_BYTES)
+    if size == 0:
+        return f"{name}: the file is empty"
+    return ""
+
+
+def store_trials(data: bytes, name: str, folder: Path, workdir: Path) -> Path:
+    """An uploaded zip of physical trials, unpacked into a new folder under folder
+    (``<zip name>``, ``-2``, ...: never over another upload) inside workdir; returns
+    its TRIALS.csv. Every member is checked before anything is written: a path that
+    leaves the folder (absolute, ``..``, a drive), a link, more than TRIALS_MAX_FILES
+    files or TRIALS_MAX_UNPACKED bytes unpacked, and not exactly one TRIALS.csv (a CSV
+    whose header names grasp_pose and success) are refused, naming the member. macOS's
+    ``__MACOSX/`` folder (the archiver's metadata, not the user's files) is left out."""
+    import io
+    import stat
+    import zipfile
+    from pathlib import PurePosixPath
+
+    from mjx_pick.gui.workfolder import confined
+
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(data))
+    except zipfile.BadZipFile:
+        raise ConfigError(f"{name}: cannot be read as a zip file") from None
+    members, trials, total = [], [], 0
+    with archive:
+        for info in archive.infolist():
+            path = PurePosixPath(info.filename.replace("\\", "/"))
+            if info.is_dir() or (path.parts and path.parts[0] == "__MACOSX"):
+                continue
+            if path.is_absolute() or ".." in path.parts or ":" in info.filename:
+                raise ConfigError(
+                    f"{name}: {info.filename!r} would be written outside the zip's folder: "
+                    "give paths relative to the TRIALS.csv"
+                )
+            if stat.S_ISLNK(info.external_attr >> 16):
+                raise ConfigError(f"{name}: {info.filename!r} is a link: give the file itself")
+            total += info.file_size
+            members.append((info, path))
+            if path.suffix.lower() == ".csv":
+                with archive.open(info) as fh:
+                    header = fh.readline(4096).decode("utf-8-sig", errors="replace")
+                if {"grasp_pose", "success"} <= {c.strip() for c in header.split(",")}:
+                    trials.append(path)
+        if len(members) > TRIALS_MAX_FILES or total > TRIALS_MAX_UNPACKED:
+            raise ConfigError(
+                f"{name}: {len(members):,} files of {_megabytes(total)} unpacked: at most "
+                f"{TRIALS_MAX_FILES:,} files of {_megabytes(TRIALS_MAX_UNPACKED)}"
+            )
+        if len(trials) != 1:
+            found = ", ".join(str(t) for t in trials) or "none"
+            raise ConfigError(
+                f"{name}: holds {len(trials)} TRIALS.csv files ({found}): give one, a CSV "
+                "whose header names object, mass_g, gripper, grasp_pose, success, trial"
+            )
+        stem = re.sub(r"[^A-Za-z0-9._-]+", "_", Path(name).stem)[:60] or "trials"
+        confined(folder, workdir)  # the uploads folder itself: never one a link leads out
+        folder.mkdir(parents=True, exist_ok=True)
+        for k in range(1, 1000):
+            target = folder / (stem if k == 1 else f"{stem}-{k}")
+            try:
+                target.mkdir()
+                break
+            except FileExistsError:
+                continue
+        else:
+            raise ConfigError(f"too many uploads named {name!r} in {folder}")
+        for info, path in members:
+            out = confined(target.joinpath(*path.parts), workdir)
+            write_atomic(out, archive.read(info))
+    return target.joinpath(*trials[0].parts)
 
 
 def browser_refused(files: list[dict], refused) -> str:

@@ -116,6 +116,28 @@ def score_map_png(run, pose: int | None = None) -> tuple[bytes, np.ndarray]:
     return _render(draw), drawn["pixels"]
 
 
+def posed(run) -> bool:
+    """Whether a run's grasps were given as poses (antipodal, or a grasp file): each row
+    has its grasp frame (``grasp_pose``), its tilt from vertical and its height -- the
+    pick-point maps and templates, drawn for a vertical approach, do not show them."""
+    return "grasp_pose" in run.table.column_names
+
+
+def posed_text(run) -> str:
+    """What tab 4 says of a run of grasps given as poses in place of its map: how far
+    they tilt and where their centres lie, and why no map or template is shown."""
+    tilt = np.asarray(run.table["tilt_deg"], float)
+    height = np.asarray(run.table["height_mm"], float)
+    return (
+        f"Grasps given as poses: tilted {np.nanmin(tilt):.1f}-{np.nanmax(tilt):.1f} deg from "
+        f"vertical, their centres {np.nanmin(height):.1f}-{np.nanmax(height):.1f} mm above "
+        "the table. No map: the maps (and the report's printed template and robot "
+        "pick-points) draw top-down pick-points, a vertical approach; the table gives each "
+        "grasp's tilt and height with its planar part, and the 3-D replay shows the "
+        "gripper as it was simulated."
+    )
+
+
 def nearest_pick(pixels: np.ndarray, column: float, row: float, within: float = 12.0):
     """Index of the pick-point drawn nearest a click at (column, row) in the image's
     pixels, or None when none lies within `within` pixels."""

@@ -65,7 +65,7 @@ class Trials:
         their indices, in the file's order."""
         out: dict[tuple, list[int]] = {}
         for i in range(len(self)):
-            pose = tuple(np.round(self.object_pose[i].ravel(), 9))
+            pose = _pose_key(self.object_pose[i])
             key = (self.object[i], float(self.mass_g[i]), self.gripper[i], pose)
             out.setdefault(key, []).append(i)
         return {k: np.asarray(v) for k, v in out.items()}
@@ -80,12 +80,22 @@ class Trials:
                 self.object[i],
                 float(self.mass_g[i]),
                 self.gripper[i],
-                tuple(np.round(self.object_pose[i].ravel(), 9)),
-                tuple(np.round(self.grasp_pose[i].ravel(), 9)),
+                _pose_key(self.object_pose[i]),
+                _pose_key(self.grasp_pose[i]),
                 round(float(self.depth_mm[i]), 6),
             )
             out[i] = keys.setdefault(key, len(keys))
         return out
+
+
+def _pose_key(pose: np.ndarray) -> tuple | None:
+    """A pose as a dictionary key, to a nanometre; None for an object pose the file
+    leaves to the mesh's most stable pose (all NaN: NaN never equals NaN, and each such
+    trial was once a scene and a grasp of its own, its repeats never grouped)."""
+    pose = np.asarray(pose, float)
+    if np.isnan(pose).all():
+        return None
+    return tuple(np.round(pose.ravel(), 9))
 
 
 def is_trials_file(path) -> bool:

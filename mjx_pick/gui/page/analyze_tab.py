@@ -47,18 +47,47 @@ TABLE_COLUMNS = (
     ("t_grasp_nc", "t_grasp_nc"),
     ("traced", "traced"),
 )
+# a run of grasps given as poses: each grasp's tilt and height, after its planar part
+GRASP_COLUMNS = (
+    ("tilt_deg", "tilt from vertical (deg)"),
+    ("height_mm", "grasp centre above the table (mm)"),
+)
 DOWNLOADS = (
     ("template_a4.pdf", "template (A4, PDF)"),
     ("template_letter.pdf", "template (Letter, PDF)"),
     ("report.html", "report (HTML)"),
     ("robot_picks.json", "robot pick-points (JSON)"),
 )
+# what the report writes for a vertical approach only: a printed 1:1 template and the
+# robot's gripper poses, both without a grasp's tilt -- not offered for grasps as poses
+VERTICAL_ONLY = ("template_a4.pdf", "template_letter.pdf", "robot_picks.json")
+# the grasp formats a run of grasps given as poses is exported in (``mjx-pick export``)
+GRASP_FORMATS = {
+    "graspgen": "GraspGen (JSON)",
+    "acronym": "ACRONYM (HDF5)",
+    "isaac-grasp": "isaac_grasp (YAML)",
+    "csv": "CSV of poses",
+}
+
+
+def table_columns(posed: bool) -> list[dict]:
+    """The table's columns: a run of grasps given as poses adds each grasp's tilt and
+    height after its planar part (x, y, yaw)."""
+    keys = list(TABLE_COLUMNS)
+    if posed:
+        at = [k for k, _ in keys].index("yaw_deg") + 1
+        keys[at:at] = GRASP_COLUMNS
+    return [
+        {"name": k, "label": label, "field": k, "sortable": True, "align": "left"}
+        for k, label in keys
+    ]
 
 
 class AnalyzeTab:
     def __init__(self, state: PageState, panel: JobPanel):
         self.state, self.panel = state, panel
         panel.handle("report", self.ended)
+        panel.handle("export", self.ended)
         self.map_png, self.map_pixels, self.map_ids = b"", None, []
         with ui.row().classes("w-full items-end"):
             self.run_dir = (
@@ -78,16 +107,7 @@ class AnalyzeTab:
             with ui.column().classes("w-[46rem]"):
                 self.table = (
                     ui.table(
-                        columns=[
-                            {
-                                "name": k,
-                                "label": label,
-                                "field": k,
-                                "sortable": True,
-                                "align": "left",
-                            }
-                            for k, label in TABLE_COLUMNS
-                        ],
+                        columns=table_columns(False),
                         rows=[],
                         row_key="pick_id",
                         selection="single",
@@ -103,8 +123,22 @@ class AnalyzeTab:
                     ui.button("Export template and report", on_click=self.export).props(
                         'data-testid="export"'
                     )
+                with ui.row().classes("items-end") as self.grasp_export:
+                    self.grasp_format = ui.select(
+                        GRASP_FORMATS, value="graspgen", label="grasp file format"
+                    ).classes("w-48")
+                    ui.button("Export the grasps", on_click=self.export_grasps).props(
+                        'data-testid="export-grasps"'
+                    )
+                self.grasp_export.set_visibility(False)
                 self.downloads = ui.row()
+                self.downloads_note = (
+                    ui.label("").classes("text-xs").props('data-testid="downloads-note"')
+                )
             with ui.column().classes("grow"):
+                self.map_note = (
+                    ui.label("").classes("text-sm max-w-xl").props('data-testid="map-note"')
+                )
                 self.score_map = (
                     ui.interactive_image(on_mouse=self.on_map_click, events=["click"])
                     .classes("w-full max-w-xl cursor-pointer")
@@ -185,22 +219,32 @@ class AnalyzeTab:
             self.error.set_text(f"{path}: cannot be read ({err})")
             return
         self.state.run = opened
+        posed = views.posed(opened)
         s = opened.summary
         self.run_info.set_text(
-            f"{s.get('object')} / {s.get('gripper')}: {s.get('n')} pick-points, success rate "
+            f"{s.get('object')} / {s.get('gripper')}: {s.get('n')} "
+            f"{'grasps' if posed else 'pick-points'}, success rate "
             f"{rate_text(s.get('successes', 0), s.get('n', 0))}, "
             f"mean score {fmt(s.get('score_mean'))}, "
             f"F_Gmin {fmt(s.get('f_gmin_n'))} N"
         )
+        self.table.columns = table_columns(posed)
         self.table.rows = ranked_rows(opened)
         self.table.selected = []
         self.table.update()
-        self.map_png, self.map_pixels = views.score_map_png(opened)
         self.map_ids = [int(v) for v in opened.table["pick_id"].to_pylist()]
-        self.score_map.set_source(views.data_uri(self.map_png, "image/png"))
-        self.score_map.set_visibility(True)
-        self.map_help.set_visibility(True)
-        self.detail.set_content("Select a pick-point (the table is ranked by score).")
+        if posed:  # tilted grasps: a map of a vertical approach would mislead
+            self.map_png, self.map_pixels = b"", None
+            self.map_note.set_text(views.posed_text(opened))
+        else:
+            self.map_png, self.map_pixels = views.score_map_png(opened)
+            self.score_map.set_source(views.data_uri(self.map_png, "image/png"))
+            self.map_note.set_text("")
+        self.score_map.set_visibility(not posed)
+        self.map_help.set_visibility(not posed)
+        self.grasp_export.set_visibility(posed)
+        what = "grasp" if posed else "pick-point"
+        self.detail.set_content(f"Select a {what} (the table is ranked by score).")
         self.force_image.set_visibility(False)
         self.replay.hide()
         self.show_downloads()
@@ -252,7 +296,7 @@ class AnalyzeTab:
 
     async def on_map_click(self, e) -> None:
         """A click on the score map selects the pick-point drawn nearest it."""
-        if self.state.run is None:
+        if self.state.run is None or self.map_pixels is None:
             return
         i = views.nearest_pick(self.map_pixels, e.image_x, e.image_y)
         if i is None:
@@ -275,10 +319,24 @@ class AnalyzeTab:
         pid = int(row["pick_id"])
         self.shown = (opened, pid)  # what the awaits below draw for, unless it changes
         full = opened.row(pid)
+        posed = views.posed(opened)
+        if posed:  # a grasp given as a pose: its tilt and height first
+            head = (
+                f"**grasp {pid}** (rank {row['rank']}): approach tilted "
+                f"{full['tilt_deg']:.1f} deg from vertical, grasp centre "
+                f"{full['height_mm']:.1f} mm above the table; its planar part: object x "
+                f"{full['x_mm']:.2f} mm, y {full['y_mm']:.2f} mm, yaw "
+                f"{full['yaw_deg']:.1f} deg under the gripper's heading; opening "
+                f"{full['opening_mm']:.1f} mm"
+            )
+        else:
+            head = (
+                f"**pick {pid}** (rank {row['rank']}): object x {full['x_mm']:.2f} mm, y "
+                f"{full['y_mm']:.2f} mm, yaw {full['yaw_deg']:.1f} deg under the gripper "
+                f"({FRAME_NAME}), opening {full['opening_mm']:.1f} mm"
+            )
         lines = [
-            f"**pick {pid}** (rank {row['rank']}): object x {full['x_mm']:.2f} mm, y "
-            f"{full['y_mm']:.2f} mm, yaw {full['yaw_deg']:.1f} deg under the gripper "
-            f"({FRAME_NAME}), opening {full['opening_mm']:.1f} mm",
+            head,
             "",
             f"- score (eq. 2): **{fmt(full['score'])}**, success: **{full['success']}**, "
             f"outcome: {outcome_words(full['failure'])}",
@@ -293,10 +351,11 @@ class AnalyzeTab:
         if full.get("height_compensation_mm") is not None:
             lines.append("- " + compensation_text(full["height_compensation_mm"]))
         self.detail.set_content("\n".join(lines))
-        png, _ = await run.io_bound(views.score_map_png, opened, self.map_ids.index(pid))
-        if self.shown != (opened, pid):  # another pick chosen meanwhile: it draws its own
-            return
-        self.score_map.set_source(views.data_uri(png, "image/png"))
+        if not posed:  # drawn whole on the map (grasps as poses have none)
+            png, _ = await run.io_bound(views.score_map_png, opened, self.map_ids.index(pid))
+            if self.shown != (opened, pid):  # another pick chosen meanwhile: it draws its own
+                return
+            self.score_map.set_source(views.data_uri(png, "image/png"))
         f_d = float(opened.config["grasp"]["grip_force_n"])
         if row.get("traced") == "yes":
             trace = opened.trace(pid)
@@ -305,12 +364,17 @@ class AnalyzeTab:
             if trace is None or self.shown != (opened, pid):  # another pick chosen meanwhile
                 return
         try:
+            tilted = (
+                f"; the gripper tilted {full['tilt_deg']:.1f} deg from vertical, as simulated"
+                if posed
+                else ""
+            )
             await self.replay.show(
                 opened.path / "scene.xml",
                 opened.gripper,
                 trace,
                 f_d,
-                outcome_words(full["failure"]),
+                outcome_words(full["failure"]) + tilted,
                 not full["success"],
             )
         except (OSError, ValueError) as err:  # scene.xml missing or damaged: keep the plot
@@ -389,18 +453,55 @@ class AnalyzeTab:
         self.show_downloads()
 
     def show_downloads(self) -> None:
-        """A download button for each file the report wrote into the open run."""
+        """A download button for each file the report (or the grasps' export) wrote
+        into the open run; for grasps given as poses, not the report's template and
+        robot pick-points (a vertical approach: no grasp's tilt), and said so."""
+        from mjx_pick.outputs.exchange import default_path
+
         self.downloads.clear()
+        self.downloads_note.set_text("")
         opened = self.state.run
         if opened is None:
             return
+        offered = list(DOWNLOADS)
+        if views.posed(opened):
+            offered = [(n, label) for n, label in offered if n not in VERTICAL_ONLY]
+            for fmt_name, label in GRASP_FORMATS.items():
+                name = default_path(opened.path, fmt_name).name
+                offered += [(name, f"grasps: {label}"), (f"{Path(name).stem}_object.obj", "")]
+            if any((opened.path / n).is_file() for n in VERTICAL_ONLY):
+                self.downloads_note.set_text(
+                    "The report's printed template and robot pick-points are not offered: "
+                    "they give each grasp's planar part at a vertical approach, without "
+                    "its tilt. The grasps' own poses: 'Export the grasps' (with the part's "
+                    "mesh, as simulated)."
+                )
         with self.downloads:
-            for name, label in DOWNLOADS:
+            for name, label in offered:
                 path = opened.path / name
                 if path.is_file():
+                    shown = label or f"part's mesh for {name.removesuffix('_object.obj')}"
                     ui.button(
-                        label, icon="download", on_click=lambda p=path: self.download(p)
+                        shown, icon="download", on_click=lambda p=path: self.download(p)
                     ).props(f'outline data-testid="download-{name}"')
+
+    def export_grasps(self) -> None:
+        """``mjx-pick export``: the open run's grasps (poses, labels, scores) in a grasp
+        format, with the part's mesh as simulated, into its folder."""
+        self.error.set_text("")
+        opened = self.state.run
+        if opened is None or not views.posed(opened):
+            self.error.set_text("open a run of grasps given as poses first")
+            return
+        if self.panel.busy(self.error):
+            return
+        fmt_name = self.grasp_format.value
+        # --overwrite: the file is this export's own (its default name in the run folder)
+        argv = ["export", str(opened.path), "--format", fmt_name, "--overwrite"]
+        log = self.state.log(f"{opened.path.name}-export-{fmt_name}")
+        job = jobs.Job(argv, log, unit="files")
+        job.writes = opened.path  # into the run's folder: one writer at a time
+        self.panel.start(f"export {opened.path.name} ({fmt_name})", job, self.error)
 
     def download(self, path: Path) -> None:
         """A file of the open run, sent to the browser -- checked when asked for (a
@@ -426,7 +527,9 @@ def ranked_rows(opened) -> list[dict]:
     order = np.argsort(np.where(np.isnan(score), -np.inf, -score), kind="stable")
     rows = []
     for rank, i in enumerate(order, start=1):
-        row = {k: t[k][int(i)].as_py() for k, _ in TABLE_COLUMNS if k in t.column_names}
+        row = {
+            k: t[k][int(i)].as_py() for k, _ in TABLE_COLUMNS + GRASP_COLUMNS if k in t.column_names
+        }
         for k, v in row.items():
             if isinstance(v, float):
                 row[k] = None if math.isnan(v) else round(v, 3)

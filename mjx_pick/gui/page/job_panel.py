@@ -8,10 +8,10 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
-from nicegui import ui
+from nicegui import background_tasks, ui
 
 from mjx_pick.gui import jobs
-from mjx_pick.gui.page.widgets import MessageLabel, warning_label
+from mjx_pick.gui.page.widgets import MessageLabel, StartQuestion, warning_label
 
 POLL_S = 0.5  # how often the panel reads the run's progress
 
@@ -63,6 +63,7 @@ class JobPanel:
             .classes("w-[32rem]")
             .props('data-testid="runs-list"')
         )
+        self.question = StartQuestion()
         ui.timer(POLL_S, self.poll)
         # what the page last heard is not the run's state once the server is gone: the
         # status and bar are hidden while the connection is lost, and a note says why
@@ -102,6 +103,18 @@ class JobPanel:
             return True
         log.info("a start was asked for (tab %s)", self.owner)
         return False
+
+    async def confirmed(self, refusal: str, where: ui.label) -> list[str] | None:
+        """Before a run starts: [] when it is not long (refusal '': ``jobs.long_run``
+        found nothing to ask), ["--yes"] once the user confirms a long one in the
+        dialog (the CLI's flag that starts it), None when the user does not (and so in
+        where). Start handlers ask :meth:`busy` again after it: the dialog waits."""
+        if not refusal:
+            return []
+        if await self.question.ask(refusal):
+            return ["--yes"]
+        where.set_text(f"not started: {refusal}")
+        return None
 
     def start(
         self,
@@ -205,6 +218,16 @@ class JobPanel:
         self.warnings.set_text("warning: " + "; ".join(p.warnings) if p.warnings else "")
         if p.state == "running":
             return
+        refused = self.job.refused_as_long()
+        if refused:  # the CLI's own estimate: asked here, started again with --yes
+            job, on_end = self.job, self.on_end
+            self.job, self.on_end = None, None
+            job.discard_log()  # it never started: its name stays free
+            self.runs.forget(job)
+            self.cancel_button.set_visibility(False)
+            self.status.set_text(f"not started: {refused}")
+            background_tasks.create(self.ask_again(job, on_end, refused), name="long run")
+            return
         self.bar.props(remove="indeterminate")
         if p.state == "complete":
             self.bar.set_value(1.0)
@@ -216,6 +239,17 @@ class JobPanel:
                 on_end(p)
         except (OSError, ValueError, KeyError) as err:
             self.status.set_text(f"{p.state}; its results cannot be read: {err}")
+
+    async def ask_again(self, job: jobs.Job, on_end, refused: str) -> None:
+        """A run the CLI refused as long (its estimate, where the page's own count
+        could not say it first: a calibration's fit): asked in the dialog, and started
+        again with --yes once confirmed."""
+        if not await self.question.ask(refused):
+            return
+        if self.job is None:  # no other run was started meanwhile
+            self.start(job.title, job.again("--yes"), self.status, on_end)
+        else:
+            self.status.set_text("a run is in progress: wait for it or cancel it")
 
 
 def status_line(p: jobs.Progress) -> str:

@@ -85,8 +85,9 @@ class ReplayView:
                     ui.scene.text(name, "font-size: 0.8em; color: #444").move(*at)
                 self.bodies = PickBodies()
             ui.label(
-                "world frame, m: x red (the fingers close along it), y green, z blue (up); "
-                "the table at z = 0, 1 cm grid"
+                "world frame, m: x red (a vertical gripper's fingers close along it; a "
+                "tilted grasp's gripper is turned from it), y green, z blue (up); the table "
+                "at z = 0, 1 cm grid"
             ).classes("text-xs text-gray-600")
             with ui.row().classes("w-full items-center no-wrap"):
                 self.play = ui.button(icon="play_arrow", on_click=self.toggle_play).props(

@@ -1,9 +1,11 @@
-"""The *Studies* tab: compare grippers, robustness of a run's best pick-points, calibrate.
+"""The *Studies* tab: compare grippers, robustness of a run's best pick-points, calibrate,
+validate against physical trials.
 
 Each study is a section (an expansion) and a class here; each runs its CLI command
-(``compare``, ``robust``, ``calibrate``) on the object of tab 1 with the settings of
-tab 2. The robustness study reads the run open in tab 4; a calibration's fitted contact
-parameters can be put into tab 2's form.
+(``compare``, ``robust``, ``calibrate``, ``validate``) with the settings of tab 2, the
+first three on the object of tab 1. The robustness study reads the run open in tab 4; a
+calibration's fitted contact parameters can be put into tab 2's form; a validation reads
+an uploaded zip of a TRIALS.csv with its meshes (or a TRIALS.csv in the work folder).
 """
 
 from __future__ import annotations
@@ -14,13 +16,14 @@ import numpy as np
 from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
-from mjx_pick.gui import jobs, workfolder
+from mjx_pick.gui import forms, jobs, trials_input, workfolder
 from mjx_pick.gui.formatting import fmt, md_text, stamp
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
     checked,
     error_label,
+    file_error_label,
     need_object,
     picture,
     run_folder,
@@ -31,9 +34,12 @@ from mjx_pick.gui.page.widgets import (
 from mjx_pick.gui.state import PageState
 from mjx_pick.gui.uploads import (
     OUTCOMES_MAX_BYTES,
+    TRIALS_MAX_BYTES,
     check_outcomes_upload,
     outcomes_refused,
     save_upload,
+    store_trials,
+    trials_refused,
 )
 
 
@@ -49,6 +55,8 @@ class StudiesTab:
             self.robust = RobustStudy(state, form, panel)
         with ui.expansion("Calibrate contact parameters from measured outcomes").classes("w-full"):
             self.calibrate = CalibrationStudy(state, form, panel)
+        with ui.expansion("Validate against physical trials (TRIALS.csv)").classes("w-full"):
+            self.validate = ValidateStudy(state, form, panel)
 
 
 class CompareStudy:
@@ -82,7 +90,7 @@ class CompareStudy:
                 )
                 self.image = picture("w-full max-w-3xl")
 
-    def start(self) -> None:
+    async def start(self) -> None:
         self.error.set_text("")
         self.note.set_text("")
         if self.panel.busy(self.error) or not need_object(self.state, self.error):
@@ -99,8 +107,14 @@ class CompareStudy:
         if len(names) < 2:
             self.error.set_text("choose at least two grippers")
             return
+        sizes = {"variants": len(names), "n": n}
+        backend = self.form.backend.value
+        refusal = jobs.long_run("compare", "this comparison", backend, settings.grasp, **sizes)
+        yes = await self.panel.confirmed(refusal, self.error)
+        if yes is None or self.panel.busy(self.error):  # another start while it asked
+            return
         argv = ["compare", *self.state.obj_args, *flags, "--grippers", ",".join(names)]
-        argv += ["--n", str(n), "--rank-by", self.rank.value, "--out", str(out)]
+        argv += ["--n", str(n), "--rank-by", self.rank.value, "--out", str(out), *yes]
 
         job = jobs.study_job(argv, self.state.log(out.name), out)
         self.panel.start(f"compare {out.name} ({len(names)} grippers x {n})", job, self.error)
@@ -139,7 +153,7 @@ class RobustStudy:
                     'dense data-testid="robust-table"'
                 )
 
-    def start(self) -> None:
+    async def start(self) -> None:
         self.error.set_text("")
         if self.panel.busy(self.error) or not need_object(self.state, self.error):
             return
@@ -167,6 +181,13 @@ class RobustStudy:
                 f"object and set that gripper (now {obj.name} / {settings.gripper.name})"
             )
             return
+        sizes = {"top_k": k, "m": m, "n": None}  # ranked from the run's results
+        backend = self.form.backend.value
+        what = "this robustness study"
+        refusal = jobs.long_run("robust", what, backend, settings.grasp, **sizes)
+        yes = await self.panel.confirmed(refusal, self.error)
+        if yes is None or self.panel.busy(self.error):  # another start while it asked
+            return
         out = opened.path
         argv = ["robust", *self.state.obj_args]
         argv += self.form.cli_flags(settings, self.state.workdir, out)
@@ -174,7 +195,7 @@ class RobustStudy:
         argv += ["--sigma-xy-mm", repr(float(sig[0])), "--sigma-yaw-deg", repr(float(sig[1]))]
         # robust keeps its chunks in the run's folder: a cancelled one started again
         # continues, and one complete with these settings is read back
-        argv += ["--out", str(out), "--resume"]
+        argv += ["--out", str(out), "--resume", *yes]
 
         job = jobs.study_job(argv, self.state.log(f"{out.name}-robust"), out)
         self.panel.start(f"robust {out.name} (top {k} x {m} draws)", job, self.error)
@@ -324,3 +345,193 @@ class CalibrationStudy:
             return
         self.form.adopt_contact(contact)
         self.info.set_content(self.info.content + "\n\nIn use in tab 2 (all fitted parameters).")
+
+
+class ValidateStudy:
+    """``mjx-pick validate``: each physical trial's grasp simulated, its label held
+    against the real outcome -- accuracy, precision, recall, F1 with their intervals,
+    the confusion matrix, per object, the checks' rejections (validation.json)."""
+
+    def __init__(self, state: PageState, form: SettingsForm, panel: JobPanel):
+        self.state, self.form, self.panel = state, form, panel
+        panel.handle("validate", self.ended)
+        self.trials: Path | None = None  # the TRIALS.csv checked, inside the work folder
+        self.summary: dict | None = None  # check_trials's
+        with ui.row().classes("w-full no-wrap items-start"):
+            with ui.column().classes("w-96"):
+                ui.label(
+                    "A zip of a TRIALS.csv (object, mass_g, gripper, object_pose, "
+                    "grasp_pose, depth_mm, success, trial: docs/formats.md) with the meshes "
+                    "and gripper TOMLs it names, as it names them, up to 50 MB; or a "
+                    "TRIALS.csv already in the work folder. Each trial's gripper is its "
+                    "row's; the contact settings and the backend are tab 2's, the procedure "
+                    "each gripper's defaults."
+                ).classes("text-sm")
+                self.upload = upload(
+                    "upload trials (zip)",
+                    ".zip",
+                    TRIALS_MAX_BYTES,
+                    self.on_upload,
+                    self.refuse,
+                    trials_refused,
+                    "trials-upload",
+                ).classes("w-full")
+                with ui.row().classes("w-full items-end no-wrap"):
+                    self.in_folder = ui.input("or a TRIALS.csv in the work folder").classes("grow")
+                    ui.button("Use it", on_click=self.use_in_folder).props(
+                        'flat dense data-testid="trials-use"'
+                    )
+                self.upload_error = file_error_label().props('data-testid="trials-error"')
+                self.info = ui.label("").classes("text-sm").props('data-testid="trials-info"')
+                self.unit = ui.select(["m", "mm"], value="m", label="mesh unit").classes("w-40")
+                self.seed = ui.number("seed of the intervals' bootstrap", value=0, step=1)
+                self.name = ui.input("run folder name", value=f"validate-{stamp()}")
+                ui.button("Start validation", on_click=self.start).props(
+                    'data-testid="start-validate"'
+                )
+                self.error = error_label().props('data-testid="validate-error"')
+            with ui.column().classes("grow"):
+                self.headline = ui.markdown("").props('data-testid="validate-info"')
+                self.figures = ui.table(columns=[], rows=[], row_key="figure").props(
+                    'dense data-testid="validate-figures"'
+                )
+                self.confusion = ui.table(columns=[], rows=[], row_key="real").props(
+                    'dense data-testid="validate-confusion"'
+                )
+                self.objects = ui.table(columns=[], rows=[], row_key="object").props(
+                    'dense data-testid="validate-objects"'
+                )
+                self.checks = ui.label("").classes("text-sm").props('data-testid="validate-checks"')
+                for table in (self.figures, self.confusion, self.objects):
+                    table.set_visibility(False)
+
+    async def on_upload(self, e) -> None:
+        """An uploaded zip: unpacked into the work folder (checked member by member
+        first), its TRIALS.csv read and every file it names found inside."""
+        self.upload_error.set_text("")
+        name = e.file.name
+        data = await e.file.read()
+        self.upload.reset()  # a corrected file of the same name may follow
+        problem = trials_refused(name, len(data))
+        if problem:
+            self.refuse(problem)
+            return
+        folder = self.state.workdir / "inputs" / "trials"
+        try:
+            csv = await run.io_bound(store_trials, data, name, folder, self.state.workdir)
+        except ConfigError as err:
+            self.refuse(str(err))
+            return
+        await self.take(csv, f"{name}: {csv.name}")
+
+    async def use_in_folder(self) -> None:
+        """A TRIALS.csv the user put into the work folder (a large set, copied in)."""
+        self.upload_error.set_text("")
+        text = (self.in_folder.value or "").strip()
+        path = self.state.inside(text)
+        if path is None or not path.is_file():
+            self.refuse(
+                f"{text or '(empty)'}: no file of this name inside the work folder "
+                f"({self.state.workdir}); give a TRIALS.csv's path relative to it"
+            )
+            return
+        await self.take(path, text)
+
+    async def take(self, csv: Path, shown: str) -> None:
+        """The trials of csv, checked (shown: its name in the page), or refused."""
+        try:
+            summary = await run.io_bound(trials_input.check_trials, csv, self.state.workdir, shown)
+        except ConfigError as err:  # OutsideWorkFolder too
+            self.refuse(str(err))
+            return
+        self.trials, self.summary = csv, summary
+        self.info.set_text(trials_input.trials_text(shown, summary))
+
+    def refuse(self, why: str) -> None:
+        """Trials refused (by the browser or here): said until the next, and they
+        replace the ones before -- a validation never runs on the earlier file."""
+        self.upload_error.set_text(why)
+        self.trials = self.summary = None
+        self.info.set_text("")
+
+    async def start(self) -> None:
+        self.error.set_text("")
+        if self.panel.busy(self.error):
+            return
+        if self.trials is None:
+            self.error.set_text("upload trials (or give a TRIALS.csv in the work folder) first")
+            return
+        seed = checked(self.seed, "seed")
+        settings = self.form.read()
+        out = run_folder(self.state, self.name)
+        if seed is None or settings is None or out is None:
+            return
+        try:  # read again as it will run: the files may have changed since
+            self.summary = await run.io_bound(
+                trials_input.check_trials, self.trials, self.state.workdir, self.trials.name
+            )
+        except ConfigError as err:
+            self.refuse(str(err))
+            return
+        backend = self.form.backend.value
+        # each distinct grasp is simulated once (its repeats share its label), as the
+        # CLI counts it
+        grasps = self.summary["grasps"]
+        refusal = jobs.long_run("evaluate", "this validate", backend, None, n=grasps)
+        yes = await self.panel.confirmed(refusal, self.error)
+        if yes is None or self.panel.busy(self.error):  # another start while it asked
+            return
+        paths = forms.write_inputs(settings, self.state.workdir / "inputs" / out.name)
+        argv = ["validate", str(self.trials), "--unit", self.unit.value, "--seed", str(seed)]
+        argv += ["--contact", str(paths["contact"]), "--backend", backend]
+        argv += ["--out", str(out), *yes]
+
+        job = jobs.Job(argv, self.state.log(out.name), out, unit="grasps")
+        self.panel.start(f"validate {out.name} ({grasps} grasps)", job, self.error)
+
+    def ended(self, job: jobs.Job, progress: jobs.Progress) -> None:
+        if progress.state == "complete":
+            self.name.value = f"validate-{stamp()}"  # this name is taken now
+            self.show(job.out)
+
+    def show(self, out: Path) -> None:
+        """A complete validation: its figures with their intervals, the confusion
+        matrix, each object's figures and the checks' rejections."""
+        r = workfolder.read_json(out / "validation.json", self.state.workdir)
+        self.headline.set_content(
+            f"**{md_text(out.name)}**: {r['n']:,} trials ({r['grasps']:,} grasps), real "
+            f"success rate {fmt(float(r['real_success_rate']))}; 95 % intervals from a "
+            "bootstrap over grasps (a grasp's repeats together); a success is the positive "
+            "class"
+        )
+        tables = (
+            (self.figures, ["figure", "value", "interval"], trials_input.figure_rows(r)),
+            (
+                self.confusion,
+                ["real", "sim_success", "sim_failure"],
+                trials_input.confusion_rows(r),
+            ),
+            (
+                self.objects,
+                ["object", "trials", "grasps", "accuracy", "precision", "recall", "f1"]
+                + ["real_success_rate"],
+                trials_input.object_rows(r),
+            ),
+        )
+        labels = {
+            "figure": "",
+            "interval": "95 % interval",
+            "real": "trials",
+            "sim_success": "simulated success",
+            "sim_failure": "simulated failure",
+            "f1": "F1",
+            "real_success_rate": "real success rate",
+        }
+        for table, keys, rows in tables:
+            table.columns = [
+                {"name": k, "label": labels.get(k, k), "field": k, "align": "left"} for k in keys
+            ]
+            table.rows = rows
+            table.update()
+            table.set_visibility(True)
+        self.checks.set_text(trials_input.checks_text(r))

@@ -81,7 +81,7 @@ class SweepTab:
             f"{len(values)} values x {int(n):,} pick-points = {total:,} simulations"
         )
 
-    def start_sweep(self) -> None:
+    async def start_sweep(self) -> None:
         """``mjx-pick sweep`` of the chosen parameter with the page's object and settings."""
         self.error.set_text("")
         if self.panel.busy(self.error) or not need_object(self.state, self.error):
@@ -111,13 +111,19 @@ class SweepTab:
         if problem:
             self.error.set_text(problem)
             return
+        backend = self.form.backend.value
+        sizes = {"variants": len(values), "n": int(n)}
+        refusal = jobs.long_run("sweep", "this sweep", backend, settings.grasp, **sizes)
+        yes = await self.panel.confirmed(refusal, self.error)
+        if yes is None or self.panel.busy(self.error):  # another start while it asked
+            return
         param = f"{self.param.value}=" + ",".join(repr(v) for v in values)
         argv = [
             "sweep",
             *self.state.obj_args,
             *self.form.cli_flags(settings, self.state.workdir, out),
         ]
-        argv += ["--param", param, "--n", str(int(n)), "--out", str(out)]
+        argv += ["--param", param, "--n", str(int(n)), "--out", str(out), *yes]
 
         job = jobs.study_job(argv, self.state.log(out.name), out)
         self.panel.start(f"sweep {out.name} ({len(values)} values x {int(n)})", job, self.error)

@@ -8,8 +8,8 @@ from nicegui import run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
-from mjx_pick.gui.formatting import column_label, fmt_cell, page_text
-from mjx_pick.gui.forms import page_words
+from mjx_pick.gui.formatting import column_label, fmt_cell
+from mjx_pick.gui.forms import file_words, page_words
 from mjx_pick.gui.search import Search, SearchStopped
 from mjx_pick.gui.state import RUN_NAME_RULE, PageState
 from mjx_pick.gui.uploads import browser_refused
@@ -31,12 +31,13 @@ def error_label() -> MessageLabel:
 
 
 class FileMessageLabel(ui.label):
-    """A label for what is wrong inside a file the user wrote (a gripper TOML): its keys
-    are the user's own words there (``stroke_mm = -5`` on its line), so only the
-    software's paths are taken out (``page_text``), never the file's keys."""
+    """A label for what is wrong inside a file the user wrote (a gripper TOML, a grasp
+    file, trials): its keys and columns are the user's own words there (``stroke_mm =
+    -5`` on its line), so they stay; the software's paths, the CLI's flags and advice
+    become the page's (``forms.file_words``)."""
 
     def set_text(self, text: str) -> None:
-        super().set_text(page_text(text) if text else text)
+        super().set_text(file_words(text) if text else text)
 
 
 def file_error_label() -> FileMessageLabel:
@@ -106,6 +107,34 @@ class SearchProgress:
         """Forget what the last search said (the map it was for is gone)."""
         if not self.running:
             self.line.set_text("")
+
+
+class StartQuestion:
+    """A dialog that asks before a long run starts: the estimate in the page's words
+    and two buttons, "Start it" and "Not now" (persistent: only they close it, so that
+    no answer is taken from a stray click or key)."""
+
+    def __init__(self) -> None:
+        with ui.dialog().props('persistent data-testid="long-run-dialog"') as self.dialog:
+            with ui.card().classes("max-w-xl"):
+                ui.label("A long run").classes("font-bold")
+                self.text = (
+                    MessageLabel("").classes("text-sm").props('data-testid="long-run-question"')
+                )
+                with ui.row().classes("w-full justify-end"):
+                    ui.button("Not now", on_click=lambda: self.dialog.submit(False)).props(
+                        'flat data-testid="long-run-no"'
+                    )
+                    ui.button("Start it", on_click=lambda: self.dialog.submit(True)).props(
+                        'data-testid="long-run-yes"'
+                    )
+
+    async def ask(self, refusal: str) -> bool:
+        """Whether the user starts the run refusal describes (its estimate, as
+        ``studies.duration.refuse_long`` says it)."""
+        self.text.set_text(refusal[:1].upper() + refusal[1:])  # MessageLabel: page's words
+        self.dialog.open()
+        return bool(await self.dialog)
 
 
 def upload(label: str, accept: str, max_bytes: int, on_upload, on_rejected, refused, testid: str):
