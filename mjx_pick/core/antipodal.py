@@ -172,7 +172,9 @@ def generate_antipodal(
         if progress is not None:
             progress(drawn, found, rejected)
         if time.monotonic() - noted > 2.0:
-            log.info("antipodal grasps: %d of %d found after %d candidates", found, n, drawn)
+            log.info(
+                "antipodal grasps: %d of %d found after %d candidates", min(found, n), n, drawn
+            )
             noted = time.monotonic()
     if not batches or found == 0:
         raise ConfigError(

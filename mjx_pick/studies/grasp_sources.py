@@ -45,7 +45,7 @@ def check_source(source: str, depth_mm: float | None = None) -> str:
         return str(source)
     path = Path(source)
     suffixes = {_suffix(f) for f in FORMATS}
-    if path.suffix.lower() not in suffixes | {".yml"}:
+    if path.suffix.lower() not in suffixes:
         raise ConfigError(
             f"grasps = {str(source)!r} is neither 'topdown', 'antipodal' nor a grasp file "
             f"(ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, a CSV of poses .csv)"

@@ -44,8 +44,17 @@ def read(path: Path) -> GraspLabels:
         transforms = np.asarray(grasps["transforms"], float)
         success = np.asarray(grasps["object_in_gripper"], bool)
         file, scale = obj["file"], float(obj["scale"])
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
-        raise ConfigError(f"{path} is not a GraspGen grasp file: {err!r}") from err
+    except KeyError as err:
+        raise ConfigError(
+            f"{path} is not a GraspGen grasp file: it has no {err.args[0]!r} (a GraspGen file "
+            "holds object.file, object.scale, grasps.transforms, grasps.object_in_gripper)"
+        ) from None
+    except json.JSONDecodeError as err:
+        raise ConfigError(
+            f"{path} is not a GraspGen grasp file: not JSON ({err.msg}, line {err.lineno})"
+        ) from None
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"{path} is not a GraspGen grasp file: {err}") from None
     ours = doc.get("mjx_pick") or {}
     score = ours.get("score")
     return GraspLabels(

@@ -154,8 +154,13 @@ def _templates(run: Run, out_dir: Path, chosen: list, name: str, bar) -> tuple[d
     """The 1:1 positioning template of chosen on each paper size the part fits:
     ({paper: path}, {paper: why it was not written})."""
     templates, skipped = {}, {}
+    tilted = "grasp_pose" in run.table.column_names
     for paper in PAPERS_MM:
-        misfit = page_misfit(run.outline, chosen, paper)
+        misfit = (
+            "grasps given as poses are no top-down placements: a 1:1 template shows pick-points"
+            if tilted
+            else page_misfit(run.outline, chosen, paper)
+        )
         if misfit:
             # a part larger than the page: the rest of the report is still worth having
             skipped[paper] = misfit
@@ -182,7 +187,7 @@ def _robot_export(run: Run, out_dir: Path, k: int, frame, name: str) -> list[dic
     robust_path = run.path / "robustness.parquet"
     robust = read_parquet(robust_path) if robust_path.is_file() else None
     tip_mm = float(run.config["scene"]["fingertip_height_mm"])
-    picks = robot_picks(run.table, tip_mm, k, frame, robust)
+    picks = robot_picks(run.table, tip_mm, k, frame, robust, run.gripper.pad_height_mm)
     write_json(
         out_dir / "robot_picks.json",
         {

@@ -57,6 +57,7 @@ def robot_picks(
     k: int = 10,
     frame=None,
     robust: pa.Table | None = None,
+    pad_height_mm: float = 0.0,
 ) -> list[dict]:
     """The top-k pick-points (by robust probability when given, else by score among
     successes, those whose label is in doubt last) as gripper poses.
@@ -73,6 +74,8 @@ def robot_picks(
     project's: x the closing axis, z up (the gripper approaches along -z). Its height is
     the fingertips' pick height plus the pick's height compensation (a linkage's pads
     descend as they close; the table's ``height_compensation_mm``, 0 for a parallel jaw).
+    A grasp given as a pose keeps its tilt (``_gripper_pose``; pad_height_mm: the pads'
+    height, from their centre to the fingertips twice).
     """
     from scipy.spatial.transform import Rotation
 
@@ -86,7 +89,7 @@ def robot_picks(
         r = by_id[pid]
         # a linkage starts raised so its pads meet the part at the grasp height
         raise_mm = float(r.get("height_compensation_mm") or 0.0)
-        t = _gripper_pose(r, pick_height_mm + raise_mm, user)
+        t = _gripper_pose(r, pick_height_mm + raise_mm, user, pad_height_mm)
         q = Rotation.from_matrix(t[:3, :3]).as_quat()  # x, y, z, w
         entry = {
             "pick_id": int(pid),
@@ -129,12 +132,23 @@ def _pick_order(table: pa.Table, rows: list[dict], by_id: dict, doubt: dict, rob
     return order, {}
 
 
-def _gripper_pose(r: dict, height_mm: float, user: np.ndarray | None) -> np.ndarray:
+def _gripper_pose(
+    r: dict, height_mm: float, user: np.ndarray | None, pad_height_mm: float = 0.0
+) -> np.ndarray:
     """4x4 transform (mm) of the gripper in the object frame for results row r (the
     object's x_mm, y_mm, yaw_deg in the gripper frame), at height_mm above the table;
-    in the user's frame when user (4x4, the object frame's pose there) is given."""
-    rot = _rot_z(-r["yaw_deg"])  # gripper axes in the object frame
-    pos = -rot @ np.array([r["x_mm"], r["y_mm"], 0.0]) + np.array([0, 0, height_mm])
+    in the user's frame when user (4x4, the object frame's pose there) is given. A grasp
+    given as a pose (r's ``grasp_pose``, its frame at the pads' centre) keeps its tilt:
+    the frame's origin at its fingertips (pad_height_mm / 2 along the approach), raised
+    along the gripper's z by the row's height compensation, as a pick-point's is."""
+    if r.get("grasp_pose") is not None:
+        centre = np.asarray(r["grasp_pose"], float).reshape(4, 4)
+        rot = centre[:3, :3] @ np.diag([1.0, -1.0, -1.0])  # E -> this project's frame
+        raise_mm = float(r.get("height_compensation_mm") or 0.0)
+        pos = 1e3 * centre[:3, 3] + rot @ np.array([0.0, 0.0, raise_mm - 0.5 * pad_height_mm])
+    else:
+        rot = _rot_z(-r["yaw_deg"])  # gripper axes in the object frame
+        pos = -rot @ np.array([r["x_mm"], r["y_mm"], 0.0]) + np.array([0, 0, height_mm])
     t = np.eye(4)
     t[:3, :3], t[:3, 3] = rot, pos
     if user is not None:
