@@ -56,7 +56,7 @@ def cmd_evaluate(args) -> int:
     t1 = time.perf_counter()
     obj, gripper, contact, solver, grasp, picks_cfg = inputs_of(args)
     check_contact_file(args, obj, gripper, grasp, solver)
-    size = dict(n=args.n, picks=args.picks, until=args.until, max_n=args.max)
+    size = dict(n=_grasps_in(args), picks=args.picks, until=args.until, max_n=args.max)
     size.update(min_force=args.min_force, stability_um=args.stability_um)
     count = _count("evaluate", size, step_check=args.step_check)
     confirm_duration(args, "this evaluate", count, grasp, solver)
@@ -90,6 +90,19 @@ def cmd_evaluate(args) -> int:
     total = process_age_s() if before is not None else None
     print_summary(ev.summary, args.out, total, traced=ev.traces is not None)
     return 0
+
+
+def _grasps_in(args) -> int:
+    """The grasps an evaluate simulates at most: a grasp file's (every grasp in it),
+    else --n."""
+    from mjx_pick.studies.grasp_sources import ANTIPODAL, TOPDOWN, check_source
+
+    source = check_source(args.grasps, args.depth_mm)
+    if source in (TOPDOWN, ANTIPODAL):
+        return args.n
+    from mjx_pick.outputs.exchange import read_labels
+
+    return len(read_labels(source).transforms)
 
 
 def _evaluate_set(args) -> int:
