@@ -312,3 +312,19 @@ def test_robust_ranks_grasps_given_as_poses(tmp_path, block_scene):
     import pyarrow.parquet as pq
 
     assert ids <= set(pq.read_table(run / "results.parquet")["pick_id"].to_pylist())
+
+
+def test_compare_ranks_grippers_on_one_shared_set_of_antipodal_grasps(block_scene):
+    """compare --grasps antipodal: one candidate set checked on every gripper's scene,
+    a grasp a gripper cannot take its failure, the same candidates for each."""
+    from mjx_pick.core.settings import Settings
+    from mjx_pick.studies.comparison import compare
+
+    grippers = [load_gripper("robotiq-2f85"), load_gripper("onrobot-rg2")]
+    res = compare(
+        block_scene.object, grippers, Settings(grasp=FAST["grasp"]), n=3, grasps="antipodal",
+        backend="mujoco",
+    )  # fmt: skip
+    assert [row["gripper"] for row in res.ranking] and res.success.shape == (2, 3)
+    assert res.feasible.any(axis=0).all()  # every candidate taken by some gripper
+    assert {"tilt_deg", "grasp_pose"} <= set(res.table.column_names)

@@ -507,6 +507,7 @@ def _add_compare_parser(sub) -> None:
     )
     _add_resume(cp)
     _add_ray(cp)
+    _add_grasp_source(cp)
     cp.set_defaults(func=cmd_compare, n=200)
 
 

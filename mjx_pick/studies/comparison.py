@@ -110,6 +110,97 @@ def shared_candidates(
     return cand, batches, reasons
 
 
+def shared_grasps(
+    obj: ObjectModel,
+    grippers: list[GripperSpec],
+    base: Settings,
+    n: int,
+    seed: int,
+    opts: RunOptions,
+) -> tuple[dict, list[pp.GraspBatch], np.ndarray]:
+    """:func:`shared_candidates` for grasps given as poses (opts.grasps: "antipodal" or
+    a grasp file): the same candidate poses checked on every gripper's scene by the
+    6-DoF checks (``GraspChecker``). Antipodal: the first n of the seeded stream -- drawn
+    for the widest gripper's stroke and pads -- that some gripper takes; a file: every
+    grasp in it (its tool centre point moved by each gripper's tcp_offset_mm). reasons:
+    ``grasp_checks.REASONS`` codes (0: feasible)."""
+    from mjx_pick.core import antipodal as ap
+    from mjx_pick.core.grasp_checks import GraspChecker, feasible_batch
+    from mjx_pick.core.grasps import decompose
+    from mjx_pick.engine.inputs import scene_of
+    from mjx_pick.outputs.exchange import read_labels
+    from mjx_pick.studies.grasp_sources import grasp_centres, to_object_frame
+
+    zone = opts.picks.safety_zone_mm
+    checkers = [GraspChecker(scene_of(obj, base.on_gripper(g)[0]), zone) for g in grippers]
+    if opts.grasps == "antipodal":
+        config = opts.antipodal or ap.AntipodalConfig()
+        wide = max(grippers, key=lambda g: g.stroke_mm)
+        pad_mm = (float(wide.stroke_mm), float(wide.finger_width_mm), float(wide.pad_height_mm))
+        rng = np.random.default_rng(seed)
+        parts, found, drawn = [], 0, 0
+        while found < n and drawn < config.max_candidates:
+            poses = ap.antipodal_poses(obj.mesh, pad_mm, config, rng)
+            if not len(poses):
+                break
+            res = [c(poses) for c in checkers]
+            keep = np.flatnonzero(np.any([r["reason"] == 0 for r in res], axis=0))[: n - found]
+            parts.append(
+                (drawn + keep, poses[keep], [{k: v[keep] for k, v in r.items()} for r in res])
+            )
+            found, drawn = found + len(keep), drawn + len(poses)
+        if found == 0:
+            raise ConfigError(
+                f"none of {', '.join(g.name for g in grippers)} can take any of {drawn:,} "
+                f"antipodal grasps on {obj.name!r}"
+            )
+        ids = np.concatenate([p[0] for p in parts])
+        each = [np.concatenate([p[1] for p in parts])] * len(grippers)
+        results = [
+            {k: np.concatenate([p[2][g][k] for p in parts]) for k in parts[0][2][g]}
+            for g in range(len(grippers))
+        ]
+    else:
+        labels = read_labels(opts.grasps)
+        where = f"grasps file {opts.grasps}"
+        each = [
+            to_object_frame(
+                obj,
+                grasp_centres(
+                    labels.transforms, labels.depth_m, opts.depth_mm, where, g.tcp_offset_mm
+                ),
+                where,
+            )
+            for g in grippers
+        ]
+        ids = labels.pick_id if labels.pick_id is not None else np.arange(len(each[0]))
+        results = [c(t) for c, t in zip(checkers, each, strict=True)]
+    planar = decompose(each[0])
+    cand = {"x_mm": planar["x_mm"], "y_mm": planar["y_mm"], "yaw_deg": planar["yaw_deg"]}
+    cand["pick_id"] = np.asarray(ids, np.int64)
+    batches = [feasible_batch(ids, t, r, "compare") for t, r in zip(each, results, strict=True)]
+    return cand, batches, np.stack([r["reason"] for r in results])
+
+
+def _source_key(opts: RunOptions) -> dict:
+    """A grasp source in a configuration key: the antipodal settings or a file's bytes."""
+    import hashlib
+
+    from mjx_pick.core.antipodal import AntipodalConfig
+
+    if opts.grasps == "antipodal":
+        return {"antipodal": to_dict(opts.antipodal or AntipodalConfig())}
+    digest = hashlib.sha256(Path(opts.grasps).read_bytes()).hexdigest()
+    return {"file": digest, "depth_mm": opts.depth_mm}
+
+
+def _candidates(obj, grippers, base, n, seed, pick_config, opts):
+    """compare's shared candidates from opts' grasp source."""
+    if opts is None or opts.grasps == "topdown":
+        return shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
+    return shared_grasps(obj, grippers, base, n, seed, opts)
+
+
 def unequal_forces(ranking: list[dict]) -> str:
     """A sentence for a ranking whose grippers squeezed different grip forces (one
     could not reach F_d and ran at its most), '' when they all squeezed the same: a
@@ -141,7 +232,6 @@ def compare(
     chunks of a study that runs this comparison as one of its steps (design), used
     without out."""
     opts = RunOptions.of(options, **run)
-    opts.topdown_only("compare")  # its candidates are shared pick-points (shared_candidates)
     if rank_by not in ("success", "score"):
         raise ConfigError(f"rank_by = {rank_by!r} is not allowed: choose 'success' or 'score'")
     if len(grippers) < 1:
@@ -154,17 +244,26 @@ def compare(
         raise ConfigError(f"gripper names must differ: {shown}{more}")
     base = base or Settings()
     n, seed, pick_config = opts.n_or(200), opts.seed, opts.picks
-    pp.check_raster(obj, pick_config)  # before the stroke checks
-    fitted = [base.on_gripper(g)[0] for g in grippers]  # each at its own force and speed
-    refused = [pp.stroke_refusal(obj, s.gripper, pick_config, s.grasp) for s in fitted]
-    if all(refused):  # none can take it: said now, not after max_candidates draws
-        raise ConfigError("no gripper can take the part: " + "; ".join(refused))
+    if opts.grasps == "topdown":
+        pp.check_raster(obj, pick_config)  # before the stroke checks
+        fitted = [base.on_gripper(g)[0] for g in grippers]  # each at its own force and speed
+        refused = [pp.stroke_refusal(obj, s.gripper, pick_config, s.grasp) for s in fitted]
+        if all(refused):  # none can take it: said now, not after max_candidates draws
+            raise ConfigError("no gripper can take the part: " + "; ".join(refused))
+    else:
+        from mjx_pick.studies.grasp_sources import check_source
+
+        check_source(opts.grasps, opts.depth_mm)
     request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
     request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
     request.update(picks=to_dict(pick_config))
+    if opts.grasps != "topdown":  # a top-down comparison's key as before
+        request.update(grasps=_source_key(opts))
     with opts.opening("compare", obj, request, simulator) as study:
         if study.complete:
-            return _read_comparison(study.out_dir, obj, grippers, base, n, seed, pick_config)
+            return _read_comparison(
+                study.out_dir, obj, grippers, base, n, seed, pick_config, opts=opts
+            )
         sim, store = study.sim, study.store if study.store is not None else _store
         t0 = time.perf_counter()
         result = _compare(obj, grippers, base, n, seed, pick_config, rank_by, sim, store, opts)
@@ -192,7 +291,7 @@ def _compare(
     """compare's simulations and ranking (nothing written): the shared candidates on
     every gripper through sim, chunks read from and saved to store (when given)."""
     names = [g.name for g in grippers]
-    cand, batches, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
+    cand, batches, reasons = _candidates(obj, grippers, base, n, seed, pick_config, opts)
     n_cand = len(cand["pick_id"])
     # each gripper's procedure fitted to its ranges: one that cannot squeeze F_d is
     # compared at its strongest
@@ -241,7 +340,7 @@ def _ranking(grippers, jobs, batches, outs, reasons, success, score, rank_by) ->
 
 
 def _read_comparison(
-    out_dir: Path, obj, grippers, base, n, seed, pick_config, ranking=None
+    out_dir: Path, obj, grippers, base, n, seed, pick_config, ranking=None, opts=None
 ) -> Comparison:
     """A complete comparison's folder read back (resume has nothing to do): its ranking
     (ranking.json, unless given) and table, and the per-gripper arrays rebuilt from the
@@ -250,7 +349,7 @@ def _read_comparison(
 
     import pyarrow.parquet as pq
 
-    cand, _, reasons = shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
+    cand, _, reasons = _candidates(obj, grippers, base, n, seed, pick_config, opts)
     table = pq.read_table(out_dir / "results.parquet")
     if ranking is None:
         ranking = json.loads((out_dir / "ranking.json").read_text())
