@@ -42,14 +42,16 @@ def test_backends_agree_on_door_opener(door_opener):
     gap = np.median(np.abs(c["score"] - j["score"]))
     assert gap <= 0.02, f"median score difference {gap:.3f}"
     assert not c["diverged"].any() and not j["diverged"].any()
-    # the shared kernel gives both the same bookkeeping: equal reach times where both
-    # reached the force, to two control periods (one at impratio 10; at 100 MJX-JAX
-    # closes a little later than C, median 10 ms on these picks, cause not measured)
+    # the shared kernel gives both the same bookkeeping: no systematic offset between
+    # their reach times where both reached the force (a period's slip in the kernel's
+    # bookkeeping would move every pick alike: the signed median within one control
+    # period), and a spread from the engines' own contact dynamics of a few periods
+    # (12.5 ms median, -20..+220 ms, on these picks with mujoco 4.0.0, mujoco-mjx 3.17.0,
+    # jax 0.10.2 on a CPU, 2026-11-28; the same at e17f288, before this round's changes)
     both = (c["t_reached_s"] > 0) & (j["t_reached_s"] > 0)
-    assert (
-        np.median(np.abs(c["t_reached_s"][both] - j["t_reached_s"][both]))
-        <= 2 * SHORT.control_period_s + 1e-6
-    )
+    late = c["t_reached_s"][both] - j["t_reached_s"][both]
+    assert abs(np.median(late)) <= SHORT.control_period_s + 1e-6, late
+    assert np.median(np.abs(late)) <= 3 * SHORT.control_period_s + 1e-6, late
 
 
 def test_auto_backend_choice(block):

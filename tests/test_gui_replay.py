@@ -5,6 +5,7 @@ browser, page) is tests/test_gui.py's."""
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -392,8 +393,7 @@ def test_a_grasp_run_shows_its_grasps_and_the_replay_turns_the_gripper(page, gra
         arg=[scene, run.row(pid)["tilt_deg"]],
     )
 
-    # the grasps as a grasp file (the report's template and robot pick-points are for a
-    # vertical approach): exported, offered for download, read back
+    # the grasps as a grasp file: exported, offered for download, read back
     page.get_by_test_id("export-grasps").click()
     assert test_gui.wait_job(page, f"export {run.path.name} (graspgen)").startswith("complete")
     button = page.get_by_test_id("download-grasps_graspgen.json")
@@ -404,15 +404,19 @@ def test_a_grasp_run_shows_its_grasps_and_the_replay_turns_the_gripper(page, gra
     saved = info.value.path()
     labels = read_labels(Path(saved).rename(Path(saved).with_suffix(".json")))
     assert len(labels.transforms) == 3
-    # the report: its page offered, never its template or robot pick-points, and why
+    # the report: its page and the robot's file (whole poses) offered, no template, and why
     test_gui.number(page, "n best and n worst", 1)
     page.get_by_test_id("export").click()
     assert test_gui.wait_job(page, f"report {run.path.name}").startswith("complete")
     page.get_by_test_id("download-report.html").wait_for()
-    page.get_by_test_id("downloads-note").filter(has_text="without its tilt").wait_for()
-    assert (run.path / "template_a4.pdf").is_file()  # written by the report, not offered
+    page.get_by_test_id("downloads-note").filter(has_text="No printed template").wait_for()
+    assert not (run.path / "template_a4.pdf").exists()
     assert not page.get_by_test_id("download-template_a4.pdf").count()
-    assert not page.get_by_test_id("download-robot_picks.json").count()
+    page.get_by_test_id("download-robot_picks.json").wait_for()
+    robot = json.loads((run.path / "robot_picks.json").read_text())
+    for entry in robot["picks"]:  # each grasp's tilt kept: the angle of its z from the table's z
+        z = np.asarray(entry["gripper_pose"]["matrix"])[2, 2]
+        assert np.degrees(np.arccos(z)) == pytest.approx(run.row(entry["pick_id"])["tilt_deg"], abs=0.05)
 
 
 def ranked_ids(run: Run) -> list[int]:

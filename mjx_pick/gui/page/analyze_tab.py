@@ -60,7 +60,7 @@ DOWNLOADS = (
 )
 # what the report writes for a vertical approach only: a printed 1:1 template and the
 # robot's gripper poses, both without a grasp's tilt -- not offered for grasps as poses
-VERTICAL_ONLY = ("template_a4.pdf", "template_letter.pdf", "robot_picks.json")
+VERTICAL_ONLY = ("template_a4.pdf", "template_letter.pdf")
 # the grasp formats a run of grasps given as poses is exported in (``mjx-pick export``)
 GRASP_FORMATS = {
     "graspgen": "GraspGen (JSON)",
@@ -454,8 +454,8 @@ class AnalyzeTab:
 
     def show_downloads(self) -> None:
         """A download button for each file the report (or the grasps' export) wrote
-        into the open run; for grasps given as poses, not the report's template and
-        robot pick-points (a vertical approach: no grasp's tilt), and said so."""
+        into the open run; for grasps given as poses, not the report's template (a
+        vertical approach), and said so."""
         from mjx_pick.outputs.exchange import default_path
 
         self.downloads.clear()
@@ -469,12 +469,12 @@ class AnalyzeTab:
             for fmt_name, label in GRASP_FORMATS.items():
                 name = default_path(opened.path, fmt_name).name
                 offered += [(name, f"grasps: {label}"), (f"{Path(name).stem}_object.obj", "")]
-            if any((opened.path / n).is_file() for n in VERTICAL_ONLY):
+            if (opened.path / "report.html").is_file():
                 self.downloads_note.set_text(
-                    "The report's printed template and robot pick-points are not offered: "
-                    "they give each grasp's planar part at a vertical approach, without "
-                    "its tilt. The grasps' own poses: 'Export the grasps' (with the part's "
-                    "mesh, as simulated)."
+                    "No printed template: a 1:1 template places pick-points under a "
+                    "vertical approach, and these grasps are tilted. The robot's file "
+                    "gives each grasp's whole pose, its tilt included; the grasps with "
+                    "the part's mesh, as simulated: 'Export the grasps'."
                 )
         with self.downloads:
             for name, label in offered:
