@@ -328,3 +328,29 @@ def test_compare_ranks_grippers_on_one_shared_set_of_antipodal_grasps(block_scen
     assert [row["gripper"] for row in res.ranking] and res.success.shape == (2, 3)
     assert res.feasible.any(axis=0).all()  # every candidate taken by some gripper
     assert {"tilt_deg", "grasp_pose"} <= set(res.table.column_names)
+
+
+def test_design_searches_grippers_on_antipodal_grasps(block_scene, tmp_path):
+    """design --grasps antipodal: its rounds and final compare the variants on shared
+    antipodal grasps; the folder records the source and reads back complete."""
+    import json
+
+    from mjx_pick.core.settings import Settings
+    from mjx_pick.studies.comparison import design_search
+
+    base = Settings(gripper=load_gripper("robotiq-2f85"), grasp=FAST["grasp"])
+    run = dict(n=2, grasps="antipodal", backend="mujoco", out=tmp_path / "d")
+    res = design_search(
+        block_scene.object, {"finger_width_mm": (15.0, 30.0)}, base, variants=2, rounds=1,
+        final_n=2, **run,
+    )  # fmt: skip
+    assert 15.0 <= res.best.finger_width_mm <= 30.0
+    assert {"tilt_deg", "grasp_pose"} <= set(res.final.table.column_names)
+    run_record = json.loads((tmp_path / "d" / "run.json").read_text())
+    assert "antipodal" in json.dumps(run_record)  # the source in its resume key
+    again = design_search(
+        block_scene.object, {"finger_width_mm": (15.0, 30.0)}, base, variants=2, rounds=1,
+        final_n=2, resume=True, **run,
+    )  # fmt: skip
+    assert again.final.already_complete and again.best == res.best
+    np.testing.assert_array_equal(again.final.success, res.final.success)

@@ -541,6 +541,7 @@ def _add_design_parser(sub) -> None:
         default="success",
         help="rank by success rate or by mean score, eq. (2)",
     )
+    _add_grasp_source(ds)
     _add_resume(ds)
     _add_ray(ds)
     ds.set_defaults(func=cmd_design, n=64)

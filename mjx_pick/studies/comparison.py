@@ -521,7 +521,9 @@ def design_search(
 
     Round r simulates the surviving variants on n * 2**r shared pick-points (n: 64 by
     default) and keeps the best third (at least one); the survivor is then compared
-    with the base gripper on final_n (default 4 n) fresh pick-points. The answer is
+    with the base gripper on final_n (default 4 n) fresh pick-points. With grasps given
+    as poses (options.grasps, as compare's): antipodal grasps drawn likewise, or every
+    grasp of a file in each round and the final (a file has no fresh grasps). The answer is
     always a variant within bounds (the base gripper is the reference): variants that
     no pick-point can fit (``pickpoints.stroke_refusal``) are left out before any
     draw, and a search none of whose variants fits is refused. options, or its
@@ -534,7 +536,6 @@ def design_search(
     open; backend, batch_size and ray are then its own).
     """
     req, opts = split_fields(DesignRequest, request, options, fields)
-    opts.topdown_only("design")  # its rounds compare grippers on shared pick-points
     n, seed, pick_config = opts.n_or(64), opts.seed, opts.pick_config
     base = base or Settings()
     req.check(n)
@@ -543,10 +544,22 @@ def design_search(
     request.update(base=to_dict(base), variants=req.variants, n=n, rounds=req.rounds)
     request.update(seed=seed, final_n=req.final_n, rank_by=req.rank_by)
     request.update(picks=to_dict(pick_config))
-    pool, too_narrow = _fitting_variants(obj, base, bounds, req.variants, seed, pick_config)
+    if opts.grasps == "topdown":
+        pool, too_narrow = _fitting_variants(obj, base, bounds, req.variants, seed, pick_config)
+    else:
+        from mjx_pick.studies.grasp_sources import check_source
+
+        # grasps given as poses: every variant is checked on each grasp by the 6-DoF
+        # checks as the rounds go (compare's shared_grasps); none fitting any is refused
+        # there, before its first simulation
+        check_source(opts.grasps, opts.depth_mm)
+        request.update(grasps=_source_key(opts))
+        pool, too_narrow = sample_variants(base.gripper, bounds, req.variants, seed), 0
     request.update(too_narrow=too_narrow)
     search = {"rounds": req.rounds, "n": n, "final_n": req.final_n, "seed": seed}
     search.update(rank_by=req.rank_by, pick_config=pick_config)
+    # every comparison of the search draws its grasps from the same source
+    search.update(grasps=opts.grasps, antipodal=opts.antipodal, depth_mm=opts.depth_mm)
     with opts.opening("design", obj, request, simulator) as study:
         if study.complete:
             return _read_design(study.out_dir, obj, base, pool, **search)
@@ -571,20 +584,22 @@ def _fitting_variants(obj, base: Settings, bounds, variants: int, seed: int, pic
 
 def _design(
     obj, base, pool, study, bounds, request, t0, progress, *,
-    rounds, n, final_n, seed, rank_by, pick_config,
+    rounds, n, final_n, seed, rank_by, pick_config, grasps, antipodal, depth_mm,
 ) -> DesignResult:  # fmt: skip
     """design_search once its inputs are checked, its simulator made and out claimed
     (study: the opened study, ``options.OpenStudy``)."""
     sim = study.sim
     # every comparison of the search: the same sampling, ranking, simulator and chunks
     rank = {"rank_by": rank_by, "pick_config": pick_config, "simulator": sim}
-    rank["_store"] = study.store
+    rank.update(_store=study.store, grasps=grasps, antipodal=antipodal, depth_mm=depth_mm)
     desc = f"design: {rounds} rounds + final ({sim.runner.backend_name})"
     with showing_progress(sim.runner, desc, "sim", progress) as bar:
         best, history = _rounds(obj, base, pool, rounds, n, seed, bar, rank)
         contenders = [best] if best == base.gripper else [best, base.gripper]
         if bar is not None:
-            bar.note("final: the best against the base gripper on fresh pick-points")
+            fresh = {"topdown": "fresh pick-points", "antipodal": "fresh antipodal grasps"}
+            on = fresh.get(grasps, "the file's grasps")
+            bar.note(f"final: the best against the base gripper on {on}")
         final_seed = seed + 1_000_003
         final = compare(obj, contenders, base, n=final_n or 4 * n, seed=final_seed, **rank)
     result = DesignResult(best, base.gripper, final, history, None)
@@ -634,8 +649,9 @@ def _write_design(out_dir: Path, obj, base, bounds, result: DesignResult, seed, 
 
 
 def _read_design(
-    out_dir: Path, obj, base, pool, *, rounds, n, final_n, seed, rank_by, pick_config
-) -> DesignResult:
+    out_dir: Path, obj, base, pool, *, rounds, n, final_n, seed, rank_by, pick_config,
+    grasps, antipodal, depth_mm,
+) -> DesignResult:  # fmt: skip
     """A complete design search's folder read back (resume has nothing to do): the
     winner is the pool's variant of that name (the pool is drawn again from the seed),
     the final comparison rebuilt as compare's (:func:`_read_comparison`)."""
@@ -646,7 +662,9 @@ def _read_design(
     contenders = [best] if best == base.gripper else [best, base.gripper]
     picks = pick_config or pp.PickConfig()
     final_seed = seed + 1_000_003
+    source = RunOptions(grasps=grasps, antipodal=antipodal, depth_mm=depth_mm)
     final = _read_comparison(
-        out_dir, obj, contenders, base, final_n or 4 * n, final_seed, picks, saved["final"]
-    )
+        out_dir, obj, contenders, base, final_n or 4 * n, final_seed, picks, saved["final"],
+        source,
+    )  # fmt: skip
     return DesignResult(best, base.gripper, final, saved["rounds"], out_dir)

@@ -68,15 +68,6 @@ class RunOptions:
     antipodal: AntipodalConfig | None = None
     depth_mm: float | None = None
 
-    def topdown_only(self, study: str) -> None:
-        """Refuse grasps other than top-down pick-points for a study that draws its own
-        around pick-points (before any work)."""
-        if self.grasps != "topdown":
-            raise ConfigError(
-                f"{study} takes top-down pick-points (grasps = 'topdown'); grasps = "
-                f"{self.grasps!r} runs through evaluate, sweep, validate and calibrate"
-            )
-
     def __post_init__(self):
         # the one rule of each number (core.numbers), as the CLI and the GUI check it
         for name in ("n", "seed", "batch_size", "chunk_size"):
