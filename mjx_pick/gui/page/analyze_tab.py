@@ -58,8 +58,8 @@ DOWNLOADS = (
     ("report.html", "report (HTML)"),
     ("robot_picks.json", "robot pick-points (JSON)"),
 )
-# what the report writes for a vertical approach only: a printed 1:1 template and the
-# robot's gripper poses, both without a grasp's tilt -- not offered for grasps as poses
+# what the report writes for a vertical approach only: the printed 1:1 templates (a
+# grasp run's report writes none; an older one's are not offered)
 VERTICAL_ONLY = ("template_a4.pdf", "template_letter.pdf")
 # the grasp formats a run of grasps given as poses is exported in (``mjx-pick export``)
 GRASP_FORMATS = {
