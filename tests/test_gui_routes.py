@@ -863,3 +863,48 @@ def test_validate_on_uploaded_trials_shows_its_figures(page, server, tmp_path):
     expect(checks).to_contain_text("The checks rejected 1 trial before simulating it")
     expect(checks).to_contain_text("1: nothing lies between the pads (0 held on the robot)")
     test_gui.shot(page, "validate")
+
+
+def test_compare_and_sweep_draw_antipodal_grasps(page, server):
+    """The Studies tab's comparison and the sweep tab draw their grasps as tab 3 does:
+    antipodal grasps on the part's surface, run as ``--grasps antipodal``, the count
+    named for what it counts."""
+    import pyarrow.parquet as pq
+    from playwright.sync_api import expect
+
+    from mjx_pick.gui.grasp_input import SOURCES
+
+    _, work = server
+    import_shipped(page)
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "lift height (mm)", 5)
+    number(page, "hold (s)", 0.05)
+    page.get_by_text("Studies", exact=True).click()
+    page.get_by_test_id("compare-grasps").click()
+    page.get_by_role("option", name=SOURCES["antipodal"], exact=True).click()
+    count = page.get_by_label("grasps", exact=True).filter(visible=True)
+    expect(count).to_have_count(1)  # the comparison's count, named for what it counts
+    count.fill("2")
+    page.get_by_label("run folder name").filter(visible=True).first.fill("compare-antipodal")
+    page.get_by_test_id("start-compare").click()
+    status = wait_job(page, "compare compare-antipodal")
+    assert status.startswith("complete"), status
+    shown = page.locator("code").filter(has_text="mjx-pick compare").first.inner_text()
+    assert "--grasps antipodal --n 2" in shown, shown
+    table = pq.read_table(work / "compare-antipodal" / "results.parquet")
+    assert "grasp_pose" in table.column_names and table.num_rows >= 2
+
+    page.get_by_text("Parameter sweep").click()
+    page.get_by_test_id("sweep-grasps").click()
+    page.get_by_role("option", name=SOURCES["antipodal"], exact=True).click()
+    number(page, "start", 0.5)
+    number(page, "end", 0.9)
+    number(page, "step", 0.4)
+    number(page, "simulations per value", 2)
+    expect(page.get_by_test_id("sweep-count")).to_have_text("2 values x 2 grasps = 4 simulations")
+    page.get_by_label("run folder name").filter(visible=True).last.fill("sweep-antipodal")
+    page.get_by_test_id("start-sweep").click()
+    status = wait_job(page, "sweep sweep-antipodal")
+    assert status.startswith("complete, 4/4"), status
+    shown = page.locator("code").filter(has_text="mjx-pick sweep").first.inner_text()
+    assert "--grasps antipodal" in shown, shown

@@ -18,10 +18,12 @@ from nicegui import run, ui
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import forms, jobs, trials_input, workfolder
 from mjx_pick.gui.formatting import fmt, md_text, stamp
+from mjx_pick.gui.grasp_input import source_args
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
     checked,
+    drawn_grasps_select,
     error_label,
     file_error_label,
     need_object,
@@ -77,6 +79,7 @@ class CompareStudy:
                 ).classes("w-full")
                 self.current = ui.checkbox("and the gripper of tab 2")
                 self.n = ui.number("pick-points", value=200, step=1)
+                self.source = drawn_grasps_select("compare-grasps", self.n)
                 self.rank = ui.select(["success", "score"], value="success", label="rank by")
                 self.name = ui.input("run folder name", value=f"compare-{stamp()}")
                 ui.button("Start comparison", on_click=self.start).props(
@@ -114,6 +117,7 @@ class CompareStudy:
         if yes is None or self.panel.busy(self.error):  # another start while it asked
             return
         argv = ["compare", *self.state.obj_args, *flags, "--grippers", ",".join(names)]
+        argv += source_args(self.source.value)
         argv += ["--n", str(n), "--rank-by", self.rank.value, "--out", str(out), *yes]
 
         job = jobs.study_job(argv, self.state.log(out.name), out)

@@ -10,10 +10,12 @@ from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
 from mjx_pick.gui import forms, jobs, views, workfolder
 from mjx_pick.gui.formatting import column_label, fmt, stamp
+from mjx_pick.gui.grasp_input import ANTIPODAL, source_args
 from mjx_pick.gui.page.job_panel import JobPanel
 from mjx_pick.gui.page.settings_form import SettingsForm
 from mjx_pick.gui.page.widgets import (
     checked,
+    drawn_grasps_select,
     error_label,
     need_object,
     picture,
@@ -42,6 +44,8 @@ class SweepTab:
                 self.n = ui.number(
                     "simulations per value", value=100, step=1, on_change=self.estimate
                 )
+                self.source = drawn_grasps_select("sweep-grasps")
+                self.source.on_value_change(self.estimate)
                 self.count = ui.label("").props('data-testid="sweep-count"')
                 self.name = ui.input("run folder name", value=f"sweep-{stamp()}")
                 ui.button("Start sweep", on_click=self.start_sweep).props(
@@ -77,9 +81,8 @@ class SweepTab:
             self.count.set_text("")
             return
         total = len(values) * int(n)
-        self.count.set_text(
-            f"{len(values)} values x {int(n):,} pick-points = {total:,} simulations"
-        )
+        each = "grasps" if self.source.value == ANTIPODAL else "pick-points"
+        self.count.set_text(f"{len(values)} values x {int(n):,} {each} = {total:,} simulations")
 
     async def start_sweep(self) -> None:
         """``mjx-pick sweep`` of the chosen parameter with the page's object and settings."""
@@ -123,6 +126,7 @@ class SweepTab:
             *self.state.obj_args,
             *self.form.cli_flags(settings, self.state.workdir, out),
         ]
+        argv += source_args(self.source.value)
         argv += ["--param", param, "--n", str(int(n)), "--out", str(out), *yes]
 
         job = jobs.study_job(argv, self.state.log(out.name), out)

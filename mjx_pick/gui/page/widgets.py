@@ -25,6 +25,24 @@ class MessageLabel(ui.label):
         super().set_text(page_words(text) if text else text)
 
 
+def drawn_grasps_select(testid: str, count: ui.number | None = None) -> ui.select:
+    """Where a study draws its grasps (``--grasps``): top-down pick-points or antipodal
+    grasps on the part's surface (a grasp file: tab 3's evaluate). count: the study's
+    number of them, its label following the choice (None: a field labelled otherwise)."""
+    from mjx_pick.gui.grasp_input import ANTIPODAL, SOURCES, TOPDOWN
+
+    def relabel(e) -> None:
+        if count is not None:
+            count.props(f'label="{"grasps" if e.value == ANTIPODAL else "pick-points"}"')
+
+    return ui.select(
+        {k: SOURCES[k] for k in (TOPDOWN, ANTIPODAL)},
+        value=TOPDOWN,
+        label="grasps from",
+        on_change=relabel,
+    ).props(f'data-testid="{testid}"')
+
+
 def error_label() -> MessageLabel:
     """A red line for a message that belongs to no single field."""
     return MessageLabel("").classes("text-negative text-sm").props('role="alert"')
