@@ -60,6 +60,7 @@ class GraspChecker:
         names = [m.geom(i).name for i in range(m.ngeom)]
         self.part_geoms = np.array([i for i, nm in enumerate(names) if nm.startswith("piece")])
         self.table_geom = m.geom("table").id
+        self.part_and_table = np.append(self.part_geoms, self.table_geom)
 
     def __call__(self, poses_oe: np.ndarray) -> dict[str, np.ndarray]:
         """Check grasp frames (N, 4, 4) in the object frame (E's axes, origin at the
@@ -69,16 +70,8 @@ class GraspChecker:
         start: NaN where rejected) and coverage (N,): the share of the pads' face whose
         rays meet the part between them.
         """
-        poses_oe = np.asarray(poses_oe, float)
-        n = len(poses_oe)
-        reason = np.full(n, FEASIBLE, np.int64)
-        d = gm.decompose(poses_oe)
-        reason[d["upward"]] = TABLE
-        left, right, coverage = self._extent_mm(poses_oe)
-        reason[(reason == FEASIBLE) & np.isnan(left)] = OFF_OBJECT
-        half = 0.5 * self.stroke_mm
-        reach = np.maximum(-left, right)
-        reason[(reason == FEASIBLE) & (reach > half)] = TOO_WIDE
+        d, reason, left, right, coverage, reach = self._between_pads(poses_oe)
+        reason[(reason == FEASIBLE) & (reach > 0.5 * self.stroke_mm)] = TOO_WIDE
         opening = np.minimum(2.0 * reach + 2.0 * self.safety_zone_mm, self.stroke_mm)
         for i in np.flatnonzero(reason == FEASIBLE):
             reason[i], opening[i] = self._clear(d, i, left[i], right[i], opening[i])
@@ -100,14 +93,8 @@ class GraspChecker:
 
         Returns reason (N,), gap_left_mm, gap_right_mm, coverage (N,) as ``__call__``.
         """
-        poses_oe = np.asarray(poses_oe, float)
-        opening = np.broadcast_to(np.asarray(opening_mm, float), (len(poses_oe),))
-        reason = np.full(len(poses_oe), FEASIBLE, np.int64)
-        d = gm.decompose(poses_oe)
-        reason[d["upward"]] = TABLE
-        left, right, coverage = self._extent_mm(poses_oe)
-        reason[(reason == FEASIBLE) & np.isnan(left)] = OFF_OBJECT
-        reach = np.maximum(-left, right)
+        d, reason, left, right, coverage, reach = self._between_pads(poses_oe)
+        opening = np.broadcast_to(np.asarray(opening_mm, float), reason.shape)
         reason[(reason == FEASIBLE) & (reach > 0.5 * opening)] = COLLISION
         for i in np.flatnonzero(reason == FEASIBLE):
             one = {k: v[i : i + 1] for k, v in d.items() if k != "upward"}
@@ -129,6 +116,19 @@ class GraspChecker:
         return feasible_batch(pick_id, poses_oe, self(poses_oe), mode)
 
     # ----------------------------------------------------------------- the part's extent
+    def _between_pads(self, poses_oe):
+        """What both checks start from: (decompose's dict, reason (N,) -- ``table`` for a
+        grasp approaching from below, ``off_object`` for nothing between the pads, else
+        feasible so far --, left, right, coverage (``_extent_mm``), reach (N,) mm: the
+        part's farthest extent from the grasp centre)."""
+        poses_oe = np.asarray(poses_oe, float)
+        reason = np.full(len(poses_oe), FEASIBLE, np.int64)
+        d = gm.decompose(poses_oe)
+        reason[d["upward"]] = TABLE
+        left, right, coverage = self._extent_mm(poses_oe)
+        reason[(reason == FEASIBLE) & np.isnan(left)] = OFF_OBJECT
+        return d, reason, left, right, coverage, np.maximum(-left, right)
+
     def _extent_mm(self, poses_oe: np.ndarray):
         """Where the pads meet the part along the closing axis, mm from the grasp centre:
         (left (N,), right (N,), coverage (N,)); left = min over the left pad's rays of
@@ -189,14 +189,14 @@ class GraspChecker:
             self._place(one, open_mm, gap)
             return self._touching(geoms)
 
-        part_and_table = np.append(self.part_geoms, self.table_geom)
-        if touches(self.stroke_mm, [self.table_geom]):
+        self._place(one, self.stroke_mm, gap)  # fully open: neither table nor part
+        if self._touching([self.table_geom]):
             return TABLE, opening
-        if touches(self.stroke_mm, self.part_geoms):
+        if self._touching(self.part_geoms):
             return COLLISION, opening
         if touches(gap, [self.table_geom]):
             return TABLE, opening
-        if opening < self.stroke_mm and touches(opening, part_and_table):
+        if opening < self.stroke_mm and touches(opening, self.part_and_table):
             return FEASIBLE, self.stroke_mm
         return FEASIBLE, opening
 
