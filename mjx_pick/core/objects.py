@@ -841,7 +841,7 @@ def _prepared_mesh(
     pose: str | np.ndarray,
     coacd_threshold: float,
     largest_body: bool,
-    check=lambda rep: None,
+    check,
 ) -> dict[str, np.ndarray]:
     """The mesh file's prepared geometry (:func:`_prepare_mesh`'s arrays), read from the
     on-disk cache when this file was prepared alike before, else computed and stored.
@@ -925,7 +925,7 @@ def _prepare_mesh(
     pose: str | np.ndarray,
     coacd_threshold: float,
     largest_body: bool,
-    check=lambda rep: None,
+    check,
 ) -> dict:
     """A mesh file's geometry in the object frame: the cached part of object_from_mesh.
 
@@ -1391,7 +1391,9 @@ def _check_object_options(text: str, kind: str, options: dict) -> None:
     shipped asset). options: :func:`load_object`'s keywords by name."""
     for name in _OBJECT_NUMBERS:
         numbers.check_optional(name, options[name])
-    options["pose"] = check_pose(options["pose"])
+    # checked here, projected once where it is used (object_from_mesh): the projection
+    # onto a rotation is not idempotent to the bit, and the cache key holds its bits
+    check_pose(options["pose"])
     mass_g, density_kg_m3 = options["mass_g"], options["density_kg_m3"]
     if mass_g is not None and density_kg_m3 is not None:
         raise ConfigError(
