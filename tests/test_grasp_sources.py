@@ -354,3 +354,19 @@ def test_design_searches_grippers_on_antipodal_grasps(block_scene, tmp_path):
     )  # fmt: skip
     assert again.final.already_complete and again.best == res.best
     np.testing.assert_array_equal(again.final.success, res.final.success)
+
+
+def test_the_page_checks_the_model_file_of_a_gripper_toml_saved_with_a_bom(tmp_path):
+    """A gripper TOML saved with a byte-order mark (Notepad) is read by the page's
+    trials check as validate reads it: the model file it names must lie inside the work
+    folder, as for any other TOML."""
+    from mjx_pick.gui.trials_input import check_trials
+
+    work = tmp_path / "work"
+    work.mkdir()
+    (tmp_path / "model.xml").write_text("<mujoco/>")
+    toml = 'base = "robotiq-2f85"\nname = "g"\n[mjcf]\nfile = "../model.xml"\n'
+    (work / "grip.toml").write_bytes(b"\xef\xbb\xbf" + toml.encode())
+    path = _trials_csv(work, [{"gripper": "grip.toml"}])
+    with pytest.raises(ConfigError, match=r"grip.toml: its \[mjcf\] file model.xml lies outside"):
+        check_trials(path, work, "TRIALS.csv")

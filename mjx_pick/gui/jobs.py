@@ -510,7 +510,8 @@ class Job:
         page asks instead) leaves no trace that would take its name (a run's name is its
         log's and its folder's, and a taken one is refused)."""
         try:
-            workfolder.confined(self.log, self.workdir).unlink(missing_ok=True)
+            workfolder.confined(self.log, self.workdir)
+            self.log.unlink(missing_ok=True)  # the log itself: a link, never its target
         except (OSError, ValueError):  # outside the work folder (a link): left alone
             pass
 

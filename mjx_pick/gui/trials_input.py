@@ -6,12 +6,11 @@ Details: docs/gui.md ("Physical trials").
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
-from mjx_pick.core.config import ConfigError
+from mjx_pick.core.config import ConfigError, read_toml
 from mjx_pick.gui.formatting import fmt, outcome_words
-from mjx_pick.gui.workfolder import confined
+from mjx_pick.gui.workfolder import confined, inside
 
 # validation.json's figures, in the page's words (a success is the positive class)
 FIGURES = (
@@ -42,14 +41,14 @@ def check_trials(path: Path, workdir: Path, shown: str) -> dict:
         raise ConfigError(text) from None
     for mesh in sorted(set(trials.object)):
         _inside(mesh, workdir, f"{shown}: its mesh")
-    grippers = sorted(set(trials.gripper))
+    grippers, presets = sorted(set(trials.gripper)), set(preset_names())
     for gripper in grippers:
-        if gripper in preset_names():
+        if gripper in presets:
             continue
         toml = _inside(gripper, workdir, f"{shown}: its gripper TOML")
-        try:
-            data = tomllib.loads(toml.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        try:  # read as validate reads it (a byte-order mark too): its model files checked
+            data = read_toml(toml, "gripper")
+        except ConfigError:
             continue  # validate says what is wrong with it, by its name
         for kind in ("mjcf", "urdf"):
             model = data.get(kind)
@@ -67,8 +66,6 @@ def check_trials(path: Path, workdir: Path, shown: str) -> dict:
 def _inside(path, workdir: Path, what: str) -> Path:
     """path inside the work folder, or ConfigError saying what it is and where it lies
     (a path out of it, or a link that leads out)."""
-    from mjx_pick.gui.workfolder import inside
-
     found = inside(path, workdir)
     if found is None:
         raise ConfigError(
