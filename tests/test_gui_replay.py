@@ -350,7 +350,10 @@ def test_a_grasp_run_shows_its_grasps_and_the_replay_turns_the_gripper(page, gra
     # the page's bodies are the trace's kinematics with the gripper turned as simulated
     trace = run.trace(pid)
     replay = SceneReplay(run.path / "scene.xml", run.gripper)
+    vertical = replay.model.body_quat.copy()
     track = body_track(replay.model, trace, replay.shapes, run.gripper)
+    # the shared model is left as the scene has it: two replays at once never mix tilts
+    np.testing.assert_array_equal(replay.model.body_quat, vertical)
     gripper = track.bodies.index("gripper")
     shown = quaternions(page)["gripper"]
     assert tilt_of(shown) == pytest.approx(tilt, abs=0.05)

@@ -82,15 +82,7 @@ class SceneReplay:
         """{"t": (T,) s, "position": (T, B, 3) m, "quat_wxyz": (T, B, 4), float32 base64;
         "bodies": names (B,), the order of shapes_payload; "colours": {body: colour} of
         bodies drawn apart (the object of a failed pick-point in FAILURE_COLOUR)}."""
-        # a grasp's tilt turns the gripper in the model (TracePose sets its body_quat and
-        # the lift's axis): set back after, as the scene.xml has it, for the next trace
-        gripper = self.model.body("gripper").id
-        lift = self.model.joint("lift").id
-        quat, axis = self.model.body_quat[gripper].copy(), self.model.jnt_axis[lift].copy()
-        try:
-            track = body_track(self.model, trace, self.shapes, self.gripper)
-        finally:
-            self.model.body_quat[gripper], self.model.jnt_axis[lift] = quat, axis
+        track = body_track(self.model, trace, self.shapes, self.gripper)  # model untouched
         return {
             "t": packed(track.t_s, np.float32),
             "position": packed(track.position_m, np.float32),

@@ -149,9 +149,14 @@ def body_track(
 ) -> BodyTrack:
     """The world pose of each body of shapes at every row of trace: the row's joint state
     (:class:`TracePose`) through MuJoCo's forward kinematics, so an MJCF gripper's
-    linkage is posed as the simulation posed it."""
+    linkage is posed as the simulation posed it. model is left as it is (a tilted
+    grasp's trace turns a copy's gripper): one model serves any number of traces."""
+    import copy
+
     import mujoco
 
+    if trace.get("gripper_tilt_wxyz") is not None:
+        model = copy.copy(model)
     data = mujoco.MjData(model)
     pose = TracePose(model, trace, gripper)
     ids = [s.body_id for s in shapes]
