@@ -370,3 +370,20 @@ def test_the_page_checks_the_model_file_of_a_gripper_toml_saved_with_a_bom(tmp_p
     path = _trials_csv(work, [{"gripper": "grip.toml"}])
     with pytest.raises(ConfigError, match=r"grip.toml: its \[mjcf\] file model.xml lies outside"):
         check_trials(path, work, "TRIALS.csv")
+
+
+def test_a_trial_grasping_from_under_the_table_is_rejected_not_a_crash(tmp_path):
+    """A trial whose grasp approaches from below (the identity pose: approach +z) is a
+    grasp the checks reject for the table, counted as a predicted failure with no tilt;
+    the other trials are simulated."""
+    from mjx_pick.studies.options import RunOptions
+    from mjx_pick.studies.validation import validate
+
+    below = " ".join(f"{v:g}" for v in np.eye(4).ravel())
+    path = _trials_csv(tmp_path, [{}, {"grasp_pose": below, "success": "0"}])
+    fast = {"grasp": FAST["grasp"], "keep_grasp": ("lift_height_mm", "hold_s")}
+    with pytest.warns(UserWarning, match="using 20 N"):  # the procedure fitted to the gripper
+        res = validate(path, RunOptions(backend="mujoco"), **fast)
+    rows = res.table.to_pylist()
+    assert rows[1]["sim_outcome"] == "rejected: table" and not rows[1]["sim_success"]
+    assert np.isnan(rows[1]["tilt_deg"]) and rows[0]["tilt_deg"] == pytest.approx(0.0)

@@ -165,7 +165,13 @@ def tilt_deg(grasps: GraspBatch) -> np.ndarray:
     """(N,) deg: each grasp's approach from vertical (0: straight down)."""
     if grasps.tilt_quat is None:
         return np.zeros(len(grasps))
-    w = np.clip(np.abs(grasps.tilt_quat[:, 0]), 0.0, 1.0)
+    return quat_tilt_deg(grasps.tilt_quat)
+
+
+def quat_tilt_deg(tilt_quat: np.ndarray) -> np.ndarray:
+    """(N,) deg: the turn of tilt quaternions (N, 4) w, x, y, z (NaN where NaN, as
+    :func:`decompose` gives a grasp from under the table)."""
+    w = np.clip(np.abs(tilt_quat[:, 0]), 0.0, 1.0)
     return np.rad2deg(2.0 * np.arccos(w))
 
 

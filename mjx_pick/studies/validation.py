@@ -17,7 +17,7 @@ import pyarrow as pa
 
 from mjx_pick.core.config import ConfigError, read_text, to_dict, write_json, write_parquet
 from mjx_pick.core.grasp_checks import REASON_WORDS, REASONS, GraspChecker, feasible_batch
-from mjx_pick.core.grasps import from_poses, rigid_poses, rz
+from mjx_pick.core.grasps import decompose, quat_tilt_deg, rigid_poses, rz
 from mjx_pick.core.gripper import GripperSpec, load_gripper, preset_names
 from mjx_pick.core.objects import ObjectModel, object_from_mesh
 from mjx_pick.core.physics import ContactParams, SolverParams
@@ -452,8 +452,8 @@ def _simulate(t: Trials, index, scenes: list[_Scene], opts: RunOptions) -> dict:
             labels[ok] = np.asarray(ev.table["success"], bool)
             what[ok] = ev.table["failure"].to_pylist()
             scores[ok] = np.asarray(ev.table["score"], float)
-        tilts = from_poses(sc.centres).tilt_quat
-        tilt_deg = np.rad2deg(2 * np.arccos(np.clip(np.abs(tilts[:, 0]), 0, 1)))
+        # a grasp from under the table (rejected: table) has no tilt: NaN
+        tilt_deg = quat_tilt_deg(decompose(sc.centres)["tilt_quat"])
         for k, i in enumerate(sc.trials):
             g = sc.grasp_of[k]
             sim[i], outcome[i], score[i] = labels[g], what[g], scores[g]
