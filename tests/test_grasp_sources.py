@@ -387,3 +387,30 @@ def test_a_trial_grasping_from_under_the_table_is_rejected_not_a_crash(tmp_path)
     rows = res.table.to_pylist()
     assert rows[1]["sim_outcome"] == "rejected: table" and not rows[1]["sim_success"]
     assert np.isnan(rows[1]["tilt_deg"]) and rows[0]["tilt_deg"] == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize(
+    ("grasps", "depth_mm", "match"),
+    [
+        ("antipodl", None, "neither 'topdown', 'antipodal' nor a grasp file"),
+        ("missing.csv", None, "grasps file 'missing.csv' does not exist"),
+        ("antipodal", 10.0, "depth_mm .--depth-mm. is for grasps read from a file"),
+    ],
+)
+def test_every_study_refuses_a_grasp_source_before_any_folder(
+    block_scene, tmp_path, grasps, depth_mm, match
+):
+    """The grasp source is checked with the run options, for every study alike (sweep
+    and robust as evaluate and compare): nothing is written."""
+    from mjx_pick.studies.robust import robust_best
+    from mjx_pick.studies.sweeps import ParamSpec, sweep
+
+    spec = ParamSpec.parse("contact.pad_friction=0.5,0.9")
+    run = {"n": 2, "grasps": grasps, "depth_mm": depth_mm, "backend": "mujoco"}
+    for study in (
+        lambda out: sweep(block_scene.object, [spec], out=out, **run),
+        lambda out: robust_best(block_scene.object, out=out, **run),
+    ):
+        with pytest.raises(ConfigError, match=match):
+            study(tmp_path / "run")
+        assert not (tmp_path / "run").exists()

@@ -182,18 +182,6 @@ def shared_grasps(
     return cand, batches, np.stack([r["reason"] for r in results])
 
 
-def _source_key(opts: RunOptions) -> dict:
-    """A grasp source in a configuration key: the antipodal settings or a file's bytes."""
-    import hashlib
-
-    from mjx_pick.core.antipodal import AntipodalConfig
-
-    if opts.grasps == "antipodal":
-        return {"antipodal": to_dict(opts.antipodal or AntipodalConfig())}
-    digest = hashlib.sha256(Path(opts.grasps).read_bytes()).hexdigest()
-    return {"file": digest, "depth_mm": opts.depth_mm}
-
-
 def _candidates(obj, grippers, base, n, seed, pick_config, opts):
     """compare's shared candidates from opts' grasp source."""
     if opts is None or opts.grasps == "topdown":
@@ -250,15 +238,13 @@ def compare(
         refused = [pp.stroke_refusal(obj, s.gripper, pick_config, s.grasp) for s in fitted]
         if all(refused):  # none can take it: said now, not after max_candidates draws
             raise ConfigError("no gripper can take the part: " + "; ".join(refused))
-    else:
-        from mjx_pick.studies.grasp_sources import check_source
-
-        check_source(opts.grasps, opts.depth_mm)
     request = {"object": portable_object(obj.summary()), "grippers": to_dict(grippers)}
     request.update(base=to_dict(base), n=n, seed=seed, rank_by=rank_by)
     request.update(picks=to_dict(pick_config))
     if opts.grasps != "topdown":  # a top-down comparison's key as before
-        request.update(grasps=_source_key(opts))
+        from mjx_pick.studies.grasp_sources import source_key
+
+        request.update(grasps=source_key(opts))
     with opts.opening("compare", obj, request, simulator) as study:
         if study.complete:
             return _read_comparison(
@@ -547,13 +533,12 @@ def design_search(
     if opts.grasps == "topdown":
         pool, too_narrow = _fitting_variants(obj, base, bounds, req.variants, seed, pick_config)
     else:
-        from mjx_pick.studies.grasp_sources import check_source
+        from mjx_pick.studies.grasp_sources import source_key
 
-        # grasps given as poses: every variant is checked on each grasp by the 6-DoF
-        # checks as the rounds go (compare's shared_grasps); none fitting any is refused
-        # there, before its first simulation
-        check_source(opts.grasps, opts.depth_mm)
-        request.update(grasps=_source_key(opts))
+        # grasps given as poses (their source checked with the options): every variant is
+        # checked on each grasp by the 6-DoF checks as the rounds go (compare's
+        # shared_grasps); none fitting any is refused there, before its first simulation
+        request.update(grasps=source_key(opts))
         pool, too_narrow = sample_variants(base.gripper, bounds, req.variants, seed), 0
     request.update(too_narrow=too_narrow)
     search = {"rounds": req.rounds, "n": n, "final_n": req.final_n, "seed": seed}

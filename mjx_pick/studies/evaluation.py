@@ -17,7 +17,6 @@ import pyarrow as pa
 
 from mjx_pick.core import numbers
 from mjx_pick.core import pickpoints as pp
-from mjx_pick.core.antipodal import AntipodalConfig
 from mjx_pick.core.config import (
     ConfigError,
     check_range,
@@ -57,7 +56,7 @@ from mjx_pick.outputs.rundir import (
     release,
     versions,
 )
-from mjx_pick.studies.grasp_sources import TOPDOWN, check_source, draw_grasps
+from mjx_pick.studies.grasp_sources import ANTIPODAL, TOPDOWN, draw_grasps, source_key
 from mjx_pick.studies.options import RunOptions, split_fields
 from mjx_pick.studies.pickfiles import read_picks_csv
 from mjx_pick.studies.robust import min_grip_force
@@ -315,7 +314,7 @@ def _check(obj: ObjectModel, settings: Settings, req: EvaluateRequest, opts: Run
     """Every check of the inputs that can fail before a scene, a runner or a folder."""
     settings.grasp.check_gripper(settings.gripper)
     check_clearance(obj, settings.grasp)
-    source = check_source(opts.grasps, opts.depth_mm)
+    source = opts.grasps  # checked with the options (RunOptions)
     if source != TOPDOWN:
         if req.picks is not None:
             raise ConfigError(
@@ -449,7 +448,7 @@ def _key_settings(ctx: _Context, req: _Request) -> dict:
         "source": _picks_source(what.picks),
         **_grasps_source(run),
         "n": run.n
-        if what.picks is None and what.until is None and not Path(run.grasps).is_file()
+        if what.picks is None and what.until is None and run.grasps in (TOPDOWN, ANTIPODAL)
         else None,
         "seed": run.seed,
         "until": what.until,
@@ -816,13 +815,10 @@ def _picks_source(picks) -> str:
 
 
 def _grasps_source(run: RunOptions) -> dict:
-    """The grasp source's entries of the folder's configuration hash: none for top-down
-    pick-points (their runs' keys as before), the antipodal settings, or a file's digest."""
-    if run.grasps == TOPDOWN:
-        return {}
-    if run.grasps == "antipodal":
-        return {"grasps": {"antipodal": to_dict(run.antipodal or AntipodalConfig())}}
-    return {"grasps": {"file": _file_digest(run.grasps), "depth_mm": run.depth_mm}}
+    """The grasp source's entries of the folder's configuration hash (none for top-down
+    pick-points: their runs' keys as before; ``grasp_sources.source_key``)."""
+    key = source_key(run)
+    return {} if key is None else {"grasps": key}
 
 
 def _pose_arrays(grasps: pp.GraspBatch) -> list[np.ndarray]:

@@ -56,6 +56,20 @@ def check_source(source: str, depth_mm: float | None = None) -> str:
     return str(path)
 
 
+def source_key(run) -> dict | None:
+    """A grasp source in a configuration key (run: ``RunOptions``): None for top-down
+    pick-points (their keys as before), the antipodal settings, or a file's digest (its
+    bytes, not its name) and the depth given for it."""
+    from mjx_pick.core.cache import file_digest
+    from mjx_pick.core.config import to_dict
+
+    if run.grasps == TOPDOWN:
+        return None
+    if run.grasps == ANTIPODAL:
+        return {"antipodal": to_dict(run.antipodal or AntipodalConfig())}
+    return {"file": file_digest(run.grasps), "depth_mm": run.depth_mm}
+
+
 def _suffix(fmt: str) -> str:
     from mjx_pick.outputs import exchange
 

@@ -227,9 +227,3 @@ def _set_summary(summaries: dict) -> dict:
         },
         "objects": summaries,
     }
-
-
-def part_folders(out: str | Path) -> list[Path]:
-    """The run folders of a set's parts, by name (for export)."""
-    folder = Path(out) / PARTS
-    return sorted(p for p in folder.iterdir() if p.is_dir()) if folder.is_dir() else []

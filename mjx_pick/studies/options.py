@@ -74,6 +74,11 @@ class RunOptions:
             value = numbers.check_optional(name, getattr(self, name))
             object.__setattr__(self, name, value)
         check_out(self.out)  # out="" is no folder (the current one would be written)
+        if self.grasps != "topdown" or self.depth_mm is not None:
+            # the grasp source's one check, for every study: before any folder or work
+            from mjx_pick.studies.grasp_sources import check_source
+
+            object.__setattr__(self, "grasps", check_source(self.grasps, self.depth_mm))
 
     @classmethod
     def of(cls, options: RunOptions | None = None, /, **fields) -> RunOptions:
