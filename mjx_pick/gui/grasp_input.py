@@ -70,16 +70,11 @@ def check_grasp_file(obj, gripper, path: Path, name: str, depth_mm: float | None
     for all), and the grasp centres near the part (a file in another unit or frame is
     refused, ``grasp_sources.to_object_frame``). Returns how many; ConfigError naming
     the file by name. Which grasps are feasible the run says (it needs the scene)."""
-    from mjx_pick.outputs.exchange import read_labels
-    from mjx_pick.studies.grasp_sources import check_source, grasp_centres, to_object_frame
+    from mjx_pick.studies.grasp_sources import check_source, file_centres
 
     try:
         check_source(str(path), depth_mm)
-        labels = read_labels(path)
-        centres = grasp_centres(
-            labels.transforms, labels.depth_m, depth_mm, name, gripper.tcp_offset_mm
-        )
-        to_object_frame(obj, centres, name)
+        _, centres = file_centres(obj, path, depth_mm, gripper.tcp_offset_mm, name)
     except ConfigError as err:
         raise ConfigError(str(err).replace(str(path), name)) from None
-    return len(labels.transforms)
+    return len(centres)

@@ -117,22 +117,28 @@ def shared_grasps(
     n: int,
     seed: int,
     opts: RunOptions,
+    sim: Simulator | None = None,
 ) -> tuple[dict, list[pp.GraspBatch], np.ndarray]:
     """:func:`shared_candidates` for grasps given as poses (opts.grasps: "antipodal" or
     a grasp file): the same candidate poses checked on every gripper's scene by the
     6-DoF checks (``GraspChecker``). Antipodal: the first n of the seeded stream -- drawn
     for the widest gripper's stroke and pads -- that some gripper takes; a file: every
     grasp in it (its tool centre point moved by each gripper's tcp_offset_mm). reasons:
-    ``grasp_checks.REASONS`` codes (0: feasible)."""
+    ``grasp_checks.REASONS`` codes (0: feasible). sim: the study's simulator, whose
+    scenes are checked (else each gripper's scene is built here)."""
     from mjx_pick.core import antipodal as ap
     from mjx_pick.core.grasp_checks import GraspChecker, feasible_batch
     from mjx_pick.core.grasps import decompose
     from mjx_pick.engine.inputs import scene_of
-    from mjx_pick.outputs.exchange import read_labels
-    from mjx_pick.studies.grasp_sources import grasp_centres, to_object_frame
+    from mjx_pick.studies.grasp_sources import file_centres
 
     zone = opts.picks.safety_zone_mm
-    checkers = [GraspChecker(scene_of(obj, base.on_gripper(g)[0]), zone) for g in grippers]
+
+    def scene(g: GripperSpec):  # the simulator's own scene where one runs the study
+        settings = base.on_gripper(g)[0]
+        return sim.exact_scene(settings) if sim is not None else scene_of(obj, settings)
+
+    checkers = [GraspChecker(scene(g), zone) for g in grippers]
     if opts.grasps == "antipodal":
         config = opts.antipodal or ap.AntipodalConfig()
         wide = max(grippers, key=lambda g: g.stroke_mm)
@@ -161,18 +167,8 @@ def shared_grasps(
             for g in range(len(grippers))
         ]
     else:
-        labels = read_labels(opts.grasps)
-        where = f"grasps file {opts.grasps}"
-        each = [
-            to_object_frame(
-                obj,
-                grasp_centres(
-                    labels.transforms, labels.depth_m, opts.depth_mm, where, g.tcp_offset_mm
-                ),
-                where,
-            )
-            for g in grippers
-        ]
+        read = [file_centres(obj, opts.grasps, opts.depth_mm, g.tcp_offset_mm) for g in grippers]
+        labels, each = read[0][0], [centres for _, centres in read]
         ids = labels.pick_id if labels.pick_id is not None else np.arange(len(each[0]))
         results = [c(t) for c, t in zip(checkers, each, strict=True)]
     planar = decompose(each[0])
@@ -182,11 +178,12 @@ def shared_grasps(
     return cand, batches, np.stack([r["reason"] for r in results])
 
 
-def _candidates(obj, grippers, base, n, seed, pick_config, opts):
-    """compare's shared candidates from opts' grasp source."""
+def _candidates(obj, grippers, base, n, seed, pick_config, opts, sim=None):
+    """compare's shared candidates from opts' grasp source (sim: the study's simulator,
+    whose scenes the 6-DoF checks use)."""
     if opts is None or opts.grasps == "topdown":
         return shared_candidates(obj, grippers, n, seed, pick_config, base.grasp)
-    return shared_grasps(obj, grippers, base, n, seed, opts)
+    return shared_grasps(obj, grippers, base, n, seed, opts, sim)
 
 
 def unequal_forces(ranking: list[dict]) -> str:
@@ -277,7 +274,7 @@ def _compare(
     """compare's simulations and ranking (nothing written): the shared candidates on
     every gripper through sim, chunks read from and saved to store (when given)."""
     names = [g.name for g in grippers]
-    cand, batches, reasons = _candidates(obj, grippers, base, n, seed, pick_config, opts)
+    cand, batches, reasons = _candidates(obj, grippers, base, n, seed, pick_config, opts, sim)
     n_cand = len(cand["pick_id"])
     # each gripper's procedure fitted to its ranges: one that cannot squeeze F_d is
     # compared at its strongest

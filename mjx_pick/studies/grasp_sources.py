@@ -113,18 +113,10 @@ def file_grasps(
     has one, else depth_mm); the mesh's import maps them into the object frame
     (``ObjectModel.mesh_to_object_m``). The infeasible are left out, counted by reason
     (``GraspBatch.rejected``) and warned of; none feasible is an error."""
-    labels = read_labels(path)
-    n = len(labels.transforms)
+    labels, centres = file_centres(scene.object, path, depth_mm, scene.gripper.tcp_offset_mm)
+    n = len(centres)
     if n == 0:
         raise ConfigError(f"grasps file {str(path)!r} holds no grasps")
-    centres = grasp_centres(
-        labels.transforms,
-        labels.depth_m,
-        depth_mm,
-        f"grasps file {path}",
-        scene.gripper.tcp_offset_mm,
-    )
-    centres = to_object_frame(scene.object, centres, f"grasps file {path}")
     ids = labels.pick_id if labels.pick_id is not None else np.arange(n)
     batch = GraspChecker(scene, safety_zone_mm).batch(ids, centres, mode="file")
     if len(batch) == 0:
@@ -139,6 +131,23 @@ def file_grasps(
             stacklevel=2,
         )
     return batch
+
+
+def file_centres(
+    obj: ObjectModel,
+    path: str | os.PathLike,
+    depth_mm: float | None,
+    tcp_offset_mm: float = 0.0,
+    where: str | None = None,
+):
+    """(the file's GraspLabels, their grasp frames (N, 4, 4) in obj's object frame):
+    a grasp file read (``outputs.exchange``), each pose's grasp centre found
+    (:func:`grasp_centres`) and mapped by the mesh's import (:func:`to_object_frame`).
+    where: the file as errors name it (default: "grasps file PATH")."""
+    where = where or f"grasps file {path}"
+    labels = read_labels(path)
+    centres = grasp_centres(labels.transforms, labels.depth_m, depth_mm, where, tcp_offset_mm)
+    return labels, to_object_frame(obj, centres, where)
 
 
 def grasp_centres(
