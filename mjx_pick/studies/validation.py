@@ -23,7 +23,8 @@ from mjx_pick.core.objects import ObjectModel, object_from_mesh
 from mjx_pick.core.physics import ContactParams, SolverParams
 from mjx_pick.core.procedure import GraspConfig
 from mjx_pick.core.settings import Settings
-from mjx_pick.engine.inputs import scene_of
+from mjx_pick.engine.runner import Runner
+from mjx_pick.engine.simulator import Simulator
 from mjx_pick.outputs.rundir import claim, config_hash, fail, finish
 from mjx_pick.studies.grasp_sources import grasp_centres, to_object_frame
 from mjx_pick.studies.options import RunOptions
@@ -286,7 +287,8 @@ def validate(
     if keep_grasp is None:
         keep_grasp = () if grasp is None else tuple(f.name for f in dataclasses.fields(grasp))
     # every input checked first
-    scenes = _prepare(t, index, contact, solver, grasp, keep_grasp, unit)
+    runner = Runner(opts.backend, opts.batch_size)  # one for every scene's simulator
+    scenes = _prepare(t, index, contact, solver, grasp, keep_grasp, unit, runner)
     if out_dir is not None:
         claim(out_dir, "validate", key, overwrite=opts.overwrite, settings=settings_doc)
     try:
@@ -313,11 +315,13 @@ def validate(
 
 @dataclasses.dataclass
 class _Scene:
-    """One scene of the trials: its object, settings, compiled scene, the grasps of its
-    trials in the object frame and each trial's grasp."""
+    """One scene of the trials: its object, settings, simulator and compiled scene (the
+    simulator's own), the grasps of its trials in the object frame and each trial's
+    grasp."""
 
     obj: ObjectModel
     settings: Settings
+    sim: Simulator
     scene: object
     centres: np.ndarray  # (G, 4, 4) the scene's grasps in the object frame
     grasp_of: np.ndarray  # (T_s,) each of its trials' grasp, 0..G-1
@@ -325,9 +329,11 @@ class _Scene:
     source: tuple = ()  # (mesh file, mass, gripper): what a scene sharing it must have
 
 
-def _prepare(t: Trials, index, contact, solver, grasp, keep, unit) -> list[_Scene]:
+def _prepare(t: Trials, index, contact, solver, grasp, keep, unit, runner=None) -> list[_Scene]:
     """Every scene of the trials with its grasps, checked (a mesh, a gripper, a pose
-    that cannot be used is refused here, before any simulation)."""
+    that cannot be used is refused here, before any simulation). runner: what their
+    simulators run on (None: the default backend's)."""
+    runner = runner or Runner()
     out: list[_Scene] = []
     grasp_ids = t.grasp_index()
     chosen = set(int(i) for i in index)
@@ -358,10 +364,10 @@ def _prepare(t: Trials, index, contact, solver, grasp, keep, unit) -> list[_Scen
             sc.trials = np.concatenate([sc.trials, members])
             continue
         settings = _settings(gripper, contact, solver, grasp, keep)
-        scene = scene_of(obj, settings)
-        out.append(
-            _Scene(obj, settings, scene, centres, grasp_of, members, (mesh, mass_g, gripper_name))
-        )
+        sim = Simulator(obj, runner=runner)  # the scene built once: checked and simulated
+        source = (mesh, mass_g, gripper_name)
+        scene = sim.exact_scene(settings)
+        out.append(_Scene(obj, settings, sim, scene, centres, grasp_of, members, source))
     return out
 
 
@@ -442,8 +448,8 @@ def _simulate(t: Trials, index, scenes: list[_Scene], opts: RunOptions) -> dict:
             ev = evaluate(
                 sc.obj,
                 sc.settings.gripper,
-                RunOptions(backend=opts.backend, batch_size=opts.batch_size),
                 picks=batch,
+                simulator=sc.sim,
                 contact=sc.settings.contact,
                 solver=sc.settings.solver,
                 grasp=sc.settings.grasp,
