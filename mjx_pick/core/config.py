@@ -218,12 +218,8 @@ def check_fields(obj: Any, owner: str) -> None:
     relative = [f for f in declared if any(isinstance(b, str) for b in f.metadata["range"][:2])]
     for f in [f for f in declared if f not in relative] + relative:
         value = getattr(obj, f.name)
-        if value is None:
-            continue
-        lo, hi, lo_open, hi_open = f.metadata["range"]
-        lo, hi = _bound(obj, lo), _bound(obj, hi)
-        integer = bool(f.metadata.get("integer"))
-        check_range(owner, f.name, value, lo, hi, lo_open=lo_open, hi_open=hi_open, integer=integer)
+        if value is not None:
+            _check_declared(obj, f, value, owner)
 
 
 def check_field(obj: Any, name: str, value: Any, owner: str) -> None:
@@ -232,12 +228,17 @@ def check_field(obj: Any, name: str, value: Any, owner: str) -> None:
     ``dataclasses.replace(obj, name=value)`` would refuse for the field itself (a search
     bound, a sweep's values, checked before any variant is drawn)."""
     f = next(f for f in dataclasses.fields(obj) if f.name == name)
-    if f.metadata.get("range") is None:
-        return
+    if f.metadata.get("range") is not None:
+        _check_declared(obj, f, value, owner)
+
+
+def _check_declared(obj: Any, f: dataclasses.Field, value: Any, owner: str) -> None:
+    """value against field f's declared range (a bound naming another field read from
+    obj) and its integer rule: ``check_range``."""
     lo, hi, lo_open, hi_open = f.metadata["range"]
-    integer = bool(f.metadata.get("integer"))
     lo, hi = _bound(obj, lo), _bound(obj, hi)
-    check_range(owner, name, value, lo, hi, lo_open=lo_open, hi_open=hi_open, integer=integer)
+    integer = bool(f.metadata.get("integer"))
+    check_range(owner, f.name, value, lo, hi, lo_open=lo_open, hi_open=hi_open, integer=integer)
 
 
 def range_text(rng: tuple | None) -> str:

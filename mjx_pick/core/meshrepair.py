@@ -76,6 +76,14 @@ class Repair:
     def from_json(cls, text: str) -> Repair:
         return cls(**json.loads(text))
 
+    def mass_doubt_g(self, density: float) -> float:
+        """The mass's doubt at a given density (kg/m^3), g."""
+        return density * self.volume_doubt_mm3 * 1e-6
+
+    def density_doubt(self, density: float) -> float:
+        """The density's doubt (kg/m^3) where it follows from a given mass."""
+        return density * self.volume_doubt_pct / 100.0
+
     def figures(self, mass_kg: float, density: float, density_given: bool) -> dict:
         """Plain values for a summary: the counts, the volume and its doubt (mm^3, %),
         the mass (g) and density (kg/m^3), and the doubt of the one that followed from
@@ -96,9 +104,9 @@ class Repair:
             "bounds_change_mm": _sig(self.bounds_change_mm),
         }
         if density_given:
-            out["mass_doubt_g"] = _sig(density * self.volume_doubt_mm3 * 1e-6)
+            out["mass_doubt_g"] = _sig(self.mass_doubt_g(density))
         else:
-            out["density_doubt_kg_m3"] = _sig(density * self.volume_doubt_pct / 100.0)
+            out["density_doubt_kg_m3"] = _sig(self.density_doubt(density))
         return out
 
     def describe(self, density: float | None = None, density_given: bool = False) -> str:
@@ -120,10 +128,10 @@ class Repair:
         )
         if density is not None and density_given:
             mass = density * self.volume_mm3 * 1e-6
-            doubt = density * self.volume_doubt_mm3 * 1e-6
+            doubt = self.mass_doubt_g(density)
             text += f", mass {mass:.6g} g +- {doubt:.4g} g at {density:g} kg/m^3"
         elif density is not None:
-            doubt = density * self.volume_doubt_pct / 100.0
+            doubt = self.density_doubt(density)
             text += f", density {density:.6g} +- {doubt:.4g} kg/m^3 of the given mass"
         return (
             f"{text}, centre of mass within {self.com_doubt_mm:.3g} mm, bounds moved "
