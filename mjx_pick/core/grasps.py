@@ -286,6 +286,23 @@ def from_poses(
 ORTHONORMAL_TOL = 1e-3
 
 
+def pose_numbers(text: str | None, where: str) -> list[float]:
+    """The 16 numbers of a 4x4 pose written as text (row-major, separated by spaces), or
+    a ConfigError naming where (a file's line and column) and the text."""
+    from mjx_pick.core.config import ConfigError
+
+    try:
+        values = [float(v) for v in (text or "").split()]
+    except ValueError:
+        values = []
+    if len(values) != 16:
+        raise ConfigError(
+            f"{where}: {text!r} is not 16 numbers separated by spaces (a 4x4 pose, "
+            "row-major, metres)"
+        )
+    return values
+
+
 def rigid_poses(values, where: str, rows=None) -> np.ndarray:
     """(N, 4, 4) rigid transforms from values (N, 16) or (N, 4, 4): each finite, its
     last row 0 0 0 1, its rotation proper and orthonormal within ORTHONORMAL_TOL

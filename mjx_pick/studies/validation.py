@@ -17,7 +17,7 @@ import pyarrow as pa
 
 from mjx_pick.core.config import ConfigError, read_text, to_dict, write_json, write_parquet
 from mjx_pick.core.grasp_checks import REASON_WORDS, REASONS, GraspChecker, feasible_batch
-from mjx_pick.core.grasps import decompose, quat_tilt_deg, rigid_poses, rz
+from mjx_pick.core.grasps import decompose, pose_numbers, quat_tilt_deg, rigid_poses, rz
 from mjx_pick.core.gripper import GripperSpec, load_gripper, preset_names
 from mjx_pick.core.objects import ObjectModel, object_from_mesh
 from mjx_pick.core.physics import ContactParams, SolverParams
@@ -160,9 +160,9 @@ def read_trials(path: str | Path) -> Trials:
         depth.append(
             0.0 if not cell["depth_mm"] else _number(cell["depth_mm"], where(line, "depth_mm"), 0.0)
         )
-        grasp_pose.append(_sixteen(cell["grasp_pose"], where(line, "grasp_pose")))
+        grasp_pose.append(pose_numbers(cell["grasp_pose"], where(line, "grasp_pose")))
         obj_pose.append(
-            _sixteen(cell["object_pose"], where(line, "object_pose"))
+            pose_numbers(cell["object_pose"], where(line, "object_pose"))
             if cell["object_pose"]
             else [np.nan] * 16
         )
@@ -202,20 +202,6 @@ def _number(text: str, where: str, lo: float | None = None, lo_open: float | Non
         bound = f">= {lo:g}" if lo is not None else f"> {lo_open:g}"
         raise ConfigError(f"{where}: {text!r} is not allowed: a finite number {bound}")
     return value
-
-
-def _sixteen(text: str, where: str) -> list[float]:
-    parts = text.split()
-    try:
-        values = [float(v) for v in parts]
-    except ValueError:
-        values = []
-    if len(values) != 16:
-        raise ConfigError(
-            f"{where}: {text!r} is not 16 numbers separated by spaces (a 4x4 pose, "
-            "row-major, metres)"
-        )
-    return values
 
 
 def _gripper(text: str, base: Path, where: str) -> str:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core.config import ConfigError, read_text
-from mjx_pick.core.grasps import rigid_poses
+from mjx_pick.core.grasps import pose_numbers, rigid_poses
 from mjx_pick.outputs.exchange.poses import GraspLabels
 
 SUFFIX = ".csv"
@@ -50,17 +50,7 @@ def read(path: Path) -> GraspLabels:
         )
     values = []
     for line, row in enumerate(rows, start=2):
-        cell = (row.get("grasp_pose") or "").split()
-        try:
-            numbers = [float(v) for v in cell]
-        except ValueError:
-            numbers = []
-        if len(numbers) != 16:
-            raise ConfigError(
-                f"{path} line {line}, column grasp_pose: {row.get('grasp_pose')!r} is not 16 "
-                "numbers separated by spaces (a 4x4 pose, row-major, metres)"
-            )
-        values.append(numbers)
+        values.append(pose_numbers(row.get("grasp_pose"), f"{path} line {line}, column grasp_pose"))
     lines = [f"line {i}" for i in range(2, len(rows) + 2)]
     transforms = rigid_poses(values, f"{path}, column grasp_pose", lines)
 
