@@ -300,13 +300,20 @@ def _settings(gripper: GripperSpec, req: EvaluateRequest) -> Settings:
     """The run's settings: the request's on gripper, a procedure left unset fitted to
     the gripper's ranges (with a warning saying what moved)."""
     keep = () if req.grasp is None else [f.name for f in dataclasses.fields(GraspConfig)]
+    return settings_on(gripper, req.contact, req.solver, req.grasp, keep)
+
+
+def settings_on(gripper: GripperSpec, contact, solver, grasp, keep) -> Settings:
+    """Settings of contact, solver and grasp (None: the defaults) on gripper, the
+    procedure's fields but keep fitted to the gripper's ranges (``Settings.on_gripper``),
+    with a warning saying what moved."""
     settings, note = Settings(
-        contact=req.contact or ContactParams(),
-        solver=req.solver or SolverParams(),
-        grasp=req.grasp or GraspConfig(),
+        contact=contact or ContactParams(),
+        solver=solver or SolverParams(),
+        grasp=grasp or GraspConfig(),
     ).on_gripper(gripper, keep)
     if note:
-        warnings.warn(note, stacklevel=3)
+        warnings.warn(note, stacklevel=4)
     return settings
 
 

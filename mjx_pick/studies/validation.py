@@ -9,7 +9,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,7 @@ import pyarrow as pa
 from mjx_pick.core.config import ConfigError, read_text, to_dict, write_json, write_parquet
 from mjx_pick.core.grasp_checks import REASON_WORDS, REASONS, GraspChecker, feasible_batch
 from mjx_pick.core.grasps import decompose, pose_numbers, quat_tilt_deg, rigid_poses, rz
-from mjx_pick.core.gripper import GripperSpec, load_gripper, preset_names
+from mjx_pick.core.gripper import load_gripper, preset_names
 from mjx_pick.core.objects import ObjectModel, object_from_mesh
 from mjx_pick.core.physics import ContactParams, SolverParams
 from mjx_pick.core.procedure import GraspConfig
@@ -26,6 +25,7 @@ from mjx_pick.core.settings import Settings
 from mjx_pick.engine.runner import Runner
 from mjx_pick.engine.simulator import Simulator
 from mjx_pick.outputs.rundir import claim, config_hash, fail, finish
+from mjx_pick.studies.evaluation import settings_on
 from mjx_pick.studies.grasp_sources import grasp_centres, to_object_frame
 from mjx_pick.studies.options import RunOptions
 
@@ -349,7 +349,7 @@ def _prepare(t: Trials, index, contact, solver, grasp, keep, unit, runner=None) 
             sc.centres = np.concatenate([sc.centres, moved @ centres])
             sc.trials = np.concatenate([sc.trials, members])
             continue
-        settings = _settings(gripper, contact, solver, grasp, keep)
+        settings = settings_on(gripper, contact, solver, grasp, keep)
         sim = Simulator(obj, runner=runner)  # the scene built once: checked and simulated
         source = (mesh, mass_g, gripper_name)
         scene = sim.exact_scene(settings)
@@ -396,19 +396,6 @@ def _turn_onto(target: np.ndarray, points: np.ndarray, tol: float) -> float | No
         if np.all(tree.query(moved)[0] < tol):
             return float(turn)
     return None
-
-
-def _settings(gripper: GripperSpec, contact, solver, grasp, keep) -> Settings:
-    """A scene's settings: the procedure's fields but keep fitted to the gripper
-    (evaluate's rule, ``Settings.on_gripper``)."""
-    settings, note = Settings(
-        contact=contact or ContactParams(),
-        solver=solver or SolverParams(),
-        grasp=grasp or GraspConfig(),
-    ).on_gripper(gripper, keep)
-    if note:
-        warnings.warn(note, stacklevel=3)
-    return settings
 
 
 def _simulate(t: Trials, index, scenes: list[_Scene], opts: RunOptions) -> dict:
