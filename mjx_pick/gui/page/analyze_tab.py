@@ -503,13 +503,14 @@ class AnalyzeTab:
         job.writes = opened.path  # into the run's folder: one writer at a time
         self.panel.start(f"export {opened.path.name} ({fmt_name})", job, self.error)
 
-    def download(self, path: Path) -> None:
+    async def download(self, path: Path) -> None:
         """A file of the open run, sent to the browser -- checked when asked for (a
-        link made since the run was opened is refused too) and read then: its bytes go,
-        not a route to its path that a link made later could redirect."""
+        link made since the run was opened is refused too) and read then, beside the
+        event loop: its bytes go, not a route to its path that a link made later could
+        redirect."""
         self.error.set_text("")
         try:
-            data = workfolder.read_bytes(path, self.state.workdir)
+            data = await run.io_bound(workfolder.read_bytes, path, self.state.workdir)
         except workfolder.OutsideWorkFolder as err:
             self.error.set_text(str(err))
             return

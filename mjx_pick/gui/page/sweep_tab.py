@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from nicegui import ui
+from nicegui import background_tasks, run, ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.core.numbers import INPUTS
@@ -147,4 +147,14 @@ class SweepTab:
         ]
         self.table.rows = [{k: fmt(v[k]) for k in keys} for v in variants]
         self.table.update()
-        show_picture(self.image, views.sweep_png(out, self.state.workdir, labels))
+        background_tasks.create(self.draw(out, labels), name="sweep picture")
+
+    async def draw(self, out: Path, labels: dict[str, str]) -> None:
+        """The sweep's picture, drawn beside the server's event loop (matplotlib: every
+        tab would wait for it otherwise)."""
+        try:
+            png = await run.io_bound(views.sweep_png, out, self.state.workdir, labels)
+        except (OSError, ValueError) as err:  # a folder changed since it completed
+            self.error.set_text(f"{self.state.where(out)}: its picture cannot be drawn ({err})")
+            return
+        show_picture(self.image, png)
