@@ -409,7 +409,7 @@ class GenerateTab:
             stability_um=1.0 if checks else 0.0,
         )
         yes = await self.panel.confirmed(refusal, self.error)
-        if yes is None or self.panel.busy(self.error):  # another start while it asked
+        if yes is None:
             return
         if chunk is None and source != TOPDOWN:
             # the bar moves every 2 % of the grasps: a file's count (the feasible are

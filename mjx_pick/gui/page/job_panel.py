@@ -108,13 +108,14 @@ class JobPanel:
         """Before a run starts: [] when it is not long (refusal '': ``jobs.long_run``
         found nothing to ask), ["--yes"] once the user confirms a long one in the
         dialog (the CLI's flag that starts it), None when the user does not (and so in
-        where). Start handlers ask :meth:`busy` again after it: the dialog waits."""
+        where) or when another start took the panel while the dialog waited
+        (:meth:`busy`, said in where)."""
         if not refusal:
             return []
-        if await self.question.ask(refusal):
-            return ["--yes"]
-        where.set_text(f"not started: {refusal}")
-        return None
+        if not await self.question.ask(refusal):
+            where.set_text(f"not started: {refusal}")
+            return None
+        return None if self.busy(where) else ["--yes"]
 
     def start(
         self,

@@ -114,7 +114,7 @@ class CompareStudy:
         backend = self.form.backend.value
         refusal = jobs.long_run("compare", "this comparison", backend, settings.grasp, **sizes)
         yes = await self.panel.confirmed(refusal, self.error)
-        if yes is None or self.panel.busy(self.error):  # another start while it asked
+        if yes is None:
             return
         argv = ["compare", *self.state.obj_args, *flags, "--grippers", ",".join(names)]
         argv += source_args(self.source.value)
@@ -190,7 +190,7 @@ class RobustStudy:
         what = "this robustness study"
         refusal = jobs.long_run("robust", what, backend, settings.grasp, **sizes)
         yes = await self.panel.confirmed(refusal, self.error)
-        if yes is None or self.panel.busy(self.error):  # another start while it asked
+        if yes is None:
             return
         out = opened.path
         argv = ["robust", *self.state.obj_args]
@@ -483,7 +483,7 @@ class ValidateStudy:
         grasps = self.summary["grasps"]
         refusal = jobs.long_run("evaluate", "this validate", backend, None, n=grasps)
         yes = await self.panel.confirmed(refusal, self.error)
-        if yes is None or self.panel.busy(self.error):  # another start while it asked
+        if yes is None:
             return
         paths = forms.write_inputs(settings, self.state.workdir / "inputs" / out.name)
         argv = ["validate", str(self.trials), "--unit", self.unit.value, "--seed", str(seed)]

@@ -118,7 +118,7 @@ class SweepTab:
         sizes = {"variants": len(values), "n": int(n)}
         refusal = jobs.long_run("sweep", "this sweep", backend, settings.grasp, **sizes)
         yes = await self.panel.confirmed(refusal, self.error)
-        if yes is None or self.panel.busy(self.error):  # another start while it asked
+        if yes is None:
             return
         param = f"{self.param.value}=" + ",".join(repr(v) for v in values)
         argv = [
