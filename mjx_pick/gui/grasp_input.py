@@ -46,10 +46,11 @@ def recorded_source(argv: list[str]) -> tuple[str, str | None, float | None]:
     return FILE, given, depth_mm
 
 
-def read_grasp_file(path: Path, name: str) -> tuple[int, int]:
-    """(grasps, how many of them do not say their depth) of a grasp file, read as the
-    run will read it (``outputs.exchange.read_labels``); ConfigError naming the file
-    by name (the uploaded file's, not where the page stored it)."""
+def read_grasp_file(path: Path, name: str):
+    """(the file's GraspLabels, its grasps, how many of them do not say their depth) of
+    a grasp file, read as the run will read it (``outputs.exchange.read_labels``);
+    ConfigError naming the file by name (the uploaded file's, not where the page
+    stored it)."""
     from mjx_pick.outputs.exchange import read_labels
 
     try:
@@ -61,20 +62,27 @@ def read_grasp_file(path: Path, name: str) -> tuple[int, int]:
         raise ConfigError(f"{name} holds no grasps")
     depth = labels.depth_m
     missing = n if depth is None else int(np.isnan(np.asarray(depth, float)).sum())
-    return n, missing
+    return labels, n, missing
 
 
-def check_grasp_file(obj, gripper, path: Path, name: str, depth_mm: float | None) -> int:
-    """The grasps of a grasp file for a run on obj with gripper, checked before any
-    work as the run will take them: every grasp's depth known (its own, or depth_mm
-    for all), and the grasp centres near the part (a file in another unit or frame is
-    refused, ``grasp_sources.to_object_frame``). Returns how many; ConfigError naming
-    the file by name. Which grasps are feasible the run says (it needs the scene)."""
+def check_grasp_file(
+    obj, gripper, path: Path, name: str, depth_mm: float | None
+) -> tuple[int, int]:
+    """The grasps of a grasp file for a run on obj with gripper, read once and checked
+    before any work as the run will take them: (how many, how many do not say their
+    depth -- with none given for them, nothing more is checked). Once every depth is
+    known (its own, or depth_mm for all), the grasp centres must lie near the part (a
+    file in another unit or frame is refused, ``grasp_sources.to_object_frame``).
+    ConfigError naming the file by name. Which grasps are feasible the run says (it
+    needs the scene)."""
     from mjx_pick.studies.grasp_sources import check_source, file_centres
 
+    labels, n, missing = read_grasp_file(path, name)
+    if missing and depth_mm is None:
+        return n, missing
     try:
         check_source(str(path), depth_mm)
-        _, centres = file_centres(obj, path, depth_mm, gripper.tcp_offset_mm, name)
+        file_centres(obj, path, depth_mm, gripper.tcp_offset_mm, name, labels)
     except ConfigError as err:
         raise ConfigError(str(err).replace(str(path), name)) from None
-    return len(centres)
+    return n, 0

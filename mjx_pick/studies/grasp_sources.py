@@ -139,13 +139,15 @@ def file_centres(
     depth_mm: float | None,
     tcp_offset_mm: float = 0.0,
     where: str | None = None,
+    labels=None,
 ):
     """(the file's GraspLabels, their grasp frames (N, 4, 4) in obj's object frame):
-    a grasp file read (``outputs.exchange``), each pose's grasp centre found
-    (:func:`grasp_centres`) and mapped by the mesh's import (:func:`to_object_frame`).
-    where: the file as errors name it (default: "grasps file PATH")."""
+    a grasp file read (``outputs.exchange``; labels: the file as read already), each
+    pose's grasp centre found (:func:`grasp_centres`) and mapped by the mesh's import
+    (:func:`to_object_frame`). where: the file as errors name it (default: "grasps file
+    PATH")."""
     where = where or f"grasps file {path}"
-    labels = read_labels(path)
+    labels = labels if labels is not None else read_labels(path)
     centres = grasp_centres(labels.transforms, labels.depth_m, depth_mm, where, tcp_offset_mm)
     return labels, to_object_frame(obj, centres, where)
 

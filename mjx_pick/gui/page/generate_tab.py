@@ -190,7 +190,7 @@ class GenerateTab:
             path = await run.io_bound(
                 save_upload, data, name, self.state.uploads, self.state.workdir
             )
-            n, missing = await run.io_bound(grasp_input.read_grasp_file, path, name)
+            _, n, missing = await run.io_bound(grasp_input.read_grasp_file, path, name)
         except ConfigError as err:
             self.refuse_grasp_file(str(err))
             return
@@ -470,17 +470,17 @@ class GenerateTab:
             return None
         try:
             path = workfolder.confined(path, self.state.workdir)
-            n, missing = await run.io_bound(grasp_input.read_grasp_file, path, name)
-            if missing and depth_mm is None:
+            n, missing = await run.io_bound(
+                grasp_input.check_grasp_file, obj, settings.gripper, path, name, depth_mm
+            )
+            if missing:
                 self.depth.error = (
                     f"{missing:,} of the {n:,} grasps of {name} do not say how far the grasp "
                     "centre lies from the gripper's base: give that distance here (0 where "
                     "the poses are grasp centres)"
                 )
                 return None
-            return await run.io_bound(
-                grasp_input.check_grasp_file, obj, settings.gripper, path, name, depth_mm
-            )
+            return n
         except ConfigError as err:  # OutsideWorkFolder too
             self.grasp_file_error.set_text(str(err))
             return None
