@@ -9,8 +9,6 @@ import dataclasses
 
 import numpy as np
 
-from mjx_pick.kernels import feasibility as fk
-
 # E (the exchange frame: approach +z, closing along x) is G (z up, the gripper approaching
 # along -z) turned half a turn about x: R_E = R_G . FLIP
 FLIP = np.diag([1.0, -1.0, -1.0])
@@ -117,8 +115,6 @@ def concat(batches: list[GraspBatch]) -> GraspBatch:
     for b in batches:
         for r, count in b.rejected.items():
             rejected[r] = rejected.get(r, 0) + int(count)
-    for r in fk.REASONS[1:]:
-        rejected.setdefault(r, 0)
     return dataclasses.replace(
         first, **arrays, rejected=rejected, n_candidates=sum(b.n_candidates for b in batches)
     )

@@ -22,6 +22,7 @@ import shapely
 import shapely.affinity
 
 from mjx_pick.core import cache
+from mjx_pick.core import grasps as gm
 from mjx_pick.core.config import (
     ConfigError,
     PlausibilityWarning,
@@ -29,7 +30,7 @@ from mjx_pick.core.config import (
     check_range,
     setting,
 )
-from mjx_pick.core.grasps import GraspBatch, concat
+from mjx_pick.core.grasps import GraspBatch
 from mjx_pick.core.gripper import GripperSpec
 from mjx_pick.core.objects import ObjectModel, rasterize_window
 from mjx_pick.core.procedure import GraspConfig, pad_band_mm
@@ -55,6 +56,16 @@ REASON_WORDS = {
 RARE_FEASIBLE = 1e-3  # a feasible share of candidates below this: edge cases only
 # the reasons that mean the part barely fits between the pads (its width, not a setting)
 _FIT_REASONS = ("too_wide", "clearance")
+
+
+def concat(batches: list[GraspBatch]) -> GraspBatch:
+    """Pick-point batches joined (``grasps.concat``), every check's reason counted (0
+    where none rejected): a pick-point search's summary names each."""
+    joined = gm.concat(batches)
+    rejected = dict(joined.rejected)
+    for r in fk.REASONS[1:]:
+        rejected.setdefault(r, 0)
+    return dataclasses.replace(joined, rejected=rejected)
 
 
 def warn_rare(obj, gripper, feasible: int, drawn: int, rejected: dict, config) -> None:
