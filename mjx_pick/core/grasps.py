@@ -278,8 +278,15 @@ def from_poses(
 
 
 # a rotation further than this from orthonormal (max |R^T R - I|) is not a rotation
-# rounded for a file: refused rather than projected
+# rounded for a file: refused rather than projected (grasp poses and a mesh's pose alike)
 ORTHONORMAL_TOL = 1e-3
+
+
+def nearest_rotation(r: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) the nearest rotations (SVD) of near-orthonormal matrices: a writer's
+    rounding removed."""
+    u, _, vt = np.linalg.svd(r)
+    return u @ vt
 
 
 def pose_numbers(text: str | None, where: str) -> list[float]:
@@ -327,6 +334,5 @@ def rigid_poses(values, where: str, rows=None) -> np.ndarray:
         raise ConfigError(
             f"{where}: {len(bad)} pose(s) are not rigid transforms: {'; '.join(bad[:5])}{more}"
         )
-    u, _, vt = np.linalg.svd(t[:, :3, :3])
-    t[:, :3, :3] = u @ vt
+    t[:, :3, :3] = nearest_rotation(t[:, :3, :3])
     return t

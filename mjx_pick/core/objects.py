@@ -22,6 +22,7 @@ from shapely.geometry.polygon import orient
 
 from mjx_pick.core import cache, meshrepair, numbers
 from mjx_pick.core.config import ConfigError, PlausibilityWarning, check_name, check_range
+from mjx_pick.core.grasps import ORTHONORMAL_TOL, nearest_rotation
 
 # what a slow preparation step is doing, said as it starts (the CLI shows it on stderr)
 log = logging.getLogger(__name__)
@@ -58,10 +59,11 @@ DENSITY_PLAUSIBLE_KG_M3 = (50.0, 25_000.0)
 DENSITY_POSSIBLE_KG_M3 = (1.0, 1_000_000.0)
 # a mesh's resting pose by name; or a rotation (world <- mesh file), whose R^T R may differ
 # from the identity by a writer's rounding (ROTATION_ROUNDING: projected onto the nearest
-# rotation) but not by more (ROTATION_REFUSED: a scale, shear or a wrong matrix)
+# rotation) but not by more (ROTATION_REFUSED, grasp poses' too: a scale, shear or a
+# wrong matrix)
 POSE_NAMES = ("as_given", "stable")
 ROTATION_ROUNDING = 1e-6
-ROTATION_REFUSED = 1e-3
+ROTATION_REFUSED = ORTHONORMAL_TOL
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -798,8 +800,7 @@ def check_pose(pose) -> str | np.ndarray:
             f"its rotation is not orthonormal (R^T R is {off:.3g} from the identity; "
             f"allowed {ROTATION_REFUSED:g}: a scale or shear?)",
         )
-    u, _, vt = np.linalg.svd(r)  # the nearest rotation: rounding removed, rigid
-    return u @ vt
+    return nearest_rotation(r)  # rounding removed, rigid
 
 
 def _pose_error(shown: str, why: str) -> ConfigError:
