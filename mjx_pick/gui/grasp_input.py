@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core.config import ConfigError
+from mjx_pick.outputs.exchange import SUFFIXES
 
 TOPDOWN, ANTIPODAL, FILE = "topdown", "antipodal", "file"
 # what the page offers, in its words (the CLI's --grasps topdown|antipodal|FILE)
@@ -17,7 +18,7 @@ SOURCES = {
     FILE: "grasps from a file (ACRONYM, GraspGen, isaac_grasp, CSV of poses)",
 }
 # the grasp files the library reads, by suffix (``outputs.exchange``)
-FILE_SUFFIXES = (".h5", ".json", ".yaml", ".csv")
+FILE_SUFFIXES = tuple(SUFFIXES.values())
 
 
 def source_args(source: str, path: Path | None = None, depth_mm: float | None = None) -> list[str]:

@@ -22,7 +22,7 @@ from mjx_pick.core.objects import ObjectModel
 from mjx_pick.core.scene import Scene
 from mjx_pick.core.settings import Settings
 from mjx_pick.engine.inputs import scene_of
-from mjx_pick.outputs.exchange import FORMATS, read_labels
+from mjx_pick.outputs.exchange import SUFFIXES, read_labels
 
 TOPDOWN, ANTIPODAL = "topdown", "antipodal"
 # how far a grasp centre may lie outside the part's bounding box before the file and the
@@ -44,8 +44,7 @@ def check_source(source: str, depth_mm: float | None = None) -> str:
             )
         return str(source)
     path = Path(source)
-    suffixes = {_suffix(f) for f in FORMATS}
-    if path.suffix.lower() not in suffixes:
+    if path.suffix.lower() not in SUFFIXES.values():
         raise ConfigError(
             f"grasps = {str(source)!r} is neither 'topdown', 'antipodal' nor a grasp file "
             f"(ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, a CSV of poses .csv)"
@@ -68,12 +67,6 @@ def source_key(run) -> dict | None:
     if run.grasps == ANTIPODAL:
         return {"antipodal": to_dict(run.antipodal or AntipodalConfig())}
     return {"file": file_digest(run.grasps), "depth_mm": run.depth_mm}
-
-
-def _suffix(fmt: str) -> str:
-    from mjx_pick.outputs import exchange
-
-    return exchange._format(fmt).SUFFIX
 
 
 def draw_grasps(

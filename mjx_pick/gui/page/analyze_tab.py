@@ -456,7 +456,7 @@ class AnalyzeTab:
         """A download button for each file the report (or the grasps' export) wrote
         into the open run; for grasps given as poses, not the report's template (a
         vertical approach), and said so."""
-        from mjx_pick.outputs.exchange import default_path
+        from mjx_pick.outputs.exchange import default_path, object_mesh_path
 
         self.downloads.clear()
         self.downloads_note.set_text("")
@@ -468,7 +468,7 @@ class AnalyzeTab:
             offered = [(n, label) for n, label in offered if n not in VERTICAL_ONLY]
             for fmt_name, label in GRASP_FORMATS.items():
                 name = default_path(opened.path, fmt_name).name
-                offered += [(name, f"grasps: {label}"), (f"{Path(name).stem}_object.obj", "")]
+                offered += [(name, f"grasps: {label}"), (object_mesh_path(name).name, "")]
             if (opened.path / "report.html").is_file():
                 self.downloads_note.set_text(
                     "No printed template: a 1:1 template places pick-points under a "

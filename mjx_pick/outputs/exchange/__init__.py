@@ -18,7 +18,7 @@ from mjx_pick.core.config import ConfigError, check_range, write_atomic
 if TYPE_CHECKING:
     from mjx_pick.outputs.exchange.poses import GraspLabels
 
-__all__ = ["FORMATS", "export_labels", "read_labels"]
+__all__ = ["FORMATS", "SUFFIXES", "export_labels", "object_mesh_path", "read_labels"]
 
 # format name -> its module (SUFFIX, write, read); imported on use, so that the CLI's
 # parser lists the names without loading MuJoCo, h5py or YAML
@@ -28,6 +28,8 @@ FORMATS = {
     "isaac-grasp": "isaac_grasp",
     "csv": "csv_poses",
 }
+# format name -> the suffix of its files (each module's SUFFIX): known without importing it
+SUFFIXES = {"acronym": ".h5", "graspgen": ".json", "isaac-grasp": ".yaml", "csv": ".csv"}
 FRAME = (
     "approach along +z, fingers close along x, origin at the gripper's base, the grasp "
     "centre depth_m along +z from it"
@@ -42,10 +44,18 @@ def _format(name: str):
     return importlib.import_module(f"mjx_pick.outputs.exchange.{FORMATS[name]}")
 
 
+def object_mesh_path(labels_path: str | os.PathLike) -> Path:
+    """Where the part's mesh goes beside a grasp file: ``<stem>_object.obj``."""
+    path = Path(labels_path)
+    return path.with_name(f"{path.stem}_object.obj")
+
+
 def default_path(run_dir: str | os.PathLike, fmt: str) -> Path:
     """Where ``export_labels`` writes a format by default: grasps_<format>.<suffix> in the
     run folder."""
-    return Path(run_dir) / f"grasps_{fmt.replace('-', '_')}{_format(fmt).SUFFIX}"
+    if fmt not in SUFFIXES:
+        _format(fmt)  # the error naming the formats
+    return Path(run_dir) / f"grasps_{fmt.replace('-', '_')}{SUFFIXES[fmt]}"
 
 
 def export_labels(
@@ -83,7 +93,7 @@ def export_labels(
     path = Path(out) if out is not None else default_path(run_dir, fmt)
     if path.suffix.lower() != module.SUFFIX:
         raise ConfigError(f"out = {str(path)!r}: a file of format {fmt} ends in {module.SUFFIX}")
-    mesh_path = path.with_name(f"{path.stem}_object.obj")
+    mesh_path = object_mesh_path(path)
     run = Run.load(run_dir)
     for p in (path, mesh_path):
         if p.exists() and not overwrite:
@@ -152,7 +162,7 @@ def read_labels(path: str | os.PathLike, fmt: str | None = None) -> GraspLabels:
     when None)."""
     path = Path(path)
     if fmt is None:
-        by_suffix = {_format(name).SUFFIX: name for name in FORMATS}
+        by_suffix = {suffix: name for name, suffix in SUFFIXES.items()}
         if path.suffix.lower() not in by_suffix:
             raise ConfigError(
                 f"{path}: say its format ({', '.join(FORMATS)}); its suffix names none"

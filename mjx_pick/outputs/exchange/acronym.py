@@ -10,9 +10,10 @@ import h5py
 import numpy as np
 
 from mjx_pick.core.config import ConfigError
+from mjx_pick.outputs.exchange import SUFFIXES
 from mjx_pick.outputs.exchange.poses import GraspLabels
 
-SUFFIX = ".h5"
+SUFFIX = SUFFIXES["acronym"]
 
 
 def write(labels: GraspLabels, extra: dict) -> bytes:

@@ -11,9 +11,10 @@ import numpy as np
 
 from mjx_pick.core.config import ConfigError, read_text
 from mjx_pick.core.grasps import pose_numbers, rigid_poses
+from mjx_pick.outputs.exchange import SUFFIXES
 from mjx_pick.outputs.exchange.poses import GraspLabels
 
-SUFFIX = ".csv"
+SUFFIX = SUFFIXES["csv"]
 COLUMNS = ("pick_id", "grasp_pose", "depth_mm", "success", "score", "failure")
 
 

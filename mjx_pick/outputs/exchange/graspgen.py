@@ -9,9 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from mjx_pick.core.config import ConfigError, read_text
+from mjx_pick.outputs.exchange import SUFFIXES
 from mjx_pick.outputs.exchange.poses import GraspLabels
 
-SUFFIX = ".json"
+SUFFIX = SUFFIXES["graspgen"]
 
 
 def write(labels: GraspLabels, extra: dict) -> str:

@@ -10,9 +10,10 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from mjx_pick.core.config import ConfigError, read_text
+from mjx_pick.outputs.exchange import SUFFIXES
 from mjx_pick.outputs.exchange.poses import GraspLabels
 
-SUFFIX = ".yaml"
+SUFFIX = SUFFIXES["isaac-grasp"]
 
 
 def write(labels: GraspLabels, extra: dict) -> str:
