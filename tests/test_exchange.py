@@ -165,11 +165,3 @@ def test_clear_errors(runs, tmp_path):
         mp.read_labels(tmp_path / "x.json")
     with pytest.raises(ConfigError, match="its suffix names none"):
         mp.read_labels(tmp_path / "x.txt")
-
-
-def test_each_formats_suffix_is_known_without_importing_it():
-    """exchange.SUFFIXES (what the CLI, the checks and the page use) is each format
-    module's own SUFFIX."""
-    from mjx_pick.outputs import exchange
-
-    assert exchange.SUFFIXES == {n: exchange._format(n).SUFFIX for n in exchange.FORMATS}
