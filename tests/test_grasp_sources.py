@@ -269,8 +269,16 @@ def test_a_folder_of_parts_runs_as_one_job_and_exports_per_part(tmp_path):
     argv = [*MJX_PICK.split(), "evaluate", str(parts), "--density-kg-m3", "1200"]
     argv += ["--grasps", "antipodal", "--n", "3", "--out", str(out), "--backend", "mujoco"]
     argv += ["--lift-height-mm", "5", "--hold-s", "0.05", "--no-progress", "--traces", "0"]
+    # an option of one part refused for every part before any folder, never dropped
+    refused = subprocess.run([*argv, "--simplify-mm", "1"], capture_output=True, text=True)
+    assert refused.returncode != 0 and "simplify_mm does not apply" in refused.stderr
+    assert not out.exists()
+    argv += ["--material", "rubber"]  # one that applies: every part takes it
     res = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
+    for part in ("bar", "peg"):
+        config = json.loads((out / "objects" / part / "config.json").read_text())
+        assert config["object"]["material"] == "rubber"
     import pyarrow.parquet as pq
 
     table = pq.read_table(out / "results.parquet")

@@ -107,7 +107,7 @@ def _grasps_in(args) -> int:
 
 def _evaluate_set(args) -> int:
     """evaluate on a folder of meshes or a manifest: each part into OUT/objects/<part>/."""
-    from mjx_pick.cli.inputs import DEFAULT_GRIPPER, settings
+    from mjx_pick.cli.inputs import DEFAULT_GRIPPER, set_object_options, settings
     from mjx_pick.core.gripper import load_gripper
     from mjx_pick.core.metrics import rate_text
     from mjx_pick.studies.object_sets import evaluate_set, read_parts
@@ -130,6 +130,7 @@ def _evaluate_set(args) -> int:
         parts,
         gripper,
         run_options(args, picks_cfg),
+        object_options=set_object_options(args),
         contact=contact,
         solver=solver,
         grasp=grasp,

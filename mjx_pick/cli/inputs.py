@@ -80,6 +80,28 @@ def inputs_of(args):
     return (*both, contact, solver, grasp, picks)
 
 
+# the object options of one part that a set of parts passes to each (``object_sets``):
+# given, every part takes them; one its mesh does not use is refused by load_object
+SET_OBJECT_OPTIONS = (
+    "px_per_mm",
+    "thickness_mm",
+    "pick_height_mm",
+    "simplify_mm",
+    "material",
+    "largest_body",
+    "repair_volume_pct",
+    "repair_com_mm",
+    "repair_bounds_mm",
+)
+
+
+def set_object_options(args) -> dict:
+    """The object options given on the command line for every part of a set (none
+    given: {}, a set's key as before)."""
+    given = {name: getattr(args, name, None) for name in SET_OBJECT_OPTIONS}
+    return {k: v for k, v in given.items() if v not in (None, False)}
+
+
 def object_of(args):
     """The object the object options name (no gripper: a trials folder records its own)."""
     from mjx_pick.core.objects import load_object

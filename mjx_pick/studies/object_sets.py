@@ -145,6 +145,8 @@ def evaluate_set(
     parts: list[Part],
     gripper: GripperSpec | str = "robotiq-2f85",
     options: RunOptions | None = None,
+    *,
+    object_options: dict | None = None,
     **fields,
 ) -> SetEvaluation:
     """Evaluate each part (``evaluation.evaluate``, the fields of either its request or
@@ -152,14 +154,17 @@ def evaluate_set(
     on its own (--resume continues the parts not complete, reads back those that are) --
     then one results table with an ``object`` column (``out/results.parquet``) and every
     part's summary (``out/summary.json``). Every part's mesh is read and checked before
-    the first simulation."""
+    the first simulation. object_options: ``load_object``'s keywords for every part (a
+    repair's tolerances, a material, the largest body only, ...; one a mesh does not use
+    is refused by it)."""
     from mjx_pick.studies.evaluation import EvaluateRequest, evaluate
 
     req, opts = split_fields(EvaluateRequest, None, options, fields)
     if req.picks is not None:
         raise ConfigError("a set of parts takes no picks file: each part draws its own grasps")
     gripper = gripper if isinstance(gripper, GripperSpec) else load_gripper(gripper)
-    objects = [_load(p) for p in parts]  # every part checked before any work
+    object_options = dict(object_options or {})
+    objects = [_load(p, object_options) for p in parts]  # every part checked before any work
     out = Path(opts.out) if opts.out is not None else None
     key = config_hash(
         {
@@ -168,6 +173,7 @@ def evaluate_set(
             "request": repr(req),
             "n": opts.n,
             "seed": opts.seed,
+            **({"object_options": object_options} if object_options else {}),
         }
     )
     if out is not None:
@@ -202,13 +208,14 @@ def evaluate_set(
         raise
 
 
-def _load(part: Part):
+def _load(part: Part, object_options: dict):
     return load_object(
         part.path,
         mass_g=part.mass_g,
         density_kg_m3=part.density_kg_m3,
         unit=part.unit,
         pose=part.pose,
+        **object_options,
     )
 
 
