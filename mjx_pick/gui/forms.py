@@ -247,9 +247,7 @@ def page_words(message: str) -> str:
     text = _KEY.sub(lambda m: key_words(m.group(1)) if _is_key(m.group(1)) else m.group(1), text)
     text = _PIP.sub(_install_words, text)
     text = _OUTCOME.sub(lambda m: outcome_words(m.group(0)), text)
-    return _FLAG.sub(
-        lambda m: FLAG_WORDS.get(m.group(1), key_words(m.group(1)[2:].replace("-", "_"))), text
-    )
+    return _flag_words(text)
 
 
 def file_words(message: str) -> str:
@@ -258,7 +256,11 @@ def file_words(message: str) -> str:
     are the user's own words there (``column depth_mm``, ``stroke_mm = -5``): no path
     of the software's files, the CLI's advice and flags as the page's controls (a CLI
     flag is never a file's word)."""
-    text = page_advice(_FLAG_AFTER.sub("", page_text(message)))
+    return _flag_words(page_advice(_FLAG_AFTER.sub("", page_text(message))))
+
+
+def _flag_words(text: str) -> str:
+    """Every CLI flag in text as the page's control (``FLAG_WORDS``, else its key's words)."""
     return _FLAG.sub(
         lambda m: FLAG_WORDS.get(m.group(1), key_words(m.group(1)[2:].replace("-", "_"))), text
     )

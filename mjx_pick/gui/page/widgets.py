@@ -21,8 +21,10 @@ class MessageLabel(ui.label):
     on it passes ``forms.page_words`` -- no path of the software's own files, no key,
     flag or advice of the program's reaches the page, whichever library wrote it."""
 
+    words = staticmethod(page_words)
+
     def set_text(self, text: str) -> None:
-        super().set_text(page_words(text) if text else text)
+        super().set_text(self.words(text) if text else text)
 
 
 def drawn_grasps_select(testid: str, count: ui.number | None = None) -> ui.select:
@@ -48,14 +50,13 @@ def error_label() -> MessageLabel:
     return MessageLabel("").classes("text-negative text-sm").props('role="alert"')
 
 
-class FileMessageLabel(ui.label):
+class FileMessageLabel(MessageLabel):
     """A label for what is wrong inside a file the user wrote (a gripper TOML, a grasp
     file, trials): its keys and columns are the user's own words there (``stroke_mm =
     -5`` on its line), so they stay; the software's paths, the CLI's flags and advice
     become the page's (``forms.file_words``)."""
 
-    def set_text(self, text: str) -> None:
-        super().set_text(file_words(text) if text else text)
+    words = staticmethod(file_words)
 
 
 def file_error_label() -> FileMessageLabel:
