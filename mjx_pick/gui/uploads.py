@@ -138,29 +138,25 @@ def grasps_refused(name: str, size: int) -> str:
     library reads, by suffix (``gui.grasp_input.FILE_SUFFIXES``)."""
     from mjx_pick.gui.grasp_input import FILE_SUFFIXES
 
-    if Path(name).suffix.lower() not in FILE_SUFFIXES:
-        return (
-            f"{name}: not a grasp file (ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, "
-            "a CSV of poses .csv)"
-        )
-    if size > GRASPS_MAX_BYTES:
-        return _too_large(name, size, GRASPS_MAX_BYTES)
-    if size == 0:
-        return f"{name}: the file is empty"
-    return ""
+    kind = "not a grasp file (ACRONYM .h5, GraspGen .json, isaac_grasp .yaml, a CSV of poses .csv)"
+    return _file_refused(name, size, FILE_SUFFIXES, GRASPS_MAX_BYTES, kind)
 
 
 def trials_refused(name: str, size: int) -> str:
     """Why an upload of physical trials is refused by its name or size ('' if not): a
     zip of a TRIALS.csv with the meshes and gripper TOMLs it names, beside it as the
     CSV names them."""
-    if not name.lower().endswith(".zip"):
-        return (
-            f"{name}: not a .zip file (a zip of a TRIALS.csv with the meshes and gripper "
-            "files it names)"
-        )
-    if size > TRIALS_MAX_BYTES:
-        return _too_large(name, size, TRIALS_MAX_BYTES)
+    kind = "not a .zip file (a zip of a TRIALS.csv with the meshes and gripper files it names)"
+    return _file_refused(name, size, (".zip",), TRIALS_MAX_BYTES, kind)
+
+
+def _file_refused(name: str, size: int, suffixes, most: int, kind: str) -> str:
+    """Why a file is refused by its name (its suffix not one of suffixes: "NAME: kind"),
+    its size (over most bytes) or its emptiness ('' if not)."""
+    if Path(name).suffix.lower() not in suffixes:
+        return f"{name}: {kind}"
+    if size > most:
+        return _too_large(name, size, most)
     if size == 0:
         return f"{name}: the file is empty"
     return ""
