@@ -19,10 +19,11 @@ MJX_PICK = shutil.which("mjx-pick") or f"{sys.executable} -m mjx_pick.cli"
 FAST = ["--backend", "mujoco", "--no-progress", "--lift-height-mm", "5", "--hold-s", "0.05"]
 
 
-def cli(*argv, check: bool | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
-    """Run the installed command; check=True: it must succeed, False: it must fail."""
+def cli(*argv, check: bool | None = None, timeout: float = 300, cwd=None, **kw):
+    """Run the installed command; check=True: it must succeed, False: it must fail
+    (refused with a message, never a traceback). tests/test_third_routes.py's too."""
     cmd = MJX_PICK.split() + [str(a) for a in argv]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd, **kw)
     if check is True:
         assert res.returncode == 0, res.stderr[-3000:]
     if check is False:

@@ -8,27 +8,13 @@ from __future__ import annotations
 
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from test_second_routes import MJX_PICK, cli
 
-MJX_PICK = shutil.which("mjx-pick") or f"{sys.executable} -m mjx_pick.cli"
 FAST = ["--backend", "mujoco", "--no-progress", "--lift-height-mm", "5", "--hold-s", "0.05"]
 SHIPPED = Path(__file__).resolve().parents[1] / "mjx_pick" / "assets"
-
-
-def cli(*argv, check: bool | None = None, timeout: float = 300, cwd=None, **kw):
-    """Run the installed command; check=True: it must succeed, False: it must fail
-    (refused with a message, never a traceback)."""
-    cmd = MJX_PICK.split() + [str(a) for a in argv]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd, **kw)
-    if check is True:
-        assert res.returncode == 0, res.stderr[-3000:]
-    if check is False:
-        assert res.returncode != 0, res.stdout[-2000:]
-        assert "Traceback" not in res.stderr, res.stderr[-3000:]
-    return res
 
 
 # ------------------------------------------------------------ one reader of text files
