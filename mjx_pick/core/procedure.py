@@ -310,10 +310,15 @@ def fingertip_height_mm(obj: ObjectModel, gripper: GripperSpec, grasp: GraspConf
     half = 0.5 * obj.height_mm
     if grasp.grasp_height == "fingertip_mid":
         return half
-    # the clearance never exceeds a quarter of the height, so that the pads always
-    # cover a thin part's mid-height (a 3 mm plate is gripped from 0.75 mm up)
-    clearance = min(grasp.fingertip_clearance_mm, 0.25 * obj.height_mm)
+    clearance = min(grasp.fingertip_clearance_mm, clearance_cap_mm(obj))
     return max(clearance, half - 0.5 * gripper.pad_height_mm)
+
+
+def clearance_cap_mm(obj: ObjectModel) -> float:
+    """The most the fingertips' clearance above the table may be, mm: a quarter of the
+    object's height, so that the pads always cover a thin part's mid-height (a 3 mm
+    plate is gripped from 0.75 mm up)."""
+    return 0.25 * obj.height_mm
 
 
 def check_clearance(obj: ObjectModel, grasp: GraspConfig) -> None:
@@ -325,7 +330,7 @@ def check_clearance(obj: ObjectModel, grasp: GraspConfig) -> None:
     value = grasp.fingertip_clearance_mm
     if obj.pick_height_mm is not None or grasp.grasp_height != "mid_band":
         return
-    cap = 0.25 * obj.height_mm
+    cap = clearance_cap_mm(obj)
     if value > cap and value != _DEFAULTS["fingertip_clearance_mm"]:
         raise ConfigError(
             f"grasp.fingertip_clearance_mm = {value:g} is above a quarter of object "
