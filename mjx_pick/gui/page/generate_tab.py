@@ -29,6 +29,7 @@ from mjx_pick.gui.page.widgets import (
     error_label,
     file_error_label,
     need_object,
+    received,
     run_folder,
     upload,
     warning_label,
@@ -179,13 +180,12 @@ class GenerateTab:
         """An uploaded grasp file: stored in the work folder and read as the run will
         read it (its format, its grasps, which give their depth)."""
         self.grasp_file_error.set_text("")
-        name = e.file.name
-        data = await e.file.read()
-        self.grasp_upload.reset()  # a corrected file of the same name may follow
-        problem = grasps_refused(name, len(data))
-        if problem:
-            self.refuse_grasp_file(problem)
+        got = await received(
+            e, self.grasp_upload, lambda n, d: grasps_refused(n, len(d)), self.refuse_grasp_file
+        )
+        if got is None:
             return
+        name, data = got
         try:
             path = await run.io_bound(
                 save_upload, data, name, self.state.uploads, self.state.workdir

@@ -21,6 +21,7 @@ from mjx_pick.gui.page.widgets import (
     checked,
     error_label,
     picture,
+    received,
     show_picture,
     upload,
     warning_label,
@@ -127,13 +128,12 @@ class ImportTab:
     async def on_upload(self, e) -> None:
         self.upload_error.set_text("")
         self.import_error.set_text("")
-        name = e.file.name
-        data = await e.file.read()
-        self.upload.reset()  # a corrected file of the same name may follow
-        problem = check_upload(name, len(data), data)
-        if problem:
-            self.refuse_upload(problem)
+        got = await received(
+            e, self.upload, lambda n, d: check_upload(n, len(d), d), self.refuse_upload
+        )
+        if got is None:
             return
+        name, data = got
         try:
             self.upload_path = await run.io_bound(
                 save_upload, data, name, self.state.uploads, self.state.workdir

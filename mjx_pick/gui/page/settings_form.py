@@ -14,7 +14,7 @@ from nicegui import ui
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.gui import forms, jobs
-from mjx_pick.gui.page.widgets import error_label, file_error_label, upload
+from mjx_pick.gui.page.widgets import error_label, file_error_label, received, upload
 from mjx_pick.gui.uploads import TOML_MAX_BYTES, check_toml_upload, toml_refused
 
 PRESET = "robotiq-2f85"  # the gripper the page starts with
@@ -96,13 +96,10 @@ class SettingsForm:
 
     async def on_gripper_toml(self, e) -> None:
         self.toml_error.set_text("")
-        name = e.file.name
-        data = await e.file.read()
-        self.toml_upload.reset()  # a corrected file of the same name may follow
-        problem = check_toml_upload(name, data)
-        if problem:
-            self.refuse_toml(problem)
+        got = await received(e, self.toml_upload, check_toml_upload, self.refuse_toml)
+        if got is None:
             return
+        name, data = got
         try:
             gripper = forms.gripper_from_toml(data.decode("utf-8"), where=name)
         except UnicodeDecodeError:

@@ -28,6 +28,7 @@ from mjx_pick.gui.page.widgets import (
     file_error_label,
     need_object,
     picture,
+    received,
     run_folder,
     show_picture,
     show_rows,
@@ -261,13 +262,10 @@ class CalibrationStudy:
         from mjx_pick.studies.calibration import read_outcomes
 
         self.upload_error.set_text("")
-        name = e.file.name
-        data = await e.file.read()
-        self.upload.reset()
-        problem = check_outcomes_upload(name, data)
-        if problem:
-            self.refuse_upload(problem)
+        got = await received(e, self.upload, check_outcomes_upload, self.refuse_upload)
+        if got is None:
             return
+        name, data = got
         try:
             path = await run.io_bound(
                 save_upload, data, name, self.state.uploads, self.state.workdir
@@ -413,13 +411,10 @@ class ValidateStudy:
         """An uploaded zip: unpacked into the work folder (checked member by member
         first), its TRIALS.csv read and every file it names found inside."""
         self.upload_error.set_text("")
-        name = e.file.name
-        data = await e.file.read()
-        self.upload.reset()  # a corrected file of the same name may follow
-        problem = trials_refused(name, len(data))
-        if problem:
-            self.refuse(problem)
+        got = await received(e, self.upload, lambda n, d: trials_refused(n, len(d)), self.refuse)
+        if got is None:
             return
+        name, data = got
         folder = self.state.workdir / "inputs" / "trials"
         try:
             csv = await run.io_bound(store_trials, data, name, folder, self.state.workdir)

@@ -45,6 +45,20 @@ def drawn_grasps_select(testid: str, count: ui.number | None = None) -> ui.selec
     ).props(f'data-testid="{testid}"')
 
 
+async def received(e, upload, refused, refuse) -> tuple[str, bytes] | None:
+    """An upload event's file: (its name, its bytes), the upload widget reset (a
+    corrected file of the same name may follow); None, and why through refuse(text),
+    when refused(name, data) says why ('' when accepted)."""
+    name = e.file.name
+    data = await e.file.read()
+    upload.reset()
+    problem = refused(name, data)
+    if problem:
+        refuse(problem)
+        return None
+    return name, data
+
+
 def error_label() -> MessageLabel:
     """A red line for a message that belongs to no single field."""
     return MessageLabel("").classes("text-negative text-sm").props('role="alert"')
