@@ -190,6 +190,25 @@ def test_a_candidates_result_does_not_depend_on_its_batch(door_opener):
     assert len(np.unique(whole["reason"])) >= 4  # the checks were all exercised
 
 
+def test_the_search_checks_blocks_side_by_side_as_one_after_the_other(door_opener):
+    # generate_normal checks growing groups of blocks on threads; its picks and counts
+    # are those of checking the seeded blocks one at a time
+    picks = pp.generate_normal(door_opener, GRIPPER, 2500, seed=3)
+    checker = pp.FeasibilityChecker(door_opener, GRIPPER)
+    one_by_one, found = [], 0
+    for ids, x, y, yaw in pp.candidate_blocks(checker, seed=3):
+        one_by_one.append(checker.batch(ids, x, y, yaw, mode="normal"))
+        found += len(one_by_one[-1])
+        if found >= 2500:
+            break
+    ref = pp.concat(one_by_one)
+    assert len(one_by_one) >= 4  # more than one group of blocks
+    assert picks.n_candidates == ref.n_candidates and picks.rejected == ref.rejected
+    ref = ref.take(slice(0, 2500))
+    for k in ("pick_id", "x_mm", "y_mm", "yaw_deg", "opening_mm", "coverage", "gap_left_mm"):
+        np.testing.assert_array_equal(getattr(picks, k), getattr(ref, k), err_msg=k)
+
+
 def test_same_seed_same_picks(door_opener):
     a = pp.generate_normal(door_opener, GRIPPER, 50, seed=7)
     b = pp.generate_normal(door_opener, GRIPPER, 50, seed=7)

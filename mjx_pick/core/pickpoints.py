@@ -659,9 +659,23 @@ def candidate_blocks(checker: FeasibilityChecker, seed: int):
 
 
 def candidate_stream(checker: FeasibilityChecker, seed: int):
-    """Feasible GraspBatches from the seeded stream of candidate blocks."""
-    for ids, x, y, yaw in candidate_blocks(checker, seed):
-        yield checker.batch(ids, x, y, yaw, mode="normal")
+    """Feasible GraspBatches from the seeded stream of candidate blocks, one a block.
+
+    Blocks are checked in groups that double up to two per thread
+    (``fk.threads()``), side by side; a group's blocks are drawn in order, so the
+    batches and their counts are those of checking one block at a time.
+    """
+    blocks = candidate_blocks(checker, seed)
+    group, most = 1, 2 * fk.threads()
+    while True:
+        drawn = [next(blocks) for _ in range(group)]
+        ids, x, y, yaw = (np.concatenate(a) for a in zip(*drawn, strict=True))
+        checked = checker(x, y, yaw)
+        for b in range(group):
+            s = slice(b * CANDIDATE_BLOCK, (b + 1) * CANDIDATE_BLOCK)
+            res = {k: v[s] for k, v in checked.items()}
+            yield feasible_batch(ids[s], x[s], y[s], yaw[s], res, mode="normal")
+        group = min(2 * group, most)
 
 
 def generate_normal(

@@ -5,7 +5,10 @@ Details: docs/engine.md (kernels/feasibility.py).
 
 from __future__ import annotations
 
+import concurrent.futures
+import functools
 import math
+import os
 from typing import NamedTuple
 
 import numpy as np
@@ -16,6 +19,9 @@ FEASIBLE, OFF_OBJECT, TOO_WIDE, CLEARANCE, COVERAGE, PAD_PATH = range(6)
 REASONS = ("feasible", "off_object", "too_wide", "clearance", "coverage", "pad_path")
 # candidates checked at once: bounds the (candidates x columns) temporaries
 BLOCK = 4096
+# threads that check blocks side by side (numpy releases the GIL in the block's array
+# operations): every core this process may use, up to this many
+MAX_THREADS = 32
 
 
 class GripperBand(NamedTuple):
@@ -251,13 +257,37 @@ def check_candidates(
         opening = np.full(x.shape, np.nan, np.float32)
     else:
         opening = np.broadcast_to(np.asarray(opening_mm, np.float32), x.shape)
-    parts = []
-    # NaN openings and gaps of candidates off the object are expected, not warned of
-    with np.errstate(invalid="ignore"):
-        for s in range(0, max(len(x), 1), BLOCK):
-            b = slice(s, s + BLOCK)
-            parts.append(_check_block(stack, band, x[b], y[b], yaw[b], opening[b]))
+
+    def check(s: int):
+        b = slice(s, s + BLOCK)
+        # NaN openings and gaps of candidates off the object are expected, not warned
+        # of (np.errstate holds for the thread it is set in)
+        with np.errstate(invalid="ignore"):
+            return _check_block(stack, band, x[b], y[b], yaw[b], opening[b])
+
+    starts = range(0, max(len(x), 1), BLOCK)
+    if len(starts) == 1:
+        parts = [check(0)]
+    else:  # blocks are independent: the same results in any order, kept in order
+        parts = list(_pool(os.getpid()).map(check, starts))
     return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
+
+
+def threads() -> int:
+    """Threads that check candidate blocks side by side: the cores this process may use."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, MAX_THREADS))
+
+
+@functools.cache
+def _pool(pid: int) -> concurrent.futures.ThreadPoolExecutor:
+    # one pool per process: a forked child (Ray's workers, the GUI's) has none of its
+    # parent's threads, so it makes its own
+    del pid
+    return concurrent.futures.ThreadPoolExecutor(threads(), thread_name_prefix="feasibility")
 
 
 def reference_check(polygon, band: GripperBand, x_mm, y_mm, yaw_rad, res_mm=0.1, opening_mm=None):
