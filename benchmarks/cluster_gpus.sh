@@ -26,11 +26,17 @@ t=$(date +%s); python3 -m mjx_pick.cli $common --out $OUT/one2 2>&1 | tail -4; e
 ray start --head --disable-usage-stats --include-dashboard=false --port=6380 2>&1 | tail -3
 ray status 2>&1 | grep -E "GPU|CPU" | head -4
 t=$(date +%s); timeout 300 python3 -m mjx_pick.cli $common --ray 127.0.0.1:6380 --out $OUT/ray1 2>&1 | tail -6; echo "ray, one actor per GPU: $(( $(date +%s) - t )) s"
+# a GPU actor killed mid-run (SIGKILL, KILL_AFTER s after the start, once it simulates):
+# its chunk goes back to the queue and a new actor takes it; the table must be ray1's
+( sleep "${KILL_AFTER:-25}"; pid=$(pgrep -f "ray::_Worker" | head -1)
+  [ -n "$pid" ] && kill -9 "$pid" && echo "killed actor process $pid" ) &
+t=$(date +%s); timeout 400 python3 -m mjx_pick.cli $common --ray 127.0.0.1:6380 --out $OUT/ray_killed 2>&1 | tail -6; echo "ray, an actor killed: $(( $(date +%s) - t )) s"
+wait
 OUT=$OUT python3 - <<'EOF'
 import json, os, numpy as np, pyarrow.parquet as pq
 from pathlib import Path
 rows = {}
-for name in ("one", "one2", "ray1"):
+for name in ("one", "one2", "ray1", "ray_killed"):
     d = Path(os.environ["OUT"]) / name
     if not (d / "summary.json").is_file():
         print(name, "no summary"); continue
@@ -40,7 +46,7 @@ for name in ("one", "one2", "ray1"):
     rows[name] = pq.read_table(d / "results.parquet").to_pandas().sort_values("pick_id").reset_index(drop=True)
 if "one" in rows:
     a = rows["one"]
-    for name in ("one2", "ray1"):
+    for name in ("one2", "ray1", "ray_killed"):
         if name not in rows: continue
         b = rows[name]
         same_ids = (a.pick_id.values == b.pick_id.values).all()

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio|agree|plate16|repeat
+#   bash benchmarks/gpu_round.sh fixed|padcost|throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio|agree|plate16|repeat
 # The device carries come from tools/device_bundle.sh (three calls stage them).
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
@@ -77,6 +77,37 @@ case "$1" in
     (cd benchmarks && python probes/contact_sets.py --objects "${OBJECTS:-011_banana,050_medium_clamp,040_large_marker}" \
       --n "${N:-64}" --gripper "${GRIPPER:-robotiq-2f85}" --force-n "${FORCE:-50}" \
       --out "$out/contact_sets_h100${TAG:-}.json") ;;
+  fixed)  # issue 55, fixed costs at one GPU: the feasibility checks on one thread beside
+    # every core (a million candidates; the search for 262,144 picks), then the door
+    # opener's full feasible set as one whole command (its summary's time_s)
+    python benchmarks/feasibility.py --object door_opener --n 1000000 --picks 262144 \
+      --threads 1,0 --repeats 3 --out "$out"
+    t=$EPOCHREALTIME
+    CUDA_VISIBLE_DEVICES=${GPUS:-0} python -m mjx_pick.cli evaluate door_opener --n 262144 \
+      --seed 0 --backend warp --traces 0 --no-progress --out /tmp/fixed_one | tail -3
+    awk -v a="$t" -v b="$EPOCHREALTIME" 'BEGIN { printf "whole command: %.1f s\n", b - a }'
+    python -c "import json; s = json.load(open('/tmp/fixed_one/summary.json')); print(json.dumps({k: s.get(k) for k in ('n_feasible', 'picks_per_s', 'time_s', 'device')}))" \
+      | tee "$out/fixed_one.json" ;;
+  padcost)  # issue 55, the pad contact's cost: Warp's step per ContactParams.pad_collision
+    # of VARIANTS beside the default (and multiccd off), then each variant's labels on
+    # MuJoCo C against the default's on the same picks (1 um stability; label_trust.py)
+    variants=(${VARIANTS:-mean_radius pad})
+    phys=(--physics default --physics disableflags=524288)
+    for v in "${variants[@]}"; do phys+=(--physics "pad_collision=$v"); done
+    python benchmarks/warp_profile.py --worlds "${WORLDS:-32768}" --steps 10 "${phys[@]}" \
+      --json "$out/warp_profile_padcost.json" | grep -v "^Module"
+    mkdir -p /tmp/padcost
+    for v in default "${variants[@]}"; do
+      c=()
+      if [ "$v" != default ]; then
+        printf 'pad_collision = "%s"\n' "$v" > "/tmp/padcost/$v.toml"; c=(--contact "/tmp/padcost/$v.toml")
+      fi
+      python benchmarks/real_objects.py --n "${N:-512}" --backends mujoco --stability-um 1 "${c[@]}" \
+        --objects "${OBJECTS:-door_opener,040_large_marker,037_scissors,048_hammer,044_flat_screwdriver,011_banana,050_medium_clamp}" \
+        --tables "/tmp/padcost/$v" --out "$out/real_objects_padcost_$v.json" | tail -12
+      [ "$v" = default ] || python benchmarks/label_trust.py --a /tmp/padcost/default:mujoco \
+        --b "/tmp/padcost/$v:mujoco" --out "$out/padcost_labels_$v.json" | tail -12
+    done ;;
   plate)  # the franka-hand's 0.5 kg, 3 mm plate at pad friction 0.3: six copies in one
     # batch under each solver variant (Warp's chatter and drop: solver or time step?)
     mkdir -p /tmp/plate

@@ -62,13 +62,7 @@ def scripted_states(scene, grasp, n: int, seed: int) -> dict[str, tuple[np.ndarr
     close and lift on MuJoCo C."""
     m, ix = scene.model, scene.index
     picks = pp.generate_normal(scene.object, scene.gripper, n, seed=seed, grasp=grasp)
-    q0 = scene.initial_qpos(
-        picks.x_mm * 1e-3,
-        picks.y_mm * 1e-3,
-        np.deg2rad(picks.yaw_deg),
-        picks.opening_mm * 1e-3,
-        grasp_gap_m=(picks.opening_mm - picks.gap_left_mm - picks.gap_right_mm) * 1e-3,
-    )
+    q0 = scene.placement(picks).qpos  # grasp_gap_mm: opening less both gaps
     d = mujoco.MjData(m)
     out = {"open": [], "held": []}
     half_stroke = ix.stroke_m / 2
@@ -109,11 +103,18 @@ def scripted_states(scene, grasp, n: int, seed: int) -> dict[str, tuple[np.ndarr
     return states
 
 
-def parse_physics(text: str) -> dict:
-    """'default', 'old' or 'key=value,key=value' (MuJoCo options)."""
+# keys of --physics that are the project's contact settings (a scene of their own), not
+# MuJoCo options
+CONTACT_KEYS = ("pad_collision",)
+
+
+def parse_physics(text: str) -> tuple[dict, dict]:
+    """'default', 'old' or 'key=value,key=value': (MuJoCo options, ContactParams fields)."""
     if text in PHYSICS:
-        return dict(PHYSICS[text])
-    return dict(kv.split("=", 1) for kv in text.split(","))
+        return dict(PHYSICS[text]), {}
+    pairs = dict(kv.split("=", 1) for kv in text.split(","))
+    contact = {k: pairs.pop(k) for k in CONTACT_KEYS if k in pairs}
+    return pairs, contact
 
 
 def set_options(model: mujoco.MjModel, options: dict) -> mujoco.MjModel:
@@ -206,26 +207,42 @@ def main() -> None:
         return (time.perf_counter() - t0) / (10 * args.launches) * 1e3
 
     grasp = mp.GraspConfig()
-    scene = mp.build_scene(mp.load_object(args.object), mp.load_gripper(args.gripper), grasp=grasp)
+    obj, gripper = mp.load_object(args.object), mp.load_gripper(args.gripper)
+    scene = mp.build_scene(obj, gripper, grasp=grasp)
     if args.rollout:
         rows = rollout_profile(scene, grasp, args.rollout, args.kernels or 25, args.seed)
         if args.json:
             with open(args.json, "w") as f:
                 json.dump({"meta": {"device": wp.get_device().name}, "rows": rows}, f, indent=1)
         return
-    buffers = size_buffers(scene, grasp)
-    t0 = time.perf_counter()
-    states = scripted_states(scene, grasp, args.states, args.seed)
     device = wp.get_device()
-    print(
-        f"{device.name}; warp {wp.__version__}, mujoco_warp {mjw.__version__}; buffers "
-        f"{buffers.contacts} contacts, {buffers.rows} rows per world; {args.states} picks "
-        f"scripted on MuJoCo C in {time.perf_counter() - t0:.1f} s",
-        flush=True,
-    )
+    prepared: dict = {}  # per contact variant: its scene, buffers and scripted states
+
+    def prepare(contact: dict):
+        key = tuple(sorted(contact.items()))
+        if key not in prepared:
+            sc = scene
+            if contact:
+                sc = mp.build_scene(obj, gripper, mp.ContactParams(**contact), grasp=grasp)
+            buffers = size_buffers(sc, grasp)
+            t0 = time.perf_counter()
+            states = scripted_states(sc, grasp, args.states, args.seed)
+            print(
+                f"{device.name}; warp {wp.__version__}, mujoco_warp {mjw.__version__}; "
+                f"contact {contact or 'default'}: buffers {buffers.contacts} contacts, "
+                f"{buffers.rows} rows per world, {sc.model.ngeom} geoms, {sc.model.npair} "
+                f"pairs; {args.states} picks scripted on MuJoCo C in "
+                f"{time.perf_counter() - t0:.1f} s",
+                flush=True,
+            )
+            prepared[key] = (sc, buffers, states)
+        return prepared[key]
+
     rows = []
     for text in args.physics or ["default", "old"]:
-        base = set_options(scene.model, parse_physics(text))
+        options, contact = parse_physics(text)
+        scene_v, buffers, states = prepare(contact)
+        base = set_options(scene_v.model, options)
 
         def put(mjm, conditional: bool, **opt):
             mjm = set_options(mjm, opt)

@@ -474,13 +474,7 @@ def _torsion_capacity(
     if not gravity:
         m.opt.gravity[:] = 0.0
     gap_m = 1e-3 * (picks.opening_mm - picks.gap_left_mm - picks.gap_right_mm)
-    d.qpos[:] = scene.initial_qpos(
-        1e-3 * picks.x_mm,
-        1e-3 * picks.y_mm,
-        np.radians(picks.yaw_deg),
-        1e-3 * picks.opening_mm,
-        gap_m,
-    )[0]
+    d.qpos[:] = scene.placement(picks).qpos[0]  # grasp_gap_mm: opening less both gaps
     # the part and the gripper start 5 mm up together, the part clear of the table: a
     # gripper still rising while its pads close would press a curved part's lower flank
     # and wedge it up out of the pad box (onto the rim), which no pick does
