@@ -34,13 +34,6 @@ CONTACT_SLACK = 4
 # engine's sample shows (condim-4 pads), so rows get a wider margin than contacts
 ROW_MARGIN = 2.0
 ROW_SLACK = 16
-# rows are rounded up to a multiple of this: MuJoCo Warp builds one of its solver's
-# kernels (the dense tiled J^T D J) for each njmax, seconds to tens of seconds on a GPU
-# (NVRTC), so a part never seen whose rows fall in a size already built compiles
-# nothing. The kernel stops at each world's own row count, so the unused rows cost no
-# arithmetic there and leave its sums as they are; kernels launched over every row skip
-# them at once.
-ROW_QUANTUM = 64
 
 log = logging.getLogger(__name__)
 
@@ -86,7 +79,7 @@ class BufferSizes:
 
 def buffer_margin(measured_contacts: int, measured_rows: int) -> tuple[int, int]:
     """Buffer sizes from the largest measured counts: contacts x1.5 + 4, rows x2 + 16,
-    rounded up to a multiple of 4 (contacts) and ROW_QUANTUM (rows).
+    rounded up to a multiple of 4 (contacts) and 8 (rows).
 
     Why a margin: the sample does not hold every pick-point, per-pick contact settings
     (a friction sweep) move contacts a little, and Warp's collision functions need not
@@ -101,8 +94,8 @@ def buffer_margin(measured_contacts: int, measured_rows: int) -> tuple[int, int]
         return int(math.ceil(x / q) * q)
 
     contacts = up(CONTACT_MARGIN * measured_contacts + CONTACT_SLACK, 4)
-    rows = up(ROW_MARGIN * measured_rows + ROW_SLACK, ROW_QUANTUM)
-    return max(contacts, 4), max(rows, ROW_QUANTUM)
+    rows = up(ROW_MARGIN * measured_rows + ROW_SLACK, 8)
+    return max(contacts, 4), max(rows, 8)
 
 
 class _CountingBatch:
