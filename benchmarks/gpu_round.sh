@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU measurements of one session, one part per device call (each under 10 minutes):
-#   bash benchmarks/gpu_round.sh fixed|newpart|padcost|throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio|agree|plate16|repeat
+#   bash benchmarks/gpu_round.sh fixed|pools|padcost|throughput|answer|profile|floor|frontier|stable|margin|certain|real|plate|linkage|differ|grid|variants|variants_sweep|design|contacts|impratio|agree|plate16|repeat
 # The device carries come from tools/device_bundle.sh (three calls stage them).
 # Writes JSON/JSONL under $OUT (the device tool brings it back); the tree's commit comes
 # in MJX_PICK_COMMIT (the device's copy has no git).
@@ -88,18 +88,15 @@ case "$1" in
     awk -v a="$t" -v b="$EPOCHREALTIME" 'BEGIN { printf "whole command: %.1f s\n", b - a }'
     python -c "import json; s = json.load(open('/tmp/fixed_one/summary.json')); print(json.dumps({k: s.get(k) for k in ('n_feasible', 'picks_per_s', 'time_s', 'device')}))" \
       | tee "$out/fixed_one.json" ;;
-  newpart)  # issue 55, a part never seen: on a fresh machine the banana (Warp builds every
-    # kernel), then the door opener (its constraint rows fall in the banana's size since
-    # warp_buffers.ROW_QUANTUM = 64: nothing to build), then the banana again at the old
-    # rounding of 8 rows (104 rows: the solver kernel build the quantum saves)
-    banana=(mjx_pick/assets/objects/ycb/011_banana.stl --unit m --mass-g 66)
-    for run in "64 banana" "64 door_opener" "8 banana"; do
-      set -- $run; q=$1; part=(door_opener); [ "$2" = banana ] && part=("${banana[@]}")
+  pools)  # issue 55, a part's first runs on a machine: N_SMALL picks (a small pool: Warp
+    # builds its kernels), then N_BIG (a large pool whose tail shrinks: the compaction's
+    # gather moves every per-world array; no kernel may be built for it), then N_BIG again
+    for n in "${N_SMALL:-1024}" "${N_BIG:-65536}" "${N_BIG:-65536}"; do
       t=$EPOCHREALTIME
-      python -c "import sys; from mjx_pick.engine import warp_buffers as b; b.ROW_QUANTUM = int(sys.argv[1]); from mjx_pick.cli import main; sys.exit(main(sys.argv[2:]))" \
-        "$q" evaluate "${part[@]}" --n 1024 --backend warp --no-progress --out "/tmp/newpart_${2}_$q" | grep "time, s"
-      awk -v a="$t" -v b="$EPOCHREALTIME" -v r="$run" 'BEGIN { printf "%s: whole command %.1f s\n", r, b - a }'
-    done | tee "$out/newpart.txt" ;;
+      python -m mjx_pick.cli evaluate door_opener --n "$n" --seed 0 --backend warp --traces 0 \
+        --no-progress --out "/tmp/pools_${n}_$RANDOM" 2>&1 | grep -E "time, s|compiled\)" | cut -c1-160
+      awk -v a="$t" -v b="$EPOCHREALTIME" -v n="$n" 'BEGIN { printf "n %s: whole command %.1f s\n", n, b - a }'
+    done | tee "$out/pools.txt" ;;
   padcost)  # issue 55, the pad contact's cost: Warp's step per ContactParams.pad_collision
     # of VARIANTS beside the default (and multiccd off), then each variant's labels on
     # MuJoCo C against the default's on the same picks (1 um stability; label_trust.py)

@@ -169,6 +169,16 @@ def _kernels():
     return warp_kernels
 
 
+def _world_bytes(arr):
+    """A contiguous per-world Warp array (worlds first) seen as (worlds, bytes a world)
+    uint8, the same memory: what ``warp_kernels.gather_bytes`` moves."""
+    wp = _warp()
+    if not arr.is_contiguous:
+        raise ValueError(f"a per-world array of shape {arr.shape} is not contiguous")
+    row = arr.size // arr.shape[0] * wp.types.type_size_in_bytes(arr.dtype)
+    return wp.array(ptr=arr.ptr, dtype=wp.uint8, shape=(arr.shape[0], row), device=arr.device)
+
+
 def _put_model(mjm, slots: int, fields: tuple[str, ...], deterministic: bool):
     """The scene's model on the current Warp device with a row per slot for the contact
     pair values and each carried field (an ``opt.*`` field: one value per slot)."""
@@ -280,17 +290,6 @@ class _Pool:
         arrays += [self.field_view(name) for name in self.fields]
         arrays += [getattr(self, name) for name in self.SLOT]
         return [a for a in arrays if a.size > 0]
-
-    def load_gather_kernels(self) -> None:
-        """Build (or load) the gathers a compaction into this pool launches, one per
-        array type, now: a compaction in a run's tail must not wait for a compiler."""
-        wp = _warp()
-        kern = _kernels()
-        with on_device(self.device_name):
-            none = wp.full(self.slots, -1, dtype=int)
-            for arr in self.state_arrays():
-                gather = kern.gather_slots if arr.ndim == 1 else kern.gather_rows
-                wp.launch(gather, dim=arr.shape, inputs=[none, arr, arr])
 
     def field_view(self, name: str):
         """The model's (slots, K) float rows of a carried field."""
@@ -499,10 +498,6 @@ class WarpBackend:
             pool = _Pool(self, slots, record_ticks)
             self._setup("model_and_data", t0)
             pool.capture(self)
-            if len(family) > 1:
-                t0 = time.perf_counter()
-                pool.load_gather_kernels()
-                self._setup("kernels", t0)
             self._pools[key] = pool
         return pool
 
@@ -674,8 +669,8 @@ class WarpBackend:
         order_dev = wp.array(order, dtype=int)
         kern = _kernels()
         for src, dst in zip(big.state_arrays(), small.state_arrays(), strict=True):
-            gather = kern.gather_slots if dst.ndim == 1 else kern.gather_rows
-            wp.launch(gather, dim=dst.shape, inputs=[order_dev, src, dst])
+            dst_bytes = _world_bytes(dst)
+            wp.launch(kern.gather_bytes, dim=dst_bytes.shape, inputs=[order_dev, _world_bytes(src), dst_bytes])
         wp.launch(_kernels().idle_slots, dim=small.slots, inputs=[order_dev, self.n_ticks, small.k])
         slot_pick = np.where(order >= 0, slot_pick[np.maximum(order, 0)], -1).astype(np.int32)
         small.slot_pick.assign(slot_pick)

@@ -5,8 +5,6 @@ Each launches one thread per slot (``engine.warp_direct`` launches them); a slot
 the one-pick functions of ``kernels.grasp_warp``.
 """
 
-from typing import Any
-
 import warp as wp
 
 from mjx_pick.kernels import grasp_warp as gw
@@ -218,21 +216,16 @@ def finalize(
 
 
 @wp.kernel(enable_backward=False)
-def gather_rows(order: wp.array(dtype=int), src: wp.array2d(dtype=Any), dst: wp.array2d(dtype=Any)):
-    """dst[j] = src[order[j]] where order[j] >= 0 (rows of one world's values)."""
+def gather_bytes(
+    order: wp.array(dtype=int), src: wp.array2d(dtype=wp.uint8), dst: wp.array2d(dtype=wp.uint8)
+):
+    """dst[j] = src[order[j]] where order[j] >= 0: a world's row of any per-world array,
+    seen as its bytes (one kernel for every array type: a generic kernel would add an
+    overload, and so change and rebuild this module, for each type a run first moves)."""
     j, c = wp.tid()
     i = order[j]
     if i >= 0:
         dst[j, c] = src[i, c]
-
-
-@wp.kernel(enable_backward=False)
-def gather_slots(order: wp.array(dtype=int), src: wp.array(dtype=Any), dst: wp.array(dtype=Any)):
-    """dst[j] = src[order[j]] where order[j] >= 0 (one value per world)."""
-    j = wp.tid()
-    i = order[j]
-    if i >= 0:
-        dst[j] = src[i]
 
 
 @wp.kernel(enable_backward=False)
