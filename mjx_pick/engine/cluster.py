@@ -384,17 +384,19 @@ class _ActorPool:
             self.on_event(ClusterEvent(kind, slot.node_id, label, inflight=slot.inflight, **fields))
 
     def _scan(self, force: bool = False) -> None:
-        """Start actors on alive nodes that have none (at the start, nodes that joined,
-        nodes whose actor died); at most every 2 s unless forced."""
+        """Start the actors alive nodes lack (at the start, nodes that joined, nodes one
+        of whose actors died: a node of several GPUs keeps one actor per GPU); at most
+        every 2 s unless forced."""
         now = time.monotonic()
         if not force and now - self._last_scan < 2.0:
             return
         self._last_scan = now
         for node in self._alive_nodes():
             nid = node["NodeID"]
-            if nid in self._given_up or any(s.node_id == nid for s in self.slots):
+            if nid in self._given_up:
                 continue
-            for slot in plan_slots(self.name, node):
+            have = sum(s.node_id == nid for s in self.slots)
+            for slot in plan_slots(self.name, node)[have:]:
                 self._start(slot)
 
     def _check_ready(self) -> None:
