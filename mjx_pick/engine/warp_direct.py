@@ -670,7 +670,11 @@ class WarpBackend:
         kern = _kernels()
         for src, dst in zip(big.state_arrays(), small.state_arrays(), strict=True):
             dst_bytes = _world_bytes(dst)
-            wp.launch(kern.gather_bytes, dim=dst_bytes.shape, inputs=[order_dev, _world_bytes(src), dst_bytes])
+            wp.launch(
+                kern.gather_bytes,
+                dim=dst_bytes.shape,
+                inputs=[order_dev, _world_bytes(src), dst_bytes],
+            )
         wp.launch(_kernels().idle_slots, dim=small.slots, inputs=[order_dev, self.n_ticks, small.k])
         slot_pick = np.where(order >= 0, slot_pick[np.maximum(order, 0)], -1).astype(np.int32)
         small.slot_pick.assign(slot_pick)
