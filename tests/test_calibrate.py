@@ -518,6 +518,19 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
     start = dataclasses.replace(PADS, pad_friction=0.45)
     base = mp.Settings(LIGHT, start, grasp=GRASP, solver=SOLVER)
     problem = cal.Problem(heavy_block, synthetic, ["pad_friction"], base, backend="mujoco")
+    # every simulation of this fit, by its parameter vectors: the resumed fit below asks
+    # for the same vectors (a resume that restored another state asks for others, which
+    # are simulated), and the C engine's results are a function of them alone -- the
+    # second fit's 13 steps of 24 rows x 5 vectors each were a third of this test's time
+    simulated = {}
+    simulate = problem.simulate
+
+    def simulate_and_keep(thetas):
+        key = np.atleast_2d(np.asarray(thetas, np.float32)).tobytes()
+        simulated[key] = simulate(thetas)
+        return simulated[key]
+
+    problem.simulate = simulate_and_keep
     before = problem.loss(problem.space.theta([0.45])[None])[0]
     # the smoothed gradient from below: on these 24 outcome + lift-time rows CMA-ES (the
     # default) stopped in 8 steps at 0.72, a local basin of this loss (results/history.md)
@@ -544,6 +557,15 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
             raise Killed
 
     p2 = cal.Problem(heavy_block, synthetic, ["pad_friction"], base, backend="mujoco")
+    simulate_p2 = p2.simulate
+    asked = []
+
+    def simulated_before(thetas):
+        key = np.atleast_2d(np.asarray(thetas, np.float32)).tobytes()
+        asked.append(key in simulated)
+        return simulated[key] if key in simulated else simulate_p2(thetas)
+
+    p2.simulate = simulated_before
     with pytest.raises(Killed):
         cal.calibrate(p2, **kw, out=tmp_path, log=kill_at_7, identify=False)
     assert not (tmp_path / "contact.toml").exists()
@@ -552,6 +574,7 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
     assert not (tmp_path / "checkpoint").exists()  # removed once the fit is complete
     assert resumed.values["pad_friction"] == pytest.approx(mu, abs=1e-5)
     assert len(resumed.history) == 12
+    assert asked and all(asked)  # the killed and resumed fits asked for the whole fit's vectors
     fitted, meta = load_contact(tmp_path / "contact.toml")
     assert fitted.pad_friction == pytest.approx(mu, abs=1e-6)
     assert meta["fitted_for"]["object"] == "heavy"
@@ -626,7 +649,7 @@ def test_cli_calibrate_and_the_contact_files_provenance(tmp_path, synthetic, cap
 
 
 @pytest.mark.mjx
-def test_forward_mode_gradient_through_mjx(heavy_block, synthetic):
+def test_forward_mode_gradient_through_mjx(heavy_block, synthetic, monkeypatch):
     # reverse mode cannot pass MJX's solver while_loop (upstream #2259); forward mode
     # runs and is finite. No finite-difference check can hold over a whole pick: the
     # pathwise derivative of 2,600 steps of contact is not the derivative of its outcome
@@ -635,6 +658,7 @@ def test_forward_mode_gradient_through_mjx(heavy_block, synthetic):
     import jax.numpy as jnp
 
     from mjx_pick.engine.mjx_backend import make_rollout
+    from mjx_pick.studies.calibration import problem as problem_module
 
     rows = synthetic.take([0, len(synthetic) - 1])
     # MJX runs the differentiable physics alone (at the default's elliptic cones its
@@ -652,16 +676,29 @@ def test_forward_mode_gradient_through_mjx(heavy_block, synthetic):
     box = mp.ContactParams.differentiable(mp.ContactParams(pad_collision="mean_radius"))
     base = mp.Settings(LIGHT, box, mp.SolverParams.differentiable(), grasp=SHORT)
     problem = cal.Problem(heavy_block, rows, ["pad_friction"], base, backend="mjx")
+    # the rollout the problem differentiates (mjx_backend.make_rollout, through
+    # simulator.differentiable_rollout), kept for the reverse-mode check below: the same
+    # jitted function on the same shapes, whose trace JAX then reuses instead of tracing
+    # MJX's Python a second time (half this test's time on a CPU)
+    made = []
+
+    def keep(*args):
+        made.append(make_rollout(*args))
+        return made[-1]
+
+    monkeypatch.setattr(problem_module, "differentiable_rollout", keep)
     loss, grad = problem.mjx_loss_and_grad(problem.space.theta([0.75]))
     assert np.isfinite(loss) and np.all(np.isfinite(grad))
-    roll = make_rollout(problem.scene, SHORT, False)
+    (roll,) = made
     inp = problem.inputs
 
     def lift(mu):
-        fr, ref, _ = contact_arrays_jnp(
+        fr, ref, force = contact_arrays_jnp(
             ["pad_friction"], [mu], inp, problem.scene, base, heavy_block.mass_kg
         )
-        return jnp.sum(roll(inp.qpos0, inp.params, fr, ref, inp.pair_solimp)[0]["lift_height_mm"])
+        params = inp.params._replace(grip_force_n=force)
+        out, _ = roll(inp.qpos0, params, fr, ref, inp.pair_solimp)
+        return jnp.sum(out["lift_height_mm"])
 
     # traced, not run: JAX raises when it transposes the solver's while_loop, before
     # anything is compiled (called eagerly, jax.grad first compiles and runs the whole
