@@ -17,7 +17,7 @@ from mjx_pick.cli import main
 from mjx_pick.core.config import PlausibilityWarning, to_toml
 from mjx_pick.core.physics import load_contact
 from mjx_pick.core.procedure import GraspConfig
-from mjx_pick.engine.inputs import pick_inputs
+from mjx_pick.engine.inputs import pick_inputs, tree_leaves
 from mjx_pick.studies import calibration as cal
 from mjx_pick.studies.calibration import estimators as E
 from mjx_pick.studies.calibration import loss as L
@@ -522,11 +522,17 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
     # for the same vectors (a resume that restored another state asks for others, which
     # are simulated), and the C engine's results are a function of them alone -- the
     # second fit's 13 steps of 24 rows x 5 vectors each were a third of this test's time
+    # -- keyed by the problem's simulation inputs too, so that a resumed problem built
+    # on other pick-points or settings misses and is simulated
     simulated = {}
     simulate = problem.simulate
 
+    def sim_key(pr, thetas) -> bytes:
+        leaves = [np.asarray(a) for a in tree_leaves(pr.inputs)]
+        return b"".join(a.tobytes() for a in leaves) + np.asarray(thetas, np.float32).tobytes()
+
     def simulate_and_keep(thetas):
-        key = np.atleast_2d(np.asarray(thetas, np.float32)).tobytes()
+        key = sim_key(problem, np.atleast_2d(thetas))
         simulated[key] = simulate(thetas)
         return simulated[key]
 
@@ -561,7 +567,7 @@ def test_fit_moves_friction_to_the_hidden_value_and_resumes(tmp_path, heavy_bloc
     asked = []
 
     def simulated_before(thetas):
-        key = np.atleast_2d(np.asarray(thetas, np.float32)).tobytes()
+        key = sim_key(p2, np.atleast_2d(thetas))
         asked.append(key in simulated)
         return simulated[key] if key in simulated else simulate_p2(thetas)
 
