@@ -663,7 +663,9 @@ def candidate_stream(checker: FeasibilityChecker, seed: int):
 
     Blocks are checked in groups that double up to two per thread
     (``fk.threads()``), side by side; a group's blocks are drawn in order, so the
-    batches and their counts are those of checking one block at a time.
+    batches and their counts are those of checking one block at a time. A search that
+    ends inside a group has checked the group's later blocks for nothing (at most half
+    its checks: the groups double from one block).
     """
     blocks = candidate_blocks(checker, seed)
     group, most = 1, 2 * fk.threads()

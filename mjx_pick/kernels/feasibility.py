@@ -269,7 +269,7 @@ def check_candidates(
     if len(starts) == 1:
         parts = [check(0)]
     else:  # blocks are independent: the same results in any order, kept in order
-        parts = list(_pool(os.getpid()).map(check, starts))
+        parts = list(_pool().map(check, starts))
     return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
 
 
@@ -283,11 +283,14 @@ def threads() -> int:
 
 
 @functools.cache
-def _pool(pid: int) -> concurrent.futures.ThreadPoolExecutor:
-    # one pool per process: a forked child (Ray's workers, the GUI's) has none of its
-    # parent's threads, so it makes its own
-    del pid
+def _pool() -> concurrent.futures.ThreadPoolExecutor:
     return concurrent.futures.ThreadPoolExecutor(threads(), thread_name_prefix="feasibility")
+
+
+# a forked child (Ray's workers, the GUI's) has none of its parent's threads: it makes
+# a pool of its own (no fork where there is no register_at_fork)
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_pool.cache_clear)
 
 
 def reference_check(polygon, band: GripperBand, x_mm, y_mm, yaw_rad, res_mm=0.1, opening_mm=None):
