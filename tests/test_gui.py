@@ -201,38 +201,53 @@ def wait_job(page, title: str, timeout_ms: int = TIMEOUT_MS) -> str:
 
 
 def click_start(page, button_test_id: str, title: str, lost_after_ms: int = 60_000) -> None:
-    """Click a start button and wait until the job panel names the run `title`.
+    """Click a start button and wait until the job panel names the run `title`
+    (:func:`click_answered`)."""
+    job = page.get_by_test_id("job-title").filter(has_text=title)
+    click_answered(page, button_test_id, job, f"run {title!r} started", lost_after_ms)
+
+
+def click_answered(page, button_test_id: str, answer, what: str, lost_after_ms: int = 60_000):
+    """Click a button and wait until the page shows answer (a locator; what: it in words).
 
     A click was three times lost on the loaded 2-core CI machine (the robustness study
-    after a sweep): no run, no error on the page, the websocket open throughout, and the
-    server's log shows the start handler never ran (``JobPanel.busy`` logs each call).
-    Cause not found: whether the browser sent the click is in ``browser_events``, which
-    a failed test prints. A user clicks again, so once the panel has shown nothing for
-    lost_after_ms and the page shows no error, the test clicks again too and says so (a
-    warning in the test report, not a failure); a second lost click fails."""
+    after a sweep; a calibration's refusal of a start without outcomes): no answer, no
+    error on the page, the websocket open throughout, and the server's log shows the
+    start handler never ran (``JobPanel.busy`` logs each call); the browser sent no event
+    for it (``browser_events``, which a failed test prints). Cause not found. A user
+    clicks again, so once the page has shown nothing for lost_after_ms and no error, the
+    test clicks again too and says so (a warning in the test report, not a failure); a
+    second lost click fails where the caller waits for the answer."""
     from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
     button = page.get_by_test_id(button_test_id)
     button.click()
     try:
-        page.get_by_test_id("job-title").filter(has_text=title).wait_for(timeout=lost_after_ms)
+        answer.wait_for(timeout=lost_after_ms)
         return
     except PlaywrightTimeout:
         errors = shown_errors(page)
         if errors:
-            pytest.fail(f"run {title!r} was refused: {errors}")
+            pytest.fail(f"not {what}: the page says {errors}")
     # a field's own message (a value the server read as out of range) is no error label
     fields = shown_field_messages(page)
     with warnings.catch_warnings():
         warnings.simplefilter("default")  # reported, not raised: the suite's filter is "error"
         warnings.warn(
-            f"run {title!r} had not started {lost_after_ms / 1000:g} s after its click on "
-            f"element {button.get_attribute('id')}, with no error shown (field messages: "
+            f"not {what} {lost_after_ms / 1000:g} s after a click on element "
+            f"{button.get_attribute('id')}, with no error shown (field messages: "
             f"{fields}): clicked again. What the browser saw:\n"
             + "\n".join(getattr(page, "browser_seen", [])[-20:]),
             stacklevel=2,
         )
     button.click()
+
+
+def short_procedure(page, lift_mm: float = 20, hold_s: float = 0.1) -> None:
+    """Tab 2: a short lift and hold (a test's run takes seconds, not minutes)."""
+    page.get_by_text("2 Set gripper parameters").click()
+    number(page, "lift height (mm)", lift_mm)
+    number(page, "hold (s)", hold_s)
 
 
 def start_short_batch(page, url: str, name: str, n: int, chunk: int | None = None) -> None:
@@ -242,9 +257,7 @@ def start_short_batch(page, url: str, name: str, n: int, chunk: int | None = Non
     page.set_default_timeout(60_000)
     page.goto(url)
     import_shipped(page)
-    page.get_by_text("2 Set gripper parameters").click()
-    number(page, "lift height (mm)", 20)
-    number(page, "hold (s)", 0.1)
+    short_procedure(page)
     page.get_by_text("3 Generate input data").click()
     number(page, "pick-points", n)
     if chunk is not None:
@@ -822,9 +835,7 @@ def test_a_reload_brings_back_the_object_settings_and_run(page, server):
     says a folder still being written is running."""
     _, work = server
     import_shipped(page)
-    page.get_by_text("2 Set gripper parameters").click()
-    number(page, "lift height (mm)", 20)
-    number(page, "hold (s)", 0.1)
+    short_procedure(page)
     number(page, "grip force F_d (N)", 45)
     page.get_by_text("3 Generate input data").click()
     number(page, "pick-points", 40)

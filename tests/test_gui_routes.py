@@ -15,8 +15,10 @@ from test_gui import (
     BLOCK,
     TIMEOUT_MS,
     choose,
+    click_answered,
     import_shipped,
     number,
+    short_procedure,
     shown_field_messages,
     start_short_batch,
     wait_job,
@@ -390,7 +392,6 @@ def test_a_file_the_browser_refuses_replaces_the_upload_before_it(page, tmp_path
     """An SVG or a 60 MB mesh, refused by the browser itself (the upload's accept and
     size): said by its name and why, it stays said, and Import takes no earlier upload
     in its place; so for an outcomes CSV before a calibration."""
-    from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
     from playwright.sync_api import expect
 
     page.get_by_text("1 Import object model").click()
@@ -431,19 +432,10 @@ def test_a_file_the_browser_refuses_replaces_the_upload_before_it(page, tmp_path
     expect(csv_refused).to_have_text("outcomes.xlsx: not a .csv file", timeout=30_000)
     expect(page.get_by_test_id("calibrate-info")).to_have_text("")
     page.get_by_label("run folder name").filter(visible=True).last.fill("no-outcomes")
-    # the start is refused with a message each time it is clicked; under load the
-    # browser has sent no event for a click that landed while the page re-rendered
-    # after the upload's refusal (the websocket log of a failing run: the folder name,
-    # then nothing), so a click without an answer is tried again, three times at most
+    # a click the browser sent no event for, under load, is clicked again (click_answered)
     error = page.get_by_test_id("calibrate-error").filter(has_text="upload an outcomes CSV")
-    for _ in range(3):
-        page.get_by_test_id("start-calibrate").click()
-        try:
-            error.wait_for(timeout=20_000)
-            break
-        except PlaywrightTimeoutError:
-            continue
-    expect(error).to_be_visible()
+    click_answered(page, "start-calibrate", error, "refused for want of outcomes")
+    error.wait_for()
     expect(csv_refused).to_have_text("outcomes.xlsx: not a .csv file")
     assert not page.get_by_test_id("job-title").is_visible()
 
@@ -457,9 +449,7 @@ def test_a_reload_shows_a_stopped_run_as_its_folder_records_it_and_start_resumes
 
     url, work = server
     import_shipped(page)
-    page.get_by_text("2 Set gripper parameters").click()
-    number(page, "lift height (mm)", 20)
-    number(page, "hold (s)", 0.1)
+    short_procedure(page)
     page.get_by_text("3 Generate input data").click()
     recorded = {
         "pick-points": "40",
@@ -621,9 +611,7 @@ def test_two_browser_tabs_starting_one_run_name_at_once_start_it_once(page, serv
         tabs = (page, other)
         for pg in tabs:
             import_shipped(pg)
-            pg.get_by_text("2 Set gripper parameters").click()
-            number(pg, "lift height (mm)", 5)
-            number(pg, "hold (s)", 0.05)
+            short_procedure(pg, 5, 0.05)
             pg.get_by_text("3 Generate input data").click()
             number(pg, "pick-points", 4)
             pg.get_by_label("run folder name").fill("twin")
@@ -686,9 +674,7 @@ def test_grasps_antipodal_and_from_a_file_run_through_the_cli(page, server, tmp_
 
     _, work = server
     import_shipped(page)
-    page.get_by_text("2 Set gripper parameters").click()
-    number(page, "lift height (mm)", 5)
-    number(page, "hold (s)", 0.05)
+    short_procedure(page, 5, 0.05)
     page.get_by_text("3 Generate input data").click()
     choose(page, "grasps from", SOURCES["antipodal"])
     expect(page.get_by_test_id("generate")).to_be_hidden()  # the map is of pick-points
@@ -888,9 +874,7 @@ def test_compare_and_sweep_draw_antipodal_grasps(page, server):
 
     _, work = server
     import_shipped(page)
-    page.get_by_text("2 Set gripper parameters").click()
-    number(page, "lift height (mm)", 5)
-    number(page, "hold (s)", 0.05)
+    short_procedure(page, 5, 0.05)
     page.get_by_text("Studies", exact=True).click()
     page.get_by_test_id("compare-grasps").click()
     page.get_by_role("option", name=SOURCES["antipodal"], exact=True).click()
