@@ -92,6 +92,33 @@ case "$1" in
     awk -v a="$t" -v b="$EPOCHREALTIME" 'BEGIN { printf "whole command: %.1f s\n", b - a }'
     python -c "import json; s = json.load(open('/tmp/fixed_one/summary.json')); print(json.dumps({k: s.get(k) for k in ('n_feasible', 'picks_per_s', 'time_s', 'device')}))" \
       | tee "$out/fixed_one.json" ;;
+  scale)  # issue 55, the door opener's full set as one whole command on 1 / 2 / 4 GPUs of
+    # one host (SCALE_GPUS), timed from the shell. A small run on one GPU builds Warp's
+    # kernels first (reported apart): after it, no pool size builds anything. Labels of
+    # every run against the first's (the same picks: ids must be equal)
+    t=$EPOCHREALTIME
+    CUDA_VISIBLE_DEVICES=0 python -m mjx_pick.cli evaluate door_opener --n 4096 --seed 1 \
+      --backend warp --traces 0 --no-progress --out /tmp/scale_warm | grep "time, s" || true
+    awk -v a="$t" -v b="$EPOCHREALTIME" 'BEGIN { printf "kernels built (4,096 picks): %.1f s\n", b - a }'
+    for g in ${SCALE_GPUS:-0 0,1 0,1,2,3}; do
+      t=$EPOCHREALTIME
+      CUDA_VISIBLE_DEVICES=$g python -m mjx_pick.cli evaluate door_opener --n 262144 --seed 0 \
+        --backend warp --traces 0 --no-progress --out "/tmp/scale_$g" | grep "time, s" || true
+      w=$(awk -v a="$t" -v b="$EPOCHREALTIME" 'BEGIN { printf "%.1f", b - a }')
+      python -c "import json, sys; s = json.load(open('/tmp/scale_$g/summary.json')); print(json.dumps({'gpus': '$g', 'whole_s': float(sys.argv[1]), **{k: s.get(k) for k in ('n_feasible', 'picks_per_s', 'time_s', 'device')}}))" \
+        "$w" | tee -a "$out/scale.jsonl"
+    done
+    python - ${SCALE_GPUS:-0 0,1 0,1,2,3} <<'EOF' | tee "$out/scale_labels.txt"
+import sys, pyarrow.parquet as pq
+runs = sys.argv[1:]
+tab = {g: pq.read_table(f"/tmp/scale_{g}/results.parquet").to_pandas().sort_values("pick_id") for g in runs}
+a = tab[runs[0]]
+for g in runs[1:]:
+    b = tab[g]
+    same = (a.pick_id.values == b.pick_id.values).all()
+    print(f"{runs[0]} vs {g}: ids equal {same}, labels equal {(a.success.values == b.success.values).mean():.4%}")
+EOF
+    ;;
   pools)  # issue 55, a part's first runs on a machine: N_SMALL picks (a small pool: Warp
     # builds its kernels), then N_BIG (a large pool whose tail shrinks: the compaction's
     # gather moves every per-world array; no kernel may be built for it), then N_BIG again
