@@ -133,6 +133,9 @@ def rejected_text(rejected: dict) -> str:
 
 
 CANDIDATE_BLOCK = 4096  # candidates are drawn in fixed blocks: same seed, same stream
+# the most blocks a search checks in one Warp launch (a million candidates): the groups
+# double up to it, as on the host up to two blocks per thread
+DEVICE_GROUP = 256
 SEARCH_NOTE_S = 2.0  # a long search for feasible pick-points says how far it is this often
 
 
@@ -217,6 +220,10 @@ class FeasibilityChecker:
     check rejects those poses
     as "pad_path" (the part's full height is taken as its top: optimistic for a mesh
     lower under the near pad).
+
+    device: a Warp device name ('cuda:0'): the checks run there, one Warp kernel launch
+    a call (``kernels.feasibility_warp``: the same results as numpy's, bit for bit);
+    None: numpy on the host's threads (``kernels.feasibility``, the reference).
     """
 
     def __init__(
@@ -225,6 +232,7 @@ class FeasibilityChecker:
         gripper: GripperSpec,
         config: PickConfig | None = None,
         grasp: GraspConfig | None = None,
+        device: str | None = None,
     ):
         config = config or PickConfig()
         if config.safety_zone_mm >= 0.5 * gripper.stroke_mm:
@@ -233,6 +241,7 @@ class FeasibilityChecker:
                 f"< half the stroke of {gripper.name} ({0.5 * gripper.stroke_mm:g} mm)"
             )
         self.object, self.gripper, self.config = obj, gripper, config
+        self.device = device
         self.band = fk.GripperBand(
             stroke_mm=float(gripper.stroke_mm),
             finger_width_mm=float(gripper.finger_width_mm),
@@ -261,9 +270,16 @@ class FeasibilityChecker:
         opening_mm: (N,) fixed starting openings (the fingers of a plan made for another
         pose; an object reaching a finger fails clearance), or None to choose them.
         """
-        reason, opening, coverage, gap_l, gap_r = fk.check_candidates(
-            self.stack, self.band, x_mm, y_mm, np.deg2rad(np.asarray(yaw_deg, float)), opening_mm
-        )
+        yaw_rad = np.deg2rad(np.asarray(yaw_deg, float))
+        if self.device is None:
+            checked = fk.check_candidates(self.stack, self.band, x_mm, y_mm, yaw_rad, opening_mm)
+        else:
+            from mjx_pick.kernels import feasibility_warp
+
+            checked = feasibility_warp.check_candidates(
+                self.stack, self.band, x_mm, y_mm, yaw_rad, opening_mm, device=self.device
+            )
+        reason, opening, coverage, gap_l, gap_r = checked
         reason = np.asarray(reason)
         if self.kinematics is not None:
             rides = self.near_pad_rise_mm(opening, gap_l, gap_r) >= self.room_mm
@@ -662,13 +678,14 @@ def candidate_stream(checker: FeasibilityChecker, seed: int):
     """Feasible GraspBatches from the seeded stream of candidate blocks, one a block.
 
     Blocks are checked in groups that double up to two per thread
-    (``fk.threads()``), side by side; a group's blocks are drawn in order, so the
-    batches and their counts are those of checking one block at a time. A search that
-    ends inside a group has checked the group's later blocks for nothing (at most half
-    its checks: the groups double from one block).
+    (``fk.threads()``), side by side, or up to DEVICE_GROUP in one launch on the
+    checker's Warp device; a group's blocks are drawn in order, so the batches and
+    their counts are those of checking one block at a time. A search that ends inside a
+    group has checked the group's later blocks for nothing (at most half its checks:
+    the groups double from one block).
     """
     blocks = candidate_blocks(checker, seed)
-    group, most = 1, 2 * fk.threads()
+    group, most = 1, DEVICE_GROUP if checker.device is not None else 2 * fk.threads()
     while True:
         drawn = [next(blocks) for _ in range(group)]
         ids, x, y, yaw = (np.concatenate(a) for a in zip(*drawn, strict=True))
@@ -688,16 +705,18 @@ def generate_normal(
     config: PickConfig | None = None,
     grasp: GraspConfig | None = None,
     progress: Callable[[int, int, dict], None] | None = None,
+    device: str | None = None,
 ) -> GraspBatch:
     """Normal mode: the first n feasible pick-points of the seeded candidate stream.
 
     A search that finds few feasible poses draws up to ``max_candidates``: it logs how
     far it is every SEARCH_NOTE_S (:func:`search_note`), and calls progress(drawn,
     found, rejected) -- candidates checked, feasible found, {reason: count} -- after
-    each block, which may raise to stop it (the GUI's Stop button).
+    each block, which may raise to stop it (the GUI's Stop button). device: where the
+    checks run (:class:`FeasibilityChecker`; the same picks anywhere).
     """
     check_range("picks", "n", n, 1, 1e9)
-    checker = FeasibilityChecker(obj, gripper, config, grasp)
+    checker = FeasibilityChecker(obj, gripper, config, grasp, device)
     most = checker.config.max_candidates
     batches, found, drawn = [], 0, 0
     rejected: dict[str, int] = {}
@@ -794,6 +813,7 @@ def optimize(
     seed: int = 0,
     config: PickConfig | None = None,
     grasp: GraspConfig | None = None,
+    device: str | None = None,
 ) -> OptimizationResult:
     """Optimization mode: evaluate feasible batches until k reach min_score or max_n are spent.
 
@@ -802,11 +822,12 @@ def optimize(
       k: pick-points wanted at or above min_score.
       max_n: most pick-points to evaluate.
       batch_size: pick-points per call of score_fn (a fixed shape: no recompiles).
+      device: where the checks run (:class:`FeasibilityChecker`; the same picks anywhere).
     """
     check_range("optimize", "k", k, 1)
     check_range("optimize", "max_n", max_n, 1)
     check_range("optimize", "batch_size", batch_size, 1)
-    checker = FeasibilityChecker(obj, gripper, config, grasp)
+    checker = FeasibilityChecker(obj, gripper, config, grasp, device)
     pending: list[GraspBatch] = []
     evaluated, scores, good = [], [], 0
     stream = candidate_stream(checker, seed)

@@ -179,3 +179,14 @@ def warp_problem() -> str | None:
     except Exception as err:  # any failure to load warp's native library
         return f"warp-lang does not load: {type(err).__name__}: {err}"
     return None
+
+
+def checks_device(backend) -> str | None:
+    """The Warp device on which a run on `backend` checks its pick-point candidates
+    (``pickpoints.FeasibilityChecker(device=...)``): the first CUDA device of the direct
+    MuJoCo Warp backend in this process (its Warp device name, 'cuda:0'); None -- numpy
+    on the host's threads -- for every other: MuJoCo C, MJX and MJX's Warp bridge (JAX
+    holds the GPU there), a Ray cluster (its GPUs are the actors'), Warp on the CPU."""
+    parts = getattr(backend, "parts", None) or [backend]  # pool.DeviceThreads: one a device
+    name = getattr(parts[0], "device_name", None)  # warp_direct.WarpBackend's own
+    return name if isinstance(name, str) and name.startswith("cuda") else None

@@ -250,13 +250,7 @@ def check_candidates(
       between each finger's start and the object, gap_left_mm / gap_right_mm (N,), all
       float32.
     """
-    x = np.atleast_1d(np.asarray(x_mm, np.float32))
-    y = np.broadcast_to(np.asarray(y_mm, np.float32), x.shape)
-    yaw = np.broadcast_to(np.asarray(yaw_rad, np.float32), x.shape)
-    if opening_mm is None:
-        opening = np.full(x.shape, np.nan, np.float32)
-    else:
-        opening = np.broadcast_to(np.asarray(opening_mm, np.float32), x.shape)
+    x, y, yaw, opening = candidates(x_mm, y_mm, yaw_rad, opening_mm)
 
     def check(s: int):
         b = slice(s, s + BLOCK)
@@ -271,6 +265,19 @@ def check_candidates(
     else:  # blocks are independent: the same results in any order, kept in order
         parts = list(_pool().map(check, starts))
     return tuple(np.concatenate(p) for p in zip(*parts, strict=True))
+
+
+def candidates(x_mm, y_mm, yaw_rad, opening_mm=None):
+    """(N,) float32 x, y, yaw and fixed openings (NaN: choose) of check_candidates'
+    arguments: y, yaw and opening broadcast to x's shape, None as every opening NaN."""
+    x = np.atleast_1d(np.asarray(x_mm, np.float32))
+    y = np.broadcast_to(np.asarray(y_mm, np.float32), x.shape)
+    yaw = np.broadcast_to(np.asarray(yaw_rad, np.float32), x.shape)
+    if opening_mm is None:
+        opening = np.full(x.shape, np.nan, np.float32)
+    else:
+        opening = np.broadcast_to(np.asarray(opening_mm, np.float32), x.shape)
+    return x, y, yaw, opening
 
 
 def threads() -> int:

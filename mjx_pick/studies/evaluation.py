@@ -34,6 +34,7 @@ from mjx_pick.core.scene import Scene
 from mjx_pick.core.settings import Settings
 from mjx_pick.engine import interrupts
 from mjx_pick.engine.chunks import ChunkStore
+from mjx_pick.engine.devices import checks_device
 from mjx_pick.engine.inputs import scene_of
 from mjx_pick.engine.registry import AUTO
 from mjx_pick.engine.runner import (
@@ -490,6 +491,7 @@ def _picks(ctx: _Context, req: _Request):
             antipodal=run.antipodal,
             depth_mm=run.depth_mm,
             scene=ctx.scene,
+            device=checks_device(ctx.backend),
         )
         return req, batch
     if isinstance(what.picks, pp.GraspBatch):
@@ -511,7 +513,7 @@ def _evaluate_claimed(
     t0 = time.perf_counter()
     try:
         if req.what.until is not None:
-            picks_batch, table = _optimize(ctx.chunks, chunk, store, req)
+            picks_batch, table = _optimize(ctx, chunk, store, req)
             config["n"], config["mode"] = int(len(picks_batch)), picks_batch.mode
             if out_dir is not None:
                 write_json(out_dir / "config.json", config)
@@ -901,10 +903,10 @@ def _simulate(chunks, picks, chunk: int, store, bar: bool, on_progress):
         return run_chunks(chunks, picks, chunk, store, report, on_chunk=chunk_done)
 
 
-def _optimize(chunks, chunk: int, store: ChunkStore | None, req: _Request):
+def _optimize(ctx: _Context, chunk: int, store: ChunkStore | None, req: _Request):
     """Optimization mode: batches of chunk pick-points until req.what.until reach
     req.what.min_score or req.what.max_n are spent; (GraspBatch, results table of every simulated
-    pick).
+    pick). The candidates are checked where ``checks_device`` says for ctx's backend.
 
     Batch j is chunk j of the run (the batches depend only on the seed and the batch
     size, never on results): a resumed run reads the chunks in its store and simulates
@@ -916,7 +918,7 @@ def _optimize(chunks, chunk: int, store: ChunkStore | None, req: _Request):
         j = len(tables)
         table = read_chunk(store, j, b)
         if table is None:
-            for result in chunks.run({j: b}):
+            for result in ctx.chunks.run({j: b}):
                 table = result.table
             if store is not None:
                 store.write(chunk_name(j), table)
@@ -935,6 +937,7 @@ def _optimize(chunks, chunk: int, store: ChunkStore | None, req: _Request):
         seed=req.run.seed,
         config=req.run.pick_config,
         grasp=req.settings.grasp,
+        device=checks_device(ctx.backend),
     )
     return res.picks, pa.concat_tables(tables)
 

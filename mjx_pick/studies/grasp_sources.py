@@ -80,14 +80,18 @@ def draw_grasps(
     antipodal: AntipodalConfig | None = None,
     depth_mm: float | None = None,
     scene: Scene | None = None,
+    device: str | None = None,
 ) -> GraspBatch:
     """A study's grasps for obj under settings: n top-down pick-points (``pickpoints``),
     n antipodal grasps on the part's mesh (``core.antipodal``), or every grasp of a file
     (:func:`file_grasps`, n unused). scene: the compiled scene, when the caller has it
-    (the grasp checks need one; built here otherwise)."""
+    (the grasp checks need one; built here otherwise). device: the Warp device that
+    checks top-down candidates (``pickpoints.FeasibilityChecker``; None: numpy)."""
     config = pick_config or pp.PickConfig()
     if source == TOPDOWN:
-        return pp.generate_normal(obj, settings.gripper, n, seed, config, settings.grasp)
+        return pp.generate_normal(
+            obj, settings.gripper, n, seed, config, settings.grasp, device=device
+        )
     scene = scene if scene is not None else scene_of(obj, settings)
     if source == ANTIPODAL:
         return generate_antipodal(scene, n, seed, antipodal, config.safety_zone_mm)
