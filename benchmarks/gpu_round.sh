@@ -96,6 +96,7 @@ case "$1" in
     # one host (SCALE_GPUS), timed from the shell. A small run on one GPU builds Warp's
     # kernels first (reported apart): after it, no pool size builds anything. Labels of
     # every run against the first's (the same picks: ids must be equal)
+    rm -rf /tmp/scale_*
     t=$EPOCHREALTIME
     CUDA_VISIBLE_DEVICES=0 python -m mjx_pick.cli evaluate door_opener --n 4096 --seed 1 \
       --backend warp --traces 0 --no-progress --out /tmp/scale_warm | grep "time, s" || true
