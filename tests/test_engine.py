@@ -461,3 +461,42 @@ def test_jax_on_the_cpu_refuses_what_would_need_a_gpu(monkeypatch):
     monkeypatch.setattr(xla_bridge, "backends", lambda: {"cpu": None, "cuda": None})
     with pytest.raises(mp.ConfigError, match="JAX has started cuda"):
         devices.keep_jax_on_cpu()
+
+
+# Warp started on a thread of its own (the CLI's start_engine) while other threads ask
+# for it: Warp's own init has no lock, so without devices.warp()'s lock a slow runtime
+# start would be made twice (the sleep widens the window a race needs)
+WARP_ONCE = """
+import json, threading, time
+import warp._src.context as context
+made = []
+start = context.Runtime.__init__
+def counted(self, *args, **kwargs):
+    made.append(threading.current_thread().name)
+    time.sleep(0.3)
+    start(self, *args, **kwargs)
+context.Runtime.__init__ = counted
+from mjx_pick.engine import devices
+devices.nvidia_driver_present = lambda: True  # as on a GPU machine
+devices.start_warp()
+askers = [threading.Thread(target=devices.warp) for _ in range(3)]
+for t in askers:
+    t.start()
+wp = devices.warp()
+for t in askers:
+    t.join()
+print(json.dumps({"made": made, "initialised": context.runtime is not None}))
+"""
+
+
+def test_warp_started_on_a_thread_is_started_once():
+    import os
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [sys.executable, "-c", WARP_ONCE], env=dict(os.environ), capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    got = json.loads(run.stdout.splitlines()[-1])
+    assert got == {"made": ["warp-start"], "initialised": True}

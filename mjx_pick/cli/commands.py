@@ -45,8 +45,22 @@ def confirm_duration(args, what: str, simulations: int, grasp=None, solver=None,
         print(f"mjx-pick: {line}", file=sys.stderr)
 
 
+def start_engine(args) -> None:
+    """A command that simulates in this process on a backend that drives CUDA devices
+    through Warp (named, or 'auto''s first choice) starts Warp now, beside its own
+    imports and the part's preparation (``devices.start_warp``: the driver's and the
+    GPUs' start, a fixed cost of every run, overlaps them)."""
+    name = getattr(args, "backend", registry.AUTO)
+    first = registry.auto_order()[0] if name == registry.AUTO else registry.ENTRIES.get(name)
+    if first is not None and first.cuda_devices and not getattr(args, "ray", None):
+        from mjx_pick.engine.devices import start_warp
+
+        start_warp()
+
+
 def cmd_evaluate(args) -> int:
     t0 = time.perf_counter()
+    start_engine(args)
     from mjx_pick.studies.evaluation import evaluate
     from mjx_pick.studies.object_sets import is_object_set
 
@@ -170,6 +184,7 @@ def _fmt(v) -> str:
 
 
 def cmd_sweep(args) -> int:
+    start_engine(args)
     from mjx_pick.studies.sweeps import ParamSpec, sweep, variants
 
     if not args.param:
@@ -217,6 +232,7 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_compare(args) -> int:
+    start_engine(args)
     from mjx_pick.studies.comparison import compare, unequal_forces
 
     obj, base, picks_cfg = base_settings(args)
@@ -254,6 +270,7 @@ def cmd_compare(args) -> int:
 
 
 def cmd_design(args) -> int:
+    start_engine(args)
     from mjx_pick.studies.comparison import design_search, sample_variants
 
     obj, base, picks_cfg = base_settings(args)
@@ -285,6 +302,7 @@ def cmd_design(args) -> int:
 
 
 def cmd_robust(args) -> int:
+    start_engine(args)
     from mjx_pick.studies.robust import robust_best
 
     if args.n is None and not args.results:

@@ -7,11 +7,13 @@ with 'auto') asks these questions without importing the backend that needs the a
 
 from __future__ import annotations
 
+import atexit
 import functools
 import importlib.metadata
 import importlib.util
 import os
 import sys
+import threading
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.engine import compiled
@@ -109,14 +111,49 @@ def nvidia_gpu_count() -> int:
         return 0
     if importlib.util.find_spec("warp") is not None:
         try:
-            import warp as wp
-
-            wp.config.quiet = True
-            wp.init()
-            return int(wp.get_cuda_device_count())
+            return int(warp().get_cuda_device_count())
         except Exception:  # warp's native library does not load: ask JAX
             pass
     return len(nvidia_gpus())
+
+
+# Warp's init is not thread-safe (two threads could each make a runtime): every caller
+# here starts Warp through warp(), under this lock
+_WARP_START = threading.Lock()
+
+
+def warp():
+    """The ``warp`` module, imported and initialised once in this process (waits for
+    :func:`start_warp`'s thread where it runs)."""
+    with _WARP_START:
+        import warp as wp
+
+        wp.config.quiet = True  # no banner on stdout (older Warp)
+        wp.init()
+    return wp
+
+
+def start_warp() -> None:
+    """Start Warp -- its import, CUDA's driver and the GPUs' contexts -- on a thread of
+    its own, while the caller goes on with its imports and the part's preparation.
+
+    CUDA's start runs in Warp's native library, which does not hold Python's GIL, so it
+    overlaps the caller's Python work (an import on a second thread does not: the two
+    take turns at the GIL). Nothing happens without an NVIDIA driver or warp-lang; a
+    failure is left for the first :func:`warp` call to raise. The process waits for the
+    thread before it exits (a CUDA call cut off by the interpreter's exit)."""
+    if not nvidia_driver_present() or importlib.util.find_spec("warp") is None:
+        return
+
+    def start() -> None:
+        try:
+            warp()
+        except Exception:  # noqa: BLE001 - the caller's own warp() call says what failed
+            pass
+
+    thread = threading.Thread(target=start, name="warp-start", daemon=True)
+    thread.start()
+    atexit.register(thread.join)
 
 
 def has_accelerator() -> bool:
@@ -166,10 +203,7 @@ def warp_problem() -> str | None:
         except ImportError:  # packaging absent: trust the installed version
             pass
     try:
-        import warp as wp
-
-        wp.config.quiet = True  # no banner on stdout
-        wp.init()
+        wp = warp()
         from mujoco.mjx import warp as mjxw
 
         if not mjxw.WARP_INSTALLED:

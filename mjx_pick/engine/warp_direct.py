@@ -85,11 +85,7 @@ def check_warp() -> None:
 
 
 def _warp():
-    import warp as wp
-
-    wp.config.quiet = True  # no banner on stdout
-    wp.init()
-    return wp
+    return devices.warp()
 
 
 # Warp's current device is one for the whole process (wp.ScopedDevice sets it for every
