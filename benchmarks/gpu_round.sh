@@ -120,6 +120,28 @@ for g in runs[1:]:
     print(f"{runs[0]} vs {g}: ids equal {same}, labels equal {(a.success.values == b.success.values).mean():.4%}")
 EOF
     ;;
+  ab)  # issue 55, two trees of the project side by side (TREE_A, TREE_B: folders holding
+    # each one's tree), whole commands alternated A, B, A, B...: the YCB banana seen before
+    # on one GPU (1,024 picks, REPEATS times each), then the door opener's full set on
+    # the GPUs of AB_GPUS (twice each). Kernels and the banana's cache primed first
+    banana=(mjx_pick/assets/objects/ycb/011_banana.stl --unit m --mass-g 66)
+    whole() {  # tree, label, gpus, evaluate's arguments...
+      local tree=$1 label=$2 gpus=$3; shift 3; local t=$EPOCHREALTIME
+      (cd "$tree" && CUDA_VISIBLE_DEVICES=$gpus python -m mjx_pick.cli evaluate "$@" \
+        --backend warp --traces 0 --no-progress --overwrite --out "/tmp/ab_$label" | grep "time, s")
+      awk -v a="$t" -v b="$EPOCHREALTIME" -v l="$label" 'BEGIN { printf "%s: whole command %.2f s\n", l, b - a }'
+    }
+    whole "$TREE_A" prime_door 0 door_opener --n 4096 --seed 1
+    whole "$TREE_B" prime_door_b 0 door_opener --n 4096 --seed 1
+    whole "$TREE_A" prime_banana 0 "${banana[@]}" --n 1024
+    for r in $(seq "${REPEATS:-3}"); do
+      whole "$TREE_A" "A_banana_$r" 0 "${banana[@]}" --n 1024
+      whole "$TREE_B" "B_banana_$r" 0 "${banana[@]}" --n 1024
+    done
+    for r in 1 2; do
+      whole "$TREE_A" "A_door_$r" "${AB_GPUS:-0,1,2,3}" door_opener --n 262144 --seed 0
+      whole "$TREE_B" "B_door_$r" "${AB_GPUS:-0,1,2,3}" door_opener --n 262144 --seed 0
+    done 2>&1 | grep -v "warning: only" ;;
   pools)  # issue 55, a part's first runs on a machine: N_SMALL picks (a small pool: Warp
     # builds its kernels), then N_BIG (a large pool whose tail shrinks: the compaction's
     # gather moves every per-world array; no kernel may be built for it), then N_BIG again
