@@ -240,12 +240,16 @@ def _initial(
     pair_solref,
     pair_solimp,
     model=None,
+    forward: bool = True,
 ):
-    """One pick's model, data (after mj_forward), control state and accumulators."""
+    """One pick's model, data (after mj_forward), control state and accumulators.
+    forward=False: the data before mj_forward, of the same shapes and dtypes (a shape
+    of the carry, without tracing MJX's forward)."""
     m = _pick_model(phys, pair_friction, pair_solref, pair_solimp, model)
     s, a = gk.initial(ad, qpos0)
     d = phys.data0.replace(qpos=qpos0, ctrl=gk.command(ad, s, qpos0))
-    d = mjx.forward(m, d)
+    if forward:
+        d = mjx.forward(m, d)
     diag = Diagnostics(phys.overflow(d), phys.nefc(d), phys.nacon(d))
     return m, d, s, a, diag
 
@@ -404,21 +408,29 @@ def _finished(slot: Slot, n_ticks: int):
 
 
 def _pool_programs(phys: Physics, ad, n_sub: int, n_ticks: int, ticks_per_call: int):
-    """(batched start, batched advance, Slot axes) of a pool run with phys (Warp's Data
-    tree holds its contact buffer's size: one set per pool size). advance runs
-    ticks_per_call control periods of n_sub physics steps on every slot, the slots
-    marked fresh first restarted on their new pick's inputs."""
+    """(batched start, batched advance, Slot axes, batched shapes) of a pool run with
+    phys (Warp's Data tree holds its contact buffer's size: one set per pool size).
+    advance runs ticks_per_call control periods of n_sub physics steps on every slot,
+    the slots marked fresh first restarted on their new pick's inputs. shapes: the
+    (Slot, results) that start and advance return, for ``jax.eval_shape``: start without
+    MJX's forward (whose Data has the shapes and dtypes of the one it is given; the
+    loops' carries would refuse any other), so that finding the carry's shapes does not
+    trace MJX (seconds per trace on a CPU)."""
     axes = _slot_axes(phys)
     d_tree = jax.tree.structure(phys.data0)
     o = ad.object_qpos
 
-    def start(qpos0, params, pair_friction, pair_solref, pair_solimp, model) -> Slot:
+    def start(qpos0, params, pair_friction, pair_solref, pair_solimp, model, forward=True):
         _, d, s, a, diag = _initial(
-            phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp, model
+            phys, ad, qpos0, params, pair_friction, pair_solref, pair_solimp, model, forward
         )
         pos0, quat0 = qpos0[o : o + 3], qpos0[o + 3 : o + 7]
         args = (pair_friction, pair_solref, pair_solimp, model, params, s, a, pos0, quat0)
         return Slot(tuple(d_tree.flatten_up_to(d)), *args, jnp.int32(0), diag)
+
+    def shapes_one(*inputs):
+        slot = start(*inputs, forward=False)
+        return slot, gk.finalize(slot.params, slot.a)
 
     def advance_one(slot: Slot, fresh, *inputs):
         new = start(*inputs)
@@ -458,7 +470,8 @@ def _pool_programs(phys: Physics, ad, n_sub: int, n_ticks: int, ticks_per_call: 
         return slot, gk.finalize(slot.params, slot.a), _finished(slot, n_ticks), slot.k, slot.diag
 
     advance = jax.vmap(advance_one, in_axes=(axes,) + (0,) * 7, out_axes=(axes, 0, 0, 0, 0))
-    return jax.vmap(start, out_axes=axes), advance, axes
+    shapes = jax.vmap(shapes_one, out_axes=(axes, 0))
+    return jax.vmap(start, out_axes=axes), advance, axes, shapes
 
 
 def _compact(state: Slot, order, phys: Physics, axes) -> Slot:
@@ -479,7 +492,6 @@ def _run_queue(sizes, physes, levels, valid, *inputs):
     """The pool's queue (see make_pool): every pick of inputs (valid (N,) bool, padding
     last) through slots refilled in rounds, at each pool size of sizes in turn (physes,
     levels: their physics and programs); (results, ticks, Diagnostics, rounds)."""
-    starts = levels[0][0]
     n = valid.shape[0]
     n_valid = jnp.sum(valid.astype(jnp.int32))
     size = sizes[0]
@@ -492,11 +504,9 @@ def _run_queue(sizes, physes, levels, valid, *inputs):
     pick0 = jnp.where(ids < n_valid, ids, -1)
     fresh0 = jnp.ones(size, bool)
     # every slot is fresh in the first round: zeros of the right shapes will do
-    zeros = jax.tree.map(
-        lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(starts, *gather(pick0))
-    )
-    shapes = jax.eval_shape(levels[0][1], zeros, fresh0, *gather(pick0))
-    _, out_s, _, ticks_s, diag_s = shapes
+    slot_s, out_s = jax.eval_shape(levels[0][3], *gather(pick0))
+    zeros = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), slot_s)
+    ticks_s, diag_s = slot_s.k, slot_s.diag  # as advance returns them
     rows = jax.tree.map(lambda x: jnp.zeros((n,) + x.shape[1:], x.dtype), (out_s, ticks_s, diag_s))
 
     def body(c, advance):
