@@ -13,11 +13,21 @@ import tempfile
 os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=4")
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 # the on-disk cache (object preparation, compiled programs) in a folder of this session,
-# never the user's own: its processes (CLI tests, GUI jobs) inherit the variable
-_CACHE_DIR = tempfile.mkdtemp(prefix="mjx_pick_test_cache.")
+# never the user's own: its processes (CLI tests, GUI jobs) inherit the variable. One
+# folder for the whole run: made by the process that starts it (xdist's controller, or
+# the only process) before any worker starts, so the workers inherit it through the
+# environment and share what one of them prepared or compiled; removed by that process
+# alone. Sharing is safe: object entries are written to a temporary file and renamed
+# (core/cache.py), JAX's programs under its file lock (a size limit is set).
+_SHARED = "MJX_PICK_TEST_SESSION_CACHE"
+if os.environ.get("PYTEST_XDIST_WORKER") and os.environ.get(_SHARED):
+    _CACHE_DIR = os.environ[_SHARED]
+else:
+    _CACHE_DIR = tempfile.mkdtemp(prefix="mjx_pick_test_cache.")
+    os.environ[_SHARED] = _CACHE_DIR
+    atexit.register(shutil.rmtree, _CACHE_DIR, True)
 os.environ["MJX_PICK_CACHE_DIR"] = _CACHE_DIR
 os.environ.pop("MJX_PICK_CACHE", None)
-atexit.register(shutil.rmtree, _CACHE_DIR, True)
 
 from mjx_pick.outputs.display import use_offscreen_rendering  # noqa: E402
 
@@ -25,6 +35,14 @@ use_offscreen_rendering()  # the report tests render animations on a headless CI
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
+
+from mjx_pick.engine import compiled  # noqa: E402
+
+# JAX's compiled programs kept on disk from the first compile on (the engine turns this
+# on when it builds a backend; programs compiled before that, or traced by tests
+# themselves, were compiled anew in every worker and again after each file's
+# release_compiled_programs)
+compiled.use_persistent_cache()
 
 
 def pytest_configure(config):
@@ -44,10 +62,10 @@ FILE_SECONDS = {
     "tests/test_backends.py": 140,
     "tests/test_variants.py": 115,
     "tests/test_warp_direct.py": 170,
-    "tests/test_physics.py": 85,
+    "tests/test_physics.py": 60,  # the rubber pad's reference LP built sparse (was 85)
     "tests/test_cluster.py": 75,
     "tests/test_scale.py": 75,
-    "tests/test_gripper_mjcf.py": 65,
+    "tests/test_gripper_mjcf.py": 50,  # the same (was 65)
     "tests/test_gui_parts.py": 65,
     "tests/test_readme.py": 60,
     "tests/test_gui_routes.py": 150,  # 20 Chromium tests (measured alone, 2026-11-28)
