@@ -173,16 +173,25 @@ def main() -> None:
         record["cases"][name] = rows
     import pyarrow.parquet as pq
 
-    if "mesh" in record["cases"] and {"no_cache", "second"} <= set(args.runs.split(",")):
-        a = pq.read_table(work / "mesh_no_cache" / "results.parquet")
-        b = pq.read_table(work / "mesh_second" / "results.parquet")
-        record["mesh_tables_equal"] = bool(a.equals(b))
-        print("mesh results.parquet equal with and without the cache:", a.equals(b))
-    both = [work / "mesh_second" / "results.parquet", work / "session_second" / "results.parquet"]
-    if all(f.is_file() for f in both):
-        equal = pq.read_table(both[0]).equals(pq.read_table(both[1]))
-        record["session_tables_equal"] = bool(equal)
-        print("mesh results.parquet equal from a new process and a session's second call:", equal)
+    # bit for bit on the C engine; MuJoCo Warp on a GPU is not bit-reproducible (atomic
+    # contact counters), so the share of equal labels is said beside the bits
+    pairs = {
+        "mesh": ("mesh_no_cache", "mesh_second", "with and without the cache"),
+        "session": (
+            "mesh_second",
+            "session_second",
+            "from a new process and a session's second call",
+        ),
+    }
+    for key, (left, right, what) in pairs.items():
+        files = [work / left / "results.parquet", work / right / "results.parquet"]
+        if not all(f.is_file() for f in files):
+            continue
+        a, b = (pq.read_table(f).sort_by("pick_id") for f in files)
+        labels = (a["success"].to_numpy() == b["success"].to_numpy()).mean()
+        record[f"{key}_tables_equal"] = bool(a.equals(b))
+        record[f"{key}_labels_equal"] = round(float(labels), 5)
+        print(f"mesh results.parquet {what}: bit for bit {a.equals(b)}, labels equal {labels:.2%}")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(record, indent=2) + "\n")
     shutil.rmtree(work, ignore_errors=True)
