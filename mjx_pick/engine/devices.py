@@ -17,6 +17,7 @@ import threading
 
 from mjx_pick.core.config import ConfigError
 from mjx_pick.engine import compiled
+from mjx_pick.kernels.warp_runtime import warp
 
 # set to 1: let the Warp backend run on the CPU (warp-lang's CPU device; tests only)
 ALLOW_CPU_ENV = "MJX_PICK_WARP_CPU"
@@ -117,22 +118,6 @@ def nvidia_gpu_count() -> int:
     return len(nvidia_gpus())
 
 
-# Warp's init is not thread-safe (two threads could each make a runtime): every caller
-# here starts Warp through warp(), under this lock
-_WARP_START = threading.Lock()
-
-
-def warp():
-    """The ``warp`` module, imported and initialised once in this process (waits for
-    :func:`start_warp`'s thread where it runs)."""
-    with _WARP_START:
-        import warp as wp
-
-        wp.config.quiet = True  # no banner on stdout (older Warp)
-        wp.init()
-    return wp
-
-
 def start_warp() -> None:
     """Start Warp -- its import, CUDA's driver and the GPUs' contexts -- on a thread of
     its own, while the caller goes on with its imports and the part's preparation.
@@ -140,8 +125,9 @@ def start_warp() -> None:
     CUDA's start runs in Warp's native library, which does not hold Python's GIL, so it
     overlaps the caller's Python work (an import on a second thread does not: the two
     take turns at the GIL). Nothing happens without an NVIDIA driver or warp-lang; a
-    failure is left for the first :func:`warp` call to raise. The process waits for the
-    thread before it exits (a CUDA call cut off by the interpreter's exit)."""
+    failure is left for the next ``warp()`` call (``kernels.warp_runtime``) to raise.
+    The process waits for the thread before it exits (a CUDA call cut off by the
+    interpreter's exit)."""
     if not nvidia_driver_present() or importlib.util.find_spec("warp") is None:
         return
 

@@ -65,7 +65,7 @@ def warp_problem(allow_cpu: bool | None = None) -> str | None:
         if importlib.util.find_spec(module) is None:
             return f"{package} is not installed"
     try:
-        wp = _warp()
+        wp = devices.warp()
         if not allow_cpu and wp.get_cuda_device_count() < 1:
             return "warp-lang sees no CUDA device (driver too old for its CUDA build?)"
     except Exception as err:  # any failure to load warp's native library
@@ -84,10 +84,6 @@ def check_warp() -> None:
         )
 
 
-def _warp():
-    return devices.warp()
-
-
 # Warp's current device is one for the whole process (wp.ScopedDevice sets it for every
 # thread): backends on several devices take turns at this lock for each stretch of Warp
 # calls, and wait for their device outside it
@@ -97,14 +93,14 @@ _WARP_LOCK = threading.RLock()
 @contextlib.contextmanager
 def on_device(name: str):
     """Warp calls on device `name`, from any thread (see _WARP_LOCK)."""
-    wp = _warp()
+    wp = devices.warp()
     with _WARP_LOCK, wp.ScopedDevice(name):
         yield
 
 
 def cuda_devices() -> list[str]:
     """Warp's CUDA devices ('cuda:0', ...)."""
-    wp = _warp()
+    wp = devices.warp()
     return [f"cuda:{i}" for i in range(wp.get_cuda_device_count())]
 
 
@@ -159,7 +155,7 @@ def carried_fields() -> frozenset[str]:
 def _kernels():
     """The backend's Warp kernels (``engine.warp_kernels``, imported on first use:
     importing this module imports neither warp nor mujoco_warp)."""
-    _warp()
+    devices.warp()
     from mjx_pick.engine import warp_kernels
 
     return warp_kernels
@@ -168,7 +164,7 @@ def _kernels():
 def _world_bytes(arr):
     """A contiguous per-world Warp array (worlds first) seen as (worlds, bytes a world)
     uint8, the same memory: what ``warp_kernels.gather_bytes`` moves."""
-    wp = _warp()
+    wp = devices.warp()
     if not arr.is_contiguous:
         raise ValueError(f"a per-world array of shape {arr.shape} is not contiguous")
     row = arr.size // arr.shape[0] * wp.types.type_size_in_bytes(arr.dtype)
@@ -180,7 +176,7 @@ def _put_model(mjm, slots: int, fields: tuple[str, ...], deterministic: bool):
     pair values and each carried field (an ``opt.*`` field: one value per slot)."""
     import mujoco_warp as mjw
 
-    wp = _warp()
+    wp = devices.warp()
     batch = {name: slots for name in ("pair_friction", "pair_solref", "pair_solimp")}
     for name in fields:
         if not name.startswith("opt."):
@@ -208,7 +204,7 @@ class _Pool:
     def __init__(self, backend: WarpBackend, slots: int, record_ticks: int):
         import mujoco_warp as mjw
 
-        wp = _warp()
+        wp = devices.warp()
         from mjx_pick.kernels import grasp_warp as gw
 
         self.slots = slots
@@ -300,7 +296,7 @@ class _Pool:
         """One control period: the tick, then n_substeps physics steps."""
         import mujoco_warp as mjw
 
-        wp = _warp()
+        wp = devices.warp()
         kern = _kernels()
         d = self.d
         wp.launch(
@@ -349,7 +345,7 @@ class _Pool:
 
     def capture(self, backend: WarpBackend) -> None:
         """The control period as one CUDA graph (on a GPU; the CPU runs it eagerly)."""
-        wp = _warp()
+        wp = devices.warp()
         if self.graph is not None or not wp.get_device(backend.device_name).is_cuda:
             return
         with on_device(backend.device_name):
@@ -365,7 +361,7 @@ class _Pool:
             backend._setup("graph", t0)
 
     def run_period(self, backend: WarpBackend) -> None:
-        wp = _warp()
+        wp = devices.warp()
         if self.graph is not None:
             wp.capture_launch(self.graph)
         else:
@@ -376,7 +372,7 @@ class _Outputs:
     """Per-pick rows a run fills as its picks end (on the current device)."""
 
     def __init__(self, n: int):
-        wp = _warp()
+        wp = devices.warp()
         from mjx_pick.kernels import grasp_warp as gw
 
         self.acc = wp.zeros(n, dtype=gw.Acc)
@@ -432,7 +428,7 @@ class WarpBackend:
         self.n_sub = grasp.substeps(scene.solver)  # validates the control period
         self.n_ticks = grasp.n_ticks()
         self.ad = addresses(scene)
-        wp = _warp()
+        wp = devices.warp()
         self.device_name = device or default_devices()[0]
         dev = wp.get_device(self.device_name)
         self.device = f"{'gpu' if dev.is_cuda else 'cpu'}:{dev.name}"
@@ -463,7 +459,7 @@ class WarpBackend:
     def peak_device_bytes(self) -> int | None:
         """The most device memory Warp's memory pool has held on this device (None on
         the CPU)."""
-        wp = _warp()
+        wp = devices.warp()
         dev = wp.get_device(self.device_name)
         if not dev.is_cuda or not wp.is_mempool_enabled(dev):
             return None
@@ -531,7 +527,7 @@ class WarpBackend:
     def _run_once(self, inputs: PickInputs, record: bool):
         """Every pick of inputs through the pool (record: one slot per pick, every
         tick's row kept); (results, traces, Diagnostics) in pick-point order."""
-        wp = _warp()
+        wp = devices.warp()
         from mjx_pick.kernels import grasp_warp as gw
 
         n = len(inputs)
@@ -618,7 +614,7 @@ class WarpBackend:
         """Slots whose pick has ended write it to its row of out. Returns a function
         that waits for the device and gives (S,) bool of them (call it outside
         :func:`on_device`, so other devices' threads run meanwhile)."""
-        wp = _warp()
+        wp = devices.warp()
         wp.launch(
             _kernels().save,
             dim=pool.slots,
@@ -658,7 +654,7 @@ class WarpBackend:
         simulation state, model rows and controller state; small's other slots idle.
         Returns small's slot_pick. Every step recomputes the rest of a world's data from
         what is copied, so a pick runs on as if it had stayed where it was."""
-        wp = _warp()
+        wp = devices.warp()
         live = np.flatnonzero(slot_pick >= 0)
         order = np.full(small.slots, -1, np.int32)
         order[: len(live)] = live
@@ -680,7 +676,7 @@ class WarpBackend:
         """Fresh slots take their picks: reset, inputs written, one forward pass."""
         import mujoco_warp as mjw
 
-        wp = _warp()
+        wp = devices.warp()
         kern = _kernels()
         d, m = pool.d, pool.m
         pool.slot_pick.assign(slot_pick)
@@ -730,7 +726,7 @@ class WarpBackend:
         use, the others keep the forces their last step measured."""
         import mujoco_warp as mjw
 
-        wp = _warp()
+        wp = devices.warp()
         d = pool.d
         wp.copy(pool.saved_cfrc, d.cfrc_ext)
         mjw.forward(pool.m, d)
@@ -794,7 +790,7 @@ def pad_traces(rows: np.ndarray, ticks: np.ndarray, phase: np.ndarray, grasp: Gr
 
 def _device_inputs(inputs: PickInputs, fields: tuple[str, ...], gw) -> dict:
     """The picks' inputs as Warp arrays on the current device."""
-    wp = _warp()
+    wp = devices.warp()
     n = len(inputs)
     return {
         "qpos0": wp.array(np.asarray(inputs.qpos0, np.float32), dtype=float),
@@ -822,7 +818,7 @@ def _warp_values(name: str, values: np.ndarray) -> np.ndarray:
 
 def _finalize_device(kern, src: dict, out_acc, gw) -> dict:
     """Per-pick results (kernels.grasp.finalize's fields) from their accumulators."""
-    wp = _warp()
+    wp = devices.warp()
     n = out_acc.shape[0]
     res = wp.zeros(n, dtype=gw.Result)
     wp.launch(kern.finalize, dim=n, inputs=[src["params"], out_acc, res])

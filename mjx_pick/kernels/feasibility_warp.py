@@ -12,6 +12,7 @@ import numpy as np
 import warp as wp
 
 from mjx_pick.kernels import feasibility as fk
+from mjx_pick.kernels import warp_runtime
 
 # no gradients of these checks: no adjoint code to generate and compile; no fused
 # multiply-adds (CUDA's default): each float32 operation rounds once, as numpy's do
@@ -288,15 +289,8 @@ def _on_device(stack: fk.SilhouetteStack, device) -> tuple:
 def prepare(device="cuda:0") -> None:
     """Build (or load from Warp's kernel cache) this module's kernel for device, now:
     a first use on a machine compiles it (seconds), later processes load it."""
-    _init()
+    warp_runtime.warp()
     wp.load_module(check_kernel.module, device=device)
-
-
-def _init() -> None:
-    # no banner or module-load lines on stdout (Warp 1.18 logs them at INFO); a stricter
-    # level set by the caller is kept
-    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
-    wp.init()
 
 
 def check_candidates(
@@ -323,7 +317,7 @@ def check_candidates(
       reason (N,) int32 in fk.REASONS order, opening_mm, coverage, gap_left_mm and
       gap_right_mm (N,) float32.
     """
-    _init()
+    warp_runtime.warp()
     device = wp.get_device(device)
     poses = fk.candidates(x_mm, y_mm, yaw_rad, opening_mm)
     poses = [wp.array(np.ascontiguousarray(a), dtype=wp.float32, device=device) for a in poses]
